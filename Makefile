@@ -1,0 +1,25 @@
+# Two commands (README): `make run` runs the main job, `make test` passes the tests.
+# Both create .venv/ at the repo root with the package installed editable on a fresh machine.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.vdps-installed
+
+.PHONY: setup run test bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test,mdf]'
+	touch $(STAMP)
+
+run: setup
+	$(VENV)/bin/vdps sim paper --duration 15 -o paper.mcap --json -
+
+test: setup
+	$(PY) -m pytest -q -p no:cacheprovider --timeout 600 tests
+
+clean:
+	rm -rf $(VENV) .pytest_cache

@@ -1,0 +1,78 @@
+"""Shared CLI pieces: one-line user errors, shared option decorators, JSON output."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import click
+
+
+class UserError(click.ClickException):
+    """A mistake the person made (bad option, unreadable file): one line, exit status 2."""
+
+    exit_code = 2
+
+    def show(self, file=None) -> None:  # one line, no traceback
+        click.echo(f"vdps: error: {self.format_message()}", err=True, file=file)
+
+
+def _clean(o):
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    if isinstance(o, dict):
+        return {str(k): _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    if hasattr(o, "item") and callable(o.item):  # numpy scalars
+        return _clean(o.item())
+    return o
+
+
+def write_json(doc: dict, target: str | None) -> None:
+    """Write ``doc`` as JSON to ``target`` (``-`` = stdout); non-finite floats become null."""
+    if not target:
+        return
+    text = json.dumps(_clean(doc), indent=2, sort_keys=True)
+    if target == "-":
+        click.echo(text)
+        return
+    try:
+        Path(target).write_text(text + "\n", encoding="utf-8")
+    except OSError as e:
+        raise UserError(f"cannot write {target}: {e.strerror or e}") from None
+
+
+json_option = click.option("--json", "json_out", metavar="FILE", default=None,
+                           help="Write a machine-readable summary to FILE ('-' for stdout).")
+output_option = click.option("-o", "--output", "output", metavar="FILE", default=None,
+                             help="Output file.")
+seed_option = click.option("--seed", type=int, default=0, show_default=True,
+                           help="Seed of every random number generator.")
+
+
+def vehicle_option(default: str, help_text: str):
+    return click.option("--vehicle", "vehicle", metavar="FILE", default=default, show_default=True,
+                        help=help_text)
+
+
+def debug_enabled() -> bool:
+    ctx = click.get_current_context(silent=True)
+    while ctx is not None:
+        if ctx.obj and isinstance(ctx.obj, dict) and "debug" in ctx.obj:
+            return bool(ctx.obj["debug"])
+        ctx = ctx.parent
+    return False
+
+
+def fail_user(exc: BaseException) -> None:
+    """Turn a known error type into a one-line UserError (re-raise with --debug)."""
+    if debug_enabled():
+        raise exc
+    raise UserError(str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__) from None
+
+
+def eprint(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)

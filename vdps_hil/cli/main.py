@@ -1,0 +1,79 @@
+"""``vdps``: the root command group. Subcommands are imported only when invoked, so ``vdps
+--help`` stays fast and a broken optional dependency only affects its own command."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import click
+
+from vdps_hil import __version__
+from vdps_hil.cli.common import UserError
+
+# name -> (module, attribute, one-line help). Explicit registry, no import side effects.
+COMMANDS: dict[str, tuple[str, str, str]] = {
+    "sim": ("vdps_hil.cli.sim_cmd", "sim", "Simulate a scenario and write a recording."),
+    "conventions": ("vdps_hil.cli.conventions_cmd", "conventions",
+                    "Print the frames, signs, units and wire formats every part agrees on."),
+}
+
+
+class LazyGroup(click.Group):
+    def list_commands(self, ctx):
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx, name):
+        if name not in COMMANDS:
+            return None
+        module, attr, _ = COMMANDS[name]
+        return getattr(importlib.import_module(module), attr)
+
+    def format_commands(self, ctx, formatter):
+        rows = [(n, COMMANDS[n][2]) for n in self.list_commands(ctx)]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("--debug", is_flag=True, help="Show full tracebacks instead of one-line errors.")
+@click.version_option(__version__, prog_name="vdps")
+@click.pass_context
+def cli(ctx, debug):
+    """vdps-hil: vehicle dynamics prediction (Hsu & Chen 2012) as a logger, estimator,
+    simulator, model workbench and HIL bench.
+
+    Example: vdps sim paper --duration 15 -o paper.mcap --json -
+    """
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+
+
+def main(argv=None) -> int:
+    """Entry point with the project's error policy: a person's mistake prints one line and
+    exits 2; an internal error prints one line (full traceback with --debug) and exits 1."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    try:
+        cli.main(args=argv, prog_name="vdps", standalone_mode=False)
+    except click.exceptions.Abort:
+        click.echo("vdps: aborted", err=True)
+        return 130
+    except UserError as e:
+        e.show()
+        return 2
+    except click.ClickException as e:  # usage errors: unknown option, bad value
+        click.echo(f"vdps: error: {e.format_message()}", err=True)
+        return 2
+    except SystemExit as e:
+        return int(e.code or 0)
+    except Exception as e:  # noqa: BLE001 - the last line of defence
+        if debug:
+            raise
+        click.echo(f"vdps: internal error: {e.__class__.__name__}: {e} (rerun with --debug)", err=True)
+        return 1
+    return 0
+
+
+def entry() -> None:
+    sys.exit(main())
