@@ -1,0 +1,369 @@
+"""MCAP recording writer for the layout of :mod:`vdps_hil.record.schemas`.
+
+One channel per topic, registered lazily on the first message with its schema (once per
+file). Messages are JSON; ``publish_time = t_ns`` (monotonic measurement time, the ordering
+key) and ``log_time`` = wall-clock UTC ns::
+
+    log_time = wall_time_ns                if given (non-zero)
+             = sim_epoch_ns + t_ns         if the writer was opened with sim_epoch_ns
+             = time.time_ns() at write     otherwise (live, no wall time supplied)
+
+Chunks are ZSTD-compressed and closed when their uncompressed content exceeds ``chunk_size``
+bytes (about 64 KiB by default), so a crash loses at most the chunk in progress (call
+:meth:`RecordingWriter.flush` to bound that in time). The file opens with a Header and the
+``vdps.recording`` metadata record, so even a file cut off by a crash tells what it is.
+
+Extension points (used by rotation, recovery and python-can registration): every message
+goes through :meth:`RecordingWriter.write_json` / ``_write``; per-file state (channels,
+schemas, the mcap writer) lives in ``_open_file`` / ``_finish_file``, so a rotating writer
+closes one file and opens the next with the same metadata.
+
+The writer is safe to share between threads (one lock around each message).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import IO, Any, Mapping
+
+from mcap.writer import CompressionType, IndexType, Writer
+from mcap.writer import LIBRARY_IDENTIFIER as _MCAP_LIBRARY
+
+from vdps_hil import __version__ as _TOOL_VERSION
+from vdps_hil.record import schemas as S
+
+__all__ = ["RecordingWriter", "WriterStats"]
+
+_RESERVED_KEYS = ("layout_version", "tool", "tool_version", "mcap_library", "log_time",
+                  "publish_time", "sim_epoch_ns", "message_encoding")
+
+
+@dataclass
+class _Channel:
+    id: int
+    schema: str
+    seq: int = 0
+    last_t_ns: int = -1
+
+
+@dataclass
+class WriterStats:
+    """What the writer has done: messages per topic and per-topic time-order violations.
+
+    ``time_backwards[topic]`` counts messages whose ``t_ns`` was below the previous one on the
+    same topic (written anyway, never dropped; readers assume per-topic order, so such a file
+    reads in slightly wrong order around them).
+    """
+
+    messages: dict[str, int] = field(default_factory=dict)
+    time_backwards: dict[str, int] = field(default_factory=dict)
+    location_fix_skipped: int = 0
+
+    @property
+    def total(self) -> int:
+        return sum(self.messages.values())
+
+
+class RecordingWriter:
+    """Write one MCAP recording.
+
+    ``path``: file path, or a binary stream opened for writing (not closed by us).
+    ``metadata``: free-form provenance (values converted to str; non-str values as JSON),
+    stored in the ``vdps.recording`` metadata record next to the layout version and tool
+    version. ``content_hashes``: role -> bytes or file path; stored as ``hash.<role>`` =
+    ``sha256:<hex>`` (e.g. ``{"config": cfg_path, "dbc.vdps": dbc_path, "signalmap": ...}``).
+    ``sim_epoch_ns``: set for simulated recordings (``schemas.DEFAULT_SIM_EPOCH_NS``) so that
+    ``log_time = sim_epoch_ns + t_ns`` when no wall time is given.
+    """
+
+    def __init__(self, path: str | os.PathLike | IO[bytes], *,
+                 metadata: Mapping[str, Any] | None = None,
+                 content_hashes: Mapping[str, bytes | os.PathLike | str] | None = None,
+                 chunk_size: int = 65536, sim_epoch_ns: int | None = None):
+        if chunk_size <= 0:
+            raise ValueError("chunk_size must be positive")
+        self.chunk_size = int(chunk_size)
+        self.sim_epoch_ns = (None if sim_epoch_ns is None
+                             else S.check_time_ns("sim_epoch_ns", sim_epoch_ns))
+        self._metadata = self._provenance(metadata or {}, content_hashes or {})
+        self._lock = threading.Lock()
+        self.stats = WriterStats()
+        self._serial_meta: dict[str, tuple[str, str]] = {}
+        self._can_topics: dict[str, str] = {}
+        self._closed = True
+        self._open_file(path)
+
+    # --- per-file state (rotation re-runs these) ----------------------------------------------
+
+    def _provenance(self, metadata: Mapping[str, Any],
+                    hashes: Mapping[str, bytes | os.PathLike | str]) -> dict[str, str]:
+        md = {"layout_version": S.LAYOUT_VERSION, "tool": "vdps-hil",
+              "tool_version": _TOOL_VERSION, "mcap_library": _MCAP_LIBRARY,
+              "message_encoding": S.MESSAGE_ENCODING, "publish_time": "t_ns",
+              "log_time": ("sim_epoch_ns+t_ns" if self.sim_epoch_ns is not None
+                           else "wall_time_ns"),
+              "sim_epoch_ns": "" if self.sim_epoch_ns is None else str(self.sim_epoch_ns)}
+        for k, v in metadata.items():
+            if k in _RESERVED_KEYS:
+                raise ValueError(f"metadata key {k!r} is reserved by the recording layout")
+            md[str(k)] = v if isinstance(v, str) else json.dumps(S.clean_json(v),
+                                                                  sort_keys=True)
+        for role, content in hashes.items():
+            md[f"hash.{role}"] = S.content_hash(content)
+        return md
+
+    def _open_file(self, path: str | os.PathLike | IO[bytes]) -> None:
+        if hasattr(path, "write"):
+            self._stream, self._owns_stream = path, False
+            self.path = getattr(path, "name", None)
+        else:
+            self._stream, self._owns_stream = open(path, "wb"), True
+            self.path = os.fspath(path)
+        self._mcap = Writer(self._stream, chunk_size=self.chunk_size,
+                            compression=CompressionType.ZSTD, index_types=IndexType.ALL,
+                            repeat_channels=True, repeat_schemas=True, use_chunking=True,
+                            use_statistics=True, use_summary_offsets=True, enable_crcs=True)
+        self._channels: dict[str, _Channel] = {}
+        self._schema_ids: dict[str, int] = {}
+        self._mcap.start(profile="", library=f"vdps-hil/{_TOOL_VERSION} {_MCAP_LIBRARY}")
+        self._mcap.add_metadata(S.METADATA_NAME, self._metadata)
+        self._stream.flush()
+        self._closed = False
+
+    def _finish_file(self) -> None:
+        try:
+            self._mcap.finish()
+            self._stream.flush()
+        finally:
+            if self._owns_stream:
+                self._stream.close()
+
+    # --- core -----------------------------------------------------------------------------------
+
+    def _log_time(self, t_ns: int, wall_time_ns: int | None) -> int:
+        if wall_time_ns:
+            return S.check_time_ns("wall_time_ns", wall_time_ns)
+        if self.sim_epoch_ns is not None:
+            return S.check_time_ns("log_time", self.sim_epoch_ns + t_ns)
+        return time.time_ns()
+
+    def _channel(self, topic: str, schema_name: str, channel_metadata: Mapping[str, str]):
+        ch = self._channels.get(topic)
+        if ch is not None:
+            if ch.schema != schema_name:
+                raise ValueError(f"topic {topic} already carries {ch.schema}, "
+                                 f"not {schema_name}")
+            return ch
+        sid = self._schema_ids.get(schema_name)
+        if sid is None:
+            sid = self._mcap.register_schema(schema_name, S.SCHEMA_ENCODING,
+                                             S.schema_bytes(schema_name))
+            self._schema_ids[schema_name] = sid
+        cid = self._mcap.register_channel(topic, S.MESSAGE_ENCODING, sid,
+                                          {str(k): str(v) for k, v in channel_metadata.items()})
+        ch = self._channels[topic] = _Channel(cid, schema_name)
+        return ch
+
+    def _write(self, topic: str, schema_name: str, t_ns: int, payload: bytes,
+               wall_time_ns: int | None, channel_metadata: Mapping[str, str] = {}) -> None:
+        """Append one encoded message (t_ns already validated)."""
+        with self._lock:
+            if self._closed:
+                raise ValueError("recording is closed")
+            log_time = self._log_time(t_ns, wall_time_ns)
+            ch = self._channels.get(topic)
+            if ch is None or ch.schema != schema_name:
+                ch = self._channel(topic, schema_name, channel_metadata)  # raises on mismatch
+            if t_ns < ch.last_t_ns:
+                self.stats.time_backwards[topic] = self.stats.time_backwards.get(topic, 0) + 1
+            else:
+                ch.last_t_ns = t_ns
+            self._mcap.add_message(ch.id, log_time, payload, t_ns, ch.seq)
+            ch.seq = (ch.seq + 1) & 0xFFFFFFFF
+            self.stats.messages[topic] = self.stats.messages.get(topic, 0) + 1
+
+    def write_json(self, topic: str, schema_name: str, t_ns: int, doc: Mapping[str, Any], *,
+                   wall_time_ns: int | None = None,
+                   channel_metadata: Mapping[str, str] | None = None) -> None:
+        """Write a document under a registered schema (``schemas.SCHEMAS``).
+
+        When the schema has a ``t_ns`` property, ``doc`` gets ``t_ns`` added if absent (a
+        different ``t_ns`` inside is an error). Non-finite floats become null.
+        """
+        S.check_topic(topic)
+        S.check_time_ns("t_ns", t_ns)
+        if schema_name not in S.SCHEMAS:
+            raise KeyError(f"unknown schema {schema_name!r}; register it with "
+                           "vdps_hil.record.schemas.register_schema()")
+        doc = S.clean_json(dict(doc))
+        if "t_ns" in S.SCHEMAS[schema_name].get("properties", {}):
+            if doc.setdefault("t_ns", t_ns) != t_ns:
+                raise ValueError(f"doc t_ns {doc['t_ns']} differs from t_ns {t_ns}")
+        payload = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
+        self._write(topic, schema_name, t_ns, payload, wall_time_ns, channel_metadata or {})
+
+    # --- typed helpers --------------------------------------------------------------------------
+
+    def write_can(self, bus: str, t_ns: int, msg_or_fields: Any, direction: str | None = None,
+                  wall_time_ns: int | None = None) -> None:
+        """One CAN frame on ``/raw/can/<bus>``.
+
+        ``msg_or_fields``: a ``can.Message`` or a mapping with ``arbitration_id`` and ``data``
+        (bytes) or ``data_hex``, optionally ``is_extended_id``, ``is_fd``, ``is_remote_frame``,
+        ``is_error_frame``, ``dlc``, ``direction``, ``bitrate_switch``,
+        ``error_state_indicator``. ``direction`` (``rx``/``tx``) defaults to the message's
+        ``is_rx`` (or the mapping's ``direction``, else ``rx``).
+        """
+        topic = self._can_topics.get(bus)
+        if topic is None:
+            topic = self._can_topics[bus] = S.can_topic(bus)
+        S.check_time_ns("t_ns", t_ns)
+        m = msg_or_fields
+        if isinstance(m, Mapping):
+            data = m.get("data")
+            if data is None:
+                data = bytes.fromhex(m.get("data_hex", ""))
+            if direction is None:
+                direction = m.get("direction", "rx")
+            doc = S.raw_can_doc(t_ns, m["arbitration_id"], data,
+                                is_extended_id=m.get("is_extended_id", False),
+                                is_fd=m.get("is_fd", False),
+                                is_remote_frame=m.get("is_remote_frame", False),
+                                is_error_frame=m.get("is_error_frame", False),
+                                dlc=m.get("dlc"), direction=direction,
+                                bitrate_switch=m.get("bitrate_switch", False),
+                                error_state_indicator=m.get("error_state_indicator", False))
+            payload = json.dumps(doc, separators=(",", ":")).encode()
+        else:  # can.Message (duck-typed): fast path, same document as raw_can_doc
+            if direction is None:
+                direction = "rx" if getattr(m, "is_rx", True) else "tx"
+            elif direction not in ("rx", "tx"):
+                raise ValueError(f"direction must be 'rx' or 'tx', got {direction!r}")
+            aid, ext, dlc, data = m.arbitration_id, m.is_extended_id, m.dlc, m.data or b""
+            if not 0 <= aid <= (0x1FFFFFFF if ext else 0x7FF) or not 0 <= dlc <= 64 \
+                    or len(data) > 64:
+                raise ValueError(f"bad CAN frame: id 0x{aid:X} extended={ext} dlc={dlc} "
+                                 f"len={len(data)}")
+            fd = m.is_fd
+            tail = (f',"bitrate_switch":{"true" if m.bitrate_switch else "false"},'
+                    f'"error_state_indicator":{"true" if m.error_state_indicator else "false"}'
+                    if fd else "")
+            payload = (f'{{"t_ns":{t_ns},"arbitration_id":{aid},'
+                       f'"is_extended_id":{"true" if ext else "false"},'
+                       f'"is_fd":{"true" if fd else "false"},'
+                       f'"is_remote_frame":{"true" if m.is_remote_frame else "false"},'
+                       f'"is_error_frame":{"true" if m.is_error_frame else "false"},'
+                       f'"dlc":{dlc},"data_hex":"{bytes(data).hex()}",'
+                       f'"direction":"{direction}"{tail}}}').encode()
+        self._write(topic, S.RAW_CAN, t_ns, payload, wall_time_ns, {"bus": bus})
+
+    def write_serial(self, device: str, t_ns: int, data: bytes,
+                     wall_time_ns: int | None = None, baud: int | None = None,
+                     fmt: str | None = None) -> None:
+        """One read chunk on ``/raw/serial/<device>``; ``baud`` and ``fmt`` go into the
+        channel metadata at the first write (later calls may omit them; a different value is
+        an error, since a channel's metadata is fixed)."""
+        topic = S.serial_topic(device)
+        meta = self._serial_meta.get(topic)
+        if meta is None:
+            meta = ("" if baud is None else str(int(baud)), fmt or "")
+            self._serial_meta[topic] = meta
+        elif (baud is not None and str(int(baud)) != meta[0]) or (fmt and fmt != meta[1]):
+            raise ValueError(f"{topic}: baud/format changed from {meta} to {(baud, fmt)}")
+        doc = S.raw_serial_doc(t_ns, data)
+        payload = json.dumps(doc, separators=(",", ":")).encode()
+        self._write(topic, S.RAW_SERIAL, t_ns, payload, wall_time_ns,
+                    {"device": device, "baud": meta[0], "format": meta[1]})
+
+    def write_sample(self, sample, topic: str | None = None) -> None:
+        """A bus Sample on ``/decoded/<source>/<kind>`` (or ``topic``); log_time from the
+        sample's ``wall_time_ns`` when non-zero."""
+        topic = S.sample_topic(sample.source, sample.kind) if topic is None \
+            else S.check_topic(topic)
+        S.check_time_ns("t_ns", sample.t_ns)
+        payload = json.dumps(sample.to_json(), separators=(",", ":"),
+                             allow_nan=False).encode()
+        self._write(topic, S.SAMPLE, sample.t_ns, payload, sample.wall_time_ns or None,
+                    {"source": sample.source, "kind": sample.kind})
+
+    def write_location_fix(self, sample, topic: str = S.GNSS_FIX_TOPIC,
+                           frame_id: str = "gnss") -> bool:
+        """The GNSS position of a ``gnss_pos`` sample as ``foxglove.LocationFix``.
+
+        Its ``timestamp`` is the message's log_time (wall or simulated wall clock). Returns
+        False (and counts ``stats.location_fix_skipped``) when the sample has no finite
+        latitude/longitude.
+        """
+        S.check_topic(topic)
+        with self._lock:
+            stamp = self._log_time(S.check_time_ns("t_ns", sample.t_ns),
+                                   sample.wall_time_ns or None)
+        doc = S.location_fix_doc(sample, frame_id=frame_id, stamp_ns=stamp)
+        if doc is None:
+            self.stats.location_fix_skipped += 1
+            return False
+        payload = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
+        self._write(topic, S.LOCATION_FIX, sample.t_ns, payload, stamp)
+        return True
+
+    def write_truth(self, topic: str, t_ns: int, values: Mapping[str, Any]) -> None:
+        """Simulator ground truth (simulation only) on ``/truth/...``; ``topic`` may be given
+        without the prefix (``"state"`` -> ``/truth/state``)."""
+        if not topic.startswith("/"):
+            topic = S.TRUTH_PREFIX + topic
+        if not S.check_topic(topic).startswith(S.TRUTH_PREFIX):
+            raise ValueError(f"truth topic must be under {S.TRUTH_PREFIX}: {topic}")
+        self.write_json(topic, S.TRUTH, t_ns, S.truth_doc(t_ns, values))
+
+    def write_estimate(self, topic: str, t_ns: int, values: Mapping[str, float],
+                       sigmas: Mapping[str, float] | None = None) -> None:
+        """Estimator output on ``/est/...`` (``"ekf"`` -> ``/est/ekf``)."""
+        if not topic.startswith("/"):
+            topic = S.EST_PREFIX + topic
+        if not S.check_topic(topic).startswith(S.EST_PREFIX):
+            raise ValueError(f"estimate topic must be under {S.EST_PREFIX}: {topic}")
+        self.write_json(topic, S.ESTIMATE, t_ns, S.estimate_doc(t_ns, values, sigmas))
+
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
+        """An extra MCAP metadata record (values converted to str, non-str as JSON)."""
+        md = {str(k): v if isinstance(v, str) else json.dumps(S.clean_json(v), sort_keys=True)
+              for k, v in data.items()}
+        with self._lock:
+            if self._closed:
+                raise ValueError("recording is closed")
+            self._mcap.add_metadata(name, md)
+
+    # --- lifecycle ------------------------------------------------------------------------------
+
+    @property
+    def metadata(self) -> dict[str, str]:
+        """The ``vdps.recording`` metadata record as written."""
+        return dict(self._metadata)
+
+    def flush(self) -> None:
+        """Close the chunk in progress and push everything written so far to the OS."""
+        with self._lock:
+            if not self._closed:
+                self._mcap.flush()
+
+    def close(self) -> None:
+        """Write the summary and footer and close the file (idempotent)."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._finish_file()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def __enter__(self) -> "RecordingWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
