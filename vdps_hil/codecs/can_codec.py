@@ -348,15 +348,24 @@ def _to_raw(sig: SignalSpec, value) -> int:
             return TTR_NONE_RAW
         if value < 0.0:
             raise ValueError(f"{sig.name} must be >= 0 s or inf/None (no rollover), got {value}")
-        raw = math.floor((value - sig.offset) / sig.scale + 0.5)
+        v = min(float(value), sig.maximum + sig.scale)  # keeps the division finite
+        raw = math.floor((v - sig.offset) / sig.scale + 0.5)
         return TTR_NONE_RAW if raw >= TTR_NONE_RAW else raw
     v = float(value)
     if math.isnan(v):
         raise ValueError(f"{sig.name}: cannot encode NaN")
-    if math.isinf(v):
-        return sig.raw_max if v > 0 else sig.raw_min
-    raw = math.floor((v - sig.offset) / sig.scale + 0.5)
+    lo, hi = _phys_clip(sig)
+    raw = math.floor((min(max(v, lo), hi) - sig.offset) / sig.scale + 0.5)
     return min(max(raw, sig.raw_min), sig.raw_max)
+
+
+def _phys_clip(sig: SignalSpec) -> tuple[float, float]:
+    """A physical interval one step wider than the raw range: clipping to it first keeps
+    ``(x - offset) / scale`` finite without changing any clamped result."""
+    a = sig.raw_min * sig.scale + sig.offset
+    b = sig.raw_max * sig.scale + sig.offset
+    step = abs(sig.scale)
+    return min(a, b) - step, max(a, b) + step
 
 
 def _from_raw(sig: SignalSpec, raw: int) -> float:
@@ -384,9 +393,8 @@ def quantize(field_name: str, value, dbc: VdpsDbc | None = None):
             raise ValueError(f"{field_name}: cannot quantise NaN")
         if _is_ttr(sig):
             return np.array([quantize(field_name, float(x), dbc) for x in v.ravel()]).reshape(v.shape)
-        with np.errstate(invalid="ignore", over="ignore"):
-            raw = np.floor((v - sig.offset) / sig.scale + 0.5)
-        raw = np.clip(np.nan_to_num(raw, posinf=sig.raw_max, neginf=sig.raw_min),
+        lo, hi = _phys_clip(sig)
+        raw = np.clip(np.floor((np.clip(v, lo, hi) - sig.offset) / sig.scale + 0.5),
                       sig.raw_min, sig.raw_max)
         return raw * sig.scale + sig.offset
     return _from_raw(sig, _to_raw(sig, value))
