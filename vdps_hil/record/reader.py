@@ -12,9 +12,9 @@ stays bounded by how far apart the channels were written. Ties go to file order.
 
 Broken files. A file that is not MCAP (bad magic, empty, unreadable) raises
 :class:`RecordingError` with one line. A file without a valid summary (cut off by a crash or
-a full disk, or still being written) is scanned record by record: every complete chunk is
-read, the first incomplete record ends the scan, and ``reader.truncated`` / ``reader.problems``
-say so. A corrupt chunk inside an otherwise good file is skipped and noted in ``problems``;
+a full disk, still being written, or a summary failing its CRC) is scanned record by record:
+every complete chunk is read (chunk CRCs checked), the first incomplete record ends the scan,
+and ``reader.truncated`` / ``reader.problems`` say so. A corrupt chunk inside an otherwise good file is skipped and noted in ``problems``;
 everything around it is read.
 
 Keeping the estimator off ground truth: select topics by prefix, e.g.
@@ -47,6 +47,7 @@ __all__ = ["RecordingError", "RecordingReader", "TopicInfo", "RawRecord"]
 _MAGIC = b"\x89MCAP0\r\n"
 _HDR = struct.Struct("<BQ")
 _MSG = struct.Struct("<HIQQ")  # channel_id, sequence, log_time, publish_time
+_FOOTER = struct.Struct("<BQQQI")  # opcode, length, summary_start, summary_offset_start, crc
 
 
 class RecordingError(Exception):
@@ -146,9 +147,25 @@ class RecordingReader:
 
     def _load_summary(self) -> bool:
         """Index from the summary section; False when there is no usable summary."""
-        self._f.seek(self._size - len(_MAGIC))
-        if self._size < 2 * len(_MAGIC) or self._f.read(len(_MAGIC)) != _MAGIC:
+        footer_pos = self._size - len(_MAGIC) - _FOOTER.size
+        if footer_pos < len(_MAGIC):
+            return False
+        self._f.seek(footer_pos)
+        tail = self._f.read(_FOOTER.size + len(_MAGIC))
+        if tail[-len(_MAGIC):] != _MAGIC:
             return False  # no closing magic: cut off, or still being written
+        op, length, summary_start, _, summary_crc = _FOOTER.unpack(tail[:_FOOTER.size])
+        if op != Opcode.FOOTER or length != _FOOTER.size - _HDR.size:
+            self.problems.append("damaged footer: scanned the file")
+            return False
+        if not len(_MAGIC) <= summary_start < footer_pos:
+            return False  # no summary section (or a damaged pointer to it)
+        if summary_crc:
+            self._f.seek(summary_start)
+            covered = self._f.read(footer_pos + _FOOTER.size - 4 - summary_start)
+            if zlib.crc32(covered) != summary_crc:
+                self.problems.append("summary CRC mismatch: scanned the file instead")
+                return False
         try:
             self._f.seek(0)
             summary = SeekingReader(self._f).get_summary()
@@ -213,6 +230,8 @@ class RecordingReader:
                                      f"{pos} (truncated): read every complete record before it")
                 return
             if op in (Opcode.DATA_END, Opcode.FOOTER):
+                self.problems.append("summary or footer missing or damaged: scanned the data "
+                                     "section, which is complete")
                 return
             try:
                 if op == Opcode.CHUNK:

@@ -73,7 +73,7 @@ publication month). ``log_time = DEFAULT_SIM_EPOCH_NS + t_ns``."""
 MAX_TIME_NS = 2**63 - 1
 """Largest time stamp accepted (MCAP times are uint64; we keep them inside int64)."""
 
-_NAME_RE = re.compile(r"^[A-Za-z0-9_.:\-]+$")
+_NAME_RE = re.compile(r"[A-Za-z0-9_.:\-]+")
 
 # --- JSON schemas (draft 2020-12 subset: type, properties, required, enum, bounds, items) -------
 
@@ -240,7 +240,7 @@ def schema_bytes(name: str) -> bytes:
 
 def check_name(kind: str, name: str) -> str:
     """A logical bus/device/source/kind name: letters, digits and ``_ . : -`` only."""
-    if not isinstance(name, str) or not _NAME_RE.match(name):
+    if not isinstance(name, str) or not _NAME_RE.fullmatch(name):
         raise ValueError(f"bad {kind} name {name!r}: use letters, digits and _ . : - only")
     return name
 
