@@ -492,9 +492,10 @@ def encode_warning(level: int, time_to_rollover_s: float | None, peak_roll_rad: 
 class VdpsCanEncoder:
     """Keeps one rolling counter per message (as a sender does) and encodes samples.
 
-    ``frames(sample)`` returns one frame per DBC message whose value fields are all in the
+    ``frames(sample)`` returns one frame per sensor message whose value fields are all in the
     sample (a 4-wheel ``wheel_speed`` sample gives the front and the rear frame), with each
     message's counter advanced by one; ``ValueError`` if the sample fills no message.
+    ``warning(...)`` sends VDPS_Warning with its own counter (see :func:`encode_warning`).
     """
 
     def __init__(self, dbc: VdpsDbc | None = None):
