@@ -387,8 +387,9 @@ class RecordingReader:
             try:
                 records = self._block_messages(block)
             except Exception as e:  # noqa: BLE001 - damaged block: note it, read the rest
-                self.problems.append(f"block at byte {block.offset} unreadable, skipped: "
-                                     f"{_one_line(e)}")
+                note = f"block at byte {block.offset} unreadable, skipped: {_one_line(e)}"
+                if note not in self.problems:  # once per file, not once per pass
+                    self.problems.append(note)
                 continue
             for _, cid, seq, log_t, pub_t, data in records:
                 buf = bufs.get(cid)
