@@ -110,5 +110,78 @@ class AttitudeSign:
 
 ATTITUDE_SIGN: dict[str, AttitudeSign] = {
     # One entry per attitude sentence layout, each citing the vendor's sign definition.
+    # Keys are the layout names used by vdps_hil.codecs.nmea (ParsedSentence.sentence).
+    # has_roll: the layout carries a measured roll in its standard installation (an INS, or a
+    # two-antenna receiver whose single baseline runs along the vehicle and so measures pitch).
+    "PASHR": AttitudeSign(
+        sentence="PASHR",
+        pitch_to_paper=1.0,
+        roll_to_paper=1.0,
+        has_roll=True,
+        source=(
+            "OxTS RT3000 v4 User Manual, Appendix B 'Using the orientation measurements': heading, "
+            "pitch, roll are consecutive rotations taking the NED navigation frame to the OxTS "
+            "vehicle frame (Table 20 'Vehicle frame definition': x forward, y right, z down), "
+            "V_n = Rz(heading) Ry(pitch) Rx(roll) V_b, so positive pitch is nose up and positive "
+            "roll is right side down; the bare $PASHR (time, heading, T, roll, pitch, heave, "
+            "roll/pitch/heading accuracy, GNSS quality, INS status) prints these angles. Same "
+            "layout and Tait-Bryan angles in the Applanix POS MV V5 Installation and Operation "
+            "Guide, Table 20 '$PASHR Sentence Format' (vessel frame x fore, y starboard, z down, "
+            "POS MV V4 User Guide 'Right-Hand Orthogonal System') and NovAtel OEM7 log PASHR "
+            "(signs always printed). Cross-check on the real OxTS file rst39.nmea: roll goes "
+            "negative while the car turns right at about 18 deg/s (body rolls out of the turn, "
+            "left side down) and positive again as the turn ends."
+        ),
+    ),
+    "PASHR,HPR": AttitudeSign(
+        sentence="PASHR,HPR",
+        pitch_to_paper=1.0,
+        roll_to_paper=1.0,
+        has_roll=False,
+        source=(
+            "Spectra Geospatial SP90m Product Manual, 'HPR: True Heading' ($PASHR,HPR,time, "
+            "heading, pitch, roll, carrier RMS, baseline RMS, ambiguity, mode, antenna setup, "
+            "PDOP; 'delivers either pitch OR roll angles, not both at the same time, depending "
+            "on how the antennas are installed'); Spectra Precision ProFlex 800 Reference "
+            "Manual, web-server 'Heading' page (heading is the direction Antenna 2 -> Antenna 1; "
+            "Antenna 1 ahead for heading+pitch, on the right for heading+roll). No sign "
+            "definition of pitch or roll found in these manuals: ASSUMED pitch positive when "
+            "the forward antenna is higher (nose up) and roll positive right side down "
+            "(aerospace/NMEA sense); verify once on a tilted vehicle. has_roll False: the "
+            "standard along-track baseline measures pitch only."
+        ),
+    ),
+    "HPR": AttitudeSign(
+        sentence="HPR",
+        pitch_to_paper=1.0,
+        roll_to_paper=1.0,
+        has_roll=False,
+        source=(
+            "Unicore N4 High Precision Commands and Logs reference book, GPHPR/GNHPR (utc, "
+            "heading, pitch, roll, QF, SatNo, age, stnID) and Unicore Reference Commands Manual "
+            "section 1.4 'Heading Configuration' (heading = angle clockwise from true north to "
+            "the base -> rover baseline); same layout in the ComNav OEM Board Reference Manual "
+            "4.3.1.2.6 'GPHPR Parameters of Attitude Angles'. No vendor definition of the "
+            "pitch/roll signs found: ASSUMED pitch = elevation of the base -> rover baseline "
+            "with the rover antenna ahead (positive nose up) and roll positive right side down. "
+            "has_roll False: two antennas measure heading and pitch only."
+        ),
+    ),
+    "PTNL,AVR": AttitudeSign(
+        sentence="PTNL,AVR",
+        pitch_to_paper=1.0,
+        roll_to_paper=1.0,
+        has_roll=False,
+        source=(
+            "Trimble R750 / SPSx51 NMEA-0183 output, 'PTNL,AVR - Time, yaw, tilt/roll, range "
+            "for moving baseline RTK' (yaw,Yaw,tilt,Tilt,roll,Roll,range,quality,PDOP,sats; the "
+            "examples fill either the Tilt or the Roll slot). Trimble does not state the signs: "
+            "ASSUMED yaw clockwise from true north like a heading, tilt = elevation of the "
+            "moving-base -> rover vector with the rover antenna ahead (pitch, positive nose "
+            "up), roll positive right side down. has_roll False: the standard installation "
+            "fills the Tilt slot; a sentence whose labelled Roll slot is filled is decoded as "
+            "roll (ParsedSentence.has_roll)."
+        ),
+    ),
 }
 
