@@ -141,7 +141,7 @@ class LineFramer:
         return kept
 
     def flush(self) -> bytes:
-        """Return and forget the pending partial line (end of a recording); not counted as a line."""
+        """Return and forget the pending partial line (end of a recording); not a line."""
         rest = bytes(self._pending)
         self._pending.clear()
         return rest

@@ -90,7 +90,7 @@ W_FIELDS = axis_fields("angular_rate_radps")
 check_fields((*F_FIELDS, *W_FIELDS, "seq_counter"))
 
 IMU_REJECT_REASONS: tuple[str, ...] = ("bad_checksum", "bad_length", "malformed_payload",
-                                       "unsupported_format", "no_imu_data")
+                                       "unsupported_format", "no_imu_data", "overlapped")
 
 
 @dataclass(frozen=True)
@@ -143,11 +143,15 @@ def _check_rotation(r: Sequence[Sequence[float]]) -> tuple[tuple[int, int, int],
 
 
 def _apply(r, v) -> tuple[float, float, float]:
-    return tuple(r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2] for i in range(3))  # type: ignore[return-value]
+    """r @ v for a 3x3 r (tuple of rows) and a 3-vector."""
+    x, y, z = (r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2] for i in range(3))
+    return (x, y, z)
 
 
 def _apply_t(r, v) -> tuple[float, float, float]:
-    return tuple(r[0][i] * v[0] + r[1][i] * v[1] + r[2][i] * v[2] for i in range(3))  # type: ignore[return-value]
+    """r^T @ v."""
+    x, y, z = (r[0][i] * v[0] + r[1][i] * v[1] + r[2][i] * v[2] for i in range(3))
+    return (x, y, z)
 
 
 def t_ns_to_sample_time_fine(t_ns: int) -> int:
@@ -216,7 +220,8 @@ def _vec3(xdi: int, payload: bytes) -> tuple[float, float, float]:
     if fmt == 3 and len(payload) == 24:
         return struct.unpack(">3d", payload)
     if fmt == 1 and len(payload) == 12:
-        return tuple(v / float(1 << 20) for v in struct.unpack(">3i", payload))  # type: ignore[return-value]
+        x, y, z = (v / float(1 << 20) for v in struct.unpack(">3i", payload))
+        return (x, y, z)
     if fmt in (0, 1, 3):
         raise _Bad("malformed_payload", f"XDI {xdi:04X} size {len(payload)}")
     raise _Bad("unsupported_format", f"XDI {xdi:04X}")
@@ -267,10 +272,16 @@ class ImuDecoder:
     each stamped by the receive-time rule at ``baud``. The decoder hunts for ``FA FF``, waits
     for the announced length, checks the checksum, and on any failure advances one byte and
     hunts again, so a valid message next to (or inside the claimed span of) garbage is never
-    lost. Counters (read-only ``counters``): ``bytes``, ``messages`` (valid MTData2
-    messages), ``samples``, ``other_messages`` (checksum-valid Xbus messages of another kind,
-    not consumed), ``garbage_bytes`` (skipped while hunting), ``rejected`` and ``reject_<reason>`` for ``IMU_REJECT_REASONS``, ``seq_gaps``
-    (packets missing according to the counter) and ``time_backwards`` (chunk times going back).
+    lost. A message is accepted only if its checksum is right, its payload parses, and no
+    valid MTData2 message starts inside its span (the 8-bit checksum passes 1 corrupt span in
+    256; a packet cut just before its checksum byte, followed by the next packet, is the
+    common case). ``flush()`` at the end of a stream releases what is still held.
+
+    Counters (read-only ``counters``): ``bytes``, ``messages`` (valid MTData2 messages),
+    ``samples``, ``other_messages`` (checksum-valid Xbus messages of another kind, not
+    consumed), ``garbage_bytes`` (skipped while hunting), ``rejected`` and ``reject_<reason>``
+    for ``IMU_REJECT_REASONS``, ``seq_gaps`` (packets missing according to the counter) and
+    ``time_backwards`` (chunk times going back).
     """
 
     def __init__(self, source: str = "imu", *, baud: int = DEFAULT_BAUD,
@@ -308,9 +319,20 @@ class ImuDecoder:
         if self._last_t_ns is not None and t_ns < self._last_t_ns:
             c["time_backwards"] += 1
         self._last_t_ns = t_ns
+        self._buf += chunk
+        self._chunk_ends.append((self._base + len(self._buf), int(t_ns)))
+        return self._run(final=False)
+
+    def flush(self) -> list[Sample]:
+        """End of stream: decode what is left, treating headers whose bytes never arrived as
+        garbage (so messages held behind a false header are released)."""
+        if not self._chunk_ends:
+            return []
+        return self._run(final=True)
+
+    def _run(self, final: bool) -> list[Sample]:
+        c = self._counters
         buf = self._buf
-        buf += chunk
-        self._chunk_ends.append((self._base + len(buf), int(t_ns)))
         out: list[Sample] = []
         i = 0
         n = len(buf)
@@ -322,28 +344,28 @@ class ImuDecoder:
                 break
             c["garbage_bytes"] += k - i
             i = k
-            if n - i < 4:
-                break  # wait for the header
-            if buf[i + 1] != BID_MASTER:
+            status, mid, head, end = self._probe(buf, i, n)
+            if status == "need_more":
+                if head:
+                    # The header claims bytes not yet here. A valid MTData2 message already
+                    # complete inside the claimed span shows the header is false: skip it now
+                    # rather than hold good messages back.
+                    inner = self._inner_message(buf, i, n, n)
+                    if inner > 0:
+                        self._reject("overlapped")
+                        i = inner
+                        continue
+                if final:
+                    c["garbage_bytes"] += 1
+                    i += 1
+                    continue
+                break
+            if status == "not_header":
                 c["garbage_bytes"] += 1
                 i += 1
                 continue
-            mid, ln = buf[i + 2], buf[i + 3]
-            head = 4
-            if ln == 0xFF:
-                if n - i < 6:
-                    break
-                ln = (buf[i + 4] << 8) | buf[i + 5]
-                head = 6
-                if ln > MAX_EXTENDED_LEN or ln < 0xFF:
-                    self._reject("bad_length")
-                    i += 1
-                    continue
-            end = i + head + ln + 1
-            if end > n:
-                break  # wait for the rest
-            if sum(buf[i + 1:end]) & 0xFF:
-                self._reject("bad_checksum")
+            if status != "ok":
+                self._reject(status)
                 i += 1
                 continue
             if mid != MID_MTDATA2:
@@ -359,6 +381,16 @@ class ImuDecoder:
                 self._reject(e.reason)
                 i += 1  # same reasoning: never consume a span that does not parse
                 continue
+            inner = self._inner_message(buf, i, end, n)
+            if inner == -1 and not final:
+                break  # a header inside this span is not complete yet: decide later
+            if inner > 0:
+                # A valid MTData2 message starts inside this one's span: this one is a corrupt
+                # span that passed the 8-bit checksum by chance (e.g. a packet cut before its
+                # checksum byte, followed by the next packet). The inner message wins.
+                self._reject("overlapped")
+                i = inner
+                continue
             c["messages"] += 1
             t_msg = self._time_of_byte(self._base + end - 1)
             i = end
@@ -370,6 +402,46 @@ class ImuDecoder:
         while len(self._chunk_ends) > 1 and self._chunk_ends[0][0] <= self._base:
             self._chunk_ends.popleft()
         return out
+
+    @staticmethod
+    def _probe(buf: bytearray, i: int, n: int) -> tuple[str, int, int, int]:
+        """Classify the bytes at ``buf[i]`` (a preamble): ("need_more"|"not_header"|
+        "bad_length"|"bad_checksum"|"ok", MID, header length, end index (exclusive))."""
+        if n - i < 4:
+            return "need_more", 0, 0, 0
+        if buf[i + 1] != BID_MASTER:
+            return "not_header", 0, 0, 0
+        mid, ln, head = buf[i + 2], buf[i + 3], 4
+        if ln == 0xFF:
+            if n - i < 6:
+                return "need_more", mid, 0, 0
+            ln, head = (buf[i + 4] << 8) | buf[i + 5], 6
+            if ln > MAX_EXTENDED_LEN or ln < 0xFF:
+                return "bad_length", mid, head, 0
+        end = i + head + ln + 1
+        if end > n:
+            return "need_more", mid, head, end
+        if sum(buf[i + 1:end]) & 0xFF:
+            return "bad_checksum", mid, head, end
+        return "ok", mid, head, end
+
+    def _inner_message(self, buf: bytearray, i: int, end: int, n: int) -> int:
+        """Index of a valid MTData2 message starting inside ``buf[i+1:end]`` (0 if none, -1 if
+        one may start there but its bytes have not all arrived)."""
+        sig = bytes((PREAMBLE, BID_MASTER, MID_MTDATA2))
+        j = buf.find(sig, i + 1, end + 2)
+        while 0 <= j < end:
+            status, _, head, end_j = self._probe(buf, j, n)
+            if status == "need_more":
+                return -1
+            if status == "ok":
+                try:
+                    decode_mtdata2(bytes(buf[j + head:end_j - 1]), self.sensor_to_body)
+                    return j
+                except _Bad:
+                    pass
+            j = buf.find(sig, j + 1, end + 2)
+        return 0
 
     def _time_of_byte(self, pos: int) -> int:
         """Receive-time rule for the byte at stream offset ``pos``: the time of the chunk holding

@@ -305,7 +305,8 @@ def format_attitude(layout: str, *, utc_time_s: float, yaw_rad: float,
     if layout == "THS":
         return format_ths(yaw_rad, talker=talker)
     if layout not in ATTITUDE_LAYOUTS:
-        raise ValueError(f"unknown attitude layout {layout!r}; one of {ATTITUDE_LAYOUTS} or HDT/THS")
+        raise ValueError(f"unknown attitude layout {layout!r}; "
+                         f"one of {ATTITUDE_LAYOUTS} or HDT/THS")
     sgn = signs[layout]
     heading = yaw_to_heading(yaw_rad)
     pitch_pr = None if pitch_rad is None else _deg(pitch_rad) / sgn.pitch_to_paper
