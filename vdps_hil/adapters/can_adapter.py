@@ -1,0 +1,283 @@
+"""CAN adapters: a live bus through python-can, and a recorded log through python-can's readers.
+
+Interface strings are ``INTERFACE:CHANNEL[,key=value...]`` and go to
+``can.Bus(interface=INTERFACE, channel=CHANNEL, **kwargs)`` unchanged, so every interface
+python-can knows works: ``socketcan:can0``, ``pcan:PCAN_USBBUS1,bitrate=500000``,
+``slcan:/dev/ttyACM0@115200``, ``virtual:hil``, ``socketcand:127.0.0.1,port=29536`` ...
+Values of ``key=value`` are read as int (``500000``, ``0x1F``), float, ``true``/``false`` or
+text.
+
+Time: a live frame gets the host monotonic ``t_ns`` when ``recv`` returned it (one clock for
+every source); the interface's own time stamp is kept as ``device_time_ns`` and checked for
+going backwards (``device_time_backwards``). A recorded frame's ``t_ns`` is its file time stamp
+``round(timestamp * 1e9)``.
+
+Decoding is delegated to a *CAN decoder*: any object with
+``decode(t_ns, arbitration_id, data, is_extended_id) -> list[Sample]`` and a ``counters``
+mapping (``VdpsCanDecoder`` for ``dbc/vdps.dbc``, :class:`vdps_hil.signalmap.SignalMapDecoder`
+for a car's own DBC). ``decode_channels``: when a log holds several channels, only frames of
+these channels are decoded; the others are counted ``other_channel`` and recorded raw under
+their own bus name ``<bus>.<channel>`` (``/raw/can/pt.can1``), never mixed into ``<bus>``.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Iterable, Mapping, Sequence
+
+from vdps_hil.adapters.base import (Adapter, AdapterError, DeviceLost, EndOfInput, RawCan,
+                                    ReplayClock)
+
+__all__ = ["CanAdapter", "CanFileAdapter", "parse_can_spec", "CAN_LOG_SUFFIXES"]
+
+CAN_LOG_SUFFIXES = (".asc", ".blf", ".log", ".trc", ".mf4", ".csv", ".db")
+"""Log formats python-can reads (``.mf4`` needs asammdf), plus ``.mcap`` (ours)."""
+
+
+def _value(text: str) -> Any:
+    t = text.strip()
+    low = t.lower()
+    if low in ("true", "yes", "on"):
+        return True
+    if low in ("false", "no", "off"):
+        return False
+    try:
+        return int(t, 0)
+    except ValueError:
+        pass
+    try:
+        return float(t)
+    except ValueError:
+        return t
+
+
+def parse_can_spec(spec: str) -> tuple[str, str, dict[str, Any]]:
+    """``"pcan:PCAN_USBBUS1,bitrate=500000"`` -> ``("pcan", "PCAN_USBBUS1", {"bitrate":
+    500000})``. Raises AdapterError (one line) on a malformed string or an interface python-can
+    does not know."""
+    import can
+
+    if not isinstance(spec, str) or ":" not in spec:
+        raise AdapterError(f"CAN interface {spec!r} is not INTERFACE:CHANNEL "
+                           "(e.g. socketcan:can0, pcan:PCAN_USBBUS1, virtual:hil)")
+    iface, rest = spec.split(":", 1)
+    iface = iface.strip()
+    parts = rest.split(",")
+    channel = parts[0].strip()
+    kwargs: dict[str, Any] = {}
+    for p in parts[1:]:
+        if "=" not in p:
+            raise AdapterError(f"CAN interface {spec!r}: option {p!r} is not key=value")
+        k, v = p.split("=", 1)
+        kwargs[k.strip()] = _value(v)
+    known = set(can.interfaces.VALID_INTERFACES)
+    if iface not in known:
+        raise AdapterError(f"unknown CAN interface {iface!r} in {spec!r} "
+                           f"(python-can knows: {', '.join(sorted(known))})")
+    if not channel and iface not in ("virtual",):
+        raise AdapterError(f"CAN interface {spec!r} has no channel")
+    return iface, channel, kwargs
+
+
+def _clean_channel(channel) -> str:
+    return "".join(c if c.isalnum() or c in "_.:-" else "_" for c in str(channel)) or "none"
+
+
+class _CanDecodeMixin:
+    """Decoding and raw records shared by the live and the file adapter."""
+
+    decoder: Any
+    decode_channels: frozenset | None
+    bus_name: str
+
+    def _raw(self, t_ns, wall_time_ns, msg):
+        dev = getattr(msg, "timestamp", None)
+        source = self.name
+        if self.decode_channels is not None and str(msg.channel) not in self.decode_channels:
+            source = f"{self.name}.{_clean_channel(msg.channel)}"  # another physical bus
+        return RawCan(t_ns, wall_time_ns, source, msg,
+                      "rx" if getattr(msg, "is_rx", True) else "tx",
+                      None if dev is None else int(round(dev * 1e9)))
+
+    def _decode(self, t_ns, msg):
+        if self.decoder is None or msg.is_error_frame or msg.is_remote_frame:
+            if msg.is_error_frame:
+                self.health.count("error_frames")
+            return ()
+        if self.decode_channels is not None and str(msg.channel) not in self.decode_channels:
+            self.health.count("other_channel")
+            return ()
+        return self.decoder.decode(t_ns, msg.arbitration_id, bytes(msg.data),
+                                   msg.is_extended_id)
+
+    def decoder_counters(self) -> Mapping[str, int]:
+        c = getattr(self.decoder, "counters", None)
+        if c is None:
+            return {}
+        return c() if callable(c) else c
+
+
+class CanAdapter(_CanDecodeMixin, Adapter):
+    """A live CAN bus through python-can.
+
+    ``bus_name``: the logical bus (topic ``/raw/can/<bus_name>``, source ``can.<bus_name>``).
+    ``spec``: an interface string (see the module docstring) or None with ``bus=`` an already
+    open ``can.BusABC`` (tests, HIL). ``decoder``: a CAN decoder or None (raw only).
+    """
+
+    transport = "can"
+
+    def __init__(self, bus_name: str, spec: str | None = None, *, decoder=None, bus=None,
+                 decode_channels: Iterable[str] | None = None, batch: int = 256, **kw):
+        super().__init__(f"can.{bus_name}", spec or repr(bus), **kw)
+        self.bus_name = bus_name
+        self.spec = spec
+        self.decoder = decoder
+        self.decode_channels = None if decode_channels is None else frozenset(
+            str(c) for c in decode_channels)
+        self.batch = int(batch)
+        self.bus = bus
+        self._external_bus = bus is not None
+        self._last_dev_ns = -1
+        if spec is not None:
+            self.iface, self.channel, self.bus_kwargs = parse_can_spec(spec)
+        elif bus is None:
+            raise AdapterError(f"CAN bus {bus_name}: give an interface string or a bus")
+
+    def _open(self) -> None:
+        if self._external_bus:
+            return
+        import can
+
+        try:
+            self.bus = can.Bus(interface=self.iface, channel=self.channel, **self.bus_kwargs)
+        except (can.CanInterfaceNotImplementedError, ImportError) as e:
+            raise AdapterError(f"CAN {self.spec}: interface not available here: "
+                               f"{str(e).splitlines()[0] if str(e) else type(e).__name__}") \
+                from None
+        except (can.CanError, OSError, ValueError, TypeError) as e:
+            msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+            if self.health.state == "closed":
+                raise AdapterError(f"CAN {self.spec}: cannot open: {msg}") from None
+            raise DeviceLost(msg) from None
+
+    def _close(self) -> None:
+        if self.bus is not None and not self._external_bus:
+            try:
+                self.bus.shutdown()
+            finally:
+                self.bus = None
+
+    def _read(self, timeout_s: float) -> Sequence[tuple[int | None, Any]]:
+        import can
+
+        bus = self.bus
+        try:
+            msg = bus.recv(timeout_s)
+            if msg is None:
+                return ()
+            out = [(None, msg)]
+            for _ in range(self.batch - 1):
+                msg = bus.recv(0.0)
+                if msg is None:
+                    break
+                out.append((None, msg))
+        except (can.CanOperationError, OSError) as e:
+            raise DeviceLost(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
+        for _, m in out:
+            ts = m.timestamp
+            if ts:
+                dev = int(ts * 1e9)
+                if dev < self._last_dev_ns:
+                    self.health.count("device_time_backwards")
+                self._last_dev_ns = dev
+        return out
+
+    def send(self, msg) -> None:
+        """Send a frame on this bus and publish it as a ``tx`` raw record."""
+        import can
+
+        try:
+            self.bus.send(msg)
+        except (can.CanOperationError, OSError) as e:
+            self.health.count("send_errors")
+            self.health.last_error = str(e).splitlines()[0] if str(e) else "send failed"
+            return
+        t, wall = self.clock.now()
+        self._publish(RawCan(t, wall, self.name, msg, "tx", None))
+        self.health.count("sent")
+
+
+class CanFileAdapter(_CanDecodeMixin, Adapter):
+    """A recorded CAN log read through ``can.LogReader`` (asc, blf, candump log, trc, mf4,
+    csv, db, and ``.mcap`` through our plugin), replayed as fast as it can be read.
+
+    ``channels``: keep only frames of these channels (``msg.channel`` as text; None: all).
+    ``decode_channels``: see the module docstring.
+    """
+
+    transport = "can"
+
+    def __init__(self, bus_name: str, path: str | os.PathLike, *, decoder=None,
+                 channels: Iterable[str] | None = None,
+                 decode_channels: Iterable[str] | None = None, batch: int = 4096, **kw):
+        kw.setdefault("clock", ReplayClock())
+        super().__init__(f"can.{bus_name}", os.fspath(path), **kw)
+        self.bus_name = bus_name
+        self.path = os.fspath(path)
+        self.decoder = decoder
+        self.channels = None if channels is None else frozenset(str(c) for c in channels)
+        self.decode_channels = None if decode_channels is None else frozenset(
+            str(c) for c in decode_channels)
+        self.batch = int(batch)
+        self._reader = None
+        self._it = None
+
+    def _open(self) -> None:
+        import can
+
+        if not os.path.isfile(self.path):
+            raise AdapterError(f"CAN log {self.path}: no such file")
+        try:
+            self._reader = can.LogReader(self.path)
+            self._it = iter(self._reader)
+        except ValueError as e:
+            raise AdapterError(f"CAN log {self.path}: {str(e).splitlines()[0]} (readable: "
+                               f"{', '.join(CAN_LOG_SUFFIXES)}, .mcap)") from None
+        except ImportError as e:
+            raise AdapterError(f"CAN log {self.path}: needs an optional package: {e}") from None
+        except Exception as e:  # noqa: BLE001 - a broken file is the person's input
+            raise AdapterError(f"CAN log {self.path}: unreadable: {type(e).__name__}: "
+                               f"{str(e).splitlines()[0] if str(e) else ''}") from None
+
+    def _close(self) -> None:
+        if self._reader is not None:
+            try:
+                self._reader.stop()
+            except Exception:  # noqa: BLE001
+                pass
+            self._reader = None
+
+    def _read(self, timeout_s: float) -> Sequence[tuple[int | None, Any]]:
+        if self._it is None:
+            raise EndOfInput()
+        out = []
+        chans = self.channels
+        it = self._it
+        try:
+            for msg in it:
+                if chans is not None and str(msg.channel) not in chans:
+                    continue
+                out.append((int(round(msg.timestamp * 1e9)), msg))
+                if len(out) >= self.batch:
+                    break
+            else:
+                self._it = None
+        except Exception as e:  # noqa: BLE001 - a truncated or corrupt log ends the input
+            self.health.count("read_errors")
+            self.health.last_error = (f"{type(e).__name__}: "
+                                      f"{str(e).splitlines()[0] if str(e) else ''}")
+            self._it = None
+        if not out and self._it is None:
+            raise EndOfInput()
+        return out

@@ -1,0 +1,587 @@
+"""Signal maps: which frame and signal of a car's own DBC feeds which bus catalogue field.
+
+A signal map (``configs/signalmaps/*.toml``, read with tomllib: nothing in it can execute) says,
+per CAN bus, which message -- **by frame ID**, because real DBCs repeat message names -- and
+which of its signals give which catalogue field (:mod:`vdps_hil.bus.samples`), with the unit of
+the DBC value and an optional scale, offset, sign and transform. Decoding uses cantools (never a
+hand-written DBC parser).
+
+Conversion of one mapped value (signals listed together are summed first)::
+
+    x      = sum_j v_j                     v_j: DBC physical value of signal j [unit]
+    y      = scale * x + offset            still in ``unit``
+    y_SI   = U(unit -> field unit) * y     unit conversion; km/h or m/s to rad/s divides by
+                                           the bus's rolling_radius_m (wheel linear speed ->
+                                           spin rate, omega = v / r)
+    z      = sign * T(y_SI)                T: transform, identity or ``heading_to_yaw``:
+                                           psi = wrap(pi/2 - heading), heading clockwise from N
+
+============  ============================================  =========
+symbol        meaning                                       unit
+============  ============================================  =========
+v_j           DBC value of a signal (after DBC factor)      the map's ``unit``
+scale,offset  map's linear correction                       1, unit
+U             unit factor to the catalogue unit             -
+r             rolling radius (``rolling_radius_m``)         m
+sign          +1 or -1 (frame and sign conventions)         1
+============  ============================================  =========
+
+TOML layout::
+
+    name = "toyota-rav4-2017"
+    description = "..."
+    [bus.pt]                       # one table per bus; the name matches ``--can pt=...``
+    dbc = "vdps.dbc"               # optional: path relative to this file (``--dbc`` overrides)
+    dbc_name = "toyota_new_mc_pt_generated.dbc"   # informational (checked by file name only)
+    dbc_sha256 = "..."             # optional: warn when the DBC given differs from this one
+    dbc_strict = false             # load with cantools strict=False (logged)
+    channel = "can0"               # optional: in multi-channel logs decode only this channel
+    rolling_radius_m = 0.35        # optional: for km/h or m/s -> rad/s wheel speeds
+    decode_all = true              # decode unmapped DBC messages too (counts decode errors)
+    codec = "vdps"                 # optional: decode with VdpsCanDecoder (dbc/vdps.dbc only)
+
+    [[bus.pt.message]]
+    frame_id = 0xAA                # required; extended = true for 29-bit IDs
+    name = "WHEEL_SPEEDS"          # optional; checked against the DBC
+    kind = "wheel_speed"           # the Sample kind
+    checksum = "toyota"            # optional: a named checksum rule (CHECKSUMS)
+    counter = "COUNTER"            # optional: a rolling counter signal (jumps are counted)
+    valid_signal = "PositionValid" # optional: Sample.valid = (value != 0)
+    signals = [ { signal = "WHEEL_SPEED_FL", field = "wheel_speed_radps_1", unit = "km/h" },
+                { signal = ["STEER_ANGLE", "STEER_FRACTION"], field = "...", unit = "deg",
+                  sign = -1, scale = 1.0, offset = 0.0, transform = "heading_to_yaw" } ]
+
+Counters of :class:`SignalMapDecoder`: ``frames``, ``decoded`` (mapped frames that gave a
+sample), ``unmapped`` (in the DBC, not in the map: decoded only to check them),
+``unknown_id`` (not in the DBC: not an error), ``dlc_mismatch`` (payload length differs from
+the DBC; a longer payload is decoded from its first bytes, a shorter one as far as it goes),
+``undecodable`` (cantools could not decode: a decode error), ``checksum_mismatch`` and
+``counter_jump`` (the sample is kept with ``valid=False``), ``missing_signal`` (a mapped signal
+absent from the frame).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Callable, Mapping
+
+from vdps_hil.bus.samples import FIELDS, Sample
+
+__all__ = ["SignalMap", "BusMap", "MessageRule", "SignalRule", "SignalMapError",
+           "SignalMapDecoder", "load_signalmap", "load_dbc", "build_decoder", "CHECKSUMS",
+           "SIGNALMAP_DIR", "convert_unit"]
+
+log = logging.getLogger(__name__)
+
+SIGNALMAP_DIR = Path(__file__).resolve().parents[2] / "configs" / "signalmaps"
+
+
+class SignalMapError(ValueError):
+    """A signal map or its DBC cannot be used (one line naming the file and the problem)."""
+
+
+# --- units ----------------------------------------------------------------------------------
+
+_ALIASES = {
+    "": "1", "-": "1", "1": "1", "none": "1", "unit": "1", "%": "%",
+    "rad": "rad", "deg": "deg", "degree": "deg", "degrees": "deg", "°": "deg",
+    "rad/s": "rad/s", "deg/s": "deg/s", "°/s": "deg/s", "dps": "deg/s", "rpm": "rpm",
+    "m/s": "m/s", "km/h": "km/h", "kph": "km/h", "kmh": "km/h", "mph": "mph", "kn": "kn",
+    "m/s^2": "m/s^2", "m/s2": "m/s^2", "m/s²": "m/s^2", "g": "g",
+    "m": "m", "mm": "mm", "cm": "cm", "km": "km",
+    "n m": "N m", "nm": "N m", "n.m": "N m", "n*m": "N m",
+    "pa": "Pa", "kpa": "kPa", "mpa": "MPa", "bar": "bar", "mbar": "mbar", "psi": "psi",
+    "degc": "degC", "°c": "degC", "c": "degC", "s": "s", "ms": "ms",
+}
+
+# unit -> (dimension, factor to the SI unit of that dimension)
+_UNITS: dict[str, tuple[str, float]] = {
+    "1": ("1", 1.0), "%": ("1", 0.01),
+    "rad": ("angle", 1.0), "deg": ("angle", math.pi / 180.0),
+    "rad/s": ("rate", 1.0), "deg/s": ("rate", math.pi / 180.0), "rpm": ("rate", math.pi / 30.0),
+    "m/s": ("speed", 1.0), "km/h": ("speed", 1.0 / 3.6), "mph": ("speed", 0.44704),
+    "kn": ("speed", 1852.0 / 3600.0),
+    "m/s^2": ("accel", 1.0), "g": ("accel", 9.80665),
+    "m": ("length", 1.0), "mm": ("length", 1e-3), "cm": ("length", 1e-2), "km": ("length", 1e3),
+    "N m": ("torque", 1.0),
+    "Pa": ("pressure", 1.0), "kPa": ("pressure", 1e3), "MPa": ("pressure", 1e6),
+    "bar": ("pressure", 1e5), "mbar": ("pressure", 1e2), "psi": ("pressure", 6894.757293168),
+    "degC": ("temperature", 1.0), "s": ("time", 1.0), "ms": ("time", 1e-3),
+}
+
+
+def _norm_unit(u: str) -> str:
+    key = str(u).strip()
+    return _ALIASES.get(key.lower(), key)
+
+
+def convert_unit(from_unit: str, to_unit: str, rolling_radius_m: float | None = None
+                 ) -> float:
+    """Factor taking a value in ``from_unit`` to ``to_unit``; a speed to a spin rate divides
+    by ``rolling_radius_m``. Raises SignalMapError when the units are unknown or
+    incompatible."""
+    a, b = _norm_unit(from_unit), _norm_unit(to_unit)
+    if a not in _UNITS:
+        raise SignalMapError(f"unknown unit {from_unit!r} (known: {', '.join(sorted(_UNITS))})")
+    if b not in _UNITS:
+        raise SignalMapError(f"unknown unit {to_unit!r}")
+    (da, fa), (db, fb) = _UNITS[a], _UNITS[b]
+    if da == db:
+        return fa / fb
+    if da == "speed" and db == "rate":
+        if not rolling_radius_m or rolling_radius_m <= 0:
+            raise SignalMapError(f"{from_unit} -> {to_unit} needs rolling_radius_m on the bus")
+        return fa / rolling_radius_m / fb
+    raise SignalMapError(f"cannot convert {from_unit!r} to {to_unit!r}")
+
+
+def _heading_to_yaw(h_rad: float) -> float:
+    psi = math.pi / 2.0 - h_rad
+    return (psi + math.pi) % (2.0 * math.pi) - math.pi
+
+
+TRANSFORMS: dict[str, Callable[[float], float]] = {
+    "": lambda v: v,
+    "heading_to_yaw": _heading_to_yaw,
+}
+"""Named transforms applied after the unit conversion (input already in SI)."""
+
+
+# --- checksums ------------------------------------------------------------------------------
+
+def _toyota_checksum(frame_id: int, data: bytes) -> bool:
+    """Toyota/opendbc: last byte = (id_low + id_high + length + sum(other bytes)) mod 256."""
+    if len(data) < 1:
+        return False
+    s = (frame_id & 0xFF) + ((frame_id >> 8) & 0xFF) + len(data) + sum(data[:-1])
+    return (s & 0xFF) == data[-1]
+
+
+def _vdps_crc8(frame_id: int, data: bytes) -> bool:
+    """dbc/vdps.dbc VDPS_Warning: byte 0 = CRC-8/SAE-J1850 of bytes 1..7."""
+    from vdps_hil.codecs.can_codec import crc8_j1850
+
+    return len(data) >= 2 and crc8_j1850(data[1:]) == data[0]
+
+
+CHECKSUMS: dict[str, Callable[[int, bytes], bool]] = {
+    "toyota": _toyota_checksum,
+    "vdps_crc8": _vdps_crc8,
+}
+"""Named checksum rules: ``(frame_id, data) -> ok``."""
+
+
+# --- the map --------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class SignalRule:
+    signals: tuple[str, ...]
+    field: str
+    unit: str
+    factor: float  # scale * U (unit conversion, radius) folded
+    offset_si: float  # offset * U
+    sign: float
+    transform: str
+
+    def value(self, vals: Mapping[str, Any]) -> float | None:
+        x = 0.0
+        for s in self.signals:
+            v = vals.get(s)
+            if v is None:
+                return None
+            x += float(v)
+        y = self.sign * TRANSFORMS[self.transform](self.factor * x + self.offset_si)
+        return y
+
+
+@dataclass(frozen=True)
+class MessageRule:
+    frame_id: int
+    is_extended: bool
+    name: str
+    kind: str
+    rules: tuple[SignalRule, ...]
+    checksum: str = ""
+    counter: str = ""
+    valid_signal: str = ""
+
+
+@dataclass(frozen=True)
+class BusMap:
+    name: str
+    dbc: Path | None
+    dbc_name: str
+    dbc_sha256: str
+    dbc_strict: bool
+    channel: str | None
+    rolling_radius_m: float | None
+    decode_all: bool
+    messages: Mapping[tuple[int, bool], MessageRule]
+    codec: str = ""
+
+    def fields(self) -> set[str]:
+        return {r.field for m in self.messages.values() for r in m.rules}
+
+
+@dataclass(frozen=True)
+class SignalMap:
+    name: str
+    description: str
+    path: Path | None
+    sha256: str
+    buses: Mapping[str, BusMap] = field(default_factory=dict)
+    text: str = ""
+
+    def bus(self, name: str) -> BusMap | None:
+        """The map of bus ``name``; with a single bus in the map, that one for any name."""
+        if name in self.buses:
+            return self.buses[name]
+        if len(self.buses) == 1:
+            only = next(iter(self.buses.values()))
+            log.info("signal map %s: bus %r not named in the map, using its only bus %r",
+                     self.name, name, only.name)
+            return only
+        return None
+
+
+_TOP_KEYS = {"name", "description", "bus"}
+_BUS_KEYS = {"dbc", "dbc_name", "dbc_sha256", "dbc_strict", "channel", "rolling_radius_m",
+             "decode_all", "codec", "message"}
+
+CODECS = ("", "vdps")
+"""``codec`` values of a bus: "" (generic SignalMapDecoder) or "vdps" (VdpsCanDecoder)."""
+_MSG_KEYS = {"frame_id", "extended", "name", "kind", "checksum", "counter", "valid_signal",
+             "signals"}
+_SIG_KEYS = {"signal", "field", "unit", "scale", "offset", "sign", "transform"}
+
+
+def _check_keys(where: str, d: Mapping, allowed: set[str]) -> None:
+    extra = set(d) - allowed
+    if extra:
+        raise SignalMapError(f"{where}: unknown key(s) {', '.join(sorted(extra))} "
+                             f"(allowed: {', '.join(sorted(allowed))})")
+
+
+def _num(where: str, v, what: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise SignalMapError(f"{where}: {what} must be a finite number, got {v!r}")
+    return float(v)
+
+
+def _signal_rule(where: str, d: Mapping, radius: float | None) -> SignalRule:
+    if not isinstance(d, Mapping):
+        raise SignalMapError(f"{where}: each signal entry must be a table")
+    _check_keys(where, d, _SIG_KEYS)
+    sig = d.get("signal")
+    sigs = (sig,) if isinstance(sig, str) else tuple(sig) if isinstance(sig, list) else ()
+    if not sigs or not all(isinstance(s, str) and s for s in sigs):
+        raise SignalMapError(f"{where}: 'signal' must be a name or a list of names")
+    fld = d.get("field")
+    if fld not in FIELDS:
+        raise SignalMapError(f"{where}: field {fld!r} is not in the bus catalogue "
+                             "(vdps_hil.bus.samples.FIELDS)")
+    unit = d.get("unit", "")
+    if not isinstance(unit, str):
+        raise SignalMapError(f"{where}: unit must be text")
+    scale = _num(where, d.get("scale", 1.0), "scale")
+    offset = _num(where, d.get("offset", 0.0), "offset")
+    sign = _num(where, d.get("sign", 1), "sign")
+    if sign not in (1.0, -1.0):
+        raise SignalMapError(f"{where}: sign must be 1 or -1")
+    transform = d.get("transform", "")
+    if transform not in TRANSFORMS:
+        raise SignalMapError(f"{where}: unknown transform {transform!r} "
+                             f"(known: {', '.join(t for t in TRANSFORMS if t)})")
+    try:
+        u = convert_unit(unit, FIELDS[fld].unit, radius)
+    except SignalMapError as e:
+        raise SignalMapError(f"{where}: {e}") from None
+    return SignalRule(sigs, fld, unit, scale * u, offset * u, sign, transform)
+
+
+def _parse(doc: Mapping, path: Path | None, text: str) -> SignalMap:
+    where0 = str(path) if path else "signal map"
+    _check_keys(where0, doc, _TOP_KEYS)
+    buses_doc = doc.get("bus")
+    if not isinstance(buses_doc, Mapping) or not buses_doc:
+        raise SignalMapError(f"{where0}: no [bus.<name>] table")
+    buses = {}
+    for bname, b in buses_doc.items():
+        where = f"{where0} [bus.{bname}]"
+        if not isinstance(b, Mapping):
+            raise SignalMapError(f"{where}: must be a table")
+        _check_keys(where, b, _BUS_KEYS)
+        radius = b.get("rolling_radius_m")
+        if radius is not None:
+            radius = _num(where, radius, "rolling_radius_m")
+            if radius <= 0:
+                raise SignalMapError(f"{where}: rolling_radius_m must be positive")
+        dbc = b.get("dbc")
+        if dbc is not None:
+            if not isinstance(dbc, str):
+                raise SignalMapError(f"{where}: dbc must be a path")
+            dbc = ((path.parent / dbc) if path is not None else Path(dbc)).resolve()
+        channel = b.get("channel")
+        codec = b.get("codec", "")
+        if codec not in CODECS:
+            raise SignalMapError(f"{where}: unknown codec {codec!r} (known: vdps)")
+        msgs: dict[tuple[int, bool], MessageRule] = {}
+        for i, m in enumerate(b.get("message", [])):
+            mw = f"{where} message #{i + 1}"
+            if not isinstance(m, Mapping):
+                raise SignalMapError(f"{mw}: must be a table")
+            _check_keys(mw, m, _MSG_KEYS)
+            fid = m.get("frame_id")
+            if isinstance(fid, bool) or not isinstance(fid, int) or fid < 0 or fid > 0x1FFFFFFF:
+                raise SignalMapError(f"{mw}: frame_id must be an integer ID (e.g. 0xAA)")
+            ext = bool(m.get("extended", fid > 0x7FF))
+            kind = m.get("kind")
+            if not isinstance(kind, str) or not kind:
+                raise SignalMapError(f"{mw}: kind is required (e.g. 'wheel_speed')")
+            cks = m.get("checksum", "")
+            if cks and cks not in CHECKSUMS:
+                raise SignalMapError(f"{mw}: unknown checksum {cks!r} "
+                                     f"(known: {', '.join(CHECKSUMS)})")
+            sigs = m.get("signals", [])
+            if not isinstance(sigs, list) or not sigs:
+                raise SignalMapError(f"{mw}: 'signals' must be a non-empty list")
+            rules = tuple(_signal_rule(f"{mw} signal #{j + 1}", s, radius)
+                          for j, s in enumerate(sigs))
+            key = (fid, ext)
+            if key in msgs:
+                raise SignalMapError(f"{mw}: frame 0x{fid:X} mapped twice")
+            msgs[key] = MessageRule(fid, ext, str(m.get("name", "")), kind, rules,
+                                    str(cks), str(m.get("counter", "")),
+                                    str(m.get("valid_signal", "")))
+        buses[str(bname)] = BusMap(
+            str(bname), dbc, str(b.get("dbc_name", "")), str(b.get("dbc_sha256", "")),
+            bool(b.get("dbc_strict", True)), None if channel is None else str(channel), radius,
+            bool(b.get("decode_all", True)), MappingProxyType(msgs), str(codec))
+    name = doc.get("name", path.stem if path else "signalmap")
+    return SignalMap(str(name), str(doc.get("description", "")), path,
+                     hashlib.sha256(text.encode()).hexdigest(), MappingProxyType(buses), text)
+
+
+def load_signalmap(path: str | os.PathLike) -> SignalMap:
+    """Read and check a signal map (a bare name such as ``rav4`` is looked up in
+    ``configs/signalmaps/``). Raises SignalMapError (one line)."""
+    p = Path(path)
+    if not p.suffix and not p.exists():
+        p = SIGNALMAP_DIR / f"{p.name}.toml"
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise SignalMapError(f"signal map {path}: cannot read: "
+                             f"{getattr(e, 'strerror', None) or e}") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SignalMapError(f"signal map {p}: malformed TOML: {e}") from None
+    return _parse(doc, p, text)
+
+
+def load_dbc(path: str | os.PathLike, *, strict: bool = True):
+    """Load a DBC with cantools (``strict=False`` logs that it does). SignalMapError on
+    failure, suggesting ``dbc_strict = false`` when only the strict checks fail."""
+    import cantools
+
+    p = Path(path).resolve()
+    if not p.is_file():
+        raise SignalMapError(f"DBC {p}: no such file")
+    quiet = logging.getLogger("cantools")
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)  # "Overwriting message ..." for repeated names: expected
+    try:
+        db = cantools.database.load_file(str(p), database_format="dbc", strict=strict)
+    except Exception as e:  # noqa: BLE001 - cantools raises many types
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        if strict:
+            try:
+                cantools.database.load_file(str(p), database_format="dbc", strict=False)
+            except Exception:  # noqa: BLE001
+                pass
+            else:
+                raise SignalMapError(f"DBC {p} fails cantools' strict checks ({msg}); set "
+                                     "dbc_strict = false in the signal map to load it anyway") \
+                    from None
+        raise SignalMapError(f"DBC {p}: cannot load: {msg}") from None
+    finally:
+        quiet.setLevel(level)
+    if not strict:
+        log.warning("DBC %s loaded with strict=False (the signal map allows it)", p)
+    return db
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 16), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+# --- the decoder ----------------------------------------------------------------------------
+
+class _Compiled:
+    __slots__ = ("rule", "message", "length", "counter_mod", "last_counter", "checksum")
+
+    def __init__(self, rule: MessageRule, message):
+        self.rule, self.message = rule, message
+        self.length = message.length
+        self.checksum = CHECKSUMS.get(rule.checksum)
+        self.counter_mod = 0
+        self.last_counter = None
+        if rule.counter:
+            sig = next((s for s in message.signals if s.name == rule.counter), None)
+            if sig is None:
+                raise SignalMapError(f"frame 0x{rule.frame_id:X}: counter signal "
+                                     f"{rule.counter!r} is not in the DBC message")
+            self.counter_mod = 1 << sig.length
+
+
+class SignalMapDecoder:
+    """Decode one bus's frames with its DBC and signal map into bus samples.
+
+    Same interface as ``VdpsCanDecoder``: ``decode(t_ns, arbitration_id, data,
+    is_extended_id) -> list[Sample]`` never raises on frame content; ``counters`` (module
+    docstring). ``source``: the samples' source (default ``can.<bus>``).
+    """
+
+    def __init__(self, bus_map: BusMap, db, *, source: str | None = None):
+        self.bus_map = bus_map
+        self.db = db
+        self.source = source or f"can.{bus_map.name}"
+        self._c = {k: 0 for k in ("frames", "decoded", "unmapped", "unknown_id",
+                                  "dlc_mismatch", "undecodable", "checksum_mismatch",
+                                  "counter_jump", "missing_signal")}
+        self._by_key: dict[tuple[int, bool], _Compiled | None] = {}
+        self._dbc_msgs: dict[tuple[int, bool], Any] = {}
+        for m in db.messages:
+            self._dbc_msgs[(m.frame_id, bool(m.is_extended_frame))] = m
+        for key, rule in bus_map.messages.items():
+            m = self._dbc_msgs.get(key)
+            if m is None:
+                raise SignalMapError(f"signal map bus {bus_map.name}: frame 0x{key[0]:X} "
+                                     f"({rule.name or 'unnamed'}) is not in the DBC")
+            if rule.name and rule.name != m.name:
+                log.warning("signal map bus %s: frame 0x%X is %s in the DBC, not %s",
+                            bus_map.name, key[0], m.name, rule.name)
+            names = {s.name for s in m.signals}
+            for r in rule.rules:
+                for s in r.signals:
+                    if s not in names:
+                        raise SignalMapError(f"signal map bus {bus_map.name}: frame 0x{key[0]:X}"
+                                             f" ({m.name}) has no signal {s!r}")
+            if rule.valid_signal and rule.valid_signal not in names:
+                raise SignalMapError(f"signal map bus {bus_map.name}: frame 0x{key[0]:X} has no "
+                                     f"signal {rule.valid_signal!r}")
+            self._by_key[key] = _Compiled(rule, m)
+
+    @property
+    def counters(self) -> Mapping[str, int]:
+        return MappingProxyType(self._c)
+
+    def fields(self) -> set[str]:
+        return self.bus_map.fields()
+
+    def decode(self, t_ns: int, arbitration_id: int, data: bytes,
+               is_extended_id: bool = False) -> list[Sample]:
+        c = self._c
+        c["frames"] += 1
+        key = (arbitration_id, bool(is_extended_id))
+        comp = self._by_key.get(key)
+        if comp is None:
+            m = self._dbc_msgs.get(key)
+            if m is None:
+                c["unknown_id"] += 1
+                return []
+            c["unmapped"] += 1
+            if self.bus_map.decode_all:
+                self._try_decode(m, data)
+            return []
+        vals = self._try_decode(comp.message, data)
+        if vals is None:
+            return []
+        rule = comp.rule
+        valid = True
+        if comp.checksum is not None and not comp.checksum(arbitration_id, data):
+            c["checksum_mismatch"] += 1
+            valid = False
+        if comp.counter_mod:
+            cnt = vals.get(rule.counter)
+            if cnt is not None:
+                cnt = int(cnt)
+                if comp.last_counter is not None and \
+                        (cnt - comp.last_counter) % comp.counter_mod != 1:
+                    c["counter_jump"] += 1
+                    valid = False
+                comp.last_counter = cnt
+        if rule.valid_signal:
+            v = vals.get(rule.valid_signal)
+            if v is None or not float(v):
+                valid = False
+        fields = {}
+        for r in rule.rules:
+            y = r.value(vals)
+            if y is None:
+                c["missing_signal"] += 1
+                continue
+            fields[r.field] = y
+        if not fields:
+            return []
+        c["decoded"] += 1
+        return [Sample(t_ns=int(t_ns), source=self.source, kind=rule.kind, fields=fields,
+                       valid=valid)]
+
+    def _try_decode(self, m, data: bytes):
+        c = self._c
+        n = len(data)
+        if n != m.length:
+            c["dlc_mismatch"] += 1
+        try:
+            return m.decode(bytes(data), decode_choices=False, scaling=True,
+                            allow_truncated=n < m.length, allow_excess=True)
+        except Exception:  # noqa: BLE001 - cantools' DecodeError and friends
+            c["undecodable"] += 1
+            return None
+
+
+def build_decoder(sigmap: SignalMap, bus: str, dbc_path: str | os.PathLike | None = None,
+                  *, source: str | None = None) -> tuple[SignalMapDecoder | None, dict]:
+    """The decoder of ``bus`` from a signal map and a DBC (``dbc_path`` overrides the map's).
+
+    Returns ``(decoder or None, info)`` where ``info`` has the DBC path and its sha256, whether
+    it was loaded non-strictly, and the decoded channel; ``None`` when the map has no entry for
+    this bus. Raises SignalMapError (one line) when the DBC is missing or does not fit.
+    """
+    bm = sigmap.bus(bus)
+    if bm is None:
+        return None, {}
+    path = Path(dbc_path) if dbc_path is not None else bm.dbc
+    if path is None:
+        raise SignalMapError(f"signal map {sigmap.name} bus {bm.name}: no DBC given "
+                             f"(pass --dbc {bm.dbc_name or 'FILE'})")
+    db = load_dbc(path, strict=bm.dbc_strict)
+    generic = SignalMapDecoder(bm, db, source=source)  # checks the map against the DBC
+    digest = file_sha256(path)
+    if bm.dbc_sha256 and bm.dbc_sha256 != digest:
+        log.warning("DBC %s differs from the one signal map %s was written for (sha256 %s...)",
+                    path, sigmap.name, bm.dbc_sha256[:12])
+    info = {"dbc": str(path), "dbc_sha256": digest, "dbc_strict": bm.dbc_strict,
+            "channel": bm.channel, "signalmap": sigmap.name, "signalmap_sha256": sigmap.sha256,
+            "codec": bm.codec or "signalmap"}
+    if bm.codec == "vdps":
+        from vdps_hil.codecs.can_codec import DbcError, VdpsCanDecoder
+
+        try:
+            return VdpsCanDecoder(path, source=source or f"can.{bm.name}"), info
+        except DbcError as e:
+            raise SignalMapError(str(e)) from None
+    return generic, info
