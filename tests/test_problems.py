@@ -160,6 +160,15 @@ def test_dependent_problems_wait_for_their_upstream_problems(rng):
     assert ident.waiting_upstream["inertia"] > ident.waiting_upstream["cornering"]
 
 
+def test_a_never_excited_upstream_problem_delays_its_dependants_at_most_max_wait(rng):
+    cfg = dataclasses.replace(load_ident_config(), upstream_max_wait=30)
+    ident = Identifier(MODEL, cfg)
+    for k in range(60):  # no wheel ever slips: tracking is never excited
+        ident.update(_forward(rng, k, slip=np.zeros(4)))
+    assert ident.counters["tracking"].updates == 0
+    assert ident.waiting_upstream["cornering"] == 30 and ident.counters["cornering"].updates > 0
+
+
 def test_low_speed_gates_the_slip_problems(rng):
     ident = _warmed_up(rng)
     c0 = ident.counters
@@ -217,6 +226,31 @@ def test_status_is_json_and_converged_flags(rng):
     assert set(doc["params"]) == set(PARAM_NAMES) == set(doc["sigmas"])
     assert doc["converged"]["mass"] is True  # noise-free data: sigma -> 0
     assert all(doc["identifiability"][p] > 0 for p in PROBLEM_NAMES)
+
+
+@pytest.mark.parametrize("problem", ["cornering", "inertia"])
+def test_upstream_sensitivity_of_b_matches_finite_differences(rng, problem):
+    from vdps_hil.identification.problems import REGRESSORS
+    cfg = load_ident_config()
+    inp = _forward(rng, 0)
+    names = Identifier.upstream_param_names(problem)
+    base = REGRESSORS[problem](inp, MODEL, TRUE, cfg)
+    assert base.db_dup.shape == (base.b.shape[0], len(names))
+    for j, n in enumerate(names):
+        step = 1e-3 * getattr(TRUE, n)
+        moved = REGRESSORS[problem](inp, MODEL, dataclasses.replace(TRUE, **{n: getattr(TRUE, n) + step}), cfg)
+        assert np.allclose((moved.b - base.b) / step, base.db_dup[:, j], rtol=1e-6, atol=1e-9), n
+
+
+def test_sigmas_include_the_uncertainty_of_upstream_estimates(rng):
+    ident = Identifier(MODEL)
+    for k in range(200):
+        ident.update(_forward(rng, k))
+    own = ident.problem("inertia").parameter_covariance
+    total = ident.covariances["inertia"]
+    assert np.all(np.diag(total) >= np.diag(own))
+    assert np.any(np.diag(total) > np.diag(own))
+    assert ident.sigmas["inertia_z_kgm2"] == pytest.approx(math.sqrt(total[2, 2]))
 
 
 # ------------------------------------------------------------------- forces and moments

@@ -214,6 +214,20 @@ def test_identifiability_is_min_eigenvalue_of_weighted_information(rng):
     assert r2.identifiability == pytest.approx(0.04 * r1.identifiability, rel=1e-10)
 
 
+def test_consider_covariance_uses_the_least_squares_sensitivity(rng):
+    # b depends on a consider parameter theta: b = A x + d theta. J = dx/dtheta by finite difference.
+    data = [(a, b, rng.normal(size=3)) for a, b in _rows(rng, 50, noise_sd=10.0)]
+    def run(theta):
+        r = WeightedRLS(X0, 0.5 * X0, [0.5, 1.0, 2.0], forgetting=0.98)
+        for a, b, d in data:
+            r.update(a, b + d * theta, db_dtheta=d[:, None])
+        return r
+    r0, r1 = run(0.0), run(1.0)
+    j = r1.x - r0.x  # exact: x is linear in theta
+    assert np.allclose(r0.consider_covariance([[4.0]]), 4.0 * np.outer(j, j), rtol=1e-8, atol=1e-12)
+    assert np.array_equal(WeightedRLS(X0, X0, [1.0] * 3).consider_covariance([[1.0]]), np.zeros((3, 3)))
+
+
 # ------------------------------------------------------------------ sigma calibration (MC)
 N_SEEDS = 40
 COVERAGE_BAND = (0.85, 1.0)  # 95 % expected; 40 seeds -> binomial sd 3.4 %

@@ -52,7 +52,12 @@ class PersistedParams:
 
 
 def _finite(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:  # a JSON integer beyond the float range
+        return False
 
 
 def check_params(params: IdentifiedParams, prior: IdentifiedParams,

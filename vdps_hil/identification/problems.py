@@ -22,7 +22,7 @@ The four RLS problems ``Q A W W^-1 x = Q b`` (solved by :class:`~.rls.WeightedRL
 * **cornering** (eq 22): x = [C_alpha,f, C_alpha,r], with the current estimates of m and
   C_lambda (Gauss-Seidel: the problems are updated in the order mass, tracking, cornering,
   inertia, each with the newest estimates of the others; a problem waits until the problems it
-  uses are full rank and have ``upstream_min_updates`` updates, see ``UPSTREAM``)::
+  uses have ``upstream_min_updates`` updates, see ``UPSTREAM``)::
 
       A = [[-(a1 sin d1 + a2 sin d2)/2, -(a3 sin d3 + a4 sin d4)/2],
            [ (a1 cos d1 + a2 cos d2)/2,  (a3 cos d3 + a4 cos d4)/2]]       (steer_form per_wheel)
@@ -114,6 +114,10 @@ Misprints of the paper (section 4-5, 8 and the figures) and what we implement
     compression from the spring's free length: we use H = static_compression_m + H^sus
     (``vdps_hil.conventions``), so b_1 balances m_tot g at rest.
 12. Table 3 footnote a: "convergent rate" is a time (reaching 90 % of the real value), not a rate.
+13. (Not a misprint, a gap.) Table 3 does not give P(0). With W_4 = I and P(0) = I (config
+    ``p0_scaled = 1``) our noise-free inertia runs reproduce its ordering and orders of
+    magnitude (q = 0.625: 0.03/0.08/0.13 s to 90 % for I_x/I_y/I_z, paper 0.08/1.63/0.24 s;
+    q = 0.005: none within the run, paper "NaN"), see ``tests/test_problems.py``.
 """
 
 from __future__ import annotations
@@ -122,7 +126,7 @@ import math
 import tomllib
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Callable
 
 import numpy as np
 
@@ -150,8 +154,9 @@ PROBLEM_ROWS = {"mass": 1, "tracking": 4, "cornering": 2, "inertia": 3}
 UPSTREAM: dict[str, tuple[str, ...]] = {"mass": (), "tracking": (), "cornering": ("mass", "tracking"),
                                         "inertia": ("tracking", "cornering")}
 """Problems whose estimates enter a problem's b (eq 22: m, C_lambda; eq 23's moments: C_lambda,
-C_alpha). A problem waits until each of these is full rank and has ``upstream_min_updates``
-updates: rows built from the priors would otherwise stay in its memory (weight 1/N)."""
+C_alpha). A problem waits until each of these has ``upstream_min_updates`` updates (at most
+``upstream_max_wait`` calls): rows built from the priors would otherwise stay in its memory
+(weight 1/N without forgetting)."""
 
 
 # --------------------------------------------------------------------------- configuration
@@ -181,6 +186,7 @@ class IdentConfig:
     min_updates_converged: int
     steer_form: str
     upstream_min_updates: int
+    upstream_max_wait: int
     mass: ProblemConfig
     tracking: ProblemConfig
     cornering: ProblemConfig
@@ -191,7 +197,8 @@ class IdentConfig:
 
 
 _GENERAL_KEYS = {"form", "bounds_mode", "bounds_factor", "min_speed_mps", "sigma_autocorr", "min_dof",
-                 "converged_rel_sigma", "min_updates_converged", "steer_form", "upstream_min_updates"}
+                 "converged_rel_sigma", "min_updates_converged", "steer_form", "upstream_min_updates",
+                 "upstream_max_wait"}
 _PROBLEM_KEYS = {"q", "w", "forgetting", "prior_rel_sigma", "excitation_min"}
 
 
@@ -245,7 +252,7 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
     lo, hi = _nums(g["bounds_factor"], 2, f"{origin}[general].bounds_factor", positive=True)
     if not lo < 1.0 < hi:
         raise IdentConfigError(f"{origin}[general].bounds_factor: need lo < 1 < hi, got [{lo}, {hi}]")
-    for k in ("min_dof", "min_updates_converged", "upstream_min_updates"):
+    for k in ("min_dof", "min_updates_converged", "upstream_min_updates", "upstream_max_wait"):
         if isinstance(g[k], bool) or not isinstance(g[k], int) or g[k] < 0:
             raise IdentConfigError(f"{origin}[general].{k}: expected a non-negative integer")
     problems = {}
@@ -275,7 +282,8 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
         converged_rel_sigma=_num(g["converged_rel_sigma"], f"{origin}[general].converged_rel_sigma",
                                  positive=True),
         min_updates_converged=g["min_updates_converged"], steer_form=g["steer_form"],
-        upstream_min_updates=g["upstream_min_updates"], **problems)
+        upstream_min_updates=g["upstream_min_updates"], upstream_max_wait=g["upstream_max_wait"],
+        **problems)
 
 
 def load_ident_config(path: str | Path | None = None) -> IdentConfig:
@@ -402,11 +410,14 @@ def moments_from_inputs(vehicle: Vehicle, params: IdentifiedParams, inp: IdentIn
 # --------------------------------------------------------------------------- regressors
 @dataclass(frozen=True)
 class Regressor:
-    """A_rls (m x n, physical), b (m) and the rows that are excited (m booleans)."""
+    """A_rls (m x n, physical), b (m), the rows that are excited (m booleans) and, for problems
+    whose b uses other problems' estimates, db/dtheta (m x p) over the upstream parameters in
+    ``upstream_param_names(problem)`` order (for the consider covariance)."""
 
     a: np.ndarray
     b: np.ndarray
     rows: np.ndarray
+    db_dup: np.ndarray | None = None
 
 
 def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
@@ -451,11 +462,11 @@ def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPa
     fa = np.array(params.tracking_stiffness_n) * np.asarray(inp.slip_ratio)
     m, g = params.mass_kg, inp.gravity_aux_mps2
     psid = inp.psi_v_dot_radps
-    b = np.array([
-        m * (inp.xdd_a_mps2 - inp.yd_a_mps * psid - g[0]) - np.sum(fa * np.cos(d)),
-        m * (inp.ydd_a_mps2 + inp.xd_a_mps * psid - g[1]) - np.sum(fa * np.sin(d)),
-    ])
-    return Regressor(a, b, _gate(a, cfg.cornering.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps))
+    acc = np.array([inp.xdd_a_mps2 - inp.yd_a_mps * psid - g[0], inp.ydd_a_mps2 + inp.xd_a_mps * psid - g[1]])
+    b = m * acc - np.array([np.sum(fa * np.cos(d)), np.sum(fa * np.sin(d))])
+    lam = np.asarray(inp.slip_ratio)
+    db = np.column_stack([acc, -np.vstack([lam * np.cos(d), lam * np.sin(d)])])  # d/d[m, C_lambda,1..4]
+    return Regressor(a, b, _gate(a, cfg.cornering.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps), db)
 
 
 def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams,
@@ -467,7 +478,26 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
                   [wz * wx, dy, -wz * wx],
                   [-wx * wy, wx * wy, dz]])
     b = moments_from_inputs(vehicle, params, inp)
-    return Regressor(a, b, _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps))
+    db = np.zeros((3, 6)) if inp.moments_nm is not None else _moment_sensitivity(vehicle.geometry, inp)
+    return Regressor(a, b, _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps), db)
+
+
+def _moment_sensitivity(geometry: Geometry, inp: IdentInputs) -> np.ndarray:
+    """d(M_x, M_y, M_z)/d(C_lambda,1..4, C_alpha,f, C_alpha,r): the moments are linear in the
+    tire stiffnesses; dM/dF_x,i = (0, -h, -y_i), dM/dF_y,i = (h, 0, x_i)."""
+    xy = np.array(geometry.corner_xy_m())
+    h = geometry.h_cg_m
+    d = np.asarray(inp.wheel_angle_rad)
+    lam, al = np.asarray(inp.slip_ratio), np.asarray(inp.slip_angle_rad)
+    dm_dfx = np.stack([np.zeros(4), np.full(4, -h), -xy[:, 1]])  # 3 x 4
+    dm_dfy = np.stack([np.full(4, h), np.zeros(4), xy[:, 0]])
+    c, s = np.cos(d), np.sin(d)
+    out = np.zeros((3, 6))
+    out[:, :4] = dm_dfx * (lam * c) + dm_dfy * (lam * s)
+    per_wheel = dm_dfx * (-al * s / 2.0) + dm_dfy * (al * c / 2.0)
+    out[:, 4] = per_wheel[:, 0] + per_wheel[:, 1]
+    out[:, 5] = per_wheel[:, 2] + per_wheel[:, 3]
+    return out
 
 
 RegressorBuilder = Callable[[IdentInputs, Vehicle, IdentifiedParams, IdentConfig], Regressor]
@@ -514,6 +544,7 @@ class Identifier:
         self._rls = {name: self._make(name) for name in PROBLEM_NAMES}
         self._excited = {name: False for name in PROBLEM_NAMES}
         self._waiting = {name: 0 for name in PROBLEM_NAMES}
+        self._ready = {name: False for name in PROBLEM_NAMES}
         self._inputs_rejected = 0
         self._last_t_ns: int | None = None
         self._params = self._collect()
@@ -553,16 +584,21 @@ class Identifier:
                 self._excited[name] = False
                 continue
             reg = REGRESSORS[name](inputs, self._vehicle, self._params, self.config)
-            self._excited[name] = self._rls[name].update(reg.a, reg.b, reg.rows)
+            self._excited[name] = self._rls[name].update(reg.a, reg.b, reg.rows, db_dtheta=reg.db_dup)
             if self._excited[name]:
                 self._params = self._collect()
 
     def _upstream_ready(self, name: str) -> bool:
-        for up in UPSTREAM[name]:
-            rls = self._rls[up]
-            if rls.counters.updates < self.config.upstream_min_updates or not _full_rank(rls.information):
-                return False
-        return True
+        """Ready when every upstream problem has ``upstream_min_updates`` updates, or after
+        ``upstream_max_wait`` calls (an upstream problem that is never excited, e.g. the
+        tracking stiffness of a wheel that never slips, contributes ~ C lambda ~ 0 to b anyway).
+        Once ready a problem stays ready until a reset."""
+        if self._ready[name]:
+            return True
+        if (all(self._rls[up].counters.updates >= self.config.upstream_min_updates for up in UPSTREAM[name])
+                or self._waiting[name] >= self.config.upstream_max_wait):
+            self._ready[name] = True
+        return self._ready[name]
 
     def reset(self, problem: str | None = None, start: IdentifiedParams | None = None) -> None:
         """Back to the starting values (or ``start``) for one problem or all."""
@@ -573,6 +609,8 @@ class Identifier:
                 raise KeyError(f"unknown problem {name!r}; one of {PROBLEM_NAMES}")
             self._rls[name].reset(np.array([getattr(self._start, n) for n in PROBLEM_PARAMS[name]]))
             self._excited[name] = False
+        self._ready = {name: False for name in PROBLEM_NAMES}  # dependants re-check their upstream
+        self._waiting = {name: 0 for name in PROBLEM_NAMES}
         self._params = self._collect()
         if problem is None:
             self._last_t_ns = None
@@ -593,11 +631,34 @@ class Identifier:
         return self._prior
 
     @property
+    def covariances(self) -> dict[str, np.ndarray]:
+        """Problem -> covariance of its parameters (physical units): the RLS's own
+        (``parameter_covariance``) plus the consider covariance of the upstream estimates it
+        used (block-diagonal over the upstream problems, cascaded in update order)."""
+        out: dict[str, np.ndarray] = {}
+        for name in PROBLEM_NAMES:
+            rls = self._rls[name]
+            c = rls.parameter_covariance
+            ups = UPSTREAM[name]
+            if ups:
+                blocks = [out[u] for u in ups]
+                size = sum(b.shape[0] for b in blocks)
+                cu, i = np.zeros((size, size)), 0
+                for blk in blocks:
+                    k = blk.shape[0]
+                    cu[i:i + k, i:i + k] = blk
+                    i += k
+                c = c + rls.consider_covariance(cu)
+            out[name] = c
+        return out
+
+    @property
     def sigmas(self) -> dict[str, float]:
-        """Parameter field name -> standard deviation (same unit as the parameter)."""
+        """Parameter field name -> standard deviation (same unit as the parameter), including
+        the uncertainty inherited from the upstream problems (``covariances``)."""
         out = {}
-        for name, rls in self._rls.items():
-            out.update(zip(PROBLEM_PARAMS[name], (float(s) for s in rls.sigma)))
+        for name, c in self.covariances.items():
+            out.update(zip(PROBLEM_PARAMS[name], (math.sqrt(max(float(v), 0.0)) for v in np.diag(c))))
         return out
 
     @property
@@ -634,6 +695,11 @@ class Identifier:
                              and np.all(rel < self.config.converged_rel_sigma))
         return out
 
+    @staticmethod
+    def upstream_param_names(name: str) -> tuple[str, ...]:
+        """The parameters (in order) of the columns of a problem's ``Regressor.db_dup``."""
+        return tuple(p for u in UPSTREAM[name] for p in PROBLEM_PARAMS[u])
+
     def problem(self, name: str) -> WeightedRLS:
         """The RLS of one problem (read its diagnostics; do not update it directly)."""
         return self._rls[name]
@@ -651,15 +717,3 @@ class Identifier:
             "inputs_rejected": self._inputs_rejected,
         }
 
-
-def _full_rank(info: np.ndarray) -> bool:
-    ev = np.linalg.eigvalsh(info)
-    return bool(ev[-1] > 0.0 and ev[0] > 1e-12 * ev[-1])
-
-
-def params_from_mapping(prior: IdentifiedParams, values: Mapping[str, float]) -> IdentifiedParams:
-    """A new IdentifiedParams with the named values replaced (unknown names are an error)."""
-    unknown = sorted(set(values) - {f.name for f in fields(IdentifiedParams)})
-    if unknown:
-        raise KeyError(f"unknown parameter {unknown[0]!r}")
-    return replace(prior, **{k: float(v) for k, v in values.items()})

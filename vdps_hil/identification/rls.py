@@ -51,6 +51,11 @@ Diagnostics
   with white noise give f ~ 1, and coloured noise with slowly varying regressors gives the
   classical (1 + rho)/(1 - rho). ``sigma_autocorr = False`` sets f = 1. Calibration is checked by
   Monte Carlo in ``tests/test_rls.py`` (fraction of seeds with |error| <= 2 sigma).
+* **Consider covariance**: when b is built from other problems' estimates theta (eq 22 uses
+  m and C_lambda, eq 23's moments use C_lambda and C_alpha), their errors move x by
+  dx = J dtheta with J = W P sum_k A_Q^T Q db/dtheta (exact for least squares, accumulated with
+  lambda like P^-1); ``consider_covariance(cov_theta)`` = J cov_theta J^T is added to the
+  problem's own covariance by the ``Identifier``.
 * **Identifiability** (paper section 8, Table 3): the minimum eigenvalue of the accumulated
   (lambda-discounted) ``sum A^T Q^T Q A`` with the physical A (no W), as the paper defines it.
   ``identifiability_scaled`` is the same for A_Q (includes W), i.e. the information in P^-1.
@@ -170,15 +175,18 @@ class WeightedRLS:
         self._nrows = 0.0
         self._gg = np.zeros(self.n)
         self._g1 = np.zeros(self.n)
+        self._sens: np.ndarray | None = None  # sum A_Q^T Q db/dtheta (consider parameters)
         self._g_prev: np.ndarray | None = None
         self._c = dict(updates=0, rows_used=0, not_excited=0, nan_rows=0, clamped=0, rejected=0)
         self._resets += 1
 
     # ----------------------------------------------------------------- update
-    def update(self, a, b, rows=None, q=None) -> bool:
+    def update(self, a, b, rows=None, q=None, db_dtheta=None) -> bool:
         """One step of eq 19 with the rows of ``A`` (m x n, physical) and ``b`` (m) selected by
         the boolean mask ``rows`` (default all). ``q`` overrides the diagonal of Q for this
-        step (eq 19 allows Q(k+1)). Returns True if the estimate was updated."""
+        step (eq 19 allows Q(k+1)). ``db_dtheta`` (m x p) is the sensitivity of b to p
+        *consider* parameters (estimates of other problems used to build b); it feeds
+        ``consider_covariance``. Returns True if the estimate was updated."""
         a = np.asarray(a, dtype=float)
         b = np.asarray(b, dtype=float)
         if a.shape != (self.m, self.n) or b.shape != (self.m,):
@@ -237,6 +245,14 @@ class WeightedRLS:
         if self._g_prev is not None:
             self._g1 = lam * self._g1 + g * self._g_prev
         self._g_prev = g
+        if db_dtheta is not None:
+            d = np.asarray(db_dtheta, dtype=float)
+            if d.ndim != 2 or d.shape[0] != self.m:
+                raise ValueError(f"db_dtheta must be ({self.m}, p), got {d.shape}")
+            contrib = aq.T @ (qv[sel, None] * np.nan_to_num(d[sel], nan=0.0, posinf=0.0, neginf=0.0))
+            if self._sens is None or self._sens.shape != contrib.shape:
+                self._sens = np.zeros_like(contrib)
+            self._sens = lam * self._sens + contrib
         self._c["updates"] += 1
         self._c["rows_used"] += k
         return True
@@ -247,12 +263,13 @@ class WeightedRLS:
         v = y - aq @ self._xq  # a priori innovation
         pa = P @ aq.T  # n x k
         S = lam * np.eye(aq.shape[0]) + aq @ pa  # k x k, >= lam I: never singular
-        K = np.linalg.solve(S, pa.T).T  # P A_Q^T S^-1
+        s_inv = np.linalg.inv(S)  # k <= 4, condition number <= 1 + |A_Q P A_Q^T| / lam
+        K = pa @ s_inv  # P A_Q^T S^-1
         xq_new = self._xq + K @ v
         ika = np.eye(self.n) - K @ aq
         p_new = ika @ (P / lam) @ ika.T + K @ K.T
         p_new = 0.5 * (p_new + p_new.T)
-        drss = float(lam * v @ np.linalg.solve(S, v))
+        drss = float(lam * v @ s_inv @ v)
         return xq_new, p_new, drss
 
     def _step_sqrt(self, aq, y, lam):
@@ -322,6 +339,24 @@ class WeightedRLS:
         """Per-parameter standard deviation, physical units (see the module docstring)."""
         var = self.residual_variance * self.autocorr_inflation * np.diag(self.covariance)
         return np.sqrt(np.maximum(var, 0.0))
+
+    @property
+    def parameter_covariance(self) -> np.ndarray:
+        """s^2 F^1/2 (W P W) F^1/2 with F = diag(f): the covariance behind ``sigma``."""
+        sf = np.sqrt(self.residual_variance * self.autocorr_inflation)
+        return self.covariance * np.outer(sf, sf)
+
+    def consider_covariance(self, cov_theta) -> np.ndarray:
+        """Covariance of x caused by the uncertainty ``cov_theta`` (p x p) of the consider
+        parameters: J cov_theta J^T with J = dx/dtheta = W P sum(A_Q^T Q db/dtheta) (the
+        least-squares sensitivity; a Schmidt "consider" covariance). Zero before any
+        ``db_dtheta`` was given."""
+        if self._sens is None:
+            return np.zeros((self.n, self.n))
+        c = np.asarray(cov_theta, dtype=float)
+        j = (self.covariance_scaled @ self._sens) * self._w[:, None]
+        out = j @ c @ j.T
+        return 0.5 * (out + out.T)
 
     @property
     def information(self) -> np.ndarray:
