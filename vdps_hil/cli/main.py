@@ -14,8 +14,6 @@ from vdps_hil.cli.common import UserError
 # name -> (module, attribute, one-line help). Explicit registry, no import side effects.
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "sim": ("vdps_hil.cli.sim_cmd", "sim", "Simulate a scenario and write a recording."),
-    "conventions": ("vdps_hil.cli.conventions_cmd", "conventions",
-                    "Print the frames, signs, units and wire formats every part agrees on."),
 }
 
 
