@@ -353,6 +353,8 @@ ERROR_COUNTERS = frozenset({
     # CAN decoders (VdpsCanDecoder, SignalMapDecoder): per-frame rejects
     "dlc_mismatch", "undecodable", "out_of_range", "crc_mismatch", "checksum_mismatch",
     "counter_repeat", "counter_jump", "malformed",
+    # file adapters: lines of a text log that could not be read
+    "bad_lines", "non_utf8_lines",
     # this base class
     "time_backwards", "decoder_exceptions", "read_errors"})
 """Counter names that mean a rejected or faulty input (summed as ``errors`` in the status).
@@ -524,6 +526,7 @@ class Adapter(ABC):
             self._lost(str(e))
             return 0
         except EndOfInput:
+            self._end_of_input()
             raise
         except (OSError, ValueError) as e:
             self.health.count("read_errors")
@@ -589,6 +592,23 @@ class Adapter(ABC):
             s = dataclasses.replace(s, wall_time_ns=s.wall_time_ns or (wall + s.t_ns - t_ns),
                                     valid=valid)
         self._publish(s)
+
+    def _flush_decoder(self) -> Iterable[Sample]:
+        """Hook: samples a decoder still holds at the end of the input (default none)."""
+        return ()
+
+    def _end_of_input(self) -> None:
+        if getattr(self, "_ended", False):
+            return
+        self._ended = True
+        try:
+            samples = list(self._flush_decoder())
+        except Exception as e:  # noqa: BLE001
+            self.health.count("decoder_exceptions")
+            self.health.last_error = f"decoder flush: {type(e).__name__}: {e}".splitlines()[0]
+            return
+        for s in samples:
+            self._publish_sample(s, s.t_ns, self.clock.wall(s.t_ns), False)
 
     def check_timeouts(self, now_ns: int) -> list[str]:
         """Mark sample kinds that stopped arriving; returns those newly timed out."""

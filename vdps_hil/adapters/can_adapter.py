@@ -22,6 +22,7 @@ their own bus name ``<bus>.<channel>`` (``/raw/can/pt.can1``), never mixed into 
 
 from __future__ import annotations
 
+import logging
 import os
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -208,9 +209,93 @@ class CanAdapter(_CanDecodeMixin, Adapter):
         self.health.count("sent")
 
 
+TEXT_SUFFIXES = (".asc", ".log", ".trc", ".csv")
+"""Line-based formats read through :class:`_TextFeed` (bad lines skipped and counted)."""
+
+
+class _TextFeed:
+    """The lines of a text log for a python-can reader, one at a time, with the header kept.
+
+    Bytes that are not UTF-8 are skipped (``non_utf8_lines``). When the reader fails on a
+    line, :meth:`restart` replays the header (the lines before the first message) so a new
+    reader over the same feed continues after the bad line with the header state restored.
+    """
+
+    def __init__(self, f, counters: dict):
+        self.f = f
+        self.counters = counters
+        self.header: list[str] = []
+        self.in_header = True
+        self._replay: list[str] = []
+        self.last = ""
+        self.consumed = 0
+
+    def __iter__(self):
+        return self
+
+    def __next__(self) -> str:
+        if self._replay:
+            return self._replay.pop(0)
+        while True:
+            b = self.f.readline()
+            if not b:
+                raise StopIteration
+            try:
+                line = b.decode("utf-8")
+            except UnicodeDecodeError:
+                self.counters["non_utf8_lines"] = self.counters.get("non_utf8_lines", 0) + 1
+                continue
+            self.consumed += 1
+            if self.in_header:
+                self.header.append(line)
+            self.last = line
+            return line
+
+    def message_seen(self) -> None:
+        if self.in_header:
+            self.in_header = False
+            if self.header:
+                self.header.pop()  # that line was a message, not header
+
+    def restart(self) -> None:
+        self.in_header = False
+        self._replay = list(self.header)
+
+    def close(self) -> None:
+        pass
+
+    @property
+    def closed(self) -> bool:
+        return self.f.closed
+
+
+class _LogCount(logging.Handler):
+    """Counts the lines python-can's readers skip with a warning (e.g. TRC's "Failed to parse
+    message"), instead of printing them."""
+
+    def __init__(self, adapter):
+        super().__init__(logging.INFO)
+        self.adapter = adapter
+
+    def emit(self, record) -> None:
+        h = self.adapter.health
+        msg = record.getMessage()
+        if "Dropping" in msg or record.levelno < logging.INFO:
+            h.count("skipped_lines")  # e.g. TRC bus-information lines: legitimately skipped
+            return
+        h.count("bad_lines")
+        if not h.last_error:
+            h.last_error = msg.splitlines()[0][:200]
+
+
 class CanFileAdapter(_CanDecodeMixin, Adapter):
-    """A recorded CAN log read through ``can.LogReader`` (asc, blf, candump log, trc, mf4,
+    """A recorded CAN log read through python-can's readers (asc, blf, candump log, trc, mf4,
     csv, db, and ``.mcap`` through our plugin), replayed as fast as it can be read.
+
+    Text formats go line by line: a line python-can cannot parse is skipped and counted
+    (``bad_lines``, with the first in ``last_error``), bytes that are not UTF-8 too
+    (``non_utf8_lines``), and reading goes on after them. A binary file that breaks off ends
+    the input there (``read_errors`` when python-can raises).
 
     ``channels``: keep only frames of these channels (``msg.channel`` as text; None: all).
     ``decode_channels``: see the module docstring.
@@ -232,52 +317,110 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
         self.batch = int(batch)
         self._reader = None
         self._it = None
+        self._feed: _TextFeed | None = None
+        self._raw_file = None
+        self._reader_cls = None
+        self._log_handler = _LogCount(self)
+
+    def _make_reader(self):
+        if self._feed is not None:
+            return self._reader_cls(file=self._feed)
+        import can
+
+        return can.LogReader(self.path)
 
     def _open(self) -> None:
         import can
+        from can.io.player import MESSAGE_READERS, _update_reader_plugins
 
         if not os.path.isfile(self.path):
             raise AdapterError(f"CAN log {self.path}: no such file")
+        suffix = os.path.splitext(self.path)[1].lower()
         try:
-            self._reader = can.LogReader(self.path)
+            if suffix in TEXT_SUFFIXES:
+                _update_reader_plugins()
+                self._reader_cls = MESSAGE_READERS[suffix]
+                self._raw_file = open(self.path, "rb")
+                self._feed = _TextFeed(self._raw_file, self.health.counters)
+            self._reader = self._make_reader()
             self._it = iter(self._reader)
         except ValueError as e:
             raise AdapterError(f"CAN log {self.path}: {str(e).splitlines()[0]} (readable: "
                                f"{', '.join(CAN_LOG_SUFFIXES)}, .mcap)") from None
         except ImportError as e:
             raise AdapterError(f"CAN log {self.path}: needs an optional package: {e}") from None
+        except OSError as e:
+            raise AdapterError(f"CAN log {self.path}: {e.strerror or e}") from None
         except Exception as e:  # noqa: BLE001 - a broken file is the person's input
             raise AdapterError(f"CAN log {self.path}: unreadable: {type(e).__name__}: "
                                f"{str(e).splitlines()[0] if str(e) else ''}") from None
+        lg = logging.getLogger("can.io")
+        lg.addHandler(self._log_handler)
+        self._saved_log = (lg.propagate, lg.level)
+        lg.propagate = False
+        lg.setLevel(logging.INFO)  # TRC reports dropped lines at INFO
+        del can
 
     def _close(self) -> None:
+        lg = logging.getLogger("can.io")
+        if self._log_handler in lg.handlers:
+            lg.removeHandler(self._log_handler)
+            lg.propagate, level = getattr(self, "_saved_log", (True, logging.NOTSET))
+            lg.setLevel(level)
         if self._reader is not None:
             try:
                 self._reader.stop()
             except Exception:  # noqa: BLE001
                 pass
             self._reader = None
+        if self._raw_file is not None:
+            self._raw_file.close()
+            self._raw_file = None
+
+    def _bad_line(self, e: BaseException) -> bool:
+        """A text reader failed on the feed's last line: count it, continue after it.
+        Returns False when there is nothing left to try."""
+        h = self.health
+        feed = self._feed
+        h.count("bad_lines")
+        if h.counters["bad_lines"] == 1:
+            h.last_error = f"first bad line {feed.last.strip()[:80]!r}: {type(e).__name__}"
+        before = feed.consumed
+        feed.restart()
+        try:
+            self._reader = self._make_reader()
+            self._it = iter(self._reader)
+        except Exception:  # noqa: BLE001
+            return False
+        self._restart_consumed = before
+        return True
 
     def _read(self, timeout_s: float) -> Sequence[tuple[int | None, Any]]:
         if self._it is None:
             raise EndOfInput()
         out = []
         chans = self.channels
-        it = self._it
-        try:
-            for msg in it:
-                if chans is not None and str(msg.channel) not in chans:
-                    continue
-                out.append((int(round(msg.timestamp * 1e9)), msg))
-                if len(out) >= self.batch:
-                    break
-            else:
+        feed = self._feed
+        while len(out) < self.batch and self._it is not None:
+            try:
+                for msg in self._it:
+                    if feed is not None:
+                        feed.message_seen()
+                    if chans is not None and str(msg.channel) not in chans:
+                        continue
+                    out.append((int(round(msg.timestamp * 1e9)), msg))
+                    if len(out) >= self.batch:
+                        break
+                else:
+                    self._it = None
+            except Exception as e:  # noqa: BLE001 - damaged input: count, go on if we can
+                if feed is not None and feed.consumed > getattr(self, "_restart_consumed", -1):
+                    if self._bad_line(e):
+                        continue
+                self.health.count("read_errors")
+                self.health.last_error = (f"{type(e).__name__}: "
+                                          f"{str(e).splitlines()[0] if str(e) else ''}")
                 self._it = None
-        except Exception as e:  # noqa: BLE001 - a truncated or corrupt log ends the input
-            self.health.count("read_errors")
-            self.health.last_error = (f"{type(e).__name__}: "
-                                      f"{str(e).splitlines()[0] if str(e) else ''}")
-            self._it = None
         if not out and self._it is None:
             raise EndOfInput()
         return out

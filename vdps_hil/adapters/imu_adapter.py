@@ -33,6 +33,10 @@ class ImuProtocol:
     def feed(self, t_ns: int, chunk: bytes) -> list:
         return self.decoder.feed(t_ns, chunk)
 
+    def flush(self) -> list:
+        """End of a recorded stream: release what the decoder still holds."""
+        return self.decoder.flush()
+
     def reset(self) -> None:
         """Forget a partial message after an outage (a new decoder keeps nothing of the old
         stream; counters carry over)."""

@@ -22,6 +22,7 @@ Port strings are ``PORT[@BAUD]``: ``/dev/ttyUSB0@115200``, ``COM4@921600``, or a
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from typing import Any, Sequence
 
@@ -85,7 +86,14 @@ class _SerialBase(Adapter):
 class SerialAdapter(_SerialBase):
     """A live serial device. ``port`` is a path or pyserial URL; ``protocol`` decodes it
     (None: raw only). Options of ``serial.serial_for_url`` may be passed as
-    ``serial_kwargs``."""
+    ``serial_kwargs``.
+
+    Message times follow the receive-time rule, which back-dates a message by the wire time of
+    the bytes after it in its chunk. A link faster than its nominal baud (a pseudo-terminal,
+    a USB adapter delivering a burst) can make that earlier than the previous message of the
+    same stream, which cannot be: such a time is raised to the previous one (counted
+    ``time_clamped``, not an error), so live samples of a device never go backwards.
+    """
 
     def __init__(self, name: str, port: str, baud: int = DEFAULT_BAUD, protocol=None, *,
                  serial_kwargs: dict | None = None, **kw):
@@ -93,6 +101,22 @@ class SerialAdapter(_SerialBase):
         self.port = port
         self.serial_kwargs = dict(serial_kwargs or {})
         self.ser = None
+        self._last_sample_t = -1
+
+    def _decode(self, t_ns, data):
+        out = super()._decode(t_ns, data)
+        if not out:
+            return out
+        last = self._last_sample_t
+        fixed = []
+        for s in out:
+            if s.t_ns < last:
+                s = dataclasses.replace(s, t_ns=last)
+                self.health.count("time_clamped")
+            last = s.t_ns
+            fixed.append(s)
+        self._last_sample_t = last
+        return fixed
 
     def _open(self) -> None:
         import serial
@@ -164,6 +188,10 @@ class SerialFileAdapter(_SerialBase):
         if self._f is not None:
             self._f.close()
             self._f = None
+
+    def _flush_decoder(self):
+        flush = getattr(self.protocol, "flush", None)
+        return flush() if flush is not None else ()
 
     def _read(self, timeout_s: float) -> Sequence[tuple[int | None, Any]]:
         data = self._f.read(self.chunk) if self._f is not None else b""
