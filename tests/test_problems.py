@@ -71,8 +71,11 @@ def _forward(rng, k, true=TRUE, ackermann=True, pitch_scale=1.0, **override):
         fz_total[i] = fz_body[i] + ax.unsprung_mass_kg * G
     zdd = fz_total.sum() / m + g_aux[2]
     moment = np.zeros(3)
-    for (x, y), fb, fz in zip(geo.corner_xy_m(), f_body, fz_body):
-        moment += np.cross([x, y, -geo.h_cg_m], [fb[0], fb[1], fz])
+    a_minus_g = np.array([f_body[:, 0].sum() / m, f_body[:, 1].sum() / m, 0.0])  # horizontal
+    for i, ((x, y), fb, fz) in enumerate(zip(geo.corner_xy_m(), f_body, fz_body)):
+        moment += np.cross([x, y, -geo.h_cg_m], [fb[0], fb[1], fz])  # strut + tire forces
+        mu = (MODEL.front if i < 2 else MODEL.rear).unsprung_mass_kg  # unsprung d'Alembert force
+        moment += np.cross([x, y, -(geo.h_cg_m - r) + h[i]], -mu * a_minus_g)
     inertia = np.diag([true.inertia_x_kgm2, true.inertia_y_kgm2, true.inertia_z_kgm2])
     omega_dot = np.linalg.solve(inertia, moment - np.cross(omega, inertia @ omega))
     return IdentInputs(
@@ -251,6 +254,53 @@ def test_sigmas_include_the_uncertainty_of_upstream_estimates(rng):
     assert np.all(np.diag(total) >= np.diag(own))
     assert np.any(np.diag(total) > np.diag(own))
     assert ident.sigmas["inertia_z_kgm2"] == pytest.approx(math.sqrt(total[2, 2]))
+
+
+# ----------------------------------------------------- consistency with the physics core
+def _core_inputs(rng, k):
+    """A random state of the physics core (truth variant, level road, body parallel to the
+    road, linear tire) and the IdentInputs that a perfect estimator would give for it."""
+    from vdps_hil.model.core import Env, Inputs, Model
+    veh = MODEL.with_params(**TRUE.as_dict())
+    model = Model(veh, unsprung_dof=True)
+    x = model.design_state(speed_mps=rng.uniform(10.0, 30.0))
+    x[7] = rng.normal(0.0, 0.5)  # lateral velocity
+    x[9:12] = rng.normal(0.0, 0.3, 3)  # body rates
+    x[12:16] = [x[6] / r * (1.0 + rng.normal(0.0, 0.02)) for r in model.rolling_radius_m]  # slip
+    x[16:20] = rng.normal(0.0, 0.004, 4)  # H (small: the body height is not re-trimmed)
+    x[20:24] = rng.normal(0.0, 0.1, 4)
+    u = Inputs(steer_wheel_angle_rad=rng.normal(0.0, 0.5), wheel_torque_nm=tuple(rng.normal(0.0, 300.0, 4)))
+    _, d = model.evaluate(x, u, Env())
+    assert all(d[f"normal_load_n_{i}"] > 0 for i in range(1, 5))  # no wheel lifted
+    vx, vy, wz = x[6], x[7], x[11]
+    w4 = lambda stem: tuple(d[f"{stem}_{i}"] for i in range(1, 5))  # noqa: E731
+    inp = IdentInputs(
+        t_ns=k + 1, xdd_a_mps2=d["accel_b_mps2_x"] + vy * wz, ydd_a_mps2=d["accel_b_mps2_y"] - vx * wz,
+        zdd_a_mps2=d["accel_b_mps2_z"], xd_a_mps=vx, yd_a_mps=vy, psi_v_dot_radps=wz,
+        gravity_aux_mps2=gravity_aux_mps2(0.0, 0.0, x[5]), omega_radps=tuple(x[9:12]),
+        omega_dot_radps2=tuple(d[f"angular_accel_b_radps2_{a}"] for a in "xyz"),
+        susp_deflection_m=w4("susp_deflection_m"), susp_rate_mps=w4("susp_deflection_rate_mps"),
+        wheel_speed_radps=tuple(x[12:16]), wheel_accel_radps2=w4("wheel_accel_radps2"),
+        wheel_torque_nm=w4("wheel_torque_nm"), slip_ratio=w4("slip_ratio"),
+        slip_angle_rad=w4("slip_angle_rad"), wheel_angle_rad=w4("road_wheel_angle_rad"))
+    return inp, veh, np.array([d[f"moment_b_nm_{a}"] for a in "xyz"])
+
+
+def test_moments_and_all_four_equations_agree_with_the_physics_core(rng):
+    from vdps_hil.identification.problems import REGRESSORS, moments_from_inputs
+    cfg = dataclasses.replace(load_ident_config(), mass_form="sprung")
+    for k in range(5):
+        inp, veh, m_core = _core_inputs(rng, k)
+        assert np.allclose(moments_from_inputs(veh, TRUE, inp), m_core, rtol=1e-10, atol=1e-8)
+        for name in PROBLEM_NAMES:
+            reg = REGRESSORS[name](inp, veh, TRUE, cfg)
+            x = np.array([getattr(TRUE, n) for n in PROBLEM_PARAMS[name]])
+            assert np.allclose(reg.a @ x, reg.b, rtol=1e-10, atol=1e-8), name
+        # eq 20 as printed books m_u g where the core's unsprung masses weigh m_u (zdd_a - G_z)
+        paper = REGRESSORS["mass"](inp, veh, TRUE, load_ident_config())
+        a = inp.zdd_a_mps2 - inp.gravity_aux_mps2[2]
+        assert paper.a[0, 0] * TRUE.mass_kg - paper.b[0] == pytest.approx(
+            veh.unsprung_mass_total_kg * (a - G), rel=1e-6, abs=1e-6)
 
 
 # ------------------------------------------------------------------- forces and moments

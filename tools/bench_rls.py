@@ -73,7 +73,7 @@ def main() -> None:
 
             def one():
                 r = next(rit)
-                rls.update(r.a, r.b, r.rows)
+                rls.update(r.a, r.b, r.rows, db_dtheta=r.db_dup)
             t_rls = _median_us(one, args.n)
             print(f"{form:18s} {name:10s} {t_reg:10.1f} {t_rls:11.1f}")
         ident = Identifier(model, cfg)

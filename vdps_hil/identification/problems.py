@@ -17,7 +17,10 @@ rotation::
 
 The four RLS problems ``Q A W W^-1 x = Q b`` (solved by :class:`~.rls.WeightedRLS`):
 
-* **mass** (eq 20): x = [m_tot], A = [zdd_a - G_z], b = sum_i F_z,spring,i.
+* **mass** (eq 20): x = [m_tot], A = [zdd_a - G_z], b = sum_i F_z,spring,i (``mass_form =
+  "paper"``). ``"sprung"`` uses b = sum_i (K_s,i H_i + D_s,i Hd_i) + sum_i m_u,i (zdd_a - G_z):
+  exact for the truth simulator's model (struts carry the sprung mass, the unsprung masses ride
+  on the road); eq 20 instead books m_u g, which biases m_tot by about -m_u var(zdd_a)/g^2.
 * **tracking** (eq 21): x = [C_lambda,1..4], A = diag(-r_i lambda_i), b_i = I_w wd_i - T_i.
 * **cornering** (eq 22): x = [C_alpha,f, C_alpha,r], with the current estimates of m and
   C_lambda (Gauss-Seidel: the problems are updated in the order mass, tracking, cornering,
@@ -40,26 +43,28 @@ The four RLS problems ``Q A W W^-1 x = Q b`` (solved by :class:`~.rls.WeightedRL
            [ w_z w_x,   wd_y,    -w_z w_x],
            [-w_x w_y,   w_x w_y,  wd_z  ]]
 
-Moments M_x, M_y, M_z (not given by the paper beyond "functions of the forces, attitude and
-geometry [25]"; this is our definition, to be unified with the physics core in
-``vdps_hil/model/core.py`` when it exists). Forces on the sprung body about its CG, vehicle
-frame, corner i at r_i = (x_i, y_i, -h_cg) from ``Geometry.corner_xy_m()``:
+Moments M_x, M_y, M_z (the paper gives them only as "functions of the forces, attitude and
+geometry [25]"). We use the physics core's definition (``vdps_hil/model/core.py``, truth
+variant ``unsprung_dof=True``), checked against it in ``tests/test_problems.py``: forces on the
+sprung body about its CG, vehicle frame, corner i at (x_i, y_i) from ``Geometry.corner_xy_m()``:
 
-* vertical suspension force F_s,i = K_s,i H_i + D_s,i Hd_i (eq 14 without m_u g: the unsprung
-  weight acts on the wheel, not on the body; with it the static forces would leave a spurious
-  pitch moment 2 m_u g (l_r - l_f)) acting at (x_i, y_i);
+* strut force F_s,i = K_s,i H_i + D_s,i Hd_i (eq 14 without m_u g: the unsprung weight acts on
+  the wheel, not on the body; with it the static forces would leave a spurious pitch moment
+  2 m_u g (l_r - l_f)) acting at (x_i, y_i);
 * tire forces in the vehicle frame F_x,i = F_a,i cos d_i - F_b,i sin d_i,
   F_y,i = F_a,i sin d_i + F_b,i cos d_i (eq 16 per wheel, F_a,i = C_lambda,i lambda_i,
-  F_b,i = C_alpha,axle/2 alpha_i with the current estimates) acting at the contact point, height
-  -h_cg below the CG (no roll centre in the paper's model)::
+  F_b,i = C_alpha,axle/2 alpha_i with the current estimates) acting at the contact point
+  (x_i, y_i, -h_cg) (no roll centre in the paper's model);
+* the unsprung masses' horizontal weight and inertia u_i = -m_u,i (a - g) at the wheel centre
+  (x_i, y_i, z_w,i), z_w,i = -(h_cg - r) + H_i, with (a - g) = (xdd_a - yd_a psid_v - G_x,
+  ydd_a + xd_a psid_v - G_y) (the unsprung masses translate with the body)::
 
-      M_x = sum_i ( y_i F_s,i + h_cg F_y,i)
-      M_y = sum_i (-x_i F_s,i - h_cg F_x,i)
-      M_z = sum_i ( x_i F_y,i - y_i F_x,i)
+      M_x = sum_i ( y_i F_s,i + h_cg F_y,i - z_w,i u_y,i)
+      M_y = sum_i (-x_i F_s,i - h_cg F_x,i + z_w,i u_x,i)
+      M_z = sum_i ( x_i F_y,i - y_i F_x,i + x_i u_y,i - y_i u_x,i)
 
-  (= sum r_i x F_i). Small-angle: the attitude relative to the road is not used (as eq 13, which
-  writes the forces of the vehicle frame in the aux frame). ``IdentInputs.moments_nm`` overrides
-  them when a caller computes them elsewhere.
+  Small-angle: the attitude relative to the road is not used (as eq 13, which writes the
+  vehicle-frame forces in the aux frame). ``IdentInputs.moments_nm`` overrides them.
 
 Symbols and units (every input is an *estimate*: EKF, alpha-beta filters, sensors; never
 simulator truth)::
@@ -131,6 +136,7 @@ from typing import Callable
 import numpy as np
 
 from vdps_hil.identification.rls import BOUNDS_MODES, FORMS, RLSCounters, WeightedRLS
+from vdps_hil.model.core import spring_force_n
 from vdps_hil.model.frames import gravity_in_aux
 from vdps_hil.model.params import CONFIG_DIR, Geometry, IdentifiedParams, Vehicle
 from vdps_hil.units import GRAVITY_MPS2
@@ -139,6 +145,7 @@ IDENT_CONFIG_DIR = CONFIG_DIR / "identification"
 DEFAULT_CONFIG_PATH = IDENT_CONFIG_DIR / "default.toml"
 CONFIG_SCHEMA_VERSION = 1
 STEER_FORMS = ("per_wheel", "paper_mean")
+MASS_FORMS = ("paper", "sprung")
 
 PROBLEM_NAMES: tuple[str, ...] = ("mass", "tracking", "cornering", "inertia")
 """Update order (Gauss-Seidel: each problem uses the newest estimates of the previous ones)."""
@@ -185,6 +192,7 @@ class IdentConfig:
     converged_rel_sigma: float
     min_updates_converged: int
     steer_form: str
+    mass_form: str
     upstream_min_updates: int
     upstream_max_wait: int
     mass: ProblemConfig
@@ -197,7 +205,7 @@ class IdentConfig:
 
 
 _GENERAL_KEYS = {"form", "bounds_mode", "bounds_factor", "min_speed_mps", "sigma_autocorr", "min_dof",
-                 "converged_rel_sigma", "min_updates_converged", "steer_form", "upstream_min_updates",
+                 "converged_rel_sigma", "min_updates_converged", "steer_form", "mass_form", "upstream_min_updates",
                  "upstream_max_wait"}
 _PROBLEM_KEYS = {"q", "w", "forgetting", "prior_rel_sigma", "excitation_min"}
 
@@ -247,6 +255,8 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
         raise IdentConfigError(f"{origin}[general].bounds_mode: one of {BOUNDS_MODES}, got {g['bounds_mode']!r}")
     if g["steer_form"] not in STEER_FORMS:
         raise IdentConfigError(f"{origin}[general].steer_form: one of {STEER_FORMS}, got {g['steer_form']!r}")
+    if g["mass_form"] not in MASS_FORMS:
+        raise IdentConfigError(f"{origin}[general].mass_form: one of {MASS_FORMS}, got {g['mass_form']!r}")
     if not isinstance(g["sigma_autocorr"], bool):
         raise IdentConfigError(f"{origin}[general].sigma_autocorr: expected true or false")
     lo, hi = _nums(g["bounds_factor"], 2, f"{origin}[general].bounds_factor", positive=True)
@@ -281,7 +291,7 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
         sigma_autocorr=g["sigma_autocorr"], min_dof=g["min_dof"],
         converged_rel_sigma=_num(g["converged_rel_sigma"], f"{origin}[general].converged_rel_sigma",
                                  positive=True),
-        min_updates_converged=g["min_updates_converged"], steer_form=g["steer_form"],
+        min_updates_converged=g["min_updates_converged"], steer_form=g["steer_form"], mass_form=g["mass_form"],
         upstream_min_updates=g["upstream_min_updates"], upstream_max_wait=g["upstream_max_wait"],
         **problems)
 
@@ -356,18 +366,28 @@ def spring_compression_m(vehicle: Vehicle, susp_deflection_m) -> np.ndarray:
 
 def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
                         include_unsprung_weight: bool = True) -> np.ndarray:
-    """F_z,spring,i of eq 14 per corner [N] (K_s,i H_i + D_s,i Hd_i + m_u,i g), with eq 14's
-    floor H_i >= -m_u,i g / K_s,i (K_s evaluated at the unclipped H_i). Without the unsprung
-    weight it is the force the suspension puts on the sprung body (used for the moments)."""
+    """Per corner [N], the spring law of eq 14 (``model.core.spring_force_n``):
+
+    * with the unsprung weight: F_z,spring,i = K_s H + D_s Hd + m_u g, the normal load of the
+      paper's reduced model, with eq 14's clamp as the physics core applies it (lift-off when
+      K_s H + m_u g <= 0, and never negative);
+    * without: the strut force K_s H + D_s Hd acting on the sprung body (no clamp: tension past
+      the free length stands in for the rebound stop, as in the core)."""
     h = spring_compression_m(vehicle, susp_deflection_m)
     hd = np.asarray(susp_rate_mps, dtype=float)
     out = np.empty(4)
     for i in range(4):
         ax = vehicle.axle(i)
-        k = ax.spring_c1_npm * math.exp(min(ax.spring_c2_per_m * (h[i] - ax.spring_c3_m), 50.0))
+        hs = float(h[i])
+        if not (math.isfinite(hs) and math.isfinite(hd[i])):
+            out[i] = math.nan
+            continue
+        fsp = spring_force_n(min(hs, 10.0), ax.spring_c1_npm, ax.spring_c2_per_m, ax.spring_c3_m)
+        if not include_unsprung_weight:
+            out[i] = fsp + ax.damper_nspm * hd[i]
+            continue
         mug = ax.unsprung_mass_kg * GRAVITY_MPS2
-        hi = max(h[i], -mug / k)
-        out[i] = k * hi + ax.damper_nspm * hd[i] + (mug if include_unsprung_weight else 0.0)
+        out[i] = 0.0 if fsp + mug <= 0.0 else max(fsp + ax.damper_nspm * hd[i] + mug, 0.0)
     return out
 
 
@@ -389,22 +409,38 @@ def tire_forces_body_n(f_a_n, f_b_n, wheel_angle_rad) -> tuple[np.ndarray, np.nd
 
 
 def body_moments_nm(geometry: Geometry, f_susp_body_n, f_x_n, f_y_n) -> np.ndarray:
-    """(M_x, M_y, M_z) about the CG, vehicle frame: sum_i r_i x F_i with r_i = (x_i, y_i, -h_cg)
-    and F_i = (F_x,i, F_y,i, F_s,i) (see the module docstring)."""
+    """(M_x, M_y, M_z) about the CG, vehicle frame, of the strut and tire forces:
+    sum_i r_i x F_i with r_i = (x_i, y_i, -h_cg) and F_i = (F_x,i, F_y,i, F_s,i)."""
     xy = np.array(geometry.corner_xy_m())
     x, y, h = xy[:, 0], xy[:, 1], geometry.h_cg_m
     fs, fx, fy = (np.asarray(v, dtype=float) for v in (f_susp_body_n, f_x_n, f_y_n))
     return np.array([np.sum(y * fs + h * fy), np.sum(-x * fs - h * fx), np.sum(x * fy - y * fx)])
 
 
+def unsprung_inertia_moments_nm(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
+    """(M_x, M_y, M_z) of the unsprung masses' horizontal weight and inertia (d'Alembert force
+    m_u,i (g - a) at the wheel centre r_w,i = (x_i, y_i, -(h_cg - r) + H_i)), as the physics
+    core applies them to the sprung body. a - g in the aux frame is (xdd_a - yd_a psid_v - G_x,
+    ydd_a + xd_a psid_v - G_y) (eq 13's left-hand sides over m)."""
+    geo = vehicle.geometry
+    xy = np.array(geo.corner_xy_m())
+    mu = np.array([vehicle.axle(i).unsprung_mass_kg for i in range(4)])
+    zw = -(geo.h_cg_m - vehicle.tire.rolling_radius_m) + np.asarray(inp.susp_deflection_m, dtype=float)
+    psid = inp.psi_v_dot_radps
+    ux = -mu * (inp.xdd_a_mps2 - inp.yd_a_mps * psid - inp.gravity_aux_mps2[0])
+    uy = -mu * (inp.ydd_a_mps2 + inp.xd_a_mps * psid - inp.gravity_aux_mps2[1])
+    return np.array([np.sum(-zw * uy), np.sum(zw * ux), np.sum(xy[:, 0] * uy - xy[:, 1] * ux)])
+
+
 def moments_from_inputs(vehicle: Vehicle, params: IdentifiedParams, inp: IdentInputs) -> np.ndarray:
-    """b_4 of eq 23 from the suspension (eq 14) and tire (eq 15-17) forces with ``params``."""
+    """b_4 of eq 23: strut forces (eq 14), tire forces (eq 15-17 with ``params``) and the
+    unsprung masses' horizontal weight and inertia (see the module docstring)."""
     if inp.moments_nm is not None:
         return np.array(inp.moments_nm)
     fs = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
     fa, fb = tire_forces_wheel_n(inp.slip_ratio, inp.slip_angle_rad, params)
     fx, fy = tire_forces_body_n(fa, fb, inp.wheel_angle_rad)
-    return body_moments_nm(vehicle.geometry, fs, fx, fy)
+    return body_moments_nm(vehicle.geometry, fs, fx, fy) + unsprung_inertia_moments_nm(vehicle, inp)
 
 
 # --------------------------------------------------------------------------- regressors
@@ -429,9 +465,15 @@ def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
 
 
 def mass_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig) -> Regressor:
-    """Eq 20: A = [zdd_a - G_z], b = sum_i F_z,spring,i."""
+    """Eq 20: A = [zdd_a - G_z], b = sum_i F_z,spring,i (``mass_form = "paper"``), or
+    b = sum_i (K_s H + D_s Hd) + sum_i m_u,i (zdd_a - G_z) (``"sprung"``: the struts carry the
+    sprung mass, the unsprung masses follow the road and weigh on the tires directly)."""
     a = np.array([[inp.zdd_a_mps2 - inp.gravity_aux_mps2[2]]])
-    b = np.array([np.sum(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps))])
+    if cfg.mass_form == "paper":
+        b = np.array([np.sum(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps))])
+    else:
+        struts = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
+        b = np.array([np.sum(struts) + vehicle.unsprung_mass_total_kg * a[0, 0]])
     return Regressor(a, b, _gate(a, cfg.mass.excitation_min))
 
 
@@ -687,10 +729,12 @@ class Identifier:
 
     @property
     def converged(self) -> dict[str, bool]:
-        """Problem -> every sigma/|x| below ``converged_rel_sigma`` after enough updates."""
+        """Problem -> every sigma/|x| (``sigmas``, upstream included) below
+        ``converged_rel_sigma`` after enough updates."""
         out = {}
+        sig = self.sigmas
         for name, rls in self._rls.items():
-            rel = rls.sigma / np.maximum(np.abs(rls.x), 1e-300)
+            rel = np.array([sig[n] for n in PROBLEM_PARAMS[name]]) / np.maximum(np.abs(rls.x), 1e-300)
             out[name] = bool(rls.counters.updates >= self.config.min_updates_converged
                              and np.all(rel < self.config.converged_rel_sigma))
         return out
