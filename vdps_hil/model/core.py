@@ -1,0 +1,619 @@
+"""The physics core: one vehicle model f(x, u, p, env) -> x_dot shared by the truth simulator and
+the predictor (paper eq 13-17), with composable effects.
+
+Bodies and degrees of freedom
+-----------------------------
+* Sprung body (mass m_s = m_tot - sum m_u, inertias I_x, I_y, I_z about its CG, principal axes):
+  6 DOF. The vehicle frame {v} is fixed at the sprung-mass CG (``conventions``).
+* Four wheels: spin omega_i (eq 13, last line).
+* Four unsprung masses m_u,i. Two variants, chosen by ``unsprung_dof``:
+
+  - ``unsprung_dof=True`` (truth simulator): each unsprung mass slides along the body z axis at
+    its corner and has its own vertical DOF (coordinate H_i = suspension deflection from design
+    ride height, compression positive, = wheel-centre displacement up the body z axis). The tire
+    is a radial spring k_t between wheel centre and road: F_z,i = k_t (r_free,i - h_w,i) while
+    positive, **lift-off = tire deflection <= 0, normal load 0**. The suspension force
+    F_s,i = K_s H_s + D_s H_dot (eq 14 spring law, H_s = static_compression + H_i) acts between
+    body and unsprung mass. Horizontally the unsprung masses translate with the body, so the
+    body x/y balance uses m_tot and the body z balance m_s.
+  - ``unsprung_dof=False`` (the paper's reduced model, eq 13-16; used by the predictor): tires
+    are rigid, the unsprung masses move with the body, H_i follows from the body's pose over
+    the road plane, and the normal load is eq 14 directly:
+    F_z,i = K_s H_s + D_s H_dot + m_u g, with eq 14's clamp: when K_s H_s <= -m_u g the wheel
+    has lifted and F_z,i = 0 (and F_z,i >= 0 always). Translation uses m_tot on all axes
+    (eq 13).
+
+State (1-D, named slices in :class:`StateLayout`)
+-------------------------------------------------
+=================  ====  ======================================================================
+slice              size  meaning
+=================  ====  ======================================================================
+``pos_g``          3     sprung CG position, ENU [m]; the road plane passes through the origin
+``euler_g``        3     phi_g, theta_g, psi_g (eq 1: roll right-down +, pitch nose-up +, yaw CCW
+                         from East) [rad]
+``vel_b``          3     CG velocity in body axes (u, v, w) [m/s]
+``rate_b``         3     body rates (p, q, r) = (omega_x, omega_y, omega_z) [rad/s]
+``wheel_spin``     4     omega_1..4 (FL FR RR RL), positive rolling forward [rad/s]
+``susp_defl``      4     H_1..4 [m] (only with ``unsprung_dof``)
+``susp_defl_rate`` 4     H_dot_1..4 [m/s] (only with ``unsprung_dof``)
+=================  ====  ======================================================================
+
+Equations (body axes; a = CG acceleration, g_b = C_g^v [0, 0, -g], eq 13 written in {v})::
+
+    dp_g/dt      = (C_g^v)^T v_b
+    d(euler)/dt  = C_omega^-1 omega                 (frames.c_omega_inv, consistent with eq 1)
+    m a          = sum F_tire + m g_b + F_eff       (m = m_tot; with unsprung_dof: m_s on z, and
+                                                     the body receives F_s,i instead of the
+                                                     tires' body-z force)
+    dv_b/dt      = a - omega x v_b
+    I_x dp/dt    = (I_y - I_z) q r + M_x, ...       (eq 13, principal axes)
+    I_w domega_i/dt = T_i - r_i F_a,i + T_eff,i     (eq 13)
+    m_u (a_z + (omega_dot x r_w)_z + (omega x (omega x r_w))_z + H_ddot) = F_tz' - F_s + m_u g_z
+
+Moments about the sprung CG: each tire force acts at its contact point r_c = r_w - h_w n_b
+(r_w wheel centre, h_w its height above the road along the road normal n); the unsprung masses'
+weight and translational inertia act at their wheel centres. The wheels' spin angular momentum
+is not coupled to the body (gyroscopic and spin-reaction moments neglected).
+
+Tire kinematics (per corner; eq 15-16 axes)::
+
+    e_l = unit((cos d, sin d, 0) - ((cos d, sin d, 0).n) n),  e_t = n x e_l    (road plane)
+    v_w = v_b + omega x r_w (+ H_dot e_z)       wheel-centre velocity
+    v_l = v_w . e_l,  v_t = v_w . e_t
+    kappa = (r_i omega_i - v_l) / max(|v_l|, v_floor)        slip ratio
+    alpha = -atan(v_t / max(|v_l|, v_floor))                  slip angle
+    F_tire = F_a e_l + F_b e_t + F_z n                        (eq 16 when n = e_z)
+
+**Low-speed treatment**: slip denominators are floored at ``v_floor`` (default 5 m/s), so slip
+stays finite at standstill; below v_floor the tire acts as a damper on the slip velocity. The
+wheel-spin time constant is tau = I_w max(|v|, v_floor) / (r^2 C_kappa): 3.9 ms at 25 m/s and
+0.78 ms at the floor for the sedan (C_kappa = 80 kN); explicit RK4 is stable for
+dt < 2.78 tau (``Model.max_stable_step_s``). Brake torques B_i >= 0 oppose rotation as
+-B_i sat(omega_i / 2 rad/s) (a regularised Coulomb law: the brake holds a stopped wheel).
+
+Steering: the mean front road-wheel angle delta_m = delta_sw / steer_ratio is the bicycle-model
+angle; the wheel angles follow Ackermann: tan delta_1,2 = L tan delta_m / (L -+ t_f tan delta_m)
+(the mean of delta_1,2 equals delta_m to third order). Rear wheels do not steer.
+
+Road: a plane through the global origin with bank phi_r and grade theta_r (eq 2, psi_r = 0);
+gravity enters through g_b, which equals eq 13's [G_x, G_y, G_z] when the body lies in the road
+plane. Road normal in ENU: n_g = (-cos phi_r sin theta_r, -sin phi_r, cos phi_r cos theta_r).
+
+Symbols and units: m_tot, m_s, m_u [kg]; I [kg m^2]; r_i rolling radius [m]; k_t tire radial
+stiffness [N/m]; C_kappa [N], C_alpha [N/rad] per tire (C_alpha,i = C_alpha,axle / 2, eq 17);
+forces [N], moments [N m], angles [rad].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+from vdps_hil.units import GRAVITY_MPS2
+
+from .effects import EffectSet, LinearTire
+from .effects.base import DynamicsEffect, Effect, TireModel
+from .params import Vehicle
+
+SLIP_SPEED_FLOOR_MPS = 5.0
+"""Default v_floor of the slip denominators [m/s]."""
+BRAKE_HOLD_SPEED_RADPS = 2.0
+"""Wheel speed below which a brake torque is scaled down linearly (regularised Coulomb) [rad/s]."""
+RK4_STABILITY_LIMIT = 2.78
+"""|lambda dt| limit of explicit RK4 on the negative real axis."""
+
+
+class StateLayout:
+    """Named slices of the 1-D state vector (see the module docstring)."""
+
+    __slots__ = ("unsprung_dof", "size", "slices", "names")
+
+    def __init__(self, unsprung_dof: bool):
+        self.unsprung_dof = bool(unsprung_dof)
+        parts = [("pos_g", 3), ("euler_g", 3), ("vel_b", 3), ("rate_b", 3), ("wheel_spin", 4)]
+        if self.unsprung_dof:
+            parts += [("susp_defl", 4), ("susp_defl_rate", 4)]
+        self.slices: dict[str, slice] = {}
+        i = 0
+        for name, n in parts:
+            self.slices[name] = slice(i, i + n)
+            i += n
+        self.size = i
+        elem = {"pos_g": ("pos_e_m", "pos_n_m", "pos_u_m"),
+                "euler_g": ("roll_g_rad", "pitch_g_rad", "yaw_g_rad"),
+                "vel_b": ("vel_b_mps_x", "vel_b_mps_y", "vel_b_mps_z"),
+                "rate_b": ("rate_b_radps_x", "rate_b_radps_y", "rate_b_radps_z"),
+                "wheel_spin": tuple(f"wheel_speed_radps_{i}" for i in range(1, 5)),
+                "susp_defl": tuple(f"susp_deflection_m_{i}" for i in range(1, 5)),
+                "susp_defl_rate": tuple(f"susp_deflection_rate_mps_{i}" for i in range(1, 5))}
+        self.names: tuple[str, ...] = tuple(n for name, _ in parts for n in elem[name])
+
+    def __getattr__(self, name):  # layout.pos_g -> slice
+        try:
+            return object.__getattribute__(self, "slices")[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+    def __repr__(self):
+        return f"StateLayout(unsprung_dof={self.unsprung_dof}, size={self.size})"
+
+
+@dataclass(frozen=True, slots=True)
+class Inputs:
+    """Driver/ECU inputs, held over an integration step.
+
+    steer_wheel_angle_rad: positive to the left (CCW). wheel_torque_nm: drive torque per wheel
+    (FL FR RR RL), positive driving forward, applied as given (negative = retarding, e.g. engine
+    braking; it can turn a wheel backwards). brake_torque_nm: brake torque magnitudes >= 0 that
+    oppose the wheel's rotation and hold it at standstill."""
+
+    steer_wheel_angle_rad: float = 0.0
+    wheel_torque_nm: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    brake_torque_nm: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        for nm in ("wheel_torque_nm", "brake_torque_nm"):
+            v = getattr(self, nm)
+            if len(v) != 4:
+                raise ValueError(f"Inputs.{nm} needs 4 values (FL FR RR RL), got {len(v)}")
+            object.__setattr__(self, nm, tuple(float(e) for e in v))
+        if any(b < 0.0 for b in self.brake_torque_nm):
+            raise ValueError("Inputs.brake_torque_nm are magnitudes and must be >= 0")
+        object.__setattr__(self, "steer_wheel_angle_rad", float(self.steer_wheel_angle_rad))
+
+
+@dataclass(frozen=True)
+class Env:
+    """The environment: a road plane (bank phi_r, grade theta_r, constant) and the wind.
+
+    bank_rad > 0: right edge low (ISO). grade_rad < 0: downhill along the road's x axis (East at
+    psi = 0). wind_enu_mps: ambient wind velocity over ground (the ``crosswind`` effect adds its
+    own)."""
+
+    bank_rad: float = 0.0
+    grade_rad: float = 0.0
+    wind_enu_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    normal_g: tuple[float, float, float] = field(init=False, repr=False)
+
+    def __post_init__(self):
+        pr, tr = self.bank_rad, self.grade_rad
+        object.__setattr__(self, "normal_g", (-math.cos(pr) * math.sin(tr), -math.sin(pr),
+                                              math.cos(pr) * math.cos(tr)))
+        object.__setattr__(self, "wind_enu_mps", tuple(float(w) for w in self.wind_enu_mps))
+
+
+def spring_force_n(h_spring_m: float, c1: float, c2: float, c3: float) -> float:
+    """Eq 14 spring: K_s H with K_s = C1 exp(C2 (H - C3)); H compression from free length [m].
+    Negative H (extension past free length) gives tension, standing in for the rebound stop."""
+    return c1 * math.exp(c2 * (h_spring_m - c3)) * h_spring_m
+
+
+def ackermann_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front_m: float) -> tuple[float, float]:
+    """Front road-wheel angles (delta_1 FL, delta_2 FR) [rad] for a bicycle-model angle
+    delta_m: tan delta_1,2 = L tan delta_m / (L -+ t_f tan delta_m)."""
+    tm = math.tan(delta_mean_rad)
+    return (math.atan2(wheelbase_m * tm, wheelbase_m - track_half_front_m * tm),
+            math.atan2(wheelbase_m * tm, wheelbase_m + track_half_front_m * tm))
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class Model:
+    """A vehicle model: vehicle parameters + effects + variant, with ``f(x, u, env) -> x_dot``.
+
+    ``Model(vehicle, effects, unsprung_dof=True)`` is the truth simulator's model;
+    ``Model(model_vehicle, EffectSet([LinearTire()]), unsprung_dof=False)`` is the paper's eq
+    13-16. When ``effects`` has no tire model, ``linear_tire`` is used. Build once, call ``f``
+    many times: ``f`` is a closure over plain floats (no numpy inside).
+
+    Attributes: ``layout`` (StateLayout), ``vehicle``, ``effects`` (EffectSet incl. the tire),
+    ``static_load_n`` (F_z0 per corner on a level road [N]), ``rolling_radius_m`` (per corner),
+    ``max_stable_step_s``.
+    """
+
+    def __init__(self, vehicle: Vehicle, effects: EffectSet | Sequence[Effect] = (), *,
+                 unsprung_dof: bool = True, slip_speed_floor_mps: float = SLIP_SPEED_FLOOR_MPS):
+        effects = effects if isinstance(effects, EffectSet) else EffectSet(effects)
+        if effects.tire is None:
+            effects = EffectSet((LinearTire(), *effects))
+        if slip_speed_floor_mps <= 0.0:
+            raise ValueError("slip_speed_floor_mps must be positive")
+        self.vehicle = vehicle
+        self.effects = effects
+        self.unsprung_dof = bool(unsprung_dof)
+        self.layout = StateLayout(unsprung_dof)
+        self.slip_speed_floor_mps = float(slip_speed_floor_mps)
+        geo, p = vehicle.geometry, vehicle.params
+        g = GRAVITY_MPS2
+        L = geo.wheelbase_m
+        self.m_tot = p.mass_kg
+        self.m_s = vehicle.sprung_mass_kg
+        self.corner_xy = geo.corner_xy_m()
+        m_u = tuple(vehicle.axle(i).unsprung_mass_kg for i in range(4))
+        self.m_u = m_u
+        sprung_share = (geo.l_r_m / L / 2.0, geo.l_r_m / L / 2.0, geo.l_f_m / L / 2.0, geo.l_f_m / L / 2.0)
+        self.static_load_n = tuple(self.m_s * g * sprung_share[i] + m_u[i] * g for i in range(4))
+        self.static_spring_n = tuple(self.m_s * g * sprung_share[i] for i in range(4))
+        dyn = effects.dynamics
+        rfac = [1.0] * 4
+        for e in dyn:
+            if "rolling_radius_factor" in e.HOOKS:
+                for i in range(4):
+                    rfac[i] *= e.rolling_radius_factor(i)
+        r0 = vehicle.tire.rolling_radius_m
+        self.rolling_radius_m = tuple(r0 * f for f in rfac)
+        kt = vehicle.tire.vertical_stiffness_npm
+        self.tire_free_radius_m = tuple(r0 + self.static_load_n[i] / kt for i in range(4))
+        self.wheel_centre_z_m = -(geo.h_cg_m - r0)  # body z of the wheel centres at design ride height
+        ck = p.tracking_stiffness_n
+        ca = (p.cornering_stiffness_front_nprad / 2.0,) * 2 + (p.cornering_stiffness_rear_nprad / 2.0,) * 2
+        self.c_kappa = tuple(ck)
+        self.c_alpha = ca
+        tau_min = vehicle.tire.wheel_inertia_kgm2 * self.slip_speed_floor_mps / (min(self.rolling_radius_m) ** 2 * max(ck))
+        self.wheel_spin_tau_floor_s = tau_min
+        self.max_stable_step_s = RK4_STABILITY_LIMIT * tau_min
+        wind_extra = [0.0, 0.0, 0.0]
+        for e in dyn:
+            if hasattr(e, "wind_enu_mps"):
+                w = e.wind_enu_mps()
+                wind_extra = [wind_extra[k] + w[k] for k in range(3)]
+        self.effect_wind_enu_mps = tuple(wind_extra)
+        self.f = self._build()
+
+    # ------------------------------------------------------------------ the core
+    def _build(self) -> Callable:
+        veh = self.vehicle
+        geo, p = veh.geometry, veh.params
+        dof = self.unsprung_dof
+        g = GRAVITY_MPS2
+        m_tot, m_s = self.m_tot, self.m_s
+        inv_m_tot, inv_m_s = 1.0 / m_tot, 1.0 / m_s
+        Ix, Iy, Iz = p.inertia_x_kgm2, p.inertia_y_kgm2, p.inertia_z_kgm2
+        Iyz, Izx, Ixy = (Iy - Iz) / Ix, (Iz - Ix) / Iy, (Ix - Iy) / Iz
+        inv_Ix, inv_Iy, inv_Iz = 1.0 / Ix, 1.0 / Iy, 1.0 / Iz
+        Iw_inv = 1.0 / veh.tire.wheel_inertia_kgm2
+        kt = veh.tire.vertical_stiffness_npm
+        L, tf = geo.wheelbase_m, geo.track_half_front_m
+        ratio = geo.steer_ratio
+        zw0 = self.wheel_centre_z_m
+        r_load = veh.tire.rolling_radius_m
+        vfloor = self.slip_speed_floor_mps
+        wbrake = BRAKE_HOLD_SPEED_RADPS
+        corners = []
+        for i in range(4):
+            ax = veh.axle(i)
+            x_i, y_i = self.corner_xy[i]
+            corners.append((i, x_i, y_i, self.m_u[i], ax.spring_c1_npm, ax.spring_c2_per_m, ax.spring_c3_m,
+                            ax.static_compression_m, ax.damper_nspm, self.rolling_radius_m[i],
+                            self.tire_free_radius_m[i], self.c_kappa[i], self.c_alpha[i],
+                            self.static_load_n[i], self.m_u[i] * g))
+        corners = tuple(corners)
+        dyn = self.effects.dynamics
+        tire = self.effects.tire
+        tire_fn = tire.tire_forces
+        stiff_fns = tuple(e.cornering_stiffness_factor for e in dyn if "cornering_stiffness_factor" in e.HOOKS)
+        wrench_fns = tuple(e.body_wrench for e in dyn if "body_wrench" in e.HOOKS)
+        wheel_fns = tuple(e.wheel_torque for e in dyn if "wheel_torque" in e.HOOKS)
+        k_c = sum(e.compliance_steer() for e in dyn if "compliance_steer" in e.HOOKS)
+        wex, wey, wez = self.effect_wind_enu_mps
+        sqrt, sin, cos, atan, exp, atan2, tan = math.sqrt, math.sin, math.cos, math.atan, math.exp, math.atan2, math.tan
+
+        def f(x, u, env, out=None):
+            """x_dot = f(x, u, env). ``out``: optional dict filled with named diagnostics."""
+            (pe, pn, pu, phi, theta, psi, vx, vy, vz, wx, wy, wz, om1, om2, om3, om4) = x[0:16]
+            oms = (om1, om2, om3, om4)
+            if dof:
+                Hs = x[16:20]
+                Hds = x[20:24]
+            sph, cph, sth, cth, sps, cps = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
+            # C = C_g^v = R(x,phi) R(y,theta) R(z,psi), eq 1
+            c00, c01, c02 = cth * cps, cth * sps, sth
+            c10 = -cph * sps - sph * sth * cps
+            c11 = cph * cps - sph * sth * sps
+            c12 = sph * cth
+            c20 = sph * sps - cph * sth * cps
+            c21 = -sph * cps - cph * sth * sps
+            c22 = cph * cth
+            ng0, ng1, ng2 = env.normal_g
+            nx = c00 * ng0 + c01 * ng1 + c02 * ng2
+            ny = c10 * ng0 + c11 * ng1 + c12 * ng2
+            nz = c20 * ng0 + c21 * ng1 + c22 * ng2
+            gx, gy, gz = -g * c02, -g * c12, -g * c22
+            h_cg = pe * ng0 + pn * ng1 + pu * ng2
+            # steering (Ackermann from the bicycle angle)
+            dm = u.steer_wheel_angle_rad / ratio
+            tm = tan(dm)
+            d1 = atan2(L * tm, L - tf * tm)
+            d2 = atan2(L * tm, L + tf * tm)
+            torques = u.wheel_torque_nm
+            brakes = u.brake_torque_nm
+
+            # ---- per-corner kinematics and normal loads
+            ck = []
+            for (i, xi, yi, mu, c1, c2, c3, sc, ds, ri, rfree, ckap, calp, fz0, mug) in corners:
+                if dof:
+                    H = Hs[i]
+                    Hd = Hds[i]
+                    zi = zw0 + H
+                    hw = h_cg + nx * xi + ny * yi + nz * zi
+                    defl = rfree - hw
+                    fz = kt * defl if defl > 0.0 else 0.0
+                    hsp = sc + H
+                    fs = c1 * exp(c2 * (hsp - c3)) * hsp + ds * Hd
+                    vwx = vx + wy * zi - wz * yi
+                    vwy = vy + wz * xi - wx * zi
+                    vwz = vz + wx * yi - wy * xi + Hd
+                else:
+                    zi = zw0
+                    hw = h_cg + nx * xi + ny * yi + nz * zi
+                    vwx = vx + wy * zi - wz * yi
+                    vwy = vy + wz * xi - wx * zi
+                    vwz = vz + wx * yi - wy * xi
+                    H = r_load - hw
+                    Hd = -(nx * vwx + ny * vwy + nz * vwz)
+                    hsp = sc + H
+                    fsp = c1 * exp(c2 * (hsp - c3)) * hsp
+                    if fsp + mug <= 0.0:  # eq 14 clamp: lift-off
+                        fz = 0.0
+                    else:
+                        fz = fsp + ds * Hd + mug
+                        if fz < 0.0:
+                            fz = 0.0
+                    fs = fz
+                if stiff_fns:
+                    for sf in stiff_fns:
+                        calp = calp * sf(i, fz, fz0)
+                ck.append((i, xi, yi, zi, hw, fz, fs, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0))
+
+            def tire_at(c, delta):
+                (i, xi, yi, zi, hw, fz, fs, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0) = c
+                cd, sd = cos(delta), sin(delta)
+                hn = cd * nx + sd * ny
+                lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
+                inv = 1.0 / sqrt(lx * lx + ly * ly + lz * lz)
+                lx, ly, lz = lx * inv, ly * inv, lz * inv
+                tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
+                vl = vwx * lx + vwy * ly + vwz * lz
+                vt = vwx * tx + vwy * ty + vwz * tz
+                den = vl if vl > 0.0 else -vl
+                if den < vfloor:
+                    den = vfloor
+                kap = (ri * oms[i] - vl) / den
+                alp = -atan(vt / den)
+                fa, fb = tire_fn(fz, fz0, kap, alp, ckap, calp)
+                return fa, fb, kap, alp, lx, ly, lz, tx, ty, tz
+
+            if k_c != 0.0:
+                # steering compliance: delta_c = -K_c (F_b1 + F_b2), solved by secant (exact if linear)
+                c0, c1_ = ck[0], ck[1]
+
+                def resid(dc):
+                    return dc + k_c * (tire_at(c0, d1 + dc)[1] + tire_at(c1_, d2 + dc)[1])
+
+                r0_ = resid(0.0)
+                dc1 = -r0_
+                r1_ = resid(dc1)
+                den_ = r1_ - r0_
+                dcomp = dc1 - r1_ * dc1 / den_ if den_ != 0.0 else dc1
+            else:
+                dcomp = 0.0
+            deltas = (d1 + dcomp, d2 + dcomp, 0.0, 0.0)
+
+            Fx = Fy = Fz = Mx = My = Mz = 0.0
+            wdots = [0.0, 0.0, 0.0, 0.0]
+            fzt = [0.0, 0.0, 0.0, 0.0]
+            rec = [] if out is not None else None
+            for c in ck:
+                (i, xi, yi, zi, hw, fz, fs, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0) = c
+                fa, fb, kap, alp, lx, ly, lz, tx, ty, tz = tire_at(c, deltas[i])
+                ftx = fa * lx + fb * tx + fz * nx
+                fty = fa * ly + fb * ty + fz * ny
+                ftz = fa * lz + fb * tz + fz * nz
+                # contact point r_c = r_w - hw n
+                rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zi - hw * nz
+                Mx += rcy * ftz - rcz * fty
+                My += rcz * ftx - rcx * ftz
+                Mz += rcx * fty - rcy * ftx
+                Fx += ftx
+                Fy += fty
+                if dof:
+                    Fz += fs
+                    # spring/damper at the strut; the tire's body-z force goes into the unsprung mass
+                    Mx += yi * (fs - ftz)
+                    My -= xi * (fs - ftz)
+                    fzt[i] = ftz
+                else:
+                    Fz += ftz
+                om = oms[i]
+                tq = torques[i]
+                b = brakes[i]
+                if b != 0.0:
+                    s = om / wbrake
+                    tq -= b * (1.0 if s > 1.0 else (-1.0 if s < -1.0 else s))
+                teff = 0.0
+                for wf in wheel_fns:
+                    teff += wf(i, om, fz, ri)
+                wdots[i] = (tq - ri * fa + teff) * Iw_inv
+                if rec is not None:
+                    rec.append((fa, fb, fz, kap, alp, H, Hd, tq, teff, deltas[i], ri, hw, fs, ftx, fty, ftz))
+            # effects' body wrench (air velocity relative to the wind)
+            if wrench_fns:
+                we0, we1, we2 = env.wind_enu_mps
+                we0 += wex
+                we1 += wey
+                we2 += wez
+                air = (vx - (c00 * we0 + c01 * we1 + c02 * we2),
+                       vy - (c10 * we0 + c11 * we1 + c12 * we2),
+                       vz - (c20 * we0 + c21 * we1 + c22 * we2))
+                vel = (vx, vy, vz)
+                omg = (wx, wy, wz)
+                for wf in wrench_fns:
+                    ex, ey, ez, emx, emy, emz = wf(vel, omg, air)
+                    Fx += ex
+                    Fy += ey
+                    Fz += ez
+                    Mx += emx
+                    My += emy
+                    Mz += emz
+            # translation: a = F/m + g_b
+            ax_ = Fx * inv_m_tot + gx
+            ay_ = Fy * inv_m_tot + gy
+            if dof:
+                az_ = Fz * inv_m_s + gz
+            else:
+                az_ = Fz * inv_m_tot + gz
+            # unsprung masses' weight and translational inertia at the wheel centres
+            for (i, xi, yi, mu, *_rest) in corners:
+                zi = ck[i][3]
+                ux, uy = mu * (gx - ax_), mu * (gy - ay_)
+                uz = 0.0 if dof else mu * (gz - az_)
+                Mx += yi * uz - zi * uy
+                My += zi * ux - xi * uz
+                Mz += xi * uy - yi * ux
+            dwx = Iyz * wy * wz + Mx * inv_Ix
+            dwy = Izx * wz * wx + My * inv_Iy
+            dwz = Ixy * wx * wy + Mz * inv_Iz
+            # kinematics
+            dpe = c00 * vx + c10 * vy + c20 * vz
+            dpn = c01 * vx + c11 * vy + c21 * vz
+            dpu = c02 * vx + c12 * vy + c22 * vz
+            tth = sth / cth
+            dphi = wx - tth * sph * wy - tth * cph * wz
+            dtheta = -cph * wy + sph * wz
+            dpsi = (sph * wy + cph * wz) / cth
+            xd = [dpe, dpn, dpu, dphi, dtheta, dpsi,
+                  ax_ - (wy * vz - wz * vy), ay_ - (wz * vx - wx * vz), az_ - (wx * vy - wy * vx),
+                  dwx, dwy, dwz, wdots[0], wdots[1], wdots[2], wdots[3]]
+            if dof:
+                ww = wx * wx + wy * wy + wz * wz
+                hdd = []
+                for (i, xi, yi, mu, *_rest) in corners:
+                    zi = ck[i][3]
+                    acc_z = az_ + (dwx * yi - dwy * xi) + (wz * (wx * xi + wy * yi + wz * zi) - zi * ww)
+                    hdd.append((fzt[i] - ck[i][6]) / mu + gz - acc_z)
+                xd.extend(Hds)
+                xd.extend(hdd)
+            if out is not None:
+                out["_rec"] = rec
+                out["_acc_b"] = (ax_, ay_, az_)
+                out["_g_b"] = (gx, gy, gz)
+                out["_force_b"] = (Fx, Fy, Fz)
+                out["_moment_b"] = (Mx, My, Mz)
+                out["_normal_b"] = (nx, ny, nz)
+                out["_height_cg"] = h_cg
+            return xd
+
+        return f
+
+    # ------------------------------------------------------------------ helpers
+    def evaluate(self, x, u: Inputs, env: Env) -> tuple[list, dict]:
+        """x_dot and named diagnostics (slow path, for snapshots): see ``snapshot_fields``."""
+        raw: dict = {}
+        xd = self.f(x, u, env, raw)
+        return xd, self._named(x, xd, raw, env)
+
+    def _named(self, x, xd, raw, env: Env) -> dict:
+        d: dict[str, float] = {}
+        ax_, ay_, az_ = raw["_acc_b"]
+        gx, gy, gz = raw["_g_b"]
+        for k, a in enumerate("xyz"):
+            d[f"accel_b_mps2_{a}"] = raw["_acc_b"][k]
+            d[f"specific_force_b_mps2_{a}"] = raw["_acc_b"][k] - raw["_g_b"][k]
+            d[f"angular_accel_b_radps2_{a}"] = xd[9 + k]
+            d[f"force_b_n_{a}"] = raw["_force_b"][k]
+            d[f"moment_b_nm_{a}"] = raw["_moment_b"][k]
+        d["height_cg_above_road_m"] = raw["_height_cg"]
+        for i, rec in enumerate(raw["_rec"], start=1):
+            (fa, fb, fz, kap, alp, H, Hd, tq, teff, delta, ri, hw, fs, ftx, fty, ftz) = rec
+            d[f"tire_force_long_n_{i}"] = fa
+            d[f"tire_force_lat_n_{i}"] = fb
+            d[f"normal_load_n_{i}"] = fz
+            d[f"slip_ratio_{i}"] = kap
+            d[f"slip_angle_rad_{i}"] = alp
+            d[f"susp_deflection_m_{i}"] = H
+            d[f"susp_deflection_rate_mps_{i}"] = Hd
+            d[f"susp_force_n_{i}"] = fs
+            d[f"wheel_torque_nm_{i}"] = tq
+            d[f"effect_wheel_torque_nm_{i}"] = teff
+            d[f"road_wheel_angle_rad_{i}"] = delta
+            d[f"rolling_radius_m_{i}"] = ri
+            d[f"wheel_centre_height_m_{i}"] = hw
+            d[f"wheel_accel_radps2_{i}"] = xd[12 + i - 1]
+        return d
+
+    def static_loads(self) -> tuple[float, ...]:
+        """F_z0 per corner on a level road [N] (sprung share + unsprung weight)."""
+        return self.static_load_n
+
+    def design_state(self, speed_mps: float = 0.0, env: Env | None = None, heading_rad: float = 0.0,
+                     east_m: float = 0.0, north_m: float = 0.0) -> list[float]:
+        """The body at design ride height parallel to the road plane, moving straight ahead at
+        ``speed_mps`` with heading ``heading_rad`` (yaw of the road-plane projection), wheels
+        rolling without slip. The CG is at h_cg above the road plane."""
+        env = env or Env()
+        from .frames import compose_absolute
+        phi_g, theta_g, psi_g = compose_absolute(0.0, 0.0, heading_rad, env.bank_rad, env.grade_rad)
+        n = env.normal_g
+        # point on the road below (east, north): solve n . p = 0 for up, then lift by h_cg along n
+        up0 = -(n[0] * east_m + n[1] * north_m) / n[2]
+        h = self.vehicle.geometry.h_cg_m
+        pos = [east_m + h * n[0], north_m + h * n[1], up0 + h * n[2]]
+        x = pos + [phi_g, theta_g, psi_g, float(speed_mps), 0.0, 0.0, 0.0, 0.0, 0.0]
+        x += [speed_mps / r for r in self.rolling_radius_m]
+        if self.unsprung_dof:
+            x += [0.0] * 8
+        return x
+
+    def trim_state(self, speed_mps: float = 0.0, env: Env | None = None, heading_rad: float = 0.0,
+                   inputs: Inputs | None = None, iterations: int = 30, **kw) -> list[float]:
+        """``design_state`` with the vertical, roll, pitch (and unsprung) DOFs moved to static
+        equilibrium (Newton on the body-z/roll/pitch accelerations and H_ddot; horizontal motion
+        is left free). Used to start scenarios without a settling transient."""
+        env = env or Env()
+        u = inputs or Inputs()
+        x0 = self.design_state(speed_mps, env, heading_rad, **kw)
+        lay = self.layout
+        n_env = env.normal_g
+        # unknowns: height along the road normal, roll/pitch relative to the road, H_1..4
+        from .frames import compose_absolute
+
+        def build(z):
+            x = list(x0)
+            phi, th, ps = compose_absolute(z[1], z[2], heading_rad, env.bank_rad, env.grade_rad)
+            x[3], x[4], x[5] = phi, th, ps
+            for k in range(3):
+                x[k] = x0[k] + z[0] * n_env[k]
+            if lay.unsprung_dof:
+                for i in range(4):
+                    x[16 + i] = z[3 + i]
+            return x
+
+        def resid(z):
+            x = build(z)
+            xd = self.f(x, u, env)
+            r = [xd[8], xd[9], xd[10]]
+            if lay.unsprung_dof:
+                r += xd[20:24]
+            return r
+
+        nz = 7 if lay.unsprung_dof else 3
+        z = [0.0] * nz
+        import numpy as np
+        for _ in range(iterations):
+            r0 = np.array(resid(z))
+            if np.max(np.abs(r0)) < 1e-10:
+                break
+            J = np.zeros((len(r0), nz))
+            for j in range(nz):
+                zp = list(z)
+                zp[j] += 1e-7
+                J[:, j] = (np.array(resid(zp)) - r0) / 1e-7
+            dz = np.linalg.lstsq(J, -r0, rcond=None)[0]
+            z = [z[j] + float(dz[j]) for j in range(nz)]
+        return build(z)
+
+    def state_names(self) -> tuple[str, ...]:
+        return self.layout.names
