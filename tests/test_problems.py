@@ -67,7 +67,8 @@ def _forward(rng, k, true=TRUE, ackermann=True, pitch_scale=1.0, **override):
     for i in range(4):
         ax = MODEL.front if i < 2 else MODEL.rear
         hs = ax.static_compression_m + h[i]
-        fz_body[i] = ax.spring_c1_npm * math.exp(ax.spring_c2_per_m * (hs - ax.spring_c3_m)) * hs + ax.damper_nspm * hd[i]
+        k_s = ax.spring_c1_npm * math.exp(ax.spring_c2_per_m * (hs - ax.spring_c3_m))
+        fz_body[i] = k_s * hs + ax.damper_nspm * hd[i]
         fz_total[i] = fz_body[i] + ax.unsprung_mass_kg * G
     zdd = fz_total.sum() / m + g_aux[2]
     moment = np.zeros(3)

@@ -9,13 +9,15 @@ The misprints of the paper found here are listed in the ``problems`` and ``rls``
 
 from vdps_hil.identification.persistence import (ParamsFileError, PersistedParams, load_params,
                                                  reset_params, save_params)
-from vdps_hil.identification.problems import (PROBLEM_NAMES, PROBLEM_PARAMS, IdentConfig,
-                                              IdentConfigError, IdentInputs, Identifier,
-                                              gravity_aux_mps2, load_ident_config)
+from vdps_hil.identification.problems import (PROBLEM_NAMES, PROBLEM_PARAMS, REGRESSORS, IdentConfig,
+                                              IdentConfigError, IdentInputs, Identifier, Regressor,
+                                              balanced_weighting, gravity_aux_mps2, load_ident_config,
+                                              parse_ident_config)
 from vdps_hil.identification.rls import RLSCounters, WeightedRLS
 
 __all__ = [
     "IdentConfig", "IdentConfigError", "IdentInputs", "Identifier", "PROBLEM_NAMES", "PROBLEM_PARAMS",
-    "ParamsFileError", "PersistedParams", "RLSCounters", "WeightedRLS", "gravity_aux_mps2",
-    "load_ident_config", "load_params", "reset_params", "save_params",
+    "REGRESSORS", "ParamsFileError", "PersistedParams", "RLSCounters", "Regressor", "WeightedRLS",
+    "balanced_weighting", "gravity_aux_mps2", "load_ident_config", "load_params", "parse_ident_config",
+    "reset_params", "save_params",
 ]

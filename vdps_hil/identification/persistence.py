@@ -115,7 +115,8 @@ def parse_params(text: str, vehicle: Vehicle, origin: str = "<string>",
     try:
         doc = json.loads(text)
     except (json.JSONDecodeError, RecursionError) as e:
-        raise ParamsFileError(f"{origin}: not valid JSON ({str(e).splitlines()[0] if str(e) else 'too deep'})") from None
+        why = str(e).splitlines()[0] if str(e) else "too deep"
+        raise ParamsFileError(f"{origin}: not valid JSON ({why})") from None
     if not isinstance(doc, dict):
         raise ParamsFileError(f"{origin}: expected a JSON object")
     if doc.get("schema") != SCHEMA:
