@@ -1,0 +1,264 @@
+"""Rescue a recording cut off by a crash, a ``kill -9`` or a full disk (``vdps recover``).
+
+An MCAP file is a sequence of records ``opcode (1 byte) | length (8 bytes, LE) | body``. A
+logger that dies leaves a file without its summary and footer, usually ending inside a record.
+:func:`recover` walks the records from the start and copies every *complete* one into a new,
+properly closed file:
+
+* a record whose announced length runs past the end of the file ends the scan (the cut);
+* a chunk (compressed block of messages) is copied message by message when it decompresses
+  and its CRC-32 matches; a damaged chunk is skipped and counted, and the scan goes on after
+  it (its length is known), so data after a damaged spot is not lost;
+* schemas and channels are re-registered (our writer repeats them in every chunk, so every
+  complete chunk is self-describing), messages keep their ``log_time``, ``publish_time`` and
+  sequence; metadata records and attachments are copied;
+* the data section ends at the ``DataEnd`` record: a file that was closed properly is simply
+  rewritten.
+
+What is lost: the chunk that was being written when the process died. The logger closes a
+chunk every ``flush_s`` (0.5 s), so that is at most about the last half second of data.
+
+The new file gets a metadata record ``vdps.recover`` with what was done (bytes scanned, where
+the cut was, messages per topic, damaged chunks).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import struct
+import zlib
+from typing import IO
+
+import zstandard
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import (Attachment, Channel, Chunk, Header, Message, Metadata, Schema)
+from mcap.writer import CompressionType, IndexType, Writer
+
+__all__ = ["recover", "RecoverError", "RECOVER_METADATA"]
+
+MAGIC = b"\x89MCAP0\r\n"
+RECOVER_METADATA = "vdps.recover"
+_HEAD = struct.Struct("<BQ")
+_MAX_RECORD = 1 << 32
+
+
+class RecoverError(Exception):
+    """The input cannot be recovered at all (not MCAP, unreadable): one line."""
+
+
+def _one_line(e: BaseException) -> str:
+    s = str(e).splitlines()[0] if str(e) else ""
+    return f"{type(e).__name__}: {s}" if s else type(e).__name__
+
+
+class _Copier:
+    def __init__(self, out: Writer):
+        self.out = out
+        self.schemas: dict[int, int] = {}
+        self.schema_keys: dict[tuple, int] = {}
+        self.channels: dict[int, int] = {}
+        self.channel_topic: dict[int, str] = {}
+        self.pending_channels: dict[int, Channel] = {}
+        self.messages_by_topic: dict[str, int] = {}
+        self.orphans = 0
+        self.last_t_ns: dict[str, int] = {}
+
+    def schema(self, s: Schema) -> None:
+        if s.id in self.schemas:
+            return
+        key = (s.name, s.encoding, bytes(s.data))
+        sid = self.schema_keys.get(key)
+        if sid is None:
+            sid = self.out.register_schema(s.name, s.encoding, bytes(s.data))
+            self.schema_keys[key] = sid
+        self.schemas[s.id] = sid
+        for cid in [c for c, ch in self.pending_channels.items() if ch.schema_id == s.id]:
+            self.channel(self.pending_channels.pop(cid))
+
+    def channel(self, c: Channel) -> None:
+        if c.id in self.channels:
+            return
+        if c.schema_id != 0 and c.schema_id not in self.schemas:
+            self.pending_channels[c.id] = c
+            return
+        sid = self.schemas.get(c.schema_id, 0)
+        self.channels[c.id] = self.out.register_channel(c.topic, c.message_encoding, sid,
+                                                        dict(c.metadata))
+        self.channel_topic[c.id] = c.topic
+
+    def message(self, m: Message) -> None:
+        cid = self.channels.get(m.channel_id)
+        if cid is None:
+            self.orphans += 1  # its channel record was in a lost part
+            return
+        self.out.add_message(cid, m.log_time, bytes(m.data), m.publish_time, m.sequence)
+        topic = self.channel_topic[m.channel_id]
+        self.messages_by_topic[topic] = self.messages_by_topic.get(topic, 0) + 1
+        if m.publish_time > self.last_t_ns.get(topic, -1):
+            self.last_t_ns[topic] = m.publish_time
+
+
+def _chunk_records(chunk: Chunk) -> list:
+    if chunk.compression == "zstd":
+        data = zstandard.ZstdDecompressor().decompress(chunk.data,
+                                                       max_output_size=chunk.uncompressed_size)
+    elif chunk.compression == "":
+        data = bytes(chunk.data)
+    elif chunk.compression == "lz4":
+        import lz4.frame  # optional; only files written with lz4 need it
+
+        data = lz4.frame.decompress(chunk.data)
+    else:
+        raise ValueError(f"unknown chunk compression {chunk.compression!r}")
+    if len(data) != chunk.uncompressed_size:
+        raise ValueError("chunk size mismatch")
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise ValueError("chunk CRC mismatch")
+    out = []
+    stream = ReadDataStream(io.BytesIO(data))
+    n = len(data)
+    while stream.count < n:
+        if n - stream.count < _HEAD.size:
+            raise ValueError("chunk ends inside a record header")
+        op = stream.read1()
+        length = stream.read8()
+        start = stream.count
+        if start + length > n:
+            raise ValueError("chunk record runs past the chunk")
+        if op == Opcode.SCHEMA:
+            out.append(Schema.read(stream))
+        elif op == Opcode.CHANNEL:
+            out.append(Channel.read(stream))
+        elif op == Opcode.MESSAGE:
+            out.append(Message.read(stream, length))
+        pad = length - (stream.count - start)
+        if pad > 0:
+            stream.read(pad)
+    return out
+
+
+def recover(src: str | os.PathLike | IO[bytes], dst: str | os.PathLike) -> dict:
+    """Copy every complete record of ``src`` into a new closed MCAP ``dst``; returns a report.
+    Raises RecoverError (one line) when ``src`` is not an MCAP file at all."""
+    if hasattr(src, "read"):
+        f, owns, name = src, False, getattr(src, "name", "<stream>")
+    else:
+        name = os.fspath(src)
+        try:
+            f, owns = open(name, "rb"), True
+        except OSError as e:
+            raise RecoverError(f"cannot open {name}: {e.strerror or e}") from None
+    try:
+        size = os.fstat(f.fileno()).st_size if hasattr(f, "fileno") else None
+    except (OSError, io.UnsupportedOperation):
+        size = None
+    try:
+        if f.read(len(MAGIC)) != MAGIC:
+            raise RecoverError(f"{name} is not an MCAP recording (bad magic)")
+        if os.path.abspath(os.fspath(dst)) == os.path.abspath(name):
+            raise RecoverError("output must be a new file, not the broken one")
+        try:
+            out_f = open(dst, "wb")
+        except OSError as e:
+            raise RecoverError(f"cannot write {dst}: {e.strerror or e}") from None
+        report = {"input": name, "input_bytes": size, "complete_bytes": len(MAGIC),
+                  "chunks_ok": 0, "chunks_damaged": 0, "damaged": [], "metadata_records": 0,
+                  "attachments": 0, "properly_closed": False, "stop": ""}
+        with out_f:
+            w = Writer(out_f, compression=CompressionType.ZSTD, index_types=IndexType.ALL,
+                       repeat_channels=True, repeat_schemas=True, use_chunking=True,
+                       use_statistics=True, use_summary_offsets=True, enable_crcs=True)
+            started = False
+            cp = _Copier(w)
+            offset = len(MAGIC)
+            while True:
+                head = f.read(_HEAD.size)
+                if len(head) < _HEAD.size:
+                    report["stop"] = ("end of file" if not head else
+                                      f"cut inside a record header at byte {offset}")
+                    break
+                op, length = _HEAD.unpack(head)
+                if length > _MAX_RECORD or (size is not None and
+                                            offset + _HEAD.size + length > size):
+                    report["stop"] = f"cut inside a record (opcode {op}) at byte {offset}"
+                    break
+                body = f.read(length)
+                if len(body) < length:
+                    report["stop"] = f"cut inside a record (opcode {op}) at byte {offset}"
+                    break
+                rec_offset = offset
+                offset += _HEAD.size + length
+                if op == Opcode.HEADER and not started:
+                    try:
+                        h = Header.read(ReadDataStream(io.BytesIO(body)))
+                        w.start(profile=h.profile, library=f"vdps-hil recover ({h.library})")
+                    except Exception:  # noqa: BLE001
+                        w.start(profile="", library="vdps-hil recover")
+                    started = True
+                    report["complete_bytes"] = offset
+                    continue
+                if not started:
+                    w.start(profile="", library="vdps-hil recover")
+                    started = True
+                if op == Opcode.DATA_END or op == Opcode.FOOTER:
+                    report["properly_closed"] = True
+                    report["stop"] = "end of data section"
+                    report["complete_bytes"] = offset
+                    break
+                try:
+                    stream = ReadDataStream(io.BytesIO(body))
+                    if op == Opcode.CHUNK:
+                        try:
+                            records = _chunk_records(Chunk.read(stream))
+                        except Exception as e:  # noqa: BLE001 - damaged chunk: skip it
+                            report["chunks_damaged"] += 1
+                            if len(report["damaged"]) < 20:
+                                report["damaged"].append(f"chunk at byte {rec_offset}: "
+                                                         f"{_one_line(e)}")
+                            report["complete_bytes"] = offset
+                            continue
+                        for r in records:
+                            if isinstance(r, Schema):
+                                cp.schema(r)
+                            elif isinstance(r, Channel):
+                                cp.channel(r)
+                            else:
+                                cp.message(r)
+                        report["chunks_ok"] += 1
+                    elif op == Opcode.SCHEMA:
+                        cp.schema(Schema.read(stream))
+                    elif op == Opcode.CHANNEL:
+                        cp.channel(Channel.read(stream))
+                    elif op == Opcode.MESSAGE:
+                        cp.message(Message.read(stream, length))
+                    elif op == Opcode.METADATA:
+                        md = Metadata.read(stream)
+                        w.add_metadata(md.name, dict(md.metadata))
+                        report["metadata_records"] += 1
+                    elif op == Opcode.ATTACHMENT:
+                        a = Attachment.read(stream)
+                        w.add_attachment(a.create_time, a.log_time, a.name, a.media_type,
+                                         bytes(a.data))
+                        report["attachments"] += 1
+                    # message indexes, chunk indexes and the like are rebuilt by the writer
+                except Exception as e:  # noqa: BLE001 - a damaged record: skip it
+                    if len(report["damaged"]) < 20:
+                        report["damaged"].append(f"record {op} at byte {rec_offset}: "
+                                                 f"{_one_line(e)}")
+                report["complete_bytes"] = offset
+            if not started:
+                w.start(profile="", library="vdps-hil recover")
+            report["messages"] = sum(cp.messages_by_topic.values())
+            report["topics"] = dict(sorted(cp.messages_by_topic.items()))
+            report["last_t_ns"] = dict(sorted(cp.last_t_ns.items()))
+            report["orphan_messages"] = cp.orphans
+            w.add_metadata(RECOVER_METADATA, {k: v if isinstance(v, str) else json.dumps(v)
+                                              for k, v in report.items()})
+            w.finish()
+        return report
+    finally:
+        if owns:
+            f.close()
