@@ -31,8 +31,10 @@ class LinearTire(TireModel):
         F_a = C_kappa kappa          [N]
         F_b = C_alpha alpha          [N]
 
-    The stiffnesses are the vehicle's identified parameters (no parameters of its own). A wheel
-    off the ground (F_z <= 0) carries no force. Valid at small slip only (no saturation).
+    The stiffnesses are the vehicle's identified parameters (no parameters of its own; default
+    magnitudes are the vehicle file's: sedan C_kappa = 80 kN, C_alpha = 60 kN/rad front and
+    85 kN/rad rear per tire). A wheel off the ground (F_z <= 0) carries no force. Valid at small
+    slip only (no saturation).
     """
 
     name = "linear_tire"

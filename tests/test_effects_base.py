@@ -1,0 +1,89 @@
+"""Effect interface: registry, parameters with units, immutability, EffectSet composition,
+regressors equal to the contributions of effects linear in their parameters."""
+
+import pytest
+
+from vdps_hil.model.effects import (DYNAMICS_HOOKS, REGISTRY, DynamicsEffect, EffectConfigError, EffectSet,
+                                    MeasurementEffect, TireModel, effects_from_names, make_effect)
+
+CANONICAL = {"linear_tire", "magic_formula_tire", "aero_drag", "rolling_resistance",
+             "load_dependent_cornering_stiffness", "low_pressure_tire", "crosswind", "steering_compliance",
+             "imu_bias", "imu_lever_arm"}
+
+
+def test_registry_has_the_canonical_names_and_documented_effects():
+    assert set(REGISTRY) == CANONICAL
+    for name, cls in REGISTRY.items():
+        assert cls.name == name
+        assert cls.family in ("dynamics", "measurement")
+        assert issubclass(cls, DynamicsEffect if cls.family == "dynamics" else MeasurementEffect)
+        doc = cls.__doc__ or ""
+        assert name in doc and "default" in doc.lower(), name
+        for p in cls.PARAMS:
+            assert p.unit and p.description and p.lower <= p.default <= p.upper, (name, p.name)
+        if cls.family == "dynamics":
+            assert set(cls.HOOKS) <= set(DYNAMICS_HOOKS) and cls.HOOKS, name
+        e = cls()  # defaults construct
+        assert e.params == {p.name: p.default for p in cls.PARAMS}
+        assert e.plausible()
+
+
+def test_effects_are_immutable_and_replace_gives_new_objects():
+    d = make_effect("aero_drag", cda_m2=0.6)
+    with pytest.raises(AttributeError):
+        d.cda_m2 = 1.0
+    d2 = d.replace(cda_m2=0.8)
+    assert d.cda_m2 == 0.6 and d2.cda_m2 == 0.8 and d != d2 and d == make_effect("aero_drag", cda_m2=0.6)
+
+
+def test_bad_names_and_values_are_one_line_errors():
+    with pytest.raises(EffectConfigError, match="unknown effect"):
+        make_effect("flux_capacitor")
+    with pytest.raises(EffectConfigError, match="finite number"):
+        make_effect("aero_drag", cda_m2=float("nan"))
+    with pytest.raises(EffectConfigError, match="given twice"):
+        EffectSet([make_effect("aero_drag"), make_effect("aero_drag")])
+
+
+def test_effect_set_composition_and_lookup():
+    s = EffectSet([make_effect("aero_drag")]) + make_effect("imu_bias") + [make_effect("magic_formula_tire")]
+    assert s.names == ("aero_drag", "imu_bias", "magic_formula_tire")
+    assert "imu_bias" in s and s["aero_drag"].cda_m2 == 0.7
+    assert [e.name for e in s.dynamics] == ["aero_drag", "magic_formula_tire"]
+    assert [e.name for e in s.measurement] == ["imu_bias"]
+    assert isinstance(s.tire, TireModel) and s.without("magic_formula_tire").tire is None
+
+
+def test_magnitudes_come_from_vehicle_then_overrides():
+    veh = {"magic_formula_tire": {"peak_friction": 0.9}}
+    s = effects_from_names(["magic_formula_tire"], veh, {"magic_formula_tire": {"shape_lateral": 1.4}})
+    e = s["magic_formula_tire"]
+    assert e.peak_friction == 0.9 and e.shape_lateral == 1.4 and e.curvature_lateral == -1.0
+    with pytest.raises(EffectConfigError, match="not switched on"):
+        effects_from_names([], veh, {"aero_drag": {"cda_m2": 1.0}})
+
+
+def test_user_effect_takes_part_like_builtin_ones():
+    """A user's dynamics effect (a constant push) registered by name acts in the core."""
+    from vdps_hil.model.core import Env, Inputs, Model
+    from vdps_hil.model.effects.base import ParamSpec
+    from vdps_hil.model.params import load_vehicle
+
+    class Push(DynamicsEffect):
+        """``push`` -- a constant forward force F = force_n [N] at the CG (default 100 N)."""
+        name = "push"
+        HOOKS = ("body_wrench",)
+        PARAMS = (ParamSpec("force_n", "N", 100.0, "forward push"),)
+
+        def body_wrench(self, vel_b, omega_b, air_b):
+            return (self.force_n, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+    REGISTRY["push"] = Push
+    try:
+        v = load_vehicle("sedan-truth")
+        m = Model(v, effects_from_names(["push"]))
+        raw = {}
+        m.f(m.design_state(0.0), Inputs(), Env(), raw)
+        assert raw["_acc_b"][0] == pytest.approx(100.0 / v.params.mass_kg)
+    finally:
+        del REGISTRY["push"]
