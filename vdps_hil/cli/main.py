@@ -14,6 +14,14 @@ from vdps_hil.cli.common import UserError
 # name -> (module, attribute, one-line help). Explicit registry, no import side effects.
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "sim": ("vdps_hil.cli.sim_cmd", "sim", "Simulate a scenario and write a recording."),
+    "log": ("vdps_hil.cli.log_cmd", "log",
+            "Record live CAN buses and serial devices into one MCAP."),
+    "import": ("vdps_hil.cli.import_cmd", "import_",
+               "Import CAN logs (asc, blf, log, trc, mf4) and NMEA/IMU logs into a recording."),
+    "info": ("vdps_hil.cli.info_cmd", "info",
+             "Topics, rates, gaps, per-source health and fields of a recording."),
+    "recover": ("vdps_hil.cli.recover_cmd", "recover_",
+                "Rescue every complete record of a recording cut off by a crash."),
 }
 
 

@@ -1,0 +1,115 @@
+"""``vdps import``: CAN logs (asc, blf, candump log, trc, mf4, csv) and NMEA/IMU serial logs
+into one recording, decoded through a signal map."""
+
+from __future__ import annotations
+
+import click
+
+from vdps_hil.cli.common import UserError, eprint, json_option, write_json
+
+__all__ = ["import_", "parse_dbc_options", "parse_format_options"]
+
+
+def parse_dbc_options(values) -> dict[str, str]:
+    """``--dbc FILE`` (every bus) or ``--dbc BUS=FILE`` -> {bus or "*": file}."""
+    out: dict[str, str] = {}
+    for v in values:
+        if "=" in v and not v.startswith(("/", ".")) and "/" not in v.split("=", 1)[0]:
+            bus, path = v.split("=", 1)
+            out[bus] = path
+        else:
+            out["*"] = v
+    return out
+
+
+def parse_format_options(values) -> dict[str, str]:
+    out = {}
+    for v in values:
+        if "=" not in v:
+            raise UserError(f"--format {v!r}: expected NAME=nmea or NAME=imu")
+        name, fmt = v.split("=", 1)
+        if fmt not in ("nmea", "imu"):
+            raise UserError(f"--format {v!r}: format must be nmea or imu")
+        out[name] = fmt
+    return out
+
+
+def source_lines(sources: dict) -> list[str]:
+    lines = []
+    for name, st in sources.items():
+        c = st["counters"]
+        from vdps_hil.adapters.base import ERROR_COUNTERS
+
+        errs = {k: v for k, v in c.items() if k in ERROR_COUNTERS and v}
+        kinds = ", ".join(f"{k} {v['count']} @ {v['rate_hz']:.1f} Hz"
+                          for k, v in st["kinds"].items()) or "no samples"
+        extra = []
+        if c.get("unknown_id"):
+            extra.append(f"unknown IDs {c['unknown_id']}")
+        if c.get("other_channel"):
+            extra.append(f"other channel {c['other_channel']}")
+        if c.get("unsupported"):
+            extra.append(f"unsupported sentences {c['unsupported']}")
+        lines.append(f"  {name}: {st['records']} records -> {kinds}; errors "
+                     f"{sum(errs.values())}{' ' + str(errs) if errs else ''}"
+                     f"{'; ' + ', '.join(extra) if extra else ''}")
+        if st.get("last_error"):
+            lines.append(f"    last problem: {st['last_error']}")
+    return lines
+
+
+@click.command("import")
+@click.option("--can", "can_specs", multiple=True, metavar="BUS=FILE[@CHANNEL]",
+              help="A CAN log as bus BUS (asc, blf, candump .log, trc, mf4, csv, mcap); "
+                   "@CHANNEL keeps only that channel of a multi-channel log.")
+@click.option("--serial", "serial_specs", multiple=True, metavar="NAME=FILE[@BAUD]",
+              help="A serial log as device NAME: NMEA/ASCII text (time stamps optional) or a "
+                   "binary IMU capture (NAME imu*, or --format NAME=imu).")
+@click.option("--format", "formats", multiple=True, metavar="NAME=nmea|imu",
+              help="Format of a --serial log (default: imu if NAME starts with imu, else nmea).")
+@click.option("--dbc", "dbcs", multiple=True, metavar="[BUS=]FILE",
+              help="DBC of every bus, or of bus BUS (overrides the signal map's).")
+@click.option("--signalmap", metavar="FILE|NAME", default=None,
+              help="Signal map (configs/signalmaps/NAME.toml or a file): which frames feed "
+                   "which bus fields. A bus named vdps uses the vdps map by default.")
+@click.option("-o", "--output", required=True, metavar="OUT.mcap", help="Recording to write.")
+@json_option
+def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out):
+    """Import CAN and serial logs into one recording (raw + decoded + health).
+
+    \b
+    Examples:
+      vdps import --can pt=rav4.log@can0 --signalmap toyota_rav4_2017 \\
+                  --dbc toyota_new_mc_pt_generated.dbc -o rav4.mcap
+      vdps import --can gnss=gnss1.MF4 --signalmap canedge_gnss_imu --dbc gnss.dbc -o a.mcap
+      vdps import --serial gnss=rst39.nmea -o oxts.mcap
+
+    \b
+    Serial text time stamps (at the start of a line, before the $ sentence):
+      (1673458929.103950) $GP...   [12.5] $GP...   1673458929.1 $GP...
+      1673458929103950000 $GP... (integer ns)   2014-02-19T20:41:32.1Z $GP...
+      none: the sentence's own UTC time on the file's RMC/ZDA date.
+    """
+    from vdps_hil.record.importer import (ImportError_, import_logs, parse_can_source,
+                                          parse_serial_source)
+
+    fmts = parse_format_options(formats)
+    try:
+        can = [parse_can_source(s) for s in can_specs]
+        serial = []
+        for s in serial_specs:
+            src = parse_serial_source(s)
+            serial.append(parse_serial_source(s, fmts.get(src.name)))
+        report = import_logs(output, can, serial, signalmap=signalmap,
+                             dbc=parse_dbc_options(dbcs),
+                             metadata={"command": "vdps import " + " ".join(
+                                 [*(f"--can {s}" for s in can_specs),
+                                  *(f"--serial {s}" for s in serial_specs)])})
+    except ImportError_ as e:
+        raise UserError(str(e)) from None
+    eprint(f"vdps import: wrote {report['written']} messages to {output}"
+           + (f" ({report['write_errors']} refused by the writer)" if report["write_errors"]
+              else ""))
+    for line in source_lines(report["sources"]):
+        eprint(line)
+    write_json(report, json_out)

@@ -1,0 +1,199 @@
+"""``vdps log``: record live CAN buses and serial devices into one MCAP until Ctrl-C, SIGTERM
+or ``--duration``, with a live one-line status per source."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import time
+
+import click
+
+from vdps_hil.cli.common import UserError, eprint, json_option, write_json
+from vdps_hil.cli.import_cmd import parse_dbc_options, parse_format_options
+
+__all__ = ["log", "build_live_adapters"]
+
+
+def build_live_adapters(can_specs, serial_specs, formats, signalmap, dbcs):
+    """Adapters for ``--can BUS=SPEC`` and ``--serial NAME=PORT[@BAUD]`` and the decoding
+    info; raises UserError (one line) for a person's mistake."""
+    from vdps_hil.adapters.base import AdapterError
+    from vdps_hil.adapters.can_adapter import CanAdapter
+    from vdps_hil.adapters.imu_adapter import ImuAdapter
+    from vdps_hil.adapters.nmea_adapter import NmeaAdapter
+    from vdps_hil.adapters.serial_adapter import parse_port_spec
+    from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
+    from vdps_hil.codecs.imu import DEFAULT_BAUD as IMU_BAUD
+    from vdps_hil.record.importer import ImportError_, _can_decoder, serial_format
+    from vdps_hil.record.schemas import check_name
+
+    fmts = parse_format_options(formats)
+    dbc = parse_dbc_options(dbcs)
+    try:
+        sigmap = load_signalmap(signalmap) if signalmap else None
+    except SignalMapError as e:
+        raise UserError(str(e)) from None
+    adapters, info = [], {}
+    try:
+        for spec in can_specs:
+            if "=" not in spec:
+                raise UserError(f"--can {spec!r}: expected BUS=INTERFACE:CHANNEL "
+                                "(e.g. vdps=socketcan:can0)")
+            bus, iface = spec.split("=", 1)
+            check_name("bus", bus)
+            dec, _ = _can_decoder(bus, sigmap, dbc, info)  # a map's log channel: files only
+            adapters.append(CanAdapter(bus, iface, decoder=dec))
+        for spec in serial_specs:
+            if "=" not in spec:
+                raise UserError(f"--serial {spec!r}: expected NAME=PORT[@BAUD]")
+            name, port_spec = spec.split("=", 1)
+            check_name("device", name)
+            fmt = serial_format(name, fmts.get(name))
+            if fmt == "imu":
+                port, baud = parse_port_spec(port_spec, IMU_BAUD)
+                adapters.append(ImuAdapter(name, port, baud))
+            else:
+                port, baud = parse_port_spec(port_spec)
+                adapters.append(NmeaAdapter(name, port, baud))
+            info[name] = {"format": fmt, "port": port, "baud": baud}
+    except (AdapterError, ImportError_, ValueError) as e:
+        raise UserError(str(e).splitlines()[0]) from None
+    names = [a.name for a in adapters]
+    if len(set(names)) != len(names):
+        raise UserError(f"two sources share a name: {', '.join(names)}")
+    meta_sm = None if sigmap is None else {"name": sigmap.name, "path": str(sigmap.path),
+                                          "sha256": sigmap.sha256}
+    return adapters, info, meta_sm
+
+
+class _Status:
+    """Live status on stderr: rewritten in place on a terminal, a line per source every
+    ``every_s`` otherwise."""
+
+    def __init__(self, quiet: bool, every_s: float = 5.0):
+        self.quiet = quiet
+        self.tty = sys.stderr.isatty()
+        self.every_s = every_s
+        self._n = 0
+        self._last = 0.0
+
+    def __call__(self, lines):
+        if self.quiet:
+            return
+        if self.tty:
+            if self._n:
+                sys.stderr.write(f"\x1b[{self._n}F")
+            for ln in lines:
+                sys.stderr.write("\x1b[2K" + ln[:200] + "\n")
+            sys.stderr.flush()
+            self._n = len(lines)
+        else:
+            now = time.monotonic()
+            if now - self._last >= self.every_s:
+                self._last = now
+                for ln in lines:
+                    eprint(ln)
+
+
+@click.command("log")
+@click.option("--can", "can_specs", multiple=True, metavar="BUS=INTERFACE:CHANNEL",
+              help="A live CAN bus: any python-can interface string (socketcan:can0, "
+                   "pcan:PCAN_USBBUS1,bitrate=500000, slcan:/dev/ttyACM0, virtual:hil).")
+@click.option("--serial", "serial_specs", multiple=True, metavar="NAME=PORT[@BAUD]",
+              help="A serial device (NMEA GNSS, or the IMU when NAME starts with imu).")
+@click.option("--format", "formats", multiple=True, metavar="NAME=nmea|imu",
+              help="Protocol of a --serial device (default by NAME).")
+@click.option("--dbc", "dbcs", multiple=True, metavar="[BUS=]FILE", help="DBC of a bus.")
+@click.option("--signalmap", metavar="FILE|NAME", default=None,
+              help="Signal map for the CAN buses (a bus named vdps uses the vdps map).")
+@click.option("-o", "--output", required=True, metavar="FILE.mcap", help="Recording to write.")
+@click.option("--duration", type=float, default=None, metavar="S",
+              help="Stop after S seconds (default: until Ctrl-C or SIGTERM).")
+@click.option("--rotate-mb", type=float, default=None, metavar="MB",
+              help="Start a new file (FILE_0000.mcap, ...) every MB megabytes.")
+@click.option("--rotate-s", type=float, default=None, metavar="S",
+              help="Start a new file every S seconds of data.")
+@click.option("--flush-s", type=float, default=0.5, show_default=True, metavar="S",
+              help="Close the MCAP chunk in progress every S seconds (a crash loses at most "
+                   "about that much).")
+@click.option("--quiet", is_flag=True, help="No live status.")
+@json_option
+def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rotate_mb,
+        rotate_s, flush_s, quiet, json_out):
+    """Record live CAN buses and serial devices losslessly into one MCAP.
+
+    \b
+    Example:
+      vdps log --can vdps=socketcan:can0 --serial gnss=/dev/ttyUSB0@115200 \\
+               --serial imu=/dev/ttyUSB1@921600 -o track.mcap
+    Raw frames and bytes always go to /raw/..., decoded samples to /decoded/..., GNSS fixes
+    to /gnss/fix (Foxglove map), health to /health/... . Stops cleanly on Ctrl-C, SIGTERM or
+    --duration; a killed logger's file is rescued by `vdps recover`.
+    """
+    from vdps_hil.adapters.base import AdapterError
+    from vdps_hil.adapters.session import LogSession
+    from vdps_hil.record.writer import RecordingWriter
+
+    if not can_specs and not serial_specs:
+        raise UserError("nothing to log: give --can BUS=INTERFACE:CHANNEL and/or "
+                        "--serial NAME=PORT[@BAUD]")
+    if duration is not None and duration <= 0:
+        raise UserError("--duration must be positive")
+    if flush_s <= 0:
+        raise UserError("--flush-s must be positive")
+    adapters, info, sigmap = build_live_adapters(can_specs, serial_specs, formats, signalmap,
+                                                 dbcs)
+    for a in adapters:  # devices first: a bad port fails before a file is created
+        try:
+            a.open()
+        except AdapterError as e:
+            for b in adapters:
+                b.close()
+            raise UserError(str(e)) from None
+    hashes = {f"dbc.{b}": i["dbc"] for b, i in info.items() if i.get("dbc")}
+    if sigmap:
+        hashes["signalmap"] = sigmap["path"]
+    md = {"mode": "log", "command": "vdps log " + " ".join(
+        [*(f"--can {s}" for s in can_specs), *(f"--serial {s}" for s in serial_specs)]),
+        "sources": {a.name: a.device for a in adapters}, "decoding": info,
+        "host": os.uname().nodename if hasattr(os, "uname") else ""}
+    if sigmap:
+        md["signalmap"] = sigmap
+    try:
+        if rotate_mb or rotate_s:
+            from vdps_hil.record.rotation import RotatingRecordingWriter
+
+            writer = RotatingRecordingWriter(
+                output, max_bytes=None if not rotate_mb else int(rotate_mb * 1e6),
+                max_s=rotate_s, metadata=md, content_hashes=hashes)
+        else:
+            writer = RecordingWriter(output, metadata=md, content_hashes=hashes)
+    except (OSError, ValueError) as e:
+        for a in adapters:
+            a.close()
+        raise UserError(f"cannot write {output}: {getattr(e, 'strerror', None) or e}") from None
+
+    stop = threading.Event()
+
+    def on_signal(signum, frame):
+        stop.set()
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    session = LogSession(adapters, writer, flush_s=flush_s, status=_Status(quiet))
+    try:
+        summary = session.run(stop, duration)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        writer.close()
+    files = getattr(writer, "files", [output])
+    if not quiet:
+        eprint(f"vdps log: {summary['written']} messages in {summary['duration_s']:.1f} s to "
+               f"{', '.join(files)}; queue overflows {summary['queue_overflow']}")
+        for ln in session.status_lines():
+            eprint("  " + ln)
+    summary["files"] = files
+    write_json(summary, json_out)
