@@ -1,0 +1,122 @@
+"""Numerical observability of the linearised filter over a window.
+
+For the updates k = 1..K in a window starting at t_0, with Phi(t_k, t_0) the product of the
+predict transitions and H_k, R_k the update's Jacobian and noise, the whitened, scaled
+observability matrix is::
+
+    O = [ R_1^-1/2 H_1 Phi(t_1, t_0) ; ... ; R_K^-1/2 H_K Phi(t_K, t_0) ] D
+
+with D = diag(state scales) (default: 1 m, 1 m/s, 0.01 rad), so that every column is expressed
+in a typical uncertainty of its state and every row in its measurement noise. With the singular
+values s_1 >= ... >= s_n of O, the numerical rank is the number of s_i > rtol s_1 (``rtol``
+default 1e-6). The right singular vectors of the remaining s_i span the unobservable
+directions; a state is reported *unobservable* when its squared component in that null space
+(its "participation", 0..1) exceeds ``participation_threshold`` (default 0.5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from vdps_hil.estimation.states import STATE_NAMES, StateLayout
+
+DEFAULT_RTOL = 1e-6
+DEFAULT_PARTICIPATION = 0.5
+
+
+def default_scales(layout: StateLayout) -> np.ndarray:
+    """1 m for positions, 1 m/s for velocities, 0.01 rad for angles (filter layout)."""
+    full = np.array([1.0] * 3 + [1.0] * 3 + [0.01] * 6)
+    return full[layout.full_index]
+
+
+@dataclass(frozen=True)
+class ObservabilityReport:
+    """Numerical rank of O (module docstring) and the unobservable states by name."""
+
+    rank: int
+    n_states: int
+    singular_values: tuple[float, ...]
+    unobservable: tuple[str, ...]
+    participation: dict
+    rows: int
+    rtol: float
+
+    @property
+    def full_rank(self) -> bool:
+        return self.rank == self.n_states
+
+    def to_json(self) -> dict:
+        return {"rank": self.rank, "n_states": self.n_states, "rows": self.rows, "rtol": self.rtol,
+                "singular_values": list(self.singular_values), "unobservable": list(self.unobservable),
+                "participation": dict(self.participation)}
+
+
+def observability_rank(blocks, state_names, scales=None, rtol: float = DEFAULT_RTOL,
+                       participation_threshold: float = DEFAULT_PARTICIPATION) -> ObservabilityReport:
+    """Rank and unobservable states of the stacked blocks R_k^-1/2 H_k Phi(t_k, t_0) (each m_k x n).
+
+    ``scales`` multiplies the columns (state scales, D above)."""
+    names = tuple(state_names)
+    n = len(names)
+    rows = [np.atleast_2d(np.asarray(b, dtype=float)) for b in blocks]
+    for b in rows:
+        if b.shape[1] != n:
+            raise ValueError(f"observability block has {b.shape[1]} columns, expected {n}")
+    if not rows:
+        return ObservabilityReport(0, n, tuple([0.0] * n), names, {nm: 1.0 for nm in names}, 0, rtol)
+    o = np.vstack(rows)
+    if scales is not None:
+        o = o * np.asarray(scales, dtype=float)[None, :]
+    _, s, vt = np.linalg.svd(o, full_matrices=True)
+    s_full = np.zeros(n)
+    s_full[: s.size] = s
+    smax = s_full[0] if s_full.size else 0.0
+    rank = int(np.sum(s_full > rtol * smax)) if smax > 0 else 0
+    null = vt[rank:]
+    part = (null ** 2).sum(axis=0) if null.size else np.zeros(n)
+    unobs = tuple(nm for nm, p in zip(names, part) if p > participation_threshold)
+    return ObservabilityReport(rank, n, tuple(float(v) for v in s_full), unobs,
+                               {nm: float(p) for nm, p in zip(names, part)}, o.shape[0], rtol)
+
+
+class ObservabilityWindow:
+    """Collects Phi and (H, R) from an EKF (``attach``) and reports per window.
+
+    ``on_predict(Phi)`` accumulates Phi(t, t_0); ``on_update(H, R)`` appends
+    R^-1/2 H Phi(t, t_0). ``report()`` evaluates the window; ``restart()`` begins a new one."""
+
+    def __init__(self, layout: StateLayout, scales=None, rtol: float = DEFAULT_RTOL,
+                 participation_threshold: float = DEFAULT_PARTICIPATION):
+        self.layout = layout
+        self.names = tuple(STATE_NAMES[int(i)] for i in layout.full_index)
+        self.scales = default_scales(layout) if scales is None else np.asarray(scales, dtype=float)
+        self.rtol = rtol
+        self.threshold = participation_threshold
+        self._phi = np.eye(layout.n)
+        self._blocks: list[np.ndarray] = []
+
+    def attach(self, ekf) -> "ObservabilityWindow":
+        ekf.on_predict = self.on_predict
+        ekf.on_update = self.on_update
+        return self
+
+    def restart(self) -> None:
+        self._phi = np.eye(self.layout.n)
+        self._blocks = []
+
+    def on_predict(self, phi: np.ndarray) -> None:
+        self._phi = phi @ self._phi
+
+    def on_update(self, H: np.ndarray, R: np.ndarray) -> None:
+        w = np.linalg.cholesky(np.linalg.inv(R))  # w w^T = R^-1 -> w^T H is whitened
+        self._blocks.append(w.T @ H @ self._phi)
+
+    @property
+    def rows(self) -> int:
+        return sum(b.shape[0] for b in self._blocks)
+
+    def report(self) -> ObservabilityReport:
+        return observability_rank(self._blocks, self.names, self.scales, self.rtol, self.threshold)

@@ -1,0 +1,367 @@
+"""Observation models h(x) of eq 9-11, one per measurement kind, with analytic Jacobians.
+
+Every model is written for the full 12-state vector (``states.States``); the EKF maps its
+Jacobian to the filter layout (H_filter = H_full E).
+
+============  ===  =====================================================================  =====
+kind          dim  h(x)                                                                   paper
+============  ===  =====================================================================  =====
+gnss_pos      3    p + (C_g^v)^T l_ant  (antenna position in {g}; l_ant the lever arm      y1^gps
+                   from the CG in body axes, model file ``mounting.gnss_lever_arm_m``)
+gnss_att      3    [phi_g, theta_g, psi_g] (residuals wrapped)                            y1^gps
+gnss_vel      2    [|v_a,h|, atan2(v_a,y, v_a,x)] with v_a = v + (C_g^v)^T (w x l_ant)     (none)
+                   (single-antenna speed and course over ground)
+y2_gps        2    [C_r^v C_g^r](1, 1:2) = [c(th_v)c(psi_v), c(th_v)s(psi_v), s(th_v)]    y2^gps
+                   C_g^r[:, 0:2], theta_v a known parameter (aux; latest eq-5 theta_v)
+y1_sus        2    [C_r^v(1,3), C_r^v(2,3)] = [sin th_v, sin ph_v cos th_v],               y1^sus
+                   C_r^v = C_g^v (C_g^r)^T (eq 4, psi_r = 0)
+y2_sus_plane  1    C_g^r(3,:) p = n . p (CG height above one road plane through the        y2^sus
+                   origin; correction (c): only valid when that holds)
+y2_sus_rate   1    n . v (rate of the CG height above the *local* road plane; the          (c)
+                   locally referenced form of y2^sus, compared with the eq-5 z_r rate)
+============  ===  =====================================================================  =====
+
+The paper's y1^sus also lists C_r^v(3,3) = cos ph_v cos th_v: it is a function of the other two
+(unit column) and its linearisation is parallel to theirs, which makes S singular; it is left
+out (it only matters near |theta_v| = 90 deg). With eq 5 the two kept components are *linear* in
+the four deflections H_i (``suspension_measurement``), so their covariance is exact.
+
+Measurement builders (pure functions) turn sensor quantities into (z, R) for these models.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from vdps_hil.estimation.kinematics import (dcm_gr_partials, dcm_gv_partials, road_normal,
+                                            vehicle_angles_eq4)
+from vdps_hil.estimation.states import N_FULL, wrap_angle
+
+
+class ObsKind(str, enum.Enum):
+    """Measurement kinds the EKF can update with (values are stable names for counters/JSON)."""
+
+    GNSS_POS = "gnss_pos"
+    GNSS_ATT = "gnss_att"
+    GNSS_VEL = "gnss_vel"
+    Y2_GPS = "y2_gps"
+    Y1_SUS = "y1_sus"
+    Y2_SUS_PLANE = "y2_sus_plane"
+    Y2_SUS_RATE = "y2_sus_rate"
+
+
+class ObservationModel:
+    """Base: ``h(x, aux)``, ``jacobian(x, aux)`` (dim x 12), ``residual(z, y)``.
+
+    ``dof``: chi-square degrees of freedom of the NIS (= dim here). ``wrapped``: rows whose
+    residuals are angles wrapped to [-pi, pi)."""
+
+    kind: ObsKind
+    dim: int
+    wrapped: tuple[int, ...] = ()
+
+    @property
+    def dof(self) -> int:
+        return self.dim
+
+    def h(self, x: np.ndarray, aux=None) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def jacobian(self, x: np.ndarray, aux=None) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def residual(self, z: np.ndarray, y: np.ndarray) -> np.ndarray:
+        r = z - y
+        for i in self.wrapped:
+            r[i] = wrap_angle(r[i])
+        return r
+
+
+class GnssPosition(ObservationModel):
+    """Antenna position p + (C_g^v)^T l_ant in {g} [m]."""
+
+    kind = ObsKind.GNSS_POS
+    dim = 3
+
+    def __init__(self, lever_arm_m=(0.0, 0.0, 0.0)):
+        self.lever_arm_m = np.asarray(lever_arm_m, dtype=float).reshape(3)
+
+    def h(self, x, aux=None):
+        c = dcm_gv_partials(x[6], x[7], x[8])[0]
+        return x[0:3] + c.T @ self.lever_arm_m
+
+    def jacobian(self, x, aux=None):
+        _, d_f, d_t, d_p = dcm_gv_partials(x[6], x[7], x[8])
+        H = np.zeros((3, N_FULL))
+        H[0, 0] = H[1, 1] = H[2, 2] = 1.0
+        la = self.lever_arm_m
+        H[:, 6] = d_f.T @ la
+        H[:, 7] = d_t.T @ la
+        H[:, 8] = d_p.T @ la
+        return H
+
+
+class GnssAttitude(ObservationModel):
+    """Multi-antenna absolute attitude [phi_g, theta_g, psi_g] [rad]."""
+
+    kind = ObsKind.GNSS_ATT
+    dim = 3
+    wrapped = (0, 1, 2)
+
+    def h(self, x, aux=None):
+        return x[6:9].copy()
+
+    def jacobian(self, x, aux=None):
+        H = np.zeros((3, N_FULL))
+        H[0, 6] = H[1, 7] = H[2, 8] = 1.0
+        return H
+
+
+class GnssVelocity(ObservationModel):
+    """Single-antenna speed [m/s] and course [rad, CCW from East] over ground of the antenna.
+
+    aux: body angular rate w_b [rad/s] (3,) for the lever-arm velocity (None: zero)."""
+
+    kind = ObsKind.GNSS_VEL
+    dim = 2
+    wrapped = (1,)
+
+    def __init__(self, lever_arm_m=(0.0, 0.0, 0.0)):
+        self.lever_arm_m = np.asarray(lever_arm_m, dtype=float).reshape(3)
+
+    def _va(self, x, aux):
+        parts = dcm_gv_partials(x[6], x[7], x[8])
+        u = np.zeros(3) if aux is None else np.cross(np.asarray(aux, dtype=float), self.lever_arm_m)
+        return x[3:6] + parts[0].T @ u, u, parts
+
+    def h(self, x, aux=None):
+        va = self._va(x, aux)[0]
+        return np.array([math.hypot(va[0], va[1]), math.atan2(va[1], va[0])])
+
+    def jacobian(self, x, aux=None):
+        va, u, (_, d_f, d_t, d_p) = self._va(x, aux)
+        s2 = max(1e-12, va[0] ** 2 + va[1] ** 2)
+        s = math.sqrt(s2)
+        dva = np.zeros((3, N_FULL))  # d v_a / d x
+        dva[0, 3] = dva[1, 4] = dva[2, 5] = 1.0
+        dva[:, 6] = d_f.T @ u
+        dva[:, 7] = d_t.T @ u
+        dva[:, 8] = d_p.T @ u
+        H = np.empty((2, N_FULL))
+        H[0] = (va[0] * dva[0] + va[1] * dva[1]) / s
+        H[1] = (va[0] * dva[1] - va[1] * dva[0]) / s2
+        return H
+
+
+class Y2Gps(ObservationModel):
+    """y2^gps of eq 9: [C_r^v C_g^r](1, 1:2) as a function of (phi_r, theta_r, psi_v), theta_v
+    a known parameter (aux, rad). Compared with [cos th_g cos psi_g, cos th_g sin psi_g] from the
+    GNSS attitude (``y2_gps_measurement``)."""
+
+    kind = ObsKind.Y2_GPS
+    dim = 2
+
+    @staticmethod
+    def _theta_v(x, aux):
+        if aux is None or not math.isfinite(float(aux)):
+            return float(vehicle_angles_eq4(x[6:11], with_jacobian=False)[1])
+        return float(aux)
+
+    def h(self, x, aux=None):
+        tv = self._theta_v(x, aux)
+        cgr = dcm_gr_partials(x[9], x[10])[0]
+        row = np.array([math.cos(tv) * math.cos(x[11]), math.cos(tv) * math.sin(x[11]), math.sin(tv)])
+        return row @ cgr[:, 0:2]
+
+    def jacobian(self, x, aux=None):
+        tv = self._theta_v(x, aux)
+        cgr, d_f, d_t = dcm_gr_partials(x[9], x[10])
+        ct, st = math.cos(tv), math.sin(tv)
+        cp, sp = math.cos(x[11]), math.sin(x[11])
+        row = np.array([ct * cp, ct * sp, st])
+        H = np.zeros((2, N_FULL))
+        H[:, 9] = row @ d_f[:, 0:2]
+        H[:, 10] = row @ d_t[:, 0:2]
+        H[:, 11] = np.array([-ct * sp, ct * cp, 0.0]) @ cgr[:, 0:2]
+        return H
+
+
+class Y1Sus(ObservationModel):
+    """y1^sus of eq 9: [C_r^v(1,3), C_r^v(2,3)] = [sin th_v, sin ph_v cos th_v] with
+    C_r^v = C_g^v (C_g^r)^T; depends on the five angles, not on psi_v."""
+
+    kind = ObsKind.Y1_SUS
+    dim = 2
+
+    @staticmethod
+    def _parts(x):
+        cgv, g_f, g_t, g_p = dcm_gv_partials(x[6], x[7], x[8])
+        cgr, r_f, r_t = dcm_gr_partials(x[9], x[10])
+        # column 3 of C_r^v = C_g^v (C_g^r)^T is C_g^v n with n = row 3 of C_g^r
+        n = cgr[2]
+        return cgv, (g_f, g_t, g_p), n, (r_f[2], r_t[2])
+
+    def h(self, x, aux=None):
+        cgv, _, n, _ = self._parts(x)
+        return cgv[0:2] @ n
+
+    def jacobian(self, x, aux=None):
+        cgv, dg, n, dn = self._parts(x)
+        H = np.zeros((2, N_FULL))
+        for k, d in enumerate(dg):
+            H[:, 6 + k] = d[0:2] @ n
+        for k, d in enumerate(dn):
+            H[:, 9 + k] = cgv[0:2] @ d
+        return H
+
+
+class Y2SusPlane(ObservationModel):
+    """y2^sus of eq 9: n . p = C_g^r(3,1) x_g + C_g^r(3,2) y_g + C_g^r(3,3) z_g [m]."""
+
+    kind = ObsKind.Y2_SUS_PLANE
+    dim = 1
+
+    def h(self, x, aux=None):
+        n = road_normal(x[9], x[10])[0]
+        return np.array([n @ x[0:3]])
+
+    def jacobian(self, x, aux=None):
+        n, dn_f, dn_t = road_normal(x[9], x[10])
+        H = np.zeros((1, N_FULL))
+        H[0, 0:3] = n
+        H[0, 9] = dn_f @ x[0:3]
+        H[0, 10] = dn_t @ x[0:3]
+        return H
+
+
+class Y2SusRate(ObservationModel):
+    """Locally referenced y2^sus (correction (c)): n . v [m/s], the CG velocity normal to the
+    local road plane, compared with the rate of eq 5's z_r over a short baseline."""
+
+    kind = ObsKind.Y2_SUS_RATE
+    dim = 1
+
+    def h(self, x, aux=None):
+        n = road_normal(x[9], x[10])[0]
+        return np.array([n @ x[3:6]])
+
+    def jacobian(self, x, aux=None):
+        n, dn_f, dn_t = road_normal(x[9], x[10])
+        H = np.zeros((1, N_FULL))
+        H[0, 3:6] = n
+        H[0, 9] = dn_f @ x[3:6]
+        H[0, 10] = dn_t @ x[3:6]
+        return H
+
+
+def make_models(gnss_lever_arm_m=(0.0, 0.0, 0.0)) -> dict[ObsKind, ObservationModel]:
+    """One model instance per kind (the registry the EKF uses)."""
+    return {
+        ObsKind.GNSS_POS: GnssPosition(gnss_lever_arm_m),
+        ObsKind.GNSS_ATT: GnssAttitude(),
+        ObsKind.GNSS_VEL: GnssVelocity(gnss_lever_arm_m),
+        ObsKind.Y2_GPS: Y2Gps(),
+        ObsKind.Y1_SUS: Y1Sus(),
+        ObsKind.Y2_SUS_PLANE: Y2SusPlane(),
+        ObsKind.Y2_SUS_RATE: Y2SusRate(),
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# measurement builders
+
+
+@dataclass(frozen=True)
+class SuspensionMeasurement:
+    """Eq 5 applied to the four deflections H_1..4 [m] (compression positive, FL FR RR RL).
+
+    ``y1``/``r_y1``: z and R of the y1_sus model; ``z_r_m``/``var_z_r_m2``: eq 5's z_r and its
+    variance (y2_sus). With W = 2 l_f + 2 l_r and T = 2 t_f + 2 t_r::
+
+        y1 = [(-H1 - H2 + H3 + H4) / W, (-H1 + H2 + H3 - H4) / T]     (exactly linear in H)
+        R_y1 = sigma_H^2 diag(4 / W^2, 4 / T^2)                       (the rows are orthogonal)
+        z_r = (-l_r (H1 + H2) - l_f (H3 + H4)) / W,  var = sigma_H^2 (2 l_r^2 + 2 l_f^2) / W^2
+    """
+
+    theta_v_rad: float
+    phi_v_rad: float
+    z_r_m: float
+    y1: np.ndarray
+    r_y1: np.ndarray
+    var_z_r_m2: float
+
+
+def suspension_measurement(h_m, l_f_m: float, l_r_m: float, t_f_half_m: float, t_r_half_m: float,
+                           sigma_m: float) -> SuspensionMeasurement:
+    """Eq 5 (signs per ``vdps_hil.conventions``: theta_v nose-up positive) -> y1_sus and y2_sus
+    measurements with their covariances (see :class:`SuspensionMeasurement`)."""
+    h1, h2, h3, h4 = (float(v) for v in h_m)
+    w = 2.0 * l_f_m + 2.0 * l_r_m
+    t = 2.0 * t_f_half_m + 2.0 * t_r_half_m
+    s_th = (-h1 - h2 + h3 + h4) / w
+    s_ph_c_th = (-h1 + h2 + h3 - h4) / t
+    th = math.asin(max(-1.0, min(1.0, s_th)))
+    ph = math.asin(max(-1.0, min(1.0, s_ph_c_th / math.cos(th))))
+    z_r = (-l_r_m * (h1 + h2) - l_f_m * (h3 + h4)) / w
+    s2 = sigma_m * sigma_m
+    r = np.diag([4.0 * s2 / (w * w), 4.0 * s2 / (t * t)])
+    var_zr = s2 * (2.0 * l_r_m ** 2 + 2.0 * l_f_m ** 2) / (w * w)
+    return SuspensionMeasurement(th, ph, z_r, np.array([s_th, s_ph_c_th]), r, var_zr)
+
+
+Y2_GPS_R_FLOOR = 1e-4
+"""Floor [-] added to the y2_gps measurement standard deviation (see ``y2_gps_measurement``)."""
+
+
+def y2_gps_measurement(theta_g_rad: float, psi_g_rad: float, sigma_theta_rad: float,
+                       sigma_psi_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    """z = [C_g^v(1,1), C_g^v(1,2)] = [cos th cos psi, cos th sin psi] from the GNSS attitude and
+    R = J diag(sigma_th^2, sigma_psi^2) J^T + (1e-4)^2 I (first-order propagation; J is singular
+    at theta = 0, where z only moves along the heading direction, hence the small floor)."""
+    ct, st = math.cos(theta_g_rad), math.sin(theta_g_rad)
+    cp, sp = math.cos(psi_g_rad), math.sin(psi_g_rad)
+    z = np.array([ct * cp, ct * sp])
+    j = np.array([[-st * cp, -ct * sp], [-st * sp, ct * cp]])
+    return z, j @ np.diag([sigma_theta_rad ** 2, sigma_psi_rad ** 2]) @ j.T + Y2_GPS_R_FLOOR ** 2 * np.eye(2)
+
+
+class ZrRateBuilder:
+    """Measurement of the locally referenced y2^sus (correction (c), ``Y2SusRate``)::
+
+        z = (z_r(t_k) - z_r(t_j)) / (t_k - t_j)
+        R = (var_k + var_j) / (t_k - t_j)^2 + sigma_heave^2
+
+    t_j is the newest stored epoch at least ``min_baseline_s`` before t_k (epochs older than
+    ``max_baseline_s`` are dropped). The mean heave rate over the baseline stands for the
+    instantaneous n . v at t_k; ``heave_rate_sigma_mps`` covers the difference (body heave
+    relative to the road plane)."""
+
+    def __init__(self, min_baseline_s: float = 0.5, max_baseline_s: float = 3.0,
+                 heave_rate_sigma_mps: float = 0.05):
+        if not (0.0 < min_baseline_s < max_baseline_s):
+            raise ValueError("ZrRateBuilder needs 0 < min_baseline_s < max_baseline_s")
+        self._min_ns = int(round(min_baseline_s * 1e9))
+        self._max_ns = int(round(max_baseline_s * 1e9))
+        self._q = heave_rate_sigma_mps ** 2
+        self._buf: list[tuple[int, float, float]] = []
+
+    def reset(self) -> None:
+        self._buf.clear()
+
+    def push(self, t_ns: int, z_r_m: float, var_m2: float):
+        """Add an epoch; returns (z (1,), R (1, 1)) or None when no baseline is available."""
+        buf = self._buf
+        while buf and t_ns - buf[0][0] > self._max_ns:
+            buf.pop(0)
+        out = None
+        for tj, zj, vj in reversed(buf):
+            if t_ns - tj >= self._min_ns:
+                dt = (t_ns - tj) * 1e-9
+                out = (np.array([(z_r_m - zj) / dt]), np.array([[(var_m2 + vj) / (dt * dt) + self._q]]))
+                break
+        buf.append((int(t_ns), float(z_r_m), float(var_m2)))
+        return out

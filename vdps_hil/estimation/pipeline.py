@@ -1,0 +1,660 @@
+"""Estimator pipeline node: bus samples in, estimates with sigmas and innovations out.
+
+``EstimatorPipeline(model_vehicle, config).handle(sample) -> list[Estimate | Innovation]`` is a
+pure node (no threads, devices or clocks; time comes only from ``sample.t_ns``). It consumes
+catalogue fields (``vdps_hil.bus.samples``) of the kinds
+
+==============  ==========================================================================
+kind            use
+==============  ==========================================================================
+imu             specific force / angular rate -> mean input of the next predict (one predict
+                per ``predict_period_s``); gyro -> alpha-beta (rates, angular accelerations).
+                ESC cluster (``SensorSet.imu == "esc3"``): w_x = w_y := 0, f_z := g.
+gnss_pos        lat/lon/alt (+ geoid separation) -> ENU (origin: given, or the first valid
+                fix) -> ``gnss_pos`` update (antenna lever arm from the model file)
+gnss_att        roll/pitch/yaw -> ``gnss_att`` (+ ``y2_gps`` when paper-faithful (b))
+gnss_vel        speed/course -> ``gnss_vel`` (course only above ``gnss_course_min_speed_mps``)
+suspension      deflections -> eq 5 -> ``y1_sus`` and ``y2_sus`` (plane or rate form, EKF
+                correction (c)); alpha-beta (suspension rates)
+wheel_speed     alpha-beta (wheel speeds and accelerations)
+wheel_torque    latest values (for the identifier)
+steer           latest steering wheel angle (for the identifier)
+==============  ==========================================================================
+
+Sensor mounting from the *model* vehicle file: the IMU rotation (body -> sensor, roll-pitch-yaw
+of eq 1, f_b = C_bs^T f_s) and lever arm (f_cg = f_s - w_dot x l - w x (w x l), with w, w_dot
+from the alpha-beta filters), and the GNSS antenna lever arm (EKF ``gnss_pos``/``gnss_vel``).
+
+Latency per sensor (``Latencies``): a fixed delay subtracted from ``t_ns`` of that kind (an
+adapter that stamps at reception); the EKF applies measurements that are then in its past with
+its history buffer (``ekf`` module docstring).
+
+Initialisation: at a GNSS fix once a heading is known (GNSS yaw, or course at speed):
+attitude from the GNSS attitude (or roll/pitch from the mean specific force and yaw from the
+course), velocity from speed/course or the difference of two fixes, road angles from a recent
+suspension sample with eq 4 (road normal n = (C_g^v)^T C_r^v e_3), position = fix - (C_g^v)^T l.
+After a NaN reset of the EKF the next fix re-initialises.
+
+Replay: every sample handed to ``handle`` is appended to ``input_log``; feeding the same
+samples to a fresh pipeline (``EstimatorPipeline.replay``) reproduces the outputs exactly.
+The pipeline never reads simulator truth: it accepts only a model vehicle file and ignores
+(counts) samples from ``/truth`` sources or of kind ``truth*``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
+from vdps_hil.estimation.alpha_beta import TimedAlphaBeta
+from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, UpdateResult
+from vdps_hil.estimation.kinematics import dcm_gv, vehicle_angles_eq4
+from vdps_hil.estimation.observability import ObservabilityReport, ObservabilityWindow
+from vdps_hil.estimation.observations import (ObsKind, ZrRateBuilder, suspension_measurement,
+                                              y2_gps_measurement)
+from vdps_hil.estimation.states import STATE_NAMES, States
+from vdps_hil.geodesy import EnuOrigin
+from vdps_hil.units import deg2rad
+
+KINDS = ("imu", "gnss_pos", "gnss_att", "gnss_vel", "suspension", "wheel_speed", "wheel_torque", "steer")
+
+_SF = axis_fields("specific_force_mps2")
+_AR = axis_fields("angular_rate_radps")
+_SUSP = wheel_fields("susp_deflection_m")
+_WS = wheel_fields("wheel_speed_radps")
+_WT = wheel_fields("wheel_torque_nm")
+_NAN = math.nan
+
+
+@dataclass(frozen=True)
+class Bandwidths:
+    """Alpha-beta bandwidth per signal group [Hz] (critically damped gains, ``alpha_beta``)."""
+
+    angular_rate_hz: float = 5.0
+    wheel_speed_hz: float = 5.0
+    susp_deflection_hz: float = 2.0
+    max_gap_s: float = 2.0  # a longer gap between samples restarts a filter
+
+
+@dataclass(frozen=True)
+class Latencies:
+    """Fixed delay [s] between measurement and the sample's t_ns, per sensor (0: stamped at
+    measurement time)."""
+
+    imu_s: float = 0.0
+    gnss_s: float = 0.0
+    suspension_s: float = 0.0
+    wheel_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Pipeline settings; measurement noise defaults are Table 1 (used when a sample carries no
+    sigma of its own)."""
+
+    ekf: EkfConfig = field(default_factory=EkfConfig)
+    predict_period_s: float = 0.01
+    emit_estimates: bool = True  # an Estimate after every predict step
+    gnss_pos_sigma_h_m: float = 1.0
+    gnss_pos_sigma_v_m: float = 3.0
+    gnss_att_sigma_rad: float = float(deg2rad(0.4))
+    gnss_speed_sigma_mps: float = 0.1
+    gnss_course_min_speed_mps: float = 3.0
+    susp_sigma_m: float = 0.001
+    heave_rate_sigma_mps: float = 0.05  # y2_sus rate form (observations.ZrRateBuilder)
+    bandwidths: Bandwidths = field(default_factory=Bandwidths)
+    latencies: Latencies = field(default_factory=Latencies)
+    init_max_age_s: float = 1.0  # newest data usable for initialisation
+    init_road_sigma_rad: float = 0.05
+    init_level_sigma_rad: float = 0.05  # roll/pitch from the mean specific force
+    init_course_sigma_rad: float = 0.1  # yaw from course over ground
+    init_velocity_sigma_mps: float = 30.0  # no velocity information at all
+    observability_window_s: float | None = 10.0
+
+    def __post_init__(self):
+        for name in ("predict_period_s", "gnss_pos_sigma_h_m", "gnss_pos_sigma_v_m", "gnss_att_sigma_rad",
+                     "gnss_speed_sigma_mps", "susp_sigma_m", "heave_rate_sigma_mps", "init_max_age_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"PipelineConfig.{name} must be a positive finite number, got {v!r}")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The 12 states of eq 7 (``States`` order, ``STATE_NAMES``) with 1-sigma, and the
+    road-relative vehicle angles (phi_v, theta_v, psi_v) of eq 4 with their sigmas."""
+
+    t_ns: int
+    x: tuple[float, ...]
+    sigma: tuple[float, ...]
+    vehicle_angles_rad: tuple[float, float, float]
+    vehicle_angles_sigma_rad: tuple[float, float, float]
+
+    def get(self, state) -> float:
+        return self.x[_state_index(state)]
+
+    def sigma_of(self, state) -> float:
+        return self.sigma[_state_index(state)]
+
+    def to_json(self) -> dict:
+        return {"t_ns": self.t_ns, "state": dict(zip(STATE_NAMES, self.x)),
+                "sigma": dict(zip(STATE_NAMES, self.sigma)),
+                "vehicle_angles_rad": dict(zip(("phi_v", "theta_v", "psi_v"), self.vehicle_angles_rad)),
+                "vehicle_angles_sigma_rad": dict(zip(("phi_v", "theta_v", "psi_v"), self.vehicle_angles_sigma_rad))}
+
+
+@dataclass(frozen=True)
+class Innovation:
+    """One EKF update: innovation per used row, sqrt(diag S), NIS and the gate."""
+
+    t_ns: int
+    kind: str
+    status: str
+    innovation: tuple[float, ...]
+    innovation_sigma: tuple[float, ...]
+    nis: float
+    dof: int
+    gate: float
+    delayed: bool
+
+    @classmethod
+    def from_result(cls, r: UpdateResult) -> "Innovation":
+        return cls(r.t_ns, r.kind.value, r.status, r.innovation, r.innovation_sigma, r.nis, r.dof, r.gate, r.delayed)
+
+    def to_json(self) -> dict:
+        return {"t_ns": self.t_ns, "kind": self.kind, "status": self.status, "innovation": list(self.innovation),
+                "innovation_sigma": list(self.innovation_sigma), "nis": self.nis, "dof": self.dof,
+                "gate": self.gate, "delayed": self.delayed}
+
+
+@dataclass(frozen=True)
+class FilteredSignals:
+    """Latest alpha-beta outputs (eq 12) and pass-through inputs for the identifier; NaN where
+    no sample has arrived. ``lags_s``: derivative lag per group at its last sampling period."""
+
+    t_ns: int
+    angular_rate_radps: tuple[float, float, float]
+    angular_accel_radps2: tuple[float, float, float]
+    wheel_speed_radps: tuple[float, float, float, float]
+    wheel_accel_radps2: tuple[float, float, float, float]
+    susp_deflection_m: tuple[float, float, float, float]
+    susp_rate_mps: tuple[float, float, float, float]
+    wheel_torque_nm: tuple[float, float, float, float]
+    steer_wheel_angle_rad: float
+    lags_s: dict
+
+
+def _state_index(state) -> int:
+    if isinstance(state, str):
+        return STATE_NAMES.index(state)
+    return int(States(state))
+
+
+class EstimatorPipeline:
+    """Sensor samples -> multi-rate EKF + alpha-beta filters (module docstring)."""
+
+    def __init__(self, model_vehicle, config: PipelineConfig | None = None, origin: EnuOrigin | None = None):
+        if getattr(model_vehicle, "kind", None) != "model":
+            raise ValueError("EstimatorPipeline reads only a model vehicle file (kind = \"model\"), never truth")
+        self.vehicle = model_vehicle
+        self.config = config or PipelineConfig()
+        cfg = self.config
+        self.ekf = MultiRateEKF.from_vehicle(model_vehicle, cfg.ekf)
+        self._origin = origin
+        self._esc3 = cfg.ekf.sensors.imu == "esc3"
+        self._g = cfg.ekf.gravity_mps2
+        self._period_ns = int(round(cfg.predict_period_s * 1e9))
+        lat = cfg.latencies
+        self._lat = {"imu": int(round(lat.imu_s * 1e9)), "gnss": int(round(lat.gnss_s * 1e9)),
+                     "suspension": int(round(lat.suspension_s * 1e9)), "wheel": int(round(lat.wheel_s * 1e9))}
+        m = model_vehicle.mounting
+        rot = np.asarray(m.imu_rotation_rpy_rad, dtype=float)
+        self._imu_rot = None if not rot.any() else dcm_gv(rot[0], rot[1], rot[2]).T  # sensor -> body
+        arm = np.asarray(m.imu_lever_arm_m, dtype=float)
+        self._imu_arm = None if not arm.any() else arm
+        self._lever = np.asarray(m.gnss_lever_arm_m, dtype=float)
+        bw = cfg.bandwidths
+        self._ab_gyro = [TimedAlphaBeta(bw.angular_rate_hz, bw.max_gap_s) for _ in range(3)]
+        self._ab_wheel = [TimedAlphaBeta(bw.wheel_speed_hz, bw.max_gap_s) for _ in range(4)]
+        self._ab_susp = [TimedAlphaBeta(bw.susp_deflection_hz, bw.max_gap_s) for _ in range(4)]
+        self._torque = [_NAN] * 4
+        self._steer = _NAN
+        self._last_t = 0
+        # IMU accumulator for the mean input of the next predict
+        self._acc = [0.0] * 6
+        self._acc_n = 0
+        self._level_f = None  # recent mean specific force (initialisation by levelling)
+        # latest aiding data for initialisation / y2_gps
+        self._fix = None  # (t, enu, sigma_h, sigma_v)
+        self._prev_fix = None
+        self._att = None  # (t, roll, pitch, yaw, sigmas)
+        self._vel = None  # (t, speed, course)
+        self._susp = None  # (t, SuspensionMeasurement)
+        self._zr_rate = ZrRateBuilder(heave_rate_sigma_mps=cfg.heave_rate_sigma_mps)
+        self._log: list[Sample] = []
+        self._counts = {"messages": 0, "ignored": 0, "truth_ignored": 0, "invalid": 0, "estimates": 0}
+        self._rejected = dict.fromkeys(KINDS, 0)
+        self._per_kind = dict.fromkeys(KINDS, 0)
+        self._obs_reports: list[tuple[int, int, ObservabilityReport]] = []
+        self._obs = None
+        self._obs_t0 = None
+        self._obs_ns = None
+        if cfg.observability_window_s:
+            self._obs = ObservabilityWindow(self.ekf.layout).attach(self.ekf)
+            self._obs_ns = int(round(cfg.observability_window_s * 1e9))
+        self._handlers = {"imu": self._on_imu, "gnss_pos": self._on_gnss_pos, "gnss_att": self._on_gnss_att,
+                          "gnss_vel": self._on_gnss_vel, "suspension": self._on_suspension,
+                          "wheel_speed": self._on_wheel_speed, "wheel_torque": self._on_wheel_torque,
+                          "steer": self._on_steer}
+
+    # ---------------------------------------------------------------- public
+    def handle(self, sample: Sample) -> list:
+        """Consume one sample; returns the outputs it caused (Estimate / Innovation)."""
+        self._log.append(sample)
+        self._counts["messages"] += 1
+        kind = sample.kind
+        if kind.startswith("truth") or sample.source.startswith("/truth"):
+            self._counts["truth_ignored"] += 1
+            return []
+        fn = self._handlers.get(kind)
+        if fn is None:
+            self._counts["ignored"] += 1
+            return []
+        self._per_kind[kind] += 1
+        if not sample.valid:
+            self._counts["invalid"] += 1
+            self._rejected[kind] += 1
+            return []
+        out: list = []
+        fn(sample, out)
+        return out
+
+    @classmethod
+    def replay(cls, model_vehicle, config: PipelineConfig | None, samples, origin: EnuOrigin | None = None):
+        """A fresh pipeline fed ``samples`` in order: (pipeline, all outputs)."""
+        p = cls(model_vehicle, config, origin)
+        out: list = []
+        for s in samples:
+            out.extend(p.handle(s))
+        return p, out
+
+    @property
+    def input_log(self) -> tuple[Sample, ...]:
+        """Every sample handed to ``handle``, in order (feed it to ``replay``)."""
+        return tuple(self._log)
+
+    @property
+    def origin(self) -> EnuOrigin | None:
+        return self._origin
+
+    @property
+    def counters(self) -> dict:
+        d = dict(self._counts)
+        d["per_kind"] = dict(self._per_kind)
+        d["ekf"] = self.ekf.counters
+        return d
+
+    def rejected(self) -> dict[str, int]:
+        """Rejected samples per sensor kind (bad fields, no fix, invalid) plus the EKF's
+        gated/NaN/too-old updates per measurement kind."""
+        d = {k: v for k, v in self._rejected.items()}
+        for k, v in self.ekf.rejected().items():
+            d[f"ekf.{k}"] = v
+        return d
+
+    @property
+    def observability_reports(self) -> tuple[tuple[int, int, ObservabilityReport], ...]:
+        """(t_start_ns, t_end_ns, report) per completed window."""
+        return tuple(self._obs_reports)
+
+    def observability_now(self) -> ObservabilityReport | None:
+        """Report of the window in progress."""
+        return self._obs.report() if self._obs is not None else None
+
+    def estimate(self) -> Estimate | None:
+        """The current estimate (None before initialisation)."""
+        if not self.ekf.initialized:
+            return None
+        xf, pf = self.ekf.full_state()
+        sig = np.sqrt(np.maximum(np.diag(pf), 0.0))
+        ang, jac = vehicle_angles_eq4(xf[6:11])
+        pa = jac @ pf[6:11, 6:11] @ jac.T
+        sa = np.sqrt(np.maximum(np.diag(pa), 0.0))
+        return Estimate(self.ekf.t_ns, tuple(xf.tolist()), tuple(sig.tolist()), tuple(ang.tolist()), tuple(sa.tolist()))
+
+    def filtered(self) -> FilteredSignals:
+        g, w, s = self._ab_gyro, self._ab_wheel, self._ab_susp
+        return FilteredSignals(
+            self._last_t, tuple(f.x for f in g), tuple(f.v for f in g), tuple(f.x for f in w), tuple(f.v for f in w),
+            tuple(f.x for f in s), tuple(f.v for f in s), tuple(self._torque), self._steer,
+            {"angular_accel": g[2].lag_s, "wheel_accel": w[0].lag_s, "susp_rate": s[0].lag_s})
+
+    # ---------------------------------------------------------------- IMU / predict
+    def _on_imu(self, s: Sample, out: list) -> None:
+        t = s.t_ns - self._lat["imu"]
+        fd = s.fields
+        g = fd.get
+        if self._esc3:
+            f = [g(_SF[0], _NAN), g(_SF[1], _NAN), self._g]
+            w = [0.0, 0.0, g(_AR[2], _NAN)]
+        else:
+            f = [g(_SF[0], _NAN), g(_SF[1], _NAN), g(_SF[2], _NAN)]
+            w = [g(_AR[0], _NAN), g(_AR[1], _NAN), g(_AR[2], _NAN)]
+        if not math.isfinite(f[0] + f[1] + f[2] + w[0] + w[1] + w[2]):
+            self._rejected["imu"] += 1
+            return
+        if self._imu_rot is not None:
+            f = (self._imu_rot @ np.array(f)).tolist()
+            w = (self._imu_rot @ np.array(w)).tolist()
+        ab = self._ab_gyro
+        if self._esc3:
+            ab[2].update(t, w[2])
+        else:
+            ab[0].update(t, w[0])
+            ab[1].update(t, w[1])
+            ab[2].update(t, w[2])
+        if self._imu_arm is not None:
+            f = self._lever_arm_correction(f)
+        self._last_t = t
+        ekf = self.ekf
+        if not ekf.initialized:  # levelling: exponential mean of the specific force (tau ~ 100 samples)
+            lf = self._level_f
+            self._level_f = tuple(f) if lf is None else tuple(o + 0.01 * (v - o) for o, v in zip(lf, f))
+            return
+        a = self._acc
+        a[0] += f[0]
+        a[1] += f[1]
+        a[2] += f[2]
+        a[3] += w[0]
+        a[4] += w[1]
+        a[5] += w[2]
+        self._acc_n += 1
+        if t - ekf.t_ns >= self._period_ns:
+            self._flush(t, out)
+
+    def _lever_arm_correction(self, f):
+        wv = np.array([ab.x for ab in self._ab_gyro])
+        wd = np.array([ab.v for ab in self._ab_gyro])
+        if not (np.isfinite(wv).all() and np.isfinite(wd).all()):
+            return f
+        arm = self._imu_arm
+        corr = np.cross(wd, arm) + np.cross(wv, np.cross(wv, arm))
+        return [f[0] - corr[0], f[1] - corr[1], f[2] - corr[2]]
+
+    def _set_mean_input(self) -> None:
+        n = self._acc_n
+        if n:
+            a = self._acc
+            self.ekf.set_input((a[0] / n, a[1] / n, a[2] / n), (a[3] / n, a[4] / n, a[5] / n))
+            self._acc = [0.0] * 6
+            self._acc_n = 0
+
+    def _flush(self, t: int, out: list) -> None:
+        """Predict to t with the mean of the accumulated IMU samples; emit an estimate."""
+        self._set_mean_input()
+        was = self.ekf.initialized
+        self.ekf.predict_to(t)
+        if not self.ekf.initialized:
+            if was:
+                self._after_reset()
+            return
+        self._observability_tick()
+        if self.config.emit_estimates:
+            out.append(self.estimate())
+            self._counts["estimates"] += 1
+
+    def _predict_for(self, t: int) -> bool:
+        """Bring the filter to a measurement at t (if it is not in the filter's past)."""
+        ekf = self.ekf
+        if t > ekf.t_ns:
+            self._set_mean_input()
+            ekf.predict_to(t)
+            if not ekf.initialized:
+                self._after_reset()
+                return False
+        return True
+
+    def _update(self, kind: ObsKind, z, R, t: int, out: list, aux=None) -> None:
+        was = self.ekf.initialized
+        res = self.ekf.update(kind, z, R, t, aux)
+        out.append(Innovation.from_result(res))
+        if was and not self.ekf.initialized:
+            self._after_reset()
+
+    def _after_reset(self) -> None:
+        self._acc = [0.0] * 6
+        self._acc_n = 0
+        self._zr_rate.reset()
+        if self._obs is not None:
+            self._obs.restart()
+            self._obs_t0 = None
+
+    def _observability_tick(self) -> None:
+        if self._obs is None:
+            return
+        t = self.ekf.t_ns
+        if self._obs_t0 is None:
+            self._obs_t0 = t
+            self._obs.restart()
+        elif t - self._obs_t0 >= self._obs_ns:
+            self._obs_reports.append((self._obs_t0, t, self._obs.report()))
+            self._obs_t0 = t
+            self._obs.restart()
+
+    # ---------------------------------------------------------------- GNSS
+    def _on_gnss_pos(self, s: Sample, out: list) -> None:
+        t = s.t_ns - self._lat["gnss"]
+        g = s.fields.get
+        lat, lon, alt = g("gnss_lat_deg", _NAN), g("gnss_lon_deg", _NAN), g("gnss_alt_m", _NAN)
+        sep = g("gnss_geoid_sep_m", 0.0)
+        q = g("gnss_fix_quality", 1.0)
+        if not math.isfinite(sep):
+            sep = 0.0
+        if not (math.isfinite(lat + lon + alt) and abs(lat) <= 90.0 and abs(lon) <= 180.0) or not (q > 0):
+            self._rejected["gnss_pos"] += 1
+            return
+        h = alt + sep
+        if self._origin is None:
+            self._origin = EnuOrigin(lat, lon, h)
+        enu = self._origin.to_enu(lat, lon, h)
+        sh = g("gnss_pos_sigma_h_m", self.config.gnss_pos_sigma_h_m)
+        sv = g("gnss_pos_sigma_v_m", self.config.gnss_pos_sigma_v_m)
+        if not (sh > 0 and math.isfinite(sh)):
+            sh = self.config.gnss_pos_sigma_h_m
+        if not (sv > 0 and math.isfinite(sv)):
+            sv = self.config.gnss_pos_sigma_v_m
+        self._prev_fix, self._fix = self._fix, (t, enu, sh, sv)
+        if not self.ekf.initialized:
+            self._try_initialize(t, out)
+            return
+        if self._predict_for(t):
+            self._update(ObsKind.GNSS_POS, enu, np.diag([sh * sh, sh * sh, sv * sv]), t, out)
+
+    def _on_gnss_att(self, s: Sample, out: list) -> None:
+        t = s.t_ns - self._lat["gnss"]
+        g = s.fields.get
+        cfg = self.config
+        z = np.array([g("gnss_roll_rad", _NAN), g("gnss_pitch_rad", _NAN), g("gnss_yaw_rad", _NAN)])
+        if not np.isfinite(z).any():
+            self._rejected["gnss_att"] += 1
+            return
+        sig = []
+        for name in ("gnss_roll_sigma_rad", "gnss_pitch_sigma_rad", "gnss_yaw_sigma_rad"):
+            v = g(name, cfg.gnss_att_sigma_rad)
+            sig.append(v if (v > 0 and math.isfinite(v)) else cfg.gnss_att_sigma_rad)
+        self._att = (t, z, sig)
+        if not self.ekf.initialized:
+            self._try_initialize_from_pending(out)
+            return
+        if not self._predict_for(t):
+            return
+        self._update(ObsKind.GNSS_ATT, z, np.diag(np.square(sig)), t, out)
+        if ObsKind.Y2_GPS in self.ekf.kinds and math.isfinite(z[1] + z[2]) and self.ekf.initialized:
+            zz, rr = y2_gps_measurement(z[1], z[2], sig[1], sig[2])
+            theta_v = None
+            if self._susp is not None and t - self._susp[0] <= 2_000_000_000:
+                theta_v = self._susp[1].theta_v_rad
+            self._update(ObsKind.Y2_GPS, zz, rr, t, out, aux=theta_v)
+
+    def _on_gnss_vel(self, s: Sample, out: list) -> None:
+        t = s.t_ns - self._lat["gnss"]
+        g = s.fields.get
+        cfg = self.config
+        speed, course = g("gnss_speed_mps", _NAN), g("gnss_course_rad", _NAN)
+        if not (math.isfinite(speed) and speed >= 0.0):
+            self._rejected["gnss_vel"] += 1
+            return
+        self._vel = (t, speed, course)
+        if not self.ekf.initialized:
+            self._try_initialize_from_pending(out)
+            return
+        ss = cfg.gnss_speed_sigma_mps
+        if speed >= cfg.gnss_course_min_speed_mps and math.isfinite(course):
+            z = np.array([speed, course])
+            R = np.diag([ss * ss, (ss / speed) ** 2])
+        else:
+            z = np.array([speed, _NAN])
+            R = np.diag([ss * ss, 1.0])
+        w = [ab.x for ab in self._ab_gyro]
+        aux = w if all(math.isfinite(v) for v in w) else None
+        if self._predict_for(t):
+            self._update(ObsKind.GNSS_VEL, z, R, t, out, aux=aux)
+
+    # ---------------------------------------------------------------- chassis
+    def _on_suspension(self, s: Sample, out: list) -> None:
+        t = s.t_ns - self._lat["suspension"]
+        g = s.fields.get
+        h = [g(n, _NAN) for n in _SUSP]
+        if not math.isfinite(sum(h)):
+            self._rejected["suspension"] += 1
+            return
+        for ab, v in zip(self._ab_susp, h):
+            ab.update(t, v)
+        geo = self.vehicle.geometry
+        sm = suspension_measurement(h, geo.l_f_m, geo.l_r_m, geo.track_half_front_m, geo.track_half_rear_m,
+                                    self.config.susp_sigma_m)
+        self._susp = (t, sm)
+        ekf = self.ekf
+        if not ekf.initialized or not ekf.kinds & {ObsKind.Y1_SUS, ObsKind.Y2_SUS_PLANE, ObsKind.Y2_SUS_RATE}:
+            return
+        if not self._predict_for(t):
+            return
+        if ObsKind.Y1_SUS in ekf.kinds:
+            self._update(ObsKind.Y1_SUS, sm.y1, sm.r_y1, t, out)
+        if ObsKind.Y2_SUS_PLANE in ekf.kinds and ekf.initialized:
+            self._update(ObsKind.Y2_SUS_PLANE, np.array([sm.z_r_m]), np.array([[sm.var_z_r_m2]]), t, out)
+        if ObsKind.Y2_SUS_RATE in ekf.kinds and ekf.initialized:
+            zr = self._zr_rate.push(t, sm.z_r_m, sm.var_z_r_m2)
+            if zr is not None:
+                self._update(ObsKind.Y2_SUS_RATE, zr[0], zr[1], t, out)
+
+    def _on_wheel_speed(self, s: Sample, out: list) -> None:
+        t = s.t_ns - self._lat["wheel"]
+        g = s.fields.get
+        bad = False
+        for ab, n in zip(self._ab_wheel, _WS):
+            v = g(n, _NAN)
+            if math.isfinite(v):
+                ab.update(t, v)
+            else:
+                bad = True
+        if bad:
+            self._rejected["wheel_speed"] += 1
+
+    def _on_wheel_torque(self, s: Sample, out: list) -> None:
+        g = s.fields.get
+        vals = [g(n, _NAN) for n in _WT]
+        if not any(math.isfinite(v) for v in vals):
+            self._rejected["wheel_torque"] += 1
+            return
+        self._torque = [v if math.isfinite(v) else old for v, old in zip(vals, self._torque)]
+
+    def _on_steer(self, s: Sample, out: list) -> None:
+        v = s.fields.get("steer_wheel_angle_rad", _NAN)
+        if not math.isfinite(v):
+            self._rejected["steer"] += 1
+            return
+        self._steer = v
+
+    # ---------------------------------------------------------------- initialisation
+    def _fresh(self, item, t: int) -> bool:
+        return item is not None and abs(t - item[0]) <= int(self.config.init_max_age_s * 1e9)
+
+    def _try_initialize_from_pending(self, out: list) -> None:
+        if self._fix is not None:
+            self._try_initialize(self._fix[0], out)
+
+    def _try_initialize(self, t: int, out: list) -> None:
+        """Initialise at the fix of time t when a heading is known (module docstring)."""
+        cfg = self.config
+        if self._fix is None or self._fix[0] != t:
+            return
+        _, enu, sh, sv = self._fix
+        att_ok = self._fresh(self._att, t)
+        roll = pitch = yaw = _NAN
+        s_att = [cfg.init_level_sigma_rad, cfg.init_level_sigma_rad, cfg.init_course_sigma_rad]
+        if att_ok:
+            z, sig = self._att[1], self._att[2]
+            roll, pitch, yaw = (float(v) for v in z)
+            s_att = [2.0 * v for v in sig]
+        vel_ok = self._fresh(self._vel, t)
+        if not math.isfinite(yaw) and vel_ok and self._vel[1] >= cfg.gnss_course_min_speed_mps \
+                and math.isfinite(self._vel[2]):
+            yaw = self._vel[2]
+            s_att[2] = cfg.init_course_sigma_rad
+        if not math.isfinite(yaw):
+            return
+        if not (math.isfinite(roll) and math.isfinite(pitch)):
+            lf = self._level_f
+            if lf is None:
+                lf = (0.0, 0.0, self._g)
+            fn = math.sqrt(lf[0] ** 2 + lf[1] ** 2 + lf[2] ** 2) or 1.0
+            if not math.isfinite(pitch):
+                pitch = math.asin(max(-1.0, min(1.0, lf[0] / fn)))
+                s_att[1] = cfg.init_level_sigma_rad
+            if not math.isfinite(roll):
+                roll = math.atan2(lf[1], lf[2])
+                s_att[0] = cfg.init_level_sigma_rad
+        c = dcm_gv(roll, pitch, yaw)
+        x = np.zeros(12)
+        x[0:3] = enu - c.T @ self._lever
+        sig = np.zeros(12)
+        sig[0:3] = (sh, sh, sv)
+        if vel_ok and self._vel[1] >= cfg.gnss_course_min_speed_mps and math.isfinite(self._vel[2]):
+            x[3:5] = (self._vel[1] * math.cos(self._vel[2]), self._vel[1] * math.sin(self._vel[2]))
+            sig[3:6] = (1.0, 1.0, 1.0)
+        elif self._prev_fix is not None and 0 < t - self._prev_fix[0] <= int(cfg.init_max_age_s * 1e9):
+            dt = (t - self._prev_fix[0]) * 1e-9
+            x[3:5] = (enu[0:2] - self._prev_fix[1][0:2]) / dt
+            sig[3:5] = math.sqrt(2.0) * sh / dt + 1.0
+            sig[5] = 2.0
+        else:
+            sig[3:6] = cfg.init_velocity_sigma_mps
+        x[6:9] = (roll, pitch, yaw)
+        sig[6:9] = s_att
+        sig[9:12] = cfg.init_road_sigma_rad
+        if self._fresh(self._susp, t) and self.ekf.layout.road_estimated:
+            sm = self._susp[1]
+            # road normal in {g}: n = (C_g^v)^T C_r^v e_3, C_r^v e_3 = [s th_v, s ph_v c th_v, c ph_v c th_v]
+            col = np.array([math.sin(sm.theta_v_rad), math.sin(sm.phi_v_rad) * math.cos(sm.theta_v_rad),
+                            math.cos(sm.phi_v_rad) * math.cos(sm.theta_v_rad)])
+            n = c.T @ col
+            x[9] = -math.asin(max(-1.0, min(1.0, n[1])))
+            x[10] = math.atan2(-n[0], n[2])
+            sig[9:11] = 2.0 * max(s_att[0], s_att[1]) if att_ok else cfg.init_road_sigma_rad
+        layout = self.ekf.layout
+        if layout.psi_v_state:
+            x[11] = vehicle_angles_eq4(x[6:11], with_jacobian=False)[2]
+        x0 = layout.from_full(x)
+        P0 = np.diag(sig[layout.full_index] ** 2)
+        self.ekf.initialize(t, x0, P0)
+        self._acc = [0.0] * 6
+        self._acc_n = 0
+        self._zr_rate.reset()
+        self._obs_t0 = None
+        if self.config.emit_estimates:
+            out.append(self.estimate())
+            self._counts["estimates"] += 1

@@ -1,0 +1,182 @@
+"""Named EKF states (paper eq 7) and the configurable filter layout.
+
+The paper's state vector (eq 7)::
+
+    x = [x_g, y_g, z_g, xdot_g, ydot_g, zdot_g, phi_g, theta_g, psi_g, phi_r, theta_r, psi_v]
+
+=========  =====  ======  ===============================================================
+index      name   unit    meaning (frames and signs: ``vdps_hil.conventions``)
+=========  =====  ======  ===============================================================
+0..2       X_G..  m       CG position in the global ENU frame {g}
+3..5       XDOT_G m/s     CG velocity in {g}
+6          PHI_G  rad     absolute roll (right side down positive)
+7          THETA_G rad    absolute pitch (nose up positive, eq 1 as printed)
+8          PSI_G  rad     absolute yaw (CCW from East)
+9          PHI_R  rad     road bank (rotation about the road x axis, eq 2)
+10         THETA_R rad    road grade (rotation about the global y axis, eq 2; < 0 downhill)
+11         PSI_V  rad     vehicle yaw relative to the road frame (eq 3)
+=========  =====  ======  ===============================================================
+
+The *full* vector above is what every process and observation function in this package is
+written for. The *filter* vector is a subset chosen by configuration (:class:`StateLayout`):
+
+* ``psi_v`` is a filter state only in the paper-faithful variant of correction (a). With the
+  road curve angle psi_r = 0, eq 4 fixes psi_v from the other five angles
+  (C_r^v = C_g^v (C_g^r)^T), so the corrected filter *derives* it:
+  psi_v = atan2(C_r^v[0,1], C_r^v[0,0]) (``kinematics.vehicle_angles_eq4``).
+* Without suspension sensors nothing observes the road angles (section 3.2); the layout then
+  fixes phi_r = theta_r = 0 and psi_v = psi_g.
+
+``StateLayout.expand`` maps a filter vector to the full vector and returns
+E = d x_full / d x_filter (12 x n) so that H_filter = H_full E and P_full = E P E^T.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+N_FULL = 12
+
+
+class States(enum.IntEnum):
+    """Index of each state in the full vector of eq 7 (openpilot ``car_kf.States`` style)."""
+
+    X_G = 0
+    Y_G = 1
+    Z_G = 2
+    XDOT_G = 3
+    YDOT_G = 4
+    ZDOT_G = 5
+    PHI_G = 6
+    THETA_G = 7
+    PSI_G = 8
+    PHI_R = 9
+    THETA_R = 10
+    PSI_V = 11
+
+
+POSITION = slice(0, 3)
+VELOCITY = slice(3, 6)
+ATTITUDE = slice(6, 9)
+ROAD = slice(9, 11)
+ANGLES5 = slice(6, 11)  # phi_g, theta_g, psi_g, phi_r, theta_r: the five independent angles
+
+STATE_NAMES: tuple[str, ...] = ("x_g_m", "y_g_m", "z_g_m", "xdot_g_mps", "ydot_g_mps", "zdot_g_mps",
+                                "phi_g_rad", "theta_g_rad", "psi_g_rad", "phi_r_rad", "theta_r_rad",
+                                "psi_v_rad")
+"""Output names with units, index-aligned with :class:`States`."""
+
+YAW_STATES = (States.PSI_G, States.PSI_V)
+"""States wrapped to [-pi, pi)."""
+
+
+def wrap_angle(a: float) -> float:
+    """Wrap to [-pi, pi) (scalar, cheap)."""
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@dataclass(frozen=True)
+class StateLayout:
+    """Which full-vector states the filter carries.
+
+    ``road_estimated``: phi_r, theta_r are filter states (else fixed at 0).
+    ``psi_v_state``: psi_v is a filter state with eq 6's zero rate (paper-faithful (a)); else it
+    is derived from eq 4. ``psi_v_state`` requires ``road_estimated``.
+    """
+
+    road_estimated: bool = True
+    psi_v_state: bool = False
+
+    def __post_init__(self):
+        if self.psi_v_state and not self.road_estimated:
+            raise ValueError("psi_v can only be a filter state when the road angles are estimated")
+        idx = list(range(9))
+        if self.road_estimated:
+            idx += [States.PHI_R, States.THETA_R]
+        if self.psi_v_state:
+            idx.append(States.PSI_V)
+        object.__setattr__(self, "_idx", np.array(idx, dtype=int))
+        object.__setattr__(self, "_pos", {int(s): i for i, s in enumerate(idx)})
+
+    @property
+    def n(self) -> int:
+        return len(self._idx)
+
+    @property
+    def full_index(self) -> np.ndarray:
+        """Full-vector index of each filter state (read-only copy)."""
+        return self._idx.copy()
+
+    @property
+    def states(self) -> tuple[States, ...]:
+        return tuple(States(int(i)) for i in self._idx)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(STATE_NAMES[int(i)] for i in self._idx)
+
+    @property
+    def is_full(self) -> bool:
+        return self.n == N_FULL
+
+    def index(self, state: States) -> int | None:
+        """Position of ``state`` in the filter vector, or None if it is derived/fixed."""
+        return self._pos.get(int(state))
+
+    def check_x(self, x) -> np.ndarray:
+        a = np.asarray(x, dtype=float)
+        if a.ndim != 1 or a.shape[0] != self.n:
+            raise ValueError(f"state vector must be 1-D of length {self.n} ({', '.join(self.names)}), "
+                             f"got shape {a.shape}")
+        return a
+
+    def check_p(self, p) -> np.ndarray:
+        a = np.asarray(p, dtype=float)
+        if a.shape != (self.n, self.n):
+            raise ValueError(f"covariance must be 2-D of shape ({self.n}, {self.n}), got shape {a.shape}")
+        return a
+
+    def from_full(self, x_full) -> np.ndarray:
+        """Pick the filter states out of a full 12-vector."""
+        a = np.asarray(x_full, dtype=float)
+        if a.shape != (N_FULL,):
+            raise ValueError(f"full state must have shape ({N_FULL},), got {a.shape}")
+        return a[self._idx].copy()
+
+    def expand(self, x, with_jacobian: bool = True):
+        """Filter vector -> (full 12-vector, E = d x_full / d x_filter or None).
+
+        Derived psi_v (eq 4) gets its gradient with respect to the five angles in E's last row;
+        fixed road angles are zero with zero rows."""
+        from vdps_hil.estimation.kinematics import vehicle_angles_eq4  # local: avoid a cycle
+
+        xf = np.zeros(N_FULL)
+        xf[self._idx] = x
+        e = None
+        if with_jacobian:
+            e = np.zeros((N_FULL, self.n))
+            e[self._idx, np.arange(self.n)] = 1.0
+        if not self.psi_v_state:
+            if with_jacobian:
+                ang, jac = vehicle_angles_eq4(xf[ANGLES5], with_jacobian=True)
+                # jac is 3 x 5 over (phi_g, theta_g, psi_g, phi_r, theta_r); keep the columns
+                # of the angles that are filter states
+                for k in range(5 if self.road_estimated else 3):
+                    e[States.PSI_V, self._pos[6 + k]] = jac[2, k]
+            else:
+                ang = vehicle_angles_eq4(xf[ANGLES5], with_jacobian=False)
+            xf[States.PSI_V] = ang[2]
+        return xf, e
+
+    def full_covariance(self, x, p) -> tuple[np.ndarray, np.ndarray]:
+        """(x_full, P_full = E P E^T); fixed states get zero variance."""
+        xf, e = self.expand(x)
+        return xf, e @ p @ e.T
+
+    @classmethod
+    def paper(cls) -> "StateLayout":
+        """All 12 states of eq 7 (paper-faithful correction (a))."""
+        return cls(road_estimated=True, psi_v_state=True)
