@@ -91,3 +91,38 @@ def classify_outcome(tip_up: bool, max_abs_sideslip_rad: float) -> str:
     if max_abs_sideslip_rad > SPIN_OUT_SIDESLIP_RAD:
         return "spin-out"
     return "stable"
+
+
+def with_static_stability_factor(vehicle, ssf: float):
+    """The vehicle with its CG height set so that t_half / h_cg = ssf (everything else kept):
+    the parametric axis of the outcome map."""
+    import dataclasses
+    g = vehicle.geometry
+    t_half = 0.5 * (g.track_half_front_m + g.track_half_rear_m)
+    return dataclasses.replace(vehicle, geometry=dataclasses.replace(g, h_cg_m=t_half / ssf))
+
+
+@dataclass
+class RolloverAssessment:
+    """Outcome of one run: outcome class, event times [s] (NaN when absent), peaks."""
+
+    outcome: str
+    tip_up_t_s: float
+    point_of_no_return_t_s: float
+    max_abs_sideslip_rad: float
+    max_abs_roll_rel_road_rad: float
+    max_abs_ltr: float
+
+    def to_json(self) -> dict:
+        return dict(self.__dict__)
+
+
+def assess(sim, t_from_s: float = 0.0) -> RolloverAssessment:
+    """Classify a finished simulation (truth from ``t_from_s`` on)."""
+    tr = [s for s in sim.truth if s["t_s"] >= t_from_s]
+    beta = max((abs(s["sideslip_rad"]) for s in tr), default=0.0)
+    roll = max((abs(s["roll_v_rad"]) for s in tr), default=0.0)
+    ltr = max((abs(s["ltr"]) for s in tr), default=0.0)
+    tu, pn = sim.rollover.tip_up, sim.rollover.point_of_no_return
+    return RolloverAssessment(classify_outcome(tu is not None, beta), tu.t_s if tu else math.nan,
+                              pn.t_s if pn else math.nan, beta, roll, ltr)
