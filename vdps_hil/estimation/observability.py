@@ -88,15 +88,23 @@ class ObservabilityWindow:
     ``on_predict(Phi)`` accumulates Phi(t, t_0); ``on_update(H, R)`` appends
     R^-1/2 H Phi(t, t_0). ``report()`` evaluates the window; ``restart()`` begins a new one."""
 
-    def __init__(self, layout: StateLayout, scales=None, rtol: float = DEFAULT_RTOL,
+    def __init__(self, state_names, scales=None, rtol: float = DEFAULT_RTOL,
                  participation_threshold: float = DEFAULT_PARTICIPATION):
-        self.layout = layout
-        self.names = tuple(STATE_NAMES[int(i)] for i in layout.full_index)
-        self.scales = default_scales(layout) if scales is None else np.asarray(scales, dtype=float)
+        self.names = tuple(state_names)
+        n = len(self.names)
+        self.scales = np.ones(n) if scales is None else np.asarray(scales, dtype=float)
+        if self.scales.shape != (n,):
+            raise ValueError(f"scales must have shape ({n},), got {self.scales.shape}")
         self.rtol = rtol
         self.threshold = participation_threshold
-        self._phi = np.eye(layout.n)
+        self._phi = np.eye(n)
         self._blocks: list[np.ndarray] = []
+
+    @classmethod
+    def for_layout(cls, layout: StateLayout, **kw) -> "ObservabilityWindow":
+        """Names and default scales of an EKF layout."""
+        names = tuple(STATE_NAMES[int(i)] for i in layout.full_index)
+        return cls(names, kw.pop("scales", default_scales(layout)), **kw)
 
     def attach(self, ekf) -> "ObservabilityWindow":
         ekf.on_predict = self.on_predict
@@ -104,7 +112,7 @@ class ObservabilityWindow:
         return self
 
     def restart(self) -> None:
-        self._phi = np.eye(self.layout.n)
+        self._phi = np.eye(len(self.names))
         self._blocks = []
 
     def on_predict(self, phi: np.ndarray) -> None:

@@ -12,7 +12,8 @@ gnss_att      3    [phi_g, theta_g, psi_g] (residuals wrapped)                  
 gnss_vel      2    [|v_a,h|, atan2(v_a,y, v_a,x)] with v_a = v + (C_g^v)^T (w x l_ant)     (none)
                    (single-antenna speed and course over ground)
 y2_gps        2    [C_r^v C_g^r](1, 1:2) = [c(th_v)c(psi_v), c(th_v)s(psi_v), s(th_v)]    y2^gps
-                   C_g^r[:, 0:2], theta_v a known parameter (aux; latest eq-5 theta_v)
+                   C_g^r[:, 0:2], theta_v a known parameter (aux; latest eq-5 theta_v),
+                   or, without aux, theta_v of the state by eq 4 (then in the Jacobian)
 y1_sus        2    [C_r^v(1,3), C_r^v(2,3)] = [sin th_v, sin ph_v cos th_v],               y1^sus
                    C_r^v = C_g^v (C_g^r)^T (eq 4, psi_r = 0)
 y2_sus_plane  1    C_g^r(3,:) p = n . p (CG height above one road plane through the        y2^sus
@@ -187,6 +188,10 @@ class Y2Gps(ObservationModel):
         H[:, 9] = row @ d_f[:, 0:2]
         H[:, 10] = row @ d_t[:, 0:2]
         H[:, 11] = np.array([-ct * sp, ct * cp, 0.0]) @ cgr[:, 0:2]
+        if aux is None or not math.isfinite(float(aux)):
+            # theta_v from eq 4 of the state: chain rule through d theta_v / d (five angles)
+            dh_dtv = np.array([-st * cp, -st * sp, ct]) @ cgr[:, 0:2]
+            H[:, 6:11] += np.outer(dh_dtv, vehicle_angles_eq4(x[6:11])[1][1])
         return H
 
 

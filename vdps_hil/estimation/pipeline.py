@@ -243,7 +243,7 @@ class EstimatorPipeline:
         self._obs_t0 = None
         self._obs_ns = None
         if cfg.observability_window_s:
-            self._obs = ObservabilityWindow(self.ekf.layout).attach(self.ekf)
+            self._obs = ObservabilityWindow.for_layout(self.ekf.layout).attach(self.ekf)
             self._obs_ns = int(round(cfg.observability_window_s * 1e9))
         self._handlers = {"imu": self._on_imu, "gnss_pos": self._on_gnss_pos, "gnss_att": self._on_gnss_att,
                           "gnss_vel": self._on_gnss_vel, "suspension": self._on_suspension,

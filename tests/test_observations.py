@@ -1,0 +1,123 @@
+"""Observation models of eq 9: analytic Jacobians against central differences (tolerance
+1e-6), each h at the truth of the synthetic manoeuvre reproduces the measurement built from
+noise-free sensors (1e-9), and the eq-5 measurement covariance against Monte Carlo (10 %)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from vdps_hil.estimation import synthetic as syn
+from vdps_hil.estimation.observations import (ObsKind, ZrRateBuilder, make_models, suspension_measurement,
+                                              y2_gps_measurement)
+from vdps_hil.model import frames as fr
+from vdps_hil.model.params import load_vehicle
+
+VEH = load_vehicle("sedan-model")
+GEO = VEH.geometry
+LEVER = VEH.mounting.gnss_lever_arm_m
+
+
+def _aux(kind, rng):
+    if kind == ObsKind.GNSS_VEL:
+        return rng.normal(size=3) * 0.3
+    if kind == ObsKind.Y2_GPS:  # theta_v given (paper), or None: from eq 4 of the state
+        return float(rng.normal() * 0.02) if rng.uniform() < 0.5 else None
+    return None
+
+
+@pytest.mark.parametrize("kind", list(ObsKind))
+def test_jacobians_against_finite_differences(kind, rng):
+    model = make_models(LEVER)[kind]
+    for _ in range(20):
+        x = rng.normal(size=12) * np.array([300, 300, 20, 25, 25, 2, .3, .3, 3, .1, .1, 3])
+        aux = _aux(kind, rng)
+        H = model.jacobian(x, aux)
+        assert H.shape == (model.dim, 12)
+        h = 1e-6
+        num = np.empty_like(H)
+        for i in range(12):
+            d = np.zeros(12)
+            d[i] = h
+            num[:, i] = model.residual(model.h(x + d, aux), model.h(x - d, aux)) / (2 * h)
+        np.testing.assert_allclose(H, num, atol=1e-6, rtol=1e-6)
+
+
+def test_models_at_truth_match_noise_free_measurements():
+    m = syn.Maneuver(duration_s=5.0)
+    t = np.linspace(0.5, 5.0, 10)
+    tr = syn.truth(m, t)
+    models = make_models(LEVER)
+    defl = syn.deflections(tr, GEO)
+    for k in range(t.size):
+        x = tr.x_full[k]
+        sm = suspension_measurement(defl[k], GEO.l_f_m, GEO.l_r_m, GEO.track_half_front_m, GEO.track_half_rear_m, 1e-3)
+        np.testing.assert_allclose(models[ObsKind.Y1_SUS].h(x), sm.y1, atol=1e-12)
+        assert abs(sm.theta_v_rad - tr.vehicle_angles[k, 1]) < 1e-12
+        assert abs(sm.phi_v_rad - tr.vehicle_angles[k, 0]) < 1e-12
+        # y2^sus plane form: the CG height above the plane through the origin (plane offset 0)
+        assert abs(models[ObsKind.Y2_SUS_PLANE].h(x)[0] - sm.z_r_m) < 1e-9
+        assert abs(models[ObsKind.Y2_SUS_RATE].h(x)[0] - tr.heave_rate_mps[k]) < 1e-9
+        z, _ = y2_gps_measurement(x[7], x[8], 0.01, 0.01)
+        np.testing.assert_allclose(models[ObsKind.Y2_GPS].h(x, tr.vehicle_angles[k, 1]), z, atol=1e-12)
+        # without aux, theta_v comes from eq 4 of the state: the same value here
+        np.testing.assert_allclose(models[ObsKind.Y2_GPS].h(x, None), z, atol=1e-12)
+        np.testing.assert_allclose(models[ObsKind.GNSS_ATT].h(x), x[6:9], atol=0)
+
+
+def test_gnss_position_lever_arm_points_forward():
+    """Heading north (psi = 90 deg) with the antenna 0.3 m ahead and 0.85 m above the CG: the
+    antenna is 0.3 m north and 0.85 m up."""
+    x = np.zeros(12)
+    x[8] = math.pi / 2
+    np.testing.assert_allclose(make_models(LEVER)[ObsKind.GNSS_POS].h(x), [0.0, 0.30, 0.85], atol=1e-12)
+
+
+def test_gnss_velocity_speed_course():
+    x = np.zeros(12)
+    x[3:5] = (3.0, 4.0)
+    y = make_models((0, 0, 0))[ObsKind.GNSS_VEL].h(x)
+    np.testing.assert_allclose(y, [5.0, math.atan2(4, 3)], atol=1e-12)
+
+
+def test_yaw_residual_wraps():
+    model = make_models()[ObsKind.GNSS_ATT]
+    r = model.residual(np.array([0.0, 0.0, math.pi - 0.01]), np.array([0.0, 0.0, -math.pi + 0.01]))
+    assert abs(r[2] + 0.02) < 1e-12
+
+
+def test_suspension_measurement_is_eq5_and_covariance_matches_monte_carlo(rng):
+    h = np.array([0.02, -0.01, 0.015, -0.005])
+    sm = suspension_measurement(h, GEO.l_f_m, GEO.l_r_m, GEO.track_half_front_m, GEO.track_half_rear_m, 0.001)
+    z_r, th, ph = fr.suspension_to_road_attitude(h, GEO.l_f_m, GEO.l_r_m, GEO.track_half_front_m, GEO.track_half_rear_m)
+    assert abs(sm.z_r_m - z_r) < 1e-15 and abs(sm.theta_v_rad - th) < 1e-15 and abs(sm.phi_v_rad - ph) < 1e-15
+    np.testing.assert_allclose(sm.y1, [math.sin(th), math.sin(ph) * math.cos(th)], atol=1e-15)
+    samples = h + rng.normal(0, 0.001, (40000, 4))
+    ys = np.array([suspension_measurement(s, GEO.l_f_m, GEO.l_r_m, GEO.track_half_front_m,
+                                          GEO.track_half_rear_m, 0.001).y1 for s in samples[:4000]])
+    cov = np.cov(ys.T)
+    np.testing.assert_allclose(np.diag(cov), np.diag(sm.r_y1), rtol=0.1)
+    assert abs(cov[0, 1]) < 0.1 * math.sqrt(cov[0, 0] * cov[1, 1])
+    zr = (-GEO.l_r_m * (samples[:, 0] + samples[:, 1]) - GEO.l_f_m * (samples[:, 2] + samples[:, 3])) / (2 * GEO.wheelbase_m)
+    assert abs(zr.var() / sm.var_z_r_m2 - 1.0) < 0.1
+
+
+def test_y2_gps_covariance_matches_monte_carlo(rng):
+    th, psi, s = 0.1, 0.7, 0.007
+    z, r = y2_gps_measurement(th, psi, s, s)
+    a = np.array([th, psi]) + rng.normal(0, s, (20000, 2))
+    zs = np.stack([np.cos(a[:, 0]) * np.cos(a[:, 1]), np.cos(a[:, 0]) * np.sin(a[:, 1])], axis=1)
+    np.testing.assert_allclose(np.cov(zs.T), r, atol=0.1 * s * s)
+    np.testing.assert_allclose(zs.mean(0), z, atol=1e-3)
+
+
+def test_zr_rate_builder():
+    b = ZrRateBuilder(min_baseline_s=0.5, max_baseline_s=3.0, heave_rate_sigma_mps=0.05)
+    assert b.push(0, 0.0, 1e-6) is None
+    assert b.push(200_000_000, 0.001, 1e-6) is None  # baseline 0.2 s < 0.5 s
+    z, r = b.push(1_000_000_000, 0.01, 1e-6)  # baseline to t = 0.2 s is 0.8 s
+    assert abs(z[0] - (0.01 - 0.001) / 0.8) < 1e-12
+    assert abs(r[0, 0] - (2e-6 / 0.64 + 0.05 ** 2)) < 1e-15
+    assert b.push(10_000_000_000, 0.0, 1e-6) is None  # everything older than 3 s dropped
+    with pytest.raises(ValueError):
+        ZrRateBuilder(min_baseline_s=1.0, max_baseline_s=0.5)
