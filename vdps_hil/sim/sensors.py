@@ -174,6 +174,23 @@ class Block:
     def take(self, rows: np.ndarray) -> "Block":
         return Block(self.n[rows], self.t_ns[rows], self.a[rows])
 
+    _GROUPS = {"specific_force": ("f_x", 3), "rate": ("w_x", 3), "angular_accel": ("wd_x", 3),
+               "pos": ("pos_e", 3), "euler": ("roll", 3), "vel_b": ("u", 3),
+               "wheel_spin": ("spin_1", 4), "susp": ("susp_1", 4), "steer": ("steer", 1),
+               "drive_torque": ("drive_1", 4), "brake_torque": ("brake_1", 4)}
+
+    @classmethod
+    def build(cls, n: np.ndarray, dt_ns: int, **groups: np.ndarray) -> "Block":
+        """A block from arrays named like the accessors (missing groups are zero); ``n`` are
+        consecutive step indices. For tests and for driving the sensors without the simulator."""
+        n = np.asarray(n, dtype=np.int64)
+        a = np.zeros((len(n), len(_COLS)))
+        a[:, 0] = n
+        for name, value in groups.items():
+            first, k = cls._GROUPS[name]
+            a[:, _C[first]:_C[first] + k] = np.asarray(value, dtype=float).reshape(len(n), k)
+        return cls(n, n * np.int64(dt_ns), a)
+
 
 class StepRecorder:
     """Hooks into a Simulator and records the truth a sensor needs at every step (and at the

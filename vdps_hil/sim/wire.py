@@ -186,9 +186,9 @@ def pack_imu_packets(t_device_ns: np.ndarray, counters: np.ndarray, specific_for
     tick = imu_codec.NS_PER_FINE_TICK
     a["stf"] = ((np.asarray(t_device_ns, dtype=np.int64) + tick // 2) // tick) & 0xFFFFFFFF
     a["xdi_a"], a["sz_a"] = imu_codec.XDI_ACCELERATION, 12
-    a["acc"] = specific_force_mps2
+    a["acc"] = np.asarray(specific_force_mps2, dtype=float) + 0.0  # -0.0 -> +0.0 as the codec
     a["xdi_w"], a["sz_w"] = imu_codec.XDI_RATE_OF_TURN, 12
-    a["gyr"] = angular_rate_radps
+    a["gyr"] = np.asarray(angular_rate_radps, dtype=float) + 0.0
     b = a.view(np.uint8).reshape(n, 47)
     b[:, 46] = (-b[:, 1:46].sum(axis=1, dtype=np.int64)) & 0xFF
     return b
