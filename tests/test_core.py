@@ -216,3 +216,27 @@ def test_max_stable_step_covers_one_millisecond():
     tau = SEDAN.tire.wheel_inertia_kgm2 * 5.0 / (SEDAN.tire.rolling_radius_m ** 2 * 80000.0)
     assert m.wheel_spin_tau_floor_s == pytest.approx(tau)
     assert m.max_stable_step_s > 1e-3
+
+
+def test_regressors_reproduce_linear_effect_contributions_on_simulated_data():
+    """On a simulated coast-down snapshot, each linear effect's regressors times its parameters
+    equal its contribution as the core applied it: drag force (long) and rolling-resistance
+    torques (wheel_i)."""
+    eff = _drag_rr_effects()
+    sim = Simulator(SEDAN, inputs=Inputs(0.3), effects=eff, initial_speed_mps=25.0, env=Env(wind_enu_mps=(3.0, -4.0, 0.0)))
+    sim.step_to(2.0)
+    s = sim.snapshot()
+    q = sim.model.regressor_quantities(s)
+    d, rr = eff["aero_drag"], eff["rolling_resistance"]
+    drag = d.body_wrench(None, None, (s["air_vel_b_mps_x"], s["air_vel_b_mps_y"], s["air_vel_b_mps_z"]))[0]
+    assert d.regressors(q)["long"]["cda_m2"] * d.cda_m2 == pytest.approx(drag, rel=1e-12)
+    for i in range(1, 5):
+        assert rr.regressors(q)[f"wheel_{i}"]["coefficient"] * rr.coefficient == pytest.approx(
+            s[f"effect_wheel_torque_nm_{i}"], rel=1e-12)
+
+
+def test_state_from_named_parts():
+    m = Model(SEDAN, unsprung_dof=False)
+    x = m.state_from((1, 2, 3), (0.1, 0.0, 0.5), (20, 0, 0), (0, 0, 0.1), (64.5,) * 4)
+    assert len(x) == m.layout.size == 16 and x[m.layout.euler_g][2] == 0.5
+    assert len(Model(SEDAN).state_from((0,) * 3, (0,) * 3, (0,) * 3, (0,) * 3, (0,) * 4)) == 24

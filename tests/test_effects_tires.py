@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vdps_hil.model.core import Env, Inputs, Model
+from vdps_hil.model.core import Inputs, Model
 from vdps_hil.model.effects import (EffectConfigError, EffectSet, LinearTire, LoadDependentCorneringStiffness,
                                     LowPressureTire, MagicFormulaTire, make_effect)
 from vdps_hil.model.params import load_vehicle

@@ -38,6 +38,11 @@ slice              size  meaning
 ``susp_defl_rate`` 4     H_dot_1..4 [m/s] (only with ``unsprung_dof``)
 =================  ====  ======================================================================
 
+Entry points: ``Model(vehicle, effects, unsprung_dof=...)`` builds the parameters once;
+``model.f(x, u, env)`` (or ``derivatives(x, u, model, env)``) is the pure derivative function;
+``model.evaluate(x, u, env)`` adds named diagnostics (tire forces, slips, loads, ...);
+``model.design_state`` / ``model.trim_state`` / ``model.state_from`` build states.
+
 Equations (body axes; a = CG acceleration, g_b = C_g^v [0, 0, -g], eq 13 written in {v})::
 
     dp_g/dt      = (C_g^v)^T v_b
@@ -88,12 +93,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Mapping, Sequence
 
 from vdps_hil.units import GRAVITY_MPS2
 
 from .effects import EffectSet, LinearTire
-from .effects.base import DynamicsEffect, Effect, TireModel
+from .effects.base import Effect
 from .params import Vehicle
 
 SLIP_SPEED_FLOOR_MPS = 5.0
@@ -197,8 +202,10 @@ def ackermann_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front
             math.atan2(wheelbase_m * tm, wheelbase_m + track_half_front_m * tm))
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
+def derivatives(x: Sequence[float], u: "Inputs", p: "Model", env: "Env") -> list[float]:
+    """f(x, u, p, env) -> x_dot: the core as a pure function of state, inputs, parameters (a
+    :class:`Model`: vehicle + effects + variant) and environment. Same as ``p.f(x, u, env)``."""
+    return p.f(x, u, env)
 
 
 class Model:
@@ -504,6 +511,14 @@ class Model:
                 out["_moment_b"] = (Mx, My, Mz)
                 out["_normal_b"] = (nx, ny, nz)
                 out["_height_cg"] = h_cg
+                if out.get("_want_air", True):
+                    we0, we1, we2 = env.wind_enu_mps
+                    we0 += wex
+                    we1 += wey
+                    we2 += wez
+                    out["_air_b"] = (vx - (c00 * we0 + c01 * we1 + c02 * we2),
+                                     vy - (c10 * we0 + c11 * we1 + c12 * we2),
+                                     vz - (c20 * we0 + c21 * we1 + c22 * we2))
             return xd
 
         return f
@@ -526,6 +541,8 @@ class Model:
             d[f"force_b_n_{a}"] = raw["_force_b"][k]
             d[f"moment_b_nm_{a}"] = raw["_moment_b"][k]
         d["height_cg_above_road_m"] = raw["_height_cg"]
+        for k, a in enumerate("xyz"):
+            d[f"air_vel_b_mps_{a}"] = raw["_air_b"][k]
         for i, rec in enumerate(raw["_rec"], start=1):
             (fa, fb, fz, kap, alp, H, Hd, tq, teff, delta, ri, hw, fs, ftx, fty, ftz) = rec
             d[f"tire_force_long_n_{i}"] = fa
@@ -543,6 +560,38 @@ class Model:
             d[f"wheel_centre_height_m_{i}"] = hw
             d[f"wheel_accel_radps2_{i}"] = xd[12 + i - 1]
         return d
+
+    def regressor_quantities(self, q: Mapping[str, float]) -> dict[str, float]:
+        """``q`` (e.g. a truth snapshot or the estimator's equivalents of its names) completed
+        with the model's constants that effects' ``regressors`` need: ``static_load_n_i``,
+        ``cornering_stiffness_nprad_i`` (C_alpha,i before effects), ``corner_x_m_i``,
+        ``rolling_radius_nominal_m``, ``cornering_stiffness_front_nprad``, ``l_f_m`` and
+        ``front_lateral_force_n`` (from ``tire_force_lat_n_1/2`` when present)."""
+        out = dict(q)
+        p = self.vehicle.params
+        for i in range(4):
+            out[f"static_load_n_{i + 1}"] = self.static_load_n[i]
+            out[f"cornering_stiffness_nprad_{i + 1}"] = self.c_alpha[i]
+            out[f"corner_x_m_{i + 1}"] = self.corner_xy[i][0]
+            out.setdefault(f"rolling_radius_m_{i + 1}", self.rolling_radius_m[i])
+        out["rolling_radius_nominal_m"] = self.vehicle.tire.rolling_radius_m
+        out["cornering_stiffness_front_nprad"] = p.cornering_stiffness_front_nprad
+        out["l_f_m"] = self.vehicle.geometry.l_f_m
+        if "tire_force_lat_n_1" in q and "tire_force_lat_n_2" in q:
+            out["front_lateral_force_n"] = q["tire_force_lat_n_1"] + q["tire_force_lat_n_2"]
+        return out
+
+    def state_from(self, pos_g, euler_g, vel_b, rate_b, wheel_spin, susp_defl=None,
+                   susp_defl_rate=None) -> list[float]:
+        """A state vector from its named parts (e.g. an estimator's state at t0). With
+        ``unsprung_dof`` the suspension deflections and rates default to zero."""
+        x = [float(v) for part in (pos_g, euler_g, vel_b, rate_b, wheel_spin) for v in part]
+        if len(x) != 16:
+            raise ValueError("state_from needs 3 + 3 + 3 + 3 + 4 values")
+        if self.unsprung_dof:
+            x += [float(v) for v in (susp_defl if susp_defl is not None else (0.0,) * 4)]
+            x += [float(v) for v in (susp_defl_rate if susp_defl_rate is not None else (0.0,) * 4)]
+        return x
 
     def static_loads(self) -> tuple[float, ...]:
         """F_z0 per corner on a level road [N] (sprung share + unsprung weight)."""

@@ -54,10 +54,6 @@ _PATH_KEYS = {"straight": {"length_m"}, "circle": {"radius_m", "entry_m"},
               "iso3888": {"entry_m", "offset_m", "exit_m"}, "points": {"points"}}
 
 
-class DriverSpecError(ValueError):
-    """A bad [driver] table; one-line message."""
-
-
 def _err(where: str, msg: str):
     from .scenarios import ScenarioError
     return ScenarioError(f"{where}: {msg}")
