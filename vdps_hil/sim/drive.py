@@ -374,9 +374,6 @@ class Drive:
                     k = faults.can_keep(name, t_rx[sel])
                     if k is not None:
                         keep[np.flatnonzero(sel)[~k]] = False
-            off = faults.clock_offset_ns("can", t_rx)
-            if off is not None:
-                t_rx = np.maximum(t_rx + off, 0)
             ts.append(t_rx[keep])
             ms.append(m[keep])
             ds.append(d[keep])
@@ -391,6 +388,10 @@ class Drive:
                   for link, fmt in ((self._imu_link, IMU_FORMAT), (self._gnss_link, GNSS_FORMAT))]
         if final:
             serial = [(link, fmt, ch + link.chunks(1 << 62, final=True)) for link, fmt, ch in serial]
+        t_write = t[:n_out]
+        off = faults.clock_offset_ns("can", t_write)  # the interface's clock stamps the frames
+        if off is not None:
+            t_write = np.maximum(t_write + off, 0)
         t1 = time.perf_counter()
         timing["sensors"] += t1 - t0
         # --- write
@@ -398,7 +399,7 @@ class Drive:
         bus = self.bus
         frames = self._frames
         raw = d[:n_out].tobytes()
-        for j, (tj, mj) in enumerate(zip(t[:n_out].tolist(), m[:n_out].tolist())):
+        for j, (tj, mj) in enumerate(zip(t_write.tolist(), m[:n_out].tolist())):
             fr = frames[mj]
             fr.data = raw[8 * j:8 * j + fr.dlc]
             w.write_can(bus, tj, fr)

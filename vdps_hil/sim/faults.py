@@ -260,7 +260,8 @@ class DroppedFrames(Fault):
 
     def bind(self, rng, dbc=None) -> None:
         self._rng = rng
-        if dbc is not None and self.message and self.message not in dbc.messages:
+        if (dbc is not None and self.message
+                and (self.message not in dbc.messages or dbc.messages[self.message].crc is not None)):
             known = ", ".join(n for n, s in dbc.messages.items() if s.crc is None)
             raise FaultError(f"fault {self.name!r}: unknown message {self.message!r} (known: {known})")
 

@@ -1,0 +1,58 @@
+"""Tests of ``vdps sim``: a run writes the recording and the summaries, the default output name,
+and one-line errors with exit status 2 for bad scenarios, effects, faults, profiles and options."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from vdps_hil.cli.main import main
+from vdps_hil.record.reader import RecordingReader
+
+
+def test_sim_writes_the_recording_and_a_json_summary(tmp_path, capsys):
+    out, js = tmp_path / "p.mcap", tmp_path / "p.json"
+    rc = main(["sim", "paper", "--duration", "0.5", "--seed", "2", "--profile", "table1",
+               "--effect", "imu_bias:gyro_bias_z_radps=0.01", "--fault", "gyro_spike:t_s=0.2",
+               "-o", str(out), "--json", str(js)])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "paper: 0.50 s simulated" in text and "/raw/can/vdps" in text and "no rollover event" in text
+    doc = json.loads(js.read_text())
+    assert doc["duration_s"] == 0.5 and doc["seed"] == 2 and doc["profile"] == "table1"
+    assert doc["effects"] == ["magic_formula_tire", "imu_bias"] and doc["faults"][0].startswith("gyro_spike:")
+    assert doc["messages"]["/truth/state"] == 51 and doc["messages"]["/raw/serial/imu"] == 101
+    assert 24.0 < doc["final_speed_mps"] < 26.0 and doc["rollover_events"] == []
+    with RecordingReader(out) as r:
+        assert r.topics()["/raw/can/vdps"].count == doc["messages"]["/raw/can/vdps"]
+
+
+def test_default_output_and_json_on_stdout(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["sim", "paper-left-turn", "--duration", "0.2", "--json", "-"]) == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["output"] == "paper-left-turn.mcap"
+    assert "simulated" in cap.err  # the human summary moves to stderr
+    assert (tmp_path / "paper-left-turn.mcap").stat().st_size > 0
+
+
+@pytest.mark.parametrize("args, words", [
+    (["sim", "no-such-scenario"], "unknown scenario"),
+    (["sim", "paper", "--effect", "no_such_effect"], "unknown effect"),
+    (["sim", "paper", "--effect", "imu_bias:nope=1"], "unknown parameter"),
+    (["sim", "paper", "--fault", "no_such_fault"], "unknown fault"),
+    (["sim", "paper", "--fault", "gyro_spike:axis=w"], "axis must be one of"),
+    (["sim", "paper", "--profile", "no_such_profile"], "unknown sensor profile"),
+    (["sim", "paper", "--vehicle", "no_such_vehicle"], "cannot read vehicle file"),
+    (["sim", "paper", "--vehicle", "sedan-model"], "truth file is needed"),
+    (["sim", "paper", "--duration", "0"], "duration must be"),
+    (["sim", "paper", "--duration", "x"], "Invalid value"),
+    (["sim", "paper", "-o", "/no/such/dir/x.mcap"], "does not exist"),
+])
+def test_errors_are_one_line_with_exit_status_2(args, words, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("vdps: error:") and words in err
+    assert not list(tmp_path.iterdir())  # nothing written
