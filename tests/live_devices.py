@@ -1,0 +1,73 @@
+"""Helpers for the cross-process logger tests: the device emulator of tools/bench_logger.py
+(slcan CAN adapter, MTi IMU and NMEA receiver on pseudo-terminals) in one process, ``vdps log``
+in another."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+TOOL = REPO / "tools" / "bench_logger.py"
+VDPS = "import sys; from vdps_hil.cli.main import entry; sys.argv[0] = 'vdps'; entry()"
+
+
+def wait_for(path: Path, timeout: float) -> bool:
+    t_end = time.monotonic() + timeout
+    while not path.exists():
+        if time.monotonic() > t_end:
+            return False
+        time.sleep(0.02)
+    return True
+
+
+def vdps(*args, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", VDPS, *map(str, args)], capture_output=True,
+                          text=True, timeout=120, **kw)
+
+
+class Rig:
+    """Emulator + logger. ``start()`` returns when both run and the stream has begun."""
+
+    def __init__(self, d: Path, seconds: float, *, extra_fps: int = 0, flush_s: float = 0.5):
+        self.d = d
+        self.seconds = seconds
+        self.out = d / "out.mcap"
+        self.emu = subprocess.Popen([sys.executable, str(TOOL), "emulate", "--dir", str(d),
+                                     "--seconds", str(seconds), "--extra-fps", str(extra_fps),
+                                     "--linger", "60", "--wait", "60"])
+        assert wait_for(d / "ready.json", 30), "emulator did not start"
+        self.logger = subprocess.Popen(
+            [sys.executable, "-c", VDPS, "log",
+             "--can", f"vdps=slcan:{d / 'can'},sleep_after_open=0",
+             "--serial", f"imu={d / 'imu'}@921600", "--serial", f"gnss={d / 'gnss'}@115200",
+             "-o", str(self.out), "--flush-s", str(flush_s), "--quiet",
+             "--json", str(d / "log.json")],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        if not wait_for(self.out, 60):
+            self.logger.kill()
+            self.close()
+            raise AssertionError(f"logger did not start: {self.logger.stderr.read()[-800:]}")
+        time.sleep(0.3)
+        (d / "go").touch()
+
+    def sent(self, timeout: float = 60) -> dict:
+        assert wait_for(self.d / "sent.json", timeout), "emulator did not finish"
+        return json.loads((self.d / "sent.json").read_text())
+
+    def progress(self) -> list[dict]:
+        return [json.loads(ln) for ln in (self.d / "progress.jsonl").read_text().splitlines()]
+
+    def close(self) -> None:
+        (self.d / "stop").touch()
+        try:
+            self.emu.wait(30)
+        except subprocess.TimeoutExpired:
+            self.emu.kill()
+            self.emu.wait()
+        if self.logger.poll() is None:
+            self.logger.kill()
+            self.logger.wait()

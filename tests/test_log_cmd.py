@@ -1,0 +1,73 @@
+"""``vdps log`` across processes: an emulator process drives an slcan CAN adapter, the IMU and
+a GNSS receiver on pseudo-terminals at Table 1 rates with sequence counters; the logger (its
+own process) must record every message and close the file cleanly on SIGTERM. Plus one-line
+errors for a person's mistakes."""
+
+import json
+import signal
+import time
+
+from live_devices import Rig, vdps
+
+from vdps_hil.record.reader import RecordingReader
+
+
+def test_nothing_lost_at_table1_rates_and_sigterm_closes_cleanly(tmp_path):
+    rig = Rig(tmp_path, seconds=2.0)
+    try:
+        sent = rig.sent()
+        time.sleep(0.8)  # what is in flight reaches the file
+        rig.logger.send_signal(signal.SIGTERM)
+        rc = rig.logger.wait(30)
+        err = rig.logger.stderr.read()
+    finally:
+        rig.close()
+    assert rc == 0, err[-800:]
+    assert sum(sent["dropped_at_device"].values()) == 0  # the logger kept up with the links
+    s = sent["sent"]
+    with RecordingReader(rig.out) as r:
+        assert not r.truncated  # closed properly by SIGTERM
+        imu_seq, can_seq, gnss = [], {}, 0
+        for smp in r.iter_samples():
+            if smp.kind == "imu":
+                imu_seq.append(int(smp.fields["seq_counter"]))
+            elif smp.source == "can.vdps":
+                key = smp.kind if smp.kind != "wheel_speed" else \
+                    ("front" if "wheel_speed_radps_1" in smp.fields else "rear")
+                can_seq.setdefault(key, []).append(int(smp.fields["seq_counter"]))
+            elif smp.kind == "gnss_att":
+                gnss += 1
+        raw_can = sum(1 for _ in r.iter_raw_can())
+        health = json.loads(r.metadata()["vdps.health"]["can.vdps"])
+    # every packet, in order, by its own counter
+    assert imu_seq == [k % 65536 for k in range(s["imu"])]
+    for key, n in (("front", s["wheel_speed"]), ("rear", s["wheel_speed"]),
+                   ("wheel_torque", s["wheel_torque"]), ("steer", s["steer"]),
+                   ("suspension", s["suspension"])):
+        assert can_seq[key] == [k % 256 for k in range(n)], key
+    assert raw_can == sent["can_frames"]
+    assert gnss == s["gnss"]
+    assert health["counters"]["lost_frames"] == 0 and health["drops"] == 0
+    summary = json.loads((tmp_path / "log.json").read_text())
+    assert summary["queue_overflow"] == 0 and summary["write_errors"] == 0
+
+
+def test_bad_interface_and_port_are_one_line_exit_2(tmp_path):
+    out = tmp_path / "x.mcap"
+    for args in (["--can", "vdps=nosuch:chan"], ["--can", "vdps"],
+                 ["--serial", f"gnss={tmp_path / 'no_tty'}@115200"],
+                 ["--serial", "gnss=/dev/null@fast"], []):
+        p = vdps("log", *args, "-o", out, "--duration", "1")
+        assert p.returncode == 2, (args, p.stderr)
+        lines = p.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("vdps: error:"), p.stderr
+        assert "Traceback" not in p.stderr
+    assert not out.exists()  # devices are checked before the file is created
+
+
+def test_unreadable_signal_map_is_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[bus.vdps\n")
+    p = vdps("log", "--can", "vdps=virtual:x", "--signalmap", bad, "-o", tmp_path / "y.mcap")
+    assert p.returncode == 2 and "malformed TOML" in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
