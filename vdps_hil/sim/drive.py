@@ -194,7 +194,8 @@ class Drive:
         scenario_faults = self.scenario.raw.get("faults", []) if isinstance(self.scenario.raw, Mapping) else []
         if not isinstance(scenario_faults, list):
             raise DriveError(f"scenario {self.scenario.name!r}: faults must be a list")
-        self.faults = FaultSet([*scenario_faults, *faults], seed=self.seed, dbc=self.dbc)
+        self._fault_specs = [*scenario_faults, *faults]
+        self.faults = FaultSet(self._fault_specs, seed=self.seed, dbc=self.dbc)  # checked now
 
     def _effects(self, specs: list[str]) -> EffectSet:
         sc = self.scenario
@@ -234,6 +235,7 @@ class Drive:
                                  content_hashes={"dbc.vdps": self.dbc_path},
                                  sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
         self._writer = writer
+        self.faults = FaultSet(self._fault_specs, seed=self.seed, dbc=self.dbc)  # fresh state per run
         self._stats = {"final_speed_mps": math.nan, "max_roll": 0.0, "max_roll_v": 0.0, "t_s": 0.0}
         self._events: list[dict] = []
         self._fault_events = sorted(

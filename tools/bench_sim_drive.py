@@ -1,0 +1,132 @@
+"""Benchmark: real-time factor of ``vdps sim paper`` with every sensor on (profile
+``table1-susp1k``: IMU 1 kHz, tachometers 1 kHz, suspension 1 kHz, torque and steering 100 Hz,
+GNSS 5 Hz) on one core, and where the time goes.
+
+Usage::
+
+    .venv/bin/python tools/bench_sim_drive.py [--scenario paper] [--profile table1-susp1k]
+                                              [--repeat 3] [--json FILE]
+
+It measures, best of ``--repeat`` runs each:
+
+* ``physics``: the simulator alone (``Simulator(scenario).run()``, truth snapshots computed but
+  not kept), the floor for any drive;
+* ``physics + recorder``: the same with the sensors' per-step truth recorder hooked in;
+* the full drive (``sim.drive.Drive.run`` to a file in a temporary directory), with its own
+  split: physics and recorder, truth writing (/truth/state JSON), sensor models and encoding,
+  CAN writing (one MCAP message per frame), serial writing (read chunks);
+* the CLI end to end (``vdps sim`` in a subprocess, Python start-up and imports included).
+
+The process is pinned to one CPU where the OS allows it. First bar: RTF >= 10; goal: 50.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from vdps_hil.sim.drive import Drive  # noqa: E402
+from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
+from vdps_hil.sim.sensors import StepRecorder  # noqa: E402
+from vdps_hil.sim.simulator import Simulator  # noqa: E402
+
+
+def pin_one_core() -> str:
+    if hasattr(os, "sched_setaffinity"):
+        cpu = min(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {cpu})
+        return f"pinned to CPU {cpu}"
+    return "not pinned (no sched_setaffinity)"
+
+
+def best(fn, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default="paper")
+    ap.add_argument("--profile", default="table1-susp1k")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--json", default=None, help="write the figures to FILE")
+    a = ap.parse_args()
+    pin = pin_one_core()
+    sc = load_scenario(a.scenario)
+    dur = sc.duration_s
+
+    def physics():
+        Simulator(scenario=sc, record_truth=False).run()
+
+    def physics_recorder():
+        sim = Simulator(scenario=sc, record_truth=False)
+        rec = StepRecorder(sim)
+        while sim.n < round(dur * 1000) and not sim.stopped:
+            sim.step()
+            if sim.n % 500 == 0:
+                rec.take()
+
+    t_phys = best(physics, a.repeat)
+    t_rec = best(physics_recorder, a.repeat)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "bench.mcap"
+        runs = []
+        for _ in range(a.repeat):
+            s = Drive(sc, profile=a.profile, seed=0).run(out)
+            runs.append(s)
+        s = min(runs, key=lambda x: x.wall_time_s)
+        size = out.stat().st_size
+        t0 = time.perf_counter()
+        cli = subprocess.run([sys.executable, "-c", "from vdps_hil.cli.main import entry; entry()",
+                              "sim", a.scenario, "--profile", a.profile, "-o", str(out)],
+                             cwd=REPO, capture_output=True, text=True)
+        t_cli = time.perf_counter() - t0
+        if cli.returncode != 0:
+            print(cli.stderr, file=sys.stderr)
+            return 1
+    tm = s.timing_s
+    n_msgs = sum(s.messages.values())
+    rows = [("physics alone (simulator)", t_phys),
+            ("physics + per-step recorder", t_rec),
+            ("drive: physics + recorder", tm["physics_and_recorder"]),
+            ("drive: /truth/state writing", tm["truth_write"]),
+            ("drive: sensor models + encoding", tm["sensors"]),
+            ("drive: CAN frame writing", tm["can_write"]),
+            ("drive: serial chunk writing", tm["serial_write"]),
+            ("drive: total", s.wall_time_s),
+            ("vdps sim (CLI, start-up included)", t_cli)]
+    print(f"bench_sim_drive: scenario {a.scenario} ({dur:g} s simulated), profile {a.profile}, "
+          f"best of {a.repeat}, {pin}")
+    print(f"  {'part':<36} {'wall [s]':>9} {'ms per sim s':>13} {'RTF':>8}")
+    for name, t in rows:
+        print(f"  {name:<36} {t:9.3f} {1000 * t / dur:13.1f} {dur / t:8.1f}")
+    print(f"  messages {n_msgs} ({n_msgs / dur:.0f} per simulated s, "
+          f"{1e6 * tm['can_write'] / max(s.messages.get('/raw/can/vdps', 1), 1):.1f} us per CAN frame), "
+          f"file {size / 1e6:.1f} MB")
+    rtf = dur / s.wall_time_s
+    print(f"  real-time factor {rtf:.1f}x: first bar 10x {'met' if rtf >= 10 else 'NOT met'}, "
+          f"goal 50x {'met' if rtf >= 50 else 'not met'}")
+    if a.json:
+        doc = {"scenario": a.scenario, "profile": a.profile, "duration_s": dur,
+               "rtf": rtf, "rtf_cli": dur / t_cli, "physics_s": t_phys, "physics_recorder_s": t_rec,
+               "drive_timing_s": tm, "drive_wall_s": s.wall_time_s, "messages": s.messages,
+               "file_bytes": size}
+        Path(a.json).write_text(json.dumps(doc, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
