@@ -109,7 +109,8 @@ def test_imu_measurement_effects_equal_the_effects_own_formulas(rng):
         d = {f"specific_force_mps2_{a}": b.specific_force[i, j] for j, a in enumerate("xyz")}
         d.update({f"angular_rate_radps_{a}": b.rate[i, j] for j, a in enumerate("xyz")})
         d = DoubleX().apply(bias.apply(lever.apply(d, kin), kin), kin)
-        np.testing.assert_allclose(out.specific_force_mps2[i], [d[f"specific_force_mps2_{a}"] for a in "xyz"], atol=1e-12)
+        np.testing.assert_allclose(out.specific_force_mps2[i],
+                                   [d[f"specific_force_mps2_{a}"] for a in "xyz"], atol=1e-12)
         np.testing.assert_allclose(out.angular_rate_radps[i], [d[f"angular_rate_radps_{a}"] for a in "xyz"], atol=1e-12)
 
 
@@ -232,7 +233,8 @@ def test_gnss_sentences_in_every_fix_state(layout, rng):
         assert pos["gnss_lat_deg"] == pytest.approx(ep.lat_deg, abs=1e-6 / 60 / 2 + 1e-12)
         assert pos["gnss_alt_m"] == pytest.approx(ep.alt_msl_m, abs=5e-4 + 1e-9)
         att = samples[2].fields
-        assert math.remainder(att["gnss_yaw_rad"] - ep.yaw_rad, 2 * math.pi) == pytest.approx(0, abs=math.radians(0.005) + 1e-9)
+        assert math.remainder(att["gnss_yaw_rad"] - ep.yaw_rad, 2 * math.pi) == \
+            pytest.approx(0, abs=math.radians(0.005) + 1e-9)
         assert att["gnss_pitch_rad"] == pytest.approx(ep.pitch_rad, abs=math.radians(0.005) + 1e-9)
         if "gnss_roll_rad" in att:  # HPR: a two-antenna layout, the decoder keeps the pitch
             assert att["gnss_roll_rad"] == pytest.approx(ep.roll_rad, abs=math.radians(0.005) + 1e-9)
