@@ -253,7 +253,12 @@ def test_paper_faithful_switches_run_and_differ():
         assert np.isfinite(tr.x_full).all()
     _, tr = _run(EkfConfig(paper_faithful=PaperFaithful.all()), seed=7)
     assert np.isfinite(tr.x_full).all()
+    # (a) alone: y2^gps is dropped by (b), nothing observes psi_v; with (b) faithful too, the
+    # paper's own psi_v machinery (zero rate + y2^gps) lags the heading between GPS epochs
     assert stds["a_psi_v_zero_rate"][States.PSI_V] > 10 * base[States.PSI_V]
+    ekf, tr = _run(EkfConfig(paper_faithful=PaperFaithful(a_psi_v_zero_rate=True, b_y2_gps=True)), seed=7)
+    assert _std(tr)[States.PSI_V] > 10 * base[States.PSI_V]
+    assert ekf.counters["updates"]["y2_gps"]["accepted"] == 150
     assert stds["d_accel_as_acceleration"][States.Z_G] > 10.0 > 1.0 > base[States.Z_G]
     # the corrected filter's own psi_v (eq 4) is as good as its yaw
     assert base[States.PSI_V] < 1.5 * base[States.PSI_G]

@@ -104,7 +104,9 @@ def test_suspension_measurement_is_eq5_and_covariance_matches_monte_carlo(rng):
 
 def test_y2_gps_covariance_matches_monte_carlo(rng):
     th, psi, s = 0.1, 0.7, 0.007
-    z, r = y2_gps_measurement(th, psi, s, s)
+    z, r = y2_gps_measurement(th, psi, s, s, floor=0.0)
+    r_default = y2_gps_measurement(th, psi, s, s)[1]
+    np.testing.assert_allclose(r_default - r, s * s * np.eye(2), atol=1e-18)  # isotropic floor = sigma
     a = np.array([th, psi]) + rng.normal(0, s, (20000, 2))
     zs = np.stack([np.cos(a[:, 0]) * np.cos(a[:, 1]), np.cos(a[:, 0]) * np.sin(a[:, 1])], axis=1)
     np.testing.assert_allclose(np.cov(zs.T), r, atol=0.1 * s * s)

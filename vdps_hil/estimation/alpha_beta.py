@@ -216,3 +216,68 @@ class TimedAlphaBeta:
             return math.nan
         a, b = critically_damped_gains(self.bandwidth_hz, self._dt_s)
         return derivative_lag_s(a, b, self._dt_s)
+
+
+class TimedAlphaBetaBank:
+    """``n`` signals sampled together (gyro axes, four wheels, four corners): each is a
+    ``TimedAlphaBeta`` with its own state and time, sharing the bandwidth and the gain cache
+    (one call per sample instead of n). ``rejected[i]`` counts skipped non-finite values."""
+
+    __slots__ = ("bandwidth_hz", "max_gap_ns", "x", "v", "t", "rejected", "restarts", "_gains", "_dt_s")
+
+    def __init__(self, n: int, bandwidth_hz: float, max_gap_s: float = 0.5):
+        critically_damped_gains(bandwidth_hz, 1e-3)  # validates
+        self.bandwidth_hz = float(bandwidth_hz)
+        self.max_gap_ns = int(round(max_gap_s * 1e9))
+        self.x = [math.nan] * n
+        self.v = [math.nan] * n
+        self.t: list[int | None] = [None] * n
+        self.rejected = [0] * n
+        self.restarts = 0
+        self._gains: dict[int, tuple[float, float, float]] = {}
+        self._dt_s = math.nan
+
+    def update(self, t_ns: int, values) -> int:
+        """Feed one value per signal (NaN: skipped for that signal); returns how many were used."""
+        used = 0
+        xs, vs, ts, gains = self.x, self.v, self.t, self._gains
+        i = -1
+        for z in values:
+            i += 1
+            if z - z != 0.0:  # NaN or +-inf
+                self.rejected[i] += 1
+                continue
+            t0 = ts[i]
+            if t0 is None or t_ns - t0 > self.max_gap_ns:
+                if t0 is not None:
+                    self.restarts += 1
+                xs[i], vs[i], ts[i] = z, 0.0, t_ns
+                used += 1
+                continue
+            d = t_ns - t0
+            if d <= 0:
+                self.rejected[i] += 1
+                continue
+            g = gains.get(d)
+            if g is None:
+                dt = d * 1e-9
+                a, b = critically_damped_gains(self.bandwidth_hz, dt)
+                g = (a, b / dt, dt)
+                if len(gains) < 256:
+                    gains[d] = g
+            a, bt, dt = g
+            xp = xs[i] + dt * vs[i]
+            r = z - xp
+            xs[i] = xp + a * r
+            vs[i] += bt * r
+            ts[i] = t_ns
+            self._dt_s = dt
+            used += 1
+        return used
+
+    @property
+    def lag_s(self) -> float:
+        if not math.isfinite(self._dt_s):
+            return math.nan
+        a, b = critically_damped_gains(self.bandwidth_hz, self._dt_s)
+        return derivative_lag_s(a, b, self._dt_s)

@@ -253,6 +253,7 @@ class MultiRateEKF:
         self.layout = self.config.layout()
         self._idx = self.layout.full_index
         self._n = self.layout.n
+        self._ix = np.ix_(self._idx, self._idx)
         self._models = make_models(gnss_lever_arm_m)
         self._kinds = self.config.kinds()
         self._q_in = self.config.input_psd()
@@ -397,7 +398,7 @@ class MultiRateEKF:
         F, G = linearize(xf, self._f, self._w)
         xn = step(xf, self._f, self._w, dt, self._g)
         if n != N_FULL:
-            F = F[np.ix_(idx, idx)]
+            F = F[self._ix]
             G = G[idx]
         phi = transition(F, dt)
         qc = (G * self._q_in) @ G.T + self._q_rw

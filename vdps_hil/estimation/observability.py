@@ -70,7 +70,7 @@ def observability_rank(blocks, state_names, scales=None, rtol: float = DEFAULT_R
     o = np.vstack(rows)
     if scales is not None:
         o = o * np.asarray(scales, dtype=float)[None, :]
-    _, s, vt = np.linalg.svd(o, full_matrices=True)
+    _, s, vt = np.linalg.svd(o, full_matrices=o.shape[0] < n)  # economy size unless fewer rows than states
     s_full = np.zeros(n)
     s_full[: s.size] = s
     smax = s_full[0] if s_full.size else 0.0

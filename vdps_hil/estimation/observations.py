@@ -12,8 +12,10 @@ gnss_att      3    [phi_g, theta_g, psi_g] (residuals wrapped)                  
 gnss_vel      2    [|v_a,h|, atan2(v_a,y, v_a,x)] with v_a = v + (C_g^v)^T (w x l_ant)     (none)
                    (single-antenna speed and course over ground)
 y2_gps        2    [C_r^v C_g^r](1, 1:2) = [c(th_v)c(psi_v), c(th_v)s(psi_v), s(th_v)]    y2^gps
-                   C_g^r[:, 0:2], theta_v a known parameter (aux; latest eq-5 theta_v),
-                   or, without aux, theta_v of the state by eq 4 (then in the Jacobian)
+                   C_g^r[:, 0:2] with psi_v the state; theta_v by eq 4 of the state (in the
+                   Jacobian), or a given value (aux: e.g. eq 5's theta_v, then a constant).
+                   A stale eq-5 theta_v (1 Hz) leaves a radial residual on the unit circle
+                   that gets gated, hence the eq-4 default
 y1_sus        2    [C_r^v(1,3), C_r^v(2,3)] = [sin th_v, sin ph_v cos th_v],               y1^sus
                    C_r^v = C_g^v (C_g^r)^T (eq 4, psi_r = 0)
 y2_sus_plane  1    C_g^r(3,:) p = n . p (CG height above one road plane through the        y2^sus
@@ -318,20 +320,22 @@ def suspension_measurement(h_m, l_f_m: float, l_r_m: float, t_f_half_m: float, t
     return SuspensionMeasurement(th, ph, z_r, np.array([s_th, s_ph_c_th]), r, var_zr)
 
 
-Y2_GPS_R_FLOOR = 1e-4
-"""Floor [-] added to the y2_gps measurement standard deviation (see ``y2_gps_measurement``)."""
-
-
 def y2_gps_measurement(theta_g_rad: float, psi_g_rad: float, sigma_theta_rad: float,
-                       sigma_psi_rad: float) -> tuple[np.ndarray, np.ndarray]:
+                       sigma_psi_rad: float, floor: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """z = [C_g^v(1,1), C_g^v(1,2)] = [cos th cos psi, cos th sin psi] from the GNSS attitude and
-    R = J diag(sigma_th^2, sigma_psi^2) J^T + (1e-4)^2 I (first-order propagation; J is singular
-    at theta = 0, where z only moves along the heading direction, hence the small floor)."""
+    R = J diag(sigma_th^2, sigma_psi^2) J^T + floor^2 I.
+
+    J is singular at theta = 0 (z then moves only along the circle of radius cos(theta)); the
+    radial direction would get almost no noise, and the second-order residual of a lagging
+    psi_v (eq 6's zero rate, yaw rate x 0.2 s ~ 0.05 rad -> 1e-3 radially) would be gated. The
+    isotropic ``floor`` (default: the larger angle sigma) keeps the paper's measurement usable."""
+    if floor is None:
+        floor = max(sigma_theta_rad, sigma_psi_rad)
     ct, st = math.cos(theta_g_rad), math.sin(theta_g_rad)
     cp, sp = math.cos(psi_g_rad), math.sin(psi_g_rad)
     z = np.array([ct * cp, ct * sp])
     j = np.array([[-st * cp, -ct * sp], [-st * sp, ct * cp]])
-    return z, j @ np.diag([sigma_theta_rad ** 2, sigma_psi_rad ** 2]) @ j.T + Y2_GPS_R_FLOOR ** 2 * np.eye(2)
+    return z, j @ np.diag([sigma_theta_rad ** 2, sigma_psi_rad ** 2]) @ j.T + floor ** 2 * np.eye(2)
 
 
 class ZrRateBuilder:

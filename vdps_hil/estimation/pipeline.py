@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
-from vdps_hil.estimation.alpha_beta import TimedAlphaBeta
+from vdps_hil.estimation.alpha_beta import TimedAlphaBetaBank
 from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, UpdateResult
 from vdps_hil.estimation.kinematics import dcm_gv, vehicle_angles_eq4
 from vdps_hil.estimation.observability import ObservabilityReport, ObservabilityWindow
@@ -97,7 +97,8 @@ class PipelineConfig:
 
     ekf: EkfConfig = field(default_factory=EkfConfig)
     predict_period_s: float = 0.01
-    emit_estimates: bool = True  # an Estimate after every predict step
+    emit_estimates: bool = True  # Estimates as outputs
+    output_period_s: float = 0.0  # at most one Estimate per period (0: after every predict step)
     gnss_pos_sigma_h_m: float = 1.0
     gnss_pos_sigma_v_m: float = 3.0
     gnss_att_sigma_rad: float = float(deg2rad(0.4))
@@ -207,6 +208,8 @@ class EstimatorPipeline:
         self._esc3 = cfg.ekf.sensors.imu == "esc3"
         self._g = cfg.ekf.gravity_mps2
         self._period_ns = int(round(cfg.predict_period_s * 1e9))
+        self._out_ns = int(round(cfg.output_period_s * 1e9))
+        self._last_out = -(1 << 62)
         lat = cfg.latencies
         self._lat = {"imu": int(round(lat.imu_s * 1e9)), "gnss": int(round(lat.gnss_s * 1e9)),
                      "suspension": int(round(lat.suspension_s * 1e9)), "wheel": int(round(lat.wheel_s * 1e9))}
@@ -217,9 +220,9 @@ class EstimatorPipeline:
         self._imu_arm = None if not arm.any() else arm
         self._lever = np.asarray(m.gnss_lever_arm_m, dtype=float)
         bw = cfg.bandwidths
-        self._ab_gyro = [TimedAlphaBeta(bw.angular_rate_hz, bw.max_gap_s) for _ in range(3)]
-        self._ab_wheel = [TimedAlphaBeta(bw.wheel_speed_hz, bw.max_gap_s) for _ in range(4)]
-        self._ab_susp = [TimedAlphaBeta(bw.susp_deflection_hz, bw.max_gap_s) for _ in range(4)]
+        self._ab_gyro = TimedAlphaBetaBank(3, bw.angular_rate_hz, bw.max_gap_s)
+        self._ab_wheel = TimedAlphaBetaBank(4, bw.wheel_speed_hz, bw.max_gap_s)
+        self._ab_susp = TimedAlphaBetaBank(4, bw.susp_deflection_hz, bw.max_gap_s)
         self._torque = [_NAN] * 4
         self._steer = _NAN
         self._last_t = 0
@@ -256,12 +259,12 @@ class EstimatorPipeline:
         self._log.append(sample)
         self._counts["messages"] += 1
         kind = sample.kind
-        if kind.startswith("truth") or sample.source.startswith("/truth"):
-            self._counts["truth_ignored"] += 1
-            return []
         fn = self._handlers.get(kind)
-        if fn is None:
-            self._counts["ignored"] += 1
+        if fn is None or sample.source.startswith("/truth"):
+            if kind.startswith("truth") or sample.source.startswith("/truth"):
+                self._counts["truth_ignored"] += 1
+            else:
+                self._counts["ignored"] += 1
             return []
         self._per_kind[kind] += 1
         if not sample.valid:
@@ -318,9 +321,9 @@ class EstimatorPipeline:
         """The current estimate (None before initialisation)."""
         if not self.ekf.initialized:
             return None
-        xf, pf = self.ekf.full_state()
+        xf, e, ang, jac = self.ekf.layout.expand_with_vehicle_angles(self.ekf.x)
+        pf = e @ self.ekf.P @ e.T
         sig = np.sqrt(np.maximum(np.diag(pf), 0.0))
-        ang, jac = vehicle_angles_eq4(xf[6:11])
         pa = jac @ pf[6:11, 6:11] @ jac.T
         sa = np.sqrt(np.maximum(np.diag(pa), 0.0))
         return Estimate(self.ekf.t_ns, tuple(xf.tolist()), tuple(sig.tolist()), tuple(ang.tolist()), tuple(sa.tolist()))
@@ -328,9 +331,9 @@ class EstimatorPipeline:
     def filtered(self) -> FilteredSignals:
         g, w, s = self._ab_gyro, self._ab_wheel, self._ab_susp
         return FilteredSignals(
-            self._last_t, tuple(f.x for f in g), tuple(f.v for f in g), tuple(f.x for f in w), tuple(f.v for f in w),
-            tuple(f.x for f in s), tuple(f.v for f in s), tuple(self._torque), self._steer,
-            {"angular_accel": g[2].lag_s, "wheel_accel": w[0].lag_s, "susp_rate": s[0].lag_s})
+            self._last_t, tuple(g.x), tuple(g.v), tuple(w.x), tuple(w.v), tuple(s.x), tuple(s.v),
+            tuple(self._torque), self._steer,
+            {"angular_accel": g.lag_s, "wheel_accel": w.lag_s, "susp_rate": s.lag_s})
 
     # ---------------------------------------------------------------- IMU / predict
     def _on_imu(self, s: Sample, out: list) -> None:
@@ -349,13 +352,7 @@ class EstimatorPipeline:
         if self._imu_rot is not None:
             f = (self._imu_rot @ np.array(f)).tolist()
             w = (self._imu_rot @ np.array(w)).tolist()
-        ab = self._ab_gyro
-        if self._esc3:
-            ab[2].update(t, w[2])
-        else:
-            ab[0].update(t, w[0])
-            ab[1].update(t, w[1])
-            ab[2].update(t, w[2])
+        self._ab_gyro.update(t, (_NAN, _NAN, w[2]) if self._esc3 else w)
         if self._imu_arm is not None:
             f = self._lever_arm_correction(f)
         self._last_t = t
@@ -376,8 +373,8 @@ class EstimatorPipeline:
             self._flush(t, out)
 
     def _lever_arm_correction(self, f):
-        wv = np.array([ab.x for ab in self._ab_gyro])
-        wd = np.array([ab.v for ab in self._ab_gyro])
+        wv = np.array(self._ab_gyro.x)
+        wd = np.array(self._ab_gyro.v)
         if not (np.isfinite(wv).all() and np.isfinite(wd).all()):
             return f
         arm = self._imu_arm
@@ -402,7 +399,8 @@ class EstimatorPipeline:
                 self._after_reset()
             return
         self._observability_tick()
-        if self.config.emit_estimates:
+        if self.config.emit_estimates and t - self._last_out >= self._out_ns:
+            self._last_out = t
             out.append(self.estimate())
             self._counts["estimates"] += 1
 
@@ -494,10 +492,7 @@ class EstimatorPipeline:
         self._update(ObsKind.GNSS_ATT, z, np.diag(np.square(sig)), t, out)
         if ObsKind.Y2_GPS in self.ekf.kinds and math.isfinite(z[1] + z[2]) and self.ekf.initialized:
             zz, rr = y2_gps_measurement(z[1], z[2], sig[1], sig[2])
-            theta_v = None
-            if self._susp is not None and t - self._susp[0] <= 2_000_000_000:
-                theta_v = self._susp[1].theta_v_rad
-            self._update(ObsKind.Y2_GPS, zz, rr, t, out, aux=theta_v)
+            self._update(ObsKind.Y2_GPS, zz, rr, t, out)  # theta_v from eq 4 of the state
 
     def _on_gnss_vel(self, s: Sample, out: list) -> None:
         t = s.t_ns - self._lat["gnss"]
@@ -518,7 +513,7 @@ class EstimatorPipeline:
         else:
             z = np.array([speed, _NAN])
             R = np.diag([ss * ss, 1.0])
-        w = [ab.x for ab in self._ab_gyro]
+        w = list(self._ab_gyro.x)
         aux = w if all(math.isfinite(v) for v in w) else None
         if self._predict_for(t):
             self._update(ObsKind.GNSS_VEL, z, R, t, out, aux=aux)
@@ -531,8 +526,7 @@ class EstimatorPipeline:
         if not math.isfinite(sum(h)):
             self._rejected["suspension"] += 1
             return
-        for ab, v in zip(self._ab_susp, h):
-            ab.update(t, v)
+        self._ab_susp.update(t, h)
         geo = self.vehicle.geometry
         sm = suspension_measurement(h, geo.l_f_m, geo.l_r_m, geo.track_half_front_m, geo.track_half_rear_m,
                                     self.config.susp_sigma_m)
@@ -554,14 +548,7 @@ class EstimatorPipeline:
     def _on_wheel_speed(self, s: Sample, out: list) -> None:
         t = s.t_ns - self._lat["wheel"]
         g = s.fields.get
-        bad = False
-        for ab, n in zip(self._ab_wheel, _WS):
-            v = g(n, _NAN)
-            if math.isfinite(v):
-                ab.update(t, v)
-            else:
-                bad = True
-        if bad:
+        if self._ab_wheel.update(t, [g(_WS[0], _NAN), g(_WS[1], _NAN), g(_WS[2], _NAN), g(_WS[3], _NAN)]) < 4:
             self._rejected["wheel_speed"] += 1
 
     def _on_wheel_torque(self, s: Sample, out: list) -> None:

@@ -171,6 +171,22 @@ class StateLayout:
             xf[States.PSI_V] = ang[2]
         return xf, e
 
+    def expand_with_vehicle_angles(self, x):
+        """(x_full, E, (phi_v, theta_v, psi_v), d angles / d x_full[6:11]) in one evaluation of
+        eq 4 (the pipeline's output path)."""
+        from vdps_hil.estimation.kinematics import vehicle_angles_eq4
+
+        xf = np.zeros(N_FULL)
+        xf[self._idx] = x
+        e = np.zeros((N_FULL, self.n))
+        e[self._idx, np.arange(self.n)] = 1.0
+        ang, jac = vehicle_angles_eq4(xf[ANGLES5], with_jacobian=True)
+        if not self.psi_v_state:
+            for k in range(5 if self.road_estimated else 3):
+                e[States.PSI_V, self._pos[6 + k]] = jac[2, k]
+            xf[States.PSI_V] = ang[2]
+        return xf, e, ang, jac
+
     def full_covariance(self, x, p) -> tuple[np.ndarray, np.ndarray]:
         """(x_full, P_full = E P E^T); fixed states get zero variance."""
         xf, e = self.expand(x)

@@ -352,7 +352,6 @@ def drive_ekf(ekf, data: SensorData, vehicle, decimation: int = 10, heave_rate_s
     s_att = nz.gnss_att_rad if gnss_att_sigma_rad is None else gnss_att_sigma_rad
     r_att = np.eye(3) * s_att ** 2
     zr_rate = ZrRateBuilder(heave_rate_sigma_mps=heave_rate_sigma_mps)
-    theta_v_sus = None
     rec_t, rec_x, rec_p, rec_xf, rec_sf = [], [], [], [], []
     i_used = int(np.searchsorted(t_imu, ekf.t_ns, side="right"))
     layout = ekf.layout
@@ -384,11 +383,10 @@ def drive_ekf(ekf, data: SensorData, vehicle, decimation: int = 10, heave_rate_s
                 ekf.update(ObsKind.GNSS_ATT, data.gnss_att[k], r_att, t)
             if ObsKind.Y2_GPS in kinds:
                 z, r = y2_gps_measurement(data.gnss_att[k, 1], data.gnss_att[k, 2], s_att, s_att)
-                ekf.update(ObsKind.Y2_GPS, z, r, t, aux=theta_v_sus)
+                ekf.update(ObsKind.Y2_GPS, z, r, t)  # theta_v from eq 4 of the state
         else:
             sm = suspension_measurement(data.susp_deflection[k], geo.l_f_m, geo.l_r_m, geo.track_half_front_m,
                                         geo.track_half_rear_m, nz.susp_m)
-            theta_v_sus = sm.theta_v_rad
             if ObsKind.Y1_SUS in kinds:
                 ekf.update(ObsKind.Y1_SUS, sm.y1, sm.r_y1, t)
             if ObsKind.Y2_SUS_PLANE in kinds:
