@@ -265,3 +265,57 @@ def test_run_in_thread_until_stopped(rng):
         tx.shutdown()
     assert not th.is_alive() and a.health.state == "closed"
     assert len(sub.drain()) == 100 and a.health.all_counters()["lost_frames"] == 0
+
+
+def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
+    """The slcan path end to end (our chunked reader), including a USB-CAN adapter that is
+    unplugged and plugged back in under the same name."""
+    import os
+    import pty
+    import tty
+
+    from vdps_hil.adapters.can_adapter import slcan_line
+
+    link = tmp_path / "ttyACM0"
+
+    def plug():
+        m, s = pty.openpty()
+        tty.setraw(s)
+        if link.is_symlink():
+            link.unlink()
+        link.symlink_to(os.ttyname(s))
+        return m, s
+
+    m, s = plug()
+    a = CanAdapter("vdps", f"slcan:{link},sleep_after_open=0", decoder=cc.VdpsCanDecoder(),
+                   reconnect_s=0.05)
+    sub = a.subscribe(raw=False)
+    a.open()
+    try:
+        os.write(m, b"".join(slcan_line(f.arbitration_id, bytes(f.data))
+                             for k in range(50) for f in cc.encode_wheel_speeds([5.0] * 4, k)))
+        os.write(m, b"tZZZ8GARBAGE!!\r\xff\xfe\r")  # malformed lines: counted, not fatal
+        _pump(a, 100)
+        os.close(m)
+        os.close(s)
+        link.unlink()
+        t_end = time.monotonic() + 3
+        while a.health.state != "lost" and time.monotonic() < t_end:
+            a.poll(0.02)
+        assert a.health.state == "lost"
+        m, s = plug()
+        t_end = time.monotonic() + 3
+        while a.health.state != "open" and time.monotonic() < t_end:
+            a.poll(0.02)
+        os.write(m, b"".join(slcan_line(f.arbitration_id, bytes(f.data))
+                             for f in cc.encode_wheel_speeds([6.0] * 4, 50)))
+        _pump(a, 102)
+    finally:
+        a.close()
+        os.close(m)
+        os.close(s)
+    got = sub.drain()
+    assert len(got) == 102 and got[-1].fields["wheel_speed_radps_3"] == pytest.approx(6.0)
+    c = a.health.all_counters()
+    assert c["outages"] == 1 and c["reconnects"] == 1
+    assert c["bad_frames"] >= 1 and c["lost_frames"] == 0

@@ -9,8 +9,9 @@ Values of ``key=value`` are read as int (``500000``, ``0x1F``), float, ``true``/
 text.
 
 Time: a live frame gets the host monotonic ``t_ns`` when ``recv`` returned it (one clock for
-every source); the interface's own time stamp is kept as ``device_time_ns`` and checked for
-going backwards (``device_time_backwards``). A recorded frame's ``t_ns`` is its file time stamp
+every source); the interface's own time stamp travels on the event as ``device_time_ns`` and
+is checked for going backwards (``device_time_backwards``) -- the recording layout
+(``vdps.RawCan.v1``) has no slot for it yet, so it is not in the file. A recorded frame's ``t_ns`` is its file time stamp
 ``round(timestamp * 1e9)``.
 
 Decoding is delegated to a *CAN decoder*: any object with
