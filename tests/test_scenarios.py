@@ -107,3 +107,15 @@ def test_paper_peak_lateral_acceleration_is_4_mps2():
     sim.run(10.25)
     peak = max(abs(s["accel_b_mps2_y"]) for s in sim.truth if s["t_s"] >= 1.0)
     assert peak == pytest.approx(4.0, abs=0.02)
+
+
+def test_scenario_faults_are_validated_at_load():
+    from vdps_hil.sim.scenarios import ScenarioError, parse_scenario
+    base = 'name = "x"\nduration_s = 1.0\n'
+    sc = parse_scenario(base + 'faults = ["gnss_outage:t_s=0.2,duration_s=0.3"]\n')
+    assert sc.raw["faults"] == ["gnss_outage:t_s=0.2,duration_s=0.3"]
+    import pytest as _pytest
+    with _pytest.raises(ScenarioError, match="faults"):
+        parse_scenario(base + 'faults = ["no_such_fault"]\n')
+    with _pytest.raises(ScenarioError, match="faults"):
+        parse_scenario(base + 'faults = "gnss_outage"\n')

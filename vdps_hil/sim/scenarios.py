@@ -162,7 +162,8 @@ def build_signal(spec: Any, where: str) -> Callable[[float], float]:
 
 # ---------------------------------------------------------------------- scenario
 _TOP_KEYS = {"name", "description", "vehicle", "duration_s", "effects", "effect_params",
-             "stop_at_point_of_no_return", "road", "wind", "initial", "inputs", "driver", "notes"}
+             "stop_at_point_of_no_return", "road", "wind", "initial", "inputs", "driver", "notes",
+             "faults"}
 
 
 @dataclass(frozen=True)
@@ -328,6 +329,16 @@ def parse_scenario(text: str, origin: str = "<string>") -> Scenario:
         initial_north_m=_num(init, "north_m", f"{origin}[initial]", 0.0),
         signals=signals, driver_spec=dict(driver) if driver is not None else None,
         stop_at_point_of_no_return=stop, path=origin, raw=doc)
+    # faults (sensor-level, applied by sim.drive): validate now, one-line errors at load time
+    faults = doc.get("faults", [])
+    if not isinstance(faults, list):
+        raise ScenarioError(f"{origin}.faults: expected a list of fault specs")
+    from vdps_hil.sim.faults import FaultError, parse_fault
+    for spec in faults:
+        try:
+            parse_fault(spec)
+        except FaultError as e:
+            raise ScenarioError(f"{origin}.faults: {e}") from None
     # validate effect names and parameters now (one-line errors at load time)
     from vdps_hil.model.effects import REGISTRY
     for n in sc.effect_names:
