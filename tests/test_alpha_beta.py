@@ -109,3 +109,21 @@ def test_bad_parameters_rejected():
         kalata_gains(-1.0)
     with pytest.raises(ValueError):
         AlphaBetaFilter(1.5, 0.1, 1e-3)
+
+
+def test_bank_equals_individual_filters_and_skips_nan_per_signal(rng):
+    from vdps_hil.estimation.alpha_beta import TimedAlphaBetaBank
+
+    bank = TimedAlphaBetaBank(3, 4.0, max_gap_s=0.5)
+    singles = [TimedAlphaBeta(4.0, max_gap_s=0.5) for _ in range(3)]
+    z = rng.normal(size=(1500, 3)).cumsum(axis=0) * 0.01
+    z[700, 1] = math.nan
+    for k in range(z.shape[0]):
+        t = k * 1_000_000 + int(rng.integers(0, 100))  # jittered timestamps
+        used = bank.update(t, z[k].tolist())
+        assert used == (2 if k == 700 else 3)
+        for f, v in zip(singles, z[k]):
+            f.update(t, float(v))
+    for i, f in enumerate(singles):
+        assert abs(bank.x[i] - f.x) < 1e-12 and abs(bank.v[i] - f.v) < 1e-9
+    assert bank.rejected == [0, 1, 0] and abs(bank.lag_s - singles[0].lag_s) < 1e-4

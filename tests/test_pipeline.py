@@ -13,7 +13,8 @@ from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation import synthetic as syn
 from vdps_hil.estimation.ekf import EkfConfig, SensorSet
 from vdps_hil.estimation.pipeline import (Estimate, EstimatorPipeline, Innovation, Latencies, PipelineConfig)
-from vdps_hil.estimation.states import States
+from vdps_hil.estimation.kinematics import dcm_gv
+from vdps_hil.estimation.states import STATE_NAMES, States
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.params import load_vehicle
 
@@ -176,3 +177,61 @@ def test_alpha_beta_outputs_for_the_identifier():
     np.testing.assert_allclose(f.angular_accel_radps2, tr_lag.omega_dot_b[0], atol=0.05)
     assert f.wheel_torque_nm == (10.0, 20.0, 30.0, 40.0) and f.steer_wheel_angle_rad == 0.3
     assert all(math.isfinite(v) for v in f.susp_rate_mps)
+
+
+def _imu_in_sensor_frame(samples, rot_rpy=(0.0, 0.0, 0.0), arm=(0.0, 0.0, 0.0)):
+    """Re-express the IMU samples as a sensor mounted with rotation ``rot_rpy`` (body ->
+    sensor) at lever arm ``arm`` from the CG (truth rotational kinematics of the manoeuvre)."""
+    c_bs = dcm_gv(*rot_rpy)
+    imu = [s for s in samples if s.kind == "imu"]
+    tr = syn.truth(MAN, np.array([s.t_ns for s in imu]) / 1e9 - 0.5e-3)
+    arm = np.asarray(arm)
+    out, k = [], 0
+    for s in samples:
+        if s.kind != "imu":
+            out.append(s)
+            continue
+        f = np.array([s.fields[f"specific_force_mps2_{a}"] for a in "xyz"])
+        w = np.array([s.fields[f"angular_rate_radps_{a}"] for a in "xyz"])
+        wt, wd = tr.omega_b[k], tr.omega_dot_b[k]
+        f = f + np.cross(wd, arm) + np.cross(wt, np.cross(wt, arm))
+        f, w = c_bs @ f, c_bs @ w
+        fields = {**{f"specific_force_mps2_{a}": float(v) for a, v in zip("xyz", f)},
+                  **{f"angular_rate_radps_{a}": float(v) for a, v in zip("xyz", w)}}
+        out.append(dataclasses.replace(s, fields=fields))
+        k += 1
+    return out
+
+
+def test_imu_mounting_rotation_and_lever_arm_from_the_model_file():
+    base = list(_samples())
+    p0, _ = _run(base)
+    rot = (0.02, -0.03, 0.05)
+    veh_rot = dataclasses.replace(VEH, mounting=dataclasses.replace(VEH.mounting, imu_rotation_rpy_rad=rot))
+    p1 = EstimatorPipeline(veh_rot, origin=DEFAULT_ORIGIN)
+    for s in _imu_in_sensor_frame(base, rot_rpy=rot):
+        p1.handle(s)
+    np.testing.assert_allclose(p1.estimate().x, p0.estimate().x, atol=1e-6)
+    arm = (0.8, 0.3, -0.2)
+    veh_arm = dataclasses.replace(VEH, mounting=dataclasses.replace(VEH.mounting, imu_lever_arm_m=arm))
+    p2 = EstimatorPipeline(veh_arm, origin=DEFAULT_ORIGIN)
+    out2 = []
+    for s in _imu_in_sensor_frame(base, arm=arm):
+        out2.extend(p2.handle(s))
+    t, e, _ = _errors(out2)
+    assert np.hypot(*np.sqrt((e[t >= 5.0, 0:2] ** 2).mean(0))) < 0.6
+    assert np.sqrt((e[t >= 5.0, 3:6] ** 2).mean(0)).max() < 0.15
+
+
+def test_output_types_serialise():
+    p, out = _run(_samples()[:6000])
+    est = next(o for o in out if isinstance(o, Estimate))
+    inn = next(o for o in out if isinstance(o, Innovation))
+    assert est.get(States.THETA_R) == est.get("theta_r_rad") == est.x[10]
+    assert est.sigma_of("x_g_m") == est.sigma[0] > 0
+    d = est.to_json()
+    assert set(d["state"]) == set(STATE_NAMES) and set(d["vehicle_angles_rad"]) == {"phi_v", "theta_v", "psi_v"}
+    j = inn.to_json()
+    assert j["kind"] in {"gnss_pos", "gnss_att", "y1_sus", "y2_sus_rate"} and j["dof"] == len(j["innovation"])
+    with pytest.raises(ValueError):
+        PipelineConfig(predict_period_s=0.0)

@@ -23,23 +23,20 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 from scipy.stats import chi2
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from vdps_hil.estimation import synthetic as syn  # noqa: E402
-from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, PaperFaithful  # noqa: E402
-from vdps_hil.estimation.observations import ObsKind, make_models, suspension_measurement  # noqa: E402
-from vdps_hil.estimation.observations import y2_gps_measurement  # noqa: E402
-from vdps_hil.estimation.pipeline import EstimatorPipeline, PipelineConfig  # noqa: E402
-from vdps_hil.estimation.states import STATE_NAMES  # noqa: E402
-from vdps_hil.geodesy import DEFAULT_ORIGIN  # noqa: E402
-from vdps_hil.model.params import load_vehicle  # noqa: E402
+from vdps_hil.estimation import synthetic as syn
+from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, PaperFaithful
+from vdps_hil.estimation.observations import ObsKind, make_models, suspension_measurement
+from vdps_hil.estimation.observations import y2_gps_measurement
+from vdps_hil.estimation.pipeline import EstimatorPipeline, PipelineConfig
+from vdps_hil.estimation.states import STATE_NAMES
+from vdps_hil.geodesy import DEFAULT_ORIGIN
+from vdps_hil.model.params import load_vehicle
 
 VEH = load_vehicle("sedan-model")
 SIG0 = np.array([2.0, 2.0, 4.0, 1.0, 1.0, 1.0, 0.02, 0.02, 0.02, 0.05, 0.05, 0.05])
@@ -111,12 +108,12 @@ def replay_rtf(duration_s: float = 60.0, repeat: int = 3) -> dict:
     return res
 
 
-def _run(cfg, seed, m, outage=None):
+def _run(cfg, seed, m, outage=None, y2_floor=None):
     data = syn.make_sensor_data(m, VEH, seed=seed, gnss_outage_s=outage)
     ekf = MultiRateEKF.from_vehicle(VEH, cfg)
     x0, p0 = syn.initial_state(m, ekf.layout, 0.0, SIG0, np.random.default_rng(1000 + seed))
     ekf.initialize(0, x0, p0)
-    return ekf, syn.drive_ekf(ekf, data, VEH)
+    return ekf, syn.drive_ekf(ekf, data, VEH, y2_gps_floor=y2_floor)
 
 
 def figures(seeds: int, runs: int) -> dict:
@@ -126,11 +123,14 @@ def figures(seeds: int, runs: int) -> dict:
         variants[f"faithful_{name}"] = PaperFaithful.only(name)
     variants["faithful_a_and_b"] = PaperFaithful(a_psi_v_zero_rate=True, b_y2_gps=True)
     variants["faithful_all"] = PaperFaithful.all()
+    variants["faithful_b_y2_gps_no_floor"] = PaperFaithful.only("b_y2_gps")
+    variants["faithful_a_and_b_no_floor"] = PaperFaithful(a_psi_v_zero_rate=True, b_y2_gps=True)
     std = {}
     for label, pf in variants.items():
         w1, w2, nees_v, gated = [], [], [], 0
+        floor = 1e-4 if label.endswith("no_floor") else None  # y2_gps R = J R_att J^T (+ 1e-4^2 I)
         for s in range(seeds):
-            ekf, tr = _run(EkfConfig(paper_faithful=pf), s, m)
+            ekf, tr = _run(EkfConfig(paper_faithful=pf), s, m, y2_floor=floor)
             e = tr.errors_full()
             for w, (a, b) in ((w1, (5.0, 10.0)), (w2, (5.0, 30.0))):
                 sel = (tr.t_s >= a) & (tr.t_s <= b)

@@ -106,6 +106,7 @@ class PipelineConfig:
     gnss_course_min_speed_mps: float = 3.0
     susp_sigma_m: float = 0.001
     heave_rate_sigma_mps: float = 0.05  # y2_sus rate form (observations.ZrRateBuilder)
+    y2_gps_floor_rad: float | None = None  # faithful (b) only: isotropic R floor (None: the angle sigma)
     bandwidths: Bandwidths = field(default_factory=Bandwidths)
     latencies: Latencies = field(default_factory=Latencies)
     init_max_age_s: float = 1.0  # newest data usable for initialisation
@@ -491,7 +492,7 @@ class EstimatorPipeline:
             return
         self._update(ObsKind.GNSS_ATT, z, np.diag(np.square(sig)), t, out)
         if ObsKind.Y2_GPS in self.ekf.kinds and math.isfinite(z[1] + z[2]) and self.ekf.initialized:
-            zz, rr = y2_gps_measurement(z[1], z[2], sig[1], sig[2])
+            zz, rr = y2_gps_measurement(z[1], z[2], sig[1], sig[2], self.config.y2_gps_floor_rad)
             self._update(ObsKind.Y2_GPS, zz, rr, t, out)  # theta_v from eq 4 of the state
 
     def _on_gnss_vel(self, s: Sample, out: list) -> None:

@@ -330,7 +330,7 @@ def initial_state(m: Maneuver, layout, t_s: float, sigma_full, rng) -> tuple[np.
 
 
 def drive_ekf(ekf, data: SensorData, vehicle, decimation: int = 10, heave_rate_sigma_mps: float = 0.05,
-              gnss_att_sigma_rad: float | None = None, on_epoch=None) -> EkfTrace:
+              gnss_att_sigma_rad: float | None = None, on_epoch=None, y2_gps_floor: float | None = None) -> EkfTrace:
     """Run an initialised EKF over ``data``: IMU samples averaged in blocks of ``decimation``
     (one predict per block), GNSS and suspension updates at their own times (the pipeline's
     policy, without the bus). ``on_epoch(kind, k)`` may return False to skip epoch k of
@@ -382,7 +382,7 @@ def drive_ekf(ekf, data: SensorData, vehicle, decimation: int = 10, heave_rate_s
             if ObsKind.GNSS_ATT in kinds:
                 ekf.update(ObsKind.GNSS_ATT, data.gnss_att[k], r_att, t)
             if ObsKind.Y2_GPS in kinds:
-                z, r = y2_gps_measurement(data.gnss_att[k, 1], data.gnss_att[k, 2], s_att, s_att)
+                z, r = y2_gps_measurement(data.gnss_att[k, 1], data.gnss_att[k, 2], s_att, s_att, y2_gps_floor)
                 ekf.update(ObsKind.Y2_GPS, z, r, t)  # theta_v from eq 4 of the state
         else:
             sm = suspension_measurement(data.susp_deflection[k], geo.l_f_m, geo.l_r_m, geo.track_half_front_m,
