@@ -105,7 +105,7 @@ def test_rav4_candump_zero_decode_errors_and_wheel_speeds_equal_comma(real_data)
     the DBC resolution (0.01 km/h); steering equals processed_log/CAN/steering_angle."""
     dec, info = rav4_decoder(real_data)
     assert not info["dbc_strict"]
-    wheel, steer, checks = [], [], 0
+    wheel, steer = [], []
     for msg in can.LogReader(real_data / RAV4 / "rav4_seg40.candump.log"):
         if msg.channel != "can0":
             continue
@@ -132,7 +132,7 @@ def test_rav4_candump_zero_decode_errors_and_wheel_speeds_equal_comma(real_data)
     comma = ws[:, [0, 1, 3, 2]]  # comma's columns are FL FR RL RR; ours FL FR RR RL
     assert np.max(np.abs(ours - comma)) <= 0.01 / 3.6 / 2 + 1e-9
 
-    sa, sa_t = np.load(base / "steering_angle" / "value"), np.load(base / "steering_angle" / "t")
+    sa = np.load(base / "steering_angle" / "value")
     assert len(steer) == len(sa)
     ours_deg = np.degrees([s.fields["steer_wheel_angle_rad"] for s in steer])
     assert np.max(np.abs(ours_deg - sa)) < 1e-9

@@ -28,8 +28,8 @@ Health (like opendbc's ``MessageState``), per source and per sample kind ``k``::
 
 plus counters: records, bytes, samples, invalid samples, ``time_backwards`` (a record or a
 sample whose time is below the previous one of the same stream: kept, counted, the sample
-marked ``valid=False``), ``queue_overflow`` (a listener's queue was full: the event is dropped for that listener only
-and counted), ``reconnects``/``outages``/``outage_s`` (device lost and back), ``read_errors``,
+marked ``valid=False``), ``queue_overflow`` (a listener's queue was full: the event is dropped
+for that listener only and counted), ``reconnects``/``outages``/``outage_s`` (device lost and back), ``read_errors``,
 ``decoder_exceptions`` (a decoder raised: a bug, counted, never a crash), and the decoder's own
 counters (unknown IDs, DLC mismatches, bad checksums, garbage, non-UTF-8 ...) merged in.
 

@@ -11,8 +11,8 @@ text.
 Time: a live frame gets the host monotonic ``t_ns`` when ``recv`` returned it (one clock for
 every source); the interface's own time stamp travels on the event as ``device_time_ns`` and
 is checked for going backwards (``device_time_backwards``) -- the recording layout
-(``vdps.RawCan.v1``) has no slot for it yet, so it is not in the file. A recorded frame's ``t_ns`` is its file time stamp
-``round(timestamp * 1e9)``.
+(``vdps.RawCan.v1``) has no slot for it yet, so it is not in the file. A recorded frame's
+``t_ns`` is its file time stamp ``round(timestamp * 1e9)``.
 
 Decoding is delegated to a *CAN decoder*: any object with
 ``decode(t_ns, arbitration_id, data, is_extended_id) -> list[Sample]`` and a ``counters``

@@ -87,7 +87,8 @@ class Recorder:
     def _fail(self, what: str, e: BaseException) -> None:
         self.write_errors += 1
         if len(self.problems) < 20:
-            self.problems.append(f"{what}: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}")
+            first = str(e).splitlines()[0] if str(e) else ""
+            self.problems.append(f"{what}: {type(e).__name__}: {first}")
 
     def write(self, ev) -> None:
         w = self.writer

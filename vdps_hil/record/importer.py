@@ -22,9 +22,8 @@ it is named ``vdps``; other buses are recorded raw.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Sequence
 
 from vdps_hil.adapters.base import Adapter, AdapterError, EndOfInput
 from vdps_hil.adapters.session import Recorder
