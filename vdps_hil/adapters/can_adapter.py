@@ -417,19 +417,9 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
         except Exception as e:  # noqa: BLE001 - a broken file is the person's input
             raise AdapterError(f"CAN log {self.path}: unreadable: {type(e).__name__}: "
                                f"{str(e).splitlines()[0] if str(e) else ''}") from None
-        lg = logging.getLogger("can.io")
-        lg.addHandler(self._log_handler)
-        self._saved_log = (lg.propagate, lg.level)
-        lg.propagate = False
-        lg.setLevel(logging.INFO)  # TRC reports dropped lines at INFO
         del can
 
     def _close(self) -> None:
-        lg = logging.getLogger("can.io")
-        if self._log_handler in lg.handlers:
-            lg.removeHandler(self._log_handler)
-            lg.propagate, level = getattr(self, "_saved_log", (True, logging.NOTSET))
-            lg.setLevel(level)
         if self._reader is not None:
             try:
                 self._reader.stop()
@@ -459,6 +449,21 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
         return True
 
     def _read(self, timeout_s: float) -> Sequence[tuple[int | None, Any]]:
+        # python-can's readers report skipped lines through the "can.io" logger: count them
+        # for this adapter while it reads (and keep them off the console)
+        lg = logging.getLogger("can.io")
+        saved = (lg.propagate, lg.level)
+        lg.addHandler(self._log_handler)
+        lg.propagate = False
+        lg.setLevel(logging.INFO)  # TRC reports dropped lines at INFO
+        try:
+            return self._read_batch()
+        finally:
+            lg.removeHandler(self._log_handler)
+            lg.propagate, level = saved
+            lg.setLevel(level)
+
+    def _read_batch(self) -> Sequence[tuple[int | None, Any]]:
         if self._it is None:
             raise EndOfInput()
         out = []
