@@ -25,7 +25,10 @@ Corrections of the paper (``PaperFaithful``: True = as printed, the default Fals
     and the filter carries 11 states.
 (b) ``b_y2_gps``: y2^gps is computed from the same GNSS attitude as y1^gps, so using both
     counts that attitude twice with independent noise. Corrected: y2^gps is dropped (with (a)
-    corrected psi_v needs no observation of its own).
+    corrected psi_v needs no observation of its own). Faithful: y2^gps is used with
+    R = J R_att J^T + floor^2 I (``observations.y2_gps_measurement``; the isotropic floor, by
+    default the angle sigma, keeps the lagging zero-rate psi_v from being gated on the radial
+    direction of the unit-circle measurement, and also weakens the double counting).
 (c) ``c_y2_sus_single_plane``: y2^sus = n . p assumes one road plane through the ENU origin.
     Corrected: that form is used only when ``road_plane_through_origin`` is configured true;
     otherwise the locally referenced form n . v = dz_r/dt (``observations.Y2SusRate``).
