@@ -52,8 +52,9 @@ def test_road_dcm_and_normal(phi_r, theta_r):
     np.testing.assert_allclose(n_f, d_f[2], atol=1e-15)
     np.testing.assert_allclose(n_t, d_t[2], atol=1e-15)
     h = 1e-6
-    np.testing.assert_allclose(d_f, (fr.dcm_global_to_road(phi_r + h, theta_r) - fr.dcm_global_to_road(phi_r - h, theta_r)) / (2 * h), atol=1e-8)
-    np.testing.assert_allclose(d_t, (fr.dcm_global_to_road(phi_r, theta_r + h) - fr.dcm_global_to_road(phi_r, theta_r - h)) / (2 * h), atol=1e-8)
+    road = fr.dcm_global_to_road
+    np.testing.assert_allclose(d_f, (road(phi_r + h, theta_r) - road(phi_r - h, theta_r)) / (2 * h), atol=1e-8)
+    np.testing.assert_allclose(d_t, (road(phi_r, theta_r + h) - road(phi_r, theta_r - h)) / (2 * h), atol=1e-8)
 
 
 @settings(max_examples=40, deadline=None)

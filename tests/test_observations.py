@@ -98,7 +98,8 @@ def test_suspension_measurement_is_eq5_and_covariance_matches_monte_carlo(rng):
     cov = np.cov(ys.T)
     np.testing.assert_allclose(np.diag(cov), np.diag(sm.r_y1), rtol=0.1)
     assert abs(cov[0, 1]) < 0.1 * math.sqrt(cov[0, 0] * cov[1, 1])
-    zr = (-GEO.l_r_m * (samples[:, 0] + samples[:, 1]) - GEO.l_f_m * (samples[:, 2] + samples[:, 3])) / (2 * GEO.wheelbase_m)
+    zr = (-GEO.l_r_m * (samples[:, 0] + samples[:, 1])
+          - GEO.l_f_m * (samples[:, 2] + samples[:, 3])) / (2 * GEO.wheelbase_m)
     assert abs(zr.var() / sm.var_z_r_m2 - 1.0) < 0.1
 
 

@@ -40,7 +40,6 @@ from vdps_hil.model.params import load_vehicle
 
 VEH = load_vehicle("sedan-model")
 SIG0 = np.array([2.0, 2.0, 4.0, 1.0, 1.0, 1.0, 0.02, 0.02, 0.02, 0.05, 0.05, 0.05])
-UNITS = ["m"] * 3 + ["m/s"] * 3 + ["deg"] * 6
 
 
 def _best(fn, repeat=3):
@@ -193,7 +192,8 @@ def main(argv=None) -> int:
         f = doc["figures"]
         for win in ("window_5_10s", "window_5_30s"):
             print(f"\nfusion error std ({win}, mean over {a.seeds} seeds; m, m/s, deg)")
-            print(f"{'variant':34s}" + "".join(f"{n[:-2] if n.endswith('_m') else n.rsplit('_', 1)[0]:>11s}" for n in STATE_NAMES))
+            short = [n.rsplit("_", 1)[0] for n in STATE_NAMES]
+            print(f"{'variant':34s}" + "".join(f"{n:>11s}" for n in short))
             for label, d in f["error_std"].items():
                 print(f"{label:34s}" + "".join(f"{d[win][n]:11.4g}" for n in STATE_NAMES))
         print("\nNEES / n (5-30 s, mean over seeds) and rejected updates per variant:")
@@ -204,9 +204,10 @@ def main(argv=None) -> int:
               f"[{nd['band'][0]:.2f}, {nd['band'][1]:.2f}], inside for {100 * nd['fraction_inside_after_5s']:.1f} % "
               f"of epochs after 5 s (default road noise: mean {nd['default_config_mean_after_5s']:.2f})")
         o = f["outage_12_22s"]
-        print(f"outage 12-22 s: horizontal error {o['mean']['eh_at_12s']:.2f} m -> {o['mean']['eh_at_17s']:.2f} m (5 s) -> "
-              f"{o['mean']['eh_at_22s']:.2f} m (10 s, max {o['max_eh_at_22s']:.2f} m, sigma {o['mean']['sigma_h_at_22s']:.2f} m), "
-              f"vertical {o['mean']['ez_at_22s']:.2f} m; recovered (< 3 sigma) {o['recovery_s_mean']:.2f} s after "
+        om = o["mean"]
+        print(f"outage 12-22 s: horizontal error {om['eh_at_12s']:.2f} m -> {om['eh_at_17s']:.2f} m (5 s) -> "
+              f"{om['eh_at_22s']:.2f} m (10 s, max {o['max_eh_at_22s']:.2f} m, sigma {om['sigma_h_at_22s']:.2f} m), "
+              f"vertical {om['ez_at_22s']:.2f} m; recovered (< 3 sigma) {o['recovery_s_mean']:.2f} s after "
               f"(max {o['recovery_s_max']:.2f} s)")
     if a.json:
         Path(a.json).write_text(json.dumps(doc, indent=2, default=float) + "\n", encoding="utf-8")
