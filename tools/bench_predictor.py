@@ -1,0 +1,125 @@
+"""Benchmark of the predictor: time of one prediction over the configured horizon, and the
+accuracy cost of the integrator/step against the explicit RK2 reference at 1 ms.
+
+For each case (a scenario, a start time t0, the truth-initialised state and the TRUE
+parameters on the model file) it runs
+
+* the reference: explicit Heun (RK2) at 1 ms (the truth simulator's integrator and step);
+* the candidates: ROS2 (linearly implicit wheel spin, see ``vdps_hil.prediction.predictor``)
+  at several steps and Jacobian refresh intervals, and the configured default;
+
+and prints per candidate: the median wall time of one prediction, f-evaluations, and the largest
+differences to the reference over the common span (position [m], road-relative angles [deg]) and
+of the predicted point-of-no-return time [s].
+
+Usage::
+
+    .venv/bin/python tools/bench_predictor.py [--repeat 7] [--json out.json]
+
+First bar: <= 20 ms for a 5 s prediction; goal 5 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from vdps_hil.model.params import load_vehicle  # noqa: E402
+from vdps_hil.prediction.metrics import PoseTrajectory  # noqa: E402
+from vdps_hil.prediction.predictor import (Predictor, PredictorConfig, PredictorInitialState,  # noqa: E402
+                                           load_predictor_config)
+from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
+from vdps_hil.sim.simulator import Simulator  # noqa: E402
+
+CASES = (
+    ("paper-left-turn", 10.25, "sedan-model", "left turn held (Fig 8)"),
+    ("paper-rollover", 10.25, "sedan-model", "T2 = T3 = 1000 N m (Fig 9)"),
+    ("fishhook-suv", 1.90, "suv-model", "fishhook, after the reversal"),
+)
+
+
+def truth_snapshot(name: str, t0: float):
+    sim = Simulator(scenario=load_scenario(name))
+    sim.step_to(t0 + 1e-9)
+    return sim.snapshot(), sim.scenario
+
+
+def timed(pred: Predictor, init, repeat: int):
+    times, r = [], None
+    for _ in range(repeat):
+        t = time.perf_counter()
+        r = pred.predict(init)
+        times.append(time.perf_counter() - t)
+    return statistics.median(times), min(times), r
+
+
+def diff(ref, r) -> dict:
+    a = PoseTrajectory.from_prediction(ref)
+    b = PoseTrajectory.from_prediction(r)
+    keep = b.t_s <= a.t_s[-1] + 1e-9
+    ai = a.at(b.t_s[keep])
+    dp = np.linalg.norm(b.pos_g_m[keep] - ai.pos_g_m, axis=1)
+    de = b.euler_v_rad[keep] - ai.euler_v_rad
+    de[:, 2] = (de[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    pn_a, pn_b = ref.point_of_no_return_t_s, r.point_of_no_return_t_s
+    dpn = (pn_b - pn_a) if (pn_a is not None and pn_b is not None) else (0.0 if pn_a == pn_b else math.nan)
+    return {"max_pos_diff_m": float(dp.max()), "end_pos_diff_m": float(dp[-1]),
+            "max_angle_diff_deg": float(np.degrees(np.abs(de)).max()), "ponr_diff_s": dpn}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    default = load_predictor_config()
+    candidates = [("rk2 1 ms (reference)", PredictorConfig(integrator="rk2", step_s=0.001, output_every=10))]
+    for step in (0.002, 0.005, 0.01, 0.02):
+        for je, coup in ((1, False), (1, True), (2, True), (4, True)):
+            candidates.append((f"ros2 {step * 1e3:g} ms J/{je}{' +cpl' if coup else ' diag'}",
+                               PredictorConfig(integrator="ros2", step_s=step, jacobian_every=je,
+                                               jacobian_coupling=coup,
+                                               output_every=max(1, int(round(0.01 / step))))))
+    candidates.append((f"configured ({default.integrator} {default.step_s * 1e3:g} ms J/{default.jacobian_every})",
+                       default))
+    report = {"horizon_s": default.horizon_s, "cases": []}
+    for name, t0, model, label in CASES:
+        snap, sc = truth_snapshot(name, t0)
+        vehicle = load_vehicle(model).with_params(**sc.vehicle.params.as_dict())
+        init = PredictorInitialState.from_truth_for_tests_only(snap)
+        print(f"\n== {name} from t0 = {t0} s: {label}; true parameters, truth initial state, held inputs, "
+              f"horizon {default.horizon_s} s")
+        print(f"{'case':34s} {'median ms':>9s} {'min ms':>7s} {'f-evals':>7s} {'stop':>18s} {'max dpos m':>10s} "
+              f"{'end dpos m':>10s} {'max dang deg':>12s} {'dPONR s':>8s}")
+        ref = None
+        rows = []
+        for lab, cfg in candidates:
+            cfg = PredictorConfig(**{**cfg.__dict__, "horizon_s": default.horizon_s})
+            pred = Predictor(vehicle, cfg)
+            rep = 1 if cfg.step_s < 0.002 else args.repeat
+            med, mn, r = timed(pred, init, rep)
+            if ref is None:
+                ref = r
+            d = diff(ref, r)
+            rows.append({"case": lab, "median_ms": med * 1e3, "min_ms": mn * 1e3, "f_evals": r.n_f_evals,
+                         "stop": r.stop_reason, **d})
+            print(f"{lab:34s} {med * 1e3:9.1f} {mn * 1e3:7.1f} {r.n_f_evals:7d} {r.stop_reason:>18s} "
+                  f"{d['max_pos_diff_m']:10.4f} {d['end_pos_diff_m']:10.4f} {d['max_angle_diff_deg']:12.4f} "
+                  f"{d['ponr_diff_s']:8.3f}")
+        report["cases"].append({"scenario": name, "t0_s": t0, "rows": rows})
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

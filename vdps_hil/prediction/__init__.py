@@ -1,0 +1,1 @@
+"""Prediction (paper section 6): predictor, metrics, rollover warning."""
