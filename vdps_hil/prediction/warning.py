@@ -402,7 +402,7 @@ def evaluate_warning_frames(frames: Sequence[can.Message], truth_events: Iterabl
                          "ttr_s": s.fields["warning_time_to_rollover_s"],
                          "ltr": s.fields["warning_ltr"], "peak_roll_rad": s.fields["warning_peak_roll_rad"]})
     counts = dec.counters[WARNING]
-    rejected = sum(v for k, v in counts.items() if k not in ("accepted", "lost_frames"))
+    rejected = dec.total_rejected  # CRC, counter, range, DLC, unknown ID, malformed
     events = list(truth_events)
     t_pn = _event_time(events, "point_of_no_return")
     t_tu = _event_time(events, "tip_up")

@@ -1,0 +1,217 @@
+"""Tests of vdps_hil.prediction.warning: measures, policy, the CAN node, and the warning path on
+the truth simulator (truth-initialised predictor with the true parameters, held inputs)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from vdps_hil.codecs.can_codec import VdpsCanDecoder, crc8_j1850
+from vdps_hil.model.params import load_vehicle
+from vdps_hil.prediction.predictor import (PredictionConfigError, Predictor, PredictorInitialState,
+                                           load_predictor_config)
+from vdps_hil.prediction.warning import (RolloverAssessment, WarningChain, WarningLevel, WarningNode,
+                                         WarningNodeConfig, WarningPolicy, WarningStatus, evaluate_warning_frames,
+                                         load_transfer_ratio, load_warning_config, replay_assessments,
+                                         warning_config_from_table)
+from vdps_hil.sim.scenarios import load_scenario
+from vdps_hil.sim.simulator import Simulator
+
+MS = 1_000_000
+
+
+def assessment(t0_ns=0, ttr=None, peak_ltr=0.0, roll=0.0):
+    return RolloverAssessment(t0_ns, ttr, None, peak_ltr, 0.0, roll, 5.0, "horizon")
+
+
+def decode(frames):
+    dec = VdpsCanDecoder()
+    out = [s for m in frames for s in dec.decode_message(m)]
+    return out, dec
+
+
+# ----------------------------------------------------------------------------- measures and policy
+def test_load_transfer_ratio_sign_and_zero_total():
+    fz = np.array([[4000.0, 4000.0, 4000.0, 4000.0],  # even
+                   [0.0, 5000.0, 5000.0, 0.0],  # left wheels off: +1 (roll right side down)
+                   [3000.0, 1000.0, 1000.0, 3000.0],  # (2000 - 6000) / 8000
+                   [0.0, 0.0, 0.0, 0.0]])
+    assert np.allclose(load_transfer_ratio(fz), [0.0, 1.0, -0.5, 0.0])
+
+
+def test_policy_levels():
+    pol = WarningPolicy(reaction_time_s=1.0, margin_s=0.5, imminent_time_s=0.5, caution_ltr=0.9)
+    assert pol.warning_time_s == 1.5
+    assert pol.level(None, 0) == WarningLevel.NONE
+    assert pol.level(assessment(), 0) == WarningLevel.NONE
+    assert pol.level(assessment(peak_ltr=-0.95), 0) == WarningLevel.CAUTION
+    assert pol.level(assessment(ttr=3.0), 0) == WarningLevel.CAUTION  # rollover beyond T_w
+    assert pol.level(assessment(ttr=1.5), 0) == WarningLevel.WARNING
+    assert pol.level(assessment(ttr=0.5), 0) == WarningLevel.IMMINENT
+    # the TTR ages with time since t0: 2.0 s predicted at t0, 0.6 s later it is 1.4 s
+    a = assessment(t0_ns=1000 * MS, ttr=2.0)
+    assert a.ttr_at(1600 * MS) == pytest.approx(1.4)
+    assert pol.level(a, 1400 * MS) == WarningLevel.CAUTION and pol.level(a, 1600 * MS) == WarningLevel.WARNING
+    assert a.ttr_at(5000 * MS) == 0.0
+    assert WarningPolicy(caution_on_predicted_rollover=False).level(assessment(ttr=3.0), 0) == WarningLevel.NONE
+
+
+def test_warning_config_file_and_errors():
+    pol, node = load_warning_config()
+    assert (pol.reaction_time_s, pol.margin_s, pol.imminent_time_s, pol.hold_s) == (1.0, 0.5, 0.5, 0.5)
+    assert (node.period_s, node.max_prediction_age_s, node.prediction_latency_s) == (0.02, 0.5, 0.02)
+    with pytest.raises(PredictionConfigError, match="unknown key 'reaction_s'"):
+        warning_config_from_table({"reaction_s": 1.0})
+    with pytest.raises(PredictionConfigError, match="imminent_time_s"):
+        WarningPolicy(imminent_time_s=3.0)
+    with pytest.raises(PredictionConfigError, match="period_s"):
+        WarningNodeConfig(period_s=0.0)
+
+
+# ----------------------------------------------------------------------------- the node
+def test_node_sends_at_50_hz_with_valid_crc_and_counter():
+    node = WarningNode(WarningPolicy(), WarningNodeConfig(period_s=0.02, max_prediction_age_s=10.0))
+    frames = []
+    a = assessment(t0_ns=0)
+    for t in range(0, 1000 * MS, MS):
+        frames += node.handle(t, a if t == 0 else None)
+    assert len(frames) == 50
+    assert [round(f.timestamp * 1e3) for f in frames[:3]] == [0, 20, 40]
+    for f in frames:
+        assert f.arbitration_id == 0x080 and f.dlc == 8
+        assert f.data[0] == crc8_j1850(bytes(f.data[1:]))
+    samples, dec = decode(frames)
+    assert len(samples) == 50 and dec.total_rejected == 0
+    counters = [int(s.fields["warning_counter"]) for s in samples]
+    assert counters == [k % 16 for k in range(50)]
+    assert all(s.valid and s.fields["warning_level"] == 0 for s in samples)
+    assert math.isinf(samples[0].fields["warning_time_to_rollover_s"])  # none predicted
+
+
+def test_level_change_is_sent_at_once_and_held():
+    node = WarningNode(WarningPolicy(hold_s=0.5), WarningNodeConfig(period_s=0.02))
+    sent = {}
+    for t in range(0, 2000 * MS, MS):
+        a = None
+        if t == 0:
+            a = assessment(0)
+        elif t == 505 * MS:  # 5 ms after a periodic frame at 500 ms
+            a = assessment(t, ttr=1.2, peak_ltr=-1.0, roll=-0.8)
+        elif t == 700 * MS:
+            a = assessment(t)  # the danger is gone ...
+        for m in node.handle(t, a):
+            sent[t] = m
+    assert 505 * MS in sent  # at once, not at the next 20 ms tick
+    samples, dec = decode([sent[t] for t in sorted(sent)])
+    assert dec.total_rejected == 0
+    by_t = {s.t_ns: s for s in samples}
+    s = by_t[505 * MS]
+    assert s.fields["warning_level"] == WarningLevel.WARNING
+    assert s.fields["warning_time_to_rollover_s"] == pytest.approx(1.2)
+    assert s.fields["warning_ltr"] == pytest.approx(-1.0) and s.fields["warning_peak_roll_rad"] == pytest.approx(-0.8)
+    # ... but the level is held 0.5 s after it was last confirmed (699 ms, the last call before the
+    # all-clear) and drops at 1199 ms, sent at once
+    assert by_t[1185 * MS].fields["warning_level"] == WarningLevel.WARNING
+    assert 1199 * MS in sent and by_t[1199 * MS].fields["warning_level"] == WarningLevel.NONE
+    # the TTR in the frames counts down while the level is held
+    assert by_t[605 * MS].fields["warning_time_to_rollover_s"] == pytest.approx(1.1)
+
+
+def test_status_field():
+    pol, cfg = WarningPolicy(), WarningNodeConfig(period_s=0.02, max_prediction_age_s=0.5)
+    node = WarningNode(pol, cfg)
+    f0 = node.handle(0, None)  # nothing predicted yet: not converged
+    f1 = node.handle(20 * MS, assessment(20 * MS), WarningStatus.NOT_CONVERGED)
+    f2 = node.handle(40 * MS, None, WarningStatus.SENSOR_MISSING)
+    f3 = node.handle(60 * MS, None)
+    f4 = node.handle(600 * MS, None)  # prediction 580 ms old -> fault
+    samples, dec = decode(f0 + f1 + f2 + f3 + f4)
+    assert dec.total_rejected == 0
+    assert [int(s.fields["warning_status"]) for s in samples] == [1, 1, 2, 0, 3]
+    assert [s.valid for s in samples] == [False, False, False, True, False]
+
+
+def test_evaluate_counts_corrupted_frames_and_episodes():
+    node = WarningNode(WarningPolicy(hold_s=0.0), WarningNodeConfig(period_s=0.02))
+    frames = []
+    for t in range(0, 3000 * MS, 10 * MS):
+        a = None
+        if t == 0:
+            a = assessment(0)
+        elif t == 1000 * MS:
+            a = assessment(t, ttr=1.0, roll=-0.9)
+        elif t == 1500 * MS:
+            a = assessment(t)
+        frames += node.handle(t, a)
+    bad = frames[10]
+    data = bytearray(bad.data)
+    data[3] ^= 0x01
+    frames[10] = type(bad)(timestamp=bad.timestamp, arbitration_id=bad.arbitration_id, is_extended_id=False,
+                           dlc=8, data=bytes(data))
+    events = [{"kind": "tip_up", "t_s": 1.8}, {"kind": "point_of_no_return", "t_s": 2.5, "side": "right"}]
+    o = evaluate_warning_frames(frames, events)
+    assert o.frames_rejected == 1  # the CRC catches the flipped bit
+    assert o.warning_episodes == [(1.0, 1.48)]  # the last frame at level 2 (the all-clear is sent at 1.5 s)
+    assert o.first_warning_t_s == 1.0 and o.lead_time_s == pytest.approx(1.5)
+    assert o.lead_to_tip_up_s == pytest.approx(0.8) and o.lead_time_matched_side_s == pytest.approx(1.5)
+    assert o.false_alarms == 0
+    # the same frames in a run without a rollover: one false alarm
+    assert evaluate_warning_frames(frames, []).false_alarms == 1
+    # a rollover 10 s later: the episode ended more than 5 s before it, a false alarm too
+    assert evaluate_warning_frames(frames, [{"kind": "point_of_no_return", "t_s": 12.0}]).false_alarms == 1
+
+
+# ----------------------------------------------------------------------------- on the simulator
+def run_chain(name, model, every=1):
+    """Truth simulation, then the warning chain fed with the truth-initialised state at 100 Hz
+    (every ``every``-th snapshot), true parameters, the configured predictor and policy."""
+    sc = load_scenario(name)
+    sim = Simulator(scenario=sc)
+    sim.run()
+    pred = Predictor(load_vehicle(model).with_params(**sc.vehicle.params.as_dict()), load_predictor_config())
+    chain = WarningChain(pred, *load_warning_config())
+    for s in sim.truth[::every]:
+        chain.handle(s["t_ns"], PredictorInitialState.from_truth_for_tests_only(s))
+    return sim, chain, evaluate_warning_frames(chain.frames, sim.events)
+
+
+def test_fishhook_suv_rollover_warned_with_lead_time():
+    """Truth: tip-up 2.21 s, point of no return 3.72 s. Measured: first warning 1.22 s (lead
+    2.50 s; the linear-tire model foresees a rollover during the first steer), first warning
+    with the truth's roll direction 1.92 s (lead 1.80 s), lead to tip-up 0.99 s."""
+    sim, chain, o = run_chain("fishhook-suv", "suv-model")
+    assert o.truth_point_of_no_return_t_s == pytest.approx(3.72)
+    assert o.lead_time_s >= 1.0
+    assert o.lead_time_matched_side_s >= 1.0
+    assert o.false_alarms == 0 and o.frames_rejected == 0
+    assert o.max_gap_s <= 0.02 + 1e-9  # 50 Hz, never a gap
+    assert not math.isnan(o.first_imminent_t_s) and o.first_imminent_t_s < o.truth_point_of_no_return_t_s
+    # the level follows the time to rollover in the frames (T_w = 1.5 s, imminent 0.5 s); while the
+    # steering crosses zero (1.6-1.9 s) no rollover is predicted and the warning is held
+    valid = [r for r in o.decoded if r["valid"]]
+    assert all(r["level"] >= WarningLevel.WARNING for r in valid if r["ttr_s"] <= 1.5)
+    assert all(r["level"] == WarningLevel.IMMINENT for r in valid if r["ttr_s"] <= 0.5)
+    assert any(math.isinf(r["ttr_s"]) and r["level"] == WarningLevel.WARNING for r in valid)
+
+
+@pytest.mark.parametrize("name, every", [("paper-left-turn", 1), ("lane-change-iso3888", 1), ("sine-sweep", 1),
+                                         ("circle-iso4138", 1)])
+def test_no_false_alarms_on_normal_driving(name, every):
+    sim, chain, o = run_chain(name, "sedan-model", every)
+    assert sim.events == []
+    assert o.false_alarms == 0 and o.warning_episodes == []
+    assert o.frames_rejected == 0 and o.frames_accepted > 45 * sim.t_s
+    # nothing close either: the highest level sent is "none"
+    assert max(r["level"] for r in o.decoded) == WarningLevel.NONE
+
+
+def test_replay_with_another_policy_reproduces_the_chain():
+    sim, chain, o = run_chain("fishhook-suv", "suv-model")
+    pol, nc = load_warning_config()
+    frames = replay_assessments(chain.assessments, [s["t_ns"] for s in sim.truth], pol, nc)
+    assert [bytes(f.data) for f in frames] == [bytes(f.data) for f in chain.frames]
+    # a shorter warning time warns later
+    late = evaluate_warning_frames(replay_assessments(chain.assessments, [s["t_ns"] for s in sim.truth],
+                                                      WarningPolicy(reaction_time_s=0.4, margin_s=0.1,
+                                                                    imminent_time_s=0.2), nc), sim.events)
+    assert late.lead_time_s < o.lead_time_s
