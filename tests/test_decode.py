@@ -1,0 +1,247 @@
+"""Tests of vdps_hil.record.decode: /raw/ topics -> bus samples in t_ns order, device clocks."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from vdps_hil.codecs.nmea import format_gga
+from vdps_hil.record import schemas as S
+from vdps_hil.record.decode import (ClockAligner, DecodeError, DeviceStamper, Unwrapper, copy_raw_topics,
+                                    decode_recording, raw_copier)
+from vdps_hil.record.reader import RecordingReader
+from vdps_hil.record.writer import RecordingWriter
+from vdps_hil.bus.samples import Sample
+from vdps_hil.sim.drive import Drive
+from vdps_hil.sim.profiles import load_profile
+
+MS = 1_000_000
+ZERO = load_profile("table1-susp1k").zero_noise()
+
+
+def _drive(tmp_path, name="d.mcap", faults=(), duration_s=2.0, profile=ZERO, seed=1):
+    p = tmp_path / name
+    Drive("paper", profile=profile, seed=seed, duration_s=duration_s, faults=list(faults)).run(p)
+    return p
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory):
+    return _drive(tmp_path_factory.mktemp("dec"))
+
+
+def _imu_time_errors(samples):
+    """t_ns - measurement instant (packet k is sampled at k ms in the simulator) [ns]."""
+    return [s.t_ns - int(s.fields["seq_counter"]) * MS for s in samples if s.kind == "imu"]
+
+
+def test_decodes_every_raw_topic_in_time_order_without_rejects(drive):
+    d = decode_recording(drive)
+    samples = list(d)
+    kinds = {}
+    for s in samples:
+        kinds[(s.source, s.kind)] = kinds.get((s.source, s.kind), 0) + 1
+    # 2 s: 2001 samples of each 1 kHz sensor (wheel speeds in two frames), 201 at 100 Hz, 11 GNSS epochs
+    assert kinds == {("can.vdps", "wheel_speed"): 4002, ("can.vdps", "suspension"): 2001,
+                     ("can.vdps", "wheel_torque"): 201, ("can.vdps", "steer"): 201, ("imu", "imu"): 2001,
+                     ("gnss", "gnss_pos"): 11, ("gnss", "gnss_vel"): 11, ("gnss", "gnss_att"): 11}
+    t = [s.t_ns for s in samples]
+    assert t == sorted(t)
+    assert d.rejected() == {"can.vdps": 0, "serial.imu": 0, "serial.gnss": 0}
+    c = d.counters
+    assert c["reader"]["late"] == 0 and c["reader"]["undecoded"] == {}
+    assert c["serial.imu"]["samples"] == 2001 and c["clock.imu"]["observations"] == 2001
+
+
+def test_device_clocks_remove_the_read_chunk_quantisation(drive):
+    """Packets arrive in 5 ms read chunks: the receive-time rule is off by up to ~2 ms; the
+    SampleTimeFine alignment gives the sampling instant exactly (zero-noise simulator, the
+    device time is on the 100 us tick grid and the last packet of a chunk is not queued).
+    GNSS sentences are stamped at their UTC epoch (5 Hz grid, no latency in the profile)."""
+    raw = _imu_time_errors(decode_recording(drive, device_time=False))
+    assert max(raw) - min(raw) > 1 * MS  # the quantisation this removes
+    aligned = list(decode_recording(drive))
+    assert set(_imu_time_errors(aligned)) == {0}
+    gnss = [s.t_ns for s in aligned if s.source == "gnss"]
+    assert all(t % (200 * MS) == 0 for t in gnss)
+    rule = [s.t_ns for s in decode_recording(drive, device_time=False) if s.source == "gnss"]
+    assert min(r - t for r, t in zip(rule, gnss)) > 5 * MS  # line ends arrive after the epoch
+
+
+@pytest.mark.parametrize("spec,device,jump_ns", [
+    ("clock_jump:device=imu,t_s=1.0,jump_s=-0.5", "imu", 500 * MS),
+    ("clock_jump:device=imu,t_s=1.0,jump_s=0.3", "imu", -300 * MS),
+    ("clock_jump:device=gnss,t_s=1.0,jump_s=2.0", "gnss", -2000 * MS),
+])
+def test_a_device_clock_step_is_confirmed_and_followed(tmp_path, spec, device, jump_ns):
+    d = decode_recording(_drive(tmp_path, faults=[spec], duration_s=2.0))
+    samples = list(d)
+    assert set(_imu_time_errors(samples)) == {0}
+    assert all(s.t_ns % (200 * MS) == 0 for s in samples if s.source == "gnss")
+    clk = d.counters[f"clock.{device}"]
+    assert clk["clock_jumps"] == 1 and clk["offset_ns"] == jump_ns and clk["outliers"] == 0
+    assert d.counters["reader"]["late"] == 0
+
+
+def test_serial_disconnect_loses_only_the_gap(tmp_path):
+    d = decode_recording(_drive(tmp_path, faults=["serial_disconnect:device=imu,t_s=1.0,duration_s=0.3"]))
+    imu = [s for s in d if s.kind == "imu"]
+    assert set(_imu_time_errors(imu)) == {0}
+    assert 2001 - 302 <= len(imu) <= 2001 - 299  # 0.3 s of packets (+- the ones cut in flight)
+    assert d.counters["serial.imu"]["seq_gaps"] == 2001 - len(imu)
+
+
+def test_reads_only_the_raw_topics(drive, tmp_path):
+    """A copy with ONLY /raw/ topics decodes to the same samples; broken /truth/ and bogus
+    /decoded/ topics next to /raw/ are never read (the reader would count them as rejected)."""
+    only_raw = tmp_path / "raw.mcap"
+    n = copy_raw_topics(drive, only_raw)
+    with RecordingReader(only_raw) as r:
+        assert all(t.startswith("/raw/") for t in r.topics())
+        assert sum(i.count for i in r.topics().values()) == n
+    poisoned = tmp_path / "poisoned.mcap"
+    with RecordingReader(drive) as src, RecordingWriter(poisoned) as w:
+        sink = raw_copier(src, w)
+        for rec in src.iter_records(prefixes=("/raw/",)):
+            sink(rec)
+            if rec.topic == "/raw/serial/gnss":
+                w._write("/truth/state", S.TRUTH, rec.t_ns, b"{not json", None)
+                w.write_sample(Sample(rec.t_ns, "gnss", "gnss_pos", {"gnss_lat_deg": 1.0}))
+    a = [s.to_json() for s in decode_recording(drive)]
+    b = [s.to_json() for s in decode_recording(only_raw)]
+    with RecordingReader(poisoned) as r:
+        dec = decode_recording(r)
+        c = [s.to_json() for s in dec]
+        assert r.rejected == 0  # the broken /truth/ messages were never decoded
+    assert a == b == c
+
+
+def test_streaming_yields_before_the_whole_file_is_read(drive):
+    seen = []
+    d = decode_recording(drive, raw_sink=lambda rec: seen.append(rec.t_ns), reorder_window_s=0.2)
+    first = next(iter(d))
+    total = sum(1 for _ in RecordingReader(drive).iter_records(prefixes=("/raw/",)))
+    assert first.t_ns == 0 and 0 < len(seen) < total / 5  # released one 0.2 s window into the 2 s drive
+    assert seen[-1] - first.t_ns <= 0.21e9
+    list(d)
+    assert len(seen) == total
+
+
+def _serial_recording(chunks, fmt="nmea", device="gnss", can=()):
+    buf = io.BytesIO()
+    with RecordingWriter(buf, sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS) as w:
+        for t, data in chunks:
+            w.write_serial(device, t, data, baud=115200, fmt=fmt)
+        for t, doc in can:
+            w.write_json("/raw/can/vdps", S.RAW_CAN, t, doc)
+    buf.seek(0)
+    return buf
+
+
+def test_garbage_is_counted_and_good_data_around_it_is_kept():
+    lines = [format_gga(1.0 + 0.2 * k, 48.0, 11.0, 500.0, fix_quality=4) for k in range(4)]
+    chunks = [(1_200 * MS, lines[0]), (1_400 * MS, b"\x00\xff$GPGGA,garbage*00\r\n" + lines[1]),
+              (1_600 * MS, lines[2][:20]), (1_650 * MS, lines[2][20:] + b"\xfe\xfe"), (1_800 * MS, lines[3])]
+    good = {"t_ns": 0, "arbitration_id": 0x130, "is_extended_id": False, "is_fd": False, "is_remote_frame": False,
+            "is_error_frame": False, "dlc": 3, "data_hex": "000000", "direction": "rx"}
+    bad_len = dict(good, dlc=2, data_hex="0000")
+    err = dict(good, is_error_frame=True)
+    can = [(1_000 * MS, dict(good, t_ns=1_000 * MS)), (1_010 * MS, dict(bad_len, t_ns=1_010 * MS)),
+           (1_020 * MS, dict(err, t_ns=1_020 * MS)), (1_030 * MS, dict(good, t_ns=1_030 * MS, data_hex="000001"))]
+    d = decode_recording(_serial_recording(chunks, can=can))
+    samples = list(d)
+    gnss = [s for s in samples if s.kind == "gnss_pos"]
+    assert len(gnss) == 4 and all(s.fields["gnss_lat_deg"] == pytest.approx(48.0) for s in gnss)
+    # UTC epochs 1.0, 1.2, ... s on the host clock: the first line's start of transmission
+    wire = round((len(lines[0]) * 10 / 115200) * 1e9)  # sentence incl. CR LF at 115200 Bd
+    # (lines 3 and 4 arrive later than their epoch, so the offset leaks up by 100 ppm x 0.2 s)
+    assert [s.t_ns for s in gnss] == pytest.approx([1_200 * MS - wire + k * 200 * MS for k in range(4)], abs=25_000)
+    assert gnss[1].t_ns == 1_400 * MS - wire  # a line that ends its chunk resets the offset exactly
+    assert len([s for s in samples if s.kind == "steer"]) == 2
+    rej = d.rejected()
+    assert rej["serial.gnss"] == 1  # the bad checksum line
+    assert rej["can.vdps"] == 2  # dlc mismatch + error frame
+
+
+def test_unknown_serial_format_and_undecoded_bus_are_counted_not_fatal():
+    buf = io.BytesIO()
+    with RecordingWriter(buf) as w:
+        w.write_serial("lidar", 10, b"\x01\x02", baud=9600, fmt="velodyne")
+        w.write_can("body", 20, {"arbitration_id": 0x10, "data": b"\x00"})
+    buf.seek(0)
+    d = decode_recording(buf)
+    assert list(d) == []
+    assert d.counters["reader"]["undecoded"] == {"/raw/serial/lidar": 1, "/raw/can/body": 1}
+    assert d.decoding["serial.lidar"]["decoded"] is False and d.decoding["can.body"]["decoded"] is False
+
+
+def test_bus_map_renames_a_recording_bus_to_a_signal_map_bus(tmp_path):
+    buf = io.BytesIO()
+    doc = {"arbitration_id": 0x130, "data": bytes(3)}
+    with RecordingWriter(buf) as w:
+        w.write_can("chassis", 5, doc)
+    buf.seek(0)
+    assert list(decode_recording(buf)) == []
+    buf.seek(0)
+    got = list(decode_recording(buf, signalmap="vdps", bus_map={"chassis": "vdps"}))
+    assert [(s.source, s.kind) for s in got] == [("can.chassis", "steer")]
+
+
+def test_bad_options_are_one_line_errors(tmp_path):
+    with pytest.raises(DecodeError, match="--signalmap"):
+        decode_recording(io.BytesIO(_serial_recording([]).getvalue()), dbc="x.dbc")
+    with pytest.raises(DecodeError, match="signal map"):
+        decode_recording(io.BytesIO(_serial_recording([]).getvalue()), signalmap=tmp_path / "none.toml")
+    (tmp_path / "x.mcap").write_bytes(b"not an mcap")
+    with pytest.raises(DecodeError, match="not an MCAP"):
+        decode_recording(tmp_path / "x.mcap")
+
+
+# ------------------------------------------------------------------ clock alignment properties
+def test_unwrapper_follows_wraps_both_ways():
+    u = Unwrapper(1 << 16)
+    assert [u(v) for v in (65530, 65535, 3, 10, 4, 20000)] == [65530, 65535, 65539, 65546, 65540, 85536]
+
+
+@settings(max_examples=60, deadline=None)
+@given(offset=st.integers(-10**12, 10**12),
+       delays=st.lists(st.lists(st.integers(0, 3 * MS), min_size=1, max_size=6), min_size=2, max_size=40))
+def test_stamper_recovers_the_offset_when_each_batch_has_an_unqueued_message(offset, delays):
+    """host = dev + offset + queueing delay >= 0; one message per batch with no delay: every
+    stamp equals dev + offset, up to the leak (100 ppm of the time between batches)."""
+    stamper = DeviceStamper(ClockAligner(jump_s=0.02, confirm_s=0.2))
+    dev = 0
+    for batch_delays in delays:
+        batch_delays = list(batch_delays) + [0]
+        batch = []
+        for dl in batch_delays:
+            dev += MS
+            batch.append((Sample(0, "imu", "imu"), dev + offset + dl, dev))
+        out = stamper.stamp(batch)
+        for s, (_, _, d) in zip(out, batch):
+            assert 0 <= s.t_ns - (d + offset) <= 1_000  # leak: 100 ppm x at most ~7 ms
+    assert stamper.clock.jumps == 0 and stamper.outliers == 0
+
+
+def test_a_single_corrupt_time_stamp_does_not_move_the_offset():
+    stamper = DeviceStamper(ClockAligner(jump_s=0.02, confirm_s=0.2))
+    out = []
+    for k in range(100):
+        dev = k * MS + (5_000 * MS if k == 50 else 0)  # one packet with a wild device time
+        out += stamper.stamp([(Sample(k * MS + 7, "imu", "imu"), k * MS + 7, dev)])
+    assert [s.t_ns for s in out] == [k * MS + 7 for k in range(100)]  # the outlier keeps its receive time
+    assert stamper.outliers == 1 and stamper.clock.jumps == 0
+
+
+def test_a_slow_device_clock_is_followed_by_the_leak():
+    """Device clock 50 ppm slow: host - dev grows 50 us/s; the 100 ppm leak follows it."""
+    clock = ClockAligner(leak_ppm=100.0)
+    for k in range(20_000):  # 20 s at 1 kHz
+        dev = k * MS
+        clock.observe(int(dev * (1 + 50e-6)), dev)
+    assert abs(clock.to_host(dev) - int(dev * (1 + 50e-6))) <= 100_000  # within 0.1 ms after 20 s
