@@ -56,7 +56,7 @@ def test_truth_model_in_the_predictor_reproduces_the_simulator_exactly(left_turn
     (RK2 at 1 ms) and the truth state, the predictor IS the simulator: equal to 1e-9 m / 1e-6 N."""
     sc, sim, snap, true_vehicle = left_turn
     cfg = PredictorConfig(integrator="rk2", step_s=0.001, output_every=10, horizon_s=4.75,
-                          unsprung_dof=True, pose_from_suspension=False)
+                          unsprung_dof=True, pose_source="estimate_plane")
     r = Predictor(true_vehicle, cfg, effects=sc.effect_set()).predict(
         PredictorInitialState.from_truth_for_tests_only(snap))
     tr = [s for s in sim.truth if s["t_s"] >= T0_LEFT_TURN - 1e-9]
@@ -157,7 +157,7 @@ def test_pose_from_suspension_inverts_the_reduced_model(left_turn):
     """The CG height and road-relative roll/pitch recovered from the model's own H_i (eq 5 with the
     model geometry) give back the state they came from (1e-9)."""
     sc, sim, snap, true_vehicle = left_turn
-    p = Predictor(true_vehicle, PredictorConfig(pose_from_suspension=False))
+    p = Predictor(true_vehicle, PredictorConfig(pose_source="estimate_plane"))
     x0, env, _ = p.core_state(PredictorInitialState.from_truth_for_tests_only(snap, with_suspension=False))
     u = Inputs()
     _, d = p.model.evaluate(x0, u, env)
@@ -225,6 +225,8 @@ def test_config_errors_are_one_line(tmp_path):
         PredictorConfig(integrator="euler")
     with pytest.raises(PredictionConfigError, match="step_s"):
         predictor_config_from_table({"step_s": -1.0})
+    with pytest.raises(PredictionConfigError, match="pose_source"):
+        predictor_config_from_table({"pose_source": "gnss"})
     with pytest.raises(PredictionConfigError, match="jacobian_every"):
         predictor_config_from_table({"jacobian_every": 0})
     bad = tmp_path / "p.toml"
@@ -256,3 +258,19 @@ def test_cadence():
     assert c.due(5) and not c.due(99_999_999) and c.due(100_000_005)
     # the grid stays anchored on the first call (5 ns); missed periods are skipped
     assert c.due(450_000_000) and not c.due(500_000_004) and c.due(500_000_005)
+
+
+@pytest.mark.parametrize("source", ["suspension", "estimate"])
+def test_prediction_is_invariant_to_the_estimator_origin(left_turn, source):
+    """The estimator's ENU origin is its first GNSS fix, not a point of the road plane: with the
+    "suspension" and "estimate" pose sources a shifted position estimate shifts the prediction
+    and changes nothing else."""
+    sc, sim, snap, true_vehicle = left_turn
+    init = PredictorInitialState.from_truth_for_tests_only(snap)
+    moved = PredictorInitialState(**{**init.__dict__, "pos_g_m": tuple(np.add(init.pos_g_m, (120.0, -45.0, 31.0)))})
+    p = Predictor(true_vehicle, PredictorConfig(horizon_s=1.0, pose_source=source))
+    a, b = p.predict(init), p.predict(moved)
+    assert np.allclose(b.pos_g_m - a.pos_g_m, (120.0, -45.0, 31.0), atol=1e-9)
+    assert np.allclose(b.euler_v_rad, a.euler_v_rad, atol=1e-12)
+    assert np.allclose(b.normal_load_n, a.normal_load_n, atol=1e-6)
+    assert np.array_equal(a.pos_g_m[0], init.pos_g_m)

@@ -32,22 +32,27 @@ rates H_dot_i)::
 
 The reduced model has no suspension DOF: H_i follows from the body pose over the road,
 ``H_i = r - h - n_b . r_w,i`` (r rolling radius, h CG height over the road along n, r_w,i the
-wheel centre at design ride height in body axes). With ``pose_from_suspension`` (default) and
-finite H_i, the CG height h and the road-relative roll/pitch are the least-squares inverse of
-that relation (eq 5 with the model's own geometry; exact for four consistent corners)::
+wheel centre at design ride height in body axes). ``pose_source`` chooses how the body is placed:
+
+* ``"suspension"`` (default): with finite H_i, the CG height h and the road-relative roll/pitch
+  are the least-squares inverse of that relation (eq 5 with the model's own geometry; exact for
+  four consistent corners)::
 
     r - H_i = c + n_x x_i + n_y y_i,   c = h + n_z z_w     ->  theta_v = asin n_x,
                                                               phi_v = asin(n_y / cos theta_v)
 
-and the CG velocity along the road normal from the suspension rates,
-``n . v_b = -mean_i (H_dot_i + n . (omega x r_w,i))``. The yaw psi_v (eq 4) and the in-plane
-velocity come from the estimate. Without suspension data the estimate's attitude is used and h
-is the design CG height. With ``pose_from_suspension = false`` the estimate's attitude is used
-and h = n_g . p_g (the road plane through the global origin: true in the simulator, and the
-assumption of the EKF's ``y2_sus_plane`` form). With ``unsprung_dof`` (a workbench variant, not
-the paper's) the estimate's pose is used as in the ``false`` case and H_i, H_dot_i become the
-suspension states. The predicted positions are shifted by the constant offset that puts
-the prediction's t0 position on the estimated one, so ``pos_g_m[0]`` equals the estimate.
+  and the CG velocity along the road normal from the suspension rates,
+  ``n . v_b = -mean_i (H_dot_i + n . (omega x r_w,i))``; the yaw psi_v (eq 4) and the in-plane
+  velocity come from the estimate. Without suspension data: as ``"estimate"``.
+* ``"estimate"``: attitude and velocity from the estimate, h = the design CG height (the
+  estimator's vertical position is not referred to the road: its origin is the first GNSS fix).
+* ``"estimate_plane"``: attitude and velocity from the estimate, h = n_g . p_g (the road plane
+  through the global origin: true in the simulator, and the assumption of the EKF's
+  ``y2_sus_plane`` form). With ``unsprung_dof`` (a workbench variant, not the paper's) H_i and
+  H_dot_i become the suspension states and the pose is placed as here or as ``"estimate"``.
+
+The predicted positions are shifted by the constant offset that puts the prediction's t0
+position on the estimated one, so ``pos_g_m[0]`` equals the estimate.
 
 Integration (the stiff wheel spin)
 ----------------------------------
@@ -130,6 +135,7 @@ ROS2_GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
 ROLL_LIMIT_RAD = math.radians(85.0)
 """The prediction stops beyond this road-relative roll (the model has no body-ground contact)."""
 INTEGRATORS = ("ros2", "rk2")
+POSE_SOURCES = ("suspension", "estimate", "estimate_plane")
 
 
 class PredictionConfigError(ValueError):
@@ -146,7 +152,8 @@ class PredictorConfig:
     Defaults (``configs/prediction/default.toml``): horizon 5 s, step 10 ms with ``ros2``
     (linearly implicit wheel spin), Jacobian every step, one output sample per step (100 Hz),
     cadence 10 Hz, effects ``["linear_tire"]``, reduced model (``unsprung_dof = false``), slip
-    speed floor 5 m/s, stop at the predicted point of no return, pose from the suspension."""
+    speed floor 5 m/s, stop at the predicted point of no return, pose from the suspension
+    (``pose_source``: "suspension", "estimate" or "estimate_plane", module docstring)."""
 
     horizon_s: float = 5.0
     step_s: float = 0.01
@@ -160,7 +167,7 @@ class PredictorConfig:
     unsprung_dof: bool = False
     slip_speed_floor_mps: float = 5.0
     stop_at_point_of_no_return: bool = True
-    pose_from_suspension: bool = True
+    pose_source: str = "suspension"
 
     def __post_init__(self):
         for name in ("horizon_s", "step_s", "cadence_hz", "slip_speed_floor_mps"):
@@ -174,6 +181,9 @@ class PredictorConfig:
         if self.integrator not in INTEGRATORS:
             raise PredictionConfigError(f"predictor.integrator must be one of {', '.join(INTEGRATORS)}, "
                                         f"got {self.integrator!r}")
+        if self.pose_source not in POSE_SOURCES:
+            raise PredictionConfigError(f"predictor.pose_source must be one of {', '.join(POSE_SOURCES)}, "
+                                        f"got {self.pose_source!r}")
         if self.step_s > self.horizon_s:
             raise PredictionConfigError("predictor.step_s must not exceed horizon_s")
         if not isinstance(self.effects, tuple):
@@ -213,7 +223,7 @@ def predictor_config_from_table(t: Mapping, where: str = "[predictor]") -> Predi
         ep = d["effect_params"]
         if not isinstance(ep, Mapping) or not all(isinstance(v, Mapping) for v in ep.values()):
             raise PredictionConfigError(f"{where}.effect_params: expected tables of parameters")
-    for b in ("unsprung_dof", "stop_at_point_of_no_return", "pose_from_suspension", "jacobian_coupling"):
+    for b in ("unsprung_dof", "stop_at_point_of_no_return", "jacobian_coupling"):
         if b in d and not isinstance(d[b], bool):
             raise PredictionConfigError(f"{where}.{b}: expected true or false")
     for k in ("horizon_s", "step_s", "cadence_hz", "slip_speed_floor_mps"):
@@ -516,8 +526,8 @@ class Predictor:
         zw = m.wheel_centre_z_m
         xy = m.corner_xy
         omega = init.rate_b_radps
-        use_susp = (self.config.pose_from_suspension and init.has_suspension
-                    and not self.config.unsprung_dof)
+        src = self.config.pose_source
+        use_susp = src == "suspension" and init.has_suspension and not self.config.unsprung_dof
         if use_susp:
             # least squares: r - H_i = c + n_x x_i + n_y y_i
             a = np.array([[1.0, xy[i][0], xy[i][1]] for i in range(4)])
@@ -528,11 +538,11 @@ class Predictor:
             nzb = math.cos(phi_v) * math.cos(theta_v)
             h = float(c - nzb * zw)
             phi_g, theta_g, psi_g = compose_absolute(phi_v, theta_v, psi_v, env.bank_rad, env.grade_rad)
-        elif self.config.pose_from_suspension and not self.config.unsprung_dof:
-            h = geo.h_cg_m  # no suspension data: design CG height
-        else:
+        elif src == "estimate_plane":
             ng = env.normal_g
             h = float(ng[0] * init.pos_g_m[0] + ng[1] * init.pos_g_m[1] + ng[2] * init.pos_g_m[2])
+        else:
+            h = geo.h_cg_m  # design CG height
         cgv = dcm_global_to_vehicle(phi_g, theta_g, psi_g)
         v_b = cgv @ np.asarray(init.vel_g_mps)
         n_b = cgv @ np.asarray(env.normal_g)
