@@ -1,0 +1,320 @@
+"""Tests of vdps_hil.batch.engine: parallel results equal the serial ones exactly, tasks run in
+distinct worker processes, a real LocalCluster and a separately started Dask cluster run
+batches, killed workers are retried, failing tasks are reported without stopping the batch,
+resume skips unchanged results, and every socket of the cluster listens on 127.0.0.1 only.
+
+Drives are short simulated ones (1 s, seeds 0-7); clusters are module-scoped (start-up is the
+expensive part)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from vdps_hil.batch.engine import (AGGREGATE, Engine, EngineConfig, Outcome, Task, execute,
+                                   result_path, run_batch, strip_run, to_jsonable)
+from vdps_hil.batch.tasks import replay_tasks
+from vdps_hil.sim.drive import Drive
+
+distributed = pytest.importorskip("distributed")
+psutil = pytest.importorskip("psutil")
+
+N_DRIVES = 8
+DRIVE_S = 1.0
+VENV_BIN = Path(sys.executable).parent
+
+
+@pytest.fixture(scope="module")
+def drives(tmp_path_factory) -> list[str]:
+    d = tmp_path_factory.mktemp("drives")
+    paths = []
+    for seed in range(N_DRIVES):
+        p = d / f"drive{seed}.mcap"
+        Drive("paper", seed=seed, duration_s=DRIVE_S).run(p)
+        paths.append(os.fspath(p))
+    return paths
+
+
+@pytest.fixture(scope="module")
+def corrupt(tmp_path_factory) -> str:
+    """An MCAP magic followed by garbage: not a recording anyone can replay."""
+    p = tmp_path_factory.mktemp("bad") / "corrupt.mcap"
+    p.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 4)
+    return os.fspath(p)
+
+
+@pytest.fixture(scope="module")
+def serial(drives, tmp_path_factory):
+    out = tmp_path_factory.mktemp("serial")
+    res = run_batch(replay_tasks(drives), EngineConfig(backend="inline"), out_dir=out, kind="replay")
+    assert res.counts == {"total": N_DRIVES, "ok": N_DRIVES, "failed": 0}
+    return res, out
+
+
+@pytest.fixture(scope="module")
+def local_engine():
+    """A LocalCluster: 2 worker processes, scheduler and dashboard on 127.0.0.1."""
+    with Engine(EngineConfig(backend="dask", workers=2, allowed_failures=1)) as eng:
+        yield eng
+
+
+def _listening(procs) -> list[tuple[int, str, int]]:
+    out = []
+    for p in procs:
+        try:
+            conns = p.net_connections(kind="inet")
+        except (psutil.NoSuchProcess, psutil.AccessDenied):
+            continue
+        out += [(p.pid, c.laddr.ip, c.laddr.port) for c in conns if c.status == psutil.CONN_LISTEN]
+    return out
+
+
+def _tree(pid: int) -> list:
+    p = psutil.Process(pid)
+    return [p] + p.children(recursive=True)
+
+
+# ------------------------------------------------------------------------------ LocalCluster
+def test_two_workers_give_the_serial_results_exactly_in_two_processes(drives, serial, local_engine,
+                                                                       tmp_path):
+    ser, ser_dir = serial
+    par = run_batch(replay_tasks(drives), out_dir=tmp_path, kind="replay", engine=local_engine)
+    assert par.counts == ser.counts
+    # same JSON apart from the timing fields ("run"), aggregate and per-drive files alike
+    assert strip_run(par.aggregate) == strip_run(ser.aggregate)
+    for o in par.outcomes:
+        a = json.loads(result_path(tmp_path, o.id).read_text())
+        b = json.loads(result_path(ser_dir, o.id).read_text())
+        assert strip_run(a) == strip_run(b)
+        assert a["result"]["estimator"]["final"] is not None  # the replay did estimate
+    pids = {o.run["pid"] for o in par.outcomes}
+    assert len(pids) == 2 and os.getpid() not in pids
+    assert pids == set(local_engine.worker_pids())
+    assert {o.run["pid"] for o in ser.outcomes} == {os.getpid()}
+
+
+def test_every_listening_socket_of_the_local_cluster_is_on_localhost(local_engine):
+    socks = _listening(_tree(os.getpid()))
+    pids = {pid for pid, _, _ in socks}
+    # scheduler + dashboard in this process, a listener (and an HTTP server) per worker process
+    assert set(local_engine.worker_pids()) <= pids
+    assert len(socks) >= 4
+    assert all(ip == "127.0.0.1" for _, ip, _ in socks), socks
+    info = local_engine.info
+    assert info["scheduler"].startswith("tcp://127.0.0.1:")
+    assert info["dashboard"] is None or info["dashboard"].startswith("http://127.0.0.1:")
+
+
+def test_a_worker_killed_mid_batch_has_its_task_retried(drives, serial, local_engine):
+    tasks = replay_tasks(drives)
+    client = local_engine.client
+    killed, victims = None, set()
+    outcomes: list[Outcome] = []
+    for o in local_engine.run(tasks):
+        outcomes.append(o)
+        if killed is None:
+            # a task has finished, the others are queued on the workers: kill a worker that
+            # holds tasks, remembering which ones it held
+            pids = client.run(os.getpid)
+            addr, keys = next((a, k) for a, k in client.processing().items() if k)
+            killed = pids[addr]
+            victims = {k[len("vdps-"):-len("-12345678")] for k in keys}
+            os.kill(killed, signal.SIGKILL)
+    assert len(outcomes) == N_DRIVES and all(o.ok for o in outcomes), [o.error for o in outcomes]
+    assert victims and victims <= {t.id for t in tasks}
+    # the killed worker's tasks ran again elsewhere (the other worker or the restarted one)
+    by_id = {o.id: o for o in outcomes}
+    assert all(by_id[v].run["pid"] != killed for v in victims)
+    ser = {o.id: o for o in serial[0].outcomes}
+    for o in outcomes:
+        assert o.result == ser[o.id].result  # a retried task gives the same result
+
+
+def test_a_task_that_kills_every_worker_fails_after_the_allowed_failures(local_engine):
+    # signal.raise_signal(SIGKILL) in the worker: the worker dies each time it runs the task;
+    # allowed_failures = 1: two deaths, then the task is reported, the others complete
+    tasks = [Task("killer", "signal:raise_signal", args=(int(signal.SIGKILL),)),
+             Task("fine", "vdps_hil.batch.tasks:worker_info")]
+    outcomes = {o.id: o for o in local_engine.run(tasks)}
+    assert outcomes["killer"].status == "failed"
+    assert outcomes["killer"].error["type"] == "WorkerDied"
+    assert "allowed-failures = 1" in outcomes["killer"].error["message"]
+    assert outcomes["fine"].ok
+
+
+# ------------------------------------------------------------ a separately started cluster
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
+    """``dask scheduler`` and two ``dask worker`` processes started as commands, on 127.0.0.1
+    (what a user does on a real cluster), allowed-failures set on the scheduler by env var."""
+    d = tmp_path_factory.mktemp("cluster")
+    sched_file = d / "scheduler.json"
+    env = dict(os.environ, DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES="1")
+    dask = os.fspath(VENV_BIN / "dask")
+    log = open(d / "cluster.log", "wb")
+    procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--dashboard-address", "127.0.0.1:0", "--scheduler-file",
+                               os.fspath(sched_file)], env=env, stdout=log, stderr=log)]
+    try:
+        deadline = time.monotonic() + 30
+        while not sched_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert sched_file.exists(), (d / "cluster.log").read_text()
+        address = json.loads(sched_file.read_text())["address"]
+        for _ in range(2):
+            procs.append(subprocess.Popen(
+                [dask, "worker", "--scheduler-file", os.fspath(sched_file), "--nworkers", "1",
+                 "--nthreads", "1", "--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0"],
+                env=env, stdout=log, stderr=log))
+        client = distributed.Client(address, timeout="30s")
+        client.wait_for_workers(2, timeout=60)
+        client.close()
+        yield address, procs
+        with distributed.Client(address, timeout="10s") as c:
+            c.shutdown()  # closes scheduler and workers (faster than a signal per process)
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                p.terminate()
+        for p in procs:
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        log.close()
+
+
+def test_a_separately_started_cluster_runs_a_batch_with_a_corrupt_and_a_missing_file(
+        drives, corrupt, serial, dask_cluster, tmp_path):
+    address, procs = dask_cluster
+    missing = os.fspath(tmp_path / "gone.mcap")
+    inputs = drives[:4] + [corrupt, missing]
+    res = run_batch(replay_tasks(inputs), EngineConfig(scheduler=address), out_dir=tmp_path / "out",
+                    kind="replay")
+    assert res.info["scheduler"] == address and res.info["workers"] == 2
+    assert res.info["allowed_failures"] == 1  # read back from the scheduler
+    by_id = {o.id: o for o in res.outcomes}
+    assert [o.id for o in res.outcomes] == ["drive0", "drive1", "drive2", "drive3", "corrupt", "gone"]
+    ser = {o.id: o for o in serial[0].outcomes}
+    for i in range(4):
+        assert by_id[f"drive{i}"].ok and by_id[f"drive{i}"].result == ser[f"drive{i}"].result
+    assert by_id["corrupt"].status == "failed" and by_id["corrupt"].error["message"]
+    assert by_id["gone"].status == "failed"
+    assert "gone.mcap" in by_id["gone"].error["message"]
+    assert res.counts == {"total": 6, "ok": 4, "failed": 2}
+    agg = json.loads((tmp_path / "out" / AGGREGATE).read_text())
+    assert {f["id"] for f in agg["failed"]} == {"corrupt", "gone"}
+    # the tasks ran in the cluster's worker processes, none in this one
+    worker_pids = {p.pid for w in procs[1:] for p in _tree(w.pid)}
+    assert {o.run["pid"] for o in res.outcomes if o.run.get("pid")} <= worker_pids
+
+
+def test_every_listening_socket_of_the_started_cluster_is_on_localhost(dask_cluster):
+    _, procs = dask_cluster
+    socks = _listening([p for proc in procs for p in _tree(proc.pid)])
+    assert len(socks) >= 5  # scheduler + dashboard, per worker: nanny, worker, HTTP
+    assert all(ip == "127.0.0.1" for _, ip, _ in socks), socks
+
+
+# ------------------------------------------------------------------------- process pool
+def test_process_pool_gives_the_serial_results_and_survives_a_killed_worker(drives, serial):
+    tasks = replay_tasks(drives[:4])
+    ser = {o.id: o for o in serial[0].outcomes}
+    before = {p.pid for p in psutil.Process().children()}
+    with Engine(EngineConfig(backend="processes", workers=2)) as eng:
+        outcomes = []
+        for o in eng.run(tasks):
+            if not outcomes:  # kill a pool worker (not the spawn resource tracker)
+                kids = [p for p in psutil.Process().children() if p.pid not in before
+                        and "spawn_main" in " ".join(p.cmdline())]
+                os.kill(kids[0].pid, signal.SIGKILL)
+            outcomes.append(o)
+    assert sorted(o.id for o in outcomes) == [t.id for t in tasks]
+    assert all(o.ok for o in outcomes), [o.error for o in outcomes]
+    for o in outcomes:
+        assert o.result == ser[o.id].result
+
+
+# ------------------------------------------------------------------- errors and resume
+def test_execute_turns_an_exception_into_a_one_line_failure(tmp_path):
+    doc = execute("vdps_hil.batch.tasks:replay_drive", {"path": os.fspath(tmp_path / "none.mcap")})
+    assert doc["status"] == "failed" and doc["result"] is None
+    assert doc["error"]["type"] == "RecordingError" and "\n" not in doc["error"]["message"]
+    assert doc["run"]["pid"] == os.getpid() and doc["run"]["wall_s"] >= 0
+    bad = execute("vdps_hil.batch.tasks:no_such_function", {})
+    assert bad["status"] == "failed" and bad["error"]["type"] == "AttributeError"
+
+
+def test_resume_skips_unchanged_results_and_recomputes_changed_and_failed(drives, corrupt, tmp_path):
+    inputs = [tmp_path / f"d{i}.mcap" for i in range(3)] + [tmp_path / "corrupt.mcap"]
+    for src, dst in zip(drives[:3] + [corrupt], inputs):
+        dst.write_bytes(Path(src).read_bytes())
+
+    class Stop(Exception):
+        pass
+
+    class InterruptAfter:
+        """Progress that interrupts the batch after n outcomes (a Ctrl-C)."""
+
+        def __init__(self, n):
+            self.n, self.seen = n, []
+
+        def start(self, total, reused):
+            self.reused = reused
+
+        def engine(self, info):
+            pass
+
+        def update(self, o):
+            self.seen.append(o.id)
+            if len(self.seen) == self.n:
+                raise Stop
+
+        def close(self):
+            pass
+
+    cfg = EngineConfig(backend="inline")
+    out = tmp_path / "out"
+    with pytest.raises(Stop):
+        run_batch(replay_tasks(inputs), cfg, out_dir=out, progress=InterruptAfter(2))
+    assert len(list((out / "drives").glob("*.json"))) == 2  # written as they finished
+    prog = InterruptAfter(-1)
+    res = run_batch(replay_tasks(inputs), cfg, out_dir=out, progress=prog)
+    assert prog.reused == 2 and len(prog.seen) == 2  # resumed: only the rest ran
+    assert res.aggregate["run"]["reused"] == 2 and res.counts["failed"] == 1
+    # a rerun: everything reused except the failed corrupt file, which is tried again
+    prog = InterruptAfter(-1)
+    res2 = run_batch(replay_tasks(inputs), cfg, out_dir=out, progress=prog)
+    assert prog.seen == ["corrupt"] and strip_run(res2.aggregate) == strip_run(res.aggregate)
+    # a changed recording gets a new key and is recomputed; a changed option recomputes all
+    inputs[0].write_bytes(Path(drives[5]).read_bytes())
+    prog = InterruptAfter(-1)
+    run_batch(replay_tasks(inputs), cfg, out_dir=out, progress=prog)
+    assert sorted(prog.seen) == ["corrupt", "d0"]
+    prog = InterruptAfter(-1)
+    run_batch(replay_tasks(inputs, options={"predict_period_s": 0.02}), cfg, out_dir=out,
+              progress=prog)
+    assert len(prog.seen) == 4
+    prog = InterruptAfter(-1)
+    run_batch(replay_tasks(inputs), cfg, out_dir=out, progress=prog, force=True)
+    assert len(prog.seen) == 4
+
+
+def test_duplicate_ids_are_refused():
+    with pytest.raises(ValueError, match="unique"):
+        run_batch([Task("a", "x:y"), Task("a", "x:y")], EngineConfig(backend="inline"))
+
+
+def test_to_jsonable_makes_plain_json():
+    import numpy as np
+    doc = to_jsonable({"a": np.float64(1.5), "b": (1, float("nan")), 3: np.arange(2),
+                       "p": Path("/x")})
+    assert doc == {"a": 1.5, "b": [1, None], "3": [0, 1], "p": "/x"}
+    json.dumps(doc, allow_nan=False)
