@@ -90,7 +90,7 @@ explicit RK2 at 1 ms (``tools/bench_predictor.py``, true parameters, 5 s)::
 (time of one 5 s prediction in pure Python; explicit RK2 at 1 ms takes 97 ms). ``rk2`` (Heun,
 explicit) is available for reference and needs h below the wheel-spin stability limit.
 
-Stop conditions: the horizon, the predicted point of no return (``sim.rollover`` definition,
+Stop conditions: the horizon, the predicted point of no return (``model.rollover`` definition,
 applied to the predicted trajectory; with ``stop_at_point_of_no_return``), |phi_v| > 85 deg or a
 non-finite state.
 
@@ -126,7 +126,7 @@ from vdps_hil.model.core import Env, Inputs, Model, ackermann_angles
 from vdps_hil.model.effects import EffectConfigError, EffectSet, effects_from_names
 from vdps_hil.model.frames import compose_absolute, decompose_vehicle, dcm_global_to_vehicle
 from vdps_hil.model.params import CONFIG_DIR, IdentifiedParams, Vehicle
-from vdps_hil.sim.rollover import RolloverMonitor
+from vdps_hil.model.rollover import RolloverMonitor
 from vdps_hil.units import NS_PER_S
 
 DEFAULT_CONFIG_PATH = CONFIG_DIR / "prediction" / "default.toml"
@@ -431,7 +431,7 @@ class PredictionResult:
     ``rate_b_radps``, ``wheel_speed_radps``, ``normal_load_n`` (eq 14, per wheel), ``ltr``
     ((F_right - F_left) / sum, as the simulator's), ``roll_rate_v_radps`` (d phi_v / dt).
     Events (times after t0 [s], None when not predicted): ``tip_up_t_s`` (start of the 0.2 s
-    interval), ``point_of_no_return_t_s`` (``sim.rollover`` definitions on the predicted
+    interval), ``point_of_no_return_t_s`` (``model.rollover`` definitions on the predicted
     trajectory). ``stop_reason``: horizon, point_of_no_return, roll_limit, non_finite."""
 
     t0_ns: int

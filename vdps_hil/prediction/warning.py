@@ -2,7 +2,7 @@
 sends ``VDPS_Warning`` on CAN (paper section 7.3 "the dynamic prediction system can predict the
 rollover event"; the message layout is ``dbc/vdps.dbc`` / :mod:`vdps_hil.codecs.can_codec`).
 
-Rollover measures of one prediction (definitions of :mod:`vdps_hil.sim.rollover`, applied to the
+Rollover measures of one prediction (definitions of :mod:`vdps_hil.model.rollover`, applied to the
 predicted trajectory; never redefined here)
 -----------------------------------------------------------------------------------------------
 ::

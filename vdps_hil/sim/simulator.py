@@ -56,7 +56,7 @@ from vdps_hil.model.frames import decompose_vehicle
 from vdps_hil.model.params import Vehicle, load_vehicle
 from vdps_hil.units import NS_PER_S
 
-from .rollover import RolloverMonitor
+from vdps_hil.model.rollover import RolloverMonitor
 
 InputSource = Callable[[float, Sequence[float]], Inputs]
 """``source(t_s, x) -> Inputs``: an open-loop schedule or a closed-loop driver."""
