@@ -1,0 +1,564 @@
+"""The hardware-in-the-loop bench: the simulated vehicle on live wires, paced to the wall clock,
+the VDPS pipeline answering on CAN, a simulated ECU reacting, everything timed.
+
+::
+
+    Drive (truth simulator + sensor models + faults)                       SimulatorSide
+        |  CAN frames at their receive times, serial read chunks             (hil.simside)
+        v  paced: sent when the bench clock reaches them                     (hil.pacing)
+    [ CAN transport ] [ IMU pty 921600 Bd ] [ GNSS pty 115200 Bd ]         (hil.transports)
+        |                      |                     |
+    CanAdapter             ImuAdapter           NmeaAdapter                 PipelineNode
+        \\____________________  |  _________________/                       (hil.node)
+                             VdpsSystem.handle(sample)  -->  /est, VDPS_Warning
+                                                              |
+    Ecu  <----------------------- CAN -------------------------+            (hil.ecu)
+      |  --react: cut drive torque, brake (dead time, pressure ramp)
+      v
+    Simulator.set_input_override
+
+Processes: ``--can virtual`` (default) runs everything in this process (python-can's virtual
+bus: one process by definition); ``--can pty`` and ``--can tcp`` run the pipeline in a child
+process (``python -m vdps_hil.hil.child``) reached over a pseudo-terminal (slcan) or a
+loopback-only TCP socket (socketcand protocol); an interface string (``socketcan:vcan0``) opens
+that bus on both sides in this process. The child gets the device paths and the bench clock's
+start instant on its command line and stdin; it reports progress on stdout and leaves its
+results (cycle log, sent frames, counters, its part of the recording) in a work directory.
+
+End of a run: when the drive has ended and every item is sent, the bench waits until the
+pipeline has received as much as was sent (``drain_timeout_s`` at most), lets it finish what is
+queued and stops it. Lost data is counted per stream from the senders' and receivers' counts
+(and cross-checked by the sequence counters: CAN ``lost_frames``, IMU ``seq_gaps``).
+
+Results (``BenchResult.to_json``): the ``--json`` keys of ``vdps bench`` (``hil`` issue):
+``frames_sent``, ``frames_received``, ``lines_sent``, ``lines_received``, ``dropped``,
+``warning_latency_ms`` {p50, p99}, ``warning_lead_time_s``, ``warning_lead_to_tipup_s``,
+``rolled_over`` (the point of no return reached in this run), ``realtime_factor`` (simulated
+seconds per wall second achieved), ``late_sends``; plus details (IMU packets, pipeline keeps
+up, ECU actions, first warning, truth events, transport).
+
+The pipeline *keeps up* when nothing was lost and its slowest output cycle was out within
+``max_lag_s`` (default 0.25 s wall) of its input: a pipeline falling behind shows as a growing
+latency and, once the wires' buffers are full, as lost data.
+"""
+
+from __future__ import annotations
+
+import gc
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from vdps_hil.adapters.base import AdapterError
+from vdps_hil.record import schemas as S
+from vdps_hil.units import NS_PER_S
+
+from .ecu import ActuatorConfig, Ecu
+from .latency import CycleLog, cycle_latencies, latency_summary, lead_times, reference_events
+from .pacing import DEFAULT_LATE_TOLERANCE_S, BenchClock
+from .transports import PtySerialDevice, parse_transport
+
+__all__ = ["BenchConfig", "Bench", "BenchResult", "BenchError", "make_system", "model_for",
+           "IMU_PACKET_BYTES"]
+
+IMU_PACKET_BYTES = 47
+"""Bytes of one simulated Xsens MTData2 packet (``sim.wire``)."""
+
+
+class BenchError(RuntimeError):
+    """The bench could not run (one-line message)."""
+
+
+@dataclass
+class BenchConfig:
+    """What to run (``vdps bench`` options). Times [s]."""
+
+    scenario: str = "fishhook-suv"
+    vehicle: str | None = None
+    model: str | None = None
+    effects: tuple[str, ...] = ()
+    faults: tuple[str, ...] = ()
+    duration_s: float | None = None
+    speed: float = 1.0
+    can: str = "virtual"
+    sim_can: str | None = None
+    react: bool = False
+    output: str | None = None
+    seed: int = 0
+    profile: str | None = None
+    actuator: ActuatorConfig = field(default_factory=ActuatorConfig)
+    block_s: float = 0.01
+    lookahead_s: float = 0.02
+    late_tolerance_s: float = DEFAULT_LATE_TOLERANCE_S
+    drain_timeout_s: float = 3.0
+    max_lag_s: float = 0.25
+    switch_interval_s: float | None = 0.001
+    start_delay_s: float = 0.3
+
+
+def model_for(truth_name: str) -> str:
+    """The model vehicle file paired with a truth file (``suv-truth`` -> ``suv-model``)."""
+    stem = Path(truth_name).name
+    if stem.endswith(".toml"):
+        stem = stem[:-5]
+    if stem.endswith("-truth"):
+        return stem[:-6] + "-model"
+    raise BenchError(f"no model file paired with vehicle {truth_name!r}: give --model FILE")
+
+
+def make_system(model: str, profile):
+    """The VDPS pipeline for the bench: ``VdpsSystem`` with the model vehicle file and the
+    sensor profile's suspension rate and noise (a sensor's data sheet, not truth)."""
+    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.system import SystemConfig, VdpsSystem
+
+    vehicle = load_vehicle(model, "model")
+    cfg = SystemConfig.for_profile(profile.suspension.rate_hz, profile.suspension.sigma_m)
+    return VdpsSystem(vehicle, cfg)
+
+
+@dataclass
+class BenchResult:
+    """Everything a run measured (``to_json``: module docstring)."""
+
+    doc: dict
+    frames_on_bus: list = field(default_factory=list, repr=False)
+    truth_events: list = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        return self.doc
+
+    def __getitem__(self, key):
+        return self.doc[key]
+
+
+class Bench:
+    """One bench run (module docstring). ``run(status)`` returns a :class:`BenchResult`;
+    ``status(doc)`` (optional) gets a live status dict about four times a second."""
+
+    def __init__(self, config: BenchConfig | None = None):
+        from vdps_hil.sim.drive import CONFIG_ERRORS, DEFAULT_PROFILE, Drive
+
+        self.config = c = config or BenchConfig()
+        if not (math.isfinite(c.speed) and c.speed > 0):
+            raise BenchError(f"--speed must be a positive number, got {c.speed!r}")
+        try:
+            self.transport = parse_transport(c.can, c.sim_can)
+        except AdapterError as e:
+            raise BenchError(str(e)) from None
+        try:
+            self.drive = Drive(c.scenario, profile=c.profile or DEFAULT_PROFILE, seed=c.seed, vehicle=c.vehicle,
+                               effects=c.effects, faults=c.faults, duration_s=c.duration_s, block_s=c.block_s)
+        except CONFIG_ERRORS as e:
+            raise BenchError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
+        truth = c.vehicle or self.drive.scenario.raw.get("vehicle") or self.drive.vehicle.name
+        self.model = c.model or model_for(str(truth))
+
+    # ------------------------------------------------------------------------------------------
+    def run(self, status: Callable[[dict], None] | None = None) -> BenchResult:
+        c = self.config
+        old_switch = sys.getswitchinterval()
+        if c.switch_interval_s:
+            sys.setswitchinterval(c.switch_interval_s)
+        try:
+            return self._run(status)
+        finally:
+            sys.setswitchinterval(old_switch)
+
+    def _make_writer(self):
+        from vdps_hil.record.writer import RecordingWriter
+
+        c = self.config
+        if not c.output:
+            return None
+        try:
+            return RecordingWriter(c.output, metadata={"source": "vdps bench"},
+                                   content_hashes={"dbc.vdps": self.drive.dbc_path},
+                                   sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
+        except OSError as e:
+            raise BenchError(f"cannot write {c.output}: {e.strerror or e}") from None
+
+    def _run(self, status) -> BenchResult:
+        from .simside import SimulatorSide
+
+        c = self.config
+        drive = self.drive
+        reference = reference_events(drive) if c.react else None
+        can_dev = self.transport.make()
+        serial = {"imu": PtySerialDevice("imu"), "gnss": PtySerialDevice("gnss", fifo_bytes=4096)}
+        writer = None
+        work = None
+        try:
+            try:
+                can_dev.open()
+            except AdapterError as e:
+                raise BenchError(str(e)) from None
+            clock = BenchClock(c.speed)
+            ecu = Ecu(c.actuator, c.react)
+            cross = self.transport.cross_process
+            if cross:
+                work = Path(tempfile.mkdtemp(prefix="vdps-bench-"))
+                truth_path = work / "truth.mcap" if c.output else None
+                from vdps_hil.record.writer import RecordingWriter
+
+                writer = (RecordingWriter(truth_path, metadata={"source": "vdps bench"},
+                                          sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS) if truth_path else None)
+            else:
+                writer = self._make_writer()
+            lock = threading.Lock()
+
+            def on_truth(topic, t_ns, doc):
+                if writer is not None:
+                    with lock:
+                        writer.write_truth(topic, t_ns, doc)
+
+            def on_metadata(name, data):
+                if writer is not None:
+                    writer.add_metadata(name, data)
+
+            side = SimulatorSide(drive, can_dev, serial, clock, ecu, block_s=c.block_s, lookahead_s=c.lookahead_s,
+                                 late_tolerance_s=c.late_tolerance_s, on_truth=on_truth, on_metadata=on_metadata)
+            side.prepare()
+            side.start_receiver()
+            if cross:
+                pipe = _ChildPipeline(self, can_dev, serial, work)
+            else:
+                pipe = _LocalPipeline(self, can_dev, serial, clock, writer)
+            pipe.open()
+            gc.collect()
+            gc.freeze()  # what exists now is never scanned again: no long collections mid-run
+            mono0 = time.monotonic_ns() + int(c.start_delay_s * NS_PER_S)
+            clock.start(mono0)
+            pipe.start(mono0)
+            sim_thread = threading.Thread(target=self._sim_thread, args=(side,), name="bench-sim", daemon=True)
+            sim_thread.start()
+            t_status = 0.0
+            while not side.done.wait(0.05):
+                if status is not None and time.monotonic() - t_status >= 0.25:
+                    t_status = time.monotonic()
+                    status(self._status(side, pipe, clock))
+                if pipe.failed():
+                    break
+            sim_thread.join(timeout=10.0)
+            if side.error:
+                raise BenchError(f"simulator side failed: {side.error}")
+            side.flush()
+            self._drain(side, pipe)
+            pipe.stop()
+            side.stop_receiver()
+            if status is not None:
+                status(self._status(side, pipe, clock, final=True))
+            result = self._result(side, pipe, clock, ecu, reference)
+            if c.output:
+                pipe.finish_recording(result.doc, writer)
+            return result
+        finally:
+            gc.unfreeze()
+            for d in serial.values():
+                d.close()
+            can_dev.close()
+            if writer is not None and not writer.closed:
+                writer.close()
+            if work is not None:
+                shutil.rmtree(work, ignore_errors=True)
+
+    def _sim_thread(self, side) -> None:
+        try:
+            side.run()
+        except Exception:  # noqa: BLE001 - side.error has it; the bench raises it
+            pass
+
+    def _drain(self, side, pipe) -> None:
+        sent = side.sent_counts()
+        imu_bytes = side.serial["imu"].log.total
+        gnss_bytes = side.serial["gnss"].log.total
+        t_end = time.monotonic() + self.config.drain_timeout_s
+        while time.monotonic() < t_end:
+            r = pipe.received()
+            if (r.get("can_frames", 0) >= sent["frames_sent"] and r.get("imu_bytes", 0) >= imu_bytes
+                    and r.get("gnss_bytes", 0) >= gnss_bytes):
+                break
+            if pipe.failed():
+                break
+            time.sleep(0.01)
+            side._serve_ecu()
+
+    # ------------------------------------------------------------------------------------------
+    def _status(self, side, pipe, clock, final: bool = False) -> dict:
+        s = side.sent_counts()
+        r = pipe.received()
+        truth = side.sink.last_truth or {}
+        ecu = side.ecu
+        t_s = clock.now_ns() / NS_PER_S if not final else side.session.t_ns / NS_PER_S
+        return {"t_s": max(0.0, min(t_s, side.session.t_ns / NS_PER_S)), "duration_s": self.drive.duration_s,
+                "frames_sent": s["frames_sent"], "frames_received": r.get("can_frames", 0),
+                "imu_bytes_sent": side.serial["imu"].log.total, "imu_bytes_received": r.get("imu_bytes", 0),
+                "late_sends": side.pacer.late_sends, "roll_deg": math.degrees(truth.get("roll_v_rad", 0.0)),
+                "speed_mps": truth.get("speed_mps", math.nan),
+                "warning_level": ecu.max_level,
+                "first_warning_t_s": None if ecu.first_warning_ns is None else ecu.first_warning_ns / NS_PER_S,
+                "brake_fraction": ecu.brake_fraction(side.session.t_ns / NS_PER_S),
+                "events": [e["kind"] for e in side.sink.events if e.get("kind") in ("tip_up", "point_of_no_return")],
+                "final": final}
+
+    def _result(self, side, pipe, clock, ecu, reference) -> BenchResult:
+        c = self.config
+        p = pipe.results()
+        sent = side.sent_counts()
+        counters = p["counters"]
+        # --- data on the wires
+        imu_packets_sent = side.serial["imu"].bytes_in // IMU_PACKET_BYTES
+        imu_packets_received = counters["imu"]["packets"]
+        lines_sent = side.serial["gnss"].lines
+        lines_received = counters["gnss"]["lines"]
+        frames_generated = sent["frames_sent"] + sent["frames_dropped_at_device"]
+        frames_received = counters["can"]["frames"]
+        lost = {"can_frames": max(frames_generated - frames_received, counters["can"]["lost_frames"]),
+                "imu_packets": max(imu_packets_sent - imu_packets_received, counters["imu"]["seq_gaps"]),
+                "gnss_lines": max(lines_sent - lines_received, 0)}
+        dropped = sum(lost.values()) + counters["subscription_overflows"]
+        # --- latency
+        logs = {"can": side.can.log, "imu": side.serial["imu"].log, "gnss": side.serial["gnss"].log}
+        bus_times = [m for m, _ in side.frames_from_pipeline]
+        lat = cycle_latencies(p["cycles"], logs, bus_times if len(bus_times) == p["frames_sent"] else None)
+        ls = latency_summary(lat)
+        # --- lead times on the bus (the ECU's receptions), bench time
+        frames_on_bus = []
+        for m, msg in side.frames_from_pipeline:
+            msg.timestamp = clock.t_of(m) / NS_PER_S
+            frames_on_bus.append(msg)
+        events = [e for e in side.sink.events if e.get("kind") in ("tip_up", "point_of_no_return")]
+        lt = lead_times(frames_on_bus, events, reference)
+        rolled = any(e.get("kind") == "point_of_no_return" for e in events)
+        pace = side.pacer.stats()
+        wall = side.wall_s
+        sim_s = side.sim_s
+        lat_max = ls["warning_latency_ms"]["max"]
+        keeps_up = dropped == 0 and (not math.isfinite(lat_max) or lat_max <= c.max_lag_s * 1e3)
+        ecu_sum = ecu.summary()
+        doc = {
+            "scenario": self.drive.scenario.name, "vehicle": self.drive.vehicle.name, "model": self.model,
+            "profile": self.drive.profile.name, "seed": self.drive.seed, "transport": self.transport.name,
+            "can": side.can.describe(), "speed": c.speed, "react": c.react,
+            "effects": list(self.drive.effect_set.names), "faults": [str(f) for f in c.faults],
+            "duration_s": sim_s, "wall_time_s": wall,
+            "realtime_factor": sim_s / wall if wall > 0 else math.nan,
+            "frames_sent": frames_generated, "frames_received": frames_received,
+            "lines_sent": lines_sent, "lines_received": lines_received,
+            "imu_packets_sent": imu_packets_sent, "imu_packets_received": imu_packets_received,
+            "dropped": dropped, "lost": lost, "seq_counters": {
+                "can_lost_frames": counters["can"]["lost_frames"], "imu_seq_gaps": counters["imu"]["seq_gaps"]},
+            "dropped_at_device": {"can_frames": sent["frames_dropped_at_device"],
+                                  "imu_chunks": sent["imu_dropped_at_device"],
+                                  "gnss_chunks": sent["gnss_dropped_at_device"]},
+            "rejected": {"can": counters["can"]["rejected"], "imu": counters["imu"]["rejected"],
+                         "gnss": counters["gnss"]["rejected"]},
+            "warning_latency_ms": {k: ls["warning_latency_ms"][k] for k in ("p50", "p99", "max")},
+            "warning_frame_latency_ms": {k: ls["warning_frame_latency_ms"][k] for k in ("p50", "p99", "max")},
+            "output_cycles": ls["cycles"], "output_cycles_unmatched": ls["cycles_unmatched"],
+            "warning_frames": p["frames_sent"], "warning_frames_on_bus": len(frames_on_bus),
+            **lt,
+            "rolled_over": rolled, "truth_events": events,
+            "reference_events": [e for e in (reference or []) if e.get("kind") in ("tip_up", "point_of_no_return")],
+            "late_sends": pace["late_sends"], "sends": pace["sends"], "late_tolerance_ms": pace["late_tolerance_ms"],
+            "send_lateness_ms": pace["lateness_ms"],
+            "pipeline_keeps_up": keeps_up, "max_lag_s": c.max_lag_s,
+            "ecu": ecu_sum, "pipeline": {"outputs": p["outputs"], "errors": p["errors"]},
+            "stop_reason": side.session.sim.stop_reason or "duration",
+            "output": c.output,
+        }
+        return BenchResult(doc, frames_on_bus, events)
+
+
+# ---------------------------------------------------------------------------------------------
+# the pipeline in this process or in a child
+# ---------------------------------------------------------------------------------------------
+class _LocalPipeline:
+    def __init__(self, bench: Bench, can_dev, serial, clock, writer):
+        from .node import PipelineNode
+
+        try:
+            system = make_system(bench.model, bench.drive.profile)
+        except (ValueError, OSError) as e:
+            raise BenchError(str(e).splitlines()[0]) from None
+        self.node = PipelineNode(system, can_dev.pipeline_spec, serial["imu"].port, serial["gnss"].port, clock,
+                                 writer=writer)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._error = ""
+
+    def open(self) -> None:
+        try:
+            self.node.open()
+        except AdapterError as e:
+            raise BenchError(str(e)) from None
+
+    def start(self, mono0: int) -> None:
+        self._thread = threading.Thread(target=self._run, name="bench-pipeline", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            self.node.run(self._stop)
+        except Exception as e:  # noqa: BLE001 - reported by the bench
+            self._error = f"{type(e).__name__}: {e}"
+
+    def failed(self) -> bool:
+        return bool(self._error)
+
+    def received(self) -> dict:
+        return self.node.received_counts()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=30.0)
+        if self._error:
+            raise BenchError(f"pipeline failed: {self._error}")
+
+    def results(self) -> dict:
+        n = self.node
+        return {"cycles": n.cycles, "frames_sent": len(n.frames_sent), "counters": n.counters(),
+                "outputs": dict(n.outputs), "errors": list(n.errors)}
+
+    def finish_recording(self, doc: dict, writer) -> None:
+        self.node.finish_recording({"bench": doc})
+        writer.add_metadata("hil.bench", {"result": json.dumps(S.clean_json(doc), sort_keys=True)})
+
+
+class _ChildPipeline:
+    """The pipeline in ``python -m vdps_hil.hil.child`` (module docstring)."""
+
+    def __init__(self, bench: Bench, can_dev, serial, work: Path):
+        self.bench = bench
+        self.work = work
+        c = bench.config
+        self.part = work / "pipeline.mcap" if c.output else None
+        cmd = [sys.executable, "-m", "vdps_hil.hil.child", "--can-spec", can_dev.pipeline_spec,
+               "--imu-port", serial["imu"].port, "--gnss-port", serial["gnss"].port, "--model", bench.model,
+               "--profile", bench.drive.profile.name, "--speed", repr(c.speed), "--work", str(work)]
+        if self.part is not None:
+            cmd += ["--output", str(self.part)]
+        if c.switch_interval_s:
+            cmd += ["--switch-interval", repr(c.switch_interval_s)]
+        env = dict(os.environ)
+        repo = str(Path(__file__).resolve().parents[2])
+        env["PYTHONPATH"] = repo + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        self._err_path = work / "child.err"
+        self._err = open(self._err_path, "w")  # a file, never a pipe that could fill and block the child
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._err,
+                                     env=env, text=True, bufsize=1)
+        self._progress: dict = {}
+        self._lines: list[dict] = []
+        self._ready = threading.Event()
+        self._done = threading.Event()
+        self._reader = threading.Thread(target=self._read, name="bench-child-out", daemon=True)
+        self._reader.start()
+        self.can_dev = can_dev
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            try:
+                doc = json.loads(line)
+            except ValueError:
+                continue
+            if doc.get("ready"):
+                self._ready.set()
+            if "received" in doc:
+                self._progress = doc["received"]
+            if doc.get("done"):
+                self._done.set()
+            self._lines.append(doc)
+        self._ready.set()
+        self._done.set()
+
+    def open(self) -> None:
+        if not self._ready.wait(60.0) or self.proc.poll() is not None:
+            err = self._stderr()
+            raise BenchError(f"pipeline process did not start: {err}")
+        if any(d.get("error") for d in self._lines):
+            raise BenchError(f"pipeline process: {next(d['error'] for d in self._lines if d.get('error'))}")
+
+    def _stderr(self) -> str:
+        try:
+            if self.proc.poll() is None:
+                self.proc.kill()
+                self.proc.wait(10.0)
+            err = self._err_path.read_text(errors="replace")
+        except (OSError, ValueError, subprocess.TimeoutExpired):
+            err = ""
+        lines = [ln for ln in (err or "").strip().splitlines() if ln.strip()]
+        return lines[-1] if lines else f"exit status {self.proc.poll()}"
+
+    def start(self, mono0: int) -> None:
+        self._send(f"go {mono0}")
+
+    def _send(self, text: str) -> None:
+        try:
+            self.proc.stdin.write(text + "\n")
+            self.proc.stdin.flush()
+        except (OSError, ValueError):
+            pass
+
+    def failed(self) -> bool:
+        return self.proc.poll() is not None and not self._done.is_set()
+
+    def received(self) -> dict:
+        return dict(self._progress)
+
+    def stop(self) -> None:
+        self._send("stop")
+        if not self._done.wait(60.0):
+            self.proc.kill()
+            raise BenchError("pipeline process did not stop")
+        try:
+            self.proc.wait(30.0)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+        self._err.close()
+        if self.proc.returncode != 0:
+            raise BenchError(f"pipeline process failed: {self._stderr()}")
+
+    def results(self) -> dict:
+        d = np.load(self.work / "cycles.npz")
+        doc = json.loads((self.work / "result.json").read_text())
+        err = [ln for ln in self._err_path.read_text(errors="replace").splitlines() if ln.strip()]
+        return {"cycles": CycleLog.from_arrays(d), "frames_sent": doc["frames_sent"], "counters": doc["counters"],
+                "outputs": doc["outputs"], "errors": doc["errors"] + [f"stderr: {ln}" for ln in err[-5:]]}
+
+    def finish_recording(self, doc: dict, writer) -> None:
+        """Merge the child's recording (raw as received, /decoded, /est) with the truth."""
+        from vdps_hil.record.reader import RecordingReader
+        from vdps_hil.record.writer import RecordingWriter
+
+        c = self.bench.config
+        writer.close()
+        out = RecordingWriter(c.output, metadata={"source": "vdps bench"},
+                              content_hashes={"dbc.vdps": self.bench.drive.dbc_path},
+                              sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
+        try:
+            for path in (self.part, writer.path):
+                with RecordingReader(path) as r:
+                    topics = r.topics()
+                    for name, md in r.metadata().items():
+                        if name != S.METADATA_NAME:
+                            out.add_metadata(name, md)
+                    for rec in r.iter_records():
+                        doc_ = json.loads(rec.data)
+                        out.write_json(rec.topic, topics[rec.topic].schema, rec.t_ns, doc_,
+                                       wall_time_ns=rec.log_time_ns, channel_metadata=r.channel_metadata(rec.topic))
+            out.add_metadata("hil.bench", {"result": json.dumps(S.clean_json(doc), sort_keys=True)})
+        finally:
+            out.close()
+

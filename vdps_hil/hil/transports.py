@@ -1,0 +1,676 @@
+"""Bench transports: the wires between the simulated vehicle and the pipeline.
+
+The simulator's end of every wire is a *device side* (it plays the sensors and, on CAN, the
+bus); the pipeline's end is what a real logger would open: a python-can interface string for
+:class:`~vdps_hil.adapters.can_adapter.CanAdapter` and serial port paths for the IMU and GNSS
+adapters. Serial always goes through real pseudo-terminals (``os.openpty``): the pipeline's
+``ImuAdapter``/``NmeaAdapter`` open ``/dev/pts/N`` exactly as they would open
+``/dev/ttyUSB0``.
+
+CAN transports (``--can SPEC``)
+-------------------------------
+==================  ====================================================================  =========
+SPEC                simulator side / pipeline side                                         process
+==================  ====================================================================  =========
+``virtual``         python-can ``virtual`` bus on a fresh channel / ``virtual:<channel>``  one
+(default)
+``pty``             the simulator is an slcan (Lawicel) USB-CAN adapter on a pty: frames  two
+                    go out as ``tIIILDD..\\r`` lines, the pipeline's ``t080..`` transmit
+                    commands come back (answered ``z\\r``) / ``slcan:/dev/pts/N``
+``tcp``             the simulator is a socketcand server bound to 127.0.0.1 (an ephemeral  two
+                    port; loopback only) / ``socketcand:vdps,host=127.0.0.1,port=P``
+``IFACE:CHANNEL``   both sides open ``IFACE:CHANNEL[,key=value..]`` through python-can    one
+[,key=value...]     (``socketcan:vcan0``, ``virtual:NAME``); with ``sim_spec`` the
+                    simulator opens another interface (two adapters wired together:
+                    ``pcan:PCAN_USBBUS1`` for the pipeline, ``kvaser:0`` for the simulator)
+==================  ====================================================================  =========
+
+``socketcan:vcan0`` needs a Linux kernel with vcan (``ip link add dev vcan0 type vcan; ip
+link set up vcan0``); this project's CI machine has none, so that row is documented, not
+tested. Two SocketCAN sockets on one interface see each other's frames (the kernel's loopback),
+which is what makes the one-interface form work.
+
+Device-side behaviour (all transports)
+--------------------------------------
+* Writes never block the simulator: a pty or socket that cannot take more keeps the rest in a
+  device FIFO (``fifo_bytes``, default 4 KiB, a USB-serial adapter's buffer) and, when that is
+  full too, drops the whole new message and counts it (``dropped``) -- lost data shows up as
+  sequence gaps at the receiver, as on a real link.
+* Every accepted write is logged as (cumulative count, monotonic time) in a :class:`SendLog`:
+  the latency measurement (``hil.latency``) finds the time a given frame or byte went onto the
+  wire from its index.
+
+Symbols: cumulative counts (frames, bytes) are 0-based item indices + 1; times are monotonic
+host ns (``time.monotonic_ns``).
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import itertools
+import os
+import pty
+import select
+import socket
+import threading
+import time
+import tty
+from typing import Sequence
+
+import numpy as np
+
+from vdps_hil.adapters.base import AdapterError
+
+__all__ = ["SendLog", "PtySerialDevice", "CanDeviceSide", "VirtualCanDevice", "SlcanPtyDevice",
+           "SocketcandServer", "ExternalCanDevice", "TransportSpec", "parse_transport",
+           "NAMED_TRANSPORTS", "listening_sockets"]
+
+NAMED_TRANSPORTS = ("virtual", "pty", "tcp")
+"""Transport names of ``--can`` besides python-can interface strings (module docstring)."""
+
+_channel_ids = itertools.count()
+
+
+class SendLog:
+    """(cumulative count, monotonic ns) per accepted write: ``time_of(i)`` is the send time of
+    item ``i`` (0-based: the i-th frame, or the byte at offset i of a serial stream)."""
+
+    def __init__(self):
+        self._cum: list[int] = []
+        self._t: list[int] = []
+        self.total = 0
+
+    def add(self, n: int, mono_ns: int) -> None:
+        if n > 0:
+            self.total += n
+            self._cum.append(self.total)
+            self._t.append(mono_ns)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.asarray(self._cum, dtype=np.int64), np.asarray(self._t, dtype=np.int64)
+
+    def time_of(self, index) -> np.ndarray:
+        """Send time of items ``index`` (array); -1 where the item was never sent."""
+        cum, t = self.arrays()
+        idx = np.asarray(index, dtype=np.int64)
+        k = np.searchsorted(cum, idx, side="right")
+        out = np.full(idx.shape, -1, dtype=np.int64)
+        ok = (k < len(cum)) & (idx >= 0)
+        out[ok] = t[k[ok]]
+        return out
+
+
+def _nonblocking(fd: int) -> None:
+    fl = fcntl.fcntl(fd, fcntl.F_GETFL)
+    fcntl.fcntl(fd, fcntl.F_SETFL, fl | os.O_NONBLOCK)
+
+
+class _Fifo:
+    """A non-blocking writer with a device FIFO (module docstring). ``write_fn(bytes) -> n``
+    writes what the OS takes (raises BlockingIOError when nothing)."""
+
+    def __init__(self, write_fn, fifo_bytes: int):
+        self._write = write_fn
+        self._lock = threading.Lock()
+        self.fifo_bytes = int(fifo_bytes)
+        self.pending = bytearray()
+        self.dropped = 0
+        self.dropped_bytes = 0
+        self.log = SendLog()
+
+    def pump(self) -> None:
+        with self._lock:
+            self._pump()
+
+    def _pump(self) -> None:
+        while self.pending:
+            try:
+                n = self._write(bytes(self.pending))
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as e:
+                if e.errno in (errno.EAGAIN, errno.EWOULDBLOCK):
+                    return
+                raise
+            if not n:
+                return
+            self.log.add(n, time.monotonic_ns())
+            del self.pending[:n]
+
+    def send(self, msg: bytes) -> bool:
+        """Queue one whole message; False (dropped, counted) when the FIFO cannot take it."""
+        with self._lock:
+            if self.pending:
+                self._pump()
+            if len(self.pending) + len(msg) > self.fifo_bytes and self.pending:
+                self.dropped += 1
+                self.dropped_bytes += len(msg)
+                return False
+            self.pending += msg
+            self._pump()
+            return True
+
+
+class PtySerialDevice:
+    """The device end of a pseudo-terminal (raw mode, non-blocking). ``port`` is the path the
+    pipeline opens. ``write(data)`` queues one message (a read chunk of the simulated device),
+    counts what was accepted (``log``, byte offsets) and what was dropped. The slave end stays
+    open on our side so the pty survives the pipeline opening and closing it."""
+
+    def __init__(self, name: str, fifo_bytes: int = 4096):
+        self.name = name
+        self.master, self.slave = pty.openpty()
+        tty.setraw(self.master)
+        tty.setraw(self.slave)
+        _nonblocking(self.master)
+        self.port = os.ttyname(self.slave)
+        self._fifo = _Fifo(lambda b: os.write(self.master, b), fifo_bytes)
+        self.messages = 0
+        self.lines = 0
+        self.bytes_in = 0
+
+    @property
+    def log(self) -> SendLog:
+        return self._fifo.log
+
+    @property
+    def dropped(self) -> int:
+        return self._fifo.dropped
+
+    @property
+    def pending_bytes(self) -> int:
+        return len(self._fifo.pending)
+
+    def write(self, data: bytes) -> bool:
+        self.messages += 1
+        self.bytes_in += len(data)
+        self.lines += data.count(b"\n")
+        return self._fifo.send(data)
+
+    def pump(self) -> None:
+        self._fifo.pump()
+
+    def read(self, timeout_s: float = 0.0) -> bytes:
+        """What the pipeline wrote to the device (commands); waits up to ``timeout_s``."""
+        try:
+            if timeout_s > 0:
+                r, _, _ = select.select([self.master], [], [], timeout_s)
+                if not r:
+                    return b""
+            return os.read(self.master, 65536)
+        except (BlockingIOError, InterruptedError):
+            return b""
+        except OSError:
+            return b""
+
+    def close(self) -> None:
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+# ---------------------------------------------------------------------------------------------
+# CAN device sides
+# ---------------------------------------------------------------------------------------------
+class CanDeviceSide:
+    """The simulator's end of the CAN bus.
+
+    ``send_frames(ids, dlcs, data)``: frames in order (``data`` (N, 8) uint8, the first DLC bytes
+    of each row); returns how many were accepted (the rest dropped and counted).
+    ``poll(timeout_s)``: frames the pipeline sent since the last call (waiting up to
+    ``timeout_s`` for the first), as ``[(mono_ns, can.Message)]`` stamped on arrival.
+    ``pipeline_spec``: the interface string the pipeline's CanAdapter opens.
+    ``in_process``: the pipeline must run in this process (python-can's virtual bus)."""
+
+    kind = "?"
+    in_process = False
+    pipeline_spec = ""
+
+    def __init__(self):
+        self.log = SendLog()
+        self.dropped = 0
+        self.frames_received = 0
+
+    def open(self) -> None:
+        pass
+
+    def send_frames(self, ids: Sequence[int], dlcs: Sequence[int], data: np.ndarray) -> int:
+        raise NotImplementedError
+
+    def poll(self, timeout_s: float = 0.0) -> list:
+        return []
+
+    def pump(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+    def describe(self) -> dict:
+        return {"kind": self.kind, "pipeline_spec": self.pipeline_spec, "in_process": self.in_process}
+
+
+def _message(aid: int, dlc: int, payload: bytes, *, rx: bool = True):
+    import can
+
+    return can.Message(arbitration_id=aid, dlc=dlc, data=payload, is_extended_id=False, is_rx=rx,
+                       check=False)
+
+
+class _PythonCanDevice(CanDeviceSide):
+    """A device side that is itself a python-can bus (virtual, socketcan, hardware)."""
+
+    def __init__(self):
+        super().__init__()
+        self.bus = None
+
+    def send_frames(self, ids, dlcs, data) -> int:
+        import can
+
+        raw = np.ascontiguousarray(data, dtype=np.uint8).tobytes()
+        bus = self.bus
+        n = 0
+        for j, (aid, dlc) in enumerate(zip(ids, dlcs)):
+            try:
+                bus.send(_message(aid, dlc, raw[8 * j:8 * j + dlc]), timeout=0.0)
+            except (can.CanOperationError, OSError):
+                self.dropped += 1
+                continue
+            n += 1
+        self.log.add(n, time.monotonic_ns())
+        return n
+
+    def poll(self, timeout_s: float = 0.0) -> list:
+        out = []
+        bus = self.bus
+        timeout = timeout_s
+        while True:
+            msg = bus.recv(timeout)
+            timeout = 0.0
+            if msg is None:
+                break
+            out.append((time.monotonic_ns(), msg))
+        self.frames_received += len(out)
+        return out
+
+    def close(self) -> None:
+        if self.bus is not None:
+            try:
+                self.bus.shutdown()
+            finally:
+                self.bus = None
+
+
+class VirtualCanDevice(_PythonCanDevice):
+    """python-can's ``virtual`` bus on a fresh channel (``vdps-hil-<pid>-<n>``): reliable,
+    ordered, unbounded queues; the pipeline must be in this process."""
+
+    kind = "virtual"
+    in_process = True
+
+    def __init__(self, channel: str | None = None):
+        super().__init__()
+        self.channel = channel or f"vdps-hil-{os.getpid()}-{next(_channel_ids)}"
+        self.pipeline_spec = f"virtual:{self.channel}"
+
+    def open(self) -> None:
+        import can
+
+        self.bus = can.Bus(interface="virtual", channel=self.channel)
+
+
+class ExternalCanDevice(_PythonCanDevice):
+    """Any python-can interface string for the simulator (``sim_spec``) while the pipeline opens
+    ``spec`` (module docstring)."""
+
+    kind = "external"
+
+    def __init__(self, spec: str, sim_spec: str | None = None):
+        super().__init__()
+        from vdps_hil.adapters.can_adapter import parse_can_spec
+
+        self.pipeline_spec = spec
+        self.sim_spec = sim_spec or spec
+        parse_can_spec(spec)
+        self._iface, self._channel, self._kw = parse_can_spec(self.sim_spec)
+        self.in_process = self._iface == "virtual"
+
+    def open(self) -> None:
+        import can
+
+        try:
+            self.bus = can.Bus(interface=self._iface, channel=self._channel, **self._kw)
+        except (can.CanError, OSError, ValueError, TypeError, ImportError) as e:
+            msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise AdapterError(f"bench CAN {self.sim_spec}: cannot open: {msg}") from None
+
+    def describe(self) -> dict:
+        return {**super().describe(), "sim_spec": self.sim_spec}
+
+
+def _parse_slcan_line(line: bytes):
+    """A ``t``/``T`` transmit command -> can.Message, else None."""
+    try:
+        s = line.decode("ascii")
+        if s[:1] == "t":
+            aid, dlc, off = int(s[1:4], 16), int(s[4]), 5
+        elif s[:1] == "T":
+            aid, dlc, off = int(s[1:9], 16), int(s[9]), 10
+        else:
+            return None
+        data = bytes.fromhex(s[off:off + 2 * dlc])
+        if len(data) != dlc or dlc > 8:
+            return None
+        import can
+
+        return can.Message(arbitration_id=aid, data=data, dlc=dlc, is_extended_id=s[0] == "T",
+                           is_rx=True, check=False)
+    except (ValueError, IndexError, UnicodeDecodeError):
+        return None
+
+
+class SlcanPtyDevice(CanDeviceSide):
+    """The simulator as an slcan (Lawicel) USB-CAN adapter on a pseudo-terminal.
+
+    To the host: every received frame as ``tIIIL<hex>\\r`` (the format python-can's slcan
+    interface parses); answers to commands (``O``, ``C``, ``S6``, ``L`` ...) ``\\r``; a
+    transmit command ``tIIIL<hex>\\r`` is answered ``z\\r`` and handed to :meth:`poll` (the frame
+    went onto the bus). Malformed command lines are counted ``bad_commands``."""
+
+    kind = "pty"
+
+    def __init__(self, fifo_bytes: int = 4096):
+        super().__init__()
+        self.dev = PtySerialDevice("can", fifo_bytes)
+        self.pipeline_spec = f"slcan:{self.dev.port},sleep_after_open=0"
+        self._rx = bytearray()
+        self.bad_commands = 0
+
+    def send_frames(self, ids, dlcs, data) -> int:
+        hexes = np.ascontiguousarray(data, dtype=np.uint8).tobytes().hex().upper().encode()
+        blob = b"".join([b"t%03X%d%s\r" % (aid, dlc, hexes[16 * j:16 * j + 2 * dlc])
+                         for j, (aid, dlc) in enumerate(zip(ids, dlcs))])
+        n = len(ids)
+        if not n:
+            return 0
+        if not self.dev._fifo.send(blob):  # the frames of one instant go together
+            self.dropped += n
+            return 0
+        self.log.add(n, time.monotonic_ns())
+        return n
+
+    def pump(self) -> None:
+        self.dev.pump()
+
+    def poll(self, timeout_s: float = 0.0) -> list:
+        data = self.dev.read(timeout_s)
+        if not data:
+            return []
+        now = time.monotonic_ns()
+        buf = self._rx
+        buf += data
+        out = []
+        replies = bytearray()
+        while True:
+            i = buf.find(b"\r")
+            if i < 0:
+                break
+            line = bytes(buf[:i])
+            del buf[:i + 1]
+            if line[:1] in (b"t", b"T"):
+                msg = _parse_slcan_line(line)
+                if msg is None:
+                    self.bad_commands += 1
+                    replies += b"\x07"
+                else:
+                    out.append((now, msg))
+                    replies += b"z\r"
+            else:
+                replies += b"\r"
+        if len(buf) > 4096:
+            del buf[:]
+            self.bad_commands += 1
+        if replies:
+            self.dev._fifo.send(bytes(replies))
+        self.frames_received += len(out)
+        return out
+
+    def close(self) -> None:
+        self.dev.close()
+
+    def describe(self) -> dict:
+        return {**super().describe(), "port": self.dev.port}
+
+
+class SocketcandServer(CanDeviceSide):
+    """The simulator as a socketcand server (the ASCII protocol python-can's ``socketcand``
+    interface speaks), listening on 127.0.0.1 only, on an ephemeral port, for one client.
+
+    Handshake: ``< hi >``, then ``< open CHANNEL >`` -> ``< ok >``, ``< rawmode >`` -> ``< ok >``.
+    Frames to the client: ``< frame III SECS.USECS HEX >``; from the client: ``< send III L B0 B1
+    .. >`` (handed to :meth:`poll`). The accept and the handshake run in a thread; frames sent
+    before a client is in raw mode are kept (up to the FIFO) and go out when it is."""
+
+    kind = "tcp"
+    HOST = "127.0.0.1"
+
+    def __init__(self, channel: str = "vdps", fifo_bytes: int = 65536):
+        super().__init__()
+        self.channel = channel
+        self._lsock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self._lsock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self._lsock.bind((self.HOST, 0))
+        self._lsock.listen(1)
+        self.port = self._lsock.getsockname()[1]
+        self.pipeline_spec = f"socketcand:{channel},host={self.HOST},port={self.port},tcp_tune=true"
+        self._conn: socket.socket | None = None
+        self._ready = threading.Event()
+        self._closed = False
+        self._pre = bytearray()
+        self._fifo: _Fifo | None = None
+        self._fifo_bytes = int(fifo_bytes)
+        self._rx = bytearray()
+        self.bad_commands = 0
+        self.handshake_error = ""
+        self._thread = threading.Thread(target=self._accept, name="socketcand-accept", daemon=True)
+        self._thread.start()
+
+    def _accept(self) -> None:
+        try:
+            self._lsock.settimeout(60.0)
+            conn, _ = self._lsock.accept()
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            conn.settimeout(10.0)
+            conn.sendall(b"< hi >")
+            for expect, reply in ((b"< open ", b"< ok >"), (b"< rawmode >", b"< ok >")):
+                got = conn.recv(256)
+                if not got.startswith(expect):
+                    self.handshake_error = f"expected {expect!r}, got {got[:40]!r}"
+                    conn.close()
+                    return
+                conn.sendall(reply)
+            conn.setblocking(False)
+            self._conn = conn
+            self._fifo = _Fifo(conn.send, self._fifo_bytes)
+            self._ready.set()
+        except OSError as e:
+            if not self._closed:
+                self.handshake_error = str(e) or type(e).__name__
+
+    def wait_client(self, timeout_s: float) -> bool:
+        return self._ready.wait(timeout_s)
+
+    def send_frames(self, ids, dlcs, data) -> int:
+        raw = np.ascontiguousarray(data, dtype=np.uint8).tobytes()
+        hexes = raw.hex().encode()
+        now = time.time()
+        stamp = b"%d.%06d" % (int(now), int((now % 1.0) * 1e6))
+        blob = b"".join([b"< frame %03X %s %s >" % (aid, stamp, hexes[16 * j:16 * j + 2 * dlc])
+                         for j, (aid, dlc) in enumerate(zip(ids, dlcs))])
+        n = len(ids)
+        if not n:
+            return 0
+        fifo = self._fifo
+        if fifo is None:  # no client yet: keep (bounded), as an adapter's buffer would
+            if len(self._pre) + len(blob) > self._fifo_bytes:
+                self.dropped += n
+                return 0
+            self._pre += blob
+        else:
+            if self._pre:
+                fifo.send(bytes(self._pre))
+                self._pre.clear()
+            if not fifo.send(blob):
+                self.dropped += n
+                return 0
+        self.log.add(n, time.monotonic_ns())
+        return n
+
+    def pump(self) -> None:
+        if self._fifo is not None:
+            if self._pre:
+                self._fifo.send(bytes(self._pre))
+                self._pre.clear()
+            self._fifo.pump()
+
+    def poll(self, timeout_s: float = 0.0) -> list:
+        conn = self._conn
+        if conn is None:
+            if timeout_s > 0:
+                self._ready.wait(timeout_s)
+            return []
+        try:
+            r, _, _ = select.select([conn], [], [], timeout_s)
+            data = conn.recv(65536) if r else b""
+        except (BlockingIOError, InterruptedError):
+            data = b""
+        except OSError:
+            data = b""
+        if not data:
+            return []
+        now = time.monotonic_ns()
+        buf = self._rx
+        buf += data
+        out = []
+        while True:
+            a = buf.find(b"<")
+            b = buf.find(b">", a + 1) if a >= 0 else -1
+            if a < 0 or b < 0:
+                break
+            body = bytes(buf[a + 1:b]).split()
+            del buf[:b + 1]
+            msg = None
+            if len(body) >= 3 and body[0] == b"send":
+                try:
+                    aid, dlc = int(body[1], 16), int(body[2], 16)
+                    payload = bytes(int(x, 16) for x in body[3:3 + dlc])
+                    if len(payload) == dlc <= 8:
+                        msg = _message(aid, dlc, payload)
+                except ValueError:
+                    msg = None
+            if msg is None:
+                self.bad_commands += 1
+            else:
+                out.append((now, msg))
+        if len(buf) > 4096:
+            del buf[:]
+            self.bad_commands += 1
+        self.frames_received += len(out)
+        return out
+
+    def close(self) -> None:
+        self._closed = True
+        for s in (self._conn, self._lsock):
+            if s is not None:
+                try:
+                    s.close()
+                except OSError:
+                    pass
+
+    def describe(self) -> dict:
+        return {**super().describe(), "listen": f"{self.HOST}:{self.port}"}
+
+
+# ---------------------------------------------------------------------------------------------
+# --can SPEC
+# ---------------------------------------------------------------------------------------------
+class TransportSpec:
+    """A parsed ``--can`` value: ``name`` (``virtual``, ``pty``, ``tcp`` or ``external``),
+    ``spec``/``sim_spec`` for python-can interface strings; ``make()`` builds the device side;
+    ``cross_process``: the pipeline runs in a child process."""
+
+    def __init__(self, name: str, spec: str | None = None, sim_spec: str | None = None):
+        self.name, self.spec, self.sim_spec = name, spec, sim_spec
+
+    @property
+    def cross_process(self) -> bool:
+        return self.name in ("pty", "tcp")
+
+    def make(self) -> CanDeviceSide:
+        if self.name == "virtual":
+            return VirtualCanDevice()
+        if self.name == "pty":
+            return SlcanPtyDevice()
+        if self.name == "tcp":
+            return SocketcandServer()
+        return ExternalCanDevice(self.spec, self.sim_spec)
+
+    def __repr__(self) -> str:
+        return f"TransportSpec({self.name!r}, {self.spec!r}, {self.sim_spec!r})"
+
+
+def parse_transport(spec: str | None, sim_spec: str | None = None) -> TransportSpec:
+    """``--can`` value -> :class:`TransportSpec`; AdapterError (one line) when malformed."""
+    from vdps_hil.adapters.can_adapter import parse_can_spec
+
+    s = (spec or "virtual").strip()
+    if s in NAMED_TRANSPORTS:
+        if sim_spec:
+            raise AdapterError(f"--sim-can applies to an interface string, not to --can {s}")
+        return TransportSpec(s)
+    parse_can_spec(s)
+    if sim_spec:
+        parse_can_spec(sim_spec)
+    return TransportSpec("external", s, sim_spec)
+
+
+def listening_sockets(pid: int | None = None) -> list[tuple[str, int]]:
+    """``[(address, port)]`` of the TCP sockets in LISTEN state (and bound UDP sockets) owned by
+    process ``pid`` (default: this one), read from ``/proc/<pid>/fd`` and ``/proc/net/{tcp,tcp6,
+    udp,udp6}``. IPv4 addresses as dotted quads, IPv6 as ``[hex]``."""
+    pid = os.getpid() if pid is None else int(pid)
+    inodes = set()
+    fd_dir = f"/proc/{pid}/fd"
+    for fd in os.listdir(fd_dir):
+        try:
+            target = os.readlink(os.path.join(fd_dir, fd))
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    out = []
+    for table, listen_state in (("tcp", "0A"), ("tcp6", "0A"), ("udp", "07"), ("udp6", "07")):
+        try:
+            with open(f"/proc/{pid}/net/{table}") as f:
+                rows = f.read().splitlines()[1:]
+        except OSError:
+            continue
+        for row in rows:
+            parts = row.split()
+            if len(parts) < 10 or parts[3] != listen_state or parts[9] not in inodes:
+                continue
+            addr_hex, port_hex = parts[1].split(":")
+            if len(addr_hex) == 8:
+                addr = ".".join(str(b) for b in bytes.fromhex(addr_hex)[::-1])
+            else:
+                words = [bytes.fromhex(addr_hex[i:i + 8])[::-1] for i in range(0, 32, 8)]
+                raw = b"".join(words)
+                if raw[:12] == b"\0" * 10 + b"\xff\xff":
+                    addr = ".".join(str(b) for b in raw[12:])
+                else:
+                    addr = "[" + raw.hex() + "]"
+            out.append((addr, int(port_hex, 16)))
+    return out
