@@ -1,0 +1,210 @@
+"""The identifier's inputs (``IdentInputs``) built from the estimator's outputs only.
+
+Paper section 5: the estimated states "are transformed into the aux-frame using the matrices of
+eq 1-3" and fed, with the alpha-beta filtered rates and accelerations (eq 12), to the four RLS
+problems (eq 20-23). ``IdentFeeder(model_vehicle).inputs(estimate, filtered)`` does that for one
+instant; ``observe(sample)`` collects the IMU specific force between two calls. Every input is
+an *estimate* (EKF state, alpha-beta outputs, sensor samples); simulator truth never enters.
+
+Frames (``vdps_hil.conventions``; ``C_a^b`` maps coordinates in a to coordinates in b)::
+
+    C_g^v = R(x, phi_g) R(y, theta_g) R(z, psi_g)              eq 1 (EKF attitude)
+    C_g^r = R(x, phi_r) R(y, theta_r)                           eq 2 (psi_r = 0; EKF road angles)
+    C_r^a = R(z, psi_v)                                         aux frame, section 2
+    C_g^a = C_r^a C_g^r
+
+Velocity and acceleration in the aux frame::
+
+    [xd_a, yd_a, zd_a] = C_g^a v_g                              v_g: EKF CG velocity, ENU
+    a_a = C_g^a (C_g^v)^T f_cg + G                              inertial CG acceleration in {a}
+    G   = R(z, psi_v) R(x, phi_r) R(y, theta_r) [0, 0, -g]       eq 13 (``gravity_aux_mps2``)
+    f_cg = C_bs f_s - wd x l - w x (w x l)                       IMU specific force at the CG
+
+``f_s`` is the mean of the IMU samples since the previous call (``observe``), rotated to the
+body by the model file's ``imu_rotation_rpy_rad`` (C_bs = (C_g^v(rpy))^T, as the pipeline) and
+moved to the CG by the lever arm ``l`` with the alpha-beta rate w and its derivative wd. We use
+the specific force rather than differentiating the EKF velocity: the accelerometer has
+0.02 m/s^2 of noise at 1 kHz (Table 1) and no lag, while the EKF velocity jumps at every GNSS
+update (5 Hz), so its derivative has spikes; the two agree in the mean (the EKF integrates the
+same specific force, eq 7 with correction (d)). An ESC cluster without f_z gets f_z = g.
+
+Eq 13 writes the translation in the aux frame, which turns with the vehicle about the road
+normal at psid_v, so the component derivatives are::
+
+    xdd_a = a_a,x + yd_a psid_v,   ydd_a = a_a,y - xd_a psid_v,   zdd_a = a_a,z
+    [phid_v, thetad_v, psid_v] = C_omega(phi_v, theta_v)^-1 w    (eq 7's C_omega with the
+                                                                   road-relative angles; road
+                                                                   angles constant, eq 6)
+
+Tire quantities from the physics core (``vdps_hil.model.core``: the same definitions the truth
+simulator and the predictor use): the core's reduced model (``unsprung_dof=False``) is
+evaluated at the estimated state -- body velocity v_b = C_g^v v_g, body rates w (alpha-beta),
+wheel spins (alpha-beta), the estimated road plane (phi_r, theta_r) and the measured steering
+wheel angle -- giving per wheel::
+
+    d_1,2 = Ackermann(delta_sw / steer_ratio),  d_3,4 = 0                (core.ackermann_angles)
+    lambda_i = (r_i w_i - v_l,i) / max(|v_l,i|, v_floor)                  slip ratio
+    alpha_i  = -atan(v_t,i / max(|v_l,i|, v_floor))                       slip angle
+
+with v_l, v_t the wheel-centre velocity along and across the wheel in the road plane and
+v_floor the core's slip speed floor (5 m/s). Suspension deflections and rates, wheel speeds and
+accelerations, body rates and angular accelerations are the alpha-beta outputs
+(``FilteredSignals``); wheel torques and the steering angle are the latest samples.
+
+Symbols and units: v_g [m/s] ENU; f [m/s^2]; w [rad/s]; wd [rad/s^2]; l [m] (body axes);
+angles [rad]; lambda [-]; alpha [rad]; G [m/s^2].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from vdps_hil.bus.samples import Sample, axis_fields
+from vdps_hil.identification.problems import IdentInputs, gravity_aux_mps2
+from vdps_hil.model.core import SLIP_SPEED_FLOOR_MPS, Env, Inputs, Model
+from vdps_hil.model.frames import (c_omega_inv, dcm_global_to_road, dcm_global_to_vehicle,
+                                   dcm_road_to_aux)
+from vdps_hil.model.params import Vehicle
+from vdps_hil.units import GRAVITY_MPS2
+
+__all__ = ["FeederConfig", "IdentFeeder"]
+
+_SF = axis_fields("specific_force_mps2")
+_NAN = math.nan
+
+
+@dataclass(frozen=True)
+class FeederConfig:
+    """``slip_speed_floor_mps``: the core's v_floor for the slip denominators [m/s];
+    ``gravity_mps2``: g for an ESC cluster's missing f_z."""
+
+    slip_speed_floor_mps: float = SLIP_SPEED_FLOOR_MPS
+    gravity_mps2: float = GRAVITY_MPS2
+
+    def __post_init__(self):
+        if not (math.isfinite(self.slip_speed_floor_mps) and self.slip_speed_floor_mps > 0):
+            raise ValueError("FeederConfig.slip_speed_floor_mps must be positive")
+
+
+class IdentFeeder:
+    """Estimates -> :class:`~vdps_hil.identification.problems.IdentInputs` (module docstring).
+
+    ``model_vehicle`` must be a *model* file (mounting, geometry, tire radius). ``inputs``
+    returns None before the estimator is initialised; quantities it cannot form (no wheel
+    speeds yet, no IMU sample since the last call) are NaN, which the identifier's RLS guard
+    leaves out and counts. ``counters``: calls, inputs built, incomplete (some NaN), no_imu."""
+
+    def __init__(self, model_vehicle: Vehicle, config: FeederConfig | None = None):
+        if getattr(model_vehicle, "kind", None) != "model":
+            raise ValueError("IdentFeeder reads only a model vehicle file (kind = \"model\"), never truth")
+        self.vehicle = model_vehicle
+        self.config = config or FeederConfig()
+        self._model = Model(model_vehicle, (), unsprung_dof=False,
+                            slip_speed_floor_mps=self.config.slip_speed_floor_mps)
+        m = model_vehicle.mounting
+        rpy = np.asarray(m.imu_rotation_rpy_rad, dtype=float)
+        self._imu_rot = None if not rpy.any() else dcm_global_to_vehicle(*rpy).T  # sensor -> body
+        arm = np.asarray(m.imu_lever_arm_m, dtype=float)
+        self._arm = None if not arm.any() else arm
+        self._h_cg = model_vehicle.geometry.h_cg_m
+        self._f_sum = [0.0, 0.0, 0.0]
+        self._f_n = 0
+        self.counters = {"calls": 0, "inputs": 0, "incomplete": 0, "no_imu": 0, "imu_samples": 0}
+
+    # ------------------------------------------------------------------ IMU
+    def observe(self, sample: Sample) -> None:
+        """Collect the specific force of ``imu`` samples (others are ignored)."""
+        if sample.kind != "imu" or not sample.valid:
+            return
+        g = sample.fields.get
+        fx, fy, fz = g(_SF[0], _NAN), g(_SF[1], _NAN), g(_SF[2], _NAN)
+        if not math.isfinite(fz):
+            fz = self.config.gravity_mps2  # ESC cluster: no f_z
+        if not math.isfinite(fx + fy):
+            return
+        s = self._f_sum
+        s[0] += fx
+        s[1] += fy
+        s[2] += fz
+        self._f_n += 1
+        self.counters["imu_samples"] += 1
+
+    def _mean_specific_force(self, omega, omega_dot) -> np.ndarray:
+        n = self._f_n
+        if n == 0:
+            self.counters["no_imu"] += 1
+            return np.full(3, _NAN)
+        f = np.array(self._f_sum) / n
+        self._f_sum = [0.0, 0.0, 0.0]
+        self._f_n = 0
+        if self._imu_rot is not None:
+            f = self._imu_rot @ f
+        if self._arm is not None and np.isfinite(omega).all() and np.isfinite(omega_dot).all():
+            f = f - np.cross(omega_dot, self._arm) - np.cross(omega, np.cross(omega, self._arm))
+        return f
+
+    # ------------------------------------------------------------------ inputs
+    def inputs(self, estimate, filtered) -> IdentInputs | None:
+        """The identifier's inputs at ``estimate.t_ns`` (module docstring); None without an
+        estimate."""
+        self.counters["calls"] += 1
+        if estimate is None:
+            return None
+        x = estimate.x
+        phi_g, theta_g, psi_g, phi_r, theta_r, psi_v = (float(v) for v in x[6:12])
+        phi_v, theta_v, _ = (float(v) for v in estimate.vehicle_angles_rad)
+        c_gv = dcm_global_to_vehicle(phi_g, theta_g, psi_g)
+        c_ga = dcm_road_to_aux(psi_v) @ dcm_global_to_road(phi_r, theta_r)
+        v_g = np.array(x[3:6], dtype=float)
+        v_a = c_ga @ v_g
+        grav = gravity_aux_mps2(phi_r, theta_r, psi_v)
+        omega = np.array(filtered.angular_rate_radps, dtype=float)
+        omega_dot = np.array(filtered.angular_accel_radps2, dtype=float)
+        f_cg = self._mean_specific_force(omega, omega_dot)
+        a_a = c_ga @ (c_gv.T @ f_cg) + np.array(grav)
+        psi_v_dot = float((c_omega_inv(phi_v, theta_v) @ omega)[2])
+        xdd = float(a_a[0] + v_a[1] * psi_v_dot)
+        ydd = float(a_a[1] - v_a[0] * psi_v_dot)
+        slip, alpha, delta = self._tire_kinematics(estimate, filtered, c_gv @ v_g, omega)
+        inp = IdentInputs(
+            t_ns=int(estimate.t_ns), xdd_a_mps2=xdd, ydd_a_mps2=ydd, zdd_a_mps2=float(a_a[2]),
+            xd_a_mps=float(v_a[0]), yd_a_mps=float(v_a[1]), psi_v_dot_radps=psi_v_dot,
+            gravity_aux_mps2=grav, omega_radps=tuple(omega.tolist()), omega_dot_radps2=tuple(omega_dot.tolist()),
+            susp_deflection_m=filtered.susp_deflection_m, susp_rate_mps=filtered.susp_rate_mps,
+            wheel_speed_radps=filtered.wheel_speed_radps, wheel_accel_radps2=filtered.wheel_accel_radps2,
+            wheel_torque_nm=filtered.wheel_torque_nm, slip_ratio=slip, slip_angle_rad=alpha,
+            wheel_angle_rad=delta)
+        self.counters["inputs"] += 1
+        if not _all_finite(inp):
+            self.counters["incomplete"] += 1
+        return inp
+
+    def _tire_kinematics(self, estimate, filtered, v_b: np.ndarray, omega: np.ndarray):
+        """Slip ratios, slip angles and road-wheel angles from the core (module docstring)."""
+        x = estimate.x
+        env = Env(float(x[9]), float(x[10]))
+        n = env.normal_g
+        h = self._h_cg
+        w = np.where(np.isfinite(omega), omega, 0.0) if not np.isfinite(omega).all() else omega
+        state = [h * n[0], h * n[1], h * n[2], float(x[6]), float(x[7]), float(x[8]),
+                 float(v_b[0]), float(v_b[1]), float(v_b[2]), float(w[0]), float(w[1]), float(w[2]),
+                 *(float(v) for v in filtered.wheel_speed_radps)]
+        steer = float(filtered.steer_wheel_angle_rad)
+        _, d = self._model.evaluate(state, Inputs(steer_wheel_angle_rad=steer), env)
+        slip = tuple(d[f"slip_ratio_{i}"] for i in range(1, 5))
+        alpha = tuple(d[f"slip_angle_rad_{i}"] for i in range(1, 5))
+        delta = tuple(d[f"road_wheel_angle_rad_{i}"] for i in range(1, 5))
+        if not np.isfinite(omega).all():  # the slips need the rates (v_w = v_b + w x r_w)
+            slip = alpha = (_NAN,) * 4
+        return slip, alpha, delta
+
+
+def _all_finite(inp: IdentInputs) -> bool:
+    vals = (inp.xdd_a_mps2, inp.ydd_a_mps2, inp.zdd_a_mps2, inp.xd_a_mps, inp.yd_a_mps, inp.psi_v_dot_radps,
+            *inp.gravity_aux_mps2, *inp.omega_radps, *inp.omega_dot_radps2, *inp.susp_deflection_m,
+            *inp.susp_rate_mps, *inp.wheel_speed_radps, *inp.wheel_accel_radps2, *inp.wheel_torque_nm,
+            *inp.slip_ratio, *inp.slip_angle_rad, *inp.wheel_angle_rad)
+    return all(math.isfinite(v) for v in vals)
