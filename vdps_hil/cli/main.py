@@ -14,6 +14,8 @@ from vdps_hil.cli.common import UserError
 # name -> (module, attribute, one-line help). Explicit registry, no import side effects.
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "sim": ("vdps_hil.cli.sim_cmd", "sim", "Simulate a scenario and write a recording."),
+    "bench": ("vdps_hil.cli.bench_cmd", "bench",
+              "Hardware-in-the-loop bench: simulated vehicle on live CAN/serial, pipeline, ECU."),
     "log": ("vdps_hil.cli.log_cmd", "log",
             "Record live CAN buses and serial devices into one MCAP."),
     "import": ("vdps_hil.cli.import_cmd", "import_",

@@ -117,15 +117,14 @@ def model_for(truth_name: str) -> str:
     raise BenchError(f"no model file paired with vehicle {truth_name!r}: give --model FILE")
 
 
-def make_system(model: str, profile):
+def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float):
     """The VDPS pipeline for the bench: ``VdpsSystem`` with the model vehicle file and the
-    sensor profile's suspension rate and noise (a sensor's data sheet, not truth)."""
+    suspension sensor's rate and noise (its data sheet, from the sensor profile; not truth)."""
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.system import SystemConfig, VdpsSystem
 
     vehicle = load_vehicle(model, "model")
-    cfg = SystemConfig.for_profile(profile.suspension.rate_hz, profile.suspension.sigma_m)
-    return VdpsSystem(vehicle, cfg)
+    return VdpsSystem(vehicle, SystemConfig.for_profile(susp_rate_hz, susp_sigma_m))
 
 
 @dataclass
@@ -370,6 +369,7 @@ class Bench:
             "warning_frames": p["frames_sent"], "warning_frames_on_bus": len(frames_on_bus),
             **lt,
             "rolled_over": rolled, "truth_events": events,
+            "max_abs_roll_deg": math.degrees(side.sink.max_abs_roll_v_rad),
             "reference_events": [e for e in (reference or []) if e.get("kind") in ("tip_up", "point_of_no_return")],
             "late_sends": pace["late_sends"], "sends": pace["sends"], "late_tolerance_ms": pace["late_tolerance_ms"],
             "send_lateness_ms": pace["lateness_ms"],
@@ -389,7 +389,8 @@ class _LocalPipeline:
         from .node import PipelineNode
 
         try:
-            system = make_system(bench.model, bench.drive.profile)
+            sp = bench.drive.profile.suspension
+            system = make_system(bench.model, sp.rate_hz, sp.sigma_m)
         except (ValueError, OSError) as e:
             raise BenchError(str(e).splitlines()[0]) from None
         self.node = PipelineNode(system, can_dev.pipeline_spec, serial["imu"].port, serial["gnss"].port, clock,
@@ -447,7 +448,9 @@ class _ChildPipeline:
         self.part = work / "pipeline.mcap" if c.output else None
         cmd = [sys.executable, "-m", "vdps_hil.hil.child", "--can-spec", can_dev.pipeline_spec,
                "--imu-port", serial["imu"].port, "--gnss-port", serial["gnss"].port, "--model", bench.model,
-               "--profile", bench.drive.profile.name, "--speed", repr(c.speed), "--work", str(work)]
+               "--susp-rate-hz", repr(bench.drive.profile.suspension.rate_hz),
+               "--susp-sigma-m", repr(bench.drive.profile.suspension.sigma_m),
+               "--speed", repr(c.speed), "--work", str(work)]
         if self.part is not None:
             cmd += ["--output", str(self.part)]
         if c.switch_interval_s:

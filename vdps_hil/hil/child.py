@@ -1,7 +1,7 @@
 """The bench's pipeline as a separate process (``--can pty`` / ``--can tcp``).
 
 ``python -m vdps_hil.hil.child --can-spec SPEC --imu-port PTY --gnss-port PTY --model FILE
---profile NAME --speed X --work DIR [--output PART.mcap]``
+--susp-rate-hz F --susp-sigma-m S --speed X --work DIR [--output PART.mcap]``
 
 Protocol with the parent (``hil.bench``), one JSON document per stdout line:
 ``{"ready": true}`` once the adapters are open (or ``{"error": "..."}`` and exit status 2);
@@ -11,7 +11,8 @@ node handles what is queued, writes ``DIR/cycles.npz`` (the output-cycle log) an
 ``DIR/result.json`` (counters, outputs, frames sent), closes its recording part and prints
 ``{"done": true}``.
 
-The child reads no truth: the model vehicle file, the sensor profile (a data sheet), the wires.
+The child reads no truth and never imports ``vdps_hil.sim``: it has the model vehicle file, the
+suspension sensor's rate and noise (a data sheet), the wires and the clock.
 """
 
 from __future__ import annotations
@@ -37,7 +38,8 @@ def main(argv=None) -> int:
     ap.add_argument("--imu-port", required=True)
     ap.add_argument("--gnss-port", required=True)
     ap.add_argument("--model", required=True)
-    ap.add_argument("--profile", required=True)
+    ap.add_argument("--susp-rate-hz", type=float, required=True)
+    ap.add_argument("--susp-sigma-m", type=float, required=True)
     ap.add_argument("--speed", type=float, required=True)
     ap.add_argument("--work", required=True)
     ap.add_argument("--output", default=None)
@@ -52,7 +54,6 @@ def main(argv=None) -> int:
     from vdps_hil.adapters.base import AdapterError
     from vdps_hil.record import schemas as S
     from vdps_hil.record.writer import RecordingWriter
-    from vdps_hil.sim.profiles import load_profile
 
     from .bench import make_system
     from .node import PipelineNode
@@ -62,7 +63,7 @@ def main(argv=None) -> int:
     clock = BenchClock(a.speed)
     writer = None
     try:
-        system = make_system(a.model, load_profile(a.profile))
+        system = make_system(a.model, a.susp_rate_hz, a.susp_sigma_m)
         if a.output:
             writer = RecordingWriter(a.output, metadata={"source": "vdps bench (pipeline process)"},
                                      sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)

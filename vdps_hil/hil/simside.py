@@ -56,6 +56,7 @@ class LiveSink(DriveSink):
         self.serial_q: dict[str, collections.deque] = {}
         self.events: list[dict] = []
         self.last_truth: dict | None = None
+        self.max_abs_roll_v_rad = 0.0
         self._specs: list[tuple[int, int]] = []
         self._ids = np.zeros(0, np.int64)
         self._dlcs = np.zeros(0, np.int64)
@@ -72,6 +73,9 @@ class LiveSink(DriveSink):
             self.events.append(dict(doc))
         else:
             self.last_truth = doc
+            r = abs(doc.get("roll_v_rad", 0.0))
+            if r > self.max_abs_roll_v_rad:
+                self.max_abs_roll_v_rad = r
         if self.on_truth is not None:
             self.on_truth(topic, t_ns, doc)
 

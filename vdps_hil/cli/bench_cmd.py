@@ -1,0 +1,194 @@
+"""``vdps bench``: the hardware-in-the-loop bench (``vdps_hil.hil``): the simulated vehicle
+sends its sensors on CAN and serial ports paced to the wall clock, the live pipeline answers
+with VDPS_Warning on CAN, a simulated ECU reacts, and everything is timed."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import click
+
+from vdps_hil.cli.common import UserError, json_option, write_json
+
+_EXAMPLE = """\b
+Examples:
+  vdps bench --react -o bench.mcap
+  vdps bench --scenario paper-left-turn --duration 12 --json -
+  vdps bench --can pty --speed 0.5          # pipeline in its own process, slcan on a pty
+  vdps bench --can tcp                      # pipeline in its own process, TCP on 127.0.0.1
+  vdps bench --can socketcan:vcan0          # a Linux vcan (sudo ip link add dev vcan0 type vcan)
+
+\b
+--can SPEC: virtual (default: one process, python-can's virtual bus; serial on ptys),
+pty (simulator as an slcan adapter on a pseudo-terminal, pipeline in a child process),
+tcp (simulator as a socketcand server on 127.0.0.1 only, pipeline in a child process),
+or a python-can interface string INTERFACE:CHANNEL[,key=value...] opened by both sides
+(socketcan:vcan0; with --sim-can the simulator opens another interface, e.g. two USB
+adapters wired together: --can pcan:PCAN_USBBUS1 --sim-can kvaser:0).
+
+\b
+ECU reaction (--react): after the first valid VDPS_Warning with level >= 2, 100 ms dead time,
+drive torque cut, brake pressure 0 -> full in 300 ms, 2500 N m per wheel on all four wheels."""
+
+
+@click.command("bench", epilog=_EXAMPLE)
+@click.option("--scenario", default="fishhook-suv", show_default=True, metavar="NAME",
+              help="Scenario (configs/scenarios/NAME.toml or a .toml path).")
+@click.option("--vehicle", default=None, metavar="FILE",
+              help="Truth vehicle file or name for the simulator (default: the scenario's).")
+@click.option("--model", default=None, metavar="FILE",
+              help="Model vehicle file for the pipeline (default: the truth file's pair, e.g. suv-model).")
+@click.option("--effect", "effects", multiple=True, metavar="NAME",
+              help="Switch on an effect in the simulator (NAME or NAME:param=value,...); repeatable.")
+@click.option("--fault", "faults", multiple=True, metavar="NAME",
+              help="Inject a sensor/wire fault (NAME or NAME:key=value,...); repeatable.")
+@click.option("--duration", "duration_s", type=float, default=None, metavar="S",
+              help="Simulated seconds (default: the scenario's).")
+@click.option("--speed", type=float, default=1.0, show_default=True, metavar="X",
+              help="Simulated seconds per wall second.")
+@click.option("--can", "can_spec", default="virtual", show_default=True, metavar="SPEC",
+              help="CAN transport (see below).")
+@click.option("--sim-can", "sim_can", default=None, metavar="SPEC",
+              help="Interface the simulator opens when --can is an interface string (default: the same).")
+@click.option("--react/--no-react", default=False, show_default=True,
+              help="Let the simulated ECU cut torque and brake on a warning.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of every sensor's random streams.")
+@click.option("--profile", default=None, metavar="NAME", help="Sensor profile [default: table1-susp1k].")
+@click.option("-o", "--output", default=None, metavar="FILE.mcap",
+              help="Record the session: raw topics as the pipeline received them, /decoded, /est, /truth.")
+@click.option("--quiet", is_flag=True, help="No live status line.")
+@json_option
+def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec, sim_can, react, seed, profile,
+          output, quiet, json_out):
+    """Run the hardware-in-the-loop bench on one machine with nothing plugged in: the simulated
+    vehicle on CAN and serial ports in real time, the live pipeline, its warning on CAN, a
+    simulated ECU. Prints what happened: warning time, lead time, ECU action, upright or not."""
+    from pathlib import Path
+
+    from vdps_hil.hil.bench import Bench, BenchConfig, BenchError
+
+    if output is not None:
+        out = Path(output)
+        if out.is_dir():
+            raise UserError(f"-o {output}: is a directory")
+        if not out.parent.exists():
+            raise UserError(f"-o {output}: directory {out.parent} does not exist")
+    try:
+        cfg = BenchConfig(scenario=scenario, vehicle=vehicle, model=model, effects=tuple(effects),
+                          faults=tuple(faults), duration_s=duration_s, speed=speed, can=can_spec, sim_can=sim_can,
+                          react=react, output=output, seed=seed, profile=profile)
+        b = Bench(cfg)
+    except (BenchError, ValueError) as e:
+        raise UserError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
+    to_stderr = json_out == "-"
+    status = None if quiet else _StatusLine(sys.stderr)
+    try:
+        result = b.run(status)
+    except BenchError as e:
+        if status is not None:
+            status.end()
+        raise UserError(str(e).splitlines()[0]) from None
+    if status is not None:
+        status.end()
+    doc = result.to_json()
+    for line in describe(doc):
+        click.echo(line, err=to_stderr)
+    write_json(doc, json_out)
+
+
+class _StatusLine:
+    """One live line on a terminal (rewritten in place), or a line per second elsewhere."""
+
+    def __init__(self, stream):
+        self.stream = stream
+        self.tty = hasattr(stream, "isatty") and stream.isatty()
+        self._last = -1.0
+        self._width = 0
+
+    def __call__(self, d: dict) -> None:
+        ev = ", ".join(e.replace("_", " ") for e in d["events"]) or "upright"
+        warn = (f"warning L{d['warning_level']} since {d['first_warning_t_s']:.2f} s"
+                if d["first_warning_t_s"] is not None else "no warning")
+        brake = f" | ECU brake {100 * d['brake_fraction']:.0f} %" if d["brake_fraction"] > 0 else ""
+        line = (f"t {d['t_s']:5.2f}/{d['duration_s']:.2f} s | CAN {d['frames_received']}/{d['frames_sent']} "
+                f"IMU {d['imu_bytes_received'] // 47}/{d['imu_bytes_sent'] // 47} | late sends {d['late_sends']} | "
+                f"roll {d['roll_deg']:+5.1f} deg | {warn}{brake} | {ev}")
+        if self.tty:
+            pad = max(0, self._width - len(line))
+            self.stream.write("\r" + line + " " * pad)
+            self.stream.flush()
+            self._width = len(line)
+        elif d["final"] or math.floor(d["t_s"]) > self._last:
+            self._last = math.floor(d["t_s"])
+            self.stream.write(line + "\n")
+            self.stream.flush()
+
+    def end(self) -> None:
+        if self.tty and self._width:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _t(x) -> str:
+    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.2f} s"
+
+
+def describe(d: dict) -> list[str]:
+    """The plain-words summary of a bench run (what ``make run`` prints)."""
+    tr = {"virtual": "one process, python-can virtual bus + IMU and GNSS on pseudo-terminals",
+          "pty": "pipeline in its own process; CAN as slcan on a pseudo-terminal, IMU and GNSS on ptys",
+          "tcp": "pipeline in its own process; CAN over TCP on 127.0.0.1 (socketcand), IMU and GNSS on ptys",
+          "external": f"CAN on {d['can'].get('pipeline_spec')}, IMU and GNSS on pseudo-terminals"}[d["transport"]]
+    lines = [f"vdps bench: {d['scenario']} ({d['vehicle']} simulated, pipeline on {d['model']}), {tr}, "
+             f"speed {d['speed']:g}x, ECU reaction {'on' if d['react'] else 'off'}"]
+    lost = d["dropped"]
+    lines.append(f"  ran {d['duration_s']:.2f} s of simulated time in {d['wall_time_s']:.2f} s "
+                 f"({d['realtime_factor']:.2f}x real time); sent {d['frames_sent']} CAN frames, "
+                 f"{d['imu_packets_sent']} IMU packets, {d['lines_sent']} NMEA lines; "
+                 + ("the pipeline received every one of them" if lost == 0 else f"{lost} were LOST on the way")
+                 + f"; {d['late_sends']} of {d['sends']} sends later than {d['late_tolerance_ms']:g} ms")
+    ref = d["lead_reference"] == "open_loop"
+    if d["first_warning_t_s"] is None or not math.isfinite(d["first_warning_t_s"]):
+        lines.append("  warning: none -- the pipeline never sent a valid VDPS_Warning of level >= 2")
+    else:
+        lt = d["warning_lead_time_s"]
+        ponr = d["point_of_no_return_t_s"]
+        when = "without the ECU's reaction, " if ref else ""
+        lead = (f"{lt:.2f} s before the point of no return ({when}at {ponr:.2f} s)"
+                if math.isfinite(lt if lt is not None else math.nan) else "no point of no return to lead")
+        tip = d["warning_lead_to_tipup_s"]
+        tip_s = (f" and {tip:.2f} s before tip-up (at {d['tip_up_t_s']:.2f} s)"
+                 if tip is not None and math.isfinite(tip) else "")
+        lines.append(f"  warning: first VDPS_Warning of level >= 2 on the bus at {d['first_warning_t_s']:.2f} s: "
+                     f"{lead}{tip_s}")
+    e = d["ecu"]
+    if not d["react"]:
+        lines.append(f"  ECU: listening only (--no-react); it accepted {e['frames']['accepted']} warning frames "
+                     f"(CRC and counter checked), {e['frames']['timeouts']} timeouts")
+    elif e["intervention_t_s"] is None:
+        lines.append("  ECU: no intervention (no valid warning of level >= 2 arrived)")
+    else:
+        a = e["actuator"]
+        lines.append(f"  ECU: acted on the warning at {e['intervention_t_s']:.2f} s: cut the drive torque and "
+                     f"started braking at {e['actuation_t_s']:.2f} s ({1000 * a['delay_s']:.0f} ms dead time), "
+                     f"full brakes ({a['brake_torque_full_nm_per_wheel']:.0f} N m per wheel) at "
+                     f"{e['full_brake_t_s']:.2f} s")
+    if d["rolled_over"]:
+        lines.append(f"  outcome: the vehicle ROLLED OVER (point of no return at {_t(d['point_of_no_return_t_s'])}, "
+                     f"max roll {d['max_abs_roll_deg']:.1f} deg relative to the road)")
+    else:
+        tipped = any(ev.get("kind") == "tip_up" for ev in d["truth_events"])
+        extra = ""
+        if ref:
+            extra = f"; without the ECU it would have rolled over at {_t(d['point_of_no_return_t_s'])}"
+        lines.append(f"  outcome: the vehicle stayed upright{' (after lifting two wheels)' if tipped else ''}, "
+                     f"max roll {d['max_abs_roll_deg']:.1f} deg relative to the road{extra}")
+    w = d["warning_latency_ms"]
+    lines.append(f"  latency from sensor frame to pipeline output on the bus: p50 {w['p50']:.1f} ms, "
+                 f"p99 {w['p99']:.1f} ms over {d['output_cycles']} pipeline cycles"
+                 + ("" if d["pipeline_keeps_up"] else " -- the pipeline did NOT keep up at this speed"))
+    if d["output"]:
+        lines.append(f"  recording: {d['output']} (raw CAN/serial as the pipeline received them, /decoded, /est, "
+                     f"/truth)")
+    return lines
