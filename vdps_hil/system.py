@@ -95,8 +95,8 @@ from vdps_hil.identification.feeder import FeederConfig, IdentFeeder
 from vdps_hil.identification.problems import IdentConfig, Identifier
 from vdps_hil.model.params import IdentifiedParams, Vehicle
 
-__all__ = ["CanFrame", "default_pipeline_config", "IdentReport", "PredictionReport", "SuspensionConditioner", "SystemConfig", "VdpsSystem",
-           "output_to_json", "outputs_digest"]
+__all__ = ["CanFrame", "IdentReport", "PredictionReport", "ReplayError", "SuspensionConditioner", "SystemConfig",
+           "VdpsSystem", "default_pipeline_config", "measure_rates", "output_to_json", "outputs_digest", "replay_file"]
 
 _SUSP = wheel_fields("susp_deflection_m")
 
@@ -526,3 +526,345 @@ class VdpsSystem:
         for m in frames:
             self.counters["frames"] += 1
             out.append(CanFrame(int(t_ns), self.config.warning_bus, int(m.arbitration_id), bytes(m.data)))
+
+
+# ------------------------------------------------------------------------------- file replay
+class ReplayError(ValueError):
+    """A replay that cannot run (bad option, unreadable input, wrong vehicle file): one line."""
+
+
+INNOVATION_STATUS = ("accepted", "gated", "nan", "too_old", "disabled", "not_initialized")
+"""``status_code`` of ``/est/innovation/<kind>`` messages: index in this tuple."""
+
+
+def measure_rates(path, seconds: float = 2.0, **decode_kw) -> dict[str, float]:
+    """Sample rate [Hz] per sample kind over the first ``seconds`` of decoded ``/raw/`` data
+    (samples of one instant from one source count once): lets a replay size the suspension
+    averaging from the data instead of a profile name."""
+    from vdps_hil.record.decode import decode_recording
+
+    dec = decode_recording(path, **decode_kw)
+    first: dict[str, int] = {}
+    last: dict[str, int] = {}
+    count: dict[str, int] = {}
+    t0 = None
+    for s in dec:
+        t0 = s.t_ns if t0 is None else t0
+        if s.t_ns - t0 > seconds * 1e9:
+            break
+        k = s.kind
+        if last.get(k) == s.t_ns:
+            continue
+        first.setdefault(k, s.t_ns)
+        last[k] = s.t_ns
+        count[k] = count.get(k, 0) + 1
+    dec.close()
+    return {k: (count[k] - 1) * 1e9 / (last[k] - first[k]) for k in count if count[k] > 1 and last[k] > first[k]}
+
+
+def _est_docs(o) -> list[tuple[str, int, dict, dict | None]]:
+    """(topic, t_ns, values, sigmas) documents of one system output for ``/est/``."""
+    from vdps_hil.estimation.states import STATE_NAMES
+
+    if isinstance(o, Estimate):
+        names = (*STATE_NAMES, "phi_v_rad", "theta_v_rad", "psi_v_rad")
+        vals = dict(zip(names, (*o.x, *o.vehicle_angles_rad)))
+        sig = dict(zip(names, (*o.sigma, *o.vehicle_angles_sigma_rad)))
+        return [("/est/state", o.t_ns, vals, sig)]
+    if isinstance(o, Innovation):
+        vals = {"nis": o.nis, "dof": float(o.dof), "gate": o.gate,
+                "status_code": float(INNOVATION_STATUS.index(o.status)) if o.status in INNOVATION_STATUS else -1.0,
+                "accepted": 1.0 if o.status == "accepted" else 0.0, "delayed": 1.0 if o.delayed else 0.0}
+        sig = {}
+        for i, (v, s) in enumerate(zip(o.innovation, o.innovation_sigma)):
+            vals[f"innovation_{i}"] = v
+            sig[f"innovation_{i}"] = s
+        return [(f"/est/innovation/{o.kind}", o.t_ns, vals, sig)]
+    if isinstance(o, FilteredSignals):
+        vals = {}
+        for stem, v in (("angular_rate_radps", o.angular_rate_radps), ("angular_accel_radps2", o.angular_accel_radps2)):
+            vals.update({f"{stem}_{a}": x for a, x in zip("xyz", v)})
+        for stem, v in (("wheel_speed_radps", o.wheel_speed_radps), ("wheel_accel_radps2", o.wheel_accel_radps2),
+                        ("susp_deflection_m", o.susp_deflection_m), ("susp_rate_mps", o.susp_rate_mps),
+                        ("wheel_torque_nm", o.wheel_torque_nm)):
+            vals.update({f"{stem}_{i}": x for i, x in enumerate(v, 1)})
+        vals["steer_wheel_angle_rad"] = o.steer_wheel_angle_rad
+        return [("/est/filtered", o.t_ns, vals, None)]
+    if isinstance(o, IdentReport):
+        vals = dict(o.params)
+        vals.update({f"identifiability_{k}": v for k, v in o.identifiability.items()})
+        vals.update({f"converged_{k}": 1.0 if v else 0.0 for k, v in o.converged.items()})
+        vals.update({f"updates_{k}": float(v) for k, v in o.updates.items()})
+        return [("/est/ident", o.t_ns, vals, dict(o.sigmas))]
+    if isinstance(o, PredictionReport):
+        nan = math.nan
+        vals = {"time_to_point_of_no_return_s": nan if o.time_to_point_of_no_return_s is None
+                else o.time_to_point_of_no_return_s,
+                "time_to_tip_up_s": nan if o.time_to_tip_up_s is None else o.time_to_tip_up_s,
+                "peak_ltr": o.peak_ltr, "peak_roll_rad": o.peak_roll_rad, "horizon_s": o.horizon_s}
+        return [("/est/prediction", o.t0_ns, vals, None)]
+    return []
+
+
+def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, model=None, dbc=None,
+                signalmap=None, bus_map: Mapping[str, str] | None = None, params=None, save_params=None,
+                config: SystemConfig | None = None, identify: bool = True, predict: bool = True,
+                susp_sigma_m: float = 0.001, paper_faithful=None, copy_raw: bool = True) -> dict:
+    """Replay a recording's ``/raw/`` topics through :class:`VdpsSystem` (``vdps replay``).
+
+    Decodes only ``/raw/`` (``record.decode``), runs the system, writes ``output`` (MCAP: the
+    raw topics copied unchanged, ``/est/state`` with sigmas, ``/est/innovation/<kind>`` with NIS,
+    ``/est/filtered``, ``/est/ident``, ``/est/prediction`` and the sent VDPS_Warning frames on
+    ``/est/can/<bus>`` (schema vdps.RawCan.v1, direction tx)) and returns the summary (the
+    ``--json`` document). ``vehicle``: a *model* vehicle file or name (a truth file is refused);
+    ``params``: a saved parameter file to start the identifier from; ``save_params``: where to
+    save the identified parameters; ``model``: a saved workbench model
+    (``vdps_hil.workbench.model_file``); ``paper_faithful``: names of the EKF switches set to
+    the paper as printed (``"all"`` for all four). Without ``config`` the suspension window
+    averaging is sized from the measured sample rate and ``susp_sigma_m`` (Table 1: 1 mm).
+    Raises :class:`ReplayError` (one line)."""
+    import os
+    import time
+
+    from vdps_hil.record.decode import DecodeError, decode_recording, raw_copier
+    from vdps_hil.record.reader import RecordingError, RecordingReader
+
+    wall0 = time.perf_counter()
+    veh = _load_model_vehicle(vehicle)
+    start = None
+    if params is not None:
+        from vdps_hil.identification.persistence import ParamsFileError, load_params
+
+        try:
+            start = load_params(params, veh).params
+        except ParamsFileError as e:
+            raise ReplayError(str(e)) from None
+    if model is not None:
+        start = _load_workbench_model(model, veh, start)
+    if save_params is not None and not identify:
+        raise ReplayError("--save-params needs the identifier (drop --no-identify)")
+    try:
+        reader = RecordingReader(path)
+    except RecordingError as e:
+        raise ReplayError(str(e)) from None
+    try:
+        if config is None:
+            config = _replay_config(path, veh, dbc, signalmap, bus_map, susp_sigma_m, paper_faithful,
+                                    identify=identify, predict=predict)
+        if start is not None:
+            config = replace(config, start_params=start)
+        state: dict = {"writer": None, "copy": None}
+        sink = None
+        if output is not None:
+            from vdps_hil.record.writer import RecordingWriter
+
+            def sink(rec):
+                if state["writer"] is None:  # opened at the first raw record: keep its clock
+                    epoch = max(0, rec.log_time_ns - rec.t_ns) if rec.log_time_ns else None
+                    try:
+                        state["writer"] = RecordingWriter(
+                            output, sim_epoch_ns=epoch,
+                            metadata={"source": "vdps replay", "input": os.path.basename(os.fspath(path)),
+                                      "vehicle": veh.name, "vehicle_sha256": veh.source_sha256})
+                    except OSError as e:
+                        raise ReplayError(f"cannot write {output}: {e.strerror or e}") from None
+                    state["copy"] = raw_copier(reader, state["writer"])
+                if copy_raw:
+                    state["copy"](rec)
+        try:
+            dec = decode_recording(reader, dbc=dbc, signalmap=signalmap, bus_map=bus_map, raw_sink=sink)
+        except DecodeError as e:
+            raise ReplayError(str(e)) from None
+        system = VdpsSystem(veh, config)
+        system.clear_input_log()
+        summary = _Summary()
+        try:
+            for s in dec:
+                summary.sample(s)
+                outs = system.handle(s)
+                system.clear_input_log()  # a file replay keeps the file, not a copy in memory
+                if outs:
+                    summary.outputs(outs, state["writer"])
+            summary.outputs(system.finish(), state["writer"])
+        finally:
+            if state["writer"] is not None:
+                state["writer"].close()
+    finally:
+        reader.close()
+    wall = time.perf_counter() - wall0
+    doc = summary.document(system, dec, veh)
+    doc.update({"input": os.fspath(path), "output": None if output is None else os.fspath(output),
+                "vehicle": veh.name, "wall_time_s": wall,
+                "realtime_factor": (doc["duration_s"] / wall) if wall > 0 and doc["duration_s"] else None})
+    if save_params is not None:
+        from vdps_hil.identification.persistence import ParamsFileError, save_params as _save
+
+        idf = system.identifier
+        try:
+            _save(save_params, idf.params, veh, sigmas=idf.sigmas,
+                  meta={"source": os.path.basename(os.fspath(path)), "updates":
+                        {n: c.updates for n, c in idf.counters.items()}})
+        except ParamsFileError as e:
+            raise ReplayError(str(e)) from None
+        doc["saved_params"] = os.fspath(save_params)
+    return doc
+
+
+def _load_model_vehicle(vehicle) -> Vehicle:
+    if isinstance(vehicle, Vehicle):
+        if vehicle.kind != "model":
+            raise ReplayError(f"vehicle {vehicle.name} is a {vehicle.kind} file; the replay needs a model file")
+        return vehicle
+    from vdps_hil.model.params import VehicleFileError, load_vehicle
+
+    try:
+        return load_vehicle(vehicle, "model")
+    except VehicleFileError as e:
+        raise ReplayError(str(e).splitlines()[0]) from None
+
+
+def _load_workbench_model(path, vehicle: Vehicle, start):
+    """A saved workbench model (effects + identified parameters): only when the workbench's
+    ``model_file`` module exists (it defines the format); its ``load_model_file(path, vehicle)``
+    result's ``params`` start the identifier."""
+    import importlib
+
+    try:
+        mod = importlib.import_module("vdps_hil.workbench.model_file")
+    except ImportError:
+        raise ReplayError("--model: saved workbench models are not supported yet") from None
+    loader = getattr(mod, "load_model_file", None)
+    if loader is None:
+        raise ReplayError("--model: saved workbench models are not supported yet")
+    try:
+        m = loader(path, vehicle)
+    except (OSError, ValueError) as e:
+        raise ReplayError(f"--model {path}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
+    p = getattr(m, "params", None)
+    return p if isinstance(p, IdentifiedParams) else start
+
+
+def _replay_config(path, veh, dbc, signalmap, bus_map, susp_sigma_m, paper_faithful, **kw) -> SystemConfig:
+    from vdps_hil.estimation.ekf import EkfConfig, PaperFaithful
+
+    from vdps_hil.record.decode import DecodeError
+
+    try:
+        rates = measure_rates(path, dbc=dbc, signalmap=signalmap, bus_map=bus_map)
+    except DecodeError as e:
+        raise ReplayError(str(e)) from None
+    pc = default_pipeline_config()
+    if paper_faithful:
+        names = set(paper_faithful)
+        pf = PaperFaithful.all() if "all" in names else PaperFaithful(**{n: True for n in names})
+        pc = replace(pc, ekf=replace(pc.ekf, paper_faithful=pf))
+    if not (math.isfinite(susp_sigma_m) and susp_sigma_m > 0):
+        raise ReplayError(f"suspension sigma must be positive, got {susp_sigma_m!r}")
+    return SystemConfig.for_profile(rates.get("suspension", 1.0), susp_sigma_m, pipeline=pc, **kw)
+
+
+class _Summary:
+    """Running summary of a replay (the ``--json`` document)."""
+
+    def __init__(self):
+        self.samples: dict[str, int] = {}
+        self.t_first = None
+        self.t_last = None
+        self.n_est = 0
+        self.est_first = None
+        self.est_last: Estimate | None = None
+        self.sig_sum = None
+        self.innov: dict[str, list] = {}
+        self.pred = {"predictions": 0, "rollover_predicted": 0, "min_time_to_point_of_no_return_s": None}
+        self.frames = {"sent": 0, "max_level": 0}
+        self.writer_errors = 0
+
+    def sample(self, s: Sample) -> None:
+        k = f"{s.source}/{s.kind}"
+        self.samples[k] = self.samples.get(k, 0) + 1
+        if self.t_first is None:
+            self.t_first = s.t_ns
+        self.t_last = s.t_ns
+
+    def outputs(self, outs, writer) -> None:
+        for o in outs:
+            if isinstance(o, Estimate):
+                self.n_est += 1
+                if self.est_first is None:
+                    self.est_first = o.t_ns
+                self.est_last = o
+                sig = [v * v for v in o.sigma]
+                self.sig_sum = sig if self.sig_sum is None else [a + b for a, b in zip(self.sig_sum, sig)]
+            elif isinstance(o, Innovation):
+                c = self.innov.setdefault(o.kind, [0, 0, 0.0, 0])
+                c[0] += 1
+                if o.status == "accepted":
+                    c[1] += 1
+                    if math.isfinite(o.nis) and o.dof:
+                        c[2] += o.nis
+                        c[3] += o.dof
+            elif isinstance(o, PredictionReport):
+                p = self.pred
+                p["predictions"] += 1
+                if o.time_to_point_of_no_return_s is not None:
+                    p["rollover_predicted"] += 1
+                    m = p["min_time_to_point_of_no_return_s"]
+                    p["min_time_to_point_of_no_return_s"] = o.time_to_point_of_no_return_s if m is None else \
+                        min(m, o.time_to_point_of_no_return_s)
+            elif isinstance(o, CanFrame):
+                self.frames["sent"] += 1
+                self.frames["max_level"] = max(self.frames["max_level"], (o.data[1] >> 4) & 0x3)
+            if writer is not None:
+                self._write(o, writer)
+
+    @staticmethod
+    def _write(o, writer) -> None:
+        from vdps_hil.record import schemas as S
+
+        if isinstance(o, CanFrame):
+            doc = S.raw_can_doc(o.t_ns, o.arbitration_id, o.data, direction="tx")
+            writer.write_json(f"/est/can/{o.bus}", S.RAW_CAN, o.t_ns, doc, channel_metadata={"bus": o.bus})
+            return
+        for topic, t, vals, sig in _est_docs(o):
+            writer.write_estimate(topic, t, vals, sig)
+
+    def document(self, system: "VdpsSystem", dec, veh: Vehicle) -> dict:
+        from vdps_hil.estimation.states import STATE_NAMES
+
+        dur = (self.t_last - self.t_first) / 1e9 if self.t_first is not None else 0.0
+        est = self.est_last
+        es = {"count": self.n_est,
+              "t_first_s": None if self.est_first is None else self.est_first / 1e9,
+              "t_last_s": None if est is None else est.t_ns / 1e9}
+        if est is not None:
+            es["final"] = {"state": dict(zip(STATE_NAMES, est.x)), "sigma": dict(zip(STATE_NAMES, est.sigma)),
+                           "vehicle_angles_rad": dict(zip(("phi_v", "theta_v", "psi_v"), est.vehicle_angles_rad))}
+            es["rms_sigma"] = {n: math.sqrt(v / self.n_est) for n, v in zip(STATE_NAMES, self.sig_sum)}
+        rejected = dict(dec.rejected())
+        rejected.update(system.pipeline.rejected())
+        obs = [{"t_start_s": a / 1e9, "t_end_s": b / 1e9, "rank": r.rank, "n_states": r.n_states,
+                "unobservable": list(r.unobservable)} for a, b, r in system.pipeline.observability_reports]
+        now = system.pipeline.observability_now()
+        reader_c = dec.counters["reader"]
+        doc = {
+            "duration_s": dur,
+            "messages_read": {"raw_records": reader_c["raw_records"], "samples": sum(self.samples.values()),
+                              "per_source_kind": dict(sorted(self.samples.items()))},
+            "estimates_summary": es,
+            "innovations": {k: {"updates": c[0], "accepted": c[1],
+                                "mean_nis_per_dof": (c[2] / c[3]) if c[3] else None}
+                            for k, c in sorted(self.innov.items())},
+            "rejected": rejected,
+            "observability": {"windows": obs, "in_progress": None if now is None else
+                              {"rank": now.rank, "n_states": now.n_states, "unobservable": list(now.unobservable)}},
+            "decode": {k: v for k, v in dec.counters.items()},
+            "decoding": dict(dec.decoding),
+            "system": system.status()["counters"],
+        }
+        if system.identifier is not None:
+            st = system.identifier.status()
+            st["prior"] = veh.params.as_dict()
+            doc["identification"] = st
+        if system.config.predict:
+            doc["prediction"] = dict(self.pred, frames_sent=self.frames["sent"], max_level=self.frames["max_level"])
+        return doc

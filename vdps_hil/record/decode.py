@@ -408,6 +408,19 @@ class DecodedRecording:
                  signalmap: str | os.PathLike | None = None, bus_map: Mapping[str, str] | None = None,
                  device_time: bool = True, reorder_window_s: float = 1.0, imu_rate_hz: float = IMU_RATE_HZ,
                  raw_sink: Callable[[RawRecord], None] | None = None):
+        if dbc is not None and signalmap is None:
+            raise DecodeError("--dbc needs --signalmap saying which frames feed which fields "
+                              "(see configs/signalmaps/)")
+        if not reorder_window_s >= 0:
+            raise DecodeError("reorder_window_s must be >= 0")
+        self._sigmap = None
+        if signalmap is not None:
+            from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
+
+            try:
+                self._sigmap = load_signalmap(signalmap)
+            except SignalMapError as e:
+                raise DecodeError(str(e)) from None
         if isinstance(source, RecordingReader):
             self.reader, self._owns = source, False
         else:
@@ -417,22 +430,9 @@ class DecodedRecording:
                 self.reader, self._owns = RecordingReader(source), True
             except RecordingError as e:
                 raise DecodeError(str(e)) from None
-        if dbc is not None and signalmap is None:
-            raise DecodeError("--dbc needs --signalmap saying which frames feed which fields "
-                              "(see configs/signalmaps/)")
-        self._sigmap = None
-        if signalmap is not None:
-            from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
-
-            try:
-                self._sigmap = load_signalmap(signalmap)
-            except SignalMapError as e:
-                raise DecodeError(str(e)) from None
         self._dbc = dbc
         self._bus_map = dict(bus_map or {})
         self.device_time = bool(device_time)
-        if not reorder_window_s >= 0:
-            raise DecodeError("reorder_window_s must be >= 0")
         self._window_ns = int(round(reorder_window_s * 1e9))
         self._imu_rate = float(imu_rate_hz)
         self._raw_sink = raw_sink
@@ -443,10 +443,19 @@ class DecodedRecording:
         self._raw_records = 0
         self._emitted = 0
         self.decoding: dict[str, dict] = {}
-        for topic in self.reader.topics():
-            if topic.startswith(S.RAW_CAN_PREFIX):
-                self._can_stream(topic[len(S.RAW_CAN_PREFIX):])  # fail early on a bad map/DBC
+        try:
+            for topic in self.reader.topics():
+                if topic.startswith(S.RAW_CAN_PREFIX):
+                    self._can_stream(topic[len(S.RAW_CAN_PREFIX):])  # fail early on a bad map/DBC
+        except DecodeError:
+            self.close()
+            raise
         self._it = self._run()
+
+    def close(self) -> None:
+        """Close the reader if this object opened it (also done at the end of iteration)."""
+        if self._owns:
+            self.reader.close()
 
     # ---------------------------------------------------------------- setup per source
     def _can_stream(self, bus: str) -> _CanStream | None:

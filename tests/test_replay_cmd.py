@@ -1,0 +1,154 @@
+"""Tests of ``vdps replay`` (vdps_hil.cli.replay_cmd over vdps_hil.system.replay_file)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+
+import pytest
+from click.testing import CliRunner
+
+from vdps_hil.cli.main import cli
+from vdps_hil.identification.persistence import load_params
+from vdps_hil.model.params import load_vehicle
+from vdps_hil.record.decode import copy_raw_topics
+from vdps_hil.record.reader import RecordingReader
+from vdps_hil.sim.drive import Drive
+
+_OPENED: list[str] | None = None
+
+
+def _audit(event, args):  # records every file the process opens while a test listens
+    if _OPENED is not None and event == "open" and isinstance(args[0], (str, bytes)):
+        _OPENED.append(str(args[0]))
+
+
+sys.addaudithook(_audit)
+
+
+def run(*args):
+    r = CliRunner().invoke(cli, list(args), catch_exceptions=False)
+    return r.exit_code, r.output
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory):
+    d = tmp_path_factory.mktemp("replay")
+    p = d / "paper.mcap"
+    Drive("paper", seed=5, duration_s=3.0).run(p)
+    return p
+
+
+def _est_messages(path):
+    with RecordingReader(path) as r:
+        return [(m.topic, m.t_ns, m.data) for m in r.iter_records(prefixes=("/est/",))]
+
+
+def test_replay_without_truth_equals_replay_with_truth(drive, tmp_path):
+    """The raw-only copy has no /truth/ topics and no truth metadata, and the replay opens no
+    truth vehicle file: its outputs are identical to the original's (no hidden dependency)."""
+    global _OPENED
+    raw_only = tmp_path / "raw-only.mcap"
+    copy_raw_topics(drive, raw_only)
+    with RecordingReader(raw_only) as r:
+        assert not any(t.startswith("/truth") for t in r.topics())
+        assert "truth.drive" not in r.metadata()
+    code, _ = run("replay", str(drive), "-o", str(tmp_path / "a.mcap"), "--json", str(tmp_path / "a.json"))
+    assert code == 0
+    _OPENED = []
+    try:
+        code, _ = run("replay", str(raw_only), "-o", str(tmp_path / "b.mcap"), "--json", str(tmp_path / "b.json"))
+    finally:
+        opened, _OPENED = _OPENED, None
+    assert code == 0
+    assert not [p for p in opened if "truth" in p.rsplit("/", 1)[-1]], "a truth file was opened"
+    a, b = _est_messages(tmp_path / "a.mcap"), _est_messages(tmp_path / "b.mcap")
+    assert len(a) > 300 and a == b
+    ja = json.loads((tmp_path / "a.json").read_text())
+    jb = json.loads((tmp_path / "b.json").read_text())
+    for k in ("input", "output", "wall_time_s", "realtime_factor"):
+        ja.pop(k), jb.pop(k)
+    assert ja == jb
+
+
+def test_json_summary_and_output_topics(drive, tmp_path):
+    out, js = tmp_path / "o.mcap", tmp_path / "o.json"
+    code, text = run("replay", str(drive), "-o", str(out), "--json", str(js))
+    assert code == 0 and "estimates" in text
+    doc = json.loads(js.read_text())
+    for key in ("estimates_summary", "rejected", "messages_read", "observability", "wall_time_s",
+                "realtime_factor", "identification", "prediction", "innovations"):
+        assert key in doc
+    es = doc["estimates_summary"]
+    assert es["count"] >= 290  # 100 Hz over 3 s (from the first fix)
+    assert es["final"]["sigma"]["x_g_m"] < 1.0  # GNSS 1 m, fused
+    assert doc["rejected"]["serial.imu"] == 0 and doc["rejected"]["can.vdps"] == 0
+    assert doc["messages_read"]["raw_records"] > 6000
+    assert doc["observability"]["in_progress"]["rank"] == doc["observability"]["in_progress"]["n_states"]
+    assert doc["innovations"]["gnss_pos"]["accepted"] >= 14
+    assert doc["prediction"]["predictions"] >= 25 and doc["prediction"]["frames_sent"] >= 140
+    with RecordingReader(out) as r:
+        topics = r.topics()
+    with RecordingReader(drive) as r:
+        raw_in = {t: i.count for t, i in r.topics().items() if t.startswith("/raw/")}
+    assert {t: topics[t].count for t in raw_in} == raw_in  # a complete recording: raw copied
+    for t in ("/est/state", "/est/filtered", "/est/ident", "/est/prediction", "/est/innovation/gnss_pos",
+              "/est/innovation/y1_sus", "/est/can/vdps"):
+        assert topics[t].count > 0, t
+    with RecordingReader(out) as r:
+        t, _, st = next(r.iter_messages("/est/state"))
+        assert set(st["values"]) == set(st["sigmas"]) and "psi_v_rad" in st["values"]
+
+
+def test_save_params_then_start_from_them(drive, tmp_path):
+    saved = tmp_path / "p.json"
+    code, _ = run("replay", str(drive), "--no-predict", "--save-params", str(saved), "--json", str(tmp_path / "1.json"))
+    assert code == 0
+    first = json.loads((tmp_path / "1.json").read_text())["identification"]["params"]
+    p = load_params(saved, load_vehicle("sedan-model")).params
+    assert p.mass_kg == pytest.approx(first["mass_kg"], rel=1e-12)
+    code, _ = run("replay", str(drive), "--no-predict", "--params", str(saved), "--json", str(tmp_path / "2.json"))
+    assert code == 0
+    second = json.loads((tmp_path / "2.json").read_text())["identification"]
+    assert second["prior"]["mass_kg"] == 1840.0  # the model file's prior stays the prior ...
+    # ... but the run started from the saved mass, so it ends nearer to it than the first run did
+    assert abs(second["params"]["mass_kg"] - p.mass_kg) < abs(first["mass_kg"] - 1840.0)
+    code, text = run("replay", str(drive), "--vehicle", "suv-model", "--params", str(saved))
+    assert code == 2 and "sedan-model" in text and len(text.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--vehicle", "sedan-truth"], "truth file"),
+    (["--dbc", "x.dbc"], "--signalmap"),
+    (["--bus", "nonsense"], "REC=MAP"),
+    (["--params", "/nonexistent/p.json"], "cannot read"),
+    (["--no-identify", "--save-params", "p.json"], "identifier"),
+])
+def test_bad_options_are_one_line_errors(drive, args, needle):
+    code, text = run("replay", str(drive), "--no-predict", *args)
+    assert code == 2 and needle in text and len(text.strip().splitlines()) == 1
+
+
+def test_model_file_is_accepted_only_when_the_workbench_defines_it(drive, tmp_path):
+    if importlib.util.find_spec("vdps_hil.workbench.model_file") is None:
+        code, text = run("replay", str(drive), "--model", str(tmp_path / "m.json"))
+        assert code == 2 and "not supported yet" in text
+    else:
+        code, text = run("replay", str(drive), "--model", str(tmp_path / "missing.json"))
+        assert code == 2 and len(text.strip().splitlines()) == 1
+
+
+def test_broken_inputs_are_one_line_errors_or_read_as_far_as_they_go(drive, tmp_path):
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"\x00" * 100)
+    code, text = run("replay", str(junk))
+    assert code == 2 and "not an MCAP" in text
+    code, text = run("replay", str(drive), "-o", str(drive))
+    assert code == 2 and "overwrite" in text
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(drive.read_bytes()[: drive.stat().st_size // 2])
+    code, text = run("replay", str(cut), "--no-predict", "--no-identify", "--json", str(tmp_path / "c.json"))
+    assert code == 0
+    doc = json.loads((tmp_path / "c.json").read_text())
+    assert doc["estimates_summary"]["count"] > 50 and doc["decode"]["reader"]["problems"]
