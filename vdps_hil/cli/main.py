@@ -24,6 +24,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
              "Topics, rates, gaps, per-source health and fields of a recording."),
     "recover": ("vdps_hil.cli.recover_cmd", "recover_",
                 "Rescue every complete record of a recording cut off by a crash."),
+    "replay": ("vdps_hil.cli.replay_cmd", "replay",
+               "Run estimator, identifier, predictor and warning on a recording's /raw/ topics."),
 }
 
 
