@@ -20,7 +20,8 @@ Velocity and acceleration in the aux frame::
     G   = R(z, psi_v) R(x, phi_r) R(y, theta_r) [0, 0, -g]       eq 13 (``gravity_aux_mps2``)
     f_cg = C_bs f_s - wd x l - w x (w x l)                       IMU specific force at the CG
 
-``f_s`` is the mean of the IMU samples since the previous call (``observe``), rotated to the
+``f_s`` is the mean of the IMU samples of the last ``accel_window_s`` (2 ms: two samples at
+1 kHz, 0.5 ms of lag) up to the estimate's time (``observe`` keeps the recent ones), rotated to the
 body by the model file's ``imu_rotation_rpy_rad`` (C_bs = (C_g^v(rpy))^T, as the pipeline) and
 moved to the CG by the lever arm ``l`` with the alpha-beta rate w and its derivative wd. We use
 the specific force rather than differentiating the EKF velocity: the accelerometer has
@@ -31,7 +32,17 @@ same specific force, eq 7 with correction (d)). An ESC cluster without f_z gets 
 Eq 13 writes the translation in the aux frame, which turns with the vehicle about the road
 normal at psid_v, so the component derivatives are::
 
-    xdd_a = a_a,x + yd_a psid_v,   ydd_a = a_a,y - xd_a psid_v,   zdd_a = a_a,z
+    xdd_a = a_a,x + yd_a psid_v,   ydd_a = a_a,y - xd_a psid_v,   zdd_a = a_a,z   (vertical "aux")
+    zdd_a = f_cg,z + G_z                                                       (vertical "struts")
+
+Vertical (``FeederConfig.vertical``, default ``"struts"``): eq 20 balances the strut forces
+(along the body z axis) with m (zdd_a - G_z). Eq 13 writes the vehicle-frame forces in the aux
+frame (small angles), but in a corner the body rolls by phi_v while the lateral acceleration
+a_y is large, and the aux-frame vertical acceleration differs from the body-z one by about
+a_y sin(phi_v) -- always of one sign (roll follows the lateral acceleration), so it biases the
+mass: m_tot came out -0.59 % on the paper's scenario fed with the simulator's truth state, and
++0.07 % with ``"struts"``, where A = zdd_a - G_z is the specific force along the struts (body z,
+the axis the springs act on). ``"aux"`` keeps the literal aux-frame value.
     [phid_v, thetad_v, psid_v] = C_omega(phi_v, theta_v)^-1 w    (eq 7's C_omega with the
                                                                    road-relative angles; road
                                                                    angles constant, eq 6)
@@ -58,6 +69,7 @@ angles [rad]; lambda [-]; alpha [rad]; G [m/s^2].
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -70,23 +82,34 @@ from vdps_hil.model.frames import (c_omega_inv, dcm_global_to_road, dcm_global_t
 from vdps_hil.model.params import Vehicle
 from vdps_hil.units import GRAVITY_MPS2
 
-__all__ = ["FeederConfig", "IdentFeeder"]
+__all__ = ["FeederConfig", "IdentFeeder", "VERTICAL"]
+
+VERTICAL = ("struts", "aux")
 
 _SF = axis_fields("specific_force_mps2")
 _NAN = math.nan
+_MAX_IMU_AGE_NS = 100_000_000  # an older IMU sample does not stand for the estimate's instant
 
 
 @dataclass(frozen=True)
 class FeederConfig:
     """``slip_speed_floor_mps``: the core's v_floor for the slip denominators [m/s];
-    ``gravity_mps2``: g for an ESC cluster's missing f_z."""
+    ``gravity_mps2``: g for an ESC cluster's missing f_z; ``accel_window_s``: IMU samples of this
+    span before the estimate are averaged (the latest one if none falls in it) [s];
+    ``vertical``: "struts" or "aux" (module docstring)."""
 
     slip_speed_floor_mps: float = SLIP_SPEED_FLOOR_MPS
     gravity_mps2: float = GRAVITY_MPS2
+    accel_window_s: float = 0.002
+    vertical: str = "struts"
 
     def __post_init__(self):
         if not (math.isfinite(self.slip_speed_floor_mps) and self.slip_speed_floor_mps > 0):
             raise ValueError("FeederConfig.slip_speed_floor_mps must be positive")
+        if not (math.isfinite(self.accel_window_s) and self.accel_window_s >= 0):
+            raise ValueError("FeederConfig.accel_window_s must be >= 0")
+        if self.vertical not in VERTICAL:
+            raise ValueError(f"FeederConfig.vertical must be one of {VERTICAL}, got {self.vertical!r}")
 
 
 class IdentFeeder:
@@ -110,13 +133,13 @@ class IdentFeeder:
         arm = np.asarray(m.imu_lever_arm_m, dtype=float)
         self._arm = None if not arm.any() else arm
         self._h_cg = model_vehicle.geometry.h_cg_m
-        self._f_sum = [0.0, 0.0, 0.0]
-        self._f_n = 0
+        self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=256)
+        self._win_ns = int(round(self.config.accel_window_s * 1e9))
         self.counters = {"calls": 0, "inputs": 0, "incomplete": 0, "no_imu": 0, "imu_samples": 0}
 
     # ------------------------------------------------------------------ IMU
     def observe(self, sample: Sample) -> None:
-        """Collect the specific force of ``imu`` samples (others are ignored)."""
+        """Keep the specific force of recent ``imu`` samples (others are ignored)."""
         if sample.kind != "imu" or not sample.valid:
             return
         g = sample.fields.get
@@ -125,21 +148,27 @@ class IdentFeeder:
             fz = self.config.gravity_mps2  # ESC cluster: no f_z
         if not math.isfinite(fx + fy):
             return
-        s = self._f_sum
-        s[0] += fx
-        s[1] += fy
-        s[2] += fz
-        self._f_n += 1
+        self._recent.append((sample.t_ns, fx, fy, fz))
         self.counters["imu_samples"] += 1
 
-    def _mean_specific_force(self, omega, omega_dot) -> np.ndarray:
-        n = self._f_n
+    def _mean_specific_force(self, t_ns: int, omega, omega_dot) -> np.ndarray:
+        """Mean of the samples in (t - window, t], or the newest one at or before t if none is
+        in the window and it is at most ``_MAX_IMU_AGE_NS`` old."""
+        sx = sy = sz = 0.0
+        n = 0
+        lo = t_ns - self._win_ns
+        for t, fx, fy, fz in reversed(self._recent):
+            if t > t_ns:
+                continue
+            if t <= lo and (n or t_ns - t > _MAX_IMU_AGE_NS):
+                break
+            sx, sy, sz, n = sx + fx, sy + fy, sz + fz, n + 1
+            if t <= lo:
+                break
         if n == 0:
             self.counters["no_imu"] += 1
             return np.full(3, _NAN)
-        f = np.array(self._f_sum) / n
-        self._f_sum = [0.0, 0.0, 0.0]
-        self._f_n = 0
+        f = np.array([sx / n, sy / n, sz / n])
         if self._imu_rot is not None:
             f = self._imu_rot @ f
         if self._arm is not None and np.isfinite(omega).all() and np.isfinite(omega_dot).all():
@@ -163,14 +192,15 @@ class IdentFeeder:
         grav = gravity_aux_mps2(phi_r, theta_r, psi_v)
         omega = np.array(filtered.angular_rate_radps, dtype=float)
         omega_dot = np.array(filtered.angular_accel_radps2, dtype=float)
-        f_cg = self._mean_specific_force(omega, omega_dot)
+        f_cg = self._mean_specific_force(int(estimate.t_ns), omega, omega_dot)
         a_a = c_ga @ (c_gv.T @ f_cg) + np.array(grav)
         psi_v_dot = float((c_omega_inv(phi_v, theta_v) @ omega)[2])
         xdd = float(a_a[0] + v_a[1] * psi_v_dot)
         ydd = float(a_a[1] - v_a[0] * psi_v_dot)
+        zdd = float(a_a[2]) if self.config.vertical == "aux" else float(f_cg[2] + grav[2])
         slip, alpha, delta = self._tire_kinematics(estimate, filtered, c_gv @ v_g, omega)
         inp = IdentInputs(
-            t_ns=int(estimate.t_ns), xdd_a_mps2=xdd, ydd_a_mps2=ydd, zdd_a_mps2=float(a_a[2]),
+            t_ns=int(estimate.t_ns), xdd_a_mps2=xdd, ydd_a_mps2=ydd, zdd_a_mps2=zdd,
             xd_a_mps=float(v_a[0]), yd_a_mps=float(v_a[1]), psi_v_dot_radps=psi_v_dot,
             gravity_aux_mps2=grav, omega_radps=tuple(omega.tolist()), omega_dot_radps2=tuple(omega_dot.tolist()),
             susp_deflection_m=filtered.susp_deflection_m, susp_rate_mps=filtered.susp_rate_mps,

@@ -1,0 +1,153 @@
+#!/usr/bin/env python3
+"""Replay benchmark (issue 5): real-time factor of ``vdps replay`` on Table-1-rate drives
+(first bar >= 20x, goal 100x) and the EKF cycle time inside the chain.
+
+A drive of the ``paper`` scenario is simulated once per profile (``table1``: the paper's
+Table 1 rates, suspension 1 Hz; ``table1-susp1k``: suspension 1 kHz) and replayed:
+
+* ``decode``: ``record.decode`` alone (reader, CAN/IMU/NMEA codecs, device clocks);
+* ``estimator``: decoded samples -> ``VdpsSystem`` without identification and prediction;
+* ``+identify``: with the identifier (100 Hz);
+* ``+predict``: with the 5 s predictor at 10 Hz and the warning node;
+* ``replay_file``: the whole ``vdps replay`` (decode + system + writing OUT.mcap), estimator
+  only and complete.
+
+RTF = simulated seconds / wall seconds (best of ``--repeat``). EKF cycle time: wall time of
+``pipeline.handle`` over the run divided by the number of predict cycles (10 ms), and the
+per-kind cost from ``tools/bench_ekf.py``'s micro-benchmark when it is present.
+
+Usage::
+
+    .venv/bin/python tools/bench_replay.py [--duration 30] [--repeat 2] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+
+from vdps_hil.model.params import load_vehicle
+from vdps_hil.record.decode import decode_recording
+from vdps_hil.sim.drive import Drive
+from vdps_hil.sim.profiles import load_profile
+from vdps_hil.system import SystemConfig, VdpsSystem, replay_file
+
+
+def _best(fn, repeat: int) -> float:
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def bench_profile(profile: str, duration_s: float, repeat: int, tmp: str) -> dict:
+    path = os.path.join(tmp, f"{profile}.mcap")
+    Drive("paper", profile=profile, seed=1, duration_s=duration_s).run(path)
+    prof = load_profile(profile)
+    veh = load_vehicle("sedan-model", "model")
+    out = {"profile": profile, "duration_s": duration_s}
+    samples = []
+
+    def decode():
+        samples.clear()
+        samples.extend(decode_recording(path))
+
+    out["decode_rtf"] = duration_s / _best(decode, repeat)
+    out["samples"] = len(samples)
+
+    def system(**kw):
+        cfg = SystemConfig.for_profile(prof.suspension.rate_hz, prof.suspension.sigma_m, **kw)
+
+        def run():
+            s = VdpsSystem(veh, cfg)
+            for x in samples:
+                s.handle(x)
+            run.system = s
+        return run
+
+    run = system(identify=False, predict=False)
+    t_est = _best(run, repeat)
+    out["estimator_rtf"] = duration_s / t_est
+    ekf = run.system.pipeline.ekf
+    n_pred = ekf.counters["predicts"]
+    # the pipeline's own share: the bare pipeline on exactly the samples the system fed it
+    from vdps_hil.estimation.pipeline import EstimatorPipeline
+
+    fed = []
+    cfg = SystemConfig.for_profile(prof.suspension.rate_hz, prof.suspension.sigma_m, identify=False, predict=False)
+    s = VdpsSystem(veh, cfg)
+    orig = s.pipeline.handle
+
+    def spy(x):
+        fed.append(x)
+        return orig(x)
+    s.pipeline.handle = spy
+    for x in samples:
+        s.handle(x)
+    s.finish()
+    bare = EstimatorPipeline(veh, cfg.pipeline)
+    t0 = time.perf_counter()
+    for x in fed:
+        bare.handle(x)
+    t_pipe = time.perf_counter() - t0
+    out["ekf"] = {"predicts": n_pred, "updates": {k: v["accepted"] + v["gated"] for k, v in
+                                                    ekf.counters["updates"].items() if v["accepted"] + v["gated"]},
+                  "pipeline_s_per_s": t_pipe / duration_s,
+                  "cycle_us": t_pipe / max(n_pred, 1) * 1e6}
+    out["identify_rtf"] = duration_s / _best(system(identify=True, predict=False), repeat)
+    out["predict_rtf"] = duration_s / _best(system(identify=True, predict=True), 1)
+    o = os.path.join(tmp, f"{profile}-out.mcap")
+    out["replay_file_estimator_rtf"] = duration_s / _best(
+        lambda: replay_file(path, output=o, identify=False, predict=False), repeat)
+    out["replay_file_identify_rtf"] = duration_s / _best(
+        lambda: replay_file(path, output=o, identify=True, predict=False), repeat)
+    out["replay_file_full_rtf"] = duration_s / _best(lambda: replay_file(path, output=o), 1)
+    return out
+
+
+def ekf_micro() -> dict | None:
+    """Per-kind EKF cost from tools/bench_ekf.py (the estimator's own micro-benchmark)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    if not os.path.exists(os.path.join(here, "bench_ekf.py")):
+        return None
+    sys.path.insert(0, here)
+    import bench_ekf  # noqa: E402
+
+    return bench_ekf.cycle_times()
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--duration", type=float, default=30.0)
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--profiles", default="table1,table1-susp1k")
+    ap.add_argument("--json", default=None)
+    a = ap.parse_args(argv)
+    doc = {"profiles": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        for prof in a.profiles.split(","):
+            r = bench_profile(prof, a.duration, a.repeat, tmp)
+            doc["profiles"][prof] = r
+            print(f"{prof}: decode {r['decode_rtf']:.1f}x, estimator {r['estimator_rtf']:.1f}x, "
+                  f"+identify {r['identify_rtf']:.1f}x, +predict {r['predict_rtf']:.1f}x; vdps replay: "
+                  f"estimator {r['replay_file_estimator_rtf']:.1f}x, +identify {r['replay_file_identify_rtf']:.1f}x, "
+                  f"full {r['replay_file_full_rtf']:.1f}x; EKF cycle {r['ekf']['cycle_us']:.0f} us per 10 ms",
+                  flush=True)
+    micro = ekf_micro()
+    if micro is not None:
+        doc["ekf_micro_us"] = micro
+        print("EKF micro-benchmark (tools/bench_ekf.py):", json.dumps(micro))
+    if a.json:
+        with open(a.json, "w", encoding="utf-8") as f:
+            json.dump(doc, f, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
