@@ -1050,3 +1050,132 @@ def estimate_lag(t_a, x_a, t_b, x_b, lags_s) -> float:
         if r < best:
             best, best_l = r, float(lag)
     return best_l
+
+
+# ------------------------------------------------------------------------------ steering response
+OPENPILOT_RAV4 = {"steer_ratio": 16.88, "tire_stiffness_factor": 0.5533, "mass_kg": 3650 * 0.45359237 + 136.0,
+                  "wheelbase_m": 2.65, "center_to_front_m": 0.44 * 2.65,
+                  "cornering_stiffness_front_nprad": 121599.4, "cornering_stiffness_rear_nprad": 151033.1}
+"""openpilot's starting values for the RAV4 (selfdrive/car/toyota/interface.py: steerRatio 16.88,
+tire_stiffness_factor 0.5533, mass 3650 lb + STD_CARGO_KG 136 kg, wheelbase 2.65 m,
+centerToFront 0.44 L) and the axle cornering stiffnesses its scale_tire_stiffness gives them
+(Civic base 192150 / 202500 N/rad at 1462 kg, CG at 0.4 L)."""
+
+
+def understeer_gradient(mass_kg: float, l_f_m: float, l_r_m: float, c_f_nprad: float, c_r_nprad: float) -> float:
+    """K_us = (m / L) (l_r / C_f - l_f / C_r) [rad / (m/s^2)] of the steady-state bicycle model."""
+    L = l_f_m + l_r_m
+    return mass_kg / L * (l_r_m / c_f_nprad - l_f_m / c_r_nprad)
+
+
+@dataclass(frozen=True)
+class SteerResponseFit:
+    """Least-squares fit of the steady-state bicycle model to a drive (``steer_response_fit``):
+    ``theta`` = (p1, p2, p3) with sigmas and covariance, the derived steer ratio, stiffness
+    factor and angle offset with sigmas, the information gains and their explanation, and the
+    numbers of windows and the speed range used."""
+
+    theta: tuple[float, float, float]
+    cov: np.ndarray
+    steer_ratio: float
+    steer_ratio_sigma: float
+    stiffness_factor: float
+    stiffness_factor_sigma: float
+    angle_offset_deg: float
+    angle_offset_sigma_deg: float
+    yaw_rate_bias_degps: float
+    gains: tuple[float, ...]
+    gain_vectors: np.ndarray
+    explanations: tuple
+    n_windows: int
+    speed_range_mps: tuple[float, float]
+    steer_range_deg: tuple[float, float]
+    residual_sigma: float
+    combination: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    """(u_rms [m/s], q = s_R (L + K_us u_rms^2) [m], sigma_q [m]): the steady-state steering
+    gain r / delta_sw = u / q at the drive's RMS speed, the combination the drive pins down."""
+
+    def observable(self, gain_threshold: float = 1.0) -> dict[str, bool]:
+        """Per quantity: its prior-relative direction is carried by identified directions only
+        (|component in the unidentified directions|^2 < 0.5)."""
+        weak = self.gain_vectors[:, np.asarray(self.gains) < gain_threshold]
+        names = ("steer_ratio_x_wheelbase", "understeer_x_steer_ratio", "angle_offset")
+        return {n: bool(np.sum(weak[i] ** 2) < 0.5) for i, n in enumerate(names)}
+
+
+def steer_response_fit(t_s, speed_mps, steer_wheel_rad, yaw_rate_radps, course_rate_radps, *, wheelbase_m: float,
+                       understeer0: float, prior_steer_ratio: float, window_s: float = 1.0,
+                       min_speed_mps: float = 5.0, prior_rel_sigma=(0.25, 0.5), prior_offset_sigma_deg: float = 2.0
+                       ) -> SteerResponseFit:
+    """openpilot's learned quantities (steer ratio s_R, stiffness factor x, steering angle offset
+    delta_0) from the steady-state bicycle model, linear in three parameters::
+
+        r = u (delta_sw - delta_0) / (s_R (L + K_us u^2)),   K_us = K_0 / x
+        u delta_sw = p1 r + p2 r u^2 + p3 u,   p1 = s_R L,  p2 = s_R K_0 / x,  p3 = delta_0
+
+    ==========  ==========  ===================================================================
+    symbol      unit        meaning
+    ==========  ==========  ===================================================================
+    r           rad/s       yaw rate: the ESC yaw rate minus its bias b_r, b_r = mean(r_ESC -
+                            course rate of the EKF velocity) over the drive (GNSS-based)
+    u           m/s         speed (EKF); delta_sw [rad] the steering wheel angle (CAN)
+    L, K_0      m, rad/(m/s^2)  wheelbase; understeer gradient at x = 1 (model priors)
+    ==========  ==========  ===================================================================
+
+    Signals are averaged over ``window_s`` windows (quasi-steady state, nearly independent
+    errors); least squares gives theta and Cov = s^2 (A^T A)^-1 (s^2: residual variance). The
+    information I = A^T A / s^2 is compared with a prior (p1, p2 relative sigmas
+    ``prior_rel_sigma`` about s_R L and s_R K_0, p3 sigma ``prior_offset_sigma_deg``) as in
+    ``observability_report``: gains = eig(S I S), S = diag(prior sigmas); a direction with gain
+    < 1 is not identified by the drive (it does not halve the prior variance). s_R = p1 / L,
+    x = p1 K_0 / (L p2), delta_0 = p3 (sigmas by first-order propagation)."""
+    from vdps_hil.estimation.observability_report import explain_null_space
+
+    t = np.asarray(t_s, dtype=float)
+    u, sw, r_m, cr = (np.asarray(v, dtype=float) for v in (speed_mps, steer_wheel_rad, yaw_rate_radps,
+                                                           course_rate_radps))
+    ok = np.isfinite(u + sw + r_m + cr) & (u >= min_speed_mps)
+    bias = float(np.mean((r_m - cr)[ok]))
+    r = r_m - bias
+    edges = np.arange(t[ok][0], t[ok][-1] + 1e-9, window_s)
+    rows, ys = [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        m = ok & (t >= a) & (t < b)
+        if m.sum() < 3:
+            continue
+        um, rm, sm = u[m].mean(), r[m].mean(), sw[m].mean()
+        rows.append([rm, rm * um * um, um])
+        ys.append(um * sm)
+    A, y = np.array(rows), np.array(ys)
+    n = A.shape[0]
+    theta, *_ = np.linalg.lstsq(A, y, rcond=None)
+    res = y - A @ theta
+    s2 = float(res @ res / max(n - 3, 1))
+    info = A.T @ A / s2
+    cov = np.linalg.pinv(info)
+    p1, p2, p3 = theta
+    sr = p1 / wheelbase_m
+    x = p1 * understeer0 / (wheelbase_m * p2) if p2 != 0 else math.inf
+    j_x = np.array([understeer0 / (wheelbase_m * p2), -p1 * understeer0 / (wheelbase_m * p2 * p2), 0.0])
+    prior = np.array([prior_steer_ratio * wheelbase_m * prior_rel_sigma[0],
+                      prior_steer_ratio * understeer0 * prior_rel_sigma[1], math.radians(prior_offset_sigma_deg)])
+    g = prior[:, None] * info * prior[None, :]
+    gains, vecs = np.linalg.eigh(0.5 * (g + g.T))
+    names = ("steer_ratio_x_wheelbase", "understeer_x_steer_ratio", "angle_offset")
+    weak = vecs[:, gains < 1.0].T
+    expl = list(explain_null_space(weak, names, "is barely seen in the data")) if weak.size else []
+    # a constant road bank phi enters as -s_R K_us g sin(phi) u: the same column as the offset
+    aug = np.column_stack([A, A[:, 2]])
+    _, sv, vt = np.linalg.svd(aug / np.linalg.norm(aug, axis=0), full_matrices=False)
+    null = vt[sv < 1e-9 * sv[0]]
+    expl += explain_null_space(null, (*names, "road_bank_term"))
+    u2 = float(np.mean(A[:, 2] ** 2))
+    jq = np.array([1.0, u2, 0.0])
+    comb = (math.sqrt(u2), float(p1 + p2 * u2), float(math.sqrt(max(jq @ cov @ jq, 0.0))))
+    return SteerResponseFit(tuple(float(v) for v in theta), cov, float(sr), float(math.sqrt(cov[0, 0]) / wheelbase_m),
+                            float(x), float(math.sqrt(max(j_x @ cov @ j_x, 0.0))), float(math.degrees(p3)),
+                            float(math.degrees(math.sqrt(cov[2, 2]))), float(math.degrees(bias)),
+                            tuple(float(v) for v in gains), vecs, tuple(expl), n,
+                            (float(u[ok].min()), float(u[ok].max())),
+                            (float(np.degrees(sw[ok].min())), float(np.degrees(sw[ok].max()))), float(math.sqrt(s2)),
+                            comb)

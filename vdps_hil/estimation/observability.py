@@ -11,7 +11,9 @@ in a typical uncertainty of its state and every row in its measurement noise. Wi
 values s_1 >= ... >= s_n of O, the numerical rank is the number of s_i > rtol s_1 (``rtol``
 default 1e-6). The right singular vectors of the remaining s_i span the unobservable
 directions; a state is reported *unobservable* when its squared component in that null space
-(its "participation", 0..1) exceeds ``participation_threshold`` (default 0.5).
+(its "participation", 0..1) exceeds ``participation_threshold`` (default 0.5). The null-space
+basis itself (rows, scaled coordinates) is kept in ``ObservabilityReport.null_space`` so the
+reasons can be derived from it (``observability_report.explain_null_space``).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ class ObservabilityReport:
     participation: dict
     rows: int
     rtol: float
+    null_space: tuple = ()  # orthonormal basis of the unobservable directions (rows, scaled coordinates)
 
     @property
     def full_rank(self) -> bool:
@@ -66,7 +69,8 @@ def observability_rank(blocks, state_names, scales=None, rtol: float = DEFAULT_R
         if b.shape[1] != n:
             raise ValueError(f"observability block has {b.shape[1]} columns, expected {n}")
     if not rows:
-        return ObservabilityReport(0, n, tuple([0.0] * n), names, {nm: 1.0 for nm in names}, 0, rtol)
+        return ObservabilityReport(0, n, tuple([0.0] * n), names, {nm: 1.0 for nm in names}, 0, rtol,
+                                   tuple(tuple(float(v) for v in row) for row in np.eye(n)))
     o = np.vstack(rows)
     if scales is not None:
         o = o * np.asarray(scales, dtype=float)[None, :]
@@ -79,7 +83,8 @@ def observability_rank(blocks, state_names, scales=None, rtol: float = DEFAULT_R
     part = (null ** 2).sum(axis=0) if null.size else np.zeros(n)
     unobs = tuple(nm for nm, p in zip(names, part) if p > participation_threshold)
     return ObservabilityReport(rank, n, tuple(float(v) for v in s_full), unobs,
-                               {nm: float(p) for nm, p in zip(names, part)}, o.shape[0], rtol)
+                               {nm: float(p) for nm, p in zip(names, part)}, o.shape[0], rtol,
+                               tuple(tuple(float(v) for v in row) for row in null))
 
 
 class ObservabilityWindow:

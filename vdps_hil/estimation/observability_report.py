@@ -1,0 +1,664 @@
+"""The observability report: what a sensor set and a drive let the system estimate and identify,
+and *why not*, computed from the linearised filter and the identification information (no
+lookup of conclusions).
+
+1. Filter windows (``estimation.observability``): for each window the whitened, scaled
+   observability matrix O = [R_k^-1/2 H_k Phi(t_k, t_0)]_k D has the null space N (orthonormal
+   rows n_j, scaled coordinates, the right singular vectors of the singular values below
+   rtol s_1). ``explain_null_space`` turns N into statements:
+
+   * participation p_i = sum_j n_ji^2 (0..1). A state with p_i >= 1 - eps lies entirely in N:
+     "X: not observable".
+   * N is projected off those states and brought to reduced row-echelon form over the remaining
+     states; each row with support {i, k, ...} is one unobservable combination: moving the
+     states together by (c_i, c_k, ...) (scaled units) leaves every measurement unchanged.
+     Two states with c_i = c_k ("phi_g, phi_r: only their difference is observable"), with
+     c_i = -c_k ("only their sum"), otherwise "only combinations orthogonal to ...".
+   * why: the measurement kinds of the window and the process coupling decide which; the
+     report names the kinds whose Jacobian columns of those states are zero over the window
+     (``structural_report``) and, for states the generic model observes but the window does
+     not, says "not excited on this drive".
+   * derived outputs y = g^T x: road-relative roll/pitch phi_v, theta_v (eq 4), speed and
+     course: unobservable when |N g_s| / |g_s| > ``derived_threshold`` (g_s = D g, scaled).
+
+2. Structure of the configured model (``structural_report``): the rank of O built from the
+   configured measurement kinds along a *generic* trajectory (random states and IMU inputs:
+   speeds 5-25 m/s, accelerations up to 3 m/s^2, rates up to 0.3 rad/s; seeded) in the full
+   layout of eq 7 (road angles estimated). It is the best any drive can give; a drive's window
+   with a lower rank lacks excitation. States the configured layout does not carry (road angles
+   without suspension) are explained here.
+
+3. Identification (``identification_report``): for each RLS problem (eq 20-23) the accumulated
+   information I = sum A^T Q^T Q A (physical A, ``WeightedRLS.information``) is compared with
+   the prior information P0^-1 = diag(1 / sigma0^2) in the prior-relative coordinates
+   u_j = x_j / x0_j::
+
+       G = S I S,   S = diag(sigma0)   (information gain: eigenvalue 1 = as much as the prior)
+
+   with eigenvalues g_1 <= ... <= g_n and eigenvectors e_1..e_n (in u). A direction is
+   *identified* when g >= ``gain_threshold`` (default 1: the drive at least halves the prior
+   variance along it). Unidentified directions are explained from the RLS counters and, with
+   an ``IdentificationMonitor``, from the inputs: rows never usable because an input was NaN
+   (which IdentInputs fields), rows gated by ``excitation_min`` (the largest |A_ij| reached vs
+   the gate), or used rows that are collinear (only the combination e_n is identified).
+
+Symbols: O observability matrix (whitened, scaled); N null space; D state scales (1 m, 1 m/s,
+0.01 rad); rtol relative singular value threshold; I, G information [1/unit^2], gain [-];
+sigma0 prior standard deviation (parameter unit).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from vdps_hil.estimation.ekf import EkfConfig
+from vdps_hil.estimation.kinematics import linearize, transition, vehicle_angles_eq4
+from vdps_hil.estimation.observability import DEFAULT_RTOL, ObservabilityReport, default_scales, observability_rank
+from vdps_hil.estimation.observations import ObsKind, make_models
+from vdps_hil.estimation.states import N_FULL, STATE_NAMES, StateLayout
+
+__all__ = ["Explanation", "WindowExplanation", "StructuralReport", "ProblemReport", "IdentificationMonitor",
+           "ObservabilityReportDoc", "explain_null_space", "structural_report", "identification_report",
+           "observability_report", "STATE_LABELS"]
+
+STATE_LABELS = {
+    "x_g_m": "east position", "y_g_m": "north position", "z_g_m": "height",
+    "xdot_g_mps": "east velocity", "ydot_g_mps": "north velocity", "zdot_g_mps": "vertical velocity",
+    "phi_g_rad": "roll", "theta_g_rad": "pitch", "psi_g_rad": "yaw",
+    "phi_r_rad": "road bank", "theta_r_rad": "road grade", "psi_v_rad": "yaw over the road",
+}
+"""Plain words for the state names (``STATE_NAMES``)."""
+
+_SHORT = {n: n.rsplit("_", 1)[0] for n in STATE_NAMES}  # phi_g_rad -> phi_g
+_EPS_FULL = 0.02  # participation >= 1 - eps: the state lies entirely in the null space
+_COEF_MIN = 0.05  # coefficients below this (relative) are not part of a relation
+
+
+@dataclass(frozen=True)
+class Explanation:
+    """One statement: ``names`` involved, the relation ``coefficients`` (scaled units; a
+    combination that moves no measurement), ``kind`` (``not_observable``, ``only_difference``,
+    ``only_sum``, ``combination``, ``not_estimated``, ``derived``, ``not_excited``) and the
+    sentence ``text``."""
+
+    kind: str
+    names: tuple[str, ...]
+    coefficients: tuple[float, ...]
+    text: str
+
+    def to_json(self) -> dict:
+        return {"kind": self.kind, "names": list(self.names), "coefficients": list(self.coefficients),
+                "text": self.text}
+
+
+def _short(n: str) -> str:
+    return _SHORT.get(n, n)
+
+
+def _relation_text(names: Sequence[str], coef: np.ndarray, unseen: str = "changes no measurement"
+                   ) -> tuple[str, str]:
+    """(kind, sentence) for one unobservable combination over ``names``."""
+    sn = [_short(n) for n in names]
+    if len(names) == 2:
+        a, b = coef
+        if abs(abs(a) - abs(b)) <= 0.1 * max(abs(a), abs(b)):
+            if a * b > 0:
+                return "only_difference", f"{sn[0]}, {sn[1]}: only their difference is observable"
+            return "only_sum", f"{sn[0]}, {sn[1]}: only their sum is observable"
+    terms = " + ".join(f"{c:+.2f} {n}" for c, n in zip(coef, sn)).replace("+ -", "- ")
+    return "combination", f"{', '.join(sn)}: not separable; moving them together along ({terms}) {unseen}"
+
+
+def _rref(a: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """Reduced row-echelon form (partial pivoting) of a small dense matrix."""
+    m = a.astype(float).copy()
+    rows, cols = m.shape
+    r = 0
+    for c in range(cols):
+        if r >= rows:
+            break
+        p = r + int(np.argmax(np.abs(m[r:, c])))
+        if abs(m[p, c]) <= tol:
+            continue
+        m[[r, p]] = m[[p, r]]
+        m[r] /= m[r, c]
+        for k in range(rows):
+            if k != r:
+                m[k] -= m[k, c] * m[r]
+        r += 1
+    return m[:r]
+
+
+def explain_null_space(null_space, names: Sequence[str], unseen: str = "changes no measurement"
+                       ) -> list[Explanation]:
+    """Statements about an unobservable subspace (rows: orthonormal basis, columns ``names``);
+    see the module docstring (item 1). ``unseen`` ends the sentence of a general combination
+    (a weak rather than null direction: "is barely seen in the data")."""
+    n = np.atleast_2d(np.asarray(null_space, dtype=float))
+    names = tuple(names)
+    if n.size == 0:
+        return []
+    out: list[Explanation] = []
+    part = (n ** 2).sum(axis=0)
+    full = [i for i, p in enumerate(part) if p >= 1.0 - _EPS_FULL]
+    for i in full:
+        out.append(Explanation("not_observable", (names[i],), (1.0,),
+                               f"{_short(names[i])} ({STATE_LABELS.get(names[i], names[i])}): not observable"))
+    # remove the fully unobservable states' directions, keep the rest of the null space
+    keep = [i for i in range(len(names)) if i not in full]
+    rest = n[:, keep]
+    u, s, vt = np.linalg.svd(rest, full_matrices=False)
+    basis = vt[s > 1e-6]
+    if basis.size == 0:
+        return out
+    r = _rref(basis)
+    for row in r:
+        idx = [k for k, c in enumerate(row) if abs(c) > _COEF_MIN * np.max(np.abs(row))]
+        if len(idx) < 2:
+            continue
+        coef = row[idx] / np.max(np.abs(row[idx]))
+        nm = tuple(names[keep[k]] for k in idx)
+        kind, text = _relation_text(nm, coef, unseen)
+        out.append(Explanation(kind, nm, tuple(float(c) for c in coef), text))
+    return out
+
+
+# ------------------------------------------------------------------------------- derived outputs
+def derived_gradients(x_full: np.ndarray) -> dict[str, np.ndarray]:
+    """Gradients (full 12-state, physical units) of derived outputs at ``x_full``: road-relative
+    roll and pitch (eq 4), horizontal speed and course over ground."""
+    x = np.asarray(x_full, dtype=float)
+    _, jac = vehicle_angles_eq4(x[6:11], with_jacobian=True)
+    g = {}
+    for k, name in ((0, "phi_v"), (1, "theta_v")):
+        v = np.zeros(N_FULL)
+        v[6:11] = jac[k]
+        g[name] = v
+    vx, vy = x[3], x[4]
+    sp = math.hypot(vx, vy)
+    if sp > 1e-6:
+        v = np.zeros(N_FULL)
+        v[3], v[4] = vx / sp, vy / sp
+        g["speed"] = v
+        c = np.zeros(N_FULL)
+        c[3], c[4] = -vy / sp ** 2, vx / sp ** 2
+        g["course"] = c
+    return g
+
+
+DERIVED_THRESHOLD = 1e-3
+"""A derived output whose gradient has more than this fraction inside the null space is not
+observable (a linear function of the states is observable iff its gradient is orthogonal to the
+null space; the threshold only absorbs round-off)."""
+
+
+def derived_observability(null_space, layout: StateLayout, x_full, scales=None) -> dict[str, float]:
+    """For each derived output y = g^T x: the fraction |N g_s|^2 / |g_s|^2 of its (scaled,
+    filter-layout) gradient inside the null space (0 observable; > ``DERIVED_THRESHOLD`` not
+    observable)."""
+    n = np.atleast_2d(np.asarray(null_space, dtype=float))
+    idx = layout.full_index
+    d = default_scales(layout) if scales is None else np.asarray(scales, dtype=float)
+    out = {}
+    for name, g in derived_gradients(x_full).items():
+        gs = g[idx] * d  # d y / d (x / D) in the filter layout
+        norm2 = float(gs @ gs)
+        if norm2 <= 0.0:
+            continue
+        out[name] = float(np.sum((n @ gs) ** 2) / norm2) if n.size else 0.0
+    return out
+
+
+# ------------------------------------------------------------------------------- structure
+@dataclass(frozen=True)
+class StructuralReport:
+    """Generic observability of a configuration (module docstring, item 2): ``rank`` of
+    ``n_states`` (full layout, road angles estimated), the unobservable states, explanations,
+    ``not_estimated`` (states the configured layout fixes, with why), and per measurement kind
+    the states its Jacobian never touches along the generic trajectory (``blind``)."""
+
+    kinds: tuple[str, ...]
+    rank: int
+    n_states: int
+    unobservable: tuple[str, ...]
+    explanations: tuple[Explanation, ...]
+    not_estimated: tuple[Explanation, ...]
+    report: ObservabilityReport
+
+    def to_json(self) -> dict:
+        return {"kinds": list(self.kinds), "rank": self.rank, "n_states": self.n_states,
+                "unobservable": list(self.unobservable),
+                "explanations": [e.to_json() for e in self.explanations],
+                "not_estimated": [e.to_json() for e in self.not_estimated]}
+
+
+def _generic_states(rng, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A generic, physically consistent linearisation path: one road plane (bank, grade ~ 2 deg)
+    for the whole trajectory (eq 6: constant road angles), the vehicle's speed, course and
+    attitude over the road varying epoch to epoch, IMU inputs with accelerations and rates."""
+    xs = np.zeros((k, N_FULL))
+    fs = np.zeros((k, 3))
+    ws = np.zeros((k, 3))
+    road = rng.normal(0.0, 0.035, 2)
+    for i in range(k):
+        sp = rng.uniform(5.0, 25.0)
+        crs = rng.uniform(-math.pi, math.pi)
+        xs[i, 0:3] = rng.normal(0.0, 200.0, 3)
+        xs[i, 3:6] = (sp * math.cos(crs), sp * math.sin(crs), rng.normal(0.0, 0.3))
+        xs[i, 6:8] = road + rng.normal(0.0, 0.02, 2)
+        xs[i, 8] = crs + rng.normal(0.0, 0.03)
+        xs[i, 9:11] = road
+        fs[i] = (rng.uniform(-3, 3), rng.uniform(-3, 3), 9.80665 + rng.normal(0.0, 0.5))
+        ws[i] = rng.uniform(-0.3, 0.3, 3)
+    return xs, fs, ws
+
+
+_NOMINAL_SIGMA = {ObsKind.GNSS_POS: 1.0, ObsKind.GNSS_ATT: 0.007, ObsKind.GNSS_VEL: 0.1, ObsKind.Y2_GPS: 0.007,
+                  ObsKind.Y1_SUS: 4e-4, ObsKind.Y2_SUS_PLANE: 0.001, ObsKind.Y2_SUS_RATE: 0.05}
+"""Whitening of the generic analysis: Table 1 sigmas (GNSS 1 m, attitude 0.4 deg, speed 0.1 m/s,
+suspension 1 mm over the wheelbase, heave rate 0.05 m/s)."""
+
+
+def _blocks_along(xs, fs, ws, layout: StateLayout, kinds, lever_arm, dt: float):
+    """R = nominal sigma^2 I per kind, Phi products along the generic trajectory, H of each kind
+    per epoch."""
+    models = make_models(lever_arm)
+    blocks = []
+    phi = np.eye(layout.n)
+    idx = layout.full_index
+    ix = np.ix_(idx, idx)
+    for x, f, w in zip(xs, fs, ws):
+        xf, e = layout.expand(layout.from_full(x))
+        for k in kinds:
+            aux = w if k == ObsKind.GNSS_VEL else None
+            h = models[k].jacobian(xf, aux) @ e
+            blocks.append(h @ phi / _NOMINAL_SIGMA[k])
+        F, _ = linearize(xf, f, w)
+        phi = transition(F[ix], dt) @ phi
+    return blocks
+
+
+def structural_report(ekf_config: EkfConfig, gnss_lever_arm_m=(0.0, 0.0, 0.0), *, epochs: int = 40,
+                      dt_s: float = 0.2, seed: int = 0, rtol: float = DEFAULT_RTOL) -> StructuralReport:
+    """Generic observability of ``ekf_config``'s measurement kinds in the full layout (module
+    docstring, item 2). Deterministic for a seed."""
+    full_cfg = dataclasses.replace(ekf_config, estimate_road=True)
+    layout = full_cfg.layout()
+    kinds = tuple(sorted(full_cfg.kinds(), key=lambda k: k.value))
+    rng = np.random.default_rng(seed)
+    xs, fs, ws = _generic_states(rng, epochs)
+    blocks = _blocks_along(xs, fs, ws, layout, kinds, gnss_lever_arm_m, dt_s)
+    names = layout.names
+    scales = default_scales(layout)
+    rep = observability_rank(blocks, names, scales, rtol)
+    expl = explain_null_space(rep.null_space, names)
+    # which kinds are blind to which states (zero columns over the whole trajectory)
+    seen = {}
+    models = make_models(gnss_lever_arm_m)
+    for k in kinds:
+        col = np.zeros(layout.n)
+        for x, w in zip(xs, ws):
+            xf, e = layout.expand(layout.from_full(x))
+            col += np.abs(models[k].jacobian(xf, w if k == ObsKind.GNSS_VEL else None) @ e).sum(axis=0)
+        seen[k.value] = col > 0
+    why = []
+    for ex in expl:
+        idx = [names.index(n) for n in ex.names]
+        blind = [k for k, s in seen.items() if not any(s[i] for i in idx)]
+        if blind and len(blind) == len(seen):
+            why.append(dataclasses.replace(ex, text=ex.text + f" (no measurement kind of this sensor set "
+                                           f"({', '.join(seen) or 'none'}) depends on "
+                                           f"{'it' if len(idx) == 1 else 'them'}, and the process model "
+                                           "does not couple it to one that does)"))
+        else:
+            why.append(ex)
+    not_est = []
+    cfg_layout = ekf_config.layout()
+    dropped = [n for n in names if n not in cfg_layout.names]
+    if dropped:
+        dropped_unobs = [n for n in dropped if n in rep.unobservable]
+        text = (f"{', '.join(_short(n) for n in dropped)}: not estimated (fixed at 0) by this configuration"
+                + ("; the generic rank analysis finds them unobservable with these sensors" if dropped_unobs
+                   else ""))
+        not_est.append(Explanation("not_estimated", tuple(dropped), tuple(1.0 for _ in dropped), text))
+        # consequences for the road-relative angles (eq 4): gradient inside the null space
+        x0 = xs[0]
+        frac = derived_observability(rep.null_space, layout, x0, scales)
+        for nm in ("phi_v", "theta_v"):
+            if frac.get(nm, 0.0) > DERIVED_THRESHOLD:
+                not_est.append(Explanation("derived", (nm,), (frac[nm],),
+                                           f"{nm} (road-relative {'roll' if nm == 'phi_v' else 'pitch'}, eq 4): "
+                                           f"not observable ({100 * frac[nm]:.0f} % of its gradient lies in the "
+                                           "unobservable subspace: it needs the road angles)"))
+    return StructuralReport(tuple(k.value for k in kinds), rep.rank, rep.n_states, rep.unobservable, tuple(why),
+                            tuple(not_est), rep)
+
+
+# ------------------------------------------------------------------------------- windows
+@dataclass(frozen=True)
+class WindowExplanation:
+    """One filter window: times, rank, unobservable states, explanations, derived outputs'
+    null-space fractions, and states the generic model observes but this window does not
+    (``not_excited``)."""
+
+    t_start_s: float
+    t_end_s: float
+    rank: int
+    n_states: int
+    unobservable: tuple[str, ...]
+    explanations: tuple[Explanation, ...]
+    derived: dict
+    not_excited: tuple[str, ...]
+
+    def to_json(self) -> dict:
+        return {"t_start_s": self.t_start_s, "t_end_s": self.t_end_s, "rank": self.rank, "n_states": self.n_states,
+                "unobservable": list(self.unobservable), "explanations": [e.to_json() for e in self.explanations],
+                "derived_null_fraction": dict(self.derived), "not_excited": list(self.not_excited)}
+
+
+def explain_window(t0_ns: int, t1_ns: int, rep: ObservabilityReport, layout: StateLayout, x_full=None,
+                   structural: StructuralReport | None = None) -> WindowExplanation:
+    """Explain one pipeline window (``EstimatorPipeline.observability_reports`` entry)."""
+    names = tuple(STATE_NAMES[int(i)] for i in layout.full_index)
+    expl = list(explain_null_space(rep.null_space, names))
+    derived = {} if x_full is None else derived_observability(rep.null_space, layout, x_full)
+    not_exc: tuple[str, ...] = ()
+    if structural is not None:
+        not_exc = tuple(n for n in rep.unobservable if n not in structural.unobservable)
+        if not_exc:
+            expl.append(Explanation("not_excited", not_exc, tuple(1.0 for _ in not_exc),
+                                    f"{', '.join(_short(n) for n in not_exc)}: observable with these sensors "
+                                    "(generic rank analysis) but not excited in this window"))
+    return WindowExplanation(t0_ns / 1e9, t1_ns / 1e9, rep.rank, rep.n_states, rep.unobservable, tuple(expl),
+                             derived, not_exc)
+
+
+# ------------------------------------------------------------------------------- identification
+_EXAMPLE_INPUTS = None
+
+
+def _example_inputs():
+    """A finite, excited IdentInputs (only used to find which fields each problem reads)."""
+    from vdps_hil.identification.problems import IdentInputs
+
+    return IdentInputs(t_ns=1, xdd_a_mps2=0.7, ydd_a_mps2=1.3, zdd_a_mps2=0.4, xd_a_mps=15.0, yd_a_mps=0.3,
+                       psi_v_dot_radps=0.1, gravity_aux_mps2=(0.1, -0.2, -9.8), omega_radps=(0.05, -0.04, 0.1),
+                       omega_dot_radps2=(0.3, -0.2, 0.4), susp_deflection_m=(0.01, -0.01, 0.02, -0.02),
+                       susp_rate_mps=(0.05, -0.05, 0.04, -0.04), wheel_speed_radps=(48.0, 47.0, 46.5, 47.5),
+                       wheel_accel_radps2=(2.0, 2.1, 1.9, 2.0), wheel_torque_nm=(300.0, 310.0, 290.0, 305.0),
+                       slip_ratio=(0.02, 0.021, 0.019, 0.02), slip_angle_rad=(0.02, 0.021, 0.015, 0.016),
+                       wheel_angle_rad=(0.05, 0.048, 0.0, 0.0))
+
+
+def input_dependencies(vehicle, config=None) -> dict[str, tuple[str, ...]]:
+    """Problem -> the IdentInputs fields its regressor (A or b) reads, found by setting each
+    field to NaN in an excited example and seeing which rows turn non-finite (computed)."""
+    from vdps_hil.identification.problems import PROBLEM_NAMES, REGRESSORS, load_ident_config
+
+    cfg = config or load_ident_config()
+    base = _example_inputs()
+    skip = {"t_ns", "moments_nm"}
+    fields_ = [f.name for f in dataclasses.fields(base) if f.name not in skip]
+    out = {}
+    for name in PROBLEM_NAMES:
+        deps = []
+        for fn in fields_:
+            v = getattr(base, fn)
+            nan = tuple(math.nan for _ in v) if isinstance(v, tuple) else math.nan
+            inp = dataclasses.replace(base, **{fn: nan})
+            reg = REGRESSORS[name](inp, vehicle, vehicle.params, cfg)
+            if not (np.isfinite(reg.a).all() and np.isfinite(reg.b).all()):
+                deps.append(fn)
+        out[name] = tuple(deps)
+    return out
+
+
+class IdentificationMonitor:
+    """A drop-in wrapper of an ``Identifier`` (``update(inputs)`` passes through; every other
+    attribute is the identifier's) that records, per problem, why rows were not usable: the
+    IdentInputs fields that were NaN (among those the problem reads, ``input_dependencies``),
+    rows gated by ``excitation_min`` and the largest |A_ij| each row reached."""
+
+    def __init__(self, identifier):
+        from vdps_hil.identification.problems import PROBLEM_NAMES
+
+        self._idf = identifier
+        self._deps = input_dependencies(identifier.vehicle, identifier.config)
+        self.calls = 0
+        self.nan_fields = {n: {} for n in PROBLEM_NAMES}
+        self.max_excitation = {n: None for n in PROBLEM_NAMES}
+        self.gated_rows = {n: 0 for n in PROBLEM_NAMES}
+        self.rows_seen = {n: 0 for n in PROBLEM_NAMES}
+
+    def __getattr__(self, name):
+        return getattr(self._idf, name)
+
+    @property
+    def identifier(self):
+        return self._idf
+
+    @property
+    def dependencies(self) -> dict[str, tuple[str, ...]]:
+        return dict(self._deps)
+
+    def update(self, inputs) -> None:
+        from vdps_hil.identification.problems import PROBLEM_NAMES, REGRESSORS
+
+        self.calls += 1
+        idf = self._idf
+        params = idf.params
+        for name in PROBLEM_NAMES:
+            for fn in self._deps[name]:
+                v = getattr(inputs, fn)
+                bad = any(not math.isfinite(x) for x in v) if isinstance(v, tuple) else not math.isfinite(v)
+                if bad:
+                    self.nan_fields[name][fn] = self.nan_fields[name].get(fn, 0) + 1
+            try:
+                reg = REGRESSORS[name](inputs, idf.vehicle, params, idf.config)
+            except (ValueError, ArithmeticError):
+                continue
+            with np.errstate(invalid="ignore"):
+                mag = np.max(np.abs(reg.a), axis=1)
+            fin = np.isfinite(mag)
+            cur = self.max_excitation[name]
+            mag0 = np.where(fin, mag, 0.0)
+            self.max_excitation[name] = mag0 if cur is None else np.maximum(cur, mag0)
+            self.rows_seen[name] += int(fin.sum())
+            self.gated_rows[name] += int(np.count_nonzero(fin & ~np.asarray(reg.rows, dtype=bool)))
+        idf.update(inputs)
+
+
+PROBLEM_STATUSES = ("identified", "partially_identified", "not_excited", "inputs_missing", "waiting_upstream")
+
+
+@dataclass(frozen=True)
+class ProblemReport:
+    """One identification problem over the drive: parameter names, information-gain
+    eigenvalues (ascending) and eigenvectors (columns, prior-relative coordinates), the number of
+    identified directions, ``status`` (``PROBLEM_STATUSES``), explanations and the RLS counters."""
+
+    problem: str
+    params: tuple[str, ...]
+    gains: tuple[float, ...]
+    eigenvectors: tuple[tuple[float, ...], ...]
+    information_eigenvalues: tuple[float, ...]
+    identified: int
+    status: str
+    explanations: tuple[Explanation, ...]
+    counters: dict
+
+    @property
+    def fully_identified(self) -> bool:
+        return self.identified == len(self.params)
+
+    def to_json(self) -> dict:
+        return {"params": list(self.params), "status": self.status, "gain_eigenvalues": list(self.gains),
+                "information_eigenvalues": list(self.information_eigenvalues),
+                "eigenvectors": [list(v) for v in self.eigenvectors], "identified_directions": self.identified,
+                "explanations": [e.to_json() for e in self.explanations], "counters": dict(self.counters)}
+
+
+def _prior_sigma(identifier, problem: str) -> np.ndarray:
+    from vdps_hil.identification.problems import PROBLEM_PARAMS
+
+    cfg = identifier.config.problem(problem)
+    names = PROBLEM_PARAMS[problem]
+    prior = np.array([getattr(identifier.prior, n) for n in names])
+    w = np.abs(prior) if cfg.w is None else np.array(cfg.w)
+    return cfg.prior_rel_sigma * np.abs(prior) if cfg.p0_scaled is None else math.sqrt(cfg.p0_scaled) * w
+
+
+MISSING_SHARE = 0.5
+"""A problem whose needed inputs were NaN in more than this share of the updates is
+``inputs_missing``."""
+GATED_SHARE = 0.5
+"""... whose finite rows were below the excitation gate in more than this share is
+``not_excited`` (as is one that gathered less information than its prior)."""
+
+
+def identification_report(identifier, monitor: IdentificationMonitor | None = None,
+                          gain_threshold: float = 1.0) -> dict[str, ProblemReport]:
+    """Per problem (module docstring, item 3). ``identifier`` may be the monitor itself."""
+    from vdps_hil.identification.problems import PROBLEM_NAMES, PROBLEM_PARAMS
+
+    if isinstance(identifier, IdentificationMonitor):
+        monitor, identifier = identifier, identifier.identifier
+    out = {}
+    for name in PROBLEM_NAMES:
+        rls = identifier.problem(name)
+        names = PROBLEM_PARAMS[name]
+        info = rls.information
+        s0 = _prior_sigma(identifier, name)
+        prior = np.abs(np.array([getattr(identifier.prior, n) for n in names]))
+        # prior-relative coordinates u = x / x0: I_u = diag(x0) I diag(x0), prior info diag(x0^2 / s0^2);
+        # gain G = S_u I_u S_u with S_u = diag(s0 / x0) (= diag(s0) I diag(s0))
+        g = s0[:, None] * info * s0[None, :]
+        gains, vecs = np.linalg.eigh(0.5 * (g + g.T))
+        gains = np.maximum(gains, 0.0)
+        ident = int(np.sum(gains >= gain_threshold))
+        c = rls.counters
+        counters = {"updates": c.updates, "rows_used": c.rows_used, "not_excited": c.not_excited,
+                    "nan_rows": c.nan_rows, "waiting_upstream": identifier.waiting_upstream.get(name, 0)}
+        status, cause = _ident_status(name, rls, monitor, identifier, ident, len(names))
+        expl: list[Explanation] = []
+        if ident < len(names):
+            weak = vecs[:, gains < gain_threshold].T  # unidentified directions (u coordinates)
+            if ident == 0:
+                expl.append(Explanation(status, tuple(names), tuple(1.0 for _ in names),
+                                        f"{name} ({', '.join(names)}): {status.replace('_', ' ')} -- {cause}"))
+            else:
+                for e in explain_null_space(weak, names, "is barely seen in the data"):
+                    text = e.text.replace("not observable", "not identified").replace("is observable", "is identified")
+                    expl.append(Explanation(e.kind if e.kind != "not_observable" else "not_identified", e.names,
+                                            e.coefficients, f"{name}: {text} ({cause})"))
+        out[name] = ProblemReport(name, tuple(names), tuple(float(v) for v in gains),
+                                  tuple(tuple(float(x) for x in vecs[:, k]) for k in range(len(names))),
+                                  tuple(float(v) for v in np.linalg.eigvalsh(0.5 * (info + info.T))), ident, status,
+                                  tuple(expl), counters)
+    return out
+
+
+def _ident_status(name: str, rls, monitor: IdentificationMonitor | None, identifier, ident: int, n: int
+                  ) -> tuple[str, str]:
+    """(status, cause) of one problem from its counters and, if given, the monitor."""
+    c = rls.counters
+    gate = identifier.config.problem(name).excitation_min
+    waited = identifier.waiting_upstream.get(name, 0)
+    if ident == n:
+        return "identified", f"{c.rows_used} rows used"
+    parts = []
+    status = None
+    if monitor is not None and monitor.calls:
+        nf = {k: v for k, v in monitor.nan_fields[name].items() if v > 0.01 * monitor.calls}
+        if nf:
+            worst = sorted(nf.items(), key=lambda kv: -kv[1])
+            parts.append("NaN inputs: " + ", ".join(f"{k} in {100 * v / monitor.calls:.0f} % of updates"
+                                                    for k, v in worst[:4]))
+            if max(nf.values()) > MISSING_SHARE * monitor.calls:
+                status = "inputs_missing"
+        mx = monitor.max_excitation[name]
+        seen = monitor.rows_seen[name]
+        if mx is not None and seen:
+            low = [i for i, (m, g) in enumerate(zip(mx, gate)) if m < g]
+            share = monitor.gated_rows[name] / seen
+            if low:
+                parts.append("below the excitation gate: " + ", ".join(f"row {i + 1} max |A| {mx[i]:.3g} < {gate[i]:.3g}"
+                                                         for i in low))
+            if share > 0:
+                parts.append(f"{100 * share:.0f} % of the finite rows below the excitation gate")
+            if status is None and (share > GATED_SHARE or len(low) == len(gate)):
+                status = "not_excited"
+    if status is None:
+        if c.rows_used == 0 and c.nan_rows:
+            status = "inputs_missing"
+            parts.append(f"every row that passed the gate had a NaN input ({c.nan_rows} rows)")
+        elif c.updates == 0 and waited:
+            status = "waiting_upstream"
+        elif c.rows_used == 0:
+            status = "not_excited"
+            parts.append(f"{c.not_excited} calls without a row above the excitation gate")
+        elif ident == 0:
+            status = "not_excited"
+            parts.append(f"{c.rows_used} rows used, carrying less information than the prior")
+        else:
+            status = "partially_identified"
+            parts.append(f"{c.rows_used} rows used; the excitation did not separate the parameters")
+    if waited:
+        parts.append(f"waited {waited} calls for the upstream problems")
+    return status, "; ".join(parts)
+
+
+# ------------------------------------------------------------------------------- whole report
+@dataclass(frozen=True)
+class ObservabilityReportDoc:
+    """Everything ``vdps replay --json`` carries under ``observability``: the configuration's
+    structure, the windows explained, and (with an identifier) the identification problems."""
+
+    structural: StructuralReport
+    windows: tuple[WindowExplanation, ...]
+    identification: dict
+
+    def to_json(self) -> dict:
+        return {"structural": self.structural.to_json(), "windows": [w.to_json() for w in self.windows],
+                "identification": {k: v.to_json() for k, v in self.identification.items()}}
+
+    def summary_lines(self) -> list[str]:
+        s = self.structural
+        lines = [f"sensor set: {', '.join(s.kinds) or 'no GNSS/suspension measurement'}; generic rank {s.rank} of "
+                 f"{s.n_states}"]
+        lines += [f"  {e.text}" for e in (*s.not_estimated, *s.explanations)]
+        for w in self.windows:
+            lines.append(f"window {w.t_start_s:.1f}-{w.t_end_s:.1f} s: rank {w.rank}/{w.n_states}"
+                         + (f", unobservable {', '.join(_short(n) for n in w.unobservable)}" if w.unobservable else ""))
+        for name, p in self.identification.items():
+            lines.append(f"{name}: {p.status}, {p.identified}/{len(p.params)} directions identified, gains "
+                         + ", ".join(f"{g:.3g}" for g in p.gains))
+            lines += [f"  {e.text}" for e in p.explanations]
+        return lines
+
+
+def observability_report(pipeline, identifier=None, monitor: IdentificationMonitor | None = None,
+                         include_in_progress: bool = True) -> ObservabilityReportDoc:
+    """The report of a pipeline run (``EstimatorPipeline``; its windows need
+    ``observability_window_s``) and optionally its identifier. This is the call ``vdps replay``
+    wires: ``observability_report(system.pipeline, system.identifier).to_json()``."""
+    cfg = pipeline.config.ekf
+    st = structural_report(cfg, pipeline.vehicle.mounting.gnss_lever_arm_m)
+    layout = pipeline.ekf.layout
+    x_full = None
+    if pipeline.ekf.initialized:
+        x_full = pipeline.ekf.full_state()[0]
+    wins = [explain_window(a, b, r, layout, x_full, st) for a, b, r in pipeline.observability_reports]
+    if include_in_progress:
+        now = pipeline.observability_now()
+        if now is not None and now.rows:
+            t1 = pipeline.ekf.t_ns or 0
+            t0 = pipeline.observability_reports[-1][1] if pipeline.observability_reports else t1
+            wins.append(explain_window(t0, t1, now, layout, x_full, st))
+    ident = {} if identifier is None and monitor is None else identification_report(identifier or monitor, monitor)
+    return ObservabilityReportDoc(st, tuple(wins), ident)
