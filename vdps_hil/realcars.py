@@ -1116,15 +1116,17 @@ def steer_response_fit(t_s, speed_mps, steer_wheel_rad, yaw_rate_radps, course_r
     ==========  ==========  ===================================================================
     symbol      unit        meaning
     ==========  ==========  ===================================================================
-    r           rad/s       yaw rate: the ESC yaw rate minus its bias b_r, b_r = mean(r_ESC -
-                            course rate of the EKF velocity) over the drive (GNSS-based)
+    r           rad/s       yaw rate: the ESC yaw rate minus its bias b_r, b_r = mean over the
+                            windows of (r_ESC - course rate of the EKF velocity) (GNSS-based);
+                            its variance var(b_r) = var(differences) / N enters the covariance
+                            as J_b var(b_r) J_b^T, J_b = d theta / d b_r (central difference)
     u           m/s         speed (EKF); delta_sw [rad] the steering wheel angle (CAN)
     L, K_0      m, rad/(m/s^2)  wheelbase; understeer gradient at x = 1 (model priors)
     ==========  ==========  ===================================================================
 
     Signals are averaged over ``window_s`` windows (quasi-steady state, nearly independent
-    errors); least squares gives theta and Cov = s^2 (A^T A)^-1 (s^2: residual variance). The
-    information I = A^T A / s^2 is compared with a prior (p1, p2 relative sigmas
+    errors); least squares gives theta and Cov = s^2 (A^T A)^-1 + J_b var(b_r) J_b^T (s^2:
+    residual variance). The information I = Cov^-1 is compared with a prior (p1, p2 relative sigmas
     ``prior_rel_sigma`` about s_R L and s_R K_0, p3 sigma ``prior_offset_sigma_deg``) as in
     ``observability_report``: gains = eig(S I S), S = diag(prior sigmas); a direction with gain
     < 1 is not identified by the drive (it does not halve the prior variance). s_R = p1 / L,
@@ -1135,24 +1137,32 @@ def steer_response_fit(t_s, speed_mps, steer_wheel_rad, yaw_rate_radps, course_r
     u, sw, r_m, cr = (np.asarray(v, dtype=float) for v in (speed_mps, steer_wheel_rad, yaw_rate_radps,
                                                            course_rate_radps))
     ok = np.isfinite(u + sw + r_m + cr) & (u >= min_speed_mps)
-    bias = float(np.mean((r_m - cr)[ok]))
-    r = r_m - bias
     edges = np.arange(t[ok][0], t[ok][-1] + 1e-9, window_s)
-    rows, ys = [], []
+    win = []
     for a, b in zip(edges[:-1], edges[1:]):
         m = ok & (t >= a) & (t < b)
-        if m.sum() < 3:
-            continue
-        um, rm, sm = u[m].mean(), r[m].mean(), sw[m].mean()
-        rows.append([rm, rm * um * um, um])
-        ys.append(um * sm)
-    A, y = np.array(rows), np.array(ys)
-    n = A.shape[0]
-    theta, *_ = np.linalg.lstsq(A, y, rcond=None)
+        if m.sum() >= 3:
+            win.append((u[m].mean(), r_m[m].mean(), sw[m].mean(), cr[m].mean()))
+    W = np.array(win)
+    n = W.shape[0]
+    d = W[:, 1] - W[:, 3]  # yaw rate minus course rate per window
+    bias = float(d.mean())
+    var_bias = float(d.var(ddof=1) / n)
+
+    def solve(b):
+        rr = W[:, 1] - b
+        a_ = np.column_stack([rr, rr * W[:, 0] ** 2, W[:, 0]])
+        y_ = W[:, 0] * W[:, 2]
+        th, *_ = np.linalg.lstsq(a_, y_, rcond=None)
+        return a_, y_, th
+
+    A, y, theta = solve(bias)
     res = y - A @ theta
     s2 = float(res @ res / max(n - 3, 1))
-    info = A.T @ A / s2
-    cov = np.linalg.pinv(info)
+    db = 1e-4
+    j_b = (solve(bias + db)[2] - solve(bias - db)[2]) / (2 * db)  # d theta / d bias
+    cov = np.linalg.pinv(A.T @ A / s2) + np.outer(j_b, j_b) * var_bias
+    info = np.linalg.pinv(cov)
     p1, p2, p3 = theta
     sr = p1 / wheelbase_m
     x = p1 * understeer0 / (wheelbase_m * p2) if p2 != 0 else math.inf
@@ -1176,6 +1186,32 @@ def steer_response_fit(t_s, speed_mps, steer_wheel_rad, yaw_rate_radps, course_r
                             float(x), float(math.sqrt(max(j_x @ cov @ j_x, 0.0))), float(math.degrees(p3)),
                             float(math.degrees(math.sqrt(cov[2, 2]))), float(math.degrees(bias)),
                             tuple(float(v) for v in gains), vecs, tuple(expl), n,
-                            (float(u[ok].min()), float(u[ok].max())),
+                            (float(W[:, 0].min()), float(W[:, 0].max())),
                             (float(np.degrees(sw[ok].min())), float(np.degrees(sw[ok].max()))), float(math.sqrt(s2)),
                             comb)
+
+
+def series(samples: Iterable[Sample], kind: str, fields: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(t_s (N,), values (N, len(fields))) of the valid samples of one kind (NaN where a field
+    is absent)."""
+    t, v = [], []
+    for s in samples:
+        if s.kind == kind and s.valid:
+            t.append(s.t_ns / 1e9)
+            v.append([s.fields.get(f, math.nan) for f in fields])
+    return np.array(t), np.array(v, dtype=float).reshape(len(t), len(fields))
+
+
+def steer_signals(samples: Sequence[Sample], track: Track, *, yaw_kind: str = "imu"
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The inputs of ``steer_response_fit`` at the track's times: (t, speed (EKF), steering
+    wheel angle (CAN, interpolated), yaw rate (``yaw_kind`` z rate, interpolated), course rate
+    d/dt atan2(v_N, v_E) of the EKF velocity)."""
+    ts, sw = series(samples, "steer", ("steer_wheel_angle_rad",))
+    ty, wz = series(samples, yaw_kind, ("angular_rate_radps_z",))
+    t = track.t_s
+    v = track.vel_mps
+    speed = np.hypot(v[:, 0], v[:, 1])
+    course = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
+    cr = np.gradient(course, t) if t.size > 1 else np.zeros_like(t)
+    return t, speed, np.interp(t, ts, sw[:, 0]), np.interp(t, ty, wz[:, 0]), cr
