@@ -1,0 +1,192 @@
+"""Tests of vdps_hil.system: the Figure 2 node, its determinism, suspension conditioning, the
+warning path, and the estimator acceptance through the real chain (issue 5)."""
+
+from __future__ import annotations
+
+import importlib.util
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vdps_hil.bus.samples import Sample
+from vdps_hil.codecs.can_codec import VdpsCanDecoder
+from vdps_hil.estimation.pipeline import Estimate, FilteredSignals, Innovation
+from vdps_hil.identification.problems import suspension_forces_n
+from vdps_hil.model.params import load_vehicle
+from vdps_hil.record.decode import decode_recording
+from vdps_hil.sim.drive import Drive
+from vdps_hil.sim.profiles import load_profile
+from vdps_hil.system import (CanFrame, IdentReport, PredictionReport, SuspensionConditioner, SystemConfig,
+                             VdpsSystem, outputs_digest)
+
+MODEL = load_vehicle("sedan-model")
+SUSP = [f"susp_deflection_m_{i}" for i in range(1, 5)]
+
+
+def _nees_tool():
+    spec = importlib.util.spec_from_file_location("nees_study", Path(__file__).parents[1] / "tools" / "nees_study.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def paper_samples():
+    buf = io.BytesIO()
+    Drive("paper", seed=7, duration_s=2.5).run(buf)
+    buf.seek(0)
+    return list(decode_recording(buf))
+
+
+@pytest.fixture(scope="module")
+def paper_run(paper_samples):
+    cfg = SystemConfig.for_profile(1000.0, 0.001)
+    return VdpsSystem.replay(MODEL, cfg, paper_samples)
+
+
+def test_outputs_of_every_stage_in_time(paper_run):
+    system, out = paper_run
+    kinds = {type(o) for o in out}
+    assert kinds == {Innovation, Estimate, FilteredSignals, IdentReport, PredictionReport, CanFrame}
+    est = [o for o in out if isinstance(o, Estimate)]
+    t = [e.t_ns for e in est]
+    assert t == sorted(t) and all(9_000_000 <= b - a <= 11_000_000 for a, b in zip(t, t[1:]))  # 100 Hz
+    assert len([o for o in out if isinstance(o, IdentReport)]) == 3  # 1 Hz
+    preds = [o for o in out if isinstance(o, PredictionReport)]
+    assert 20 <= len(preds) <= 26  # 10 Hz cadence over the ~2.4 s after initialisation
+    assert system.counters["ident_updates"] == len(est)
+
+
+def test_warning_frames_decode_with_crc_and_counter_at_50_hz(paper_run):
+    """VDPS_Warning leaves the node every 20 ms (and at once on a change) with a valid CRC and a
+    running counter; status 0 once the estimator runs (the paper's drive has no rollover: never level 2 "warning")."""
+    _, out = paper_run
+    frames = [o for o in out if isinstance(o, CanFrame)]
+    dec = VdpsCanDecoder()
+    got = []
+    for f in frames:
+        got += dec.decode(f.t_ns, f.arbitration_id, f.data)
+    assert len(got) == len(frames) and dec.total_rejected == 0
+    gaps = np.diff([s.t_ns for s in got])
+    assert np.max(gaps) <= 30_000_000 and np.mean(gaps == 20_000_000) > 0.95  # a change is sent at once
+    assert max(int(s.fields["warning_level"]) for s in got) < 2  # no warning (caution allowed)
+    status = [int(s.fields["warning_status"]) for s in got]
+    assert status[-1] == 0 and status.count(0) > 0.9 * len(status)
+
+
+def test_replay_of_the_input_log_is_bit_identical(paper_samples):
+    cfg = SystemConfig.for_profile(1000.0, 0.001)
+    live = VdpsSystem(MODEL, cfg)
+    out = []
+    for s in paper_samples:
+        out += live.handle(s)
+    out += live.finish()
+    assert live.input_log == tuple(paper_samples)
+    _, again = VdpsSystem.replay(MODEL, cfg, live.input_log)
+    assert len(again) == len(out) > 1000
+    assert outputs_digest(again) == outputs_digest(out)
+    # the digest is sensitive: one sample less changes it
+    _, fewer = VdpsSystem.replay(MODEL, cfg, live.input_log[:-500])
+    assert outputs_digest(fewer) != outputs_digest(out)
+
+
+def test_refuses_truth_and_ignores_truth_samples():
+    with pytest.raises(ValueError, match="model vehicle"):
+        VdpsSystem(load_vehicle("sedan-truth"))
+    s = VdpsSystem(MODEL, SystemConfig(predict=False))
+    assert s.handle(Sample(0, "/truth/state", "truth", {"gnss_lat_deg": 1.0})) == []
+    assert s.pipeline.counters["truth_ignored"] == 1
+
+
+# ----------------------------------------------------------------------- suspension conditioning
+def _susp(t_ns, h):
+    return Sample(t_ns, "can.vdps", "suspension", dict(zip(SUSP, h)))
+
+
+def test_window_means_are_stamped_at_the_window_end_and_never_in_the_past():
+    c = SuspensionConditioner(MODEL, 100.0, tire_compliance=False, raw_bandwidth_hz=20.0,
+                              rate_bandwidth_hz=10.0, max_gap_s=2.0)
+    out = []
+    for k in range(35):  # 1 kHz, constant deflections
+        t = k * 1_000_000 + 200_000
+        out += c.due(t)
+        assert c.add(_susp(t, (0.01, 0.02, 0.03, 0.04))) == []
+    assert [s.t_ns for s in out] == [10_000_000, 20_000_000, 30_000_000]
+    assert all(s.fields[SUSP[i]] == pytest.approx(0.01 * (i + 1), abs=1e-15) for s in out for i in range(4))
+    assert c.windows == 3 and c.merged == 30
+    assert c.add(Sample(1, "can.vdps", "suspension", {SUSP[0]: 0.0})) is None  # incomplete: passed on
+
+
+def test_a_ramp_is_extrapolated_to_the_window_end():
+    c = SuspensionConditioner(MODEL, 100.0, tire_compliance=False, raw_bandwidth_hz=20.0,
+                              rate_bandwidth_hz=10.0, max_gap_s=2.0)
+    rate = 0.05  # m/s, all corners
+    out = []
+    for k in range(2000):
+        t = k * 1_000_000
+        out += c.due(t)
+        c.add(_susp(t, (rate * t * 1e-9,) * 4))
+    last = out[-1]
+    assert last.fields[SUSP[0]] == pytest.approx(rate * last.t_ns * 1e-9, abs=1e-6)  # the alpha-beta ramp is exact
+
+
+def test_tire_compliance_adds_the_load_change_over_the_tire_stiffness():
+    c = SuspensionConditioner(MODEL, None, tire_compliance=True, raw_bandwidth_hz=20.0, rate_bandwidth_hz=10.0,
+                              max_gap_s=2.0)
+    h = (0.01, -0.01, 0.005, 0.0)
+    (s,) = c.add(_susp(0, h))  # first sample: rate 0
+    f = suspension_forces_n(MODEL, h, (0.0,) * 4) - suspension_forces_n(MODEL, (0.0,) * 4, (0.0,) * 4)
+    kt = MODEL.tire.vertical_stiffness_npm
+    assert [s.fields[n] for n in SUSP] == pytest.approx([h[i] + f[i] / kt for i in range(4)], abs=1e-15)
+    assert c.raw_filtered()[0] == pytest.approx(h)  # the identifier keeps the measured H
+    (s0,) = c.add(_susp(1_000_000, (0.0,) * 4))
+    assert abs(s0.fields[SUSP[3]]) < 1e-3  # ~0 at design ride height (a damper term from the rate)
+
+
+# ------------------------------------------------------------------ acceptance through the chain
+def test_nees_of_five_seeded_runs_through_the_real_chain():
+    """Issue 5's NEES check on the real chain (wire formats -> decode -> system), 5 runs of the
+    ISO 3888 lane change, table1-susp1k, 12 s each, epochs after 5 s, two-sided 95 % band of the
+    averaged NEES ([7.28, 15.48] for 5 runs x 11 states). tools/nees_study.py runs the 25-run
+    version. Measured on these seeds: 90.4 % of the epochs inside, mean NEES / n = 1.13 (the
+    errors are correlated in time, so 5 runs give a noisy average: the 5-8 s part alone is at
+    78 %). Asserted with a margin for tuning changes: >= 80 % inside, mean NEES / n in 0.8-1.3."""
+    m = _nees_tool()
+    runs = [m.run_chain("lane-change-iso3888", 100 + k, duration_s=12.0) for k in range(5)]
+    s = m.nees_summary(runs)
+    assert s["runs"] == 5 and s["n_states"] == 11 and s["epochs"] >= 690
+    assert s["fraction_inside"] >= 0.80
+    assert 0.8 <= s["mean_nees_per_state"] <= 1.3
+
+
+def test_gnss_outage_keeps_the_position_bounded_and_recovers_within_2_s():
+    """10 s outage from 5 s on the paper's scenario: the horizontal error stays within 3 sigma of
+    the filter's own (growing) sigma and under 2 m (measured max 1.0 m), and is back at its
+    pre-outage level within 2 s of GNSS returning."""
+    m = _nees_tool()
+    d = m.outage_study(1, duration_s=18.0)
+    assert d["max_error_over_3sigma_during"] < 1.0
+    assert d["max_error_during_m"] < 2.0
+    assert d["sigma_at_outage_end_m"] > 2 * d["sigma_before_m"]  # the filter knows it drifts
+    assert 0.0 <= d["recovery_s"] <= 2.0
+    assert d["error_2s_after_m"] < d["max_error_during_m"]
+
+
+def test_identification_through_the_chain_finds_the_mass():
+    """Paper scenario, table1-susp1k, 10.25 s, seeded: the mass from wrong priors (+15 %) through
+    decode -> EKF -> feeder -> RLS; measured +0.07 %, asserted within 0.5 % (issue 6's bar)."""
+    buf = io.BytesIO()
+    Drive("paper", profile=load_profile("table1-susp1k"), seed=3, duration_s=10.25).run(buf)
+    buf.seek(0)
+    system, _ = VdpsSystem.replay(MODEL, SystemConfig.for_profile(1000.0, 0.001, predict=False),
+                                  decode_recording(buf))
+    truth = load_vehicle("sedan-truth").params  # test harness only
+    m = system.params.mass_kg
+    assert abs(m - truth.mass_kg) / truth.mass_kg < 0.005
+    assert abs(MODEL.params.mass_kg - truth.mass_kg) > 30 * abs(m - truth.mass_kg)
+    for n in ("tracking_stiffness_1_n", "cornering_stiffness_front_nprad"):  # moved towards the truth
+        assert abs(getattr(system.params, n) - getattr(truth, n)) < 0.5 * abs(getattr(MODEL.params, n) - getattr(truth, n))
+    assert math.isfinite(system.identifier.sigmas["mass_kg"])
