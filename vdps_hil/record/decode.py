@@ -76,6 +76,7 @@ import heapq
 import json
 import math
 import os
+import re
 from typing import Callable, Iterator, Mapping
 
 from vdps_hil.bus.samples import Sample
@@ -364,12 +365,34 @@ class _NmeaStream:
         return int(self.dec.counters["rejected"]) + int(self.framer.counters["overflows"])
 
 
+_FAST_CAN = re.compile(rb'"arbitration_id":(\d+),"is_extended_id":(true|false),"is_fd":false,'
+                       rb'"is_remote_frame":false,"is_error_frame":false,"dlc":\d+,"data_hex":"([0-9a-f]*)"')
+"""The raw CAN document as ``RecordingWriter`` writes a classic data frame (fixed key order):
+read without building a dict; anything else goes through ``json.loads``."""
+
+
 class _CanStream:
     def __init__(self, bus: str, decoder, info: dict):
         self.bus = bus
         self.dec = decoder
         self.info = info
         self.malformed = 0
+
+    def feed_raw(self, t_ns: int, data: bytes) -> list[Sample]:
+        m = _FAST_CAN.search(data)
+        if m is not None:
+            try:
+                payload = bytes.fromhex(m.group(3).decode("ascii"))
+            except ValueError:
+                payload = None
+            if payload is not None:
+                return self.dec.decode(t_ns, int(m.group(1)), payload, m.group(2) == b"true")
+        try:
+            doc = json.loads(data)
+        except ValueError:
+            self.malformed += 1
+            return []
+        return self.feed(t_ns, doc)
 
     def feed(self, t_ns: int, doc) -> list[Sample]:
         try:
@@ -531,12 +554,7 @@ class DecodedRecording:
                     if st is None:
                         self._undecoded[topic] = self._undecoded.get(topic, 0) + 1
                     else:
-                        try:
-                            doc = loads(rec.data)
-                        except ValueError:
-                            st.malformed += 1
-                            continue
-                        out = st.feed(t, doc)
+                        out = st.feed_raw(t, rec.data)
                 elif topic.startswith(ser_pre):
                     st = self._serial_stream(topic[nser:])
                     if st is None:
