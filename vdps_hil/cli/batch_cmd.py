@@ -1,0 +1,249 @@
+"""``vdps batch``: the same question for many drives (replay, diagnose) or many seeds (studies),
+as tasks on a local Dask cluster, an existing Dask cluster, a process pool or inline
+(``vdps_hil.batch``)."""
+
+from __future__ import annotations
+
+import glob
+import os
+from pathlib import Path
+
+import click
+
+from vdps_hil.cli.common import UserError, write_json
+
+_ENGINE_HELP = """\b
+Engine: by default a local Dask cluster (one worker process per core; scheduler, workers and
+dashboard on 127.0.0.1 only). --scheduler tcp://HOST:8786 submits to an existing Dask
+cluster instead (its workers must see the files at the same paths and have vdps-hil
+installed); --backend processes uses a plain process pool, --backend inline runs here.
+
+\b
+Results: OUT/drives/<drive>.json per task as it finishes, OUT/batch.json at the end. A rerun
+reuses every result whose key (hash of the input file, the options, the vehicle/config files,
+the effect list and the tool version) is unchanged, so an interrupted batch resumes; failed
+tasks are tried again. Exit status: 0 all ok, 3 finished with failed tasks (reported, the
+others' results written), 2 usage error."""
+
+_REPLAY_EXAMPLE = """\b
+Examples:
+  vdps batch replay 'drives/*.mcap' --out results/replay --report results/report
+  vdps batch replay 'drives/**/*.mcap' --workers 2 --json -
+  vdps batch replay 'drives/*.mcap' --scheduler tcp://10.0.0.5:8786 --out results/replay
+
+""" + _ENGINE_HELP
+
+
+def engine_options(f):
+    """Options shared by every batch subcommand."""
+    opts = [
+        click.option("--workers", type=int, default=None, metavar="N",
+                     help="Worker processes [default: one per core]."),
+        click.option("--scheduler", default=None, metavar="ADDRESS",
+                     help="Existing Dask scheduler, e.g. tcp://host:8786."),
+        click.option("--backend", type=click.Choice(["dask", "processes", "inline"]), default=None,
+                     help="Engine [default: dask when installed, else processes]."),
+        click.option("--allowed-failures", "allowed_failures", type=click.IntRange(0, None),
+                     default=None, metavar="N",
+                     help="Times a task may be on a worker that dies before it is reported as "
+                          "failed [default: 2]."),
+        click.option("--no-dashboard", "no_dashboard", is_flag=True,
+                     help="Do not start the local cluster's dashboard."),
+        click.option("--out", "out_dir", default=None, metavar="DIR",
+                     help="Result directory [default: ./batch-<command>]."),
+        click.option("--json", "json_out", metavar="FILE", default=None,
+                     help="Write the aggregate document to FILE ('-' for stdout)."),
+        click.option("--report", "report_dir", default=None, metavar="DIR",
+                     help="Write the fleet report (DIR/index.html)."),
+        click.option("--force", is_flag=True, help="Recompute every task (ignore stored results)."),
+        click.option("--rehash", is_flag=True,
+                     help="Hash every input file again (ignore OUT/.digests.json)."),
+        click.option("--quiet", "-q", is_flag=True, help="No progress output."),
+    ]
+    for o in reversed(opts):
+        f = o(f)
+    return f
+
+
+def expand_inputs(patterns: tuple[str, ...], suffix: str = ".mcap") -> list[str]:
+    """Shell-style globs (``**`` recursive), directories (every ``*<suffix>`` below them) and
+    plain paths -> sorted unique paths. A pattern that matches nothing is a usage error (a
+    plain path that does not exist is kept: it is reported as a failed task)."""
+    out: list[str] = []
+    for pat in patterns:
+        if os.path.isdir(pat):
+            hits = sorted(glob.glob(os.path.join(glob.escape(pat), "**", f"*{suffix}"), recursive=True))
+            if not hits:
+                raise UserError(f"no *{suffix} file under {pat}")
+        elif glob.has_magic(pat):
+            hits = sorted(p for p in glob.glob(pat, recursive=True) if not os.path.isdir(p))
+            if not hits:
+                raise UserError(f"no file matches {pat!r}")
+        else:
+            hits = [pat]
+        out += hits
+    seen, unique = set(), []
+    for p in out:
+        a = os.path.abspath(p)
+        if a not in seen:
+            seen.add(a)
+            unique.append(p)
+    return unique
+
+
+def _engine_config(workers, scheduler, backend, allowed_failures, no_dashboard):
+    from vdps_hil.batch.engine import DEFAULT_ALLOWED_FAILURES, EngineConfig, EngineError
+
+    if scheduler and backend not in (None, "dask"):
+        raise UserError(f"--scheduler needs the dask backend, not --backend {backend}")
+    if workers is not None and workers < 1:
+        raise UserError(f"--workers must be at least 1, got {workers}")
+    if scheduler and workers is not None:
+        raise UserError("--workers sizes a local cluster; with --scheduler the cluster has its own")
+    cfg = EngineConfig(backend=backend, workers=workers, scheduler=scheduler,
+                       allowed_failures=DEFAULT_ALLOWED_FAILURES if allowed_failures is None
+                       else allowed_failures, dashboard=not no_dashboard)
+    try:
+        cfg.resolved_backend()
+    except EngineError as e:
+        raise UserError(str(e)) from None
+    return cfg
+
+
+def _run(kind: str, tasks, cfg, out_dir: Path, *, force: bool, quiet: bool, options: dict,
+         json_out: str | None, report_dir: str | None, digests=None) -> None:
+    from vdps_hil.batch.engine import EngineError, run_batch
+    from vdps_hil.batch.progress import Progress
+
+    if digests is not None:
+        digests.save()
+    progress = Progress(f"vdps batch {kind}", enabled=not quiet)
+    try:
+        res = run_batch(tasks, cfg, out_dir=out_dir, kind=kind, force=force, progress=progress,
+                        options=options)
+    except EngineError as e:
+        raise UserError(str(e)) from None
+    c = res.counts
+    say = (lambda s: click.echo(s, err=True)) if json_out == "-" else click.echo
+    if not quiet:
+        run = res.aggregate["run"]
+        say(f"vdps batch {kind}: {c['ok']} ok, {c['failed']} failed of {c['total']} "
+            f"({run['computed']} computed, {run['reused']} reused) in {run['wall_s']:.1f} s; "
+            f"results in {out_dir}")
+        for f in res.aggregate["failed"]:
+            err = f.get("error") or {}
+            say(f"  failed {f['id']}: {err.get('type', '')}: {err.get('message', '')}")
+    write_json(res.aggregate, json_out)
+    if report_dir:
+        from vdps_hil.batch.report import write_report
+        path = write_report(res.aggregate, report_dir)
+        if not quiet:
+            say(f"  report: {path}")
+    if c["failed"]:
+        raise SystemExit(3)
+
+
+def _out(out_dir: str | None, kind: str) -> Path:
+    p = Path(out_dir or f"batch-{kind}")
+    if p.exists() and not p.is_dir():
+        raise UserError(f"--out {p}: not a directory")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"--out {p}: {e.strerror or e}") from None
+    return p
+
+
+def _vehicle_file(vehicle: str) -> str:
+    from vdps_hil.model.params import resolve_vehicle_path
+
+    p = resolve_vehicle_path(vehicle)
+    if not p.is_file():
+        raise UserError(f"--vehicle {vehicle}: no such vehicle file ({p})")
+    return vehicle
+
+
+def _config_file(config: str | None) -> dict:
+    if config is None:
+        return {}
+    if not os.path.isfile(config):
+        raise UserError(f"--config {config}: no such file")
+    return {"config": config}
+
+
+@click.group("batch", context_settings={"help_option_names": ["-h", "--help"]})
+def batch():
+    """Replay or diagnose many recordings, or run Monte Carlo studies, as batch tasks on a
+    local or remote Dask cluster, with resume and a fleet report."""
+
+
+@batch.command("replay", epilog=_REPLAY_EXAMPLE)
+@click.argument("patterns", nargs=-1, required=True, metavar="GLOB...")
+@click.option("--vehicle", default="sedan-model", show_default=True, metavar="FILE",
+              help="Model vehicle file or name.")
+@click.option("--config", default=None, metavar="FILE", help="Replay configuration file.")
+@click.option("--effect", "effects", multiple=True, metavar="NAME",
+              help="Effect of the model (repeatable); part of the resume key.")
+@engine_options
+def replay(patterns, vehicle, config, effects, workers, scheduler, backend, allowed_failures,
+           no_dashboard, out_dir, json_out, report_dir, force, rehash, quiet):
+    """Replay every recording matching GLOB... (one task per recording): estimates, identified
+    parameters with sigmas, counters; one JSON per drive plus an aggregate."""
+    from vdps_hil.batch.keys import DigestCache
+    from vdps_hil.batch.tasks import replay_tasks
+
+    cfg = _engine_config(workers, scheduler, backend, allowed_failures, no_dashboard)
+    paths = expand_inputs(patterns)
+    out = _out(out_dir, "replay")
+    digests = DigestCache(out / ".digests.json", enabled=not rehash)
+    extra = _config_file(config)
+    options = {**extra, **({"effects": list(effects)} if effects else {})}
+    tasks = replay_tasks(paths, vehicle=_vehicle_file(vehicle), options=options,
+                         files=extra, effects=effects, digests=digests)
+    _run("replay", tasks, cfg, out, force=force, quiet=quiet, json_out=json_out,
+         report_dir=report_dir, digests=digests,
+         options={"vehicle": vehicle, **options, "inputs": len(paths)})
+
+
+@batch.command("diagnose", epilog=_ENGINE_HELP)
+@click.argument("patterns", nargs=-1, required=True, metavar="GLOB...")
+@click.option("--vehicle", default="sedan-model", show_default=True, metavar="FILE",
+              help="Model vehicle file or name.")
+@click.option("--config", default=None, metavar="FILE", help="Workbench configuration file.")
+@click.option("--effect", "effects", multiple=True, metavar="NAME",
+              help="Candidate effect to test (repeatable; default: the workbench's list).")
+@engine_options
+def diagnose(patterns, vehicle, config, effects, workers, scheduler, backend, allowed_failures,
+             no_dashboard, out_dir, json_out, report_dir, force, rehash, quiet):
+    """Diagnose every recording matching GLOB... with the model workbench (one task per
+    recording): where the model fails and which effects it recommends."""
+    from vdps_hil.batch.keys import DigestCache
+    from vdps_hil.batch.tasks import diagnose_tasks
+
+    cfg = _engine_config(workers, scheduler, backend, allowed_failures, no_dashboard)
+    paths = expand_inputs(patterns)
+    out = _out(out_dir, "diagnose")
+    digests = DigestCache(out / ".digests.json", enabled=not rehash)
+    extra = _config_file(config)
+    options = {**extra, **({"effects": list(effects)} if effects else {})}
+    tasks = diagnose_tasks(paths, vehicle=_vehicle_file(vehicle), options=options, files=extra,
+                           effects=effects, digests=digests)
+    _run("diagnose", tasks, cfg, out, force=force, quiet=quiet, json_out=json_out,
+         report_dir=report_dir, digests=digests,
+         options={"vehicle": vehicle, **options, "inputs": len(paths)})
+
+
+@batch.command("report")
+@click.argument("out_dir", metavar="OUT")
+@click.option("--report", "report_dir", default=None, metavar="DIR",
+              help="Where to write index.html [default: OUT/report].")
+def report(out_dir, report_dir):
+    """(Re)write the fleet report of a finished or interrupted batch from OUT's result files."""
+    from vdps_hil.batch.report import aggregate_from_dir, write_report
+
+    try:
+        agg = aggregate_from_dir(out_dir)
+    except (OSError, ValueError) as e:
+        raise UserError(f"{out_dir}: {e}") from None
+    path = write_report(agg, report_dir or os.path.join(out_dir, "report"))
+    click.echo(f"vdps batch report: {path} ({agg['counts']['total']} tasks)")
