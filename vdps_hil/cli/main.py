@@ -26,6 +26,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                 "Rescue every complete record of a recording cut off by a crash."),
     "replay": ("vdps_hil.cli.replay_cmd", "replay",
                "Run estimator, identifier, predictor and warning on a recording's /raw/ topics."),
+    "batch": ("vdps_hil.cli.batch_cmd", "batch",
+              "Replay/diagnose many drives or run Monte Carlo studies on a local or Dask cluster."),
 }
 
 
