@@ -226,7 +226,7 @@ class Bench:
                 if writer is not None:
                     writer.add_metadata(name, data)
 
-            side = SimulatorSide(drive, can_dev, serial, clock, ecu, block_s=c.block_s, lookahead_s=c.lookahead_s,
+            side = SimulatorSide(drive, can_dev, serial, clock, ecu, lookahead_s=c.lookahead_s,
                                  late_tolerance_s=c.late_tolerance_s, on_truth=on_truth, on_metadata=on_metadata)
             side.prepare()
             side.start_receiver()
@@ -309,7 +309,7 @@ class Bench:
                 "first_warning_t_s": None if ecu.first_warning_ns is None else ecu.first_warning_ns / NS_PER_S,
                 "brake_fraction": ecu.brake_fraction(side.session.t_ns / NS_PER_S),
                 "events": [e["kind"] for e in side.sink.events if e.get("kind") in ("tip_up", "point_of_no_return")],
-                "final": final}
+                "pids": {"simulator": os.getpid(), "pipeline": pipe.pid}, "final": final}
 
     def _result(self, side, pipe, clock, ecu, reference) -> BenchResult:
         c = self.config
@@ -323,7 +323,7 @@ class Bench:
         lines_received = counters["gnss"]["lines"]
         frames_generated = sent["frames_sent"] + sent["frames_dropped_at_device"]
         frames_received = counters["can"]["frames"]
-        lost = {"can_frames": max(frames_generated - frames_received, counters["can"]["lost_frames"]),
+        lost = {"can_frames": max(frames_generated - frames_received, counters["can"]["counter_breaks"]),
                 "imu_packets": max(imu_packets_sent - imu_packets_received, counters["imu"]["seq_gaps"]),
                 "gnss_lines": max(lines_sent - lines_received, 0)}
         dropped = sum(lost.values()) + counters["subscription_overflows"]
@@ -357,7 +357,8 @@ class Bench:
             "lines_sent": lines_sent, "lines_received": lines_received,
             "imu_packets_sent": imu_packets_sent, "imu_packets_received": imu_packets_received,
             "dropped": dropped, "lost": lost, "seq_counters": {
-                "can_lost_frames": counters["can"]["lost_frames"], "imu_seq_gaps": counters["imu"]["seq_gaps"]},
+                "can_counter_breaks": counters["can"]["counter_breaks"], "imu_seq_gaps": counters["imu"]["seq_gaps"],
+                "can_decoder_lost_frames": counters["can"]["decoder_lost_frames"]},
             "dropped_at_device": {"can_frames": sent["frames_dropped_at_device"],
                                   "imu_chunks": sent["imu_dropped_at_device"],
                                   "gnss_chunks": sent["gnss_dropped_at_device"]},
@@ -398,6 +399,8 @@ class _LocalPipeline:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._error = ""
+
+    pid = os.getpid()
 
     def open(self) -> None:
         try:
@@ -469,6 +472,10 @@ class _ChildPipeline:
         self._reader = threading.Thread(target=self._read, name="bench-child-out", daemon=True)
         self._reader.start()
         self.can_dev = can_dev
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
 
     def _read(self) -> None:
         for line in self.proc.stdout:

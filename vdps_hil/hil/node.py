@@ -3,15 +3,29 @@ fed live, its warning frames sent back on CAN.
 
 What runs (threads: one reader per adapter, one pipeline loop)
 --------------------------------------------------------------
-* ``CanAdapter("vdps", SPEC)`` with the chassis decoder (``dbc/vdps.dbc``), ``ImuAdapter`` on
-  the IMU pty (921600 Bd), ``NmeaAdapter`` on the GNSS pty (115200 Bd) -- exactly what ``vdps
-  log`` opens on a car -- all stamping with the bench clock (``hil.pacing``);
+* ``CanAdapter("vdps", SPEC)`` with the chassis decoder (``dbc/vdps.dbc``), stamping each frame
+  with the interface's own time stamp (:class:`InterfaceTimeCanAdapter`); serial adapters on the
+  IMU pty (921600 Bd, Xsens MTData2) and the GNSS pty (115200 Bd, NMEA), stamping each message
+  by the device's own clock (:class:`DeviceTimeProtocol`, the codecs of ``ImuAdapter`` and
+  ``NmeaAdapter`` with the clock alignment of ``vdps replay``; ``device_time=False``: the
+  adapters' receive-time rule) -- all on the bench clock (``hil.pacing``);
 * one bounded queue (``Subscription``) from the three adapters to the pipeline loop, which takes
   the events in arrival order: a raw record is recorded (``-o``) and counted; a sample is
   recorded under ``/decoded/`` and handed to ``system.handle(sample)``; the outputs are sent
   (``CanFrame`` VDPS_Warning -> ``CanAdapter.send``, which also records it as a ``tx`` frame)
-  or recorded under ``/est/`` (``Estimate`` -> ``/est/ekf``, ``IdentReport`` -> ``/est/ident``,
-  ``PredictionReport`` -> ``/est/prediction``).
+  or recorded under ``/est/`` in the layout of ``vdps replay`` (``/est/state``,
+  ``/est/innovation/<kind>``, ``/est/filtered``, ``/est/ident``, ``/est/prediction``, and the
+  frames the system output on ``/est/can/<bus>``; on the wire they are ``/raw/can/<bus>`` tx).
+
+Sequencing (``sequence_s``, default 0.05 s): the estimator takes the IMU as its input and
+predicts to a measurement's time with the IMU samples it has; live, a CAN frame arrives up to a
+serial read window (5 ms) -- more when a reader thread is held up -- before the IMU packets of
+the same instant, and the filter would then run ahead on stale inputs (on paper-left-turn that
+turned the borderline "caution" predictions into false warnings). So a measurement later than
+the newest IMU sample is held until the IMU has caught up with it (at most ``sequence_s`` of
+bench time, in case the IMU is lost), and held ones go in time order -- what a replay's
+time-ordered input gives. The hold is part of the measured latency. ``sequence_s=None``: raw
+arrival order.
 
 The order in which samples reached ``system.handle`` is the system's own ``input_log``; the
 node also writes it to the recording as the metadata record ``hil.input_order`` (topic index
@@ -28,6 +42,7 @@ The node never opens truth: it has the model vehicle, the wires and the bench cl
 from __future__ import annotations
 
 import base64
+import heapq
 import json
 import threading
 import time
@@ -36,33 +51,157 @@ from typing import Any, Callable
 
 from vdps_hil.adapters.base import RawCan, RawSerial, Subscription
 from vdps_hil.adapters.can_adapter import CanAdapter
-from vdps_hil.adapters.imu_adapter import ImuAdapter
-from vdps_hil.adapters.nmea_adapter import NmeaAdapter
+from vdps_hil.adapters.imu_adapter import ImuAdapter, ImuProtocol
+from vdps_hil.adapters.nmea_adapter import NmeaAdapter, NmeaProtocol
+from vdps_hil.adapters.serial_adapter import SerialAdapter
 from vdps_hil.adapters.session import Recorder
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.can_codec import VdpsCanDecoder
+from vdps_hil.record import schemas as S
+from vdps_hil.system import _est_docs  # the /est/ layout of ``vdps replay``
 
 from .latency import SOURCES, CycleLog
 
-__all__ = ["PipelineNode", "INPUT_ORDER_METADATA", "input_order_samples", "IMU_BAUD", "GNSS_BAUD"]
+__all__ = ["PipelineNode", "InputSequencer", "InterfaceTimeCanAdapter", "DeviceTimeProtocol",
+           "INPUT_ORDER_METADATA", "input_order_samples", "IMU_BAUD", "GNSS_BAUD", "LIVE_CLOCK_JUMP_S"]
 
 IMU_BAUD = 921600
 GNSS_BAUD = 115200
 INPUT_ORDER_METADATA = "hil.input_order"
+LIVE_CLOCK_JUMP_S = 0.25
+"""Device clock alignment on the bench: a change of host-minus-device time below this is a host
+delay (a reader held up by the GIL or the machine's load), not a device clock step (``vdps
+replay`` uses 20 ms for the IMU, 100 ms for GNSS: a file has no host stalls). A device clock
+stepping back by less than this is then not followed (stamps early by the step)."""
 
 _SRC_CODE = {"can": 0, "imu": 1, "gnss": 2}
 
 
-def _estimate_values(est) -> tuple[dict, dict]:
-    from vdps_hil.estimation.states import STATE_NAMES
+class InterfaceTimeCanAdapter(CanAdapter):
+    """A CanAdapter that stamps each frame with the interface's own time stamp (``msg.timestamp``:
+    when the frame was on the bus -- python-can's virtual bus stamps at send, the bench's
+    socketcand server at send, SocketCAN in the kernel at reception), mapped onto the bench clock,
+    as a logger with hardware time stamps does. Without it a reader thread held up by the pipeline
+    (Python's GIL) gives a whole burst of frames one late host time, and the estimator sees 20 ms of
+    suspension samples at one instant. A stamp is never later than the host's reception nor earlier
+    than the previous frame's; interfaces that stamp at host reception (slcan in python-can) get
+    about the host time, as before. ``device_time_backwards`` is still counted by CanAdapter."""
 
-    values = dict(zip(STATE_NAMES, est.x))
-    sigmas = dict(zip(STATE_NAMES, est.sigma))
-    for name, v, s in zip(("roll_v_rad", "pitch_v_rad", "yaw_v_rad"), est.vehicle_angles_rad,
-                          est.vehicle_angles_sigma_rad):
-        values[name] = v
-        sigmas[name] = s
-    return values, sigmas
+    def __init__(self, *a, **kw):
+        super().__init__(*a, **kw)
+        self._wall_minus_mono_ns = time.time_ns() - time.monotonic_ns()
+        self._last_stamp = None
+
+    def _read(self, timeout_s: float):
+        items = super()._read(timeout_s)
+        if not items:
+            return items
+        clock = self.clock
+        now = clock.now_ns()
+        last = self._last_stamp
+        out = []
+        for _, msg in items:
+            ts = msg.timestamp
+            t = clock.t_of(int(ts * 1e9) - self._wall_minus_mono_ns) if ts else now
+            if t > now:
+                t = now
+            if last is not None and t < last:
+                t = last
+            last = t
+            out.append((t, msg))
+        self._last_stamp = last
+        return out
+
+
+class DeviceTimeProtocol:
+    """A serial protocol (``adapters.serial_adapter``) that stamps each message by the device's
+    own clock mapped onto the host's -- the IMU's SampleTimeFine, the GNSS sentences' UTC --
+    exactly as ``vdps replay`` does (``record.decode``: leaky running minimum of host minus
+    device time, clock steps confirmed before they are believed). The receive-time rule alone
+    makes a GNSS fix 6-20 ms late (the sentences' own wire time at 115200 Bd) and lets a late
+    read chunk compress the IMU's stamps; with the devices' clocks the live pipeline sees the
+    same times as a replay of the recording."""
+
+    def __init__(self, stream, fmt: str):
+        self.stream = stream
+        self.fmt = fmt
+
+    def feed(self, t_ns: int, chunk: bytes) -> list:
+        return self.stream.feed(t_ns, chunk)
+
+    def flush(self) -> list:
+        return self.stream.feed(0, None)
+
+    def reset(self) -> None:
+        framer = getattr(self.stream, "framer", None)
+        if framer is not None:
+            framer.flush()
+
+    def counters(self) -> dict:
+        return self.stream.counters()
+
+    def clock_status(self) -> dict:
+        return self.stream.clock_status()
+
+
+class InputSequencer:
+    """Hands samples to the system in the order its estimator needs: the IMU (the EKF's input)
+    ahead of the measurements (module docstring, "Sequencing").
+
+    ``push(item, t_ns, kind, now_ns)`` and ``expire(now_ns)`` return the items released, in
+    order; ``flush()`` releases the rest. A measurement with ``t_ns`` at or before the newest IMU
+    sample's time goes at once; a later one is held until an IMU sample at or after its time
+    arrives (held ones leave in ``t_ns`` order, before that IMU sample), or until it has waited
+    ``max_hold_s`` of bench time (the IMU lost: the measurement must not wait forever)."""
+
+    def __init__(self, max_hold_s: float = 0.05, input_kind: str = "imu"):
+        self.max_hold_ns = int(round(max_hold_s * 1e9))
+        self.input_kind = input_kind
+        self.watermark_ns: int | None = None
+        self._heap: list = []
+        self._n = 0
+        self.held_total = 0
+        self.expired = 0
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+    def push(self, item, t_ns: int, kind: str, now_ns: int) -> list:
+        heap = self._heap
+        if kind == self.input_kind:
+            out = []
+            while heap and heap[0][0] <= t_ns:
+                out.append(heapq.heappop(heap)[3])
+            out.append(item)
+            if self.watermark_ns is None or t_ns > self.watermark_ns:
+                self.watermark_ns = t_ns
+            return out
+        if self.watermark_ns is not None and t_ns <= self.watermark_ns:
+            return [item]  # every held item is later than the watermark: this one goes first
+        self._n += 1
+        self.held_total += 1
+        heapq.heappush(heap, (t_ns, self._n, now_ns, item))
+        return self._release_due()
+
+    def _release_due(self) -> list:
+        heap = self._heap
+        out = []
+        wm = self.watermark_ns
+        while heap and wm is not None and heap[0][0] <= wm:
+            out.append(heapq.heappop(heap)[3])
+        return out
+
+    def expire(self, now_ns: int) -> list:
+        heap = self._heap
+        out = self._release_due()
+        while heap and now_ns - heap[0][2] >= self.max_hold_ns:
+            out.append(heapq.heappop(heap)[3])
+            self.expired += 1
+        return out
+
+    def flush(self) -> list:
+        heap = self._heap
+        return [heapq.heappop(heap)[3] for _ in range(len(heap))]
 
 
 class PipelineNode:
@@ -74,19 +213,43 @@ class PipelineNode:
     ``run(stop)`` processes until ``stop`` is set and everything queued is handled."""
 
     def __init__(self, system, can_spec: str, imu_port: str, gnss_port: str, clock, *, writer=None,
-                 bus: str = "vdps", queue_size: int = 1_000_000, poll_s: float = 0.02):
+                 bus: str = "vdps", queue_size: int = 1_000_000, poll_s: float = 0.02, device_time: bool = True,
+                 imu_rate_hz: float = 1000.0, sequence_s: float | None = 0.05):
         self.system = system
         self.clock = clock
         self.bus = bus
-        self.can = CanAdapter(bus, can_spec, decoder=VdpsCanDecoder(source=f"can.{bus}"), clock=clock)
-        self.imu = ImuAdapter("imu", imu_port, IMU_BAUD, clock=clock)
-        self.gnss = NmeaAdapter("gnss", gnss_port, GNSS_BAUD, clock=clock)
+        # slcan: python-can's serial timeout (1 ms) restarts with every byte, so a batch read
+        # only returns when the batch is full at a steady frame rate (256 frames = 85 ms at
+        # 3 kHz); 16 frames bound that to 5 ms while keeping the reads few enough to keep up
+        # (tools/bench_hil.py). Other interfaces return at once when nothing is waiting.
+        batch = 16 if can_spec.split(":", 1)[0].strip() == "slcan" else 256
+        self.can = InterfaceTimeCanAdapter(bus, can_spec, decoder=VdpsCanDecoder(source=f"can.{bus}"),
+                                           clock=clock, batch=batch)
+        if device_time:
+            from vdps_hil.record.decode import (ClockAligner, DeviceStamper, _ImuStream,  # the replay's
+                                                _NmeaStream)  # device clocks
+
+            imu_stream = _ImuStream("imu", IMU_BAUD, True, imu_rate_hz)
+            gnss_stream = _NmeaStream("gnss", GNSS_BAUD, True)
+            for st in (imu_stream, gnss_stream):  # live: a host stall is not a device clock step
+                st.stamper = DeviceStamper(ClockAligner(jump_s=LIVE_CLOCK_JUMP_S, confirm_s=0.2))
+            self.imu = SerialAdapter("imu", imu_port, IMU_BAUD, DeviceTimeProtocol(imu_stream, ImuProtocol.fmt),
+                                     clock=clock)
+            self.gnss = SerialAdapter("gnss", gnss_port, GNSS_BAUD,
+                                      DeviceTimeProtocol(gnss_stream, NmeaProtocol.fmt), clock=clock)
+        else:
+            self.imu = ImuAdapter("imu", imu_port, IMU_BAUD, clock=clock)
+            self.gnss = NmeaAdapter("gnss", gnss_port, GNSS_BAUD, clock=clock)
         self.adapters = [self.can, self.imu, self.gnss]
         self.sub = Subscription("pipeline", queue_size)
         for a in self.adapters:
             a.subscribe(self.sub)
         self.writer = writer
         self.recorder = Recorder(writer) if writer is not None else None
+        self.sequencer = InputSequencer(sequence_s) if sequence_s else None
+        self._dbc_by_id = {aid: sp for aid, sp in self.can.decoder.dbc.by_id.items() if sp.crc is None}
+        self._counters_seen: dict[int, int] = {}
+        self.counter_breaks = 0
         self.poll_s = poll_s
         self.cycles = CycleLog()
         self.frames_sent: list[tuple[int, Any]] = []  # (monotonic ns after send, can.Message)
@@ -138,24 +301,31 @@ class PipelineNode:
                     self._handle_events(sub.drain(2000))
                 elif stop.is_set():
                     break
+                self._expire()
         finally:
             self._stop_adapters.set()
             for th in self._threads:
                 th.join(timeout=5.0)
-            self._flush_imu()
+            self._flush_serial()
             while len(sub):
                 self._handle_events(sub.drain(100_000))
+            self.release_held()
 
-    def _flush_imu(self) -> None:
-        """The IMU decoder may hold a complete packet until it has seen the bytes after it (a
-        preamble byte inside the packet's tail): release it at the end of the run."""
-        try:
-            held = self.imu.protocol.flush()
-        except Exception as e:  # noqa: BLE001 - a decoder bug must not lose the run
-            self.errors.append(f"imu flush: {type(e).__name__}: {e}")
-            return
-        for s in held:
-            self.imu._publish_sample(s, s.t_ns, self.clock.wall(s.t_ns), False)
+    def _flush_serial(self) -> None:
+        """At the end of the run release what the serial decoders hold: an IMU packet waits for
+        the bytes after it when a preamble byte sits in its tail; the clock alignment holds
+        messages while it watches a possible clock step."""
+        for a in (self.imu, self.gnss):
+            flush = getattr(a.protocol, "flush", None)
+            if flush is None:
+                continue
+            try:
+                held = flush()
+            except Exception as e:  # noqa: BLE001 - a decoder bug must not lose the run
+                self.errors.append(f"{a.name} flush: {type(e).__name__}: {e}")
+                continue
+            for s in held:
+                a._publish_sample(s, s.t_ns, self.clock.wall(s.t_ns), False)
 
     def received_counts(self) -> dict:
         return dict(self.received)
@@ -167,17 +337,21 @@ class PipelineNode:
         last = self._last_idx
         for ev in events:
             if isinstance(ev, Sample):
-                if rec is not None:
-                    rec.write(ev)
-                    self._note_order(ev)
                 received["samples"] += 1
-                self._cycle(ev)
+                src = self._src_of.get(ev.source)
+                item = (ev, src, last[src] if src is not None else -1)
+                if self.sequencer is None:
+                    self._cycle(item)
+                else:
+                    for it in self.sequencer.push(item, ev.t_ns, ev.kind, self.clock.now_ns()):
+                        self._cycle(it)
             elif isinstance(ev, RawCan):
                 if rec is not None:
                     rec.write(ev)
                 if ev.direction == "rx":
                     received["can_frames"] += 1
                     last["can"] = received["can_frames"] - 1
+                    self._check_counter(ev.msg)
             elif isinstance(ev, RawSerial):
                 if rec is not None:
                     rec.write(ev)
@@ -186,6 +360,22 @@ class PipelineNode:
                     received[key] += len(ev.data)
                     last[ev.source] = received[key] - 1
 
+    def _check_counter(self, msg) -> None:
+        """Rolling counters of the sensor frames as received, frame to frame: a step other than
+        +1 (mod 2^bits) is a break (a frame lost, repeated or reordered on the way). Exact, with
+        no time-based guess (the decoder's ``lost_frames`` unwraps long silences by time, which a
+        stall of the bench itself can fake)."""
+        spec = self._dbc_by_id.get(msg.arbitration_id)
+        if spec is None or msg.is_extended_id or len(msg.data) < spec.dlc:
+            return
+        c = spec.counter
+        word = int.from_bytes(bytes(msg.data[:spec.dlc]), "little")
+        value = (word >> c.start_bit) & ((1 << c.length_bits) - 1)
+        prev = self._counters_seen.get(msg.arbitration_id)
+        if prev is not None and (value - prev) % (1 << c.length_bits) != 1:
+            self.counter_breaks += 1
+        self._counters_seen[msg.arbitration_id] = value
+
     def _note_order(self, s: Sample) -> None:
         topic = f"/decoded/{s.source}/{s.kind}"
         k = self._order_topics.get(topic)
@@ -193,23 +383,38 @@ class PipelineNode:
             k = self._order_topics[topic] = len(self._order_topics)
         self._order.append(k)
 
-    def _cycle(self, s: Sample) -> None:
+    def release_held(self) -> None:
+        """Hand the system every sample the sequencer still holds (end of the input)."""
+        self._expire(everything=True)
+
+    def _expire(self, everything: bool = False) -> None:
+        if self.sequencer is not None:
+            items = self.sequencer.flush() if everything else self.sequencer.expire(self.clock.now_ns())
+            for it in items:
+                self._cycle(it)
+
+    def _cycle(self, item) -> None:
+        """Hand one sample to the system (recording it and its place in the input order), send or
+        record the outputs, log the cycle against the raw record that carried the sample."""
+        s, src, idx = item
+        if self.recorder is not None:
+            self.recorder.write(s)
+            self._note_order(s)
         outs = self.system.handle(s)
         n_frames = 0
         first = len(self.frames_sent)
         for o in outs:
             if self._dispatch(o):
                 n_frames += 1
-        src = self._src_of.get(s.source)
         if src is not None:
-            self.cycles.add(_SRC_CODE[src], self._last_idx[src], time.monotonic_ns(), n_frames,
-                            first if n_frames else -1)
+            self.cycles.add(_SRC_CODE[src], idx, time.monotonic_ns(), n_frames, first if n_frames else -1)
 
     def _dispatch(self, o) -> bool:
         """Send or record one output; True when a frame went onto the bus."""
         name = type(o).__name__
         if self.on_output is not None:
             self.on_output(o)
+        w = self.writer
         if name == "CanFrame":
             import can
 
@@ -218,28 +423,21 @@ class PipelineNode:
             self.can.send(msg)
             self.frames_sent.append((time.monotonic_ns(), msg))
             self.outputs["frames"] += 1
+            if w is not None:
+                doc = S.raw_can_doc(o.t_ns, o.arbitration_id, o.data, direction="tx")
+                self._write(lambda: w.write_json(f"/est/can/{o.bus}", S.RAW_CAN, o.t_ns, doc,
+                                                 channel_metadata={"bus": o.bus}))
             return True
-        w = self.writer
         if name == "Estimate":
             self.last_estimate = o
             self.outputs["estimates"] += 1
-            if w is not None:
-                values, sigmas = _estimate_values(o)
-                self._write(lambda: w.write_estimate("ekf", o.t_ns, values, sigmas))
-        elif name == "IdentReport":
-            if w is not None:
-                self._write(lambda: w.write_estimate("ident", o.t_ns, dict(o.params), dict(o.sigmas)))
         elif name == "PredictionReport":
             self.outputs["predictions"] += 1
-            if w is not None:
-                nan = float("nan")
-                v = {"time_to_point_of_no_return_s": nan if o.time_to_point_of_no_return_s is None
-                     else o.time_to_point_of_no_return_s,
-                     "time_to_tip_up_s": nan if o.time_to_tip_up_s is None else o.time_to_tip_up_s,
-                     "peak_ltr": o.peak_ltr, "peak_roll_rad": o.peak_roll_rad, "horizon_s": o.horizon_s}
-                self._write(lambda: w.write_estimate("prediction", o.t0_ns, v))
         else:
             self.outputs["other"] += 1
+        if w is not None:
+            for topic, t, vals, sig in _est_docs(o):
+                self._write(lambda: w.write_estimate(topic, t, vals, sig))
         return False
 
     def _write(self, fn) -> None:
@@ -269,7 +467,8 @@ class PipelineNode:
         can_c = self.can.health.all_counters()
         imu_c = self.imu.health.all_counters()
         gnss_c = self.gnss.health.all_counters()
-        return {"can": {"frames": self.received["can_frames"], "lost_frames": can_c.get("lost_frames", 0),
+        return {"can": {"frames": self.received["can_frames"], "counter_breaks": self.counter_breaks,
+                        "decoder_lost_frames": can_c.get("lost_frames", 0),
                         "rejected": self.can.health.error_total(), "queue_overflow": can_c.get("queue_overflow", 0)},
                 "imu": {"bytes": self.received["imu_bytes"], "packets": imu_c.get("samples", 0),
                         "seq_gaps": imu_c.get("seq_gaps", 0), "rejected": imu_c.get("rejected", 0),

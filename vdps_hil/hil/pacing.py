@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import Callable
 
 import numpy as np
 
@@ -71,7 +72,9 @@ class BenchClock:
 
     replay = False
 
-    def __init__(self, speed: float = 1.0, mono0_ns: int | None = None, epoch_ns: int = DEFAULT_SIM_EPOCH_NS):
+    def __init__(self, speed: float = 1.0, mono0_ns: int | None = None, epoch_ns: int = DEFAULT_SIM_EPOCH_NS,
+                 monotonic_ns: Callable[[], int] = time.monotonic_ns):
+        self.monotonic_ns = monotonic_ns
         speed = float(speed)
         if not (math.isfinite(speed) and speed > 0):
             raise ValueError(f"speed must be a positive number, got {speed!r}")
@@ -80,7 +83,7 @@ class BenchClock:
         self.mono0_ns: int | None = None if mono0_ns is None else int(mono0_ns)
 
     def start(self, mono0_ns: int | None = None) -> int:
-        self.mono0_ns = time.monotonic_ns() if mono0_ns is None else int(mono0_ns)
+        self.mono0_ns = self.monotonic_ns() if mono0_ns is None else int(mono0_ns)
         return self.mono0_ns
 
     @property
@@ -98,7 +101,7 @@ class BenchClock:
         return self.mono0_ns + int(round(t_ns / self.speed))
 
     def now_ns(self) -> int:
-        return self.t_of(time.monotonic_ns())
+        return self.t_of(self.monotonic_ns())
 
     def now(self) -> tuple[int, int]:
         t = self.now_ns()
@@ -117,11 +120,13 @@ class Pacer:
 
     ``wait_until(t_ns, max_wait_s)`` sleeps until simulated time ``t_ns`` is due (or
     ``max_wait_s`` wall seconds passed) and returns True when it is due. ``sent(t_items_ns,
-    m_sent_ns)`` accounts items sent at monotonic ``m_sent_ns``; ``stats()`` summarises."""
+    m_sent_ns)`` accounts items sent at monotonic ``m_sent_ns``; ``stats()`` summarises.
+    ``sleep`` and the clock's ``monotonic_ns`` can be replaced (tests)."""
 
     def __init__(self, clock: BenchClock, late_tolerance_s: float = DEFAULT_LATE_TOLERANCE_S,
-                 keep: int = 200_000):
+                 keep: int = 200_000, sleep: Callable[[float], None] = time.sleep):
         self.clock = clock
+        self.sleep = sleep
         self.late_tolerance_ns = int(round(late_tolerance_s * NS_PER_S))
         self.sends = 0
         self.late_sends = 0
@@ -132,11 +137,12 @@ class Pacer:
 
     def wait_until(self, t_ns: int, max_wait_s: float = 0.005) -> bool:
         d = self.clock.deadline(t_ns)
-        now = time.monotonic_ns()
+        mono = self.clock.monotonic_ns
+        now = mono()
         if now >= d:
             return True
-        time.sleep(min((d - now) / NS_PER_S, max_wait_s))
-        return time.monotonic_ns() >= d
+        self.sleep(min((d - now) / NS_PER_S, max_wait_s))
+        return mono() >= d
 
     def sent(self, t_items_ns, m_sent_ns: int) -> None:
         t = np.asarray(t_items_ns, dtype=np.int64)

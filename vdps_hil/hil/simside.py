@@ -7,7 +7,7 @@ Loop (one thread; ``hil.pacing`` for the time axis)
 
     repeat
         now = t(m)                                     bench time
-        while the simulation is behind now + lookahead: advance it one block (block_s)
+        while the simulation is behind now + lookahead: advance it one block (the drive's block_s)
         send every queued item with t_item <= now, in time order      (late ones counted)
         hand warning frames received on CAN to the ECU; ECU timeouts
         sleep until the next item is due (at most 1 ms)
@@ -116,10 +116,12 @@ class SimulatorSide:
 
     ``can``: the CAN device side; ``serial``: device name (``imu``, ``gnss``) -> pty device;
     ``clock``: the bench clock (started by :meth:`run` unless already started); ``ecu``: the
-    :class:`~vdps_hil.hil.ecu.Ecu` (attached to the simulator)."""
+    :class:`~vdps_hil.hil.ecu.Ecu` (attached to the simulator). The simulation advances in the
+    drive's ``block_s`` (the bench uses 10 ms), so a seed gives the same wire content as
+    ``Drive.run`` with that block length."""
 
     def __init__(self, drive: Drive, can: CanDeviceSide, serial: Mapping[str, PtySerialDevice], clock: BenchClock,
-                 ecu: Ecu, *, block_s: float = 0.005, lookahead_s: float = 0.02, late_tolerance_s: float = 0.002,
+                 ecu: Ecu, *, lookahead_s: float = 0.02, late_tolerance_s: float = 0.002,
                  on_truth=None, on_metadata=None):
         if not 0 < lookahead_s < ecu.config.delay_s:
             raise ValueError("lookahead_s must be positive and below the ECU's dead time")
@@ -128,7 +130,7 @@ class SimulatorSide:
         self.serial = dict(serial)
         self.clock = clock
         self.ecu = ecu
-        self.block_s = float(block_s)
+        self.block_s = drive.block_s  # one block length: the faults' random draws follow the blocks
         self.lookahead_ns = int(round(lookahead_s * NS_PER_S))
         self.pacer = Pacer(clock, late_tolerance_s)
         self.sink = LiveSink(on_truth, on_metadata)

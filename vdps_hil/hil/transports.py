@@ -640,11 +640,16 @@ def parse_transport(spec: str | None, sim_spec: str | None = None) -> TransportS
 def listening_sockets(pid: int | None = None) -> list[tuple[str, int]]:
     """``[(address, port)]`` of the TCP sockets in LISTEN state (and bound UDP sockets) owned by
     process ``pid`` (default: this one), read from ``/proc/<pid>/fd`` and ``/proc/net/{tcp,tcp6,
-    udp,udp6}``. IPv4 addresses as dotted quads, IPv6 as ``[hex]``."""
+    udp,udp6}``; empty for a process that has ended. IPv4 addresses as dotted quads, IPv6 as
+    ``[hex]``."""
     pid = os.getpid() if pid is None else int(pid)
     inodes = set()
     fd_dir = f"/proc/{pid}/fd"
-    for fd in os.listdir(fd_dir):
+    try:
+        fds = os.listdir(fd_dir)
+    except OSError:  # the process has ended: it listens on nothing
+        return []
+    for fd in fds:
         try:
             target = os.readlink(os.path.join(fd_dir, fd))
         except OSError:

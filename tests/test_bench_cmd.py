@@ -1,0 +1,114 @@
+"""Tests of ``vdps bench``: a run prints what happened in plain words and writes the --json
+document with the issue's keys; the status line; the JSON on stdout moves the words to stderr;
+mistakes are one line with exit status 2 and nothing written."""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import pytest
+
+from vdps_hil.cli.bench_cmd import describe
+from vdps_hil.cli.main import main
+
+KEYS = {"frames_sent": int, "frames_received": int, "lines_sent": int, "lines_received": int, "dropped": int,
+        "warning_latency_ms": dict, "warning_lead_time_s": (float, type(None)),
+        "warning_lead_to_tipup_s": (float, type(None)), "rolled_over": bool, "realtime_factor": float,
+        "late_sends": int}
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cmd")
+    out, js = d / "b.mcap", d / "b.json"
+    return d, out, js
+
+
+def test_bench_prints_what_happened_and_writes_json_and_recording(short_run, capsys):
+    d, out, js = short_run
+    rc = main(["bench", "--scenario", "paper", "--duration", "1.2", "-o", str(out), "--json", str(js)])
+    assert rc == 0
+    cap = capsys.readouterr()
+    text = cap.out
+    assert "vdps bench: paper" in text and "ECU reaction off" in text
+    assert "the pipeline received every one of them" in text
+    assert "warning: none" in text and "stayed upright" in text
+    assert f"recording: {out}" in text and out.stat().st_size > 0
+    # the status line (not a terminal here: one line per simulated second, and the last one)
+    status = [ln for ln in cap.err.splitlines() if ln.startswith("t ")]
+    assert len(status) >= 2 and "/1.20 s" in status[-1]
+    doc = json.loads(js.read_text())
+    for k, typ in KEYS.items():
+        assert isinstance(doc[k], typ), (k, doc[k])
+    assert set(doc["warning_latency_ms"]) >= {"p50", "p99"}
+    assert doc["dropped"] == 0 and doc["frames_received"] == doc["frames_sent"] > 0
+    assert doc["rolled_over"] is False and doc["output"] == str(out)
+
+
+def test_json_on_stdout_moves_the_words_to_stderr(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "--scenario", "paper", "--duration", "0.5", "--quiet", "--json", "-"]) == 0
+    cap = capsys.readouterr()
+    doc = json.loads(cap.out)
+    assert doc["scenario"] == "paper" and doc["output"] is None
+    assert "vdps bench: paper" in cap.err and not [ln for ln in cap.err.splitlines() if ln.startswith("t ")]
+    assert not list(tmp_path.iterdir())  # no -o: no recording
+
+
+def _doc(**over) -> dict:
+    base = {"scenario": "fishhook-suv", "vehicle": "suv", "model": "suv-model", "transport": "virtual",
+            "can": {"pipeline_spec": "virtual:x"}, "speed": 1.0, "react": True, "duration_s": 7.0,
+            "wall_time_s": 7.01, "realtime_factor": 0.999, "frames_sent": 10, "imu_packets_sent": 5,
+            "lines_sent": 3, "dropped": 0, "late_sends": 1, "sends": 20, "late_tolerance_ms": 2.0,
+            "lead_reference": "open_loop", "first_warning_t_s": 1.13, "warning_lead_time_s": 2.59,
+            "point_of_no_return_t_s": 3.72, "warning_lead_to_tipup_s": 1.08, "tip_up_t_s": 2.21,
+            "ecu": {"frames": {"accepted": 300, "timeouts": 0}, "intervention_t_s": 1.13, "actuation_t_s": 1.23,
+                    "full_brake_t_s": 1.53, "actuator": {"delay_s": 0.1, "brake_torque_full_nm_per_wheel": 2500.0}},
+            "rolled_over": False, "truth_events": [], "max_abs_roll_deg": 7.2,
+            "warning_latency_ms": {"p50": 1.3, "p99": 25.0}, "output_cycles": 29514, "pipeline_keeps_up": True,
+            "output": "bench.mcap"}
+    base.update(over)
+    return base
+
+
+def test_the_words_say_warning_time_lead_ecu_action_outcome_and_recording():
+    text = "\n".join(describe(_doc()))
+    assert "first VDPS_Warning of level >= 2 on the bus at 1.13 s" in text
+    assert "2.59 s before the point of no return (without the ECU's reaction, at 3.72 s)" in text
+    assert "1.08 s before tip-up" in text
+    assert "cut the drive torque and started braking at 1.23 s (100 ms dead time)" in text
+    assert "full brakes (2500 N m per wheel) at 1.53 s" in text
+    assert "stayed upright" in text and "without the ECU it would have rolled over at 3.72 s" in text
+    assert "recording: bench.mcap" in text
+    rolled = "\n".join(describe(_doc(react=False, rolled_over=True, lead_reference="this_run", dropped=4,
+                                     pipeline_keeps_up=False, output=None)))
+    assert "ROLLED OVER" in rolled and "4 were LOST" in rolled and "listening only" in rolled
+    assert "did NOT keep up" in rolled and "recording:" not in rolled
+    lifted = copy.deepcopy(_doc(truth_events=[{"kind": "tip_up", "t_s": 2.21}]))
+    assert "after lifting two wheels" in "\n".join(describe(lifted))
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--scenario", "no-such-scenario"], "unknown scenario"),
+    (["--speed", "0"], "--speed must be a positive number"),
+    (["--speed", "x"], "Invalid value"),
+    (["--can", "nonsense"], "is not INTERFACE:CHANNEL"),
+    (["--can", "nosuchbus:0"], "unknown CAN interface"),
+    (["--can", "pty", "--sim-can", "virtual:x"], "--sim-can applies"),
+    (["--vehicle", "sedan-model"], "truth file is needed"),
+    (["--fault", "no_such_fault"], "unknown fault"),
+    (["-o", "/no/such/dir/x.mcap"], "does not exist"),
+])
+def test_errors_are_one_line_with_exit_status_2(args, words, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("vdps: error:") and words in err
+    assert not list(tmp_path.iterdir())
+
+
+def test_help_shows_examples_and_the_transports(capsys):
+    assert main(["bench", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert "vdps bench --react -o bench.mcap" in out and "socketcan:vcan0" in out and "127.0.0.1" in out

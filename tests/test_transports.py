@@ -1,0 +1,218 @@
+"""Tests of hil.transports: every CAN device side delivers frames, in order and unchanged, to the
+project's CanAdapter opened with the interface string it names (virtual bus, slcan on a pty,
+socketcand on 127.0.0.1) and hands back what the pipeline sends; serial ptys carry bytes to a
+pyserial reader; a full wire drops whole messages and counts them; the send log finds the send
+time of any frame or byte; the TCP server listens on 127.0.0.1 only."""
+
+from __future__ import annotations
+
+import os
+import socket
+import threading
+import time
+
+import can
+import numpy as np
+import pytest
+import serial
+
+from vdps_hil.adapters.base import AdapterError, Subscription
+from vdps_hil.adapters.can_adapter import CanAdapter
+from vdps_hil.hil.transports import (ExternalCanDevice, PtySerialDevice, SendLog, SlcanPtyDevice,
+                                     SocketcandServer, VirtualCanDevice, listening_sockets,
+                                     parse_transport)
+
+
+def _frames(n: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    ids = rng.integers(0x100, 0x140, n).tolist()
+    dlcs = rng.integers(0, 9, n).tolist()
+    data = rng.integers(0, 256, (n, 8)).astype(np.uint8)
+    return ids, dlcs, data
+
+
+def _receive(dev, n: int, timeout_s: float = 10.0):
+    """Open the pipeline's CanAdapter on the device's spec, send n frames, collect them; then
+    send one frame from the pipeline and collect it on the device side."""
+    stop = threading.Event()
+    back: list = []
+
+    def serve():  # the device side answers the adapter (slcan "O") and collects its sends
+        while not stop.is_set():
+            back.extend(m for _, m in dev.poll(0.01))
+
+    th = threading.Thread(target=serve, daemon=True)
+    th.start()
+    ad = CanAdapter("vdps", dev.pipeline_spec, batch=16)
+    sub = ad.subscribe(Subscription("t", samples=False))
+    ad.open()
+    reader = threading.Thread(target=ad.run, args=(stop, 0.01), daemon=True)
+    reader.start()
+    if isinstance(dev, SocketcandServer):
+        assert dev.wait_client(10.0)
+    ids, dlcs, data = _frames(n)
+    sent = 0
+    for k in range(0, n, 7):  # in bursts, as the bench sends the frames of one instant
+        sent += dev.send_frames(ids[k:k + 7], dlcs[k:k + 7], data[k:k + 7])
+        dev.pump()
+    got = []
+    t_end = time.monotonic() + timeout_s
+    while len(got) < n and time.monotonic() < t_end:
+        got += [e for e in sub.drain() if e.direction == "rx"]
+        time.sleep(0.005)
+    ad.send(can.Message(arbitration_id=0x080, data=bytes(range(8)), is_extended_id=False))
+    t_end = time.monotonic() + 5.0
+    while not back and time.monotonic() < t_end:
+        time.sleep(0.005)
+    stop.set()
+    reader.join(5.0)
+    th.join(5.0)
+    return sent, (ids, dlcs, data), got, back
+
+
+@pytest.mark.parametrize("make", [VirtualCanDevice, SlcanPtyDevice, SocketcandServer],
+                         ids=["virtual", "pty", "tcp"])
+def test_can_device_sides_deliver_frames_in_order_and_take_the_pipelines_sends(make):
+    dev = make()
+    dev.open()
+    try:
+        n = 500
+        sent, (ids, dlcs, data), got, back = _receive(dev, n)
+        assert sent == n and dev.log.total == n and dev.dropped == 0
+        assert len(got) == n
+        for k, ev in enumerate(got):
+            m = ev.msg
+            assert (m.arbitration_id, m.dlc, bytes(m.data)) == (ids[k], dlcs[k], bytes(data[k, :dlcs[k]]))
+        assert len(back) == 1 and back[0].arbitration_id == 0x080 and bytes(back[0].data) == bytes(range(8))
+    finally:
+        dev.close()
+
+
+def test_slcan_device_answers_commands_and_counts_bad_ones():
+    dev = SlcanPtyDevice()
+    try:
+        fd = os.open(dev.dev.port, os.O_RDWR | os.O_NOCTTY)
+        os.write(fd, b"S8\rO\rt0803AABBCC\rtXYZ\rT000001001FF\r")
+        t_end = time.monotonic() + 5.0
+        frames = []
+        while len(frames) < 2 and time.monotonic() < t_end:
+            frames += [m for _, m in dev.poll(0.05)]
+        assert [(m.arbitration_id, bytes(m.data), m.is_extended_id) for m in frames] == \
+            [(0x080, b"\xaa\xbb\xcc", False), (0x100, b"\xff", True)]
+        assert dev.bad_commands == 1
+        time.sleep(0.05)
+        answer = os.read(fd, 100)
+        assert answer == b"\r\rz\r\x07z\r"  # OK, OK, transmitted, error, transmitted
+        os.close(fd)
+    finally:
+        dev.close()
+
+
+def test_serial_pty_carries_bytes_and_logs_their_send_times():
+    dev = PtySerialDevice("imu")
+    try:
+        ser = serial.serial_for_url(dev.port, baudrate=921600, timeout=0.2)
+        chunks = [bytes([k]) * (10 + k) for k in range(20)]
+        for c in chunks:
+            assert dev.write(c)
+        want = b"".join(chunks)
+        got = b""
+        t_end = time.monotonic() + 5.0
+        while len(got) < len(want) and time.monotonic() < t_end:
+            got += ser.read(len(want) - len(got))
+        assert got == want and dev.bytes_in == len(want) and dev.log.total == len(want)
+        cum, t = dev.log.arrays()
+        assert cum[-1] == len(want) and np.all(np.diff(t) >= 0)
+        ser.close()
+    finally:
+        dev.close()
+
+
+def test_a_full_wire_drops_whole_messages_and_counts_them():
+    """Nobody reads: the pty (some 20-30 KB) and the 4 KiB device FIFO fill, then every further
+    message is dropped whole; what was accepted is exactly what a late reader gets."""
+    dev = PtySerialDevice("imu", fifo_bytes=4096)
+    try:
+        msg = bytes(range(47))
+        accepted = sum(dev.write(msg) for _ in range(2000))  # 94 KB offered
+        assert dev.dropped == 2000 - accepted > 0
+        assert dev.pending_bytes <= 4096  # the device FIFO never holds more than its size
+        fd = os.open(dev.port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        got = b""
+        t_end = time.monotonic() + 5.0
+        while len(got) < accepted * 47 and time.monotonic() < t_end:
+            dev.pump()
+            try:
+                got += os.read(fd, 65536)
+            except BlockingIOError:
+                time.sleep(0.01)
+        os.close(fd)
+        assert got == msg * accepted  # whole messages only, in order
+    finally:
+        dev.close()
+
+
+def test_send_log_finds_the_send_time_of_any_item():
+    log = SendLog()
+    log.add(3, 100)  # items 0..2 at t=100
+    log.add(0, 150)  # nothing: not logged
+    log.add(2, 200)  # items 3, 4
+    log.add(5, 300)  # items 5..9
+    assert log.time_of([0, 2, 3, 4, 5, 9, 10, -1]).tolist() == [100, 100, 200, 200, 300, 300, -1, -1]
+    assert log.total == 10
+
+
+def test_tcp_server_listens_on_loopback_only():
+    srv = SocketcandServer()
+    try:
+        mine = listening_sockets()
+        assert ("127.0.0.1", srv.port) in mine
+        assert all(addr == "127.0.0.1" for addr, _ in mine), mine
+        with pytest.raises(OSError):  # not reachable on another address of the host
+            other = socket.gethostbyname(socket.gethostname())
+            if other.startswith("127."):
+                raise OSError("no other address to try")
+            socket.create_connection((other, srv.port), timeout=1.0)
+    finally:
+        srv.close()
+
+
+def test_listening_sockets_sees_a_socket_bound_to_every_interface():
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.bind(("0.0.0.0", 0))
+    s.listen(1)
+    try:
+        assert ("0.0.0.0", s.getsockname()[1]) in listening_sockets()
+    finally:
+        s.close()
+
+
+@pytest.mark.parametrize("spec, name, cross", [(None, "virtual", False), ("virtual", "virtual", False),
+                                               ("pty", "pty", True), ("tcp", "tcp", True),
+                                               ("socketcan:vcan0", "external", False),
+                                               ("virtual:hil,receive_own_messages=false", "external", False)])
+def test_parse_transport_names_and_interface_strings(spec, name, cross):
+    t = parse_transport(spec)
+    assert t.name == name and t.cross_process is cross
+
+
+@pytest.mark.parametrize("spec, sim, words", [("nonsense", None, "is not INTERFACE:CHANNEL"),
+                                              ("nosuchbus:0", None, "unknown CAN interface"),
+                                              ("pty", "virtual:x", "--sim-can applies"),
+                                              ("virtual:a", "bad", "is not INTERFACE:CHANNEL")])
+def test_parse_transport_errors_are_one_line(spec, sim, words):
+    with pytest.raises(AdapterError) as e:
+        parse_transport(spec, sim)
+    assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def test_external_spec_with_a_virtual_interface_string_runs_through_python_can():
+    dev = ExternalCanDevice("virtual:hil-ext-test")
+    dev.open()
+    try:
+        assert dev.in_process
+        sent, (ids, dlcs, data), got, back = _receive(dev, 50)
+        assert len(got) == 50 and [e.msg.arbitration_id for e in got] == ids
+        assert len(back) == 1
+    finally:
+        dev.close()
