@@ -64,7 +64,7 @@ import numpy as np
 from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation.ekf import EkfConfig, SensorSet
 from vdps_hil.estimation.kinematics import dcm_gv
-from vdps_hil.estimation.pipeline import Estimate, EstimatorPipeline, Latencies, PipelineConfig
+from vdps_hil.estimation.pipeline import Estimate, EstimatorPipeline, Innovation, Latencies, PipelineConfig
 from vdps_hil.geodesy import EnuOrigin, ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from vdps_hil.model.params import CONFIG_DIR
 from vdps_hil.units import GRAVITY_MPS2, deg2rad, wrap_pi
@@ -472,6 +472,7 @@ _PIPE_KEYS = {"predict_period_s", "gnss_pos_sigma_h_m", "gnss_pos_sigma_v_m", "g
 _LAT_KEYS = {"imu_s", "gnss_s", "suspension_s", "wheel_s"}
 _SENSOR_KEYS = {"imu", "gnss", "suspension", "wheel_speeds"}
 _CAL_KEYS = {"speed_still_mps", "min_still_s", "max_age_s"}
+_EKF_BOOL_KEYS = {"use_gnss_velocity"}
 
 
 def _finite(v, where: str) -> float:
@@ -510,6 +511,11 @@ def parse_sensorset(text: str, origin: str = "<string>") -> SensorSetConfig:
             raise SensorSetError(f"{origin}[{name}]: expected a table")
         out = {}
         for k, v in t.items():
+            if name == "ekf" and k in _EKF_BOOL_KEYS:
+                if not isinstance(v, bool):
+                    raise SensorSetError(f"{origin}[ekf].{k}: expected true or false")
+                out[k] = v
+                continue
             base = k
             conv = 1.0
             if k.endswith("_deg"):
@@ -651,6 +657,8 @@ class RunResult:
     track: Track
     handled: dict
     withheld: dict
+    nis: dict = field(default_factory=dict)
+    """kind -> {"accepted": n, "mean_nis_per_dof": mean(NIS / dof) of the accepted updates}."""
 
 
 def gnss_denied(windows_s: Sequence[tuple[float, float]]):
@@ -706,11 +714,17 @@ def run_pipeline(vehicle, config: PipelineConfig, samples: Iterable[Sample], *,
         stream = [node.process(s) for s in stream]
     p = EstimatorPipeline(vehicle, config, origin=origin)
     est = []
+    nis: dict[str, list[float]] = {}
     for s in stream:
         for o in p.handle(s):
             if isinstance(o, Estimate):
                 est.append(o)
-    return RunResult(p, track_from_estimates(est), handled, withheld)
+            elif isinstance(o, Innovation) and o.status == "accepted" and o.dof:
+                v = nis.setdefault(o.kind, [0, 0.0])
+                v[0] += 1
+                v[1] += o.nis / o.dof
+    summary = {k: {"accepted": n, "mean_nis_per_dof": tot / n} for k, (n, tot) in nis.items()}
+    return RunResult(p, track_from_estimates(est), handled, withheld, summary)
 
 
 # ------------------------------------------------------------------------------ metrics
@@ -1033,6 +1047,23 @@ def summarize_outages(errors: Sequence[OutageError]) -> dict:
                                "cv_mean_m": float(c.mean()), "reduction": float(1.0 - f.mean() / c.mean()),
                                "halved_fraction": float(np.mean(f <= 0.5 * c))}
     return out
+
+
+def velocity_lag(ref: Reference, lags_s=np.arange(-0.3, 0.3001, 0.005), min_speed_mps: float = 3.0) -> float:
+    """How much a solution's velocities lag its positions [s]: the L minimising the RMS of
+    (p_k+1 - p_k) / dt - v(t_mid - L) over the horizontal axes while moving (positive: the
+    velocity describes the motion L seconds earlier than its time stamp)."""
+    t, p, v = ref.t_s, ref.pos_enu_m, ref.vel_enu_mps
+    dp = np.diff(p[:, :2], axis=0) / np.diff(t)[:, None]
+    tm = 0.5 * (t[1:] + t[:-1])
+    m = np.hypot(v[1:, 0], v[1:, 1]) > min_speed_mps
+    best, best_l = math.inf, math.nan
+    for lag in lags_s:
+        vm = np.column_stack([np.interp(tm + lag, t, v[:, k]) for k in range(2)])
+        e = float(np.sqrt(np.mean((dp[m] - vm[m]) ** 2)))
+        if e < best:
+            best, best_l = e, float(lag)
+    return best_l
 
 
 def estimate_lag(t_a, x_a, t_b, x_b, lags_s) -> float:
