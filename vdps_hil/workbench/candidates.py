@@ -1,0 +1,418 @@
+"""Effect candidates: how each effect (built-in or the user's) offers columns to the ranking.
+
+A candidate turns an effect into regressor columns over the residual rows of
+:mod:`~vdps_hil.workbench.residuals` -- ``dyn`` (rows x 14 equations x parameters, the change
+of the eq 13 residuals the effect explains per unit of each fitted parameter) and ``inn`` (GNSS
+innovation rows x parameters) -- and back into an :class:`~vdps_hil.model.effects.Effect` with
+fitted values. The residual convention: r = measured - model, so an effect present in the car
+but missing in the model leaves r = sum_p column_p theta_p.
+
+===================================  ===============================================================
+adapter                              columns
+===================================  ===============================================================
+:class:`RegressorCandidate`          the effect's own ``regressors(q)`` (effects linear in their
+                                     parameters: drag, rolling resistance, load-dependent cornering
+                                     stiffness, steering compliance, a user's linear effect)
+:class:`MeasurementCandidate`        ``regressors(kin)`` of a sensor effect: m df/dtheta on the
+                                     long/lat/vert force balance and the strapdown innovations
+:class:`NumericCandidate`            central differences of the residual in each parameter at the
+                                     effect's generic prior (any user effect without regressors)
+:class:`CrosswindCandidate`          wind east/north components (the effect's direction is unknown):
+                                     differences at 1 m/s of wind from the east and the north
+:class:`LowPressureCandidate`        one tire's radius loss; the wheel (1..4) whose column fits best
+:class:`MagicFormulaCandidate`       saturation: s = (mu_0 / mu)^2 scales the small-slip deviation
+                                     of the Magic Formula from the linear tire (F - C alpha ~ -(C
+                                     alpha)^3 / (mu F_z)^2); mu refined on the residual afterwards
+:class:`ParameterCandidate`          one of the ten identified parameters (eq 20-23): finite
+                                     differences of the residual in that parameter
+===================================  ===============================================================
+
+Generic priors: every adapter starts from the effect's ``ParamSpec`` defaults (never from a
+truth file); ``prior_theta`` is the typical magnitude used to judge excitation.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from vdps_hil.model.effects import REGISTRY, EffectSet
+from vdps_hil.model.effects.base import DynamicsEffect, Effect, MeasurementEffect, TireModel
+
+__all__ = ["Candidate", "RegressorCandidate", "MeasurementCandidate", "NumericCandidate", "CrosswindCandidate",
+           "LowPressureCandidate", "MagicFormulaCandidate", "ParameterCandidate", "candidate_for",
+           "default_candidates", "BASE_PARAMS", "PARAM_LABELS"]
+
+BASE_PARAMS: tuple[str, ...] = ("mass_kg", "inertia_x_kgm2", "inertia_y_kgm2", "inertia_z_kgm2",
+                                "cornering_stiffness_front_nprad", "cornering_stiffness_rear_nprad",
+                                "tracking_stiffness_1_n", "tracking_stiffness_2_n", "tracking_stiffness_3_n",
+                                "tracking_stiffness_4_n")
+"""The ten identified parameters (section 5.2), re-identified with every fit."""
+PARAM_LABELS = {"mass_kg": "mass", "inertia_x_kgm2": "roll inertia", "inertia_y_kgm2": "pitch inertia",
+                "inertia_z_kgm2": "yaw inertia", "cornering_stiffness_front_nprad": "front cornering stiffness",
+                "cornering_stiffness_rear_nprad": "rear cornering stiffness",
+                **{f"tracking_stiffness_{i}_n": f"wheel {i} slip stiffness" for i in range(1, 5)}}
+PARAM_ALIASES = {"cornering_stiffness_front_nprad": "cornering_stiffness_front",
+                 "cornering_stiffness_rear_nprad": "cornering_stiffness_rear", "mass_kg": "mass",
+                 "inertia_x_kgm2": "inertia_x", "inertia_y_kgm2": "inertia_y", "inertia_z_kgm2": "inertia_z",
+                 **{f"tracking_stiffness_{i}_n": f"tracking_stiffness_{i}" for i in range(1, 5)}}
+"""Ranking names of the parameters (the JSON ``effect`` field)."""
+
+
+class Candidate:
+    """One candidate of the ranking. Subclasses set ``params`` and implement ``columns``."""
+
+    kind = "effect"
+
+    def __init__(self, effect_cls: type[Effect], params: Sequence[str] | None = None):
+        self.effect_cls = effect_cls
+        self.name = effect_cls.name
+        specs = effect_cls.param_specs()
+        self.params: tuple[str, ...] = tuple(params) if params is not None else tuple(specs)
+        self.defaults = {p.name: p.default for p in effect_cls.PARAMS}
+        self.family = effect_cls.family
+
+    def prior_theta(self) -> np.ndarray:
+        return np.array([self.defaults[p] for p in self.params], dtype=float)
+
+    def columns(self, ctx) -> tuple[np.ndarray | None, np.ndarray | None]:
+        raise NotImplementedError
+
+    def effect(self, theta: Sequence[float]) -> Effect:
+        vals = dict(self.defaults)
+        vals.update({p: float(v) for p, v in zip(self.params, theta)})
+        return self.effect_cls(**vals)
+
+    def report_params(self, theta, sigma) -> dict[str, tuple[float, float]]:
+        """Parameter name -> (value, sigma) in the effect's own parameters."""
+        return {p: (float(v), float(s)) for p, v, s in zip(self.params, theta, sigma)}
+
+    def plausible(self, theta) -> bool:
+        try:
+            eff = self.effect(theta)
+        except ValueError:
+            return False
+        specs = self.effect_cls.param_specs()
+        return all(specs[p].lower <= eff.params[p] <= specs[p].upper for p in self.params)
+
+    # --- the joint (nonlinear) fit: parameters phi, columns re-linearised at phi
+    linear: bool = True
+    """True when the columns do not depend on the parameter values (regressors)."""
+
+    def to_phi(self, theta) -> np.ndarray:
+        """Screening parameters -> fit parameters (a start for the joint fit)."""
+        return np.asarray(theta, dtype=float)
+
+    def phi_effect(self, phi) -> Effect:
+        return self.effect(phi)
+
+    def phi_plausible(self, phi) -> bool:
+        return self.plausible(phi)
+
+    def phi_report(self, phi, sigma) -> dict[str, tuple[float, float]]:
+        return self.report_params(phi, sigma)
+
+    def phi_steps(self, phi) -> np.ndarray:
+        prior = self.prior_theta()
+        return np.maximum(np.abs(np.asarray(phi, dtype=float)) * 0.05, np.abs(prior) * 0.05) + 1e-9
+
+    def delta_columns(self, ctx, phi) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Columns of a change of phi at phi (the model already holds the effect at phi)."""
+        if self.linear:
+            return self.columns(ctx)
+        steps = self.phi_steps(phi)
+        cols = []
+        for j, h in enumerate(steps):
+            ph = np.array(phi, dtype=float)
+            ph[j] += h
+            cols.append(ctx.dyn_contribution(self.phi_effect(ph)) / h)
+        return np.stack(cols, axis=2), None
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name})"
+
+
+class RegressorCandidate(Candidate):
+    """Columns from the effect's own ``regressors(q)`` (linear in its parameters)."""
+
+    def __init__(self, effect_cls, params=None):
+        super().__init__(effect_cls, params)
+        if params is None:
+            self.params = self._probe_params()
+
+    def _probe_params(self) -> tuple[str, ...]:
+        return tuple(self.defaults)
+
+    def columns(self, ctx):
+        eff = self.effect_cls(**self.defaults)
+        X = ctx.dyn_from_regressors(eff, self.params)
+        used = np.any(X != 0.0, axis=(0, 1))
+        if not used.all():
+            keep = [p for p, u in zip(self.params, used) if u]
+            if keep:
+                X = X[:, :, used]
+                self.params = tuple(keep)
+        return X, None
+
+
+class MeasurementCandidate(Candidate):
+    """A sensor effect: m d f / d theta on the force balance and the strapdown innovations."""
+
+    def columns(self, ctx):
+        eff = self.effect_cls(**self.defaults)
+        return ctx.dyn_from_fields(eff, self.params), ctx.innovation_columns(eff, self.params)
+
+
+class NumericCandidate(Candidate):
+    """Central differences of the residual in each parameter at the effect's generic prior
+    (exact for effects linear in their parameters)."""
+
+    linear = False
+
+    def columns(self, ctx):
+        base = dict(self.defaults)
+        cols = []
+        for p in self.params:
+            h = max(abs(base[p]) * 0.1, 1e-6)
+            lo = self.effect_cls(**{**base, p: base[p] - h}) if self._ok(p, base[p] - h) else self.effect_cls(**base)
+            hi = self.effect_cls(**{**base, p: base[p] + h})
+            dl = base[p] - h if self._ok(p, base[p] - h) else base[p]
+            cols.append((ctx.dyn_contribution(hi) - ctx.dyn_contribution(lo)) / (base[p] + h - dl))
+        inn = None
+        if issubclass(self.effect_cls, MeasurementEffect):
+            inn = ctx.innovation_columns(self.effect_cls(**base), self.params)
+        return np.stack(cols, axis=2), inn
+
+    def _ok(self, p, v) -> bool:
+        try:
+            self.effect_cls(**{**self.defaults, p: v})
+            return True
+        except ValueError:
+            return False
+
+
+class CrosswindCandidate(Candidate):
+    """Crosswind with an unknown direction: theta = (wind east, wind north) [m/s]; side-force
+    area and centre of pressure at the effect's generic prior."""
+
+    linear = False
+
+    def __init__(self, effect_cls):
+        super().__init__(effect_cls, ("wind_east_mps", "wind_north_mps"))
+
+    def phi_steps(self, phi):
+        return np.array([0.5, 0.5])
+
+    def prior_theta(self):
+        s = self.defaults["wind_speed_mps"]
+        return np.array([s / math.sqrt(2.0), s / math.sqrt(2.0)])
+
+    def columns(self, ctx):
+        h = 1.0
+        base = dict(self.defaults)
+        cols = []
+        for direction in (0.0, math.pi / 2.0):
+            e = self.effect_cls(**{**base, "wind_speed_mps": h, "wind_to_rad": direction})
+            cols.append(ctx.dyn_contribution(e) / h)
+        return np.stack(cols, axis=2), None
+
+    def effect(self, theta):
+        we, wn = float(theta[0]), float(theta[1])
+        return self.effect_cls(**{**self.defaults, "wind_speed_mps": math.hypot(we, wn),
+                                  "wind_to_rad": math.atan2(wn, we)})
+
+    def report_params(self, theta, sigma):
+        we, wn = float(theta[0]), float(theta[1])
+        s = math.hypot(we, wn)
+        ss = math.hypot(float(sigma[0]), float(sigma[1])) / math.sqrt(2.0)
+        d = math.atan2(wn, we)
+        sd = ss / s if s > 0 else math.pi
+        return {"wind_speed_mps": (s, ss), "wind_to_rad": (d, sd), "wind_east_mps": (we, float(sigma[0])),
+                "wind_north_mps": (wn, float(sigma[1]))}
+
+    def plausible(self, theta):
+        return math.hypot(float(theta[0]), float(theta[1])) <= self.effect_cls.param_specs()["wind_speed_mps"].upper
+
+
+class LowPressureCandidate(Candidate):
+    """One under-inflated tire; the wheel whose column fits the residual best."""
+
+    def __init__(self, effect_cls):
+        super().__init__(effect_cls, ("radius_reduction",))
+        self.wheel = int(self.defaults["wheel"])
+
+    def columns(self, ctx):
+        best, best_x = -1.0, None
+        for w in (1, 2, 3, 4):
+            eff = self.effect_cls(**{**self.defaults, "wheel": float(w)})
+            X = ctx.dyn_from_regressors(eff, self.params)
+            gain = ctx.fit_gain(X)
+            if gain > best:
+                best, best_x, self.wheel = gain, X, w
+        return best_x, None
+
+    def effect(self, theta):
+        return self.effect_cls(**{**self.defaults, "wheel": float(self.wheel), "radius_reduction": float(theta[0])})
+
+    def report_params(self, theta, sigma):
+        return {"wheel": (float(self.wheel), 0.0), "radius_reduction": (float(theta[0]), float(sigma[0]))}
+
+
+class MagicFormulaCandidate(Candidate):
+    """Tire saturation: theta = s = (mu_0/mu)^2 scales the Magic Formula's departure from the
+    linear tire at the generic prior mu_0 (module docstring); ``refine`` fits mu itself."""
+
+    def __init__(self, effect_cls):
+        super().__init__(effect_cls, ("saturation_scale",))
+        self.mu0 = self.defaults["peak_friction"]
+        self.mu: float | None = None  # set by refine
+
+    linear = False
+
+    def prior_theta(self):
+        return np.array([1.0])
+
+    def columns(self, ctx):
+        return ctx.dyn_contribution(self.effect_cls(**self.defaults))[:, :, None], None
+
+    def to_phi(self, theta):
+        s = float(theta[0])
+        mu = self.mu0 / math.sqrt(s) if s > 1e-3 else 2.5
+        return np.array([min(max(mu, 0.3), 2.5)])
+
+    def phi_effect(self, phi):
+        return self.effect_cls(**{**self.defaults, "peak_friction": float(min(max(phi[0], 0.05), 1e3))})
+
+    def phi_plausible(self, phi):
+        spec = self.effect_cls.param_specs()["peak_friction"]
+        return spec.lower <= float(phi[0]) <= spec.upper
+
+    def phi_report(self, phi, sigma):
+        return {"peak_friction": (float(phi[0]), float(sigma[0]))}
+
+    def phi_steps(self, phi):
+        return np.array([0.03 * max(float(phi[0]), 0.1)])
+
+    def _mu(self, theta) -> float:
+        if self.mu is not None:
+            return self.mu
+        s = float(theta[0])
+        return self.mu0 / math.sqrt(s) if s > 1e-6 else math.inf
+
+    def effect(self, theta):
+        mu = self._mu(theta)
+        mu = min(max(mu if math.isfinite(mu) else 1e3, 0.05), 1e3)
+        return self.effect_cls(**{**self.defaults, "peak_friction": mu})
+
+    def refine(self, ctx, theta, fit_fn):
+        """Golden-section search of mu on the held-in SSE (other shape factors at the prior)."""
+        s = float(theta[0])
+        if not (s > 0):
+            return theta, None
+        lo, hi = math.log(0.3), math.log(3.0)
+        start = self._mu([s])
+        if math.isfinite(start):
+            lo, hi = math.log(max(0.3, start / 2.0)), math.log(min(3.0, start * 2.0))
+
+        def sse(logmu):
+            e = self.effect_cls(**{**self.defaults, "peak_friction": math.exp(logmu)})
+            return fit_fn(ctx.dyn_contribution(e)[:, :, None])
+
+        gr = (math.sqrt(5.0) - 1.0) / 2.0
+        a, b = lo, hi
+        c1, c2 = b - gr * (b - a), a + gr * (b - a)
+        f1, f2 = sse(c1), sse(c2)
+        for _ in range(14):
+            if f1 < f2:
+                b, c2, f2 = c2, c1, f1
+                c1 = b - gr * (b - a)
+                f1 = sse(c1)
+            else:
+                a, c1, f1 = c1, c2, f2
+                c2 = a + gr * (b - a)
+                f2 = sse(c2)
+        self.mu = math.exp(0.5 * (a + b))
+        return theta, self.mu
+
+    def report_params(self, theta, sigma):
+        s, ss = float(theta[0]), float(sigma[0])
+        mu = self._mu(theta)
+        smu = 0.5 * mu * ss / s if s > 0 else math.nan
+        return {"peak_friction": (mu, smu), "saturation_scale": (s, ss)}
+
+    def plausible(self, theta):
+        if not float(theta[0]) > 0:
+            return False
+        mu = self._mu(theta)
+        spec = self.effect_cls.param_specs()["peak_friction"]
+        return spec.lower <= mu <= spec.upper
+
+
+class ParameterCandidate(Candidate):
+    """One of the ten identified parameters (a re-identification, not an effect)."""
+
+    kind = "parameter"
+
+    def __init__(self, param: str, vehicle):
+        self.param = param
+        self.name = PARAM_ALIASES[param]
+        self.params = (param,)
+        self.family = "parameter"
+        self.effect_cls = None
+        self.defaults = {param: getattr(vehicle.params, param)}
+
+    def columns(self, ctx):
+        return ctx.param_columns(self.param), None
+
+    def effect(self, theta):
+        raise TypeError("a parameter is not an effect")
+
+    def plausible(self, theta):
+        return float(theta[0]) > 0.0
+
+    def report_params(self, theta, sigma):
+        return {self.param: (float(theta[0]), float(sigma[0]))}
+
+
+_ADAPTERS = {"crosswind": CrosswindCandidate, "low_pressure_tire": LowPressureCandidate,
+             "magic_formula_tire": MagicFormulaCandidate}
+
+
+def _has_regressors(cls) -> bool:
+    if issubclass(cls, MeasurementEffect):
+        return cls.regressors is not MeasurementEffect.regressors
+    return cls.regressors is not DynamicsEffect.regressors
+
+
+def candidate_for(effect_cls: type[Effect]) -> Candidate:
+    """The adapter for an effect class (built-in special cases, then by its interface)."""
+    if effect_cls.name in _ADAPTERS and REGISTRY.get(effect_cls.name) is effect_cls:
+        return _ADAPTERS[effect_cls.name](effect_cls)
+    params = getattr(effect_cls, "WORKBENCH_PARAMS", None)
+    if issubclass(effect_cls, MeasurementEffect):
+        if _has_regressors(effect_cls):
+            return MeasurementCandidate(effect_cls, params)
+        return NumericCandidate(effect_cls, params)
+    if _has_regressors(effect_cls):
+        return RegressorCandidate(effect_cls, params)
+    return NumericCandidate(effect_cls, params)
+
+
+def default_candidates(model_effects: EffectSet, extra: Sequence[type[Effect]] = (),
+                       registry=None) -> list[Candidate]:
+    """Every registered effect (plus ``extra`` user effects) not already in the model; tire laws
+    other than the model's are offered only as the saturation candidate."""
+    reg = dict(registry if registry is not None else REGISTRY)
+    for cls in extra:
+        reg[cls.name] = cls
+    have = set(model_effects.names)
+    out = []
+    for name, cls in reg.items():
+        if name in have or name == "linear_tire":
+            continue
+        if issubclass(cls, TireModel) and model_effects.tire is not None and model_effects.tire.name != "linear_tire":
+            continue
+        out.append(candidate_for(cls))
+    return out

@@ -1,0 +1,1043 @@
+"""Which effect is missing: candidates ranked by held-out explained fraction, forward selection,
+fitted parameters with sigmas, plausibility, excitation and equivalence groups.
+
+The linear model of the residuals (``residuals``: r = measured - model at the identified model)::
+
+    r = N eta + B delta_p + sum_c X_c theta_c + e
+
+N: nuisance -- per row the estimator's body-velocity and slip directions (projected out row by
+row) and, for the GNSS innovations, the initial attitude, velocity and position (9 columns);
+B: the ten identified parameters (eq 20-23, re-identified with every fit, weak prior
+delta_p ~ N(0, (0.5 p)^2) so a parameter the drive does not excite stays where it was);
+X_c: the columns of candidate c (``candidates``). Every row is divided by its equation's noise
+sigma (inverse noise variance weighting per equation; GNSS rows by their sigma).
+
+Explained fraction (``explained_fraction``): the partial R^2 of a candidate on held-out data,
+blocked cross-validation::
+
+    EF_c = 1 - SSE_cv(S + c) / SSE_cv(S)
+
+S = the base model (N, B) plus the effects already selected. The drive is cut into micro blocks
+of ``micro_block_s`` grouped into ``folds`` contiguous folds; each fold is predicted from a fit
+on the other folds minus the micro blocks next to it (a gap, so the autocorrelated noise on
+either side of the border does not leak). Per equation the same ratio over that equation's rows.
+
+Forward selection: the candidate with the largest EF is added when (a) its BIC on the effective
+sample size improves by more than ``bic_margin``::
+
+    dBIC = n_eff ln(SSE(S + c) / SSE(S)) + p_c ln(n_eff),   n_eff = sum_g n_g / tau_g
+
+(tau_g the integrated autocorrelation time of equation g's residual), (b) EF_c >=
+``min_explained``, (c) the fitted parameters are physically plausible (``ParamSpec`` ranges:
+negative drag and so on are rejected) and (d) the drive excites it: at its generic prior
+magnitude the effect would stand ``excitation_z`` noise sigmas (effective) above zero. The first
+selected effect is the ``recommendation``.
+
+Equivalence groups: another candidate or an identified parameter A is equivalent to c when A's
+columns reproduce c's fitted contribution d_c with R^2 >= ``corr_threshold``^2 (|correlation|
+>= 0.95 for one column; a large variance inflation for several) with plausible values. A
+re-identified parameter that moved from the model file's value is an entry of its own (its
+explained fraction is that of its re-identification) and the effects that would explain the same
+change form its group -- e.g. the front cornering stiffness and steering compliance, which a drive
+in the linear range cannot tell apart. Sigmas: (X'X)^-1 s^2 n / n_eff.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Sequence
+
+import numpy as np
+
+from vdps_hil.model.effects import EffectSet
+from vdps_hil.model.effects.base import Effect, ImuKinematics
+from vdps_hil.model.params import Vehicle
+
+from .candidates import BASE_PARAMS, PARAM_ALIASES, PARAM_LABELS, Candidate, ParameterCandidate, default_candidates
+from .dataset import DriveTable
+from .residuals import (EQUATIONS, EquationResiduals, Innovations, RowStates, compute_innovations,
+                        compute_residuals, parameter_columns, row_states)
+
+__all__ = ["RankingConfig", "Ranking", "RankEntry", "Context", "Design", "rank", "identify_base",
+           "GROUP_NAMES", "SEPARATING_MANEUVERS"]
+
+INNOVATION_GROUPS = ("innov_att", "innov_vel", "innov_pos")
+GROUP_NAMES: tuple[str, ...] = EQUATIONS + INNOVATION_GROUPS
+"""Row groups: the 14 equations then the GNSS innovations (attitude, velocity, position)."""
+_INN_GROUP = {0: 14, 1: 14, 2: 14, 3: 15, 4: 15, 5: 16, 6: 16, 7: 16}
+
+
+@dataclass(frozen=True)
+class RankingConfig:
+    """Thresholds of the ranking (module docstring)."""
+
+    micro_block_s: float = 0.5
+    nuisance_knot_s: float = 2.0
+    velocity_sigma_floor_mps: float = 0.02
+    folds: int = 8
+    gap_blocks: int = 1
+    bic_margin: float = 10.0
+    min_explained: float = 0.02
+    corr_threshold: float = 0.95
+    excitation_z: float = 5.0
+    base_iterations: int = 2
+    base_prior_rel_sigma: float = 0.5
+    base_bounds: tuple[float, float] = (0.2, 5.0)
+    max_effects: int = 3
+    shortlist: int = 3
+    joint_iterations: int = 1
+    identify: tuple[str, ...] = BASE_PARAMS
+
+
+# ----------------------------------------------------------------------------------- context
+class Context:
+    """Everything candidates need to build columns at the current (identified) model."""
+
+    def __init__(self, table: DriveTable, vehicle: Vehicle, effects: EffectSet, states: RowStates,
+                 res: EquationResiduals, inn: Innovations):
+        self.table = table
+        self.vehicle = vehicle
+        self.effects = effects
+        self.states = states
+        self.res = res
+        self.inn = inn
+        self.avail = res.available & np.isfinite(res.sigma) & (res.sigma > 0)
+        self.rows = np.all(np.isfinite(res.values[:, self.avail]), axis=1)
+        sig = res.sigma[self.avail]
+        self.sig = sig
+        self.y_dyn = res.values[self.rows][:, self.avail] / sig
+        jw = res.nuisance[self.rows][:, self.avail, 2:] / sig[None, :, None]
+        if len(jw):
+            u, s, _ = np.linalg.svd(jw, full_matrices=False)
+            keep = s > 1e-9 * np.maximum(s.max(axis=1, keepdims=True), 1e-300)
+            self._u = u * keep[:, None, :]
+        else:
+            self._u = np.zeros((0, int(self.avail.sum()), 4))
+        self.y_dyn = self.project(self.y_dyn[:, :, None])[:, :, 0]
+
+    def project(self, a: np.ndarray) -> np.ndarray:
+        """Remove the row-wise nuisance directions from whitened columns (n, E, p)."""
+        u = self._u
+        return a - np.einsum("nek,nkp->nep", u, np.einsum("nek,nep->nkp", u, a))
+
+    def smooth_columns(self, knot_s: float, floor_mps: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+        """The estimator's slowly varying body-velocity errors (delta v_x, delta v_y) as
+        piecewise-linear functions of time (hat functions every ``knot_s``): (n_all, 14, 2K),
+        and their prior sigmas: the estimator's own velocity sigma near each knot (floored)."""
+        t = self.res.t_s
+        if not len(t):
+            return np.zeros((0, 14, 0)), np.zeros(0)
+        sv = np.hypot(self.table.sigma["vel_g_mps_e"], self.table.sigma["vel_g_mps_n"])[self.res.index] / math.sqrt(2.0)
+        t0, t1 = float(t[0]), float(t[-1])
+        k = max(1, int(math.ceil((t1 - t0) / knot_s)))
+        knots = np.linspace(t0, t1, k + 1)
+        dk = knots[1] - knots[0] if k else 1.0
+        out = np.zeros((len(t), 14, 2 * (k + 1)))
+        sig = np.zeros(2 * (k + 1))
+        for j, tk in enumerate(knots):
+            phi = np.clip(1.0 - np.abs(t - tk) / dk, 0.0, None)
+            near = (phi > 0) & np.isfinite(sv)
+            s_j = max(float(np.median(sv[near])) if near.any() else floor_mps, floor_mps)
+            for c in range(2):
+                out[:, :, 2 * j + c] = self.res.nuisance[:, :, c] * phi[:, None]
+                sig[2 * j + c] = s_j
+        return out, sig
+
+    def whiten_project(self, x14: np.ndarray) -> np.ndarray:
+        """(n_all, 14, p) in equation units -> whitened, projected (n, E, p) on the used rows."""
+        a = x14[self.rows][:, self.avail, :] / self.sig[None, :, None]
+        return self.project(np.nan_to_num(a))
+
+    # --- column builders (equation units, all residual rows)
+    def dyn_from_regressors(self, eff: Effect, params: Sequence[str]) -> np.ndarray:
+        n = len(self.res.t_s)
+        x = np.zeros((n, 14, len(params)))
+        idx = {e: k for k, e in enumerate(EQUATIONS)}
+        pidx = {p: j for j, p in enumerate(params)}
+        for j, q in enumerate(self.res.quantities):
+            try:
+                regs = eff.regressors(q)
+            except (KeyError, ZeroDivisionError, ValueError):
+                continue
+            for eq, d in regs.items():
+                k = idx.get(eq)
+                if k is None:
+                    continue
+                for p, v in d.items():
+                    if p in pidx and math.isfinite(v):
+                        x[j, k, pidx[p]] = v
+        return x
+
+    def dyn_from_fields(self, eff, params: Sequence[str]) -> np.ndarray:
+        n = len(self.res.t_s)
+        x = np.zeros((n, 14, len(params)))
+        c = self.table.columns
+        m = self.vehicle.params.mass_kg
+        for j, k in enumerate(self.res.index):
+            kin = ImuKinematics(0.0, tuple(c[f"specific_force_b_mps2_{a}"][k] for a in "xyz"),
+                                tuple(c[f"rate_b_radps_{a}"][k] for a in "xyz"),
+                                tuple(c[f"angular_accel_b_radps2_{a}"][k] for a in "xyz"))
+            regs = eff.regressors(kin)
+            for q, a in enumerate("xyz"):
+                d = regs.get(f"specific_force_mps2_{a}", {})
+                for pj, p in enumerate(params):
+                    x[j, q, pj] = m * d.get(p, 0.0)
+        return x
+
+    def dyn_contribution(self, eff: Effect) -> np.ndarray:
+        """What the model gains from the effect, in residual units: r(model) - r(model + eff)."""
+        eff_set = self.effects + eff if eff.name not in self.effects else self.effects.without(eff.name) + eff
+        with_e = compute_residuals(self.table, self.vehicle, eff_set, states=self.states, with_nuisance=False,
+                                   with_quantities=False)
+        return np.nan_to_num(self.res.values - with_e.values)[:, :, None][:, :, 0]
+
+    def innovation_columns(self, eff, params) -> np.ndarray:
+        if not len(self.inn):
+            return np.zeros((0, len(params)))
+        return self.inn.effect_columns(eff, params)
+
+    def param_columns(self, param: str) -> np.ndarray:
+        return parameter_columns(self.res, param, self.table)[:, :, None]
+
+    def fit_gain(self, x14: np.ndarray) -> float:
+        a = self.whiten_project(x14)
+        xx = a.reshape(-1, a.shape[2])
+        yy = self.y_dyn.reshape(-1)
+        g = xx.T @ xx
+        c = xx.T @ yy
+        try:
+            return float(c @ np.linalg.lstsq(g, c, rcond=None)[0])
+        except np.linalg.LinAlgError:
+            return 0.0
+
+
+# ----------------------------------------------------------------------------------- design
+class Design:
+    """Stacked whitened rows (dynamics, projected; GNSS innovations) and named column blocks, with
+    per (micro block, row group) sufficient statistics for fast blocked cross-validation."""
+
+    def __init__(self, ctx: Context, config: RankingConfig):
+        self.ctx = ctx
+        self.cfg = config
+        n, e = ctx.y_dyn.shape
+        inn = ctx.inn
+        self.n_dyn_rows = n * e
+        t_dyn = np.repeat(ctx.res.t_s[ctx.rows], e)
+        eq_ids = np.flatnonzero(ctx.avail)
+        g_dyn = np.tile(eq_ids, n)
+        if len(inn):
+            y_inn = inn.values / inn.sigma
+            t_inn = inn.t_s
+            g_inn = np.array([_INN_GROUP[int(c)] for c in inn.channel])
+        else:
+            y_inn, t_inn, g_inn = np.zeros(0), np.zeros(0), np.zeros(0, int)
+        self.y = np.concatenate([ctx.y_dyn.reshape(-1), y_inn])
+        t_all = np.concatenate([t_dyn, t_inn])
+        t0 = float(ctx.table.t_s[0])
+        self.block = np.floor((t_all - t0) / config.micro_block_s).astype(int)
+        self.n_blocks = int(self.block.max()) + 1 if len(self.block) else 0
+        self.group = np.concatenate([g_dyn, g_inn]).astype(int)
+        self.cols: list[np.ndarray] = []
+        self.names: list[str] = []
+        self.blocks: dict[str, list[int]] = {}
+        self.scale: list[float] = []
+        self.prior_w: list[float] = []  # prior weight per column (0 = none), scaled units
+        self.prior_c: list[float] = []  # prior centre per column, scaled units
+        self._stats = None
+        if len(inn):
+            nu = inn.nuisance / inn.sigma[:, None]
+            self.add_block("_nuisance", None, nu)
+        sm, sm_sig = ctx.smooth_columns(config.nuisance_knot_s, config.velocity_sigma_floor_mps)
+        if sm.shape[2]:
+            self.add_block("_smooth", sm, None, prior_sigma=list(sm_sig))
+
+    def add_block(self, name: str, x_dyn: np.ndarray | None, x_inn: np.ndarray | None,
+                  prior_sigma: Sequence[float] | None = None, prior_center: Sequence[float] | None = None) -> list[int]:
+        """Add a candidate's columns (x_dyn: (n_all, 14, p) equation units; x_inn: (m, p)
+        unwhitened innovation units). Returns the column indices."""
+        p = (x_dyn.shape[2] if x_dyn is not None else x_inn.shape[1])
+        ctx = self.ctx
+        dyn = ctx.whiten_project(x_dyn).reshape(-1, p) if x_dyn is not None else np.zeros((self.n_dyn_rows, p))
+        m = len(self.y) - self.n_dyn_rows
+        if x_inn is not None and m:
+            inn = np.nan_to_num(x_inn / ctx.inn.sigma[:, None])
+        else:
+            inn = np.zeros((m, p))
+        full = np.vstack([dyn, inn])
+        idx = []
+        for j in range(p):
+            col = full[:, j]
+            s = float(np.sqrt(np.mean(col * col))) if len(col) else 0.0
+            self.scale.append(s if s > 0 else 1.0)
+            self.cols.append(col / (s if s > 0 else 1.0))
+            self.prior_w.append(0.0 if prior_sigma is None else 1.0 / (prior_sigma[j] * (s if s > 0 else 1.0)) ** 2
+                                if prior_sigma[j] > 0 else 0.0)
+            self.prior_c.append(0.0 if prior_center is None else float(prior_center[j]) * (s if s > 0 else 1.0))
+            self.names.append(f"{name}[{j}]")
+            idx.append(len(self.cols) - 1)
+        self.blocks[name] = idx
+        self._stats = None
+        return idx
+
+    def shift_innovations(self, x_inn: np.ndarray, phi) -> None:
+        """The model holds a sensor effect at phi: the GNSS innovations it leaves are
+        e - X_inn phi (the innovations are computed from the raw readings)."""
+        m = len(self.y) - self.n_dyn_rows
+        if m and x_inn is not None and len(x_inn) == m:
+            self.y[self.n_dyn_rows:] -= np.nan_to_num(x_inn @ np.asarray(phi, dtype=float) / self.ctx.inn.sigma)
+            self._stats = None
+
+    def replace_block(self, name: str, x_dyn, x_inn) -> None:
+        idx = self.blocks[name]
+        tmp = Design.__new__(Design)
+        tmp.__dict__.update(self.__dict__)
+        tmp.cols, tmp.scale, tmp.prior_w, tmp.prior_c, tmp.names, tmp.blocks = [], [], [], [], [], {}
+        Design.add_block(tmp, name, x_dyn, x_inn)
+        for j, k in enumerate(idx):
+            self.cols[k] = tmp.cols[j]
+            self.scale[k] = tmp.scale[j]
+        self._stats = None
+
+    def has_signal(self, name: str) -> bool:
+        return any(s > 0 and np.any(self.cols[k] != 0) for k in self.blocks[name] for s in [self.scale[k]])
+
+    # --- sufficient statistics
+    def stats(self):
+        if self._stats is None:
+            x = np.column_stack(self.cols) if self.cols else np.zeros((len(self.y), 0))
+            ng = len(GROUP_NAMES)
+            p = x.shape[1]
+            G = np.zeros((self.n_blocks, ng, p, p))
+            c = np.zeros((self.n_blocks, ng, p))
+            yy = np.zeros((self.n_blocks, ng))
+            cnt = np.zeros((self.n_blocks, ng))
+            key = self.block * ng + self.group
+            order = np.argsort(key, kind="stable")
+            ks = key[order]
+            bounds = np.flatnonzero(np.diff(ks)) + 1
+            starts = np.r_[0, bounds]
+            ends = np.r_[bounds, len(ks)]
+            for s0, s1 in zip(starts, ends):
+                rows = order[s0:s1]
+                b, g = divmod(int(ks[s0]), ng)
+                xs = x[rows]
+                ys = self.y[rows]
+                G[b, g] = xs.T @ xs
+                c[b, g] = xs.T @ ys
+                yy[b, g] = ys @ ys
+                cnt[b, g] = len(rows)
+            self._stats = (G, c, yy, cnt)
+        return self._stats
+
+    def folds(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(held-out micro blocks, training micro blocks) per fold."""
+        nb = self.n_blocks
+        k = max(2, min(self.cfg.folds, nb // 2))
+        edges = np.linspace(0, nb, k + 1).round().astype(int)
+        out = []
+        for i in range(k):
+            held = np.arange(edges[i], edges[i + 1])
+            if not len(held):
+                continue
+            lo, hi = held[0] - self.cfg.gap_blocks, held[-1] + self.cfg.gap_blocks
+            train = np.array([b for b in range(nb) if b < lo or b > hi])
+            out.append((held, train))
+        return out
+
+    def _solve(self, G, c, cols):
+        """MAP estimate: (G + W) theta = c + W theta_c (Gaussian priors on some columns)."""
+        prior = np.array([self.prior_w[k] for k in cols])
+        centre = np.array([self.prior_c[k] for k in cols])
+        A = G[np.ix_(cols, cols)] + np.diag(prior)
+        tr = np.trace(A) / max(len(cols), 1)
+        A = A + np.eye(len(cols)) * 1e-10 * max(tr, 1e-300)
+        rhs = c[cols] + prior * centre
+        try:
+            return np.linalg.solve(A, rhs)
+        except np.linalg.LinAlgError:
+            return np.linalg.lstsq(A, rhs, rcond=None)[0]
+
+    def penalty(self, cols, th) -> float:
+        """Prior term of the MAP objective at theta."""
+        w = np.array([self.prior_w[k] for k in cols])
+        c = np.array([self.prior_c[k] for k in cols])
+        return float(np.sum(w * (np.asarray(th) - c) ** 2))
+
+    def objective(self, cols) -> tuple[np.ndarray, float]:
+        """(theta, SSE + prior term) on all data: comparable between linearisation points."""
+        th, sse, _ = self.fit(cols)
+        return th, sse + self.penalty(cols, th)
+
+    def fit(self, cols: Sequence[int], blocks: np.ndarray | None = None):
+        """(theta (scaled columns), SSE over the chosen blocks, per-group SSE)."""
+        G, c, yy, _ = self.stats()
+        cols = list(cols)
+        sel = slice(None) if blocks is None else blocks
+        Gs = G[sel].sum(axis=(0, 1))
+        cs = c[sel].sum(axis=(0, 1))
+        if not cols:
+            per = yy[sel].sum(axis=0)
+            return np.zeros(0), float(per.sum()), per
+        th = self._solve(Gs, cs, cols)
+        per = self._sse_groups(G[sel], c[sel], yy[sel], cols, th)
+        return th, float(per.sum()), per
+
+    def _sse_groups(self, G, c, yy, cols, th):
+        Gc = G[:, :, cols][:, :, :, cols]
+        cc = c[:, :, cols]
+        v = yy - 2.0 * np.einsum("bgp,p->bg", cc, th) + np.einsum("bgpq,p,q->bg", Gc, th, th)
+        return v.sum(axis=0)
+
+    def cv(self, cols: Sequence[int]) -> np.ndarray:
+        """Held-out SSE per row group (blocked cross-validation, module docstring)."""
+        G, c, yy, _ = self.stats()
+        cols = list(cols)
+        out = np.zeros(len(GROUP_NAMES))
+        for held, train in self.folds():
+            if not cols:
+                out += yy[held].sum(axis=0)
+                continue
+            th = self._solve(G[train].sum(axis=(0, 1)), c[train].sum(axis=(0, 1)), cols)
+            out += self._sse_groups(G[held], c[held], yy[held], cols, th)
+        return out
+
+    def columns_of(self, names: Sequence[str]) -> list[int]:
+        return [k for n in names for k in self.blocks.get(n, [])]
+
+    def matrix(self, cols: Sequence[int]) -> np.ndarray:
+        return np.column_stack([self.cols[k] for k in cols]) if cols else np.zeros((len(self.y), 0))
+
+
+# ----------------------------------------------------------------------------------- results
+@dataclass
+class RankEntry:
+    """One ranked candidate (an effect or an identified parameter)."""
+
+    effect: str
+    kind: str
+    explained_fraction: float
+    explained_by_equation: dict[str, float]
+    parameters: dict[str, tuple[float, float]]
+    plausible: bool
+    excited: bool
+    excitation_z: float
+    group: list[str]
+    selected: bool = False
+    delta_bic: float = math.nan
+    message: str = ""
+    reference: dict[str, float] = field(default_factory=dict)
+    explained_gain_by_equation: dict[str, float] = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return {"effect": self.effect, "kind": self.kind, "explained_fraction": _num(self.explained_fraction),
+                "explained_by_equation": {k: _num(v) for k, v in self.explained_by_equation.items()},
+                "parameters": {k: {"value": _num(v), "sigma": _num(s)} for k, (v, s) in self.parameters.items()},
+                "plausible": bool(self.plausible), "excited": bool(self.excited),
+                "excitation_z": _num(self.excitation_z), "group": list(self.group), "selected": bool(self.selected),
+                "delta_bic": _num(self.delta_bic), "message": self.message}
+
+
+def _num(v):
+    return None if v is None or not math.isfinite(float(v)) else float(v)
+
+
+@dataclass
+class Ranking:
+    """The outcome (``to_json`` has the issue's keys ``ranking``, ``recommendation``,
+    ``equivalent_to``; ``before``/``after`` are added by the CLI)."""
+
+    entries: list[RankEntry]
+    parameters: list[RankEntry]
+    recommendation: str | None
+    equivalent_to: list[str]
+    selected: list[str]
+    groups: list[dict]
+    messages: list[str]
+    n_eff: float
+    n_rows: int
+    base_vehicle: Vehicle
+    reference_vehicle: Vehicle
+    effects: EffectSet
+    context: Context = field(repr=False, default=None)
+    design: Design = field(repr=False, default=None)
+    candidates: dict = field(repr=False, default_factory=dict)
+    thetas: dict = field(repr=False, default_factory=dict)
+
+    def entry(self, name: str) -> RankEntry | None:
+        for e in self.entries + self.parameters:
+            if e.effect == name:
+                return e
+        return None
+
+    def to_json(self) -> dict:
+        return {"ranking": [e.to_json() for e in self.entries],
+                "recommendation": self.recommendation, "equivalent_to": list(self.equivalent_to),
+                "selected": list(self.selected), "groups": self.groups,
+                "identified_parameters": [e.to_json() for e in self.parameters],
+                "messages": list(self.messages), "n_eff": self.n_eff}
+
+
+# ----------------------------------------------------------------------------------- identification
+def _base_columns(ctx: Context, params: Sequence[str]) -> dict[str, np.ndarray]:
+    return {p: ctx.param_columns(p) for p in params}
+
+
+def identify_base(table: DriveTable, vehicle: Vehicle, effects: EffectSet, states: RowStates,
+                  inn: Innovations, config: RankingConfig, reference: Vehicle | None = None) -> tuple[Vehicle, dict[str, float]]:
+    """Batch re-identification of the ten parameters on the residual equations: Gauss-Newton on
+    the MAP objective (weak prior around ``reference``, the model file's values) with step
+    halving, until the objective improves by less than 0.1 %. Returns (vehicle, sigmas)."""
+    point, d, cols, sig = _identify(table, vehicle, effects, states, inn, config, reference)
+    return point.base, sig
+
+
+def _identify(table, vehicle, effects, states, inn, config, reference=None, phis=None, selected=None):
+    ref = reference or vehicle
+    selected = selected or {}
+    point = _Point(vehicle, effects, dict(phis or {}))
+    _, d, cols = _build(table, states, inn, ref, point, config, selected)
+    th, obj = d.objective(cols)
+    for _ in range(config.base_iterations):
+        new = _apply_base(point, d, cols, th, config, ref)
+        step, accepted = 1.0, None
+        for _h in range(3):
+            nb = new if step == 1.0 else _interp_base(point.base, new, step, config)
+            pt = _Point(nb, effects, dict(point.phis))
+            _, d2, cols2 = _build(table, states, inn, ref, pt, config, selected)
+            th2, obj2 = d2.objective(cols2)
+            if obj2 <= obj * 1.001 + 1e-9 or step < 0.3:
+                accepted = (pt, d2, cols2, th2, obj2)
+                break
+            step *= 0.5
+        improved = obj - accepted[4]
+        point, d, cols, th, obj_new = accepted
+        done = improved < 1e-3 * max(obj, 1e-300)
+        obj = obj_new
+        if done:
+            break
+    G = d.stats()[0].sum(axis=(0, 1))
+    pw = np.array(d.prior_w)
+    A = G[np.ix_(cols, cols)] + np.diag(pw[cols])
+    try:
+        cov = np.linalg.inv(A + np.eye(len(A)) * 1e-12 * np.trace(A) / len(A))
+    except np.linalg.LinAlgError:
+        cov = np.linalg.pinv(A)
+    pos = {k: j for j, k in enumerate(cols)}
+    sig = {p: math.sqrt(max(cov[pos[d.blocks[p][0]], pos[d.blocks[p][0]]], 0.0)) / d.scale[d.blocks[p][0]]
+           for p in config.identify}
+    return point, d, cols, sig
+
+
+def _row_mask(d: Design, ctx: Context, mask: np.ndarray) -> np.ndarray:
+    """Design rows whose time falls on table rows where ``mask`` is True."""
+    tmask = np.asarray(mask, bool)
+    t_ok = ctx.table.t_s[tmask]
+    if not len(t_ok):
+        return np.zeros(len(d.y), bool)
+    lo, hi = t_ok[0], t_ok[-1]
+    n, e = ctx.y_dyn.shape
+    t_dyn = np.repeat(ctx.res.t_s[ctx.rows], e)
+    t_inn = ctx.inn.t_s if len(ctx.inn) else np.zeros(0)
+    t_all = np.concatenate([t_dyn, t_inn])
+    return (t_all >= lo) & (t_all <= hi)
+
+
+# ----------------------------------------------------------------------------------- ranking
+def _tau(v: np.ndarray, max_lag: int = 200) -> float:
+    """Integrated autocorrelation time (sum of the autocorrelation up to its first drop below
+    0.05), >= 1."""
+    v = v - v.mean()
+    n = len(v)
+    if n < 10 or not np.any(v):
+        return 1.0
+    f = np.fft.rfft(v, 2 * n)
+    ac = np.fft.irfft(f * np.conj(f))[:n]
+    ac = ac / ac[0]
+    tau = 1.0
+    for k in range(1, min(max_lag, n - 1)):
+        if ac[k] < 0.05:
+            break
+        tau += 2.0 * ac[k]
+    return max(tau, 1.0)
+
+
+def _n_eff(d: Design, resid: np.ndarray) -> float:
+    ctx = d.ctx
+    n, e = ctx.y_dyn.shape
+    tot = 0.0
+    if n:
+        r = resid[:d.n_dyn_rows].reshape(n, e)
+        for k in range(e):
+            tot += n / _tau(r[:, k])
+    if len(ctx.inn):
+        ri = resid[d.n_dyn_rows:]
+        for ch in np.unique(ctx.inn.channel):
+            m = ctx.inn.channel == ch
+            tot += m.sum() / _tau(ri[m])
+    return max(tot, 1.0)
+
+
+@dataclass
+class _Point:
+    """A linearisation point: identified parameters and the model's effects (incl. selected)."""
+
+    base: Vehicle
+    effects: EffectSet
+    phis: dict
+
+
+@dataclass
+class _Joint:
+    name: str
+    phi: np.ndarray
+    sigma: np.ndarray
+    point: "_Point"
+    sse: float
+    cv: np.ndarray
+    design: "Design"
+    cols: list
+
+
+def _effects_with(effects: EffectSet, eff: Effect) -> EffectSet:
+    return (effects.without(eff.name) if eff.name in effects else effects) + eff
+
+
+def _build(table, states, inn, ref: Vehicle, point: _Point, cfg: RankingConfig, selected: dict,
+           screen: Sequence[Candidate] = ()):
+    """Design at a linearisation point: nuisance, the ten parameters, the selected effects'
+    change columns (always on) and the screening columns of ``screen``."""
+    res = compute_residuals(table, point.base, point.effects, states=states)
+    ctx = Context(table, point.base, point.effects, states, res, inn)
+    d = Design(ctx, cfg)
+    for p in cfg.identify:
+        pv = getattr(ref.params, p)
+        d.add_block(p, ctx.param_columns(p), None, prior_sigma=[cfg.base_prior_rel_sigma * abs(pv)],
+                    prior_center=[pv - getattr(point.base.params, p)])
+    names = ["_nuisance", "_smooth", *cfg.identify]
+    for name, c in selected.items():
+        xd, xi = c.delta_columns(ctx, point.phis[name])
+        if xi is not None:
+            d.shift_innovations(xi, point.phis[name])
+        d.add_block(name, xd, xi)
+        names.append(name)
+    for c in screen:
+        xd, xi = c.columns(ctx)
+        d.add_block(c.name, xd, xi)
+    return ctx, d, d.columns_of(names)
+
+
+def _apply_base(point: _Point, d: Design, cols, th, cfg: RankingConfig, ref: Vehicle) -> Vehicle:
+    pos = {k: j for j, k in enumerate(cols)}
+    lo, hi = cfg.base_bounds
+    changes = {}
+    for p in cfg.identify:
+        k = d.blocks[p][0]
+        pv = getattr(ref.params, p)
+        changes[p] = min(max(getattr(point.base.params, p) + th[pos[k]] / d.scale[k], lo * pv), hi * pv)
+    return point.base.with_params(**changes)
+
+
+def _joint(table, states, inn, ref, point: _Point, selected: dict, c: Candidate, theta0, cfg: RankingConfig,
+           ratio: float) -> _Joint | None:
+    """Fit a candidate jointly with the ten parameters (the selected effects' parameters free
+    too), re-linearised at its own estimate: Gauss-Newton steps on the MAP objective (SSE +
+    priors) with step halving; the design at the result gives the candidate's evidence."""
+    phi = c.to_phi(theta0)
+    if not (np.all(np.isfinite(phi)) and c.phi_plausible(phi)):
+        phi = c.to_phi(c.prior_theta())
+    base = point.base
+
+    def build(base_, phi_):
+        try:
+            eff = _effects_with(point.effects, c.phi_effect(phi_))
+        except ValueError:
+            return None
+        pt = _Point(base_, eff, {**point.phis, c.name: phi_})
+        _, d, always = _build(table, states, inn, ref, pt, cfg, selected)
+        xd, xi = c.delta_columns(d.ctx, phi_)
+        if xi is not None:
+            d.shift_innovations(xi, phi_)
+        d.add_block(c.name, xd, xi)
+        cols = always + d.blocks[c.name]
+        th, obj = d.objective(cols)
+        return pt, d, cols, th, obj
+
+    cur = build(base, phi)
+    if cur is None:
+        return None
+    for _ in range(cfg.joint_iterations):
+        pt, d, cols, th, obj = cur
+        dphi = _theta_of(d, c.name, cols, th)
+        new_base = _apply_base(pt, d, cols, th, cfg, ref)
+        step = 1.0
+        nxt = None
+        for _h in range(3):
+            ph = phi + step * dphi
+            nb = new_base if step == 1.0 else _interp_base(base, new_base, step, cfg)
+            trial = build(nb, ph) if c.phi_plausible(ph) or step < 1.0 else build(nb, ph)
+            if trial is not None and trial[4] <= obj * 1.02 + 1.0:
+                nxt = (trial, ph, nb)
+                break
+            step *= 0.5
+        if nxt is None:
+            break
+        cur, phi, base = nxt
+        if np.allclose(step * dphi, 0.0, atol=1e-12):
+            break
+    pt, d, cols, th, obj = cur
+    s2 = obj / max(len(d.y) - len(cols), 1)
+    sig = _sigma_of(d, c.name, cols, s2, ratio)
+    j = _Joint(c.name, phi, sig, pt, obj, d.cv(cols), d, cols)
+    return j
+
+
+def _linear_joint(d: Design, always, c: Candidate, theta, point: _Point, cfg: RankingConfig, ref: Vehicle,
+                  ratio: float) -> _Joint:
+    """A candidate whose columns do not depend on its parameters: the screening design already
+    is its joint fit (the ten parameters enter linearly)."""
+    cols = always + d.blocks[c.name]
+    th, obj = d.objective(cols)
+    phi = _theta_of(d, c.name, cols, th)
+    s2 = obj / max(len(d.y) - len(cols), 1)
+    sig = _sigma_of(d, c.name, cols, s2, ratio)
+    base = _apply_base(point, d, cols, th, cfg, ref)
+    try:
+        eff = _effects_with(point.effects, c.phi_effect(phi))
+    except ValueError:
+        eff = point.effects
+    pt = _Point(base, eff, {**point.phis, c.name: phi})
+    return _Joint(c.name, phi, sig, pt, obj, d.cv(cols), d, cols)
+
+
+def _interp_base(a: Vehicle, b: Vehicle, w: float, cfg: RankingConfig) -> Vehicle:
+    return a.with_params(**{p: getattr(a.params, p) + w * (getattr(b.params, p) - getattr(a.params, p))
+                            for p in cfg.identify})
+
+
+def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effect] = (), *,
+         candidates: Sequence[Candidate] | None = None, user_effects: Sequence[type[Effect]] = (),
+         config: RankingConfig | None = None, mask: np.ndarray | None = None) -> Ranking:
+    """Identify the model on the drive, then rank the effect candidates (module docstring).
+
+    ``vehicle``: the model vehicle (its parameters are the reference/priors); ``effects``: the
+    model's effects (from ``--model``); ``candidates``: default every registered effect not in the
+    model plus ``user_effects``; ``mask``: table rows to use (default all)."""
+    cfg = config or RankingConfig()
+    effects = effects if isinstance(effects, EffectSet) else EffectSet(effects)
+    if mask is not None:
+        table = table.slice(mask)
+    states = row_states(table, vehicle)
+    if len(states.index) < 50:
+        raise ValueError("too few usable rows (moving faster than 5 m/s with every signal present)")
+    inn = compute_innovations(table)
+    point, d, always, _ = _identify(table, vehicle, effects, states, inn, cfg, reference=vehicle)
+    cands = list(candidates) if candidates is not None else default_candidates(effects, user_effects)
+    by_name: dict[str, Candidate] = {c.name: c for c in cands}
+    selected: dict[str, Candidate] = {}
+    ctx = d.ctx
+    for c in cands:
+        xd, xi = c.columns(ctx)
+        d.add_block(c.name, xd, xi)
+    th0, sse_cur = d.objective(always)
+    r0 = d.y - d.matrix(always) @ th0
+    n_eff = _n_eff(d, r0)
+    n_rows = len(d.y)
+    ratio = n_eff / n_rows
+    cv_cur = d.cv(always)
+    # excitation of every candidate at its generic prior magnitude (beyond what the base absorbs)
+    excit = {}
+    G = d.stats()[0].sum(axis=(0, 1))
+    gbb = G[np.ix_(always, always)]
+    for name, c in by_name.items():
+        cols = d.blocks[name]
+        th = c.prior_theta() * np.array([d.scale[k] for k in cols])
+        vv = float(th @ G[np.ix_(cols, cols)] @ th)
+        gbv = G[np.ix_(always, cols)] @ th
+        if len(always):
+            vv -= float(gbv @ np.linalg.lstsq(gbb, gbv, rcond=None)[0])
+        excit[name] = math.sqrt(max(vv, 0.0) * ratio)
+    joints: dict[str, _Joint] = {}
+    steps: dict[str, dict] = {}
+    for _ in range(cfg.max_effects):
+        screen = []
+        for name, c in by_name.items():
+            if name in selected or not d.has_signal(name) or excit[name] < cfg.excitation_z:
+                continue
+            cols = always + d.blocks[name]
+            ef = 1.0 - d.cv(cols).sum() / max(cv_cur.sum(), 1e-300)
+            th, _, _ = d.fit(cols)
+            screen.append((ef, name, _theta_of(d, name, cols, th)))
+        screen.sort(key=lambda t: -t[0])
+        best = None
+        short = [t for t in screen[:cfg.shortlist] if t[0] > 0.0]
+        # nonlinear candidates are judged by their joint fit in any case: at a linearisation
+        # point far from the truth their screening column can hide them
+        short += [t for t in screen[cfg.shortlist:] if not by_name[t[1]].linear
+                  and (t[1] not in steps or steps[t[1]]["ef"] > 0.5 * cfg.min_explained)]
+        for ef_s, name, theta in short:
+            c = by_name[name]
+            if c.linear:
+                j = _linear_joint(d, always, c, theta, point, cfg, vehicle, ratio)
+            else:
+                j = _joint(table, states, inn, vehicle, point, selected, c, theta, cfg, ratio)
+            if j is None:
+                continue
+            ef = 1.0 - j.cv.sum() / max(cv_cur.sum(), 1e-300)
+            dbic = n_eff * math.log(max(j.sse, 1e-300) / max(sse_cur, 1e-300)) + len(j.phi) * math.log(n_eff)
+            steps[name] = {"ef": ef, "dbic": dbic, "joint": j, "cv_before": cv_cur}
+            joints[name] = j
+            ok = dbic < -cfg.bic_margin and ef >= cfg.min_explained and c.phi_plausible(j.phi)
+            if ok and (best is None or ef > best[1]):
+                best = (name, ef, j)
+        if best is None:
+            break
+        name, ef, j = best
+        selected[name] = by_name[name]
+        point = j.point
+        rest = [c for n, c in by_name.items() if n not in selected]
+        ctx, d, always = _build(table, states, inn, vehicle, point, cfg, selected, rest)
+        th_c, sse_cur = d.objective(always)
+        cv_cur = d.cv(always)
+    # final entries on the design at the final point
+    th_fin, sse_fin, _ = d.fit(always)
+    s2 = sse_fin / max(n_rows - len(always), 1)
+    entries = []
+    thetas = {}
+    for name, c in by_name.items():
+        if name in selected:
+            st = steps[name]
+            j = st["joint"]
+            cvb = st["cv_before"]
+            per, gain = {}, {}
+            for g, gname in enumerate(GROUP_NAMES):
+                if cvb[g] > 0 and _group_has_signal(j.design, name, g):
+                    per[gname] = float(1.0 - j.cv[g] / cvb[g])
+                    gain[gname] = float(cvb[g] - j.cv[g])
+            phi = point.phis[name]
+            sig = _sigma_of(d, name, always, s2, ratio)
+            thetas[name] = np.array([t * 0 for t in phi])
+            entries.append(RankEntry(effect=name, kind=c.kind, explained_fraction=st["ef"], explained_by_equation=per,
+                                     parameters=c.phi_report(phi, sig), plausible=c.phi_plausible(phi),
+                                     excited=True, excitation_z=excit[name], group=[], selected=True,
+                                     delta_bic=st["dbic"], explained_gain_by_equation=gain))
+            continue
+        cols = always + d.blocks[name]
+        cv_w = d.cv(cols)
+        ef = 1.0 - cv_w.sum() / max(cv_cur.sum(), 1e-300)
+        per, gain = {}, {}
+        for g, gname in enumerate(GROUP_NAMES):
+            if cv_cur[g] > 0 and _group_has_signal(d, name, g):
+                per[gname] = float(1.0 - cv_w[g] / cv_cur[g])
+                gain[gname] = float(cv_cur[g] - cv_w[g])
+        th, sse_w, _ = d.fit(cols)
+        theta = _theta_of(d, name, cols, th)
+        sig = _sigma_of(d, name, cols, s2, ratio)
+        thetas[name] = theta
+        jt = joints.get(name)
+        if jt is not None and name in steps:
+            dbic = steps[name]["dbic"]
+            params = c.phi_report(jt.phi, jt.sigma)
+            plaus = c.phi_plausible(jt.phi)
+        else:
+            dbic = n_eff * math.log(max(sse_w, 1e-300) / max(sse_fin, 1e-300)) + len(d.blocks[name]) * math.log(n_eff)
+            params = c.report_params(theta, sig)
+            plaus = c.plausible(theta)
+        entries.append(RankEntry(effect=name, kind=c.kind, explained_fraction=ef, explained_by_equation=per,
+                                 parameters=params, plausible=plaus,
+                                 excited=excit[name] >= cfg.excitation_z, excitation_z=excit[name], group=[],
+                                 selected=False, delta_bic=dbic, explained_gain_by_equation=gain))
+    order = list(selected)
+    entries.sort(key=lambda e: (order.index(e.effect) if e.effect in order else len(order),
+                                -(e.explained_fraction if math.isfinite(e.explained_fraction) else -1)))
+    params = _parameter_entries(d, d.ctx, vehicle, point.base, always, ratio, s2, cfg)
+    _groups(d, by_name, entries, params, always, thetas, cfg, n_eff, sse_fin, selected)
+    groups = _group_list(entries, params)
+    rec = order[0] if order else None
+    eq_to = []
+    if rec:
+        eq_to = [g for g in next(e for e in entries if e.effect == rec).group if g != rec]
+    rk = Ranking(entries=entries, parameters=params, recommendation=rec, equivalent_to=eq_to, selected=order,
+                 groups=groups, messages=[], n_eff=n_eff, n_rows=n_rows, base_vehicle=point.base,
+                 reference_vehicle=vehicle, effects=point.effects, context=d.ctx, design=d, candidates=by_name,
+                 thetas=thetas)
+    from .words import describe_ranking
+    rk.messages = describe_ranking(rk)
+    for e in rk.entries + rk.parameters:
+        e.message = rk_message(rk, e)
+    return rk
+
+
+def rk_message(rk: Ranking, e: RankEntry) -> str:
+    from .words import describe_entry
+    return describe_entry(rk, e)
+
+
+def _group_has_signal(d: Design, name: str, g: int) -> bool:
+    rows = d.group == g
+    return any(np.any(d.cols[k][rows] != 0) for k in d.blocks[name])
+
+
+def _theta_of(d: Design, name: str, cols: Sequence[int], th: np.ndarray) -> np.ndarray:
+    pos = {k: j for j, k in enumerate(cols)}
+    return np.array([th[pos[k]] / d.scale[k] for k in d.blocks[name]])
+
+
+def _sigma_of(d: Design, name: str, cols: Sequence[int], s2: float, ratio: float) -> np.ndarray:
+    G, _, _, _ = d.stats()
+    A = G.sum(axis=(0, 1))[np.ix_(cols, cols)] + np.diag([d.prior_w[k] for k in cols])
+    try:
+        cov = np.linalg.inv(A + np.eye(len(cols)) * 1e-12 * np.trace(A) / max(len(cols), 1))
+    except np.linalg.LinAlgError:
+        cov = np.linalg.pinv(A)
+    pos = {k: j for j, k in enumerate(cols)}
+    return np.array([math.sqrt(max(cov[pos[k], pos[k]] * s2 / ratio, 0.0)) / d.scale[k] for k in d.blocks[name]])
+
+
+def _parameter_entries(d: Design, ctx: Context, ref: Vehicle, base: Vehicle, current, ratio, s2,
+                       cfg: RankingConfig) -> list[RankEntry]:
+    """The identified parameters as entries: value, sigma, explained fraction of moving each
+    from the reference (model file) value to the identified one."""
+    out = []
+    G, c, yy, _ = d.stats()
+    th_all, _, _ = d.fit(current)
+    pos = {k: j for j, k in enumerate(current)}
+    for p in cfg.identify:
+        k = d.blocks[p][0]
+        ref_v = getattr(ref.params, p)
+        cur = getattr(base.params, p)
+        # residual with the parameter back at the reference: y + X_p (ref - cur) ... in scaled units
+        shift = (ref_v - cur) * d.scale[k]
+        others = [j for j in current if j != k]
+        cv_ref = _cv_shifted(d, others, k, shift)
+        cv_fit = d.cv(current)
+        ef = 1.0 - cv_fit.sum() / max(cv_ref.sum(), 1e-300)
+        sig = _sigma_of(d, p, current, s2, ratio)[0]
+        val = cur + th_all[pos[k]] / d.scale[k]
+        e = RankEntry(effect=PARAM_ALIASES[p], kind="parameter", explained_fraction=ef, explained_by_equation={},
+                      parameters={p: (val, sig)}, plausible=val > 0, excited=True, excitation_z=math.nan,
+                      group=[], reference={p: ref_v})
+        out.append(e)
+    out.sort(key=lambda e: -e.explained_fraction)
+    return out
+
+
+def _cv_shifted(d: Design, cols, k: int, shift: float) -> np.ndarray:
+    """Held-out SSE per group with column k fixed at -shift (i.e. y replaced by y + shift x_k)."""
+    G, c, yy, _ = d.stats()
+    # y' = y + s x_k: c' = c + s G[:, k], yy' = yy + 2 s c_k + s^2 G_kk
+    c2 = c + shift * G[:, :, :, k]
+    yy2 = yy + 2.0 * shift * c[:, :, k] + shift * shift * G[:, :, k, k]
+    out = np.zeros(len(GROUP_NAMES))
+    cols = list(cols)
+    for held, train in d.folds():
+        th = d._solve(G[train].sum(axis=(0, 1)), c2[train].sum(axis=(0, 1)), cols)
+        Gc = G[held][:, :, cols][:, :, :, cols]
+        cc = c2[held][:, :, cols]
+        v = yy2[held] - 2.0 * np.einsum("bgp,p->bg", cc, th) + np.einsum("bgpq,p,q->bg", Gc, th, th)
+        out += v.sum(axis=0)
+    return out
+
+
+def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingConfig, n_eff: float = 1.0,
+            sse: float = 1.0, selected=()) -> None:
+    """Fill each entry's ``group`` (module docstring), in Gram-matrix form with the GNSS
+    nuisance partialled out."""
+    r2min = cfg.corr_threshold ** 2
+    G = d.stats()[0].sum(axis=(0, 1))
+    nu = d.columns_of(["_nuisance", "_smooth"])
+    if nu:
+        gnn = G[np.ix_(nu, nu)]
+        gp = G - G[:, nu] @ np.linalg.lstsq(gnn, G[nu, :], rcond=None)[0]
+    else:
+        gp = G
+
+    def mimic(th_a, cols_a, name) -> tuple[float, np.ndarray]:
+        cols = d.blocks[name]
+        vv = float(th_a @ gp[np.ix_(cols_a, cols_a)] @ th_a)
+        if vv <= 0:
+            return 0.0, np.zeros(len(cols))
+        goo = gp[np.ix_(cols, cols)]
+        goa = gp[np.ix_(cols, cols_a)] @ th_a
+        th = np.linalg.lstsq(goo, goa, rcond=None)[0]
+        r2 = float(goa @ th) / vv
+        # not told apart only if the alternative is not significantly worse (BIC on n_eff)
+        worse = n_eff * math.log1p(max(1.0 - r2, 0.0) * vv / max(sse, 1e-300))
+        if worse > cfg.bic_margin:
+            r2 = min(r2, r2min - 1e-9)
+        return r2, np.array([t / d.scale[k] for t, k in zip(th, cols)])
+
+    names = list(by_name)
+    for e in entries:
+        if not e.excited:
+            continue
+        cols = d.blocks[e.effect]
+        c = by_name[e.effect]
+        if e.selected:
+            # the selected effect's contribution: its change columns times its value (linear
+            # candidates) or its prior-size direction (nonlinear ones)
+            phi = np.array([v for v, _ in list(e.parameters.values())[:len(cols)]])
+            th = (phi if c.linear and len(phi) == len(cols) else np.ones(len(cols))) * np.array([d.scale[k] for k in cols])
+        else:
+            theta = thetas[e.effect]
+            th = np.array([t * d.scale[k] for t, k in zip(theta, cols)])
+            if not e.explained_fraction >= cfg.min_explained:
+                th = c.prior_theta() * np.array([d.scale[k] for k in cols])
+        grp = [e.effect]
+        for other in names:
+            if other == e.effect:
+                continue
+            r2, th_o = mimic(th, cols, other)
+            if r2 >= r2min and by_name[other].plausible(th_o):
+                grp.append(other)
+        for p in params:
+            pname = next(iter(p.parameters))
+            r2, th_o = mimic(th, cols, pname)
+            cur = next(iter(p.parameters.values()))[0]
+            if r2 >= r2min and cur + th_o[0] > 0:
+                grp.append(p.effect)
+        e.group = grp if len(grp) > 1 else []
+    # parameter entries: which effects would explain their move from the reference
+    for p in params:
+        pname = next(iter(p.parameters))
+        k = d.blocks[pname][0]
+        ref_v = p.reference[pname]
+        cur = next(iter(p.parameters.values()))[0]
+        if p.explained_fraction < cfg.min_explained:
+            continue
+        th = np.array([(cur - ref_v) * d.scale[k]])
+        grp = [p.effect]
+        for other in names:
+            r2, th_o = mimic(th, [k], other)
+            if r2 >= r2min and by_name[other].plausible(th_o):
+                grp.append(other)
+        p.group = grp if len(grp) > 1 else []
+
+
+def _group_list(entries, params) -> list[dict]:
+    """Equivalence groups with at least one effect, largest explained fraction first."""
+    seen = set()
+    out = []
+    for e in sorted(entries + params, key=lambda e: -(e.explained_fraction if math.isfinite(e.explained_fraction) else -1)):
+        if len(e.group) < 2:
+            continue
+        key = frozenset(e.group)
+        if key in seen:
+            continue
+        if not any(g for g in e.group if g not in PARAM_ALIASES.values()):
+            continue
+        seen.add(key)
+        out.append({"members": list(e.group), "lead": e.effect, "explained_fraction": _num(e.explained_fraction)})
+    return out
+
+
+SEPARATING_MANEUVERS: dict[frozenset, str] = {}
+"""Filled by :mod:`~vdps_hil.workbench.words`."""
+
+
+def with_params(vehicle: Vehicle, values: dict[str, float]) -> Vehicle:
+    return vehicle.with_params(**values)
+
+
+def replace_config(cfg: RankingConfig, **kw) -> RankingConfig:
+    return replace(cfg, **kw)

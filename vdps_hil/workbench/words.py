@@ -1,0 +1,228 @@
+"""The ranking in the words of a vehicle-dynamics engineer.
+
+One sentence per candidate from its fitted parameters (e.g. "tire saturation: above 4.1 deg slip
+angle the lateral force falls below the linear tire (peak friction 0.98 +- 0.04); explains 87 %
+of the lateral residual on held-out data"), the equivalence groups with the maneuver that would
+separate them, and "not excited" when the drive cannot show an effect.
+"""
+
+from __future__ import annotations
+
+import math
+
+from vdps_hil.units import GRAVITY_MPS2
+
+from .candidates import PARAM_ALIASES, PARAM_LABELS
+from .residuals import EQUATION_LABELS
+
+__all__ = ["describe_entry", "describe_ranking", "separating_maneuver", "EFFECT_LABELS", "equation_phrase"]
+
+EFFECT_LABELS = {
+    "aero_drag": "aerodynamic drag", "rolling_resistance": "rolling resistance",
+    "magic_formula_tire": "tire saturation", "load_dependent_cornering_stiffness": "load-dependent cornering stiffness",
+    "low_pressure_tire": "under-inflated tire", "crosswind": "crosswind", "steering_compliance": "steering compliance",
+    "imu_bias": "IMU bias", "imu_lever_arm": "IMU lever arm",
+    **{v: PARAM_LABELS[k] for k, v in PARAM_ALIASES.items()},
+}
+_WHEEL = {1: "front left", 2: "front right", 3: "rear right", 4: "rear left"}
+_GROUP_LABELS = {"innov_att": "GNSS attitude innovations", "innov_vel": "GNSS velocity innovations",
+                 "innov_pos": "GNSS position innovations"}
+
+_MANEUVERS = {
+    frozenset({"steering_compliance", "cornering_stiffness_front"}):
+        "a kinematics-and-compliance measurement of the steering, or a steady-state circle up to the tire limit "
+        "(compliance steer keeps growing with the front force while the tire saturates)",
+    frozenset({"magic_formula_tire", "load_dependent_cornering_stiffness"}):
+        "a steady-state circle ramped to the limit (saturation caps the lateral force at mu F_z, load "
+        "sensitivity only lowers the slope) or a straight-line brake-in-turn that shifts load without lateral slip",
+    frozenset({"rolling_resistance", "imu_bias"}):
+        "an out-and-back coast-down on the same road (a sensor bias turns with the car, rolling resistance does not)",
+    frozenset({"rolling_resistance", "aero_drag"}):
+        "a coast-down over a wide speed range (drag grows with v^2, rolling resistance hardly changes)",
+    frozenset({"aero_drag", "imu_bias"}): "a coast-down over a wide speed range, driven in both directions",
+    frozenset({"crosswind", "imu_bias"}): "the same stretch driven in both directions (the wind's side force "
+                                          "changes sign, a sensor bias does not)",
+    frozenset({"imu_lever_arm", "inertia_z"}): "a slalom at two speeds (the lever arm acts on the lateral "
+                                               "acceleration, the yaw inertia on the yaw moment)",
+    frozenset({"imu_bias", "mass"}): "accelerations and braking at different levels (a bias is constant, the "
+                                     "mass scales with the acceleration)",
+}
+
+
+def separating_maneuver(a: str, b: str) -> str:
+    """A maneuver that separates two candidates (known pairs; generic advice otherwise)."""
+    m = _MANEUVERS.get(frozenset({a, b}))
+    if m:
+        return m
+    return ("a drive that excites them differently: vary speed, lateral acceleration and direction of travel "
+            "independently")
+
+
+def equation_phrase(eq: str) -> str:
+    if eq in _GROUP_LABELS:
+        return _GROUP_LABELS[eq]
+    return EQUATION_LABELS.get(eq, eq).replace(" force", "").replace(" moment", "") + " residual" \
+        if eq in EQUATION_LABELS else eq
+
+
+def _main_equation(e) -> tuple[str, float] | None:
+    best = None
+    for g, f in e.explained_by_equation.items():
+        w = e.explained_gain_by_equation.get(g, 0.0) if hasattr(e, "explained_gain_by_equation") else f
+        if f is not None and math.isfinite(f) and f > 0 and (best is None or w > best[2]):
+            best = (g, f, w)
+    return (best[0], best[1]) if best else None
+
+
+def _explains(e) -> str:
+    main = _main_equation(e)
+    if main is None or not (e.explained_fraction > 0):
+        return "explains nothing on held-out data"
+    g, f = main
+    return f"explains {100 * f:.0f} % of the {equation_phrase(g)} on held-out data"
+
+
+def _pv(e, name):
+    v = e.parameters.get(name)
+    return (v[0], v[1]) if v else (math.nan, math.nan)
+
+
+def describe_entry(rk, e) -> str:
+    """One sentence for a ranked candidate or an identified parameter."""
+    label = EFFECT_LABELS.get(e.effect, e.effect.replace("_", " "))
+    if e.kind == "parameter":
+        (p, (v, s)), = e.parameters.items()
+        ref = e.reference.get(p, math.nan)
+        unit, k = _unit(p)
+        msg = f"{label}: identified {v / k:.4g} +- {s / k:.2g} {unit} (model file {ref / k:.4g} {unit})"
+        if e.group:
+            alts = [g for g in e.group if g != e.effect]
+            msg += ("; the same change would be explained by " + ", ".join(EFFECT_LABELS.get(a, a) for a in alts)
+                    + " -- cannot be told apart on this drive; " + separating_maneuver(e.effect, alts[0])
+                    + " would separate them")
+        return msg
+    if not e.excited:
+        return f"{label}: not excited -- this drive cannot show it (z = {e.excitation_z:.1f} at its typical size)"
+    body = _effect_words(rk, e)
+    msg = f"{label}: {body}; {_explains(e)}"
+    if not e.plausible:
+        msg += " -- rejected, the fit is physically implausible"
+    if e.group:
+        alts = [g for g in e.group if g != e.effect]
+        msg += ("; cannot be told apart on this drive from " + ", ".join(EFFECT_LABELS.get(a, a) for a in alts)
+                + " (" + separating_maneuver(e.effect, alts[0]) + " would separate them)")
+    return msg
+
+
+def _unit(p: str) -> tuple[str, float]:
+    if p.endswith("_nprad"):
+        return "kN/rad", 1e3
+    if p.endswith("_kgm2"):
+        return "kg m^2", 1.0
+    if p.endswith("_kg"):
+        return "kg", 1.0
+    if p.endswith("_n"):
+        return "kN", 1e3
+    return "", 1.0
+
+
+def _effect_words(rk, e) -> str:
+    name = e.effect
+    veh = rk.base_vehicle
+    if name == "aero_drag":
+        v, s = _pv(e, "cda_m2")
+        f25 = 0.5 * 1.225 * v * 25.0 ** 2
+        return f"C_d A = {v:.3g} +- {s:.2g} m^2 ({f25:.0f} N of drag at 25 m/s)"
+    if name == "rolling_resistance":
+        v, s = _pv(e, "coefficient")
+        return f"f_r = {v:.4f} +- {s:.4f} ({v * veh.params.mass_kg * GRAVITY_MPS2:.0f} N on this car)"
+    if name == "magic_formula_tire":
+        mu, smu = _pv(e, "peak_friction")
+        a = _saturation_angle_deg(rk, mu)
+        where = f"above {a:.1f} deg slip angle " if math.isfinite(a) else ""
+        return (f"{where}the lateral force falls below the linear tire (peak friction mu = {mu:.2f} +- {smu:.2f}, "
+                "Magic Formula shape at its generic prior)")
+    if name == "load_dependent_cornering_stiffness":
+        a, sa = _pv(e, "load_slope")
+        b, sb = _pv(e, "load_degression")
+        loss = 1.0 - (1.0 - b * 0.25)  # axle stiffness loss at d = +-0.5 load transfer
+        return (f"cornering stiffness grows less than the load (slope {a:.2f} +- {sa:.2f}, degression {b:.2f} +- "
+                f"{sb:.2f}): an axle loses {100 * loss:.0f} % of its stiffness at 50 % load transfer")
+    if name == "low_pressure_tire":
+        w, _ = _pv(e, "wheel")
+        v, s = _pv(e, "radius_reduction")
+        wl = _WHEEL.get(int(round(w)), str(w))
+        return (f"the {wl} wheel (wheel {int(round(w))}) rolls on a {100 * v:.2f} +- {100 * s:.2f} % smaller radius "
+                "(it spins faster than the others at the same speed)")
+    if name == "crosswind":
+        sp, ss = _pv(e, "wind_speed_mps")
+        d, _ = _pv(e, "wind_to_rad")
+        frm = (math.degrees(d) + 180.0) % 360.0
+        return (f"a steady wind of {sp:.1f} +- {ss:.1f} m/s blowing toward {math.degrees(d) % 360:.0f} deg "
+                f"(from {frm:.0f} deg, CCW from East) pushes the car sideways")
+    if name == "steering_compliance":
+        v, s = _pv(e, "compliance_radpn")
+        w_f = veh.params.mass_kg * GRAVITY_MPS2 * veh.geometry.l_r_m / veh.geometry.wheelbase_m
+        dk = math.degrees(w_f * v)
+        return (f"the front wheels yield {math.degrees(v) * 1e3:.3f} +- {math.degrees(s) * 1e3:.3f} deg per kN of "
+                f"front lateral force ({dk:.2f} deg/g more understeer)")
+    if name == "imu_bias":
+        parts = []
+        for a in "xyz":
+            v, s = _pv(e, f"accel_bias_{a}_mps2")
+            parts.append(f"a_{a} {v:+.3f}+-{s:.3f}")
+        for a in "xyz":
+            v, s = _pv(e, f"gyro_bias_{a}_radps")
+            parts.append(f"w_{a} {math.degrees(v):+.3f}+-{math.degrees(s):.3f}")
+        return "sensor offsets (accelerometer m/s^2, gyro deg/s): " + ", ".join(parts)
+    if name == "imu_lever_arm":
+        xs = [_pv(e, f"lever_{a}_m") for a in "xyz"]
+        return ("the IMU sits at (" + ", ".join(f"{v:+.2f}+-{s:.2f}" for v, s in xs)
+                + ") m from the CG, so its accelerometers see the body's rotation")
+    parts = [f"{k} = {v:.4g} +- {s:.2g}" for k, (v, s) in e.parameters.items()]
+    return ", ".join(parts) if parts else "fitted"
+
+
+def _saturation_angle_deg(rk, mu: float, drop: float = 0.05) -> float:
+    """Slip angle where the Magic Formula lateral force of a front tire at its static load falls
+    ``drop`` below the linear tire (shape factors at the generic prior)."""
+    from vdps_hil.model.effects import MagicFormulaTire
+
+    if not (mu > 0 and math.isfinite(mu)):
+        return math.nan
+    spec = {p.name: p.default for p in MagicFormulaTire.PARAMS}
+    c, e = spec["shape_lateral"], spec["curvature_lateral"]
+    lo, hi = 1e-4, 1.2
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if MagicFormulaTire.shape(mid, c, e) / mid > 1.0 - drop:
+            lo = mid
+        else:
+            hi = mid
+    veh = rk.base_vehicle
+    fz = veh.params.mass_kg * GRAVITY_MPS2 * veh.geometry.l_r_m / veh.geometry.wheelbase_m / 2.0
+    ca = veh.params.cornering_stiffness_front_nprad / 2.0
+    return math.degrees(lo * mu * fz / ca)
+
+
+def describe_ranking(rk) -> list[str]:
+    """Headline lines: the recommendation (or none), the equivalence groups."""
+    out = []
+    if rk.recommendation:
+        e = rk.entry(rk.recommendation)
+        out.append("missing: " + describe_entry(rk, e))
+        for extra in rk.selected[1:]:
+            out.append("also missing: " + describe_entry(rk, rk.entry(extra)))
+    else:
+        out.append("no missing effect found: no candidate explains enough of the held-out residual with plausible "
+                   "values")
+    for g in rk.groups:
+        mem = g["members"]
+        if rk.recommendation and rk.recommendation in mem:
+            continue
+        lead = mem[0]
+        alts = mem[1:]
+        out.append(f"cannot be told apart on this drive: {EFFECT_LABELS.get(lead, lead)} and "
+                   + ", ".join(EFFECT_LABELS.get(a, a) for a in alts) + " (" + separating_maneuver(lead, alts[0])
+                   + " would separate them)")
+    return out
