@@ -239,3 +239,36 @@ def test_vertical_struts_uses_the_body_z_specific_force_aux_the_road_normal():
     assert out["aux"] - out["struts"] == pytest.approx(4.0 * math.sin(phi_v) + G * (math.cos(phi_v) - 1), abs=1e-9)
     with pytest.raises(ValueError, match="vertical"):
         FeederConfig(vertical="up")
+
+
+def test_steering_and_torques_are_extrapolated_to_the_estimate_time():
+    """100 Hz CAN inputs held between frames lag by up to a period; the feeder carries them to the
+    estimate's instant from their last two samples (a ramp exactly; at most 50 ms ahead)."""
+    from dataclasses import replace
+
+    from vdps_hil.identification.feeder import FeederConfig
+
+    def ramp_feeder(cfg=None):
+        fd = IdentFeeder(MODEL, cfg)
+        for k, t in enumerate((1_000_500_000, 1_010_500_000)):  # frames 0.5 ms after the 10 ms grid
+            fd.observe(Sample(t, "can", "steer", {"steer_wheel_angle_rad": 0.1 + 0.01 * k}))
+            fd.observe(Sample(t, "can", "wheel_torque", {f"wheel_torque_nm_{i}": 100.0 * i + 10.0 * k
+                                                          for i in range(1, 5)}))
+        fd.observe(imu((0.0, 0.0, GRAVITY_MPS2), t=1_020_000_000))
+        return fd
+
+    held = filtered(wheels=(80.0,) * 4, steer=0.11, torque=(110.0, 210.0, 310.0, 410.0))
+    est = estimate(t_ns=1_020_000_000, vel=(25.0, 0.0, 0.0))
+    inp = ramp_feeder().inputs(est, held)
+    frac = (1_020_000_000 - 1_010_500_000) / 10_000_000
+    assert inp.wheel_torque_nm == pytest.approx(tuple(100.0 * i + 10.0 + 10.0 * frac for i in range(1, 5)), abs=1e-9)
+    d_ex = inp.wheel_angle_rad[0]
+    off = ramp_feeder(replace(FeederConfig(), extrapolate_inputs=False)).inputs(est, held)
+    assert off.wheel_torque_nm == pytest.approx((110.0, 210.0, 310.0, 410.0))
+    # the front wheel angle follows the extrapolated steering (0.11 + 0.0095), not the held 0.11
+    assert d_ex > off.wheel_angle_rad[0]
+    ratio = MODEL.geometry.steer_ratio
+    assert (d_ex - off.wheel_angle_rad[0]) == pytest.approx(0.01 * frac / ratio, rel=0.05)
+    # too old: the held values
+    late = ramp_feeder().inputs(estimate(t_ns=1_100_000_000, vel=(25.0, 0.0, 0.0)), held)
+    assert late.wheel_torque_nm == pytest.approx((110.0, 210.0, 310.0, 410.0))

@@ -60,7 +60,18 @@ wheel angle -- giving per wheel::
 with v_l, v_t the wheel-centre velocity along and across the wheel in the road plane and
 v_floor the core's slip speed floor (5 m/s). Suspension deflections and rates, wheel speeds and
 accelerations, body rates and angular accelerations are the alpha-beta outputs
-(``FilteredSignals``); wheel torques and the steering angle are the latest samples.
+(``FilteredSignals``). Wheel torques and the steering angle come from the CAN bus at 100 Hz and
+are held between frames; held, they are on average half a period and, at the estimate instants
+(multiples of 10 ms, frames 0.5 ms after them), a whole period old: the front slip angle lagged
+the simulator's by 12.9 ms on the paper's scenario, which the cornering problem (eq 22, whose
+front and rear columns are nearly collinear) turned into C_alpha,r -12 % (linear-tire truth,
+zero-noise sensors). With ``extrapolate_inputs`` (default) both are extrapolated to the
+estimate time from their last two samples (``observe``)::
+
+    u(t) = u_k + (u_k - u_k-1) (t - t_k) / (t_k - t_k-1),   0 <= t - t_k <= max_extrapolation_s
+
+(otherwise the latest sample, as before; the linear term raises white sensor noise by at most
+sqrt(1 + 2 ((t - t_k) / T)^2 + ...) ~ 2.2 at t - t_k = T).
 
 Symbols and units: v_g [m/s] ENU; f [m/s^2]; w [rad/s]; wd [rad/s^2]; l [m] (body axes);
 angles [rad]; lambda [-]; alpha [rad]; G [m/s^2].
@@ -74,7 +85,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vdps_hil.bus.samples import Sample, axis_fields
+from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
 from vdps_hil.identification.problems import IdentInputs, gravity_aux_mps2
 from vdps_hil.model.core import SLIP_SPEED_FLOOR_MPS, Env, Inputs, Model
 from vdps_hil.model.frames import (c_omega_inv, dcm_global_to_road, dcm_global_to_vehicle,
@@ -87,6 +98,7 @@ __all__ = ["FeederConfig", "IdentFeeder", "VERTICAL"]
 VERTICAL = ("struts", "aux")
 
 _SF = axis_fields("specific_force_mps2")
+_TQ = wheel_fields("wheel_torque_nm")
 _NAN = math.nan
 _MAX_IMU_AGE_NS = 100_000_000  # an older IMU sample does not stand for the estimate's instant
 
@@ -96,12 +108,16 @@ class FeederConfig:
     """``slip_speed_floor_mps``: the core's v_floor for the slip denominators [m/s];
     ``gravity_mps2``: g for an ESC cluster's missing f_z; ``accel_window_s``: IMU samples of this
     span before the estimate are averaged (the latest one if none falls in it) [s];
-    ``vertical``: "struts" or "aux" (module docstring)."""
+    ``vertical``: "struts" or "aux" (module docstring); ``extrapolate_inputs``: steering and
+    wheel torques extrapolated to the estimate time, at most ``max_extrapolation_s`` past their
+    last sample (module docstring)."""
 
     slip_speed_floor_mps: float = SLIP_SPEED_FLOOR_MPS
     gravity_mps2: float = GRAVITY_MPS2
     accel_window_s: float = 0.002
     vertical: str = "struts"
+    extrapolate_inputs: bool = True
+    max_extrapolation_s: float = 0.05
 
     def __post_init__(self):
         if not (math.isfinite(self.slip_speed_floor_mps) and self.slip_speed_floor_mps > 0):
@@ -135,11 +151,22 @@ class IdentFeeder:
         self._h_cg = model_vehicle.geometry.h_cg_m
         self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=256)
         self._win_ns = int(round(self.config.accel_window_s * 1e9))
+        self._steer: deque[tuple[int, tuple[float, ...]]] = deque(maxlen=2)
+        self._torque: deque[tuple[int, tuple[float, ...]]] = deque(maxlen=2)
+        self._max_ex_ns = int(round(self.config.max_extrapolation_s * 1e9))
         self.counters = {"calls": 0, "inputs": 0, "incomplete": 0, "no_imu": 0, "imu_samples": 0}
 
     # ------------------------------------------------------------------ IMU
     def observe(self, sample: Sample) -> None:
-        """Keep the specific force of recent ``imu`` samples (others are ignored)."""
+        """Keep the specific force of recent ``imu`` samples and the last two steering and
+        wheel-torque samples (others are ignored)."""
+        if sample.kind in ("steer", "wheel_torque") and sample.valid:
+            names = ("steer_wheel_angle_rad",) if sample.kind == "steer" else _TQ
+            vals = tuple(sample.fields.get(n, _NAN) for n in names)
+            hist = self._steer if sample.kind == "steer" else self._torque
+            if all(math.isfinite(v) for v in vals) and (not hist or sample.t_ns > hist[-1][0]):
+                hist.append((sample.t_ns, vals))
+            return
         if sample.kind != "imu" or not sample.valid:
             return
         g = sample.fields.get
@@ -175,6 +202,17 @@ class IdentFeeder:
             f = f - np.cross(omega_dot, self._arm) - np.cross(omega, np.cross(omega, self._arm))
         return f
 
+    def _extrapolated(self, hist, t_ns: int, held: tuple[float, ...]) -> tuple[float, ...]:
+        """The signal at ``t_ns`` from its last two samples (module docstring), else ``held``."""
+        if not self.config.extrapolate_inputs or len(hist) < 2:
+            return held
+        (t0, v0), (t1, v1) = hist
+        dt = t_ns - t1
+        if dt < 0 or dt > self._max_ex_ns or t1 <= t0:
+            return held
+        f = dt / (t1 - t0)
+        return tuple(b + (b - a) * f for a, b in zip(v0, v1))
+
     # ------------------------------------------------------------------ inputs
     def inputs(self, estimate, filtered) -> IdentInputs | None:
         """The identifier's inputs at ``estimate.t_ns`` (module docstring); None without an
@@ -198,21 +236,24 @@ class IdentFeeder:
         xdd = float(a_a[0] + v_a[1] * psi_v_dot)
         ydd = float(a_a[1] - v_a[0] * psi_v_dot)
         zdd = float(a_a[2]) if self.config.vertical == "aux" else float(f_cg[2] + grav[2])
-        slip, alpha, delta = self._tire_kinematics(estimate, filtered, c_gv @ v_g, omega)
+        t_est = int(estimate.t_ns)
+        steer = self._extrapolated(self._steer, t_est, (float(filtered.steer_wheel_angle_rad),))[0]
+        torque = self._extrapolated(self._torque, t_est, tuple(filtered.wheel_torque_nm))
+        slip, alpha, delta = self._tire_kinematics(estimate, filtered, c_gv @ v_g, omega, steer)
         inp = IdentInputs(
             t_ns=int(estimate.t_ns), xdd_a_mps2=xdd, ydd_a_mps2=ydd, zdd_a_mps2=zdd,
             xd_a_mps=float(v_a[0]), yd_a_mps=float(v_a[1]), psi_v_dot_radps=psi_v_dot,
             gravity_aux_mps2=grav, omega_radps=tuple(omega.tolist()), omega_dot_radps2=tuple(omega_dot.tolist()),
             susp_deflection_m=filtered.susp_deflection_m, susp_rate_mps=filtered.susp_rate_mps,
             wheel_speed_radps=filtered.wheel_speed_radps, wheel_accel_radps2=filtered.wheel_accel_radps2,
-            wheel_torque_nm=filtered.wheel_torque_nm, slip_ratio=slip, slip_angle_rad=alpha,
+            wheel_torque_nm=torque, slip_ratio=slip, slip_angle_rad=alpha,
             wheel_angle_rad=delta)
         self.counters["inputs"] += 1
         if not _all_finite(inp):
             self.counters["incomplete"] += 1
         return inp
 
-    def _tire_kinematics(self, estimate, filtered, v_b: np.ndarray, omega: np.ndarray):
+    def _tire_kinematics(self, estimate, filtered, v_b: np.ndarray, omega: np.ndarray, steer: float | None = None):
         """Slip ratios, slip angles and road-wheel angles from the core (module docstring)."""
         x = estimate.x
         env = Env(float(x[9]), float(x[10]))
@@ -222,7 +263,8 @@ class IdentFeeder:
         state = [h * n[0], h * n[1], h * n[2], float(x[6]), float(x[7]), float(x[8]),
                  float(v_b[0]), float(v_b[1]), float(v_b[2]), float(w[0]), float(w[1]), float(w[2]),
                  *(float(v) for v in filtered.wheel_speed_radps)]
-        steer = float(filtered.steer_wheel_angle_rad)
+        if steer is None:
+            steer = float(filtered.steer_wheel_angle_rad)
         _, d = self._model.evaluate(state, Inputs(steer_wheel_angle_rad=steer), env)
         slip = tuple(d[f"slip_ratio_{i}"] for i in range(1, 5))
         alpha = tuple(d[f"slip_angle_rad_{i}"] for i in range(1, 5))

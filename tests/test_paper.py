@@ -1,0 +1,139 @@
+"""``vdps paper`` (vdps_hil.paper): a reduced, seeded version of the paper's experiments through
+the real chain (simulated wire formats -> /raw/ decode -> VdpsSystem), asserting the issue-6
+acceptance thresholds that the chain reaches, and marking the two it does not reach as strict
+expected failures with the measured figures (so a fix shows up as an XPASS).
+
+Runtime: one paper-left-turn drive (15 s, identification + left turn + warning), the SUV fishhook,
+one lane change and a 12 s noise-free Table 3 drive: about a minute on one core.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from vdps_hil import paper as P
+from vdps_hil.sim.profiles import load_profile
+
+PROFILE = "table1-susp1k"
+
+
+@pytest.fixture(scope="module")
+def ident_run():
+    """Seed 1 of the identification experiment (the harness scores; the chain sees /raw/)."""
+    return P.identification_task(PROFILE, 1)
+
+
+# ------------------------------------------------------------------------------ pure helpers
+def test_scale_noise_scales_every_sigma_and_zero_is_the_zero_noise_profile():
+    prof = load_profile(PROFILE)
+    assert P.scale_noise(prof, 0.0) == prof.zero_noise()
+    k = 3.0
+    s = P.scale_noise(prof, k)
+    assert s.gnss.pos_sigma_h_m == pytest.approx(k * prof.gnss.pos_sigma_h_m)
+    assert s.gnss.attitude_sigma_rad == pytest.approx(k * prof.gnss.attitude_sigma_rad)
+    assert s.imu.gyro_sigma_radps == pytest.approx(k * prof.imu.gyro_sigma_radps)
+    assert s.suspension.sigma_m == pytest.approx(k * prof.suspension.sigma_m)
+    assert s.tachometer.sigma_radps == pytest.approx(k * prof.tachometer.sigma_radps)
+    assert s.imu.rate_hz == prof.imu.rate_hz and s.suspension.rate_hz == prof.suspension.rate_hz
+
+
+def test_aggregate_identification_median_p90_and_two_sigma_fraction():
+    rng = np.random.default_rng(3)
+    docs = []
+    for seed in range(10):
+        e = rng.normal(0.0, 0.01)
+        docs.append({"rel_err": {"mass_kg": e}, "rel_err_mean_window": {"mass_kg": e / 2},
+                     "prior_rel_err": {"mass_kg": 0.15}, "sigma_ratio": {"mass_kg": abs(e) / 0.01}})
+    agg = P.aggregate_identification(docs)["mass_kg"]
+    errs = np.abs([d["rel_err"]["mass_kg"] for d in docs]) * 100
+    assert agg["median_rel_err_pct"] == pytest.approx(np.median(errs))
+    assert agg["p90_rel_err_pct"] == pytest.approx(np.percentile(errs, 90))
+    assert agg["within_2_sigma"] == pytest.approx(np.mean([d["sigma_ratio"]["mass_kg"] <= 2 for d in docs]))
+    assert agg["paper_rel_err_pct"] == P.PAPER["identification_rel_err_pct"]["mass_kg"]
+    text = P.format_report({"profile": PROFILE, "seeds": list(range(10)), "identification": {"mass_kg": agg}})
+    assert "mass_kg" in text and "paper" in text
+
+
+# ----------------------------------------------------------------- through the real chain
+def test_mass_and_every_reachable_parameter_move_from_prior_toward_truth(ident_run):
+    """Acceptance: error at 10.25 s below a fifth of the prior error (table1-susp1k). Measured
+    (seed 1): mass +0.08 %, tracking -3.9..-6.6 %, cornering -3.8 / -4.4 %, I_z +0.6 %."""
+    e, prior = ident_run["rel_err"], ident_run["prior_rel_err"]
+    assert abs(e["mass_kg"]) <= 0.005  # issue 6: mass median <= 0.5 % (one seed here)
+    for k in e:
+        if k in ("inertia_x_kgm2", "inertia_y_kgm2"):
+            continue  # see the expected failure below
+        assert abs(e[k]) < abs(prior[k]) / 5.0, (k, e[k], prior[k])
+    assert ident_run["t_ident_s"] == pytest.approx(P.T0_S)
+
+
+@pytest.mark.xfail(strict=True, reason="I_x +29 %, I_y +18 % at 10.25 s (seed 1): roll/pitch moments of "
+                   "eq 23 biased by the suspension-rate lag (10 ms) and the tire-force model; see the report")
+def test_roll_and_pitch_inertia_within_ten_percent(ident_run):
+    e = ident_run["rel_err"]
+    assert abs(e["inertia_x_kgm2"]) <= 0.10 and abs(e["inertia_y_kgm2"]) <= 0.10
+
+
+@pytest.mark.xfail(strict=True, reason="4.8 m / 4.9 deg at +4.75 s (seed 1); with the TRUE linear-tire "
+                   "parameters and the TRUE initial state 6.0 m / 5.9 deg: Magic Formula truth vs linear predictor")
+def test_left_turn_prediction_within_three_metres_and_degrees(ident_run):
+    lt = ident_run["left_turn"]
+    assert lt["position_err_m"] <= 3.0 and abs(lt["yaw_err_deg"]) <= 3.0
+
+
+def test_left_turn_prediction_is_bounded_and_no_false_alarm_on_the_left_turn(ident_run):
+    """Measured (seed 1): 4.8 m, 4.9 deg at 15 s; tolerance 2x. No warning episode at all."""
+    lt = ident_run["left_turn"]
+    assert lt["t_end_s"] == pytest.approx(P.LEFT_TURN_END_S)
+    assert lt["position_err_m"] <= 10.0 and abs(lt["yaw_err_deg"]) <= 10.0
+    assert ident_run["warning"]["false_alarms"] == 0 and ident_run["warning"]["episodes"] == []
+    assert ident_run["warning"]["frames_rejected"] == 0
+
+
+def test_fusion_errors_are_reported_for_every_state(ident_run):
+    fs = ident_run["fusion_std"]
+    assert set(fs) == set(P.FUSION_NAMES)
+    assert all(math.isfinite(v) and v >= 0 for v in fs.values())
+    assert fs["psi_g_deg"] < 0.4  # below the GNSS attitude sigma of Table 1 (0.4 deg)
+
+
+def test_rollover_predicted_and_warned_at_least_one_second_ahead():
+    """fishhook-suv through the chain (suv-model, identifier running): measured lead 2.59 s to the
+    point of no return, 1.08 s to tip-up; acceptance lead >= 1.0 s, zero false alarms."""
+    r = P.rollover_task(PROFILE, 1)
+    assert r["predicted"] is True
+    assert r["lead_time_s"] >= 1.0
+    assert r["false_alarms"] == 0 and r["frames_rejected"] == 0
+    assert math.isfinite(r["inaccuracy_pct"])
+
+
+def test_no_false_alarm_on_the_lane_change():
+    r = P.false_alarm_task("lane-change-iso3888", PROFILE, 1)
+    assert r["truth_events"] == 0
+    assert r["false_alarms"] == 0 and r["episodes"] == []
+    assert r["frames_accepted"] > 45 * r["duration_s"]  # 50 Hz, a few frames at the start excepted
+
+
+def test_table3_minimum_eigenvalue_scales_with_q_squared_and_larger_q_converges_no_slower():
+    """Table 3 on a 12 s noise-free drive: the identifiability of Q4 = qI is q^2 times that of
+    I (same rows; to 1e-6 relative), and the paper's ordering holds: a larger q converges no later."""
+    qs = (0.625, 0.125, 0.025)
+    t3 = P.table3_task(PROFILE, 12.0, qs=qs)
+    lam = [t3["rows"][q]["min_eigenvalue"] for q in qs]
+    for q, lm in zip(qs[1:], lam[1:]):
+        assert lm / lam[0] == pytest.approx((q / qs[0]) ** 2, rel=1e-6)
+    conv = [t3["rows"][q]["convergence_s"] for q in qs]
+    for j in range(3):
+        times = [c[j] if math.isfinite(c[j]) else math.inf for c in conv]
+        assert times == sorted(times)
+
+
+def test_cli_rejects_an_unknown_profile_in_one_line(capsys):
+    from vdps_hil.cli.main import main
+
+    assert main(["paper", "--quick", "--profile", "no-such-profile"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no-such-profile" in err[0]
