@@ -1,6 +1,6 @@
-"""Tests of vdps_hil.batch.tasks: drive naming, the streaming replay (estimates close to the
-truth, counts equal to what was recorded), task builders
-(keys, costs), and unsupported recordings as one-line errors."""
+"""Tests of vdps_hil.batch.tasks: drive naming, the replay task (what ``vdps replay`` computes,
+timing fields moved under "run", estimates close to the truth), task builders (keys from
+contents and options, costs, per-drive estimate files) and clear errors."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import os
 
 import pytest
 
-from vdps_hil.batch.engine import execute
+from vdps_hil.batch.engine import execute, strip_run
 from vdps_hil.batch.keys import tool_version
-from vdps_hil.batch.tasks import (UnsupportedRecording, diagnose_drive, drive_ids, replay_drive,
-                                  replay_stream, replay_tasks, worker_info)
+from vdps_hil.batch.tasks import (diagnose_drive, drive_ids, replay_drive, replay_tasks,
+                                  worker_info)
 from vdps_hil.record.reader import RecordingReader
-from vdps_hil.record.writer import RecordingWriter
 from vdps_hil.sim.drive import Drive
+from vdps_hil.system import replay_file
 
 
 @pytest.fixture(scope="module")
@@ -25,59 +25,61 @@ def drive(tmp_path_factory):
     return os.fspath(p)
 
 
+@pytest.fixture(scope="module")
+def replayed(drive):
+    return replay_drive(drive)
+
+
 def test_drive_ids_are_stems_made_unique_by_a_path_hash():
     ids = drive_ids(["a/x.mcap", "b/x.mcap", "c/my drive (1).mcap", "y.mcap"])
-    assert ids[2] == "my_drive_1_.mcap".replace(".mcap", "") and ids[3] == "y"
+    assert ids[2] == "my_drive_1_" and ids[3] == "y"
     assert ids[0].startswith("x-") and ids[1].startswith("x-") and ids[0] != ids[1]
     assert len(ids[0]) == len("x-") + 8
     assert drive_ids(["a/x.mcap", "b/x.mcap"]) == ids[:2]  # stable
 
 
-def test_streaming_replay_counts_what_was_recorded_and_tracks_the_truth(drive):
-    doc = replay_stream(drive)
+def test_replay_task_is_vdps_replay_with_the_timing_fields_under_run(drive, replayed):
+    direct = replay_file(drive)
+    assert set(replayed["run"]) == {"wall_time_s", "realtime_factor"}
+    assert "wall_time_s" not in replayed and "realtime_factor" not in replayed
+    assert strip_run(replayed) == {k: v for k, v in direct.items()
+                                   if k not in ("wall_time_s", "realtime_factor")}
+
+
+def test_replay_task_reads_every_raw_record_and_tracks_the_truth(drive, replayed):
     with RecordingReader(drive) as r:
-        topics = {t: i.count for t, i in r.topics().items()}
+        raw = sum(i.count for t, i in r.topics().items() if t.startswith("/raw/"))
         truth = [d["values"] for _, _, d in r.iter_messages(["/truth/state"])]
-    assert doc["recording"]["raw_topics"] == {t: n for t, n in topics.items() if t.startswith("/raw/")}
-    assert doc["recording"]["problems"] == [] and not doc["recording"]["truncated"]
-    # one IMU sample per IMU packet decoded, every CAN frame accepted (chassis samples)
-    imu = doc["decoders"]["/raw/serial/imu"]
-    assert doc["samples"]["imu"] == imu["messages"] > 0 and imu["rejected"] == 0
-    can = doc["decoders"]["/raw/can/vdps"]
-    accepted = sum(c["accepted"] for k, c in can.items() if k != "bus")
-    assert accepted == topics["/raw/can/vdps"]
-    # the estimate at the end against the truth at its time (the EKF's ENU origin is its first
-    # fix, so positions are not compared; attitude accuracy is the estimator's tests' business):
-    # speed within 0.3 m/s, course over ground within 0.05 rad
-    est = doc["estimator"]["final"]
-    assert est is not None and est["t_s"] > 1.5
-    assert doc["span_s"] == pytest.approx(2.0, abs=0.1)
-    near = min(truth, key=lambda v: abs(v["t_s"] - est["t_s"]))
-    assert abs(near["t_s"] - est["t_s"]) < 0.03  # the last serial chunks arrive after the end
-    course = math.atan2(est["state"]["ydot_g_mps"], est["state"]["xdot_g_mps"])
-    assert abs(math.remainder(course - math.atan2(near["vel_g_mps_n"], near["vel_g_mps_e"]),
-                              2 * math.pi)) < 0.05
+    assert replayed["messages_read"]["raw_records"] == raw
+    assert replayed["identification"]["params"]["mass_kg"] > 0
+    # final estimate vs the truth at its time (positions: the EKF's origin is its first fix)
+    est = replayed["estimates_summary"]["final"]
+    t_est = replayed["estimates_summary"]["t_last_s"]
+    near = min(truth, key=lambda v: abs(v["t_s"] - t_est))
+    assert abs(near["t_s"] - t_est) < 0.03
     speed = math.hypot(est["state"]["xdot_g_mps"], est["state"]["ydot_g_mps"])
     assert speed == pytest.approx(math.hypot(near["vel_g_mps_e"], near["vel_g_mps_n"]), abs=0.3)
+    yaw_err = math.remainder(est["state"]["psi_g_rad"] - near["yaw_g_rad"], 2 * math.pi)
+    assert abs(yaw_err) < 5 * est["sigma"]["psi_g_rad"] + 0.01
 
 
-def test_unsupported_serial_format_and_missing_raw_topics_are_one_line_errors(tmp_path):
-    p = tmp_path / "weird.mcap"
-    with RecordingWriter(p) as w:
-        w.write_serial("gadget", 1_000_000, b"\x01\x02", baud=9600, fmt="morse")
-    with pytest.raises(UnsupportedRecording, match="unsupported format 'morse'"):
-        replay_stream(p)
-    q = tmp_path / "truth-only.mcap"
-    with RecordingWriter(q) as w:
-        w.write_truth("state", 0, {"t_s": 0.0})
-    with pytest.raises(UnsupportedRecording, match="no /raw/ topics"):
-        replay_stream(q)
-    doc = execute("vdps_hil.batch.tasks:replay_drive", {"path": os.fspath(q), "engine": "internal"})
-    assert doc["status"] == "failed" and "\n" not in doc["error"]["message"]
-
-
-def test_replay_drive_internal_equals_replay_stream(drive):
-    assert replay_drive(drive, engine="internal") == replay_stream(drive)
+def test_failures_are_one_line_errors(tmp_path, drive):
+    doc = execute("vdps_hil.batch.tasks:replay_drive", {"path": os.fspath(tmp_path / "no.mcap")})
+    assert doc["status"] == "failed" and doc["error"]["type"] == "ReplayError"
+    assert "\n" not in doc["error"]["message"]
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap at all")
+    doc = execute("vdps_hil.batch.tasks:replay_drive", {"path": os.fspath(bad)})
+    assert doc["status"] == "failed" and "not an MCAP" in doc["error"]["message"]
+    junk = tmp_path / "junk.mcap"  # the magic, then garbage: readable, but nothing in it
+    junk.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)))
+    doc = execute("vdps_hil.batch.tasks:replay_drive", {"path": os.fspath(junk)})
+    assert doc["status"] == "failed" and doc["error"]["type"] == "NoRawData"
+    assert "truncated" in doc["error"]["message"]
+    with pytest.raises(ValueError, match="unknown replay option"):
+        replay_drive(drive, options={"colour": "red"})
+    with pytest.raises(ValueError, match="not settable"):
+        replay_tasks([drive], options={"output": "x.mcap"})
 
 
 def test_replay_tasks_carry_keys_costs_and_inputs(drive, tmp_path):
@@ -90,9 +92,24 @@ def test_replay_tasks_carry_keys_costs_and_inputs(drive, tmp_path):
     assert tasks[2].key != tasks[0].key and tasks[2].cost == 0
     assert tasks[0].cost == os.path.getsize(drive)
     assert tasks[0].meta == {"input": drive, "kind": "replay"}
-    assert replay_tasks([drive], options={"predict_period_s": 0.02})[0].key != tasks[0].key
+    assert replay_tasks([drive], options={"predict": False})[0].key != tasks[0].key
     assert replay_tasks([drive], vehicle="suv-model")[0].key != tasks[0].key
     assert replay_tasks([drive], effects=["drag"])[0].key != tasks[0].key
+    # a parameter file named by an option is keyed by its content
+    params = tmp_path / "p.json"
+    params.write_text("{}")
+    k1 = replay_tasks([drive], options={"params": os.fspath(params)})[0].key
+    params.write_text('{"mass_kg": 1}')
+    assert replay_tasks([drive], options={"params": os.fspath(params)})[0].key != k1
+
+
+def test_est_dir_gives_each_drive_its_estimate_recording(drive, tmp_path):
+    (t,) = replay_tasks([drive], est_dir=tmp_path, options={"predict": False})
+    assert t.kwargs["options"]["output"] == os.path.join(os.fspath(tmp_path), "paper.mcap")
+    doc = execute(t.fn, t.kwargs)
+    assert doc["status"] == "ok", doc["error"]
+    with RecordingReader(tmp_path / "paper.mcap") as r:
+        assert r.topics()["/est/state"].count == doc["result"]["estimates_summary"]["count"]
 
 
 def test_diagnose_without_a_workbench_entry_point_is_a_clear_error(drive):

@@ -19,7 +19,8 @@ Sections
 3. **Effects recommended per drive** (diagnose batches): a drive x effect table and the
    count of drives recommending each effect (what the model misses across the fleet).
 4. **Failed drives and why**: id, input, error type and message.
-5. **Per-drive summary**: span, samples, rejects, mean NIS per dof (replay batches).
+5. **Per-drive summary**: duration, raw records, rejects, mean NIS per dof, problems the
+   reader met (a damaged chunk skipped, a truncated file), task wall time, worker peak memory.
 
 Result documents come from different task functions; the accessors
 (:func:`identified_params`, :func:`recommended_effects`) read the known layouts and return
@@ -38,7 +39,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 __all__ = ["write_report", "render_html", "aggregate_from_dir", "identified_params",
-           "recommended_effects", "parameter_flags", "Z_FLAG"]
+           "recommended_effects", "parameter_flags", "drive_summary", "Z_FLAG"]
 
 Z_FLAG = 3.0
 
@@ -105,6 +106,26 @@ def recommended_effects(result: Mapping[str, Any] | None) -> list[str]:
                         names.append(n)
             return names
     return []
+
+
+def drive_summary(result: Mapping[str, Any] | None) -> dict:
+    """Duration, raw records, rejects (sum), mean NIS per dof per update kind and the reader's
+    problems of a replay result (``system.replay_file`` layout); empty values otherwise."""
+    r = result if isinstance(result, Mapping) else {}
+    msgs = r.get("messages_read") if isinstance(r.get("messages_read"), Mapping) else {}
+    rej = r.get("rejected") if isinstance(r.get("rejected"), Mapping) else {}
+    inn = r.get("innovations") if isinstance(r.get("innovations"), Mapping) else {}
+    dec = r.get("decode") if isinstance(r.get("decode"), Mapping) else {}
+    reader = dec.get("reader") if isinstance(dec.get("reader"), Mapping) else {}
+    nis = {}
+    for k, v in inn.items():
+        x = _num(v.get("mean_nis_per_dof")) if isinstance(v, Mapping) else None
+        if x is not None:
+            nis[str(k)] = x
+    return {"duration_s": _num(r.get("duration_s")),
+            "raw_records": msgs.get("raw_records") if isinstance(msgs.get("raw_records"), int) else None,
+            "rejected": sum(v for v in rej.values() if isinstance(v, int) and not isinstance(v, bool)),
+            "nis": nis, "problems": [str(p) for p in reader.get("problems") or []]}
 
 
 def parameter_flags(values: list[float | None], sigmas: list[float | None],
@@ -335,19 +356,19 @@ def render_html(aggregate: Mapping[str, Any], *, z_flag: float = Z_FLAG) -> str:
     rows = []
     for t in tasks:
         r = t.get("result") if isinstance(t.get("result"), Mapping) else {}
-        est = r.get("estimator") if isinstance(r.get("estimator"), Mapping) else {}
-        nis = est.get("mean_nis_per_dof") if isinstance(est.get("mean_nis_per_dof"), Mapping) else {}
-        samples = r.get("samples") if isinstance(r.get("samples"), Mapping) else {}
-        n_samples = sum(v for v in samples.values() if isinstance(v, int))
+        s = drive_summary(r)
         trun = t.get("run") or {}
         rows.append([_td(t.get("id")), _td(t.get("status"), cls="ok" if t.get("status") == "ok" else "bad"),
-                     _td(_fmt(_num(r.get("span_s")), 4), True), _td(n_samples or "-", True),
-                     _td(", ".join(f"{k} {_fmt(_num(v), 3)}" for k, v in sorted(nis.items())) or "-"),
+                     _td(_fmt(s["duration_s"], 4), True), _td(s["raw_records"] or "-", True),
+                     _td(s["rejected"], True),
+                     _td(", ".join(f"{k} {_fmt(v, 3)}" for k, v in sorted(s["nis"].items())) or "-"),
+                     _td("; ".join(s["problems"]) or "", cls="bad" if s["problems"] else ""),
                      _td(_fmt(_num(trun.get("wall_s")), 3), True),
                      _td(_fmt(_num(trun.get("peak_rss_mib")), 4), True)])
     parts.append("<h2>Per-drive summary</h2>")
-    parts.append(_table(["drive", "status", "span [s]", "samples", "mean NIS/dof per update kind",
-                         "task wall [s]", "worker peak RSS [MiB]"], rows))
+    parts.append(_table(["drive", "status", "duration [s]", "raw records", "rejected",
+                         "mean NIS/dof per update kind", "recording problems", "task wall [s]",
+                         "worker peak RSS [MiB]"], rows))
     parts.append("</body></html>")
     return "\n".join(parts)
 

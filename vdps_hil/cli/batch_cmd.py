@@ -163,46 +163,82 @@ def _vehicle_file(vehicle: str) -> str:
     return vehicle
 
 
-def _config_file(config: str | None) -> dict:
-    if config is None:
-        return {}
-    if not os.path.isfile(config):
-        raise UserError(f"--config {config}: no such file")
-    return {"config": config}
-
-
 @click.group("batch", context_settings={"help_option_names": ["-h", "--help"]})
 def batch():
     """Replay or diagnose many recordings, or run Monte Carlo studies, as batch tasks on a
     local or remote Dask cluster, with resume and a fleet report."""
 
 
+PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_accel_as_acceleration", "all")
+
+
 @batch.command("replay", epilog=_REPLAY_EXAMPLE)
 @click.argument("patterns", nargs=-1, required=True, metavar="GLOB...")
-@click.option("--vehicle", default="sedan-model", show_default=True, metavar="FILE",
-              help="Model vehicle file or name.")
-@click.option("--config", default=None, metavar="FILE", help="Replay configuration file.")
+@click.option("--vehicle", default="sedan-model", show_default=True, metavar="MODEL_FILE",
+              help="Model vehicle file or name (a truth file is refused).")
+@click.option("--model", "model_file", default=None, metavar="FILE",
+              help="A saved workbench model (effects + identified parameters).")
+@click.option("--params", default=None, metavar="FILE",
+              help="Start every drive's identifier from these saved parameters.")
+@click.option("--dbc", default=None, metavar="FILE", help="DBC of the car's bus (with --signalmap).")
+@click.option("--signalmap", default=None, metavar="FILE",
+              help="Signal map (configs/signalmaps/NAME or a .toml path) for a foreign DBC.")
+@click.option("--bus", "bus_map", multiple=True, metavar="REC=MAP",
+              help="Decode recording bus REC with the signal map's bus MAP; repeatable.")
+@click.option("--no-identify", is_flag=True, help="Do not run the parameter identifier.")
+@click.option("--no-predict", is_flag=True, help="Do not run the predictor and the rollover warning.")
+@click.option("--susp-sigma", "susp_sigma_m", type=float, default=0.001, show_default=True,
+              metavar="M", help="Suspension sensor noise (1-sigma) [m].")
+@click.option("--paper-faithful", "paper_faithful", multiple=True, type=click.Choice(PAPER_SWITCHES),
+              help="EKF correction switched to the paper as printed (repeatable; 'all').")
 @click.option("--effect", "effects", multiple=True, metavar="NAME",
-              help="Effect of the model (repeatable); part of the resume key.")
+              help="Effect the model carries (repeatable); part of the resume key.")
+@click.option("--est-dir", default=None, metavar="DIR",
+              help="Also write each drive's estimate recording (raw + /est/ topics) to "
+                   "DIR/<drive>.mcap.")
 @engine_options
-def replay(patterns, vehicle, config, effects, workers, scheduler, backend, allowed_failures,
-           no_dashboard, out_dir, json_out, report_dir, force, rehash, quiet):
-    """Replay every recording matching GLOB... (one task per recording): estimates, identified
-    parameters with sigmas, counters; one JSON per drive plus an aggregate."""
+def replay(patterns, vehicle, model_file, params, dbc, signalmap, bus_map, no_identify, no_predict,
+           susp_sigma_m, paper_faithful, effects, est_dir, workers, scheduler, backend,
+           allowed_failures, no_dashboard, out_dir, json_out, report_dir, force, rehash, quiet):
+    """Replay every recording matching GLOB... (one task per recording, as ``vdps replay``):
+    estimates, identified parameters with sigmas, innovations, counters; one JSON per drive
+    plus an aggregate."""
     from vdps_hil.batch.keys import DigestCache
     from vdps_hil.batch.tasks import replay_tasks
 
     cfg = _engine_config(workers, scheduler, backend, allowed_failures, no_dashboard)
     paths = expand_inputs(patterns)
     out = _out(out_dir, "replay")
+    for name, f in (("--model", model_file), ("--params", params), ("--dbc", dbc)):
+        if f is not None and not os.path.isfile(f):
+            raise UserError(f"{name} {f}: no such file")
+    buses = {}
+    for spec in bus_map:
+        rec, eq, mp = spec.partition("=")
+        if not eq or not rec or not mp:
+            raise UserError(f"--bus {spec!r}: expected REC=MAP")
+        buses[rec] = mp
+    if not (susp_sigma_m > 0):
+        raise UserError(f"--susp-sigma must be positive, got {susp_sigma_m}")
+    options = {k: v for k, v in {
+        "model": model_file, "params": params, "dbc": dbc, "signalmap": signalmap,
+        "bus_map": buses or None, "paper_faithful": sorted(paper_faithful) or None}.items()
+        if v is not None}
+    if no_identify:
+        options["identify"] = False
+    if no_predict:
+        options["predict"] = False
+    if susp_sigma_m != 0.001:
+        options["susp_sigma_m"] = susp_sigma_m
+    if est_dir is not None:
+        os.makedirs(est_dir, exist_ok=True)
+        est_dir = os.path.abspath(est_dir)
     digests = DigestCache(out / ".digests.json", enabled=not rehash)
-    extra = _config_file(config)
-    options = {**extra, **({"effects": list(effects)} if effects else {})}
-    tasks = replay_tasks(paths, vehicle=_vehicle_file(vehicle), options=options,
-                         files=extra, effects=effects, digests=digests)
+    tasks = replay_tasks(paths, vehicle=_vehicle_file(vehicle), options=options, effects=effects,
+                         est_dir=est_dir, digests=digests)
     _run("replay", tasks, cfg, out, force=force, quiet=quiet, json_out=json_out,
          report_dir=report_dir, digests=digests,
-         options={"vehicle": vehicle, **options, "inputs": len(paths)})
+         options={"vehicle": vehicle, **options, "effects": list(effects), "inputs": len(paths)})
 
 
 @batch.command("diagnose", epilog=_ENGINE_HELP)
@@ -224,9 +260,12 @@ def diagnose(patterns, vehicle, config, effects, workers, scheduler, backend, al
     paths = expand_inputs(patterns)
     out = _out(out_dir, "diagnose")
     digests = DigestCache(out / ".digests.json", enabled=not rehash)
-    extra = _config_file(config)
-    options = {**extra, **({"effects": list(effects)} if effects else {})}
-    tasks = diagnose_tasks(paths, vehicle=_vehicle_file(vehicle), options=options, files=extra,
+    options = {"config": config} if config is not None else {}
+    if config is not None and not os.path.isfile(config):
+        raise UserError(f"--config {config}: no such file")
+    if effects:
+        options["effects"] = list(effects)
+    tasks = diagnose_tasks(paths, vehicle=_vehicle_file(vehicle), options=options,
                            effects=effects, digests=digests)
     _run("diagnose", tasks, cfg, out, force=force, quiet=quiet, json_out=json_out,
          report_dir=report_dir, digests=digests,
