@@ -661,16 +661,18 @@ class RunResult:
     """kind -> {"accepted": n, "mean_nis_per_dof": mean(NIS / dof) of the accepted updates}."""
 
 
-def gnss_denied(windows_s: Sequence[tuple[float, float]]):
-    """A predicate dropping GNSS samples (kinds ``gnss_*``) whose time is inside a window
-    [t0, t1) (seconds on the drive clock)."""
+def gnss_denied(windows_s: Sequence[tuple[float, float]], latency_s: float = 0.0):
+    """A predicate dropping GNSS samples (kinds ``gnss_*``) whose measurement time t - latency
+    is inside a window [t0, t1) (seconds on the drive clock; ``latency_s`` the configured GNSS
+    latency, so that no fix measured inside the window reaches the filter, and none measured
+    outside is withheld)."""
     ws = sorted((float(a), float(b)) for a, b in windows_s)
     starts = [a for a, _ in ws]
 
     def drop(s: Sample) -> bool:
         if not s.kind.startswith("gnss"):
             return False
-        t = s.t_ns / 1e9
+        t = s.t_ns / 1e9 - latency_s
         i = bisect.bisect_right(starts, t) - 1
         return i >= 0 and ws[i][0] <= t < ws[i][1]
 
