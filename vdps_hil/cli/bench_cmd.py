@@ -143,7 +143,8 @@ def describe(d: dict) -> list[str]:
     lines = [f"vdps bench: {d['scenario']} ({d['vehicle']} simulated, pipeline on {d['model']}), {tr}, "
              f"speed {d['speed']:g}x, ECU reaction {'on' if d['react'] else 'off'}"]
     lost = d["dropped"]
-    lines.append(f"  ran {d['duration_s']:.2f} s of simulated time in {d['wall_time_s']:.2f} s "
+    stopped = " (interrupted: the drive ended there)" if d.get("stop_reason") == "interrupted" else ""
+    lines.append(f"  ran {d['duration_s']:.2f} s of simulated time{stopped} in {d['wall_time_s']:.2f} s "
                  f"({d['realtime_factor']:.2f}x real time); sent {d['frames_sent']} CAN frames, "
                  f"{d['imu_packets_sent']} IMU packets, {d['lines_sent']} NMEA lines; "
                  + ("the pipeline received every one of them" if lost == 0 else f"{lost} were LOST on the way")

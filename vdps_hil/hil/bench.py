@@ -198,6 +198,8 @@ class Bench:
         serial = {"imu": PtySerialDevice("imu"), "gnss": PtySerialDevice("gnss", fifo_bytes=4096)}
         writer = None
         work = None
+        pipe = None
+        side = None
         try:
             try:
                 can_dev.open()
@@ -240,15 +242,24 @@ class Bench:
             mono0 = time.monotonic_ns() + int(c.start_delay_s * NS_PER_S)
             clock.start(mono0)
             pipe.start(mono0)
-            sim_thread = threading.Thread(target=self._sim_thread, args=(side,), name="bench-sim", daemon=True)
+            sim_stop = threading.Event()
+            sim_thread = threading.Thread(target=self._sim_thread, args=(side, sim_stop), name="bench-sim",
+                                          daemon=True)
             sim_thread.start()
             t_status = 0.0
-            while not side.done.wait(0.05):
-                if status is not None and time.monotonic() - t_status >= 0.25:
-                    t_status = time.monotonic()
-                    status(self._status(side, pipe, clock))
-                if pipe.failed():
-                    break
+            self.interrupted = False
+            try:
+                while not side.done.wait(0.05):
+                    if status is not None and time.monotonic() - t_status >= 0.25:
+                        t_status = time.monotonic()
+                        status(self._status(side, pipe, clock))
+                    if pipe.failed():
+                        sim_stop.set()
+                        sim_thread.join(timeout=10.0)
+                        raise BenchError(f"pipeline failed: {pipe.error()}")
+            except KeyboardInterrupt:  # Ctrl-C: end the drive here and report what happened so far
+                self.interrupted = True
+                sim_stop.set()
             sim_thread.join(timeout=10.0)
             if side.error:
                 raise BenchError(f"simulator side failed: {side.error}")
@@ -264,6 +275,10 @@ class Bench:
             return result
         finally:
             gc.unfreeze()
+            if pipe is not None:
+                pipe.kill()
+            if side is not None:
+                side.stop_receiver()
             for d in serial.values():
                 d.close()
             can_dev.close()
@@ -272,9 +287,9 @@ class Bench:
             if work is not None:
                 shutil.rmtree(work, ignore_errors=True)
 
-    def _sim_thread(self, side) -> None:
+    def _sim_thread(self, side, stop) -> None:
         try:
-            side.run()
+            side.run(stop)
         except Exception:  # noqa: BLE001 - side.error has it; the bench raises it
             pass
 
@@ -376,7 +391,8 @@ class Bench:
             "send_lateness_ms": pace["lateness_ms"],
             "pipeline_keeps_up": keeps_up, "max_lag_s": c.max_lag_s,
             "ecu": ecu_sum, "pipeline": {"outputs": p["outputs"], "errors": p["errors"]},
-            "stop_reason": side.session.sim.stop_reason or "duration",
+            "stop_reason": ("interrupted" if getattr(self, "interrupted", False)
+                            else side.session.sim.stop_reason or "duration"),
             "output": c.output,
         }
         return BenchResult(doc, frames_on_bus, events)
@@ -420,6 +436,13 @@ class _LocalPipeline:
 
     def failed(self) -> bool:
         return bool(self._error)
+
+    def kill(self) -> None:
+        """Stop the pipeline thread if the bench ends early (an error)."""
+        self._stop.set()
+
+    def error(self) -> str:
+        return self._error
 
     def received(self) -> dict:
         return self.node.received_counts()
@@ -523,6 +546,20 @@ class _ChildPipeline:
 
     def failed(self) -> bool:
         return self.proc.poll() is not None and not self._done.is_set()
+
+    def error(self) -> str:
+        return self._stderr()
+
+    def kill(self) -> None:
+        """End the child if it is still running (the bench ended early); close its stderr file."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            try:
+                self.proc.wait(10.0)
+            except subprocess.TimeoutExpired:
+                pass
+        if not self._err.closed:
+            self._err.close()
 
     def received(self) -> dict:
         return dict(self._progress)

@@ -279,7 +279,12 @@ class PipelineNode:
 
     def _reader(self, a) -> None:
         try:
-            a.run(self._stop_adapters, self.poll_s)
+            if a is self.can:  # the bus stays open after reading stops: the last frames go out
+                stop = self._stop_adapters
+                while not stop.is_set():
+                    a.poll(self.poll_s)
+            else:
+                a.run(self._stop_adapters, self.poll_s)
         except Exception as e:  # noqa: BLE001 - reported, never a silent thread death
             self.errors.append(f"{a.name}: {type(e).__name__}: {e}")
 
@@ -310,6 +315,7 @@ class PipelineNode:
             while len(sub):
                 self._handle_events(sub.drain(100_000))
             self.release_held()
+            self.can.close()
 
     def _flush_serial(self) -> None:
         """At the end of the run release what the serial decoders hold: an IMU packet waits for
@@ -418,6 +424,9 @@ class PipelineNode:
         if name == "CanFrame":
             import can
 
+            if not self.can.is_open:  # only after the end of the run (or a lost bus): counted
+                self.outputs["frames_not_sent"] = self.outputs.get("frames_not_sent", 0) + 1
+                return False
             msg = can.Message(arbitration_id=o.arbitration_id, data=o.data, dlc=len(o.data),
                               is_extended_id=False, is_rx=False, check=False)
             self.can.send(msg)

@@ -286,6 +286,8 @@ class _PythonCanDevice(CanDeviceSide):
     def poll(self, timeout_s: float = 0.0) -> list:
         out = []
         bus = self.bus
+        if bus is None:  # closed
+            return out
         timeout = timeout_s
         while True:
             msg = bus.recv(timeout)
@@ -339,13 +341,20 @@ class ExternalCanDevice(_PythonCanDevice):
         self.in_process = self._iface == "virtual"
 
     def open(self) -> None:
+        import logging
+
         import can
 
+        lg = logging.getLogger("can")
+        level = lg.level
+        lg.setLevel(logging.ERROR)  # interface modules warn at import about optional libraries
         try:
             self.bus = can.Bus(interface=self._iface, channel=self._channel, **self._kw)
         except (can.CanError, OSError, ValueError, TypeError, ImportError) as e:
             msg = str(e).splitlines()[0] if str(e) else type(e).__name__
             raise AdapterError(f"bench CAN {self.sim_spec}: cannot open: {msg}") from None
+        finally:
+            lg.setLevel(level)
 
     def describe(self) -> dict:
         return {**super().describe(), "sim_spec": self.sim_spec}
