@@ -114,6 +114,15 @@ class Candidate:
     def phi_report(self, phi, sigma) -> dict[str, tuple[float, float]]:
         return self.report_params(phi, sigma)
 
+    def clip_phi(self, phi) -> np.ndarray:
+        """Parameters moved into their physically plausible ranges (``ParamSpec`` bounds)."""
+        specs = self.effect_cls.param_specs() if self.effect_cls is not None else {}
+        out = np.array(phi, dtype=float)
+        for j, p in enumerate(self.params):
+            if p in specs:
+                out[j] = min(max(out[j], specs[p].lower), specs[p].upper)
+        return out
+
     def phi_steps(self, phi) -> np.ndarray:
         prior = self.prior_theta()
         return np.maximum(np.abs(np.asarray(phi, dtype=float)) * 0.05, np.abs(prior) * 0.05) + 1e-9
@@ -169,8 +178,6 @@ class NumericCandidate(Candidate):
     """Central differences of the residual in each parameter at the effect's generic prior
     (exact for effects linear in their parameters)."""
 
-    linear = False
-
     def columns(self, ctx):
         base = dict(self.defaults)
         cols = []
@@ -196,8 +203,6 @@ class NumericCandidate(Candidate):
 class CrosswindCandidate(Candidate):
     """Crosswind with an unknown direction: theta = (wind east, wind north) [m/s]; side-force
     area and centre of pressure at the effect's generic prior."""
-
-    linear = False
 
     def __init__(self, effect_cls):
         super().__init__(effect_cls, ("wind_east_mps", "wind_north_mps"))
@@ -235,6 +240,12 @@ class CrosswindCandidate(Candidate):
     def plausible(self, theta):
         return math.hypot(float(theta[0]), float(theta[1])) <= self.effect_cls.param_specs()["wind_speed_mps"].upper
 
+    def clip_phi(self, phi):
+        phi = np.array(phi, dtype=float)
+        s = math.hypot(phi[0], phi[1])
+        top = self.effect_cls.param_specs()["wind_speed_mps"].upper
+        return phi * (top / s) if s > top else phi
+
 
 class LowPressureCandidate(Candidate):
     """One under-inflated tire; the wheel whose column fits the residual best."""
@@ -262,7 +273,11 @@ class LowPressureCandidate(Candidate):
 
 class MagicFormulaCandidate(Candidate):
     """Tire saturation: theta = s = (mu_0/mu)^2 scales the Magic Formula's departure from the
-    linear tire at the generic prior mu_0 (module docstring); ``refine`` fits mu itself."""
+    linear tire at the generic prior mu_0 (module docstring) for screening; the joint fit is a
+    profile of the identified model's objective over mu (``profile_range``), the other shape
+    factors at their generic priors."""
+
+    profile_range = (0.3, 3.0)
 
     def __init__(self, effect_cls):
         super().__init__(effect_cls, ("saturation_scale",))
@@ -294,6 +309,10 @@ class MagicFormulaCandidate(Candidate):
 
     def phi_steps(self, phi):
         return np.array([0.03 * max(float(phi[0]), 0.1)])
+
+    def clip_phi(self, phi):
+        spec = self.effect_cls.param_specs()["peak_friction"]
+        return np.array([min(max(float(phi[0]), spec.lower), spec.upper)])
 
     def _mu(self, theta) -> float:
         if self.mu is not None:

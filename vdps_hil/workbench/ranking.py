@@ -87,6 +87,7 @@ class RankingConfig:
     max_effects: int = 3
     shortlist: int = 3
     joint_iterations: int = 1
+    profile_steps: int = 5
     identify: tuple[str, ...] = BASE_PARAMS
 
 
@@ -192,6 +193,12 @@ class Context:
                                    with_quantities=False)
         return np.nan_to_num(self.res.values - with_e.values)[:, :, None][:, :, 0]
 
+    def removal(self, name: str) -> np.ndarray:
+        """r(model without the named effect) - r(model), equation units (n, 14)."""
+        wo = compute_residuals(self.table, self.vehicle, self.effects.without(name), states=self.states,
+                               with_nuisance=False, with_quantities=False)
+        return np.nan_to_num(wo.values - self.res.values)
+
     def innovation_columns(self, eff, params) -> np.ndarray:
         if not len(self.inn):
             return np.zeros((0, len(params)))
@@ -279,6 +286,21 @@ class Design:
         self.blocks[name] = idx
         self._stats = None
         return idx
+
+    def with_y_shift(self, dyn14: np.ndarray, x_inn, phi) -> "Design":
+        """A copy whose residual is y + (whitened, projected) ``dyn14`` on the dynamic rows and
+        + X_inn phi on the innovation rows (the model without an effect it holds)."""
+        other = Design.__new__(Design)
+        other.__dict__.update(self.__dict__)
+        y = self.y.copy()
+        a = self.ctx.whiten_project(dyn14[:, :, None])[:, :, 0].reshape(-1)
+        y[:self.n_dyn_rows] += a
+        m = len(y) - self.n_dyn_rows
+        if m and x_inn is not None and len(x_inn) == m:
+            y[self.n_dyn_rows:] += np.nan_to_num(x_inn @ np.asarray(phi, dtype=float) / self.ctx.inn.sigma)
+        other.y = y
+        other._stats = None
+        return other
 
     def shift_innovations(self, x_inn: np.ndarray, phi) -> None:
         """The model holds a sensor effect at phi: the GNSS innovations it leaves are
@@ -597,6 +619,8 @@ class _Joint:
     cv: np.ndarray
     design: "Design"
     cols: list
+    sse_without: float = math.nan  # the same linearisation point without the candidate
+    cv_without: np.ndarray | None = None
 
 
 def _effects_with(effects: EffectSet, eff: Effect) -> EffectSet:
@@ -639,57 +663,58 @@ def _apply_base(point: _Point, d: Design, cols, th, cfg: RankingConfig, ref: Veh
 
 
 def _joint(table, states, inn, ref, point: _Point, selected: dict, c: Candidate, theta0, cfg: RankingConfig,
-           ratio: float) -> _Joint | None:
-    """Fit a candidate jointly with the ten parameters (the selected effects' parameters free
-    too), re-linearised at its own estimate: Gauss-Newton steps on the MAP objective (SSE +
-    priors) with step halving; the design at the result gives the candidate's evidence."""
-    phi = c.to_phi(theta0)
-    if not (np.all(np.isfinite(phi)) and c.phi_plausible(phi)):
-        phi = c.to_phi(c.prior_theta())
-    base = point.base
+           ratio: float, obj0: float, cv0: np.ndarray) -> _Joint | None:
+    """A nonlinear candidate (one parameter): profile of the MAP objective over its parameter
+    with the ten parameters (and selected effects) re-fitted at every value (golden section in
+    log phi over ``c.profile_range``); the design at the best value gives its evidence, compared
+    with the current model (``obj0``, ``cv0``)."""
+    cache: dict[float, tuple] = {}
 
-    def build(base_, phi_):
+    def build(logphi: float):
+        key = round(logphi, 6)
+        if key in cache:
+            return cache[key]
+        phi = np.array([math.exp(logphi)])
         try:
-            eff = _effects_with(point.effects, c.phi_effect(phi_))
+            eff = _effects_with(point.effects, c.phi_effect(phi))
         except ValueError:
+            cache[key] = None
             return None
-        pt = _Point(base_, eff, {**point.phis, c.name: phi_})
+        pt = _Point(point.base, eff, {**point.phis, c.name: phi})
         _, d, always = _build(table, states, inn, ref, pt, cfg, selected)
-        xd, xi = c.delta_columns(d.ctx, phi_)
-        if xi is not None:
-            d.shift_innovations(xi, phi_)
-        d.add_block(c.name, xd, xi)
-        cols = always + d.blocks[c.name]
-        th, obj = d.objective(cols)
-        return pt, d, cols, th, obj
+        th, obj = d.objective(always)
+        cache[key] = (obj, pt, d, always, phi)
+        return cache[key]
 
-    cur = build(base, phi)
-    if cur is None:
+    def f(logphi):
+        r = build(logphi)
+        return r[0] if r is not None else math.inf
+
+    lo, hi = (math.log(v) for v in getattr(c, "profile_range", (0.3, 3.0)))
+    gr = (math.sqrt(5.0) - 1.0) / 2.0
+    a, b = lo, hi
+    x1, x2 = b - gr * (b - a), a + gr * (b - a)
+    f1, f2 = f(x1), f(x2)
+    for _ in range(cfg.profile_steps):
+        if f1 < f2:
+            b, x2, f2 = x2, x1, f1
+            x1 = b - gr * (b - a)
+            f1 = f(x1)
+        else:
+            a, x1, f1 = x1, x2, f2
+            x2 = a + gr * (b - a)
+            f2 = f(x2)
+    best = min((v for v in cache.values() if v is not None), key=lambda v: v[0], default=None)
+    if best is None:
         return None
-    for _ in range(cfg.joint_iterations):
-        pt, d, cols, th, obj = cur
-        dphi = _theta_of(d, c.name, cols, th)
-        new_base = _apply_base(pt, d, cols, th, cfg, ref)
-        step = 1.0
-        nxt = None
-        for _h in range(3):
-            ph = phi + step * dphi
-            nb = new_base if step == 1.0 else _interp_base(base, new_base, step, cfg)
-            trial = build(nb, ph) if c.phi_plausible(ph) or step < 1.0 else build(nb, ph)
-            if trial is not None and trial[4] <= obj * 1.02 + 1.0:
-                nxt = (trial, ph, nb)
-                break
-            step *= 0.5
-        if nxt is None:
-            break
-        cur, phi, base = nxt
-        if np.allclose(step * dphi, 0.0, atol=1e-12):
-            break
-    pt, d, cols, th, obj = cur
-    s2 = obj / max(len(d.y) - len(cols), 1)
+    obj, pt, d, always, phi = best
+    xd, xi = c.delta_columns(d.ctx, phi)
+    d.add_block(c.name, xd, xi)
+    cols = always + d.blocks[c.name]
+    _, obj_c = d.objective(cols)
+    s2 = obj_c / max(len(d.y) - len(cols), 1)
     sig = _sigma_of(d, c.name, cols, s2, ratio)
-    j = _Joint(c.name, phi, sig, pt, obj, d.cv(cols), d, cols)
-    return j
+    return _Joint(c.name, phi, sig, pt, obj, d.cv(always), d, cols, obj0, cv0)
 
 
 def _linear_joint(d: Design, always, c: Candidate, theta, point: _Point, cfg: RankingConfig, ref: Vehicle,
@@ -780,12 +805,14 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
             if c.linear:
                 j = _linear_joint(d, always, c, theta, point, cfg, vehicle, ratio)
             else:
-                j = _joint(table, states, inn, vehicle, point, selected, c, theta, cfg, ratio)
+                j = _joint(table, states, inn, vehicle, point, selected, c, theta, cfg, ratio, sse_cur, cv_cur)
             if j is None:
                 continue
-            ef = 1.0 - j.cv.sum() / max(cv_cur.sum(), 1e-300)
-            dbic = n_eff * math.log(max(j.sse, 1e-300) / max(sse_cur, 1e-300)) + len(j.phi) * math.log(n_eff)
-            steps[name] = {"ef": ef, "dbic": dbic, "joint": j, "cv_before": cv_cur}
+            cvb = j.cv_without if j.cv_without is not None else cv_cur
+            sseb = j.sse_without if math.isfinite(j.sse_without) else sse_cur
+            ef = 1.0 - j.cv.sum() / max(cvb.sum(), 1e-300)
+            dbic = n_eff * math.log(max(j.sse, 1e-300) / max(sseb, 1e-300)) + len(j.phi) * math.log(n_eff)
+            steps[name] = {"ef": ef, "dbic": dbic, "joint": j, "cv_before": cvb}
             joints[name] = j
             ok = dbic < -cfg.bic_margin and ef >= cfg.min_explained and c.phi_plausible(j.phi)
             if ok and (best is None or ef > best[1]):

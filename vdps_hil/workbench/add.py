@@ -1,0 +1,266 @@
+"""Add effects to the model, re-identify, and watch the error fall (``--add NAME ...``).
+
+The added effects' parameters join the identification of the ten parameters: starting from the
+generic priors in each effect (``ParamSpec`` defaults; never a truth file), the model vehicle,
+the model's own effects and the added ones are fitted together on the residual equations
+(:mod:`~vdps_hil.workbench.ranking`: Gauss-Newton on the MAP objective, the changes of the
+added effects' parameters as always-on columns, two iterations). A sensor effect (IMU bias, lever
+arm) is also taken out of the IMU readings and the estimator is run again, so the predictions
+start from better estimates.
+
+Before/after (the issue's ``before``/``after``):
+
+* ``residual_rms`` per equation of eq 13 on the whole drive (in sample), model = identified
+  parameters without / with the added effects, after the estimator's error directions are taken
+  out (``cleaned_rms``: what the ranking sees, in N, N m and m/s);
+* ``simulation_error`` per horizon (0.5, 1, 2 s): the input-driven predictor started from the
+  estimate every ``every_s``; the model used for a prediction starting at t0 is fitted **only on
+  data before t0** (an expanding window refitted at ``refit_every_s`` boundaries; predictions
+  start after ``min_train_s`` of data), so every prediction is made on held-out time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from vdps_hil.model.effects import EffectSet
+from vdps_hil.model.effects.base import Effect, MeasurementEffect
+from vdps_hil.model.params import Vehicle
+
+from .candidates import Candidate, candidate_for
+from .dataset import DriveTable
+from .ranking import RankingConfig, _apply_base, _build, _effects_with, _identify, _Point, _theta_of
+from .residuals import EQUATIONS, HORIZONS_S, SimErrors, compute_innovations, row_states, simulation_errors
+
+__all__ = ["FittedModel", "fit_model", "AddResult", "add_effects", "before_after", "cleaned_rms"]
+
+
+@dataclass
+class FittedModel:
+    """A model fitted on (part of) a drive: the vehicle with identified parameters, its effects
+    (model's + added, with fitted values) and the parameters' sigmas."""
+
+    vehicle: Vehicle
+    effects: EffectSet
+    sigmas: dict[str, dict[str, float]] = field(default_factory=dict)
+    t_end_s: float = math.inf
+
+    @property
+    def added(self) -> list[str]:
+        return list(self.sigmas)
+
+
+def fit_model(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequence[Candidate] = (),
+              config: RankingConfig | None = None, mask: np.ndarray | None = None, iterations: int = 2,
+              start: dict | None = None) -> FittedModel:
+    """Identify the ten parameters and the added candidates' parameters jointly on the rows of
+    ``mask`` (module docstring). ``start``: candidate name -> starting parameters (default the
+    effect's generic prior)."""
+    cfg = config or RankingConfig()
+    tab = table.slice(mask) if mask is not None else table
+    states = row_states(tab, vehicle)
+    if len(states.index) < 30:
+        raise ValueError("too few usable rows to fit")
+    inn = compute_innovations(tab)
+    phis = {}
+    eff = effects
+    for c in add:
+        phi = np.asarray(start[c.name], dtype=float) if start and c.name in start else c.to_phi(c.prior_theta())
+        phis[c.name] = phi
+        eff = _effects_with(eff, c.phi_effect(phi))
+    selected = {c.name: c for c in add}
+    point, d, cols, _ = _identify(tab, vehicle, eff, states, inn, cfg, reference=vehicle, phis=phis, selected=selected)
+    sig: dict[str, dict[str, float]] = {}
+    for _ in range(iterations if add else 0):
+        th, obj = d.objective(cols)
+        new_phis = dict(point.phis)
+        new_eff = point.effects
+        for c in add:
+            dphi = _theta_of(d, c.name, cols, th)
+            ph = c.clip_phi(point.phis[c.name] + dphi)
+            try:
+                new_eff = _effects_with(new_eff, c.phi_effect(ph))
+                new_phis[c.name] = ph
+            except ValueError:
+                pass
+        base = _apply_base(point, d, cols, th, cfg, vehicle)
+        point = _Point(base, new_eff, new_phis)
+        _, d, cols = _build(tab, states, inn, vehicle, point, cfg, selected)
+    th, obj = d.objective(cols)
+    s2 = obj / max(len(d.y) - len(cols), 1)
+    G = d.stats()[0].sum(axis=(0, 1))
+    A = G[np.ix_(cols, cols)] + np.diag([d.prior_w[k] for k in cols])
+    try:
+        cov = np.linalg.inv(A + np.eye(len(cols)) * 1e-12 * np.trace(A) / max(len(cols), 1))
+    except np.linalg.LinAlgError:
+        cov = np.linalg.pinv(A)
+    pos = {k: j for j, k in enumerate(cols)}
+    for c in add:
+        ks = d.blocks[c.name]
+        s = np.array([math.sqrt(max(cov[pos[k], pos[k]] * s2, 0.0)) / d.scale[k] for k in ks])
+        sig[c.name] = {k: v[1] for k, v in c.phi_report(point.phis[c.name], s).items()}
+    t_end = float(tab.t_s[-1]) if len(tab.t_s) else math.inf
+    return FittedModel(point.base, point.effects, sig, t_end)
+
+
+@dataclass
+class AddResult:
+    """Before/after of adding effects (module docstring)."""
+
+    added: list[str]
+    fitted: FittedModel
+    before: dict
+    after: dict
+    sim_before: SimErrors | None = None
+    sim_after: SimErrors | None = None
+    parameters: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return {"added": list(self.added), "parameters": self.parameters, "before": self.before, "after": self.after}
+
+
+def cleaned_rms(table: DriveTable, model: FittedModel, vehicle: Vehicle, config: RankingConfig | None = None
+                ) -> dict[str, float | None]:
+    """RMS per equation of the residual the model leaves once the estimator's errors (the
+    nuisance directions) are taken out -- the residual the ranking works on, in equation units."""
+    cfg = config or RankingConfig()
+    states = row_states(table, model.vehicle)
+    inn = compute_innovations(table)
+    _, d, cols = _build(table, states, inn, vehicle, _Point(model.vehicle, model.effects, {}), cfg, {})
+    th, _ = d.objective(cols)
+    r = d.y - d.matrix(cols) @ th
+    ctx = d.ctx
+    n, e = ctx.y_dyn.shape
+    dyn = r[:d.n_dyn_rows].reshape(n, e) * ctx.sig[None, :]
+    out: dict[str, float | None] = {}
+    names = [q for q, a in zip(EQUATIONS, ctx.avail) if a]
+    for k, q in enumerate(names):
+        v = dyn[:, k]
+        out[q] = float(np.sqrt(np.mean(v * v))) if len(v) else None
+    return out
+
+
+def _expanding_models(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequence[Candidate],
+                      cfg: RankingConfig, boundaries: Sequence[float]) -> list[FittedModel]:
+    out = []
+    for tb in boundaries:
+        mask = table.t_s < tb
+        try:
+            out.append(fit_model(table, vehicle, effects, [_fresh(c) for c in add], cfg, mask=mask))
+        except ValueError:
+            continue
+    return out
+
+
+def _fresh(c: Candidate) -> Candidate:
+    """A new adapter of the same effect (adapters keep per-fit state, e.g. the chosen wheel)."""
+    if c.kind == "parameter":
+        return c
+    return candidate_for(c.effect_cls)
+
+
+def before_after(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequence[Candidate], *,
+                 config: RankingConfig | None = None, horizons_s: Sequence[float] = HORIZONS_S,
+                 every_s: float = 0.5, refit_every_s: float = 2.0, min_train_s: float | None = None,
+                 table_after: DriveTable | None = None, with_simulation: bool = True,
+                 progress: Callable[[str], None] | None = None) -> AddResult:
+    """The before/after tables (module docstring). ``table_after``: the drive re-estimated with the
+    added sensor effects taken out of the IMU readings (default ``table``)."""
+    cfg = config or RankingConfig()
+    say = progress or (lambda s: None)
+    tab_after = table_after if table_after is not None else table
+    say("fitting the model without the added effects")
+    m0 = fit_model(table, vehicle, effects, (), cfg)
+    say("fitting the model with the added effects")
+    m1 = fit_model(tab_after, vehicle, effects, [_fresh(c) for c in add], cfg)
+    before = {"residual_rms": cleaned_rms(table, m0, vehicle, cfg)}
+    after = {"residual_rms": cleaned_rms(tab_after, m1, vehicle, cfg)}
+    sim0 = sim1 = None
+    if with_simulation:
+        t = table.t_s
+        dur = float(t[-1] - t[0])
+        hmax = max(horizons_s)
+        train = min_train_s if min_train_s is not None else max(4.0, 0.35 * dur)
+        first = float(t[0]) + train
+        last = float(t[-1]) - hmax
+        if last > first:
+            bounds = list(np.arange(first, last + 1e-9, refit_every_s))
+            say(f"refitting on data before each of {len(bounds)} prediction blocks")
+            ms0 = _expanding_models(table, vehicle, effects, (), cfg, bounds)
+            ms1 = _expanding_models(tab_after, vehicle, effects, add, cfg, bounds)
+            starts = np.arange(first, last + 1e-9, every_s)
+
+            def picker(models):
+                ends = [m.t_end_s for m in models]
+
+                def veh_at(t0):
+                    return _latest(models, ends, t0).vehicle
+
+                def eff_at(t0):
+                    return _latest(models, ends, t0).effects
+                return veh_at, eff_at
+
+            if ms0 and ms1:
+                v0, e0 = picker(ms0)
+                v1, e1 = picker(ms1)
+                say(f"predicting from {len(starts)} starts")
+                sim0 = simulation_errors(table, vehicle, effects, starts_s=starts, horizons_s=horizons_s,
+                                         vehicle_at=v0, effects_at=e0)
+                sim1 = simulation_errors(tab_after, vehicle, effects, starts_s=starts, horizons_s=horizons_s,
+                                         vehicle_at=v1, effects_at=e1)
+                before["simulation_error"] = sim0.summary()
+                after["simulation_error"] = sim1.summary()
+    params = {}
+    for e in m1.effects:
+        if e.name in m1.sigmas:
+            params[e.name] = {k: {"value": v, "sigma": m1.sigmas[e.name].get(k)} for k, v in e.params.items()}
+    params["identified"] = {k: {"before": getattr(m0.vehicle.params, k), "after": getattr(m1.vehicle.params, k)}
+                            for k in cfg.identify}
+    return AddResult([c.name for c in add], m1, before, after, sim0, sim1, params)
+
+
+def _latest(models: list[FittedModel], ends: list[float], t0: float) -> FittedModel:
+    best = models[0]
+    for m, e in zip(models, ends):
+        if e <= t0 + 1e-9:
+            best = m
+    return best
+
+
+def add_effects(table: DriveTable, vehicle: Vehicle, effects: EffectSet, names: Sequence[str], *,
+                registry=None, user_effects: Sequence[type[Effect]] = (), reestimate=None, **kw) -> AddResult:
+    """``--add NAME ...``: build the candidates by name and compute the before/after tables.
+    ``reestimate(measurement_effects) -> DriveTable``: re-runs the estimator with sensor effects
+    taken out of the IMU readings (the CLI passes one over the decoded samples)."""
+    from vdps_hil.model.effects import REGISTRY
+
+    reg = dict(registry if registry is not None else REGISTRY)
+    for cls in user_effects:
+        reg[cls.name] = cls
+    cands = []
+    for n in names:
+        if n not in reg:
+            raise ValueError(f"unknown effect {n!r} (known: {', '.join(sorted(reg))})")
+        if n in effects:
+            raise ValueError(f"effect {n!r} is already in the model")
+        cands.append(candidate_for(reg[n]))
+    tab_after = table
+    meas = [c for c in cands if issubclass(c.effect_cls, MeasurementEffect)]
+    if meas and reestimate is not None:
+        m = fit_model(table, vehicle, effects, [_fresh(c) for c in cands], kw.get("config"))
+        fitted = [e for e in m.effects if isinstance(e, MeasurementEffect) and e.name in m.sigmas]
+        tab_after = reestimate(fitted)
+        # the sensor effect is now out of the readings: keep it out of the model fitted on them
+        cands = [c for c in cands if not issubclass(c.effect_cls, MeasurementEffect)]
+        res = before_after(table, vehicle, effects, cands, table_after=tab_after, **kw)
+        res.added = list(names)
+        for e in fitted:
+            res.parameters[e.name] = {k: {"value": v, "sigma": m.sigmas[e.name].get(k)} for k, v in e.params.items()}
+        res.fitted = FittedModel(res.fitted.vehicle, res.fitted.effects + EffectSet(fitted),
+                                 {**res.fitted.sigmas, **{e.name: m.sigmas[e.name] for e in fitted}})
+        return res
+    return before_after(table, vehicle, effects, cands, **kw)
