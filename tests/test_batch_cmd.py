@@ -90,6 +90,9 @@ def test_expand_inputs_globs_directories_and_duplicates(tmp_path):
     (["replay", "{d}/drive0.mcap", "--bus", "vdps"], "expected REC=MAP"),
     (["replay", "{d}/drive0.mcap", "--out", "{d}/drive0.mcap"], "not a directory"),
     (["report", "{d}"], "no batch.json"),
+    (["study", "weighting", "--duration", "5", "--out", "{d}/st"], "10.25"),
+    (["study", "snr", "--profile", "no-such-profile", "--out", "{d}/st"], "no-such-profile"),
+    (["study", "astrology"], "astrology"),
 ])
 def test_usage_errors_are_one_line_with_exit_2(drives, args, words, capsys):
     rc = main(["batch", *[a.format(d=drives) for a in args]])

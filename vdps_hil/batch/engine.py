@@ -463,8 +463,8 @@ class BatchResult:
         return self.aggregate["counts"]
 
 
-def result_path(out_dir: str | os.PathLike, task_id: str) -> Path:
-    return Path(out_dir) / RESULT_DIR / f"{task_id}.json"
+def result_path(out_dir: str | os.PathLike, task_id: str, subdir: str = RESULT_DIR) -> Path:
+    return Path(out_dir) / subdir / f"{task_id}.json"
 
 
 def _write_json_atomic(path: Path, doc: dict) -> None:
@@ -474,10 +474,10 @@ def _write_json_atomic(path: Path, doc: dict) -> None:
     os.replace(tmp, path)
 
 
-def _reusable(out_dir: Path | None, t: Task) -> Outcome | None:
+def _reusable(out_dir: Path | None, t: Task, subdir: str) -> Outcome | None:
     if out_dir is None or t.key is None:
         return None
-    p = result_path(out_dir, t.id)
+    p = result_path(out_dir, t.id, subdir)
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))
     except (OSError, ValueError):
@@ -502,7 +502,8 @@ def strip_run(doc: Any) -> Any:
 def run_batch(tasks: Sequence[Task], config: EngineConfig | None = None, *,
               out_dir: str | os.PathLike | None = None, kind: str = "batch",
               force: bool = False, progress=None, options: Mapping[str, Any] | None = None,
-              engine: Engine | None = None) -> BatchResult:
+              engine: Engine | None = None, results_subdir: str = RESULT_DIR,
+              aggregate_name: str | None = AGGREGATE) -> BatchResult:
     """Run ``tasks`` (ids must be unique) and write ``<out_dir>/drives/<id>.json`` per task as it
     finishes plus ``<out_dir>/batch.json`` at the end (module docstring).
 
@@ -510,6 +511,8 @@ def run_batch(tasks: Sequence[Task], config: EngineConfig | None = None, *,
     ``force``. ``progress`` (``progress.Progress`` or None) is told about every outcome.
     ``options`` (JSON-able) is recorded in the aggregate. ``engine``: an already started
     engine (the caller closes it); otherwise one is made from ``config`` and closed here.
+    ``results_subdir`` / ``aggregate_name``: where the per-task files and the aggregate go
+    (``aggregate_name=None``: not written, e.g. one stage of a study).
     """
     ids = [t.id for t in tasks]
     dup = sorted({i for i in ids if ids.count(i) > 1})
@@ -521,7 +524,7 @@ def run_batch(tasks: Sequence[Task], config: EngineConfig | None = None, *,
     outcomes: dict[str, Outcome] = {}
     todo: list[Task] = []
     for t in tasks:
-        prev = None if force else _reusable(out, t)
+        prev = None if force else _reusable(out, t, results_subdir)
         if prev is not None:
             outcomes[t.id] = prev
         else:
@@ -542,7 +545,7 @@ def run_batch(tasks: Sequence[Task], config: EngineConfig | None = None, *,
                 for o in eng.run(todo):
                     outcomes[o.id] = o
                     if out is not None:
-                        _write_json_atomic(result_path(out, o.id), o.to_json())
+                        _write_json_atomic(result_path(out, o.id, results_subdir), o.to_json())
                     if progress is not None:
                         progress.update(o)
             finally:
@@ -561,6 +564,6 @@ def run_batch(tasks: Sequence[Task], config: EngineConfig | None = None, *,
         "run": {"engine": info, "started_utc": started, "wall_s": time.perf_counter() - wall0,
                 "computed": len(todo), "reused": len(tasks) - len(todo)},
     }
-    if out is not None:
-        _write_json_atomic(out / AGGREGATE, aggregate)
+    if out is not None and aggregate_name:
+        _write_json_atomic(out / aggregate_name, aggregate)
     return BatchResult(ordered, info, aggregate)

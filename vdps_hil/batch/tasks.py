@@ -18,6 +18,9 @@ Task functions
     The workbench diagnosis of one recording (``vdps_hil.workbench``).
 ``worker_info()``
     A probe: the worker's tool version (a remote cluster must run the client's code).
+``snr_trial``, ``weighting_trial``, ``effect_trial``
+    One Monte Carlo trial of a study (``batch.studies``): paper Table 2, Table 3, the
+    workbench's hidden-effect drives. Each simulates its drive inside the worker.
 
 Resume keys (``keys.task_key``): the recording's bytes, the task function and its options, the
 model vehicle file, every file an option names (saved parameters, workbench model, DBC,
@@ -37,7 +40,8 @@ from vdps_hil.batch.engine import Task
 from vdps_hil.batch.keys import DigestCache, task_key
 
 __all__ = ["drive_ids", "replay_drive", "diagnose_drive", "replay_tasks", "diagnose_tasks",
-           "worker_info", "DEFAULT_MODEL", "REPLAY_OPTIONS", "NoRawData"]
+           "worker_info", "snr_trial", "weighting_trial", "effect_trial", "DEFAULT_MODEL",
+           "REPLAY_OPTIONS", "NoRawData"]
 
 DEFAULT_MODEL = "sedan-model"
 _ID_BAD = re.compile(r"[^A-Za-z0-9._-]+")
@@ -104,14 +108,22 @@ def replay_drive(path: str, *, vehicle: str = DEFAULT_MODEL,
     return doc
 
 
-def diagnose_drive(path: str, *, vehicle: str = DEFAULT_MODEL,
-                   options: Mapping[str, Any] | None = None) -> dict:
-    """Workbench diagnosis of one recording (``vdps_hil.workbench.diagnose_file``)."""
+def _diagnose_fn():
     fn = _library("vdps_hil.workbench", "diagnose_file")
     if fn is None:
         raise RuntimeError("the model workbench (vdps_hil.workbench.diagnose_file) is not "
                            "available in this installation")
-    return fn(path, vehicle=vehicle, **dict(options or {}))
+    return fn
+
+
+def diagnose_drive(path: str, *, vehicle: str = DEFAULT_MODEL,
+                   options: Mapping[str, Any] | None = None) -> dict:
+    """Workbench diagnosis of one recording (``vdps_hil.workbench.diagnose_file``, what
+    ``vdps diagnose`` does); timing fields (``wall_time_s``, ``wall_s``) moved under "run"."""
+    doc = _diagnose_fn()(path, vehicle=vehicle, **dict(options or {}))
+    if not isinstance(doc, dict):
+        raise TypeError(f"diagnose_file returned {type(doc).__name__}, not a dict")
+    return _timing_to_run(doc, ("wall_time_s", "wall_s", "realtime_factor"))
 
 
 # --------------------------------------------------------------------------------- builders
@@ -184,3 +196,114 @@ def worker_info() -> dict:
     from vdps_hil.batch.keys import tool_version
     return {"tool": tool_version(), "python": sys.version.split()[0],
             "platform": platform.platform()}
+
+
+# ------------------------------------------------------------------------------ study trials
+def _timing_to_run(doc: dict, keys: Iterable[str] = ("wall_s",)) -> dict:
+    run = doc.get("run") if isinstance(doc.get("run"), dict) else {}
+    doc["run"] = {**run, **{k: doc.pop(k) for k in keys if k in doc}}
+    return doc
+
+
+def snr_trial(profile: str, k: float, seed: int) -> dict:
+    """One trial of the SNR study (paper Table 2): the paper-scenario drive with every Table 1
+    sigma times ``k`` through the real chain; the measured SNR of the inertia problem's inputs
+    and the relative error of I_x, I_y, I_z at 10.25 s (``vdps_hil.paper.snr_task``)."""
+    from vdps_hil.paper import snr_task
+
+    return _timing_to_run(snr_task(profile, float(k), int(seed)))
+
+
+TABLE3_QS = (0.625, 0.125, 0.025, 0.005)
+
+
+def weighting_trial(profile: str, seed: int, duration_s: float, noise_scale: float = 0.0,
+                    qs: Sequence[float] = TABLE3_QS) -> dict:
+    """One trial of the weighting study (paper Table 3): a paper-scenario drive of
+    ``duration_s`` with the sensor sigmas times ``noise_scale`` (0: noise-free, as the paper)
+    through the real chain, its identifier inputs recorded; the inertia problem re-run on them
+    with Q_4 = diag(q, q, q), W_4 = I, P(0) = I for each q. Per q: minimum eigenvalue of
+    sum A^T Q^T Q A, convergence time per inertia (first time from which |I - I_true| <= 10 %
+    holds to the end; None: never, the paper's "Nan") and the final relative errors. The same
+    computation as ``vdps_hil.paper.table3_task`` with the noise scale added."""
+    import math
+    from dataclasses import replace
+
+    import numpy as np
+
+    from vdps_hil.identification.problems import Identifier, load_ident_config
+    from vdps_hil.paper import INERTIA, _profile, chain_run, scale_noise, truth_params
+
+    sheet = _profile(profile)
+    r = chain_run("paper", scale_noise(sheet, float(noise_scale)), int(seed), predict=False,
+                  sheet_profile=sheet, duration_s=float(duration_s), record_inputs=True,
+                  ident_report_period_s=1.0)
+    tp = truth_params()
+    base = load_ident_config()
+    rows = {}
+    for q in qs:
+        q = float(q)
+        cfg = replace(base, inertia=replace(base.inertia, q=(q, q, q), w=(1.0, 1.0, 1.0), p0_scaled=1.0))
+        idf = Identifier(r["model"], cfg)
+        ts, xs = [], []
+        for inp in r["inputs"]:
+            idf.update(inp)
+            ts.append(inp.t_ns / 1e9)
+            p = idf.params
+            xs.append([getattr(p, n) for n in INERTIA])
+        ts_a, xs_a = np.array(ts), np.array(xs).reshape(-1, 3)
+        conv = []
+        for j, n in enumerate(INERTIA):
+            ok = np.abs(xs_a[:, j] - tp[n]) <= 0.1 * tp[n]
+            bad = np.nonzero(~ok)[0]
+            if len(ok) and ok[-1]:
+                conv.append(float(ts_a[bad[-1] + 1] - ts_a[0]) if len(bad) else 0.0)
+            else:
+                conv.append(None)
+        rows[f"{q:g}"] = {"q": q, "min_eigenvalue": float(idf.identifiability["inertia"]),
+                          "convergence_s": dict(zip(INERTIA, conv)),
+                          "final_rel_err": {n: (float((xs_a[-1, j] - tp[n]) / tp[n]) if len(xs_a) else math.nan)
+                                            for j, n in enumerate(INERTIA)}}
+    return {"profile": profile, "seed": int(seed), "noise_scale": float(noise_scale),
+            "duration_s": float(duration_s), "inputs": len(r["inputs"]), "rows": rows,
+            "run": {"wall_s": r["wall_s"]}}
+
+
+def effect_trial(effect: str | None, seed: int, maneuver: str | None = None,
+                 vehicle: str = DEFAULT_MODEL, options: Mapping[str, Any] | None = None) -> dict:
+    """One trial of the hidden-effect study: the workbench's maneuver for ``effect`` with the
+    effect hidden in the truth simulator (``vdps_hil.workbench.study``; ``effect`` None: a null
+    drive of ``maneuver`` with nothing hidden), simulated into a temporary file, diagnosed
+    from its ``/raw/`` topics with the model vehicle file (``diagnose_drive``). Returns the
+    recommended effects, ``hit`` (the hidden effect is the first recommendation) and
+    ``found`` (it is among them); for a null drive ``false_alarm`` (anything recommended)."""
+    import tempfile
+
+    from vdps_hil.batch.report import recommended_effects
+    from vdps_hil.workbench.study import HIDDEN, hidden_drive
+
+    _diagnose_fn()  # fail before simulating when there is no workbench entry point
+
+    if effect is not None:
+        if effect not in HIDDEN:
+            raise ValueError(f"unknown hidden effect {effect!r} (one of {', '.join(sorted(HIDDEN))})")
+        maneuver, spec = HIDDEN[effect]
+        specs = [spec]
+    else:
+        if maneuver is None:
+            raise ValueError("a null trial needs a maneuver")
+        specs = []
+    with tempfile.TemporaryDirectory(prefix="vdps-effect-") as d:
+        path = os.path.join(d, "drive.mcap")
+        hidden_drive(path, maneuver, specs, seed=int(seed))
+        diag = diagnose_drive(path, vehicle=vehicle, options=options)
+    rec = recommended_effects(diag)
+    doc = {"effect": effect, "maneuver": maneuver, "seed": int(seed), "recommended": rec}
+    if effect is not None:
+        doc["hit"] = bool(rec) and rec[0] == effect
+        doc["found"] = effect in rec
+    else:
+        doc["false_alarm"] = bool(rec)
+    if isinstance(diag, dict) and isinstance(diag.get("run"), dict):
+        doc["run"] = diag["run"]
+    return doc

@@ -286,3 +286,89 @@ def report(out_dir, report_dir):
         raise UserError(f"{out_dir}: {e}") from None
     path = write_report(agg, report_dir or os.path.join(out_dir, "report"))
     click.echo(f"vdps batch report: {path} ({agg['counts']['total']} tasks)")
+
+
+_STUDY_EXAMPLE = """\b
+Examples:
+  vdps batch study snr --seeds 10 --out results/snr
+  vdps batch study weighting --seeds 5 --noise-scale 0 --noise-scale 1 --duration 40
+  vdps batch study effects --seeds 20 --null straight --json -
+
+\b
+snr: the paper's Table 2 (|rel err| of Ix Iy Iz at 10.25 s vs the measured SNR; stage 1
+finds the noise scale of each target SNR). weighting: Table 3 (time for the inertias to come
+within 10 % for Q4 = diag(q,q,q)). effects: hit rate of the workbench's diagnosis per hidden
+effect. Mean +- sd over the seeds, the paper's figures beside. Trials in OUT/trials/, the
+study in OUT/study.json; a rerun reuses finished trials.
+
+""" + _ENGINE_HELP
+
+
+@batch.command("study", epilog=_STUDY_EXAMPLE)
+@click.argument("study", type=click.Choice(["snr", "weighting", "effects"]))
+@click.option("--seeds", type=click.IntRange(1, None), default=5, show_default=True,
+              help="Trials (seeds) per row.")
+@click.option("--seed0", type=int, default=1, show_default=True, help="First seed.")
+@click.option("--profile", default="table1-susp1k", show_default=True, metavar="NAME",
+              help="Sensor profile (the data sheet the chain is configured from).")
+@click.option("--target-snr", "targets", type=float, multiple=True, metavar="DB",
+              help="snr: target SNRs [dB] (repeatable) [default: 30 20 10].")
+@click.option("--noise-scale", "noise_scales", type=float, multiple=True, metavar="K",
+              help="weighting: sensor noise scale (repeatable) [default: 0 1].")
+@click.option("--duration", "duration_s", type=float, default=40.0, show_default=True, metavar="S",
+              help="weighting: drive length [s].")
+@click.option("--q", "qs", type=float, multiple=True, metavar="Q",
+              help="weighting: Q4 = diag(q,q,q) values (repeatable) [default: the paper's four].")
+@click.option("--effect", "effects", multiple=True, metavar="NAME",
+              help="effects: hidden effect to test (repeatable) [default: all].")
+@click.option("--null", "null_maneuvers", multiple=True, metavar="MANEUVER",
+              help="effects: also drive MANEUVER with nothing hidden (false alarms); repeatable.")
+@click.option("--vehicle", default="sedan-model", show_default=True, metavar="MODEL_FILE",
+              help="effects: model vehicle the workbench diagnoses with.")
+@engine_options
+def study(study, seeds, seed0, profile, targets, noise_scales, duration_s, qs, effects, null_maneuvers,
+          vehicle, workers, scheduler, backend, allowed_failures, no_dashboard, out_dir, json_out,
+          report_dir, force, rehash, quiet):
+    """Run a Monte Carlo STUDY over seeds as batch tasks: snr (Table 2), weighting (Table 3) or
+    effects (hidden-effect hit rates)."""
+    from vdps_hil.batch.engine import EngineError
+    from vdps_hil.batch.progress import Progress
+    from vdps_hil.batch.studies import SNR_TARGETS_DB, StudyOptions, format_study, run_study
+
+    cfg = _engine_config(workers, scheduler, backend, allowed_failures, no_dashboard)
+    try:
+        opt = StudyOptions(seeds=seeds, seed0=seed0, profile=profile,
+                           snr_targets_db=tuple(targets) or SNR_TARGETS_DB,
+                           noise_scales=tuple(noise_scales) or (0.0, 1.0), duration_s=duration_s,
+                           qs=tuple(qs) or StudyOptions.qs, effects=tuple(effects) or None,
+                           null_maneuvers=tuple(null_maneuvers), vehicle=_vehicle_file(vehicle))
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    from vdps_hil.sim.profiles import ProfileError, load_profile
+    try:
+        load_profile(profile)
+    except ProfileError as e:
+        raise UserError(str(e).splitlines()[0]) from None
+    out = _out(out_dir, f"study-{study}")
+    try:
+        doc = run_study(study, opt, cfg, out_dir=out, force=force,
+                        progress=None if quiet else (lambda label: Progress(f"vdps batch {label}")))
+    except EngineError as e:
+        raise UserError(str(e)) from None
+    except (ValueError, ImportError) as e:
+        raise UserError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
+    text = format_study(doc)
+    say = (lambda s: click.echo(s, err=True)) if json_out == "-" else click.echo
+    if not quiet:
+        say(text)
+        say(f"  study in {out / 'study.json'}")
+    write_json(doc, json_out)
+    if report_dir:
+        import html as _html
+        os.makedirs(report_dir, exist_ok=True)
+        path = os.path.join(report_dir, "index.html")
+        Path(path).write_text(f"<!doctype html><html><head><meta charset=\"utf-8\"><title>vdps batch study "
+                              f"{study}</title></head><body><h1>vdps batch study {study}</h1><pre>"
+                              f"{_html.escape(text)}</pre></body></html>\n", encoding="utf-8")
+    if any(st["counts"]["failed"] for st in doc["stages"]):
+        raise SystemExit(3)

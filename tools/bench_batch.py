@@ -1,0 +1,161 @@
+#!/usr/bin/env python3
+"""Batch engine benchmark: speed-up from 1 to N workers on a local Dask cluster for a set of
+simulated drives, peak memory per worker, and (``--memory FILE``) the memory of one worker
+replaying one long recording (``tools/make_long_drive.py``).
+
+Usage:
+  .venv/bin/python tools/bench_batch.py [--drives 8] [--duration 10] [--workers 1 2]
+                                        [--dir /tmp/vdps-bench-batch] [--backend dask]
+  .venv/bin/python tools/bench_batch.py --memory long-drive.mcap [--poll 2]
+
+Speed-up: the same ``vdps batch replay`` tasks (``system.replay_file`` per drive) on a fresh
+LocalCluster of 1 and of N worker processes; times are the batch alone (cluster start-up
+reported separately) and the speed-up is T(1) / T(N). The results of every run are checked to
+be identical apart from the timing fields.
+
+Memory: ``run.peak_rss_mib`` of each task is the worker process's peak resident set
+(``getrusage``), so the maximum over a worker's tasks is that worker's peak. With ``--memory``
+one task runs on a 1-worker cluster while this process samples the worker's RSS (psutil)
+every ``--poll`` seconds: the curve shows whether memory grows with the drive (it must not).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from vdps_hil.batch.engine import Engine, EngineConfig, strip_run  # noqa: E402
+from vdps_hil.batch.tasks import replay_tasks  # noqa: E402
+
+
+def make_drives(d: Path, n: int, duration_s: float) -> list[str]:
+    from vdps_hil.sim.drive import Drive
+
+    d.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for seed in range(n):
+        p = d / f"paper-{duration_s:g}s-seed{seed}.mcap"
+        if not p.exists():
+            tmp = p.with_suffix(".tmp")
+            Drive("paper", seed=seed, duration_s=duration_s).run(tmp)
+            os.replace(tmp, p)
+        paths.append(os.fspath(p))
+    return paths
+
+
+def run_once(paths: list[str], backend: str, workers: int, trace_memory: bool = False) -> dict:
+    tasks = replay_tasks(paths)
+    t0 = time.perf_counter()
+    with Engine(EngineConfig(backend=backend, workers=workers, dashboard=False,
+                             trace_memory=trace_memory)) as eng:
+        t1 = time.perf_counter()
+        outcomes = list(eng.run(tasks))
+        t2 = time.perf_counter()
+    bad = [o for o in outcomes if not o.ok]
+    if bad:
+        raise SystemExit(f"{len(bad)} task(s) failed: {bad[0].id}: {bad[0].error}")
+    per_pid: dict[int, dict] = {}
+    for o in outcomes:
+        w = per_pid.setdefault(o.run["pid"], {"tasks": 0, "busy_s": 0.0, "peak_rss_mib": 0.0,
+                                              "py_heap_peak_mib": 0.0})
+        w["tasks"] += 1
+        w["busy_s"] += o.run["wall_s"]
+        w["peak_rss_mib"] = max(w["peak_rss_mib"], o.run["peak_rss_mib"])
+        w["py_heap_peak_mib"] = max(w["py_heap_peak_mib"], o.run.get("py_heap_peak_mib", 0.0))
+    return {"startup_s": t1 - t0, "batch_s": t2 - t1, "workers": per_pid,
+            "results": {o.id: strip_run(o.result) for o in outcomes}}
+
+
+def speedup(args) -> None:
+    paths = make_drives(Path(args.dir), args.drives, args.duration)
+    print(f"bench_batch: {args.drives} drives of {args.duration:g} s ('paper', table1-susp1k), "
+          f"backend {args.backend}, {os.cpu_count()} CPU(s)")
+    runs = {}
+    for n in args.workers:
+        r = run_once(paths, args.backend, n)
+        runs[n] = r
+        peaks = ", ".join(f"{w['peak_rss_mib']:.0f}" for w in r["workers"].values())
+        print(f"  {n} worker(s): start-up {r['startup_s']:5.1f} s, batch {r['batch_s']:6.1f} s "
+              f"({args.drives * args.duration / r['batch_s']:.2f} s of drive per s), "
+              f"{len(r['workers'])} worker process(es) used, peak RSS per worker [MiB]: {peaks}")
+    base = runs[args.workers[0]]
+    for n in args.workers[1:]:
+        r = runs[n]
+        same = r["results"] == base["results"]
+        print(f"  speed-up {args.workers[0]} -> {n} workers: {base['batch_s'] / r['batch_s']:.2f}x "
+              f"(batch only), {(base['batch_s'] + base['startup_s']) / (r['batch_s'] + r['startup_s']):.2f}x "
+              f"(with start-up); results identical: {same}")
+
+
+def memory(args) -> None:
+    import psutil
+
+    path = args.memory
+    size = os.path.getsize(path)
+    print(f"bench_batch --memory: {path} ({size / 2**20:.0f} MiB), 1 worker, RSS sampled every "
+          f"{args.poll:g} s")
+    (task,) = replay_tasks([path], options={"predict": not args.no_predict})
+    samples: list[tuple[float, float]] = []
+    with Engine(EngineConfig(backend="dask", workers=1, dashboard=False)) as eng:
+        (pid,) = eng.worker_pids()
+        proc = psutil.Process(pid)
+        base_rss = proc.memory_info().rss / 2**20
+        stop = threading.Event()
+        t0 = time.perf_counter()
+
+        def poll():
+            while not stop.is_set():
+                try:
+                    samples.append((time.perf_counter() - t0, proc.memory_info().rss / 2**20))
+                except psutil.Error:
+                    return
+                stop.wait(args.poll)
+
+        th = threading.Thread(target=poll, daemon=True)
+        th.start()
+        (o,) = list(eng.run([task]))
+        stop.set()
+        th.join()
+    if not o.ok:
+        raise SystemExit(f"task failed: {o.error}")
+    dur = o.result["duration_s"]
+    print(f"  replayed {dur:.0f} s of drive in {o.run['wall_s']:.0f} s "
+          f"({dur / o.run['wall_s']:.2f}x real time); idle worker RSS {base_rss:.0f} MiB")
+    print(f"  worker peak RSS (getrusage): {o.run['peak_rss_mib']:.0f} MiB")
+    if samples:
+        n = len(samples)
+        marks = sorted({0, n // 10, n // 4, n // 2, 3 * n // 4, n - 1})
+        print("  RSS over the replay [elapsed s: MiB]: "
+              + ", ".join(f"{samples[i][0]:.0f}: {samples[i][1]:.0f}" for i in marks))
+        first_half = max(r for t, r in samples[: n // 2]) if n > 1 else samples[0][1]
+        second_half = max(r for t, r in samples[n // 2:])
+        print(f"  max RSS first half {first_half:.0f} MiB, second half {second_half:.0f} MiB "
+              f"(growth {second_half - first_half:+.0f} MiB over {samples[-1][0] / 2:.0f} s)")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--drives", type=int, default=8)
+    ap.add_argument("--duration", type=float, default=10.0, help="seconds per simulated drive")
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--backend", default="dask", choices=["dask", "processes"])
+    ap.add_argument("--dir", default="/tmp/vdps-bench-batch", help="where the drives are written")
+    ap.add_argument("--memory", metavar="FILE", default=None,
+                    help="measure one worker replaying FILE instead")
+    ap.add_argument("--poll", type=float, default=2.0, help="RSS sampling period [s] (--memory)")
+    ap.add_argument("--no-predict", action="store_true", help="--memory: replay without predictor")
+    args = ap.parse_args()
+    if args.memory:
+        memory(args)
+    else:
+        speedup(args)
+
+
+if __name__ == "__main__":
+    main()
