@@ -163,8 +163,9 @@ def test_head_to_head_with_openpilot_learned_parameters(drive):
     print(f"\nRAV4 head to head with openpilot (paramsd: steer ratio, stiffness factor, angle offset); "
           f"{fit.n_windows} windows of 1 s, speed {fit.speed_range_mps[0]:.1f}-{fit.speed_range_mps[1]:.1f} m/s, "
           f"steering {fit.steer_range_deg[0]:.1f}..{fit.steer_range_deg[1]:.1f} deg")
+    alone = obs["steer_ratio_x_wheelbase"] and obs["understeer_x_steer_ratio"]
     print(f"  steer ratio      openpilot start {op['steer_ratio']:.2f}   ours {fit.steer_ratio:.1f} +- "
-          f"{fit.steer_ratio_sigma:.1f}  identified alone: {obs['steer_ratio_x_wheelbase'] and obs['understeer_x_steer_ratio']}")
+          f"{fit.steer_ratio_sigma:.1f}  identified alone: {alone}")
     print(f"  stiffness factor openpilot start 1.00    ours {fit.stiffness_factor:.2f} +- "
           f"{fit.stiffness_factor_sigma:.2f} (relative to tire_stiffness_factor {op['tire_stiffness_factor']})")
     print(f"  angle offset     openpilot start 0.00 deg ours {fit.angle_offset_deg:+.3f} +- "

@@ -95,11 +95,12 @@ def rav4(data: Path, tmp: Path, quick: bool) -> dict:
         pr, vr = ref.at([tr.t_s[i1]])
         sp2, crs2 = np.hypot(va2[:, 0], va2[:, 1]), np.arctan2(va2[:, 1], va2[:, 0])
         tt, dsp, dcrs, dp = rc.dead_reckoning(tw, vw, wz_w, pa2[i0, :2], float(crs2[i0]), tr.t_s[i0], tr.t_s[i1])
+        c_ref = math.atan2(vr[0, 1], vr[0, 0])
         d = {"start_s": s0, "filter": {"speed_mps": float(sp2[i1] - np.hypot(*vr[0, :2])),
-                                       "course_deg": float(np.degrees(rc.wrap_pi(crs2[i1] - math.atan2(vr[0, 1], vr[0, 0])))),
+                                       "course_deg": float(np.degrees(rc.wrap_pi(crs2[i1] - c_ref))),
                                        "position_m": float(np.hypot(*(pa2[i1, :2] - pr[0, :2])))},
              "dead_reckoning": {"speed_mps": float(dsp[-1] - np.hypot(*vr[0, :2])),
-                                "course_deg": float(np.degrees(rc.wrap_pi(dcrs[-1] - math.atan2(vr[0, 1], vr[0, 0])))),
+                                "course_deg": float(np.degrees(rc.wrap_pi(dcrs[-1] - c_ref))),
                                 "position_m": float(np.hypot(*(dp[-1] - pr[0, :2])))}}
         drift.append(d)
         f, g = d["filter"], d["dead_reckoning"]

@@ -52,7 +52,6 @@ import bisect
 import calendar
 import dataclasses
 import math
-import os
 import struct
 import tomllib
 from dataclasses import dataclass, field
@@ -67,16 +66,18 @@ from vdps_hil.estimation.kinematics import dcm_gv
 from vdps_hil.estimation.pipeline import Estimate, EstimatorPipeline, Innovation, Latencies, PipelineConfig
 from vdps_hil.geodesy import EnuOrigin, ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from vdps_hil.model.params import CONFIG_DIR
-from vdps_hil.units import GRAVITY_MPS2, deg2rad, wrap_pi
+from vdps_hil.units import GRAVITY_MPS2, wrap_pi
 
 __all__ = [
-    "COMMA_SEGMENT", "RTKLIB_DRIVE", "SENSORSET_DIR", "GnssFixes", "ImuSeries", "Reference", "RtkSolution",
-    "TimeTag", "SensorSetConfig", "SensorSetError", "Track", "RunResult", "gpst_to_unix", "unix_to_gpst",
-    "gpst_minus_utc_s", "read_comma_ublox", "read_comma_phone_imu", "read_comma_reference",
-    "read_rtklib_pos", "read_timetag", "read_rtklib_imu", "publisher_mounting_rpy", "groves_ctm",
-    "load_samples", "load_sensorset", "infer_sensor_set", "run_pipeline", "track_from_estimates",
-    "gnss_denied", "outage_windows", "speed_course_errors", "dead_reckoning", "constant_velocity",
-    "interp_angle",
+    "COMMA_SEGMENT", "RTKLIB_DRIVE", "SENSORSET_DIR", "OPENPILOT_RAV4", "GnssFixes", "ImuSeries", "Reference",
+    "RtkSolution", "TimeTag", "CaptureStats", "SensorSetConfig", "SensorSetError", "Track", "RunResult",
+    "OutageError", "SteerResponseFit", "ZeroRateCalibration", "gpst_to_unix", "unix_to_gpst", "gpst_minus_utc_s",
+    "read_comma_ublox", "read_comma_phone_imu", "read_comma_reference", "read_rtklib_pos", "read_timetag",
+    "read_rtklib_imu", "publisher_mounting_rpy", "groves_ctm", "nmea_fix_lines", "mti_capture", "load_samples",
+    "parse_sensorset", "load_sensorset", "infer_sensor_set", "run_pipeline", "track_from_estimates", "gnss_denied",
+    "outage_windows", "outage_errors", "summarize_outages", "speed_course_errors", "dead_reckoning",
+    "constant_velocity", "interp_angle", "velocity_lag", "estimate_lag", "series", "steer_signals",
+    "steer_response_fit", "understeer_gradient",
 ]
 
 COMMA_SEGMENT = "comma2k19_rav4_2018-08-02_seg40"

@@ -51,8 +51,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -379,9 +379,6 @@ def explain_window(t0_ns: int, t1_ns: int, rep: ObservabilityReport, layout: Sta
 
 
 # ------------------------------------------------------------------------------- identification
-_EXAMPLE_INPUTS = None
-
-
 def _example_inputs():
     """A finite, excited IdentInputs (only used to find which fields each problem reads). Optional
     fields (default None; ``moments_nm`` excepted: it overrides the moments) get finite values
@@ -605,8 +602,8 @@ def _ident_status(name: str, rls, monitor: IdentificationMonitor | None, identif
             low = [i for i, (m, g) in enumerate(zip(mx, gate)) if m < g]
             share = monitor.gated_rows[name] / seen
             if low:
-                parts.append("below the excitation gate: " + ", ".join(f"row {i + 1} max |A| {mx[i]:.3g} < {gate[i]:.3g}"
-                                                         for i in low))
+                parts.append("below the excitation gate: "
+                             + ", ".join(f"row {i + 1} max |A| {mx[i]:.3g} < {gate[i]:.3g}" for i in low))
             if share > 0:
                 parts.append(f"{100 * share:.0f} % of the finite rows below the excitation gate")
             if status is None and (share > GATED_SHARE or len(low) == len(gate)):
