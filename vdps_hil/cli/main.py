@@ -28,6 +28,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                "Run estimator, identifier, predictor and warning on a recording's /raw/ topics."),
     "batch": ("vdps_hil.cli.batch_cmd", "batch",
               "Replay/diagnose many drives or run Monte Carlo studies on a local or Dask cluster."),
+    "diagnose": ("vdps_hil.cli.diagnose_cmd", "diagnose",
+                 "Model workbench: where the model fails, which effect is missing, add it."),
     "paper": ("vdps_hil.cli.paper_cmd", "paper",
               "Run the paper's experiments through the real chain; print ours next to the paper's."),
 }

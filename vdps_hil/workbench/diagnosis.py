@@ -1,0 +1,222 @@
+"""``vdps diagnose`` as a function: recording + model vehicle -> :class:`Diagnosis`.
+
+Steps (each in its own module): decode the ``/raw/`` topics and run the estimator
+(``dataset``), identify the ten parameters and rank the effect candidates (``ranking``), the
+residuals and the input-driven simulation error of the identified model (``residuals``), where
+it fails (``regimes``), optionally add effects and measure before/after (``add``), optionally
+save the model (``model_file``). Only ``/raw/`` topics and the model vehicle file are read
+(plus a ``--model`` file and user effect code the user names).
+
+JSON (``Diagnosis.to_json``), the issue's keys::
+
+    ranking         [{effect, explained_fraction, parameters {name: {value, sigma}}, plausible,
+                      excited, group}]   (effects, best first)
+    recommendation  effect name or null
+    equivalent_to   names that explain the recommendation equally on this drive (or [])
+    before, after   {residual_rms {equation: value}, simulation_error {horizon_s: {position_m,
+                      yaw_deg, roll_deg, speed_mps}}}; after is null without --add
+    workbench       everything else (identified parameters, equivalence groups, messages,
+                      worst windows, regime bins, estimator NIS, timings)
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from vdps_hil.model.effects import EffectSet
+from vdps_hil.model.effects.base import Effect
+from vdps_hil.model.params import Vehicle
+
+from .add import AddResult, FittedModel, add_effects, cleaned_rms
+from .dataset import DatasetConfig, DriveTable, decode_raw, table_from_samples
+from .ranking import Ranking, RankingConfig, rank
+from .regimes import RegimeBins, Window, regime_bins, worst_windows
+from .residuals import EquationResiduals, SimErrors, compute_residuals, simulation_errors
+
+__all__ = ["Diagnosis", "diagnose"]
+
+
+@dataclass
+class Diagnosis:
+    """Everything ``vdps diagnose`` found (module docstring)."""
+
+    source: str
+    vehicle: Vehicle
+    model_effects: EffectSet
+    table: DriveTable
+    ranking: Ranking
+    residuals: EquationResiduals
+    windows: list[Window]
+    regimes: dict[str, RegimeBins]
+    sim: SimErrors | None
+    before: dict
+    add: AddResult | None = None
+    timings: dict = field(default_factory=dict)
+    saved_model: str | None = None
+
+    def to_json(self) -> dict:
+        rk = self.ranking
+        ranking = []
+        for e in rk.entries:
+            ranking.append({"effect": e.effect, "explained_fraction": _num(e.explained_fraction),
+                            "parameters": {k: {"value": _num(v), "sigma": _num(s)} for k, (v, s) in e.parameters.items()},
+                            "plausible": bool(e.plausible), "excited": bool(e.excited), "group": list(e.group)})
+        extra = {"source": self.source, "vehicle": self.vehicle.name,
+                 "model_effects": [{"name": e.name, "params": e.params} for e in self.model_effects],
+                 "messages": list(rk.messages),
+                 "ranking_details": [e.to_json() for e in rk.entries],
+                 "identified_parameters": [e.to_json() for e in rk.parameters],
+                 "groups": rk.groups, "selected": list(rk.selected), "n_eff": rk.n_eff,
+                 "worst_windows": [w.to_json() for w in self.windows],
+                 "regimes": {k: v.to_json() for k, v in self.regimes.items()},
+                 "estimator_nis": _nis(self.table), "duration_s": self.table.duration_s,
+                 "timings_s": dict(self.timings), "saved_model": self.saved_model}
+        if self.add is not None:
+            extra["added"] = self.add.to_json()
+        return {"ranking": ranking, "recommendation": rk.recommendation, "equivalent_to": list(rk.equivalent_to),
+                "before": self.before, "after": self.add.after if self.add is not None else None,
+                "workbench": extra}
+
+    def summary_lines(self) -> list[str]:
+        """The human summary (vehicle-dynamics words)."""
+        from .words import EFFECT_LABELS, describe_entry
+
+        rk = self.ranking
+        out = [f"{self.source}: {self.table.duration_s:.1f} s of drive, {len(self.residuals.t_s)} rows, "
+               f"model {self.vehicle.name}" + (f" + {', '.join(self.model_effects.names)}" if len(self.model_effects) else "")]
+        out += rk.messages
+        out.append("identified parameters:")
+        for p in rk.parameters:
+            out.append("  " + describe_entry(rk, p).split(";")[0])
+        out.append("candidates (held-out explained fraction, noise-weighted):")
+        for e in rk.entries:
+            tag = "*" if e.selected else " "
+            ef = e.explained_fraction
+            out.append(f" {tag}{EFFECT_LABELS.get(e.effect, e.effect):38s} {100 * ef:6.1f} %"
+                       + ("" if e.excited else "  (not excited)") + ("" if e.plausible else "  (implausible)"))
+        if self.windows:
+            out.append("worst windows: " + "; ".join(f"{w.t_start_s:.1f}-{w.t_end_s:.1f} s ({w.equation})"
+                                                      for w in self.windows))
+        out += _before_after_lines(self.before, self.add.after if self.add else None)
+        if self.saved_model:
+            out.append(f"model written to {self.saved_model}")
+        return out
+
+
+def _num(v):
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+def _nis(table: DriveTable) -> dict:
+    out = {}
+    for kind, t in table.innovations.items():
+        ok = t["accepted"] & np.isfinite(t["nis"])
+        if ok.any():
+            out[kind] = {"mean_nis": float(np.mean(t["nis"][ok])), "dof": float(np.mean(t["dof"][ok])),
+                         "n": int(ok.sum())}
+    return out
+
+
+def _before_after_lines(before: dict, after: dict | None) -> list[str]:
+    from .residuals import EQUATION_UNITS
+
+    out = []
+    rb = before.get("residual_rms", {})
+    ra = (after or {}).get("residual_rms", {})
+    if rb:
+        out.append("residual RMS per equation" + (" (before -> after)" if after else "") + ":")
+        for eq, v in rb.items():
+            if v is None:
+                continue
+            unit = EQUATION_UNITS.get(eq, "")
+            a = ra.get(eq)
+            out.append(f"  {eq:14s} {v:10.4g}" + (f" -> {a:10.4g}" if a is not None else "") + f" {unit}")
+    sb = before.get("simulation_error", {})
+    sa = (after or {}).get("simulation_error", {})
+    if sb:
+        out.append("simulation error (input-driven predictor, RMS over starts)" + (" before -> after" if after else "") + ":")
+        for h, d in sb.items():
+            a = sa.get(h, {})
+            parts = []
+            for k, unit in (("position_m", "m"), ("yaw_deg", "deg"), ("roll_deg", "deg"), ("speed_mps", "m/s")):
+                v = d.get(k)
+                if v is None:
+                    continue
+                s = f"{k.split('_')[0]} {v:.3f}"
+                if a.get(k) is not None:
+                    s += f" -> {a[k]:.3f}"
+                parts.append(s + f" {unit}")
+            out.append(f"  {h:>4s} s  " + ", ".join(parts))
+    return out
+
+
+def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = None, dbc=None, signalmap=None,
+             add: Sequence[str] = (), user_effects: Sequence[type[Effect]] = (), save_model: str | Path | None = None,
+             dataset_config: DatasetConfig | None = None, ranking_config: RankingConfig | None = None,
+             with_simulation: bool = True, progress: Callable[[str], None] | None = None) -> Diagnosis:
+    """Run the whole diagnosis (module docstring)."""
+    say = progress or (lambda s: None)
+    tm = {}
+    t0 = time.perf_counter()
+    model_effects = EffectSet()
+    if model is not None:
+        from .model_file import load_model
+
+        vehicle, model_effects, _ = load_model(model, vehicle, user_effects)
+    say("decoding /raw/ topics")
+    samples = decode_raw(path, dbc=dbc, signalmap=signalmap)
+    tm["decode"] = time.perf_counter() - t0
+    say(f"running the estimator on {len(samples)} samples")
+    table = table_from_samples(samples, vehicle, dataset_config)
+    tm["estimator"] = time.perf_counter() - t0 - tm["decode"]
+    say("identifying the model and ranking the candidates")
+    t1 = time.perf_counter()
+    rk = rank(table, vehicle, model_effects, user_effects=user_effects, config=ranking_config)
+    tm["ranking"] = time.perf_counter() - t1
+    base = FittedModel(rk.base_vehicle, model_effects)
+    res = compute_residuals(table, base.vehicle, base.effects)
+    wins = worst_windows(res)
+    regs = regime_bins(table, res)
+    before = {"residual_rms": cleaned_rms(table, base, vehicle, ranking_config)}
+    sim = None
+    if with_simulation and not add:
+        say("simulation error of the identified model")
+        t1 = time.perf_counter()
+        sim = simulation_errors(table, base.vehicle, base.effects)
+        before["simulation_error"] = sim.summary()
+        tm["simulation"] = time.perf_counter() - t1
+    add_res = None
+    if add:
+        say(f"adding {', '.join(add)} and re-identifying")
+        t1 = time.perf_counter()
+
+        def reestimate(meas_effects):
+            say("re-running the estimator with the sensor effects taken out of the IMU readings")
+            return table_from_samples(samples, vehicle, dataset_config, imu_effects=meas_effects)
+
+        add_res = add_effects(table, vehicle, model_effects, list(add), user_effects=user_effects,
+                              reestimate=reestimate, config=ranking_config, with_simulation=with_simulation,
+                              progress=say)
+        before = add_res.before
+        tm["add"] = time.perf_counter() - t1
+    saved = None
+    if save_model is not None:
+        from .model_file import save_model as _save
+
+        fm = add_res.fitted if add_res is not None else base
+        sig = {p.param if hasattr(p, "param") else next(iter(p.parameters)): next(iter(p.parameters.values()))[1]
+               for p in rk.parameters}
+        src = f"vdps diagnose {Path(path).name}" + "".join(f" --add {a}" for a in add)
+        saved = str(_save(save_model, fm.vehicle, fm.effects, sigmas=sig, effect_sigmas=fm.sigmas, source=src))
+    tm["total"] = time.perf_counter() - t0
+    return Diagnosis(str(path), vehicle, model_effects, table, rk, res, wins, regs, sim, before, add_res, tm, saved)
