@@ -1,7 +1,8 @@
 """``vdps paper`` (vdps_hil.paper): a reduced, seeded version of the paper's experiments through
 the real chain (simulated wire formats -> /raw/ decode -> VdpsSystem), asserting the issue-6
-acceptance thresholds that the chain reaches, and marking the two it does not reach as strict
-expected failures with the measured figures (so a fix shows up as an XPASS).
+acceptance thresholds that the chain reaches, and marking the one it does not reach with the
+paper's linear-tire predictor (the left turn within 3 m / 3 deg) as a strict expected failure
+with the measured figures and their cause (so a fix shows up as an XPASS).
 
 Runtime: one paper-left-turn drive (15 s, identification + left turn + warning), the SUV fishhook,
 one lane change and a 12 s noise-free Table 3 drive: about a minute on one core.
@@ -58,27 +59,26 @@ def test_aggregate_identification_median_p90_and_two_sigma_fraction():
 
 
 # ----------------------------------------------------------------- through the real chain
-def test_mass_and_every_reachable_parameter_move_from_prior_toward_truth(ident_run):
-    """Acceptance: error at 10.25 s below a fifth of the prior error (table1-susp1k). Measured
-    (seed 1): mass +0.08 %, tracking -3.9..-6.6 %, cornering -3.8 / -4.4 %, I_z +0.6 %."""
+def test_every_parameter_moves_from_prior_toward_truth_and_mass_and_inertias_within_bounds(ident_run):
+    """Acceptance (table1-susp1k): error at 10.25 s below a fifth of the prior error; mass <= 0.5 %,
+    I_x, I_y, I_z <= 10 % (one seed here; the medians over 20 seeds are in tools/paper_full.py).
+    Measured (seed 1): mass +0.08 %, I_x +1.4 %, I_y -3.8 %, I_z +0.5 %, tracking -3.9..-6.6 %,
+    cornering -3.8 / -4.4 % (secant slopes of the Magic Formula truth). Every sigma-normalised
+    error below 2 except where the tire stiffness differs from the truth's zero-slip slope."""
     e, prior = ident_run["rel_err"], ident_run["prior_rel_err"]
-    assert abs(e["mass_kg"]) <= 0.005  # issue 6: mass median <= 0.5 % (one seed here)
+    assert abs(e["mass_kg"]) <= 0.005
+    for k in P.INERTIA:
+        assert abs(e[k]) <= 0.10, (k, e[k])
     for k in e:
-        if k in ("inertia_x_kgm2", "inertia_y_kgm2"):
-            continue  # see the expected failure below
         assert abs(e[k]) < abs(prior[k]) / 5.0, (k, e[k], prior[k])
     assert ident_run["t_ident_s"] == pytest.approx(P.T0_S)
+    sr = ident_run["sigma_ratio"]
+    assert all(sr[k] <= 2.0 for k in ("mass_kg", *P.INERTIA)), sr
 
 
-@pytest.mark.xfail(strict=True, reason="I_x +29 %, I_y +18 % at 10.25 s (seed 1): roll/pitch moments of "
-                   "eq 23 biased by the suspension-rate lag (10 ms) and the tire-force model; see the report")
-def test_roll_and_pitch_inertia_within_ten_percent(ident_run):
-    e = ident_run["rel_err"]
-    assert abs(e["inertia_x_kgm2"]) <= 0.10 and abs(e["inertia_y_kgm2"]) <= 0.10
-
-
-@pytest.mark.xfail(strict=True, reason="4.8 m / 4.9 deg at +4.75 s (seed 1); with the TRUE linear-tire "
-                   "parameters and the TRUE initial state 6.0 m / 5.9 deg: Magic Formula truth vs linear predictor")
+@pytest.mark.xfail(strict=True, reason="linear-tire predictor (eq 15) vs Magic Formula truth: 4.8 m / 4.9 deg "
+                   "at +4.75 s (seed 1); TRUE parameters and TRUE initial state give 6.0 m / 5.9 deg, the "
+                   "predictor with the truth's Magic Formula 0.13 m / 0.15 deg (chain init: 1.05 m / 0.78 deg)")
 def test_left_turn_prediction_within_three_metres_and_degrees(ident_run):
     lt = ident_run["left_turn"]
     assert lt["position_err_m"] <= 3.0 and abs(lt["yaw_err_deg"]) <= 3.0

@@ -99,6 +99,9 @@ __all__ = ["CanFrame", "IdentReport", "PredictionReport", "ReplayError", "Suspen
            "VdpsSystem", "default_pipeline_config", "measure_rates", "output_to_json", "outputs_digest", "replay_file"]
 
 _SUSP = wheel_fields("susp_deflection_m")
+_MAX_SUSP_LEAD_NS = 50_000_000
+"""The identifier's H, H_dot are carried forward / led only over at most 50 ms (five 100 Hz
+windows); a slower suspension sensor (table1's 1 Hz) gets the filter's values unchanged."""
 
 
 # ------------------------------------------------------------------------------------- outputs
@@ -247,7 +250,7 @@ class SuspensionConditioner:
     identifier's eq 14 forces need them; the EKF gets H_eff)."""
 
     def __init__(self, vehicle: Vehicle, rate_hz: float | None, tire_compliance: bool, raw_bandwidth_hz: float,
-                 rate_bandwidth_hz: float, max_gap_s: float):
+                 rate_bandwidth_hz: float, max_gap_s: float, rate_lead: bool = True):
         from vdps_hil.estimation.alpha_beta import TimedAlphaBetaBank
         from vdps_hil.identification.problems import suspension_forces_n
 
@@ -258,6 +261,9 @@ class SuspensionConditioner:
         self._f0 = suspension_forces_n(vehicle, (0.0,) * 4, (0.0,) * 4)
         self._kt = vehicle.tire.vertical_stiffness_npm
         self._ab_raw = TimedAlphaBetaBank(4, raw_bandwidth_hz, max_gap_s)
+        self.rate_lead = bool(rate_lead)
+        self._v_prev: list[float] = [math.nan] * 4
+        self._t_prev: list[int | None] = [None] * 4
         self._ab_rate = TimedAlphaBetaBank(4, rate_bandwidth_hz, max_gap_s)
         self._k: int | None = None
         self._sum = [0.0, 0.0, 0.0, 0.0]
@@ -270,19 +276,39 @@ class SuspensionConditioner:
     def raw_filtered(self, t_ns: int | None = None) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """(H, H_dot) of the measured deflections; with ``t_ns`` H is carried from the filter's
         last update (a window mean stamped at the window's mean sample time, about half a
-        window earlier) to ``t_ns``: H(t) = H + H_dot (t - t_update). Without it the identifier's
-        eq 14 forces lagged the deflections by 5.5 ms at 100 Hz windows (measured against the
-        simulator), which biased the roll-moment balance of eq 23."""
+        window earlier) to ``t_ns``: H(t) = H + H_dot (t - t_update), and with ``rate_lead``
+        H_dot is led by the filter's derivative lag plus that age (code comment). Without them
+        the identifier's eq 14 forces lagged the simulator's by 5.5 ms (H) and 18.3 ms (H_dot)
+        at 100 Hz windows and 20 Hz bandwidth, which biased the roll and pitch moment balances of
+        eq 23 (damper forces D_s H_dot are about half the strut roll moment at 1 Hz)."""
         ab = self._ab_raw
         if t_ns is None:
             return tuple(ab.x), tuple(ab.v)
-        h = tuple(x + v * (t_ns - t) * 1e-9 if t is not None and t <= t_ns and math.isfinite(v) else x
+        lim = _MAX_SUSP_LEAD_NS  # a slow sensor (table1: 1 Hz) is not extrapolated
+        h = tuple(x + v * (t_ns - t) * 1e-9 if t is not None and 0 <= t_ns - t <= lim and math.isfinite(v) else x
                   for x, v, t in zip(ab.x, ab.v, ab.t))
-        return h, tuple(ab.v)
+        if not self.rate_lead:
+            return h, tuple(ab.v)
+        # H_dot: the alpha-beta derivative lags by tau_d = T (alpha/beta - 1/2) behind its last
+        # update, itself (t - t_update) old; lead it by the change of H_dot between the last two
+        # updates:  H_dot(t) = v + (v - v_prev) / (t_u - t_prev) (tau_d + t - t_u)
+        tau_d = ab.lag_s
+        hd = []
+        for i, (v, t) in enumerate(zip(ab.v, ab.t)):
+            vp, tp = self._v_prev[i], self._t_prev[i]
+            if (t is None or tp is None or t <= tp or not 0 <= t_ns - t <= lim or t - tp > lim
+                    or not math.isfinite(tau_d)
+                    or not math.isfinite(v + vp)):
+                hd.append(v)
+                continue
+            hd.append(v + (v - vp) / ((t - tp) * 1e-9) * (tau_d + (t_ns - t) * 1e-9))
+        return h, tuple(hd)
 
     def _condition(self, t_ns: int, source: str, h, t_out: int) -> Sample:
         """H at t_ns -> the EKF's sample at t_out >= t_ns: H_eff(t_out) (module docstring)."""
-        self._ab_raw.update(t_ns, h)
+        ab = self._ab_raw
+        self._v_prev, self._t_prev = list(ab.v), list(ab.t)
+        ab.update(t_ns, h)
         self._ab_rate.update(t_ns, h)
         hd = [v if math.isfinite(v) else 0.0 for v in self._ab_rate.v]
         if t_out != t_ns:

@@ -247,7 +247,8 @@ class IdentFeeder:
             susp_deflection_m=filtered.susp_deflection_m, susp_rate_mps=filtered.susp_rate_mps,
             wheel_speed_radps=filtered.wheel_speed_radps, wheel_accel_radps2=filtered.wheel_accel_radps2,
             wheel_torque_nm=torque, slip_ratio=slip, slip_angle_rad=alpha,
-            wheel_angle_rad=delta)
+            wheel_angle_rad=delta, specific_force_b_mps2=tuple(float(v) for v in f_cg),
+            vehicle_angles_rad=(phi_v, theta_v))
         self.counters["inputs"] += 1
         if not _all_finite(inp):
             self.counters["incomplete"] += 1

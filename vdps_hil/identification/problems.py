@@ -64,7 +64,28 @@ sprung body about its CG, vehicle frame, corner i at (x_i, y_i) from ``Geometry.
       M_z = sum_i ( x_i F_y,i - y_i F_x,i + x_i u_y,i - y_i u_x,i)
 
   Small-angle: the attitude relative to the road is not used (as eq 13, which writes the
-  vehicle-frame forces in the aux frame). ``IdentInputs.moments_nm`` overrides them.
+  vehicle-frame forces in the aux frame). ``IdentInputs.moments_nm`` overrides them. This is
+  ``moment_form = "stiffness"``.
+
+  ``moment_form = "measured"`` (default in ``configs/identification/default.toml``): the tire
+  forces enter M_x and M_y only through their sums, which the accelerometer measures: in body
+  axes sum_i F_tire,i = m f_b (f_b the specific force at the CG, body axes; F_tire includes the
+  normal loads' components F_z,i n_b, n_b the road normal in body axes, from the estimated
+  road-relative roll and pitch)::
+
+      M_x = sum_i y_i F_s,i + (h_cg - H_bar) m f_b,y - r n_b,y sum_i F_z,i + sum_i z_w,i m_u,i f_b,y
+      M_y = -sum_i x_i F_s,i - (h_cg - H_bar) m f_b,x + r n_b,x sum_i F_z,i - sum_i z_w,i m_u,i f_b,x
+      M_z = as "stiffness" (the yaw moment needs the split between the axles)
+
+  (F_z,i = eq 14's normal load, H_bar the mean deflection, z_w,i = -(h_cg - r) + H_i; the
+  physics core's moments to first order in the road-relative angles and the deflections). Why:
+  the roll moment is the small difference of two large ones (the struts' y_i F_s,i and the
+  tires' h_cg sum F_y): with F_y from C_alpha alpha (eq 15) a 5 % stiffness error or the Magic
+  Formula's saturation, and the omitted F_z n_b,y term (body roll over the road tilts the normal
+  loads), moved I_x by +16..+40 % on the paper's scenario; with the measured sums and the
+  simulator's deflections I_x came to -0.4 % (linear-tire truth). It needs
+  ``IdentInputs.specific_force_b_mps2`` and ``vehicle_angles_rad``; without them the stiffness
+  form is used.
 
 Symbols and units (every input is an *estimate*: EKF, alpha-beta filters, sensors; never
 simulator truth)::
@@ -146,6 +167,7 @@ DEFAULT_CONFIG_PATH = IDENT_CONFIG_DIR / "default.toml"
 CONFIG_SCHEMA_VERSION = 1
 STEER_FORMS = ("per_wheel", "paper_mean")
 MASS_FORMS = ("paper", "sprung")
+MOMENT_FORMS = ("stiffness", "measured")
 
 PROBLEM_NAMES: tuple[str, ...] = ("mass", "tracking", "cornering", "inertia")
 """Update order (Gauss-Seidel: each problem uses the newest estimates of the previous ones)."""
@@ -199,6 +221,7 @@ class IdentConfig:
     tracking: ProblemConfig
     cornering: ProblemConfig
     inertia: ProblemConfig
+    moment_form: str = "stiffness"  # eq 23's b: "stiffness" (eq 15 forces) or "measured" (docstring)
 
     def problem(self, name: str) -> ProblemConfig:
         return getattr(self, name)
@@ -248,7 +271,12 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
         raise IdentConfigError(f"{origin}: schema_version {doc['schema_version']!r} is not "
                                f"{CONFIG_SCHEMA_VERSION}")
     g = doc["general"]
+    moment_form = g.get("moment_form", "stiffness") if isinstance(g, dict) else "stiffness"
+    if isinstance(g, dict):
+        g = {k: v for k, v in g.items() if k != "moment_form"}  # optional key
     _check_keys(g, _GENERAL_KEYS, f"{origin}[general]")
+    if moment_form not in MOMENT_FORMS:
+        raise IdentConfigError(f"{origin}[general].moment_form: one of {MOMENT_FORMS}, got {moment_form!r}")
     if g["form"] not in FORMS:
         raise IdentConfigError(f"{origin}[general].form: one of {FORMS}, got {g['form']!r}")
     if g["bounds_mode"] not in BOUNDS_MODES:
@@ -293,7 +321,7 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
                                  positive=True),
         min_updates_converged=g["min_updates_converged"], steer_form=g["steer_form"], mass_form=g["mass_form"],
         upstream_min_updates=g["upstream_min_updates"], upstream_max_wait=g["upstream_max_wait"],
-        **problems)
+        moment_form=moment_form, **problems)
 
 
 def load_ident_config(path: str | Path | None = None) -> IdentConfig:
@@ -338,6 +366,8 @@ class IdentInputs:
     slip_angle_rad: tuple[float, float, float, float]
     wheel_angle_rad: tuple[float, float, float, float]  # delta_i (rear 0 for front steer)
     moments_nm: tuple[float, float, float] | None = None  # override of (M_x, M_y, M_z)
+    specific_force_b_mps2: tuple[float, float, float] | None = None  # f at the CG, body axes ("measured")
+    vehicle_angles_rad: tuple[float, float] | None = None  # road-relative (phi_v, theta_v), eq 4
 
     def __post_init__(self):
         if not isinstance(self.t_ns, int) or isinstance(self.t_ns, bool):
@@ -349,6 +379,11 @@ class IdentInputs:
             object.__setattr__(self, name, _tup(getattr(self, name), n, name))
         if self.moments_nm is not None:
             object.__setattr__(self, "moments_nm", _tup(self.moments_nm, 3, "moments_nm"))
+        if self.specific_force_b_mps2 is not None:
+            object.__setattr__(self, "specific_force_b_mps2", _tup(self.specific_force_b_mps2, 3,
+                                                                   "specific_force_b_mps2"))
+        if self.vehicle_angles_rad is not None:
+            object.__setattr__(self, "vehicle_angles_rad", _tup(self.vehicle_angles_rad, 2, "vehicle_angles_rad"))
 
 
 def gravity_aux_mps2(phi_r_rad: float, theta_r_rad: float, psi_v_rad: float) -> tuple[float, float, float]:
@@ -432,15 +467,47 @@ def unsprung_inertia_moments_nm(vehicle: Vehicle, inp: IdentInputs) -> np.ndarra
     return np.array([np.sum(-zw * uy), np.sum(zw * ux), np.sum(xy[:, 0] * uy - xy[:, 1] * ux)])
 
 
-def moments_from_inputs(vehicle: Vehicle, params: IdentifiedParams, inp: IdentInputs) -> np.ndarray:
+def moments_from_inputs(vehicle: Vehicle, params: IdentifiedParams, inp: IdentInputs,
+                        form: str = "stiffness") -> np.ndarray:
     """b_4 of eq 23: strut forces (eq 14), tire forces (eq 15-17 with ``params``) and the
-    unsprung masses' horizontal weight and inertia (see the module docstring)."""
+    unsprung masses' horizontal weight and inertia; ``form = "measured"`` takes M_x, M_y from
+    the measured specific force (module docstring) when the inputs carry it."""
     if inp.moments_nm is not None:
         return np.array(inp.moments_nm)
     fs = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
     fa, fb = tire_forces_wheel_n(inp.slip_ratio, inp.slip_angle_rad, params)
     fx, fy = tire_forces_body_n(fa, fb, inp.wheel_angle_rad)
-    return body_moments_nm(vehicle.geometry, fs, fx, fy) + unsprung_inertia_moments_nm(vehicle, inp)
+    m = body_moments_nm(vehicle.geometry, fs, fx, fy) + unsprung_inertia_moments_nm(vehicle, inp)
+    if form == "measured" and inp.specific_force_b_mps2 is not None and inp.vehicle_angles_rad is not None:
+        m[0], m[1] = measured_roll_pitch_moments_nm(vehicle, params.mass_kg, inp, fs)
+    return m
+
+
+def road_normal_body(phi_v_rad: float, theta_v_rad: float) -> np.ndarray:
+    """n_b = C_r^v e_z: the road normal in body axes from the road-relative roll and pitch
+    (eq 3-4 with psi_v = 0; body parallel to the road: (0, 0, 1))."""
+    sp, cp, st, ct = math.sin(phi_v_rad), math.cos(phi_v_rad), math.sin(theta_v_rad), math.cos(theta_v_rad)
+    return np.array([st, sp * ct, cp * ct])
+
+
+def measured_roll_pitch_moments_nm(vehicle: Vehicle, mass_kg: float, inp: IdentInputs, strut_n=None
+                                   ) -> tuple[float, float]:
+    """(M_x, M_y) of the ``"measured"`` moment form (module docstring) [N m]."""
+    geo = vehicle.geometry
+    xy = np.array(geo.corner_xy_m())
+    h, r = geo.h_cg_m, vehicle.tire.rolling_radius_m
+    fs = (suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
+          if strut_n is None else np.asarray(strut_n, dtype=float))
+    fz = float(np.sum(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps)))
+    hh = np.asarray(inp.susp_deflection_m, dtype=float)
+    mu = np.array([vehicle.axle(i).unsprung_mass_kg for i in range(4)])
+    zw = -(h - r) + hh
+    n = road_normal_body(*inp.vehicle_angles_rad)
+    f = inp.specific_force_b_mps2
+    lever = h - float(np.mean(hh))
+    mx = float(np.sum(xy[:, 1] * fs) + lever * mass_kg * f[1] - r * n[1] * fz + np.sum(zw * mu) * f[1])
+    my = float(-np.sum(xy[:, 0] * fs) - lever * mass_kg * f[0] + r * n[0] * fz - np.sum(zw * mu) * f[0])
+    return mx, my
 
 
 # --------------------------------------------------------------------------- regressors
@@ -519,8 +586,11 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
     a = np.array([[dx, -wy * wz, wy * wz],
                   [wz * wx, dy, -wz * wx],
                   [-wx * wy, wx * wy, dz]])
-    b = moments_from_inputs(vehicle, params, inp)
+    b = moments_from_inputs(vehicle, params, inp, cfg.moment_form)
     db = np.zeros((3, 6)) if inp.moments_nm is not None else _moment_sensitivity(vehicle.geometry, inp)
+    if (cfg.moment_form == "measured" and inp.specific_force_b_mps2 is not None
+            and inp.vehicle_angles_rad is not None):
+        db[:2, :] = 0.0  # M_x, M_y no longer use the tire stiffnesses
     return Regressor(a, b, _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps), db)
 
 
