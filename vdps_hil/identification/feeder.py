@@ -73,6 +73,10 @@ estimate time from their last two samples (``observe``)::
 (otherwise the latest sample, as before; the linear term raises white sensor noise by at most
 sqrt(1 + 2 ((t - t_k) / T)^2 + ...) ~ 2.2 at t - t_k = T).
 
+For eq 23's ``"measured"`` moment form the inputs also carry the specific force at the CG in
+body axes (``specific_force_b_mps2`` = f_cg above) and the road-relative roll and pitch
+(``vehicle_angles_rad``, eq 4 of the estimate).
+
 Symbols and units: v_g [m/s] ENU; f [m/s^2]; w [rad/s]; wd [rad/s^2]; l [m] (body axes);
 angles [rad]; lambda [-]; alpha [rad]; G [m/s^2].
 """
