@@ -49,9 +49,10 @@ heave/pitch/roll modes are 1-2 Hz, T = 10 ms). The window is released, stamped a
 t_end, when the first sample at or after t_end arrives, so it is never in the filter's past
 (a measurement in the past costs the EKF a re-propagation from its history). Hd_i is an
 alpha-beta rate (``susp_rate_bandwidth_hz``, 10 Hz) of the window means. The EKF's sigma for
-the averaged sample is ``PipelineConfig.susp_sigma_m`` (``SystemConfig.for_profile`` sets
-sigma_H / sqrt(n) from the sensor's rate and sigma). Slower sensors (1 Hz) pass one sample per
-window unchanged.
+the conditioned sample is ``PipelineConfig.susp_sigma_m``: ``SystemConfig.for_profile`` sets
+1.5 sigma_H / sqrt(n) from the sensor's rate and sigma (``CONDITIONING_SIGMA_FACTOR``: the rate
+used for the extrapolation and the damper term below adds noise). Slower sensors (1 Hz) pass one
+sample per window unchanged, without rate terms.
 
 *Tire compliance* (``tire_compliance``, default on): eq 5 takes the body's attitude over the
 road from the suspension deflections alone (rigid tires). The tires deflect too, by their load
@@ -185,6 +186,13 @@ def _clean(o):
 
 
 # ---------------------------------------------------------------------------- configuration
+CONDITIONING_SIGMA_FACTOR = 1.5
+"""Sigma of a conditioned (window mean, extrapolated, tire-corrected) suspension sample over
+sigma_H / sqrt(n): the extrapolation to the window end and the damper term use an alpha-beta
+rate whose noise adds to the mean's (module docstring). Without it the y1_sus NIS per degree of
+freedom was 2.2 on the ISO 3888 lane change, and the averaged NEES 18 % high (25 runs)."""
+
+
 def default_pipeline_config(**kw) -> PipelineConfig:
     """The system's pipeline settings: no pipeline Estimates (the system takes its own), 20 Hz
     alpha-beta bandwidths (module docstring) and a GNSS speed sigma of 0.05 m/s (Doppler
@@ -232,12 +240,14 @@ class SystemConfig:
 
     @classmethod
     def for_profile(cls, susp_rate_hz: float, susp_sigma_m: float, **kw) -> "SystemConfig":
-        """A config whose EKF suspension sigma is that of the averaged sample:
-        sigma_H / sqrt(n), n = max(1, round(sensor rate / suspension_rate_hz))."""
+        """A config whose EKF suspension sigma is that of the conditioned sample:
+        k sigma_H / sqrt(n), n = max(1, round(sensor rate / suspension_rate_hz)), k =
+        ``CONDITIONING_SIGMA_FACTOR`` when windows are averaged (n > 1), else 1."""
         rate = kw.get("suspension_rate_hz", cls.__dataclass_fields__["suspension_rate_hz"].default)
         n = 1 if rate is None else max(1, int(round(susp_rate_hz / rate)))
+        k = CONDITIONING_SIGMA_FACTOR if n > 1 else 1.0
         pc = kw.pop("pipeline", default_pipeline_config())
-        pc = replace(pc, susp_sigma_m=susp_sigma_m / math.sqrt(n))
+        pc = replace(pc, susp_sigma_m=k * susp_sigma_m / math.sqrt(n))
         return cls(pipeline=pc, **kw)
 
 
@@ -308,9 +318,13 @@ class SuspensionConditioner:
         """H at t_ns -> the EKF's sample at t_out >= t_ns: H_eff(t_out) (module docstring)."""
         ab = self._ab_raw
         self._v_prev, self._t_prev = list(ab.v), list(ab.t)
+        t_last = ab.t[0]
         ab.update(t_ns, h)
         self._ab_rate.update(t_ns, h)
-        hd = [v if math.isfinite(v) else 0.0 for v in self._ab_rate.v]
+        if t_last is None or t_ns - t_last > _MAX_SUSP_LEAD_NS:
+            hd = [0.0] * 4  # sparse samples (a 1 Hz sensor): no usable rate for the damper term
+        else:
+            hd = [v if math.isfinite(v) else 0.0 for v in self._ab_rate.v]
         if t_out != t_ns:
             dt = (t_out - t_ns) * 1e-9
             h = [h[i] + hd[i] * dt for i in range(4)]
