@@ -93,7 +93,7 @@ def fit_model(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequ
     th, obj = d.objective(cols)
     s2 = obj / max(len(d.y) - len(cols), 1)
     G = d.stats()[0].sum(axis=(0, 1))
-    A = G[np.ix_(cols, cols)] + np.diag([d.prior_w[k] for k in cols])
+    A = G[np.ix_(cols, cols)] + np.diag([d.prior_w[k] * d.prior_scale for k in cols])
     try:
         cov = np.linalg.inv(A + np.eye(len(cols)) * 1e-12 * np.trace(A) / max(len(cols), 1))
     except np.linalg.LinAlgError:

@@ -22,6 +22,13 @@ Columns (SI, names carry units; ``i`` = wheel 1..4 FL FR RR RL, axes body x fwd 
 
 EKF sigmas are in ``table.sigma`` under the same names (positions, velocities, attitude, road).
 
+Velocity (complementary, zero phase): the EKF corrects its velocity at every GNSS update (5 Hz
+steps of a few cm/s), which a 10 Hz low-pass keeps; a step of 0.01 m/s in the lateral velocity
+moves the axle forces by 100 N, far above the IMU's force noise. So the table's velocity is
+v = v_int + LP(v_EKF - v_int), with v_int the integral of C^T f + g (IMU, EKF attitude) and LP a
+zero-phase low-pass at ``velocity_crossover_hz`` (0.2 Hz): the slow part is the estimator's, the
+fast part the IMU's.
+
 Smoothing (offline, zero phase). Every signal goes through the same low-pass: a Butterworth of
 order 4 at ``cutoff_hz`` (default 10 Hz) run forward and backward (``scipy.signal.filtfilt``) on
 its own uniform grid; derivatives are central differences of the smoothed signal. Equal zero-
@@ -80,12 +87,14 @@ class DatasetConfig:
 
     period_s: grid step [s] (default 0.02: five samples per period of the cutoff); cutoff_hz: zero-phase low-pass of every signal [Hz];
     settle_s: time after the estimator's initialisation left out (filter transient) [s];
+    velocity_crossover_hz: below it the velocity is the estimator's, above it the integrated IMU's;
     min_rate_for_derivative_hz: slower sensors give no derivative; pipeline: estimator config."""
 
     period_s: float = 0.02
     cutoff_hz: float = 10.0
     settle_s: float = 1.0
     min_rate_for_derivative_hz: float = 20.0
+    velocity_crossover_hz: float = 0.2
     pipeline: PipelineConfig | None = None
 
     def __post_init__(self):
@@ -368,10 +377,7 @@ def build_table(samples: Sequence[Sample], run: EstimatorRun, vehicle: Vehicle,
         cols[n] = xs[:, k]
         sig[n] = sg[:, k]
     c = dcm_gv_batch(cols["roll_g_rad"], cols["pitch_g_rad"], cols["yaw_g_rad"])
-    vg = np.column_stack([cols["vel_g_mps_e"], cols["vel_g_mps_n"], cols["vel_g_mps_u"]])
-    vb = np.einsum("nij,nj->ni", c, vg)
-    for k, a in enumerate("xyz"):
-        cols[f"vel_b_mps_{a}"] = vb[:, k]
+    vg_raw = _on_grid(grid, te, run.est_x[:, 3:6])
 
     # --- IMU: rotate sensor -> body, smooth, derivative of the rate, move to the CG
     imu_names = list(_SF) + list(_AR)
@@ -390,6 +396,14 @@ def build_table(samples: Sequence[Sample], run: EstimatorRun, vehicle: Vehicle,
         cols[f"specific_force_b_mps2_{a}"] = f[:, k]
         cols[f"rate_b_radps_{a}"] = w[:, k]
         cols[f"angular_accel_b_radps2_{a}"] = wd[:, k]
+
+    # --- velocity: the estimate's slow part, the IMU's fast part (zero-phase complementary)
+    vg = _complementary_velocity(grid, vg_raw, c, f, cfg.velocity_crossover_hz)
+    for k, a in enumerate("enu"):
+        cols[f"vel_g_mps_{a}"] = vg[:, k]
+    vb = np.einsum("nij,nj->ni", c, vg)
+    for k, a in enumerate("xyz"):
+        cols[f"vel_b_mps_{a}"] = vb[:, k]
 
     # --- wheels: each tachometer field as its own stream (front and rear come in different frames)
     wrates = []
@@ -424,6 +438,38 @@ def build_table(samples: Sequence[Sample], run: EstimatorRun, vehicle: Vehicle,
     innov = _innovation_tables(run.innovations, rel)
     counters = {"estimator": run.counters, "samples": len(samples)}
     return DriveTable(t0_ns, grid, cols, sig, gnss, innov, rates, vehicle, counters)
+
+
+def _complementary_velocity(t: np.ndarray, v_est: np.ndarray, c_gv: np.ndarray, f_b: np.ndarray,
+                            crossover_hz: float) -> np.ndarray:
+    """v = v_int + LP(v_est - v_int), v_int = integral of C^T f + g (ENU), LP zero phase at the
+    crossover: the estimate's corrections at every GNSS update (5 Hz steps) are replaced by the
+    integrated IMU, the slow part stays the estimate's (module docstring)."""
+    ok = np.all(np.isfinite(v_est), axis=1) & np.all(np.isfinite(f_b), axis=1) & np.all(np.isfinite(c_gv), axis=(1, 2))
+    out = v_est.copy()
+    if ok.sum() < 20 or crossover_hz <= 0:
+        return out
+    idx = np.flatnonzero(ok)
+    # the longest contiguous run
+    br = np.flatnonzero(np.diff(idx) > 1)
+    st = np.r_[0, br + 1]
+    en = np.r_[br, len(idx) - 1]
+    j = int(np.argmax(en - st))
+    sel = idx[st[j]:en[j] + 1]
+    tt = t[sel]
+    acc = np.einsum("nji,nj->ni", c_gv[sel], f_b[sel]) + np.array([0.0, 0.0, -9.80665])
+    dt = np.diff(tt)
+    vint = np.zeros_like(acc)
+    vint[1:] = np.cumsum(0.5 * (acc[1:] + acc[:-1]) * dt[:, None], axis=0)
+    rate = 1.0 / float(np.median(dt))
+    if crossover_hz >= 0.45 * rate:
+        return out
+    b, a = butter(2, crossover_hz / (0.5 * rate))
+    d = v_est[sel] - vint
+    if len(d) <= 3 * max(len(a), len(b)):
+        return out
+    out[sel] = vint + filtfilt(b, a, d, axis=0)
+    return out
 
 
 def _gnss_tables(samples, origin, rel) -> dict[str, dict[str, np.ndarray]]:

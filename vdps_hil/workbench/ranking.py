@@ -75,6 +75,10 @@ class RankingConfig:
     micro_block_s: float = 0.5
     nuisance_knot_s: float = 2.0
     velocity_sigma_floor_mps: float = 0.02
+    velocity_fast_sigma_mps: float = 0.003
+    excite_lat_mps2: float = 0.5
+    excite_angacc_radps2: float = 0.05
+    excite_torque_nm: float = 20.0
     folds: int = 8
     gap_blocks: int = 1
     bic_margin: float = 10.0
@@ -96,7 +100,7 @@ class Context:
     """Everything candidates need to build columns at the current (identified) model."""
 
     def __init__(self, table: DriveTable, vehicle: Vehicle, effects: EffectSet, states: RowStates,
-                 res: EquationResiduals, inn: Innovations):
+                 res: EquationResiduals, inn: Innovations, fast_sigma_mps: float = 0.003):
         self.table = table
         self.vehicle = vehicle
         self.effects = effects
@@ -115,12 +119,28 @@ class Context:
             self._u = u * keep[:, None, :]
         else:
             self._u = np.zeros((0, int(self.avail.sum()), 4))
+        # fast (row to row) body-velocity errors: a soft projection, i.e. whitening with the
+        # noise covariance I + J S J^T, J = d r / d(v_x, v_y) (whitened), S = sigma_fast^2
+        jv = res.nuisance[self.rows][:, self.avail, :2] / sig[None, :, None]
+        self._us = np.zeros((len(jv), int(self.avail.sum()), 2))
+        self._fs = np.zeros((len(jv), 2))
+        if len(jv) and fast_sigma_mps > 0:
+            jv = self._hard(jv) * fast_sigma_mps
+            u2, s2, _ = np.linalg.svd(jv, full_matrices=False)
+            self._us = u2
+            self._fs = 1.0 - 1.0 / np.sqrt(1.0 + s2 * s2)
         self.y_dyn = self.project(self.y_dyn[:, :, None])[:, :, 0]
 
-    def project(self, a: np.ndarray) -> np.ndarray:
-        """Remove the row-wise nuisance directions from whitened columns (n, E, p)."""
+    def _hard(self, a: np.ndarray) -> np.ndarray:
         u = self._u
         return a - np.einsum("nek,nkp->nep", u, np.einsum("nek,nep->nkp", u, a))
+
+    def project(self, a: np.ndarray) -> np.ndarray:
+        """Remove the row-wise nuisance directions from whitened columns (n, E, p): the
+        longitudinal tire forces exactly, the fast velocity errors in proportion to their sigma."""
+        a = self._hard(a)
+        u = self._us * self._fs[:, None, :]
+        return a - np.einsum("nek,nkp->nep", u, np.einsum("nek,nep->nkp", self._us, a))
 
     def smooth_columns(self, knot_s: float, floor_mps: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
         """The estimator's slowly varying body-velocity errors (delta v_x, delta v_y) as
@@ -129,7 +149,12 @@ class Context:
         t = self.res.t_s
         if not len(t):
             return np.zeros((0, 14, 0)), np.zeros(0)
-        sv = np.hypot(self.table.sigma["vel_g_mps_e"], self.table.sigma["vel_g_mps_n"])[self.res.index] / math.sqrt(2.0)
+        tsig, tc = self.table.sigma, self.table.columns
+        idx = self.res.index
+        sv = np.hypot(tsig["vel_g_mps_e"], tsig["vel_g_mps_n"])[idx] / math.sqrt(2.0)
+        # the body lateral velocity also inherits the heading error: v sigma_psi
+        speed = np.hypot(tc["vel_g_mps_e"], tc["vel_g_mps_n"])[idx]
+        svy = np.hypot(sv, speed * tsig["yaw_g_rad"][idx])
         t0, t1 = float(t[0]), float(t[-1])
         k = max(1, int(math.ceil((t1 - t0) / knot_s)))
         knots = np.linspace(t0, t1, k + 1)
@@ -138,11 +163,10 @@ class Context:
         sig = np.zeros(2 * (k + 1))
         for j, tk in enumerate(knots):
             phi = np.clip(1.0 - np.abs(t - tk) / dk, 0.0, None)
-            near = (phi > 0) & np.isfinite(sv)
-            s_j = max(float(np.median(sv[near])) if near.any() else floor_mps, floor_mps)
-            for c in range(2):
+            for c, sc in enumerate((sv, svy)):
+                near = (phi > 0) & np.isfinite(sc)
                 out[:, :, 2 * j + c] = self.res.nuisance[:, :, c] * phi[:, None]
-                sig[2 * j + c] = s_j
+                sig[2 * j + c] = max(float(np.median(sc[near])) if near.any() else floor_mps, floor_mps)
         return out, sig
 
     def whiten_project(self, x14: np.ndarray) -> np.ndarray:
@@ -251,6 +275,7 @@ class Design:
         self.scale: list[float] = []
         self.prior_w: list[float] = []  # prior weight per column (0 = none), scaled units
         self.prior_c: list[float] = []  # prior centre per column, scaled units
+        self.prior_scale = 1.0  # n / n_eff: the data rows are correlated, the priors are not
         self._stats = None
         if len(inn):
             nu = inn.nuisance / inn.sigma[:, None]
@@ -369,7 +394,7 @@ class Design:
 
     def _solve(self, G, c, cols):
         """MAP estimate: (G + W) theta = c + W theta_c (Gaussian priors on some columns)."""
-        prior = np.array([self.prior_w[k] for k in cols])
+        prior = np.array([self.prior_w[k] for k in cols]) * self.prior_scale
         centre = np.array([self.prior_c[k] for k in cols])
         A = G[np.ix_(cols, cols)] + np.diag(prior)
         tr = np.trace(A) / max(len(cols), 1)
@@ -382,7 +407,7 @@ class Design:
 
     def penalty(self, cols, th) -> float:
         """Prior term of the MAP objective at theta."""
-        w = np.array([self.prior_w[k] for k in cols])
+        w = np.array([self.prior_w[k] for k in cols]) * self.prior_scale
         c = np.array([self.prior_c[k] for k in cols])
         return float(np.sum(w * (np.asarray(th) - c) ** 2))
 
@@ -539,7 +564,7 @@ def _identify(table, vehicle, effects, states, inn, config, reference=None, phis
         if done:
             break
     G = d.stats()[0].sum(axis=(0, 1))
-    pw = np.array(d.prior_w)
+    pw = np.array(d.prior_w) * d.prior_scale
     A = G[np.ix_(cols, cols)] + np.diag(pw[cols])
     try:
         cov = np.linalg.inv(A + np.eye(len(A)) * 1e-12 * np.trace(A) / len(A))
@@ -547,7 +572,7 @@ def _identify(table, vehicle, effects, states, inn, config, reference=None, phis
         cov = np.linalg.pinv(A)
     pos = {k: j for j, k in enumerate(cols)}
     sig = {p: math.sqrt(max(cov[pos[d.blocks[p][0]], pos[d.blocks[p][0]]], 0.0)) / d.scale[d.blocks[p][0]]
-           for p in config.identify}
+           for p in config.identify if p in d.blocks}
     return point, d, cols, sig
 
 
@@ -632,9 +657,19 @@ def _build(table, states, inn, ref: Vehicle, point: _Point, cfg: RankingConfig, 
     """Design at a linearisation point: nuisance, the ten parameters, the selected effects'
     change columns (always on) and the screening columns of ``screen``."""
     res = compute_residuals(table, point.base, point.effects, states=states)
-    ctx = Context(table, point.base, point.effects, states, res, inn)
+    ctx = Context(table, point.base, point.effects, states, res, inn, cfg.velocity_fast_sigma_mps)
     d = Design(ctx, cfg)
+    if getattr(states, "prior_scale", None) is None:
+        # the residual rows are autocorrelated: their weight against the (independent) priors is
+        # n_eff / n; measured once per drive on the first residual (conservative: slow misfit
+        # lengthens the correlation)
+        states.prior_scale = max(1.0, len(d.y) / _n_eff(d, d.y))
+    d.prior_scale = states.prior_scale
+    if getattr(states, "excited_params", None) is None:
+        states.excited_params = excited_parameters(table, states, cfg)
     for p in cfg.identify:
+        if p not in states.excited_params:
+            continue
         pv = getattr(ref.params, p)
         d.add_block(p, ctx.param_columns(p), None, prior_sigma=[cfg.base_prior_rel_sigma * abs(pv)],
                     prior_center=[pv - getattr(point.base.params, p)])
@@ -651,11 +686,46 @@ def _build(table, states, inn, ref: Vehicle, point: _Point, cfg: RankingConfig, 
     return ctx, d, d.columns_of(names)
 
 
+def excited_parameters(table: DriveTable, states: RowStates, cfg: RankingConfig) -> set[str]:
+    """The identified parameters this drive excites (as the paper's RLS gates its rows): a
+    parameter whose driving signal hardly varies is held at the model file's value.
+
+    ===============================  ===========================================================
+    parameter                        excited when (std over the usable rows)
+    ===============================  ===========================================================
+    mass                             always (eq 20: the suspension carries it at rest)
+    cornering stiffnesses            lateral specific force >= ``excite_lat_mps2``
+    roll / pitch / yaw inertia       angular acceleration about that axis >= ``excite_angacc_radps2``
+    slip stiffness of wheel i        its wheel torque >= ``excite_torque_nm``
+    ===============================  ===========================================================
+    """
+    c = table.columns
+    idx = states.index
+    out = {"mass_kg"}
+
+    def sd(name):
+        v = c[name][idx]
+        v = v[np.isfinite(v)]
+        return float(np.std(v)) if len(v) > 10 else 0.0
+
+    if sd("specific_force_b_mps2_y") >= cfg.excite_lat_mps2:
+        out |= {"cornering_stiffness_front_nprad", "cornering_stiffness_rear_nprad"}
+    for a, p in zip("xyz", ("inertia_x_kgm2", "inertia_y_kgm2", "inertia_z_kgm2")):
+        if sd(f"angular_accel_b_radps2_{a}") >= cfg.excite_angacc_radps2:
+            out.add(p)
+    for i in range(1, 5):
+        if sd(f"wheel_torque_nm_{i}") >= cfg.excite_torque_nm:
+            out.add(f"tracking_stiffness_{i}_n")
+    return out & set(cfg.identify)
+
+
 def _apply_base(point: _Point, d: Design, cols, th, cfg: RankingConfig, ref: Vehicle) -> Vehicle:
     pos = {k: j for j, k in enumerate(cols)}
     lo, hi = cfg.base_bounds
     changes = {}
     for p in cfg.identify:
+        if p not in d.blocks or d.blocks[p][0] not in pos:
+            continue
         k = d.blocks[p][0]
         pv = getattr(ref.params, p)
         changes[p] = min(max(getattr(point.base.params, p) + th[pos[k]] / d.scale[k], lo * pv), hi * pv)
@@ -912,7 +982,7 @@ def _theta_of(d: Design, name: str, cols: Sequence[int], th: np.ndarray) -> np.n
 
 def _sigma_of(d: Design, name: str, cols: Sequence[int], s2: float, ratio: float) -> np.ndarray:
     G, _, _, _ = d.stats()
-    A = G.sum(axis=(0, 1))[np.ix_(cols, cols)] + np.diag([d.prior_w[k] for k in cols])
+    A = G.sum(axis=(0, 1))[np.ix_(cols, cols)] + np.diag([d.prior_w[k] * d.prior_scale for k in cols])
     try:
         cov = np.linalg.inv(A + np.eye(len(cols)) * 1e-12 * np.trace(A) / max(len(cols), 1))
     except np.linalg.LinAlgError:
@@ -930,9 +1000,14 @@ def _parameter_entries(d: Design, ctx: Context, ref: Vehicle, base: Vehicle, cur
     th_all, _, _ = d.fit(current)
     pos = {k: j for j, k in enumerate(current)}
     for p in cfg.identify:
-        k = d.blocks[p][0]
         ref_v = getattr(ref.params, p)
         cur = getattr(base.params, p)
+        if p not in d.blocks:
+            out.append(RankEntry(effect=PARAM_ALIASES[p], kind="parameter", explained_fraction=0.0,
+                                 explained_by_equation={}, parameters={p: (cur, math.nan)}, plausible=cur > 0,
+                                 excited=False, excitation_z=math.nan, group=[], reference={p: ref_v}))
+            continue
+        k = d.blocks[p][0]
         # residual with the parameter back at the reference: y + X_p (ref - cur) ... in scaled units
         shift = (ref_v - cur) * d.scale[k]
         others = [j for j in current if j != k]
@@ -1019,6 +1094,8 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
                 grp.append(other)
         for p in params:
             pname = next(iter(p.parameters))
+            if pname not in d.blocks:
+                continue
             r2, th_o = mimic(th, cols, pname)
             cur = next(iter(p.parameters.values()))[0]
             if r2 >= r2min and cur + th_o[0] > 0:
@@ -1027,6 +1104,8 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
     # parameter entries: which effects would explain their move from the reference
     for p in params:
         pname = next(iter(p.parameters))
+        if pname not in d.blocks:
+            continue
         k = d.blocks[pname][0]
         ref_v = p.reference[pname]
         cur = next(iter(p.parameters.values()))[0]

@@ -37,7 +37,8 @@ from typing import Sequence
 from vdps_hil.sim.profiles import SensorProfile, load_profile
 from vdps_hil.sim.scenarios import Scenario, parse_scenario
 
-__all__ = ["MANEUVERS", "HIDDEN", "scenario", "study_profile", "hidden_drive", "NULL_MANEUVERS"]
+__all__ = ["MANEUVERS", "HIDDEN", "scenario", "study_profile", "hidden_drive", "NULL_MANEUVERS", "is_hit",
+           "wilson_interval"]
 
 MANEUVERS: dict[str, str] = {
     "accel-coast": """name = "accel-coast"
@@ -155,3 +156,26 @@ def hidden_drive(path: str | os.PathLike, maneuver: str, effects: Sequence[str] 
 
     sc = scenario(maneuver, duration_s)
     return Drive(sc, seed=seed, effects=list(effects), profile=profile or study_profile()).run(path)
+
+
+def is_hit(ranking, effect: str) -> bool:
+    """The issue's hit: the hidden effect is recommended, or it is in the reported top
+    equivalence group together with an alternative (named in the message), or the
+    recommendation names it as equivalent."""
+    if ranking.recommendation == effect:
+        return True
+    if ranking.recommendation and effect in ranking.equivalent_to:
+        return True
+    groups = [g for g in ranking.groups if len(g["members"]) >= 2]
+    return bool(groups) and effect in groups[0]["members"]
+
+
+def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion k/n (95 % for the default z)."""
+    if n <= 0:
+        return (0.0, 1.0)
+    p = k / n
+    den = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / den
+    half = z * ((p * (1 - p) / n + z * z / (4 * n * n)) ** 0.5) / den
+    return (max(0.0, centre - half), min(1.0, centre + half))

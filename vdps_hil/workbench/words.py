@@ -94,6 +94,8 @@ def describe_entry(rk, e) -> str:
         (p, (v, s)), = e.parameters.items()
         ref = e.reference.get(p, math.nan)
         unit, k = _unit(p)
+        if not e.excited:
+            return f"{label}: not excited on this drive, held at the model file's {ref / k:.4g} {unit}"
         msg = f"{label}: identified {v / k:.4g} +- {s / k:.2g} {unit} (model file {ref / k:.4g} {unit})"
         if e.group:
             alts = [g for g in e.group if g != e.effect]
