@@ -178,3 +178,11 @@ def test_the_model_file_is_the_truth_files_pair():
     assert model_for("configs/vehicles/suv-truth.toml") == "suv-model" and model_for("sedan-truth") == "sedan-model"
     with pytest.raises(BenchError, match="give --model"):
         model_for("my-car")
+
+
+def test_an_injected_fault_shows_in_the_sequence_counters_not_as_a_bench_loss():
+    d = Bench(BenchConfig(scenario="paper", duration_s=1.0, speed=CI_SPEED,
+                          faults=("dropped_frames:fraction=0.05",))).run().to_json()
+    assert d["faults"] == ["dropped_frames:fraction=0.05"]
+    assert d["dropped"] == 0 and d["frames_received"] == d["frames_sent"]  # the wires lost nothing
+    assert d["seq_counters"]["can_counter_breaks"] > 0  # the pipeline sees the frames the fault removed

@@ -27,8 +27,12 @@ results (cycle log, sent frames, counters, its part of the recording) in a work 
 
 End of a run: when the drive has ended and every item is sent, the bench waits until the
 pipeline has received as much as was sent (``drain_timeout_s`` at most), lets it finish what is
-queued and stops it. Lost data is counted per stream from the senders' and receivers' counts
-(and cross-checked by the sequence counters: CAN ``lost_frames``, IMU ``seq_gaps``).
+queued and stops it. Lost data (``dropped``) is counted per stream from the devices' and the
+pipeline's counts: CAN frames, IMU packets, NMEA lines, plus overflows of the pipeline's queue;
+the sequence counters cross-check it (``seq_counters``: breaks of the CAN frames' rolling
+counters as received, IMU packet counter gaps) -- without injected faults both are zero on a
+bench that loses nothing; a ``dropped_frames`` or ``serial_disconnect`` fault shows in the
+counters only, since it acts before the wires.
 
 Results (``BenchResult.to_json``): the ``--json`` keys of ``vdps bench`` (``hil`` issue):
 ``frames_sent``, ``frames_received``, ``lines_sent``, ``lines_received``, ``dropped``,
@@ -56,7 +60,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 
@@ -338,8 +342,11 @@ class Bench:
         lines_received = counters["gnss"]["lines"]
         frames_generated = sent["frames_sent"] + sent["frames_dropped_at_device"]
         frames_received = counters["can"]["frames"]
-        lost = {"can_frames": max(frames_generated - frames_received, counters["can"]["counter_breaks"]),
-                "imu_packets": max(imu_packets_sent - imu_packets_received, counters["imu"]["seq_gaps"]),
+        # lost on the bench's wires: what the devices were given minus what the pipeline decoded
+        # (a fault injected into the drive -- dropped_frames, serial_disconnect -- removes data
+        # before the devices: it shows in the sequence counters, not here)
+        lost = {"can_frames": max(frames_generated - frames_received, 0),
+                "imu_packets": max(imu_packets_sent - imu_packets_received, 0),
                 "gnss_lines": max(lines_sent - lines_received, 0)}
         dropped = sum(lost.values()) + counters["subscription_overflows"]
         # --- latency

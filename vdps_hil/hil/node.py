@@ -32,9 +32,9 @@ node also writes it to the recording as the metadata record ``hil.input_order`` 
 per sample, in order), so a replay can feed the recorded ``/decoded/`` samples in exactly the
 live order (``input_order_samples``).
 
-Output cycles (``hil.latency``): every ``handle`` that returned outputs adds a row to
-``cycles`` with the input's index in its stream (CAN frames received so far, or the offset of
-the last serial byte read so far) and the time the outputs were out.
+Output cycles (``hil.latency``): every ``handle`` adds a row to ``cycles`` with the index of
+the raw record that carried the sample in its stream (the CAN frames received up to it, or the
+offset of the last serial byte read up to it) and the time its outputs were out.
 
 The node never opens truth: it has the model vehicle, the wires and the bench clock.
 """
@@ -60,7 +60,7 @@ from vdps_hil.codecs.can_codec import VdpsCanDecoder
 from vdps_hil.record import schemas as S
 from vdps_hil.system import _est_docs  # the /est/ layout of ``vdps replay``
 
-from .latency import SOURCES, CycleLog
+from .latency import CycleLog
 
 __all__ = ["PipelineNode", "InputSequencer", "InterfaceTimeCanAdapter", "DeviceTimeProtocol",
            "INPUT_ORDER_METADATA", "input_order_samples", "IMU_BAUD", "GNSS_BAUD", "LIVE_CLOCK_JUMP_S"]
