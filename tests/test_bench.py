@@ -38,7 +38,12 @@ def assert_nothing_lost(d: dict) -> None:
 def rollover_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench") / "fishhook.mcap"
     seen = []
-    r = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, output=str(out))).run(seen.append)
+
+    def status(s):
+        s["listening"] = listening_sockets(s["pids"]["simulator"])
+        seen.append(s)
+
+    r = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, output=str(out))).run(status)
     return r.to_json(), out, seen
 
 
@@ -60,8 +65,10 @@ def test_embedded_bench_loses_nothing_warns_early_and_rolls_over_without_the_ecu
     assert d["warning_latency_ms"]["p50"] <= d["warning_latency_ms"]["p99"] <= d["warning_latency_ms"]["max"]
     assert d["sends"] > 0 and 0 <= d["late_sends"] <= d["sends"]
     assert d["realtime_factor"] > 0.5 * CI_SPEED
-    # the status line saw the run progress and end
+    # the status line saw the run progress and end; the embedded bench listens on no network
+    # socket but loopback
     assert seen[-1]["final"] and seen[-1]["frames_sent"] == d["frames_sent"]
+    assert all(addr == "127.0.0.1" for s in seen for addr, _ in s["listening"])
     assert {"t_s", "roll_deg", "warning_level", "late_sends"} <= set(seen[0])
 
 
