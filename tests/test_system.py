@@ -150,10 +150,12 @@ def test_tire_compliance_adds_the_load_change_over_the_tire_stiffness():
 def test_nees_of_five_seeded_runs_through_the_real_chain():
     """Issue 5's NEES check on the real chain (wire formats -> decode -> system), 5 runs of the
     ISO 3888 lane change, table1-susp1k, 12 s each, epochs after 5 s, two-sided 95 % band of the
-    averaged NEES ([7.28, 15.48] for 5 runs x 11 states). tools/nees_study.py runs the 25-run
-    version. Measured on these seeds: 90.4 % of the epochs inside, mean NEES / n = 1.13 (the
-    errors are correlated in time, so 5 runs give a noisy average: the 5-8 s part alone is at
-    78 %). Asserted with a margin for tuning changes: >= 80 % inside, mean NEES / n in 0.8-1.3."""
+    averaged NEES ([7.28, 15.48] for 5 runs x 11 states). Measured on these seeds: 95.4 % of the
+    epochs inside, mean NEES / n = 0.92. The 25-run version (tools/nees_study.py, band [9.24,
+    12.91]) reaches 78 % inside with mean NEES / n = 0.99: the filter is consistent on average
+    but over-confident during the lane change (averaged NEES up to 1.4 n) and under-confident on
+    the straight after it (0.7 n), which 25 runs resolve and 5 do not. Asserted with a margin:
+    >= 80 % inside, mean NEES / n in 0.8-1.3 (the honest level for 5 runs, not the 90 % goal)."""
     m = _nees_tool()
     runs = [m.run_chain("lane-change-iso3888", 100 + k, duration_s=12.0) for k in range(5)]
     s = m.nees_summary(runs)

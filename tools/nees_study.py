@@ -140,7 +140,9 @@ def nees_summary(runs: list[dict], t_min_s: float = 5.0) -> dict:
 
     with np.errstate(invalid="ignore", divide="ignore"):
         nev = {STATE_NAMES[i]: float(np.nanmean((e[:, i] / s[:, i]) ** 2)) for i in idx}
-    return {"runs": N, "n_states": n, "epochs": int(len(ts)), "band": [lo, hi],
+    bins = np.floor(ts * 2.0) / 2.0  # averaged NEES per 0.5 s, to see where it leaves the band
+    profile = {f"{b:.1f}": float(avg[bins == b].mean()) for b in np.unique(bins)}
+    return {"runs": N, "n_states": n, "epochs": int(len(ts)), "band": [lo, hi], "profile_0p5s": profile,
             "fraction_inside": float(inside.mean()), "fraction_above": float((avg > hi).mean()),
             "fraction_below": float((avg < lo).mean()), "mean_nees_per_state": float(avg.mean() / n),
             "median_nees": float(np.median(avg)), "normalised_error_variance": nev}
