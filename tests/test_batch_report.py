@@ -12,7 +12,7 @@ import pytest
 
 from vdps_hil.batch.engine import EngineConfig, Task, run_batch
 from vdps_hil.batch.report import (aggregate_from_dir, identified_params, parameter_flags,
-                                   recommended_effects, render_html, write_report)
+                                   prior_params, recommended_effects, render_html, write_report)
 
 
 def _fleet(rng, n=12, jump_at=7, jump_kg=320.0):
@@ -68,6 +68,8 @@ def test_result_layouts_are_read():
     assert identified_params(a) == identified_params(b) == {"mass_kg": (1500.0, 9.0)}
     assert identified_params(c) == {"mass_kg": (1500.0, None)}
     assert identified_params(None) == {} and identified_params({"estimator": {}}) == {}
+    assert prior_params({"identification": {"prior": {"mass_kg": 1550.0, "bad": "x"}}}) == {"mass_kg": 1550.0}
+    assert prior_params(b) == {} and prior_params(None) == {}
     assert recommended_effects({"recommended_effects": ["a", {"name": "b"}, {"effect": "c"}, 3]}) \
         == ["a", "b", "c"]
     assert recommended_effects({"effects": {"recommended": ["d"]}}) == ["d"]

@@ -9,6 +9,7 @@ expensive part)."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -20,7 +21,10 @@ import pytest
 
 from vdps_hil.batch.engine import (AGGREGATE, Engine, EngineConfig, Outcome, Task, execute,
                                    result_path, run_batch, strip_run, to_jsonable)
+from vdps_hil.batch.keys import tool_version
 from vdps_hil.batch.tasks import replay_tasks
+from vdps_hil.batch.report import identified_params, parameter_flags, render_html
+from vdps_hil.model.params import load_vehicle
 from vdps_hil.sim.drive import Drive
 
 distributed = pytest.importorskip("distributed")
@@ -31,13 +35,19 @@ DRIVE_S = 1.0
 VENV_BIN = Path(sys.executable).parent
 
 
+HEAVY = 5
+"""The drive with 300 kg more on board (passengers, luggage): the fleet report must flag it."""
+
+
 @pytest.fixture(scope="module")
 def drives(tmp_path_factory) -> list[str]:
     d = tmp_path_factory.mktemp("drives")
+    truth = load_vehicle("sedan-truth")
     paths = []
     for seed in range(N_DRIVES):
         p = d / f"drive{seed}.mcap"
-        Drive("paper", seed=seed, duration_s=DRIVE_S).run(p)
+        veh = truth.with_params(mass_kg=truth.params.mass_kg + 300.0) if seed == HEAVY else truth
+        Drive("paper", seed=seed, duration_s=DRIVE_S, vehicle=veh).run(p)
         paths.append(os.fspath(p))
     return paths
 
@@ -79,6 +89,21 @@ def _listening(procs) -> list[tuple[int, str, int]]:
 def _tree(pid: int) -> list:
     p = psutil.Process(pid)
     return [p] + p.children(recursive=True)
+
+
+def test_the_fleet_report_flags_the_drive_where_the_mass_jumped(serial):
+    agg = serial[0].aggregate
+    ids = [t["id"] for t in agg["tasks"]]
+    masses = [identified_params(t["result"])["mass_kg"] for t in agg["tasks"]]
+    _, _, z = parameter_flags([m for m, _ in masses], [s for _, s in masses])
+    assert [i for i, zi in zip(ids, z) if abs(zi) > 3] == [f"drive{HEAVY}"]
+    # the identified jump is the 300 kg put on board, within 3 sigma of both drives
+    others = [m for i, (m, _) in enumerate(masses) if i != HEAVY]
+    jump = masses[HEAVY][0] - sorted(others)[len(others) // 2]
+    assert abs(jump - 300.0) < 3 * math.hypot(masses[HEAVY][1], masses[0][1]) + 5.0
+    html = render_html(agg)
+    flagged = html[html.index("Drives that differ"):html.index("Failed drives")]
+    assert f"drive{HEAVY}" in flagged and "mass_kg" in flagged
 
 
 # ------------------------------------------------------------------------------ LocalCluster
@@ -200,6 +225,10 @@ def test_a_separately_started_cluster_runs_a_batch_with_a_corrupt_and_a_missing_
                     kind="replay")
     assert res.info["scheduler"] == address and res.info["workers"] == 2
     assert res.info["allowed_failures"] == 1  # read back from the scheduler
+    # the workers report their tool version; a mismatch with this process is a warning (in
+    # this shared development tree the source may change between client and worker start)
+    assert len(res.info["worker_tools"]) == 1
+    assert ("warnings" in res.info) == (res.info["worker_tools"] != [tool_version()])
     by_id = {o.id: o for o in res.outcomes}
     assert [o.id for o in res.outcomes] == ["drive0", "drive1", "drive2", "drive3", "corrupt", "gone"]
     ser = {o.id: o for o in serial[0].outcomes}

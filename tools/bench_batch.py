@@ -13,6 +13,11 @@ LocalCluster of 1 and of N worker processes; times are the batch alone (cluster 
 reported separately) and the speed-up is T(1) / T(N). The results of every run are checked to
 be identical apart from the timing fields.
 
+On a shared machine the wall-clock speed-up is only meaningful when nothing else runs (the
+load average is printed before and after). The CPU time of every task (``run.cpu_s``) does not
+depend on contention: the tool also prints the contention-free estimate T_cpu(1 worker) / max
+over workers of T_cpu(worker), labelled as an estimate.
+
 Memory: ``run.peak_rss_mib`` of each task is the worker process's peak resident set
 (``getrusage``), so the maximum over a worker's tasks is that worker's peak. With ``--memory``
 one task runs on a 1-worker cluster while this process samples the worker's RSS (psutil)
@@ -62,10 +67,11 @@ def run_once(paths: list[str], backend: str, workers: int, trace_memory: bool = 
         raise SystemExit(f"{len(bad)} task(s) failed: {bad[0].id}: {bad[0].error}")
     per_pid: dict[int, dict] = {}
     for o in outcomes:
-        w = per_pid.setdefault(o.run["pid"], {"tasks": 0, "busy_s": 0.0, "peak_rss_mib": 0.0,
-                                              "py_heap_peak_mib": 0.0})
+        w = per_pid.setdefault(o.run["pid"], {"tasks": 0, "busy_s": 0.0, "cpu_s": 0.0,
+                                              "peak_rss_mib": 0.0, "py_heap_peak_mib": 0.0})
         w["tasks"] += 1
         w["busy_s"] += o.run["wall_s"]
+        w["cpu_s"] += o.run["cpu_s"]
         w["peak_rss_mib"] = max(w["peak_rss_mib"], o.run["peak_rss_mib"])
         w["py_heap_peak_mib"] = max(w["py_heap_peak_mib"], o.run.get("py_heap_peak_mib", 0.0))
     return {"startup_s": t1 - t0, "batch_s": t2 - t1, "workers": per_pid,
@@ -75,15 +81,21 @@ def run_once(paths: list[str], backend: str, workers: int, trace_memory: bool = 
 def speedup(args) -> None:
     paths = make_drives(Path(args.dir), args.drives, args.duration)
     print(f"bench_batch: {args.drives} drives of {args.duration:g} s ('paper', table1-susp1k), "
-          f"backend {args.backend}, {os.cpu_count()} CPU(s)")
+          f"backend {args.backend}, {os.cpu_count()} CPU(s), load average before "
+          f"{os.getloadavg()[0]:.1f}")
     runs = {}
     for n in args.workers:
         r = run_once(paths, args.backend, n)
         runs[n] = r
         peaks = ", ".join(f"{w['peak_rss_mib']:.0f}" for w in r["workers"].values())
+        cpu = [w["cpu_s"] for w in r["workers"].values()]
+        r["cpu_total_s"], r["cpu_makespan_s"] = sum(cpu), max(cpu)
         print(f"  {n} worker(s): start-up {r['startup_s']:5.1f} s, batch {r['batch_s']:6.1f} s "
               f"({args.drives * args.duration / r['batch_s']:.2f} s of drive per s), "
-              f"{len(r['workers'])} worker process(es) used, peak RSS per worker [MiB]: {peaks}")
+              f"{len(r['workers'])} worker process(es) used, peak RSS per worker [MiB]: {peaks}; "
+              f"task CPU {sum(cpu):.1f} s (per worker {', '.join(f'{c:.1f}' for c in cpu)}), "
+              f"CPU share of the worker time {sum(cpu) / (n * r['batch_s']):.0%}; "
+              f"load average after {os.getloadavg()[0]:.1f}")
     base = runs[args.workers[0]]
     for n in args.workers[1:]:
         r = runs[n]
@@ -91,6 +103,9 @@ def speedup(args) -> None:
         print(f"  speed-up {args.workers[0]} -> {n} workers: {base['batch_s'] / r['batch_s']:.2f}x "
               f"(batch only), {(base['batch_s'] + base['startup_s']) / (r['batch_s'] + r['startup_s']):.2f}x "
               f"(with start-up); results identical: {same}")
+        print(f"  contention-free estimate (CPU time): {base['cpu_total_s'] / r['cpu_makespan_s']:.2f}x "
+              f"(total task CPU of the 1-worker run / the busiest worker's task CPU of this run; "
+              f"an estimate for an otherwise idle machine, not a measurement)")
 
 
 def memory(args) -> None:

@@ -29,8 +29,9 @@ Failure model
 * A task that **raises** (corrupt file, unsupported format, bad config) does not stop the
   batch: :func:`execute` catches ``Exception`` in the worker and returns
   ``status = "failed"`` with ``error = {"type", "message"}`` (one line). The others go on.
-* A worker **process that dies** (killed, out of memory, segfault) has its task retried on
-  another worker. Dask: the scheduler's ``allowed-failures`` is set explicitly to
+* A worker **process that dies** (killed, out of memory, segfault; a LocalCluster worker
+  above its memory limit, RAM / workers by default, is restarted by its nanny) has its task
+  retried on another worker. Dask: the scheduler's ``allowed-failures`` is set explicitly to
   ``EngineConfig.allowed_failures`` (default :data:`DEFAULT_ALLOWED_FAILURES` = 2, so a task
   runs at most 3 times; Dask's own default is 3); a task that was on a dying worker more often
   than that is reported as failed ("worker died ... times") instead of killing a whole
@@ -44,8 +45,8 @@ Failure model
 
 Timing fields
 -------------
-Everything that depends on the machine or the run (worker pid and host, wall time, peak
-memory, attempts, whether the result was reused) is under a ``"run"`` key (per task and in the
+Everything that depends on the machine or the run (worker pid and host, wall and CPU time,
+peak memory, attempts, whether the result was reused) is under a ``"run"`` key (per task and in the
 aggregate), so two runs of the same batch give documents that are identical once ``"run"`` is
 removed (``strip_run``), whatever backend or number of workers computed them.
 
@@ -165,6 +166,7 @@ def execute(fn: str, kwargs: Mapping[str, Any], trace_memory: bool = False, args
     """Run one task in a worker: ``{"status", "result", "error", "run"}``. Never raises for an
     ``Exception`` of the task (it becomes ``status = "failed"`` with a one-line error)."""
     t0 = time.perf_counter()
+    c0 = time.process_time()
     rss0 = _peak_rss_mib()
     if trace_memory:
         import tracemalloc
@@ -179,7 +181,7 @@ def execute(fn: str, kwargs: Mapping[str, Any], trace_memory: bool = False, args
         status, result = "failed", None
         error = {"type": type(e).__name__, "message": _one_line(e)}
     run = {"pid": os.getpid(), "host": socket.gethostname(),
-           "wall_s": time.perf_counter() - t0,
+           "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
            "peak_rss_mib": _peak_rss_mib(), "peak_rss_mib_before": rss0}
     if trace_memory:
         import tracemalloc
@@ -294,6 +296,7 @@ class Engine:
             self.info["allowed_failures"] = self._client.run_on_scheduler(_scheduler_allowed_failures)
             self.info["workers"] = len(self._client.scheduler_info()["workers"])
             self.info["dashboard"] = None
+            self._check_worker_versions()
             return
         n = cfg.resolved_workers()
         with dask.config.set({"distributed.scheduler.allowed-failures": cfg.allowed_failures}):
@@ -308,6 +311,24 @@ class Engine:
         self.info["workers"] = n
         self.info["scheduler"] = self._cluster.scheduler_address
         self.info["dashboard"] = self._cluster.dashboard_link if cfg.dashboard else None
+
+    def _check_worker_versions(self) -> None:
+        """Every worker of an existing cluster must run this tool version (the results are
+        keyed by it): the versions seen go to ``info["worker_tools"]``, a mismatch to
+        ``info["warnings"]``."""
+        try:
+            seen = self._client.run(tool_version)
+        except Exception as e:  # noqa: BLE001 - e.g. a worker without this package
+            self.info.setdefault("warnings", []).append(
+                f"could not ask the workers for their vdps-hil version: {_one_line(e)}")
+            return
+        mine = tool_version()
+        self.info["worker_tools"] = sorted(set(seen.values()))
+        odd = sorted(addr for addr, v in seen.items() if v != mine)
+        if odd:
+            self.info.setdefault("warnings", []).append(
+                f"{len(odd)} worker(s) run another vdps-hil ({', '.join(sorted({seen[a] for a in odd}))}; "
+                f"this client: {mine}): their results may differ from a local run")
 
     def _new_pool(self):
         return cf.ProcessPoolExecutor(max_workers=self.config.resolved_workers(),

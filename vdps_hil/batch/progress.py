@@ -100,6 +100,8 @@ class Progress:
                 text += f", dashboard {info['dashboard']}"
             text += f", allowed-failures {info.get('allowed_failures')}"
         self._say(text)
+        for w in info.get("warnings") or []:
+            self._say(f"{self.label}: warning: {w}")
 
     def update(self, outcome) -> None:
         if outcome.ok:

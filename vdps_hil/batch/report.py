@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 __all__ = ["write_report", "render_html", "aggregate_from_dir", "identified_params",
-           "recommended_effects", "parameter_flags", "drive_summary", "Z_FLAG"]
+           "recommended_effects", "prior_params", "parameter_flags", "drive_summary", "Z_FLAG"]
 
 Z_FLAG = 3.0
 
@@ -83,6 +83,17 @@ def identified_params(result: Mapping[str, Any] | None) -> dict[str, tuple[float
         if out:
             return out
     return {}
+
+
+def prior_params(result: Mapping[str, Any] | None) -> dict[str, float]:
+    """The identifier's start values (the model vehicle file's ``prior`` in a replay result)."""
+    if not isinstance(result, Mapping):
+        return {}
+    block = result.get("identification")
+    prior = block.get("prior") if isinstance(block, Mapping) else None
+    if not isinstance(prior, Mapping):
+        return {}
+    return {str(k): x for k, v in prior.items() if (x := _num(v)) is not None}
 
 
 def recommended_effects(result: Mapping[str, Any] | None) -> list[str]:
@@ -194,7 +205,8 @@ def _png(fig) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def _param_figure(ids: list[str], table: dict[str, dict], z_flag: float) -> tuple[str | None, list]:
+def _param_figure(ids: list[str], table: dict[str, dict], z_flag: float,
+                  priors: Mapping[str, float] | None = None) -> tuple[str | None, list]:
     import matplotlib
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
@@ -219,6 +231,8 @@ def _param_figure(ids: list[str], table: dict[str, dict], z_flag: float) -> tupl
                         color="tab:red" if bad else "tab:blue")
             if bad:
                 flags.append((i, name, v, s, ref, zi))
+        if priors and name in priors:
+            ax.axhline(priors[name], color="tab:green", lw=0.8, ls=":")
         if ref is not None:
             ax.axhline(ref, color="0.4", lw=0.8, ls="--")
             if s_ref:
@@ -231,7 +245,8 @@ def _param_figure(ids: list[str], table: dict[str, dict], z_flag: float) -> tupl
         ax.set_xticks(x)
         ax.set_xticklabels(ids, rotation=60, ha="right", fontsize=6 if len(ids) > 20 else 7)
     fig.suptitle("Identified parameters per drive (value, error bar 1 sigma; dashed: fleet "
-                 "median, grey: robust spread; red: |z| > %.0f)" % z_flag, fontsize=10)
+                 "median, grey: robust spread; dotted green: model file; red: |z| > %.0f)" % z_flag,
+                 fontsize=10)
     fig.tight_layout()
     return _png(fig), flags
 
@@ -307,11 +322,14 @@ def render_html(aggregate: Mapping[str, Any], *, z_flag: float = Z_FLAG) -> str:
 
     # identified parameters
     table: dict[str, dict[str, tuple[float, float | None]]] = {}
+    priors: dict[str, float] = {}
     for t in ok_tasks:
         for name, vs in identified_params(t.get("result")).items():
             table.setdefault(name, {})[str(t["id"])] = vs
+        for name, v in prior_params(t.get("result")).items():
+            priors.setdefault(name, v)  # the first drive's model file (one vehicle per batch)
     if table:
-        img, flags = _param_figure(ids, table, z_flag)
+        img, flags = _param_figure(ids, table, z_flag, priors)
         parts.append("<h2>Identified parameters per drive</h2>")
         parts.append(f"<p>Each drive against the fleet: z = (x - median) / sqrt(sigma&sup2; + "
                      f"s_ref&sup2;), s_ref = 1.4826 MAD; flagged when |z| &gt; {z_flag:g}.</p>")
