@@ -114,6 +114,14 @@ class Candidate:
     def phi_report(self, phi, sigma) -> dict[str, tuple[float, float]]:
         return self.report_params(phi, sigma)
 
+    def material(self, phi, fraction: float = 0.1) -> bool:
+        """Large enough to matter: some parameter at least ``fraction`` of its generic prior size
+        (a 0.03 % radius loss or a 0.2 m^2 x 1 % drag is no missing effect)."""
+        prior = np.abs(self.prior_theta())
+        ph = np.abs(np.asarray(phi, dtype=float))
+        use = prior > 0
+        return bool(np.any(ph[use] >= fraction * prior[use])) if use.any() else True
+
     def clip_phi(self, phi) -> np.ndarray:
         """Parameters moved into their physically plausible ranges (``ParamSpec`` bounds)."""
         specs = self.effect_cls.param_specs() if self.effect_cls is not None else {}
@@ -309,6 +317,9 @@ class MagicFormulaCandidate(Candidate):
 
     def phi_steps(self, phi):
         return np.array([0.03 * max(float(phi[0]), 0.1)])
+
+    def material(self, phi, fraction: float = 0.1) -> bool:
+        return float(phi[0]) < 0.9 * self.profile_range[1]
 
     def clip_phi(self, phi):
         spec = self.effect_cls.param_specs()["peak_friction"]

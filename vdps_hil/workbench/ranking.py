@@ -82,7 +82,8 @@ class RankingConfig:
     folds: int = 8
     gap_blocks: int = 1
     bic_margin: float = 10.0
-    min_explained: float = 0.02
+    min_explained: float = 0.05
+    material_fraction: float = 0.1
     corr_threshold: float = 0.95
     excitation_z: float = 5.0
     base_iterations: int = 2
@@ -852,6 +853,19 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
         if len(always):
             vv -= float(gbv @ np.linalg.lstsq(gbb, gbv, rcond=None)[0])
         excit[name] = math.sqrt(max(vv, 0.0) * ratio)
+    # an effect that acts through the tires' lateral forces cannot be judged when the tires carry
+    # no lateral load: the slip angles are then the estimator's noise (as for the cornering
+    # stiffnesses, ``excited_parameters``)
+    Gg = d.stats()[0].sum(axis=0)
+    lateral = [GROUP_NAMES.index(g) for g in ("lat", "roll", "yaw")]
+    lat_ok = "cornering_stiffness_front_nprad" in (states.excited_params or set()) or \
+        "cornering_stiffness_front_nprad" not in cfg.identify
+    for name, c in by_name.items():
+        cols = d.blocks[name]
+        th = c.prior_theta() * np.array([d.scale[k] for k in cols])
+        e_g = np.array([float(th @ Gg[g][np.ix_(cols, cols)] @ th) for g in range(len(GROUP_NAMES))])
+        if e_g.sum() > 0 and e_g[lateral].sum() >= 0.5 * e_g.sum() and not lat_ok:
+            excit[name] = 0.0
     joints: dict[str, _Joint] = {}
     steps: dict[str, dict] = {}
     for _ in range(cfg.max_effects):
@@ -884,7 +898,8 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
             dbic = n_eff * math.log(max(j.sse, 1e-300) / max(sseb, 1e-300)) + len(j.phi) * math.log(n_eff)
             steps[name] = {"ef": ef, "dbic": dbic, "joint": j, "cv_before": cvb}
             joints[name] = j
-            ok = dbic < -cfg.bic_margin and ef >= cfg.min_explained and c.phi_plausible(j.phi)
+            ok = (dbic < -cfg.bic_margin and ef >= cfg.min_explained and c.phi_plausible(j.phi)
+                  and c.material(j.phi, cfg.material_fraction))
             if ok and (best is None or ef > best[1]):
                 best = (name, ef, j)
         if best is None:
@@ -1046,6 +1061,12 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
     """Fill each entry's ``group`` (module docstring), in Gram-matrix form with the GNSS
     nuisance partialled out."""
     r2min = cfg.corr_threshold ** 2
+    # a selected nonlinear effect: its whole contribution (the residual it removes), not the
+    # direction of a change of its parameter
+    contrib = {}
+    for e in entries:
+        if e.selected and not by_name[e.effect].linear and e.effect in d.ctx.effects:
+            contrib[e.effect] = d.add_block(f"_contrib:{e.effect}", d.ctx.removal(e.effect)[:, :, None], None)
     G = d.stats()[0].sum(axis=(0, 1))
     nu = d.columns_of(["_nuisance", "_smooth"])
     if nu:
@@ -1054,7 +1075,7 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
     else:
         gp = G
 
-    def mimic(th_a, cols_a, name) -> tuple[float, np.ndarray]:
+    def mimic(th_a, cols_a, name, significance: bool = True) -> tuple[float, np.ndarray]:
         cols = d.blocks[name]
         vv = float(th_a @ gp[np.ix_(cols_a, cols_a)] @ th_a)
         if vv <= 0:
@@ -1063,10 +1084,12 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
         goa = gp[np.ix_(cols, cols_a)] @ th_a
         th = np.linalg.lstsq(goo, goa, rcond=None)[0]
         r2 = float(goa @ th) / vv
-        # not told apart only if the alternative is not significantly worse (BIC on n_eff)
-        worse = n_eff * math.log1p(max(1.0 - r2, 0.0) * vv / max(sse, 1e-300))
-        if worse > cfg.bic_margin:
-            r2 = min(r2, r2min - 1e-9)
+        # a fitted effect: not told apart only if the alternative is not significantly worse
+        # (BIC on n_eff); a prior-size direction or a parameter's move: correlation alone
+        if significance:
+            worse = n_eff * math.log1p(max(1.0 - r2, 0.0) * vv / max(sse, 1e-300))
+            if worse > cfg.bic_margin:
+                r2 = min(r2, r2min - 1e-9)
         return r2, np.array([t / d.scale[k] for t, k in zip(th, cols)])
 
     names = list(by_name)
@@ -1075,7 +1098,11 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
             continue
         cols = d.blocks[e.effect]
         c = by_name[e.effect]
-        if e.selected:
+        fitted = e.selected or e.explained_fraction >= cfg.min_explained
+        if e.effect in contrib:
+            cols = contrib[e.effect]
+            th = np.array([d.scale[k] for k in cols])
+        elif e.selected:
             # the selected effect's contribution: its change columns times its value (linear
             # candidates) or its prior-size direction (nonlinear ones)
             phi = np.array([v for v, _ in list(e.parameters.values())[:len(cols)]])
@@ -1083,20 +1110,20 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
         else:
             theta = thetas[e.effect]
             th = np.array([t * d.scale[k] for t, k in zip(theta, cols)])
-            if not e.explained_fraction >= cfg.min_explained:
+            if not fitted:
                 th = c.prior_theta() * np.array([d.scale[k] for k in cols])
         grp = [e.effect]
         for other in names:
             if other == e.effect:
                 continue
-            r2, th_o = mimic(th, cols, other)
+            r2, th_o = mimic(th, cols, other, fitted)
             if r2 >= r2min and by_name[other].plausible(th_o):
                 grp.append(other)
         for p in params:
             pname = next(iter(p.parameters))
             if pname not in d.blocks:
                 continue
-            r2, th_o = mimic(th, cols, pname)
+            r2, th_o = mimic(th, cols, pname, fitted)
             cur = next(iter(p.parameters.values()))[0]
             if r2 >= r2min and cur + th_o[0] > 0:
                 grp.append(p.effect)
@@ -1114,7 +1141,7 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
         th = np.array([(cur - ref_v) * d.scale[k]])
         grp = [p.effect]
         for other in names:
-            r2, th_o = mimic(th, [k], other)
+            r2, th_o = mimic(th, [k], other, False)
             if r2 >= r2min and by_name[other].plausible(th_o):
                 grp.append(other)
         p.group = grp if len(grp) > 1 else []

@@ -166,6 +166,7 @@ class _RowModel:
                          a.unsprung_mass_kg * GRAVITY_MPS2) for a in self.axles]
         self.last_ws = [0.0] * 8
         self.last_slip_cols = None
+        self._zw = self.model.wheel_centre_z_m
 
     def residual(self, x, u, env, meas, want_named: bool = False, want_slip: bool = False):
         """(r (14,) list, named quantities or None) at one row; ``meas`` a sequence of 22
@@ -187,13 +188,25 @@ class _RowModel:
             self._measured_loads(r, rec, raw["_normal_b"], meas)
         iw = self.iw
         ws = self.last_ws
-        cos, sin = math.cos, math.sin
+        cos, sin, sqrt = math.cos, math.sin, math.sqrt
+        nx, ny, nz = raw["_normal_b"]
+        wx, wy = x[9], x[10]
+        vz = x[8]
+        zw = self._zw
         for i in range(4):
             rc = rec[i]
             tq, teff, delta, ri = rc[7], rc[8], rc[9], rc[10]
             r[6 + i] = iw * (meas[6 + i] - xd[12 + i])
             xi, yi = self.corners[i]
-            vl = (vx - wz * yi) * cos(delta) + (vy + wz * xi) * sin(delta)
+            # wheel-centre velocity along the wheel's heading in the road plane (as the core)
+            cd, sd = cos(delta), sin(delta)
+            hn = cd * nx + sd * ny
+            lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
+            inv = 1.0 / sqrt(lx * lx + ly * ly + lz * lz)
+            vwx = vx + wy * zw - wz * yi
+            vwy = vy + wz * xi - wx * zw
+            vwz = vz + wx * yi - wy * xi
+            vl = (vwx * lx + vwy * ly + vwz * lz) * inv
             kq = (tq + teff - iw * meas[6 + i]) / (ri * self.c_kappa[i])
             r[10 + i] = vl * (1.0 + kq) - ri * meas[10 + i]
             ws[i] = vl
@@ -467,8 +480,9 @@ class Innovations:
         return len(self.t_s)
 
     def effect_columns(self, effect: MeasurementEffect, params: Sequence[str]) -> np.ndarray:
-        """(m, len(params)): d e / d theta for a measurement effect's parameters (readings with
-        the field regressors taken out, finite differences of the strapdown)."""
+        """(m, len(params)): the innovations theta leaves when it is in the readings, per unit of
+        each parameter: e = z - h(f + theta d) ~ e_0 - theta dh/dtheta (finite differences of the
+        strapdown with the field regressors d taken out of the readings)."""
         ctx = self._ctx
         if not len(self.t_s) or not params:
             return np.zeros((len(self.t_s), len(params)))
@@ -492,7 +506,8 @@ class Innovations:
         wb = np.stack([base_w] + [base_w - h * d for h, d in zip(steps, dws)])
         traj = _strapdown(ctx["t"], fb, wb, ctx["c0"], ctx["v0"], ctx["p0"])
         h_all = _observe(traj, ctx)
-        return np.column_stack([(h_all[0] - h_all[1 + j]) / steps[j] for j in range(len(params))])
+        # e = z - h(f + theta d): an effect theta in the readings leaves e ~ -theta dh/dtheta
+        return np.column_stack([(h_all[1 + j] - h_all[0]) / steps[j] for j in range(len(params))])
 
 
 def _strapdown(t, f, w, c0, v0, p0):

@@ -15,7 +15,8 @@ from vdps_hil.units import GRAVITY_MPS2
 from .candidates import PARAM_ALIASES, PARAM_LABELS
 from .residuals import EQUATION_LABELS
 
-__all__ = ["describe_entry", "describe_ranking", "separating_maneuver", "EFFECT_LABELS", "equation_phrase"]
+__all__ = ["describe_entry", "describe_ranking", "separating_maneuver", "group_maneuver", "EFFECT_LABELS",
+           "equation_phrase"]
 
 EFFECT_LABELS = {
     "aero_drag": "aerodynamic drag", "rolling_resistance": "rolling resistance",
@@ -56,6 +57,16 @@ def separating_maneuver(a: str, b: str) -> str:
         return m
     return ("a drive that excites them differently: vary speed, lateral acceleration and direction of travel "
             "independently")
+
+
+def group_maneuver(members) -> str:
+    """The separating maneuver for a group: a known pair inside it, else generic advice."""
+    ms = list(members)
+    for i, a in enumerate(ms):
+        for b in ms[i + 1:]:
+            if frozenset({a, b}) in _MANEUVERS:
+                return _MANEUVERS[frozenset({a, b})]
+    return separating_maneuver(ms[0], ms[-1])
 
 
 def equation_phrase(eq: str) -> str:
@@ -100,7 +111,7 @@ def describe_entry(rk, e) -> str:
         if e.group:
             alts = [g for g in e.group if g != e.effect]
             msg += ("; the same change would be explained by " + ", ".join(EFFECT_LABELS.get(a, a) for a in alts)
-                    + " -- cannot be told apart on this drive; " + separating_maneuver(e.effect, alts[0])
+                    + " -- cannot be told apart on this drive; " + group_maneuver(e.group)
                     + " would separate them")
         return msg
     if not e.excited:
@@ -112,7 +123,7 @@ def describe_entry(rk, e) -> str:
     if e.group:
         alts = [g for g in e.group if g != e.effect]
         msg += ("; cannot be told apart on this drive from " + ", ".join(EFFECT_LABELS.get(a, a) for a in alts)
-                + " (" + separating_maneuver(e.effect, alts[0]) + " would separate them)")
+                + " (" + group_maneuver(e.group) + " would separate them)")
     return msg
 
 
@@ -225,6 +236,6 @@ def describe_ranking(rk) -> list[str]:
         lead = mem[0]
         alts = mem[1:]
         out.append(f"cannot be told apart on this drive: {EFFECT_LABELS.get(lead, lead)} and "
-                   + ", ".join(EFFECT_LABELS.get(a, a) for a in alts) + " (" + separating_maneuver(lead, alts[0])
+                   + ", ".join(EFFECT_LABELS.get(a, a) for a in alts) + " (" + group_maneuver(mem)
                    + " would separate them)")
     return out

@@ -1,0 +1,132 @@
+"""The workbench's drive table: built from /raw/ only, aligned with the truth within the sensors'
+noise, measurement effects taken out of the IMU readings, bad input as one-line errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from vdps_hil.model.effects import make_effect
+from vdps_hil.model.frames import dcm_global_to_vehicle
+from vdps_hil.model.params import load_vehicle
+from vdps_hil.record.reader import RecordingReader
+from vdps_hil.workbench import dataset as D
+from vdps_hil.workbench.study import cached_drive
+
+VEH = load_vehicle("sedan-model")
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory):
+    """A 12 s step steer (seed 5) and its table."""
+    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "step-steer", (), seed=5)
+    table = D.load_drive(path, VEH)
+    with RecordingReader(path) as r:
+        truth = {t: doc["values"] for _, t, doc in r.iter_messages(["/truth/state"])}
+    return path, table, truth
+
+
+def _truth(table, truth, name):
+    ts = np.array(sorted(truth))
+    return np.interp(table.t_s, (ts - table.t0_ns) * 1e-9, np.array([truth[t][name] for t in ts]))
+
+
+def test_table_matches_the_truth_within_the_sensor_noise(drive):
+    _, tab, truth = drive
+    assert tab.period_s == pytest.approx(0.02)
+    assert tab.duration_s > 9.0
+    # (column, tolerance on the mean error, on the std of the error): Table 1 noise after 10 Hz
+    checks = [("specific_force_b_mps2_y", 0.01, 0.02), ("specific_force_b_mps2_x", 0.01, 0.02),
+              ("rate_b_radps_z", 1e-3, 2e-3), ("angular_accel_b_radps2_z", 0.01, 0.05),
+              ("wheel_speed_radps_1", 5e-3, 0.02), ("susp_deflection_m_1", 1e-3, 1.5e-3),
+              ("vel_b_mps_x", 0.05, 0.05), ("vel_b_mps_y", 0.1, 0.05), ("yaw_g_rad", 0.01, 0.005)]
+    for name, mean_tol, std_tol in checks:
+        err = tab[name] - _truth(tab, truth, name if name != "yaw_g_rad" else "yaw_g_rad")
+        err = err[np.isfinite(err)]
+        assert len(err) > 400, name
+        assert abs(np.mean(err)) < mean_tol, (name, np.mean(err))
+        assert np.std(err) < std_tol, (name, np.std(err))
+
+
+def test_steering_and_torques_are_the_bus_values(drive):
+    _, tab, truth = drive
+    steer = _truth(tab, truth, "steer_wheel_angle_rad")
+    ok = np.isfinite(tab["steer_wheel_angle_rad"])
+    assert np.max(np.abs(tab["steer_wheel_angle_rad"][ok] - steer[ok])) < 0.05
+
+
+def test_body_velocity_is_the_estimate_rotated_into_the_body(drive):
+    _, tab, _ = drive
+    k = len(tab) // 2
+    c = dcm_global_to_vehicle(tab["roll_g_rad"][k], tab["pitch_g_rad"][k], tab["yaw_g_rad"][k])
+    vb = c @ np.array([tab["vel_g_mps_e"][k], tab["vel_g_mps_n"][k], tab["vel_g_mps_u"][k]])
+    assert vb == pytest.approx([tab["vel_b_mps_x"][k], tab["vel_b_mps_y"][k], tab["vel_b_mps_z"][k]], abs=1e-9)
+
+
+def test_gnss_and_innovation_tables(drive):
+    _, tab, _ = drive
+    for kind in ("pos", "att", "vel"):
+        assert kind in tab.gnss and len(tab.gnss[kind]["t_s"]) > 40
+    att = tab.gnss["att"]
+    assert np.all(np.diff(att["t_s"]) > 0)
+    assert "gnss_pos" in tab.innovations
+    nis = tab.innovations["gnss_pos"]["nis"]
+    assert 0.2 < np.nanmean(nis) / 3.0 < 5.0  # consistent filter: mean NIS near the dof
+
+
+def test_dcm_batch_equals_eq1():
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-1, 1, (5, 3))
+    c = D.dcm_gv_batch(a[:, 0], a[:, 1], a[:, 2])
+    for k in range(5):
+        assert np.allclose(c[k], dcm_global_to_vehicle(*a[k]), atol=1e-12)
+
+
+def test_imu_bias_is_taken_out_of_the_readings(drive):
+    from vdps_hil.bus.samples import Sample
+
+    bias = make_effect("imu_bias", accel_bias_x_mps2=0.2, gyro_bias_z_radps=0.01)
+    samples = [Sample(i * 1_000_000, "imu", "imu", {"specific_force_mps2_x": 1.0 + 0.2, "specific_force_mps2_y": 0.0,
+                                                    "specific_force_mps2_z": 9.8 + 0.05,
+                                                    "angular_rate_radps_x": 0.0, "angular_rate_radps_y": 0.0,
+                                                    "angular_rate_radps_z": 0.3 + 0.01})
+               for i in range(200)]
+    out = D.remove_imu_effects(samples, [bias])
+    f = out[100].fields
+    assert f["specific_force_mps2_x"] == pytest.approx(1.0)
+    assert f["angular_rate_radps_z"] == pytest.approx(0.3)
+    assert f["specific_force_mps2_z"] == pytest.approx(9.8)  # the default z bias 0.05 is in the effect
+
+
+def test_complementary_velocity_removes_update_steps():
+    t = np.arange(0.0, 20.0, 0.02)
+    true_v = np.column_stack([10 + 0.5 * np.sin(0.5 * t), 0.2 * np.sin(2.0 * t), np.zeros_like(t)])
+    acc = np.column_stack([0.25 * np.cos(0.5 * t), 0.4 * np.cos(2.0 * t), np.zeros_like(t)])
+    steps = np.repeat(np.random.default_rng(0).normal(0, 0.02, (len(t) // 10 + 1, 3)), 10, axis=0)[:len(t)]
+    est = true_v + steps  # a 5 Hz staircase of update errors
+    c = np.repeat(np.eye(3)[None], len(t), axis=0)
+    f = acc + np.array([0.0, 0.0, 9.80665])  # specific force with the body level
+    v = D._complementary_velocity(t, est, c, f, 0.2)
+    inner = slice(100, -100)
+    assert np.std((v - true_v)[inner, 1]) < 0.35 * np.std((est - true_v)[inner, 1])
+
+
+def test_truth_vehicle_and_bad_files_are_refused(tmp_path):
+    with pytest.raises(D.DatasetError, match="model vehicle"):
+        D.load_drive("x.mcap", load_vehicle("sedan-truth"))
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap at all")
+    with pytest.raises(D.DatasetError):
+        D.load_drive(bad, VEH)
+    with pytest.raises(D.DatasetError):
+        D.DatasetConfig(period_s=0.0)
+
+
+def test_slice_keeps_gnss_in_span(drive):
+    _, tab, _ = drive
+    half = tab.slice(tab.t_s < tab.t_s[len(tab) // 2])
+    assert len(half) == len(tab) // 2
+    assert half.gnss["att"]["t_s"].max() <= half.t_s[-1] + 1e-9
+    assert math.isclose(half.t_s[0], tab.t_s[0])

@@ -1,0 +1,158 @@
+"""Residuals of eq 13: consistent with the physics core (an effect's regressors are the change
+of the residual it causes), nuisance directions, parameter columns, the strapdown innovations
+and the input-driven simulation error."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from vdps_hil.model.effects import EffectSet, make_effect
+from vdps_hil.model.params import load_vehicle
+from vdps_hil.workbench import residuals as R
+from vdps_hil.workbench.dataset import load_drive
+from vdps_hil.workbench.study import cached_drive
+
+VEH = load_vehicle("sedan-model")
+TRUE = VEH.with_params(**load_vehicle("sedan-truth").params.as_dict())  # tests only: a correct model
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory):
+    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "step-steer", (), seed=5)
+    tab = load_drive(path, VEH)
+    st = R.row_states(tab, TRUE)
+    res = R.compute_residuals(tab, TRUE, EffectSet(), states=st)
+    return tab, st, res
+
+
+def _contribution(tab, st, res, effect):
+    with_e = R.compute_residuals(tab, TRUE, EffectSet([effect]), states=st, with_nuisance=False,
+                                 with_quantities=False)
+    return res.values - with_e.values
+
+
+@pytest.mark.parametrize("name, params, rel", [
+    ("aero_drag", {"cda_m2": 0.7}, 1e-6),
+    ("rolling_resistance", {"coefficient": 0.012}, 0.02),
+    ("low_pressure_tire", {"wheel": 3.0, "radius_reduction": 0.015}, 0.02),
+    ("steering_compliance", {"compliance_radpn": 2e-7}, 0.05),
+    ("load_dependent_cornering_stiffness", {"load_slope": 0.3, "load_degression": 0.2}, 0.1),
+])
+def test_regressors_are_the_residual_change_the_effect_causes(drive, name, params, rel):
+    """r(model) - r(model + effect) = sum_p regressor_p theta_p on every equation the regressor
+    names (the sign convention the ranking relies on). Tolerances: exact for drag, first order
+    for the others (rolling resistance saturates at standstill, compliance and the load law are
+    linearised)."""
+    tab, st, res = drive
+    eff = make_effect(name, **params)
+    contrib = _contribution(tab, st, res, eff)
+    pred = np.zeros_like(contrib)
+    for j, q in enumerate(res.quantities):
+        for eq, d in eff.regressors(q).items():
+            k = R.EQUATIONS.index(eq)
+            pred[j, k] += sum(v * eff.params[p] for p, v in d.items())
+    eqs = [R.EQUATIONS.index(eq) for eq in eff.regressors(res.quantities[len(res.quantities) // 2])]
+    # stacked over the equations the regressor names, each in units of its noise
+    a, b = pred[:, eqs] / res.sigma[eqs], contrib[:, eqs] / res.sigma[eqs]
+    assert np.linalg.norm(b) > 0
+    assert np.linalg.norm(a - b) <= rel * np.linalg.norm(b), np.linalg.norm(a - b) / np.linalg.norm(b)
+
+
+def test_measurement_effect_moves_the_force_balance_by_m_times_the_bias(drive):
+    tab, st, res = drive
+    eff = make_effect("imu_bias", accel_bias_x_mps2=0.05, accel_bias_y_mps2=-0.03, accel_bias_z_mps2=0.0)
+    contrib = _contribution(tab, st, res, eff)
+    m = TRUE.params.mass_kg
+    assert np.allclose(contrib[:, 0], m * 0.05, rtol=1e-9)
+    assert np.allclose(contrib[:, 1], -m * 0.03, rtol=1e-9)
+    assert np.allclose(contrib[:, 3:], 0.0)
+
+
+def test_residual_with_the_true_parameters_is_small_after_the_nuisance(drive):
+    """Whitened residual with the estimator-error directions projected out: noise level (the
+    truth simulator has unsprung masses and tire compliance the reduced model lacks, so not 1)."""
+    tab, st, res = drive
+    av = res.available & np.isfinite(res.sigma)
+    y = res.values[:, av] / res.sigma[av]
+    j = res.nuisance[:, av, :] / res.sigma[av][None, :, None]
+    out = []
+    for k in range(len(y)):
+        q, rr = np.linalg.qr(j[k])
+        out.append(y[k] - q @ (q.T @ y[k]))
+    rms = np.sqrt(np.mean(np.square(out), axis=0))
+    raw = np.sqrt(np.mean(np.square(y), axis=0))
+    assert np.all(rms < 4.0), rms
+    assert np.median(raw / rms) > 3.0  # the nuisance explains most of the raw residual
+
+
+def test_parameter_columns_match_finite_differences(drive):
+    tab, st, res = drive
+    for p in ("mass_kg", "inertia_z_kgm2", "cornering_stiffness_front_nprad", "tracking_stiffness_2_n"):
+        a = R.parameter_columns(res, p, tab)
+        v = getattr(TRUE.params, p)
+        h = 1e-4 * v
+        r1 = R.compute_residuals(tab, TRUE.with_params(**{p: v + h}), EffectSet(), states=st,
+                                 with_nuisance=False, with_quantities=False)
+        fd = np.nan_to_num((res.values - r1.values) / h)
+        if p.startswith("tracking_stiffness"):
+            # the analytic column is the wheel-speed row; the rest of the change lies along the
+            # row-wise longitudinal tire-force nuisance (the slip stiffness only scales F_a)
+            ws = slice(10, 14)
+            err = np.linalg.norm(a[:, ws] - fd[:, ws]) / np.linalg.norm(fd[:, ws])
+            rest = fd.copy()
+            rest[:, ws] = 0.0
+            jn = res.nuisance[:, :, 2:]
+            left = [rest[k] - jn[k] @ np.linalg.lstsq(jn[k], rest[k], rcond=None)[0] for k in range(len(rest))]
+            assert np.linalg.norm(left) < 0.03 * np.linalg.norm(rest)
+        else:
+            err = np.linalg.norm(a - fd) / max(np.linalg.norm(fd), 1e-12)
+        assert err < 0.03, (p, err)
+
+
+def test_noise_sigma_is_the_sensor_noise(drive):
+    _, _, res = drive
+    s = dict(zip(R.EQUATIONS, res.sigma))
+    m = TRUE.params.mass_kg
+    assert 0.5 * m * 0.002 < s["long"] < 3.0 * m * 0.004  # IMU 0.02 m/s^2 at 1 kHz through 10 Hz
+    assert 0.0 < s["wheel_speed_1"] < 0.01
+
+
+def test_innovations_are_gnss_noise_and_see_an_imu_bias(drive):
+    tab, _, _ = drive
+    inn = R.compute_innovations(tab)
+    assert len(inn) > 300
+    y = inn.values / inn.sigma
+    n = inn.nuisance / inn.sigma[:, None]
+    th = np.linalg.lstsq(n, y, rcond=None)[0]
+    r = y - n @ th
+    assert np.sqrt(np.mean(r * r)) < 1.5
+    eff = make_effect("imu_bias")
+    names = ["accel_bias_x_mps2", "gyro_bias_z_radps"]
+    cols = inn.effect_columns(eff, names)
+    # an x accelerometer bias b: the ENU velocity error is b times the integral of the body x
+    # axis in ENU, (cos psi, sin psi) for a level car (d e / d b, minus: the innovation falls)
+    t, psi = tab.t_s, tab["yaw_g_rad"]
+    ie = np.concatenate([[0.0], np.cumsum(0.5 * (np.cos(psi[1:]) + np.cos(psi[:-1])) * np.diff(t))])
+    i_n = np.concatenate([[0.0], np.cumsum(0.5 * (np.sin(psi[1:]) + np.sin(psi[:-1])) * np.diff(t))])
+    t0 = inn._ctx["t"][0]  # the strapdown's start
+    for ch, integral in ((3, ie), (4, i_n)):
+        m = inn.channel == ch
+        exp = np.interp(inn.t_s[m], t, integral) - np.interp(t0, t, integral)
+        assert np.max(np.abs(-cols[m, 0] - exp)) < 0.05 * np.max(np.abs(exp)) + 0.05
+    # a yaw gyro bias: the yaw error grows as the time since the start
+    att_yaw = inn.channel == 2
+    assert np.max(np.abs(cols[att_yaw, 1])) == pytest.approx((inn.t_s[att_yaw] - t0).max(), rel=0.05)
+    assert np.all(cols[att_yaw, 1] <= 1e-9)  # the bias is in the readings: the innovation falls
+
+
+def test_simulation_errors_grow_with_the_horizon(drive):
+    tab, _, _ = drive
+    se = R.simulation_errors(tab, TRUE, EffectSet(), every_s=2.0)
+    s = se.summary()
+    assert set(s) == {"0.5", "1", "2"}
+    assert s["0.5"]["position_m"] < s["2"]["position_m"]
+    assert s["2"]["position_m"] < 2.0  # the true parameters predict 2 s of a step steer within 2 m
+    assert all(math.isfinite(v) for v in s["2"].values())
