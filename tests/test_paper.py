@@ -58,6 +58,20 @@ def test_aggregate_identification_median_p90_and_two_sigma_fraction():
     assert "mass_kg" in text and "paper" in text
 
 
+def test_snr_is_minus_ten_log_of_the_mean_noise_to_signal_variance_ratio():
+    rng = np.random.default_rng(5)
+    t = list(range(1000))
+    clean = rng.normal(0.0, 1.0, (1000, 6)) * np.array([1, 2, 3, 100, 200, 300])
+    for ratio_db in (10.0, 30.0):
+        noise = rng.normal(0.0, 1.0, (1000, 6)) * np.array([1, 2, 3, 100, 200, 300]) * 10 ** (-ratio_db / 20)
+        noisy = clean + noise
+        expect = -10 * math.log10(np.mean(np.var(noise, axis=0) / np.var(noisy, axis=0)))
+        got = P.snr_db({"t_ns": t, "series": noisy}, {"t_ns": t, "series": clean})
+        assert got == pytest.approx(expect, rel=1e-12)
+        assert got == pytest.approx(ratio_db, abs=0.5)  # sampling spread of 1000 samples
+    assert math.isnan(P.snr_db({"t_ns": [1, 2], "series": clean[:2]}, {"t_ns": [3, 4], "series": clean[:2]}))
+
+
 # ----------------------------------------------------------------- through the real chain
 def test_every_parameter_moves_from_prior_toward_truth_and_mass_and_inertias_within_bounds(ident_run):
     """Acceptance (table1-susp1k): error at 10.25 s below a fifth of the prior error; mass <= 0.5 %,
