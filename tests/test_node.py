@@ -113,3 +113,34 @@ def test_sequencer_releases_measurements_once_the_imu_has_passed_them():
     assert seq.expire(59 * ms) == [] and seq.expire(60 * ms) == ["gnss@9"]  # the IMU stopped: 50 ms at most
     assert seq.expired == 1 and len(seq) == 0
     assert seq.push("ws@20", 20 * ms, "wheel_speed", 70 * ms) == [] and seq.flush() == ["ws@20"]
+
+
+def test_can_frames_are_stamped_with_the_interface_time_on_the_bench_axis():
+    """A frame's interface time stamp (wall clock) becomes bench time; never later than its
+    reception, never before the previous frame's stamp."""
+    import time
+
+    from vdps_hil.hil.node import InterfaceTimeCanAdapter
+
+    clock = BenchClock(2.0)
+    clock.start()
+    sender = can.Bus(interface="virtual", channel="test-stamps", preserve_timestamps=True)
+    ad = InterfaceTimeCanAdapter("vdps", "virtual:test-stamps", clock=clock)
+    ad.open()
+    try:
+        wall_minus_mono = time.time_ns() - time.monotonic_ns()
+        m0 = clock.mono0_ns
+        wall = lambda mono_ns: (mono_ns + wall_minus_mono) / 1e9  # noqa: E731
+        stamps = [wall(m0 + 10_000_000), wall(m0 + 5_000_000), wall(m0 + 10**12)]  # 10 ms, earlier, future
+        for k, ts in enumerate(stamps):
+            sender.send(can.Message(timestamp=ts, arbitration_id=0x100 + k, data=b"\x01", is_extended_id=False))
+        time.sleep(0.01)
+        got = ad._read(0.1)
+        now = clock.now_ns()
+    finally:
+        ad.close()
+        sender.shutdown()
+    t = [t for t, _ in got]
+    assert t[0] == pytest.approx(20_000_000, abs=20_000)  # 10 ms of wall time at speed 2
+    assert t[1] == t[0]  # not before the previous frame
+    assert t[0] <= t[2] <= now  # a stamp in the future is taken as the reception time

@@ -216,3 +216,28 @@ def test_external_spec_with_a_virtual_interface_string_runs_through_python_can()
         assert len(back) == 1
     finally:
         dev.close()
+
+
+@pytest.mark.parametrize("make", [VirtualCanDevice, SocketcandServer], ids=["virtual", "tcp"])
+def test_frames_carry_their_time_on_the_bus_as_time_stamp(make):
+    """The stamp given to send_frames (the frame's scheduled time on the simulated bus) reaches
+    the receiver, as a hardware time stamp does; slcan has no stamp to carry."""
+    dev = make()
+    dev.open()
+    try:
+        stop = threading.Event()
+        threading.Thread(target=lambda: [dev.poll(0.01) for _ in iter(stop.is_set, True)], daemon=True).start()
+        rx = can.Bus(interface=dev.pipeline_spec.split(":")[0], channel=dev.pipeline_spec.split(":")[1].split(",")[0],
+                     **({"host": "127.0.0.1", "port": dev.port} if isinstance(dev, SocketcandServer) else {}))
+        if isinstance(dev, SocketcandServer):
+            assert dev.wait_client(10.0)
+        stamps = [1_700_000_000.000123 + 0.001 * k for k in range(5)]
+        ids, dlcs, data = _frames(5)
+        dev.send_frames(ids, dlcs, data, stamps)
+        dev.pump()
+        got = [rx.recv(2.0) for _ in range(5)]
+        rx.shutdown()
+        stop.set()
+        assert [m.timestamp for m in got] == pytest.approx(stamps, abs=2e-6)
+    finally:
+        dev.close()

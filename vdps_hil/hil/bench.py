@@ -25,6 +25,20 @@ that bus on both sides in this process. The child gets the device paths and the 
 start instant on its command line and stdin; it reports progress on stdout and leaves its
 results (cycle log, sent frames, counters, its part of the recording) in a work directory.
 
+Cross-process transport, measured (``tools/bench_hil.py``, fishhook-suv, 2-core machine): the
+TCP path (socketcand protocol on 127.0.0.1) beat the slcan pty on latency and on the highest
+lossless speed -- python-can's slcan reader waits out its 1 ms serial timeout after every frame
+of a batch, so it must read in small batches (16 frames) and then costs more per frame -- so
+``tcp`` is the cross-process path the tests run; ``pty`` stays for what it models, a USB-CAN
+adapter speaking slcan.
+
+Real time in one Python process: the simulator side, three adapter readers and the pipeline
+share one interpreter lock. The bench lowers the interpreter's switch interval to 1 ms (a
+thread waiting for the lock gets it within about a millisecond instead of 5 ms) and freezes the
+garbage collector's view of everything built before the start (no 50 ms collections mid-run);
+at 1x the embedded bench needs about 0.7 of a CPU core, so a loaded machine shows up as late
+sends, latency and, at worst, lost serial data -- all reported, never hidden.
+
 End of a run: when the drive has ended and every item is sent, the bench waits until the
 pipeline has received as much as was sent (``drain_timeout_s`` at most), lets it finish what is
 queued and stops it. Lost data (``dropped``) is counted per stream from the devices' and the
@@ -199,7 +213,7 @@ class Bench:
         drive = self.drive
         reference = reference_events(drive) if c.react else None
         can_dev = self.transport.make()
-        serial = {"imu": PtySerialDevice("imu"), "gnss": PtySerialDevice("gnss", fifo_bytes=4096)}
+        serial = {"imu": PtySerialDevice("imu"), "gnss": PtySerialDevice("gnss")}
         writer = None
         work = None
         pipe = None

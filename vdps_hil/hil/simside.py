@@ -13,6 +13,10 @@ Loop (one thread; ``hil.pacing`` for the time axis)
         sleep until the next item is due (at most 1 ms)
     until the drive has ended and every item is sent
 
+A CAN frame carries its scheduled time on the bus as its time stamp (to interfaces that pass
+one on: the virtual bus, socketcand), as a hardware time stamp would: a late send delays the
+frame's delivery, not its time stamp.
+
 The simulation runs ``lookahead_s`` (default 20 ms) ahead of the wall clock, less than the ECU's
 actuator dead time (>= 100 ms), so an intervention always starts in the simulator's future
 (``hil.ecu``). Items are the drive's CAN frames (sent at their receive time ``t_wire``: the
@@ -145,6 +149,7 @@ class SimulatorSide:
                        "lines_sent": 0, "serial_dropped": {}}
         self.wall_s = 0.0
         self.sim_s = 0.0
+        self._wall_minus_mono_ns = time.time_ns() - time.monotonic_ns()
 
     # --- CAN receive thread ---------------------------------------------------------------------
     def _rx_loop(self) -> None:
@@ -223,8 +228,10 @@ class SimulatorSide:
                 serial_due.append((sq[0][0], dev, sq.popleft()[1]))
         if t_l:
             t = np.concatenate(t_l)
+            c = self.clock
+            stamps = ((c.mono0_ns + t / c.speed) + self._wall_minus_mono_ns) / NS_PER_S  # on the bus, wall s
             n = self.can.send_frames(np.concatenate(ids_l).tolist(), np.concatenate(dlcs_l).tolist(),
-                                     np.concatenate(data_l))
+                                     np.concatenate(data_l), stamps.tolist())
             self.counts["frames_sent"] += len(t)
             self.counts["frames_dropped"] += len(t) - n
             pacer.sent(t, time.monotonic_ns())

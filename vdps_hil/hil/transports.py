@@ -33,9 +33,10 @@ which is what makes the one-interface form work.
 Device-side behaviour (all transports)
 --------------------------------------
 * Writes never block the simulator: a pty or socket that cannot take more keeps the rest in a
-  device FIFO (``fifo_bytes``, default 4 KiB, a USB-serial adapter's buffer) and, when that is
-  full too, drops the whole new message and counts it (``dropped``) -- lost data shows up as
-  sequence gaps at the receiver, as on a real link.
+  device FIFO (``fifo_bytes``, default ``DEVICE_FIFO_BYTES`` = 64 KiB: a USB adapter's FIFO plus
+  the host driver's buffers, about 1.4 s of the IMU stream at 921600 Bd on top of the pty's own
+  20-30 KB) and, when that is full too, drops the whole new message and counts it
+  (``dropped``) -- lost data shows up as sequence gaps at the receiver, as on a real link.
 * Every accepted write is logged as (cumulative count, monotonic time) in a :class:`SendLog`:
   the latency measurement (``hil.latency``) finds the time a given frame or byte went onto the
   wire from its index.
@@ -64,9 +65,11 @@ from vdps_hil.adapters.base import AdapterError
 
 __all__ = ["SendLog", "PtySerialDevice", "CanDeviceSide", "VirtualCanDevice", "SlcanPtyDevice",
            "SocketcandServer", "ExternalCanDevice", "TransportSpec", "parse_transport",
-           "NAMED_TRANSPORTS", "listening_sockets"]
+           "NAMED_TRANSPORTS", "DEVICE_FIFO_BYTES", "listening_sockets"]
 
 NAMED_TRANSPORTS = ("virtual", "pty", "tcp")
+DEVICE_FIFO_BYTES = 65536
+"""Buffering of a device side beyond the pty/socket [bytes] (module docstring)."""
 """Transport names of ``--can`` besides python-can interface strings (module docstring)."""
 
 _channel_ids = itertools.count()
@@ -158,7 +161,7 @@ class PtySerialDevice:
     counts what was accepted (``log``, byte offsets) and what was dropped. The slave end stays
     open on our side so the pty survives the pipeline opening and closing it."""
 
-    def __init__(self, name: str, fifo_bytes: int = 4096):
+    def __init__(self, name: str, fifo_bytes: int = DEVICE_FIFO_BYTES):
         self.name = name
         self.master, self.slave = pty.openpty()
         tty.setraw(self.master)
@@ -218,8 +221,12 @@ class PtySerialDevice:
 class CanDeviceSide:
     """The simulator's end of the CAN bus.
 
-    ``send_frames(ids, dlcs, data)``: frames in order (``data`` (N, 8) uint8, the first DLC bytes
-    of each row); returns how many were accepted (the rest dropped and counted).
+    ``send_frames(ids, dlcs, data, stamps_s=None)``: frames in order (``data`` (N, 8) uint8, the
+    first DLC bytes of each row); returns how many were accepted (the rest dropped and counted).
+    ``stamps_s``: each frame's time on the bus (wall clock, s) for interfaces that carry a
+    time stamp to the receiver (virtual, socketcand): what a hardware time stamp says, the time
+    the frame was scheduled on the simulated bus, even when the sender was late (late sends are
+    counted by the pacer). Without it, the time of sending.
     ``poll(timeout_s)``: frames the pipeline sent since the last call (waiting up to
     ``timeout_s`` for the first), as ``[(mono_ns, can.Message)]`` stamped on arrival.
     ``pipeline_spec``: the interface string the pipeline's CanAdapter opens.
@@ -237,7 +244,8 @@ class CanDeviceSide:
     def open(self) -> None:
         pass
 
-    def send_frames(self, ids: Sequence[int], dlcs: Sequence[int], data: np.ndarray) -> int:
+    def send_frames(self, ids: Sequence[int], dlcs: Sequence[int], data: np.ndarray,
+                    stamps_s: Sequence[float] | None = None) -> int:
         raise NotImplementedError
 
     def poll(self, timeout_s: float = 0.0) -> list:
@@ -253,11 +261,11 @@ class CanDeviceSide:
         return {"kind": self.kind, "pipeline_spec": self.pipeline_spec, "in_process": self.in_process}
 
 
-def _message(aid: int, dlc: int, payload: bytes, *, rx: bool = True):
+def _message(aid: int, dlc: int, payload: bytes, *, rx: bool = True, timestamp: float = 0.0):
     import can
 
-    return can.Message(arbitration_id=aid, dlc=dlc, data=payload, is_extended_id=False, is_rx=rx,
-                       check=False)
+    return can.Message(timestamp=timestamp, arbitration_id=aid, dlc=dlc, data=payload, is_extended_id=False,
+                       is_rx=rx, check=False)
 
 
 class _PythonCanDevice(CanDeviceSide):
@@ -267,15 +275,16 @@ class _PythonCanDevice(CanDeviceSide):
         super().__init__()
         self.bus = None
 
-    def send_frames(self, ids, dlcs, data) -> int:
+    def send_frames(self, ids, dlcs, data, stamps_s=None) -> int:
         import can
 
         raw = np.ascontiguousarray(data, dtype=np.uint8).tobytes()
         bus = self.bus
         n = 0
         for j, (aid, dlc) in enumerate(zip(ids, dlcs)):
+            ts = float(stamps_s[j]) if stamps_s is not None else 0.0
             try:
-                bus.send(_message(aid, dlc, raw[8 * j:8 * j + dlc]), timeout=0.0)
+                bus.send(_message(aid, dlc, raw[8 * j:8 * j + dlc], timestamp=ts), timeout=0.0)
             except (can.CanOperationError, OSError):
                 self.dropped += 1
                 continue
@@ -321,7 +330,13 @@ class VirtualCanDevice(_PythonCanDevice):
     def open(self) -> None:
         import can
 
-        self.bus = can.Bus(interface="virtual", channel=self.channel)
+        # the frames carry their time on the bus (send_frames' stamps) like hardware time stamps
+        self.bus = can.Bus(interface="virtual", channel=self.channel, preserve_timestamps=True)
+
+    def send_frames(self, ids, dlcs, data, stamps_s=None) -> int:
+        if stamps_s is None:
+            stamps_s = [time.time()] * len(ids)
+        return super().send_frames(ids, dlcs, data, stamps_s)
 
 
 class ExternalCanDevice(_PythonCanDevice):
@@ -391,14 +406,14 @@ class SlcanPtyDevice(CanDeviceSide):
 
     kind = "pty"
 
-    def __init__(self, fifo_bytes: int = 4096):
+    def __init__(self, fifo_bytes: int = DEVICE_FIFO_BYTES):
         super().__init__()
         self.dev = PtySerialDevice("can", fifo_bytes)
         self.pipeline_spec = f"slcan:{self.dev.port},sleep_after_open=0"
         self._rx = bytearray()
         self.bad_commands = 0
 
-    def send_frames(self, ids, dlcs, data) -> int:
+    def send_frames(self, ids, dlcs, data, stamps_s=None) -> int:  # slcan carries no time stamp
         hexes = np.ascontiguousarray(data, dtype=np.uint8).tobytes().hex().upper().encode()
         blob = b"".join([b"t%03X%d%s\r" % (aid, dlc, hexes[16 * j:16 * j + 2 * dlc])
                          for j, (aid, dlc) in enumerate(zip(ids, dlcs))])
@@ -466,7 +481,7 @@ class SocketcandServer(CanDeviceSide):
     kind = "tcp"
     HOST = "127.0.0.1"
 
-    def __init__(self, channel: str = "vdps", fifo_bytes: int = 65536):
+    def __init__(self, channel: str = "vdps", fifo_bytes: int = DEVICE_FIFO_BYTES):
         super().__init__()
         self.channel = channel
         self._lsock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -512,13 +527,14 @@ class SocketcandServer(CanDeviceSide):
     def wait_client(self, timeout_s: float) -> bool:
         return self._ready.wait(timeout_s)
 
-    def send_frames(self, ids, dlcs, data) -> int:
+    def send_frames(self, ids, dlcs, data, stamps_s=None) -> int:
         raw = np.ascontiguousarray(data, dtype=np.uint8).tobytes()
         hexes = raw.hex().encode()
-        now = time.time()
-        stamp = b"%d.%06d" % (int(now), int((now % 1.0) * 1e6))
-        blob = b"".join([b"< frame %03X %s %s >" % (aid, stamp, hexes[16 * j:16 * j + 2 * dlc])
-                         for j, (aid, dlc) in enumerate(zip(ids, dlcs))])
+        if stamps_s is None:
+            stamps_s = [time.time()] * len(ids)
+        us = [divmod(int(round(ts * 1e6)), 1_000_000) for ts in stamps_s]  # (s, us) of each frame
+        blob = b"".join([b"< frame %03X %d.%06d %s >" % (aid, sec, usec, hexes[16 * j:16 * j + 2 * dlc])
+                         for j, (aid, dlc, (sec, usec)) in enumerate(zip(ids, dlcs, us))])
         n = len(ids)
         if not n:
             return 0
