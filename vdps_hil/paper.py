@@ -182,8 +182,8 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
 
     ``truth`` (the /truth/state snapshots, harness only), ``events`` (/truth/events),
     ``ident`` [(t_s, params dict, sigmas dict, identifiability dict)], ``captured``
-    {t_ns: (PredictorInitialState | None, IdentifiedParams)} at the estimates at ``capture_t_s``
-    (or every estimate with ``capture_all``), ``frames`` (sent VDPS_Warning as can.Message),
+    {t_ns: (PredictorInitialState | None, IdentifiedParams)} at the first estimate at or after
+    each of ``capture_t_s`` (or every estimate with ``capture_all``), ``frames`` (sent VDPS_Warning as can.Message),
     ``predictions`` (PredictionReport), ``inputs`` (IdentInputs, with ``record_inputs``),
     ``fusion_std`` (per state over ``fusion_window_s``),
     ``status`` (system counters) and ``wall_s``.
@@ -213,7 +213,7 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
                         ident_report_period_s=ident_report_period_s)
     veh = load_vehicle(model, "model")
     system = VdpsSystem(veh, cfg, origin=DEFAULT_ORIGIN)
-    cap_ns = {int(round(t * 1e9)) for t in capture_t_s}
+    cap_ns = sorted(int(round(t * 1e9)) for t in capture_t_s)  # first estimate at or after each
     out: dict = {"truth": truth, "events": events, "ident": [], "captured": {}, "frames": [], "predictions": [],
                  "inputs": [], "model": veh}
     inputs = out["inputs"]
@@ -233,7 +233,9 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
         system.clear_input_log()
         for o in outs:
             if isinstance(o, Estimate):
-                if capture_all or o.t_ns in cap_ns:
+                if capture_all or (cap_ns and o.t_ns >= cap_ns[0]):
+                    while cap_ns and o.t_ns >= cap_ns[0]:
+                        cap_ns.pop(0)
                     try:
                         init = PredictorInitialState.from_estimator(o, system.pipeline.filtered())
                     except ValueError:
@@ -298,12 +300,23 @@ def relative_errors(params: Mapping[str, float], truth: Mapping[str, float]) -> 
     return {k: (float(params[k]) - truth[k]) / truth[k] for k in truth}
 
 
-def _report_at(ident: list, t_s: float):
+def _report_at(ident: list, t_s: float, tol_s: float = 0.005):
+    """The last identifier report at or before ``t_s`` (+ ``tol_s``: report instants follow the
+    filter's clock, which may pass a multiple of the period by a sample)."""
     best = None
     for r in ident:
-        if r[0] <= t_s + 1e-9:
+        if r[0] <= t_s + tol_s:
             best = r
     return best
+
+
+def _truth_from(truth: list, t0_s: float, t_end_s: float):
+    """The truth pose trajectory from exactly ``t0_s`` (interpolated) to ``t_end_s``."""
+    from vdps_hil.prediction.metrics import PoseTrajectory
+
+    tr = PoseTrajectory.from_snapshots(truth, t0_s - 0.02, t_end_s)
+    t = tr.t_s[tr.t_s > t0_s + 1e-9]
+    return tr.at(np.concatenate([[t0_s], t]))
 
 
 # ------------------------------------------------------------------------------------ tasks
@@ -340,15 +353,18 @@ def identification_task(profile: str, seed: int, *, predict: bool = True, zero_n
         win = [x for x in r["ident"] if IDENT_WINDOW_S[0] - 1e-9 <= x[0] <= IDENT_WINDOW_S[1] + 1e-9]
         mean = {k: float(np.mean([x[1][k] for x in win])) for k in tp}
         doc["rel_err_mean_window"] = relative_errors(mean, tp)
-    cap = r["captured"].get(int(round(T0_S * 1e9)))
+    cap_t = min(r["captured"], default=None)
+    cap = r["captured"].get(cap_t)
     if cap is not None and cap[0] is not None:
         init, params = cap
-        pcfg = replace(load_predictor_config(), horizon_s=LEFT_TURN_END_S - T0_S)
+        t0 = cap_t / 1e9
+        pcfg = replace(load_predictor_config(), horizon_s=LEFT_TURN_END_S - t0)
         pred = Predictor(r["model"].with_params(**params.as_dict()), pcfg).predict(init)
-        true = PoseTrajectory.from_snapshots(r["truth"], T0_S, LEFT_TURN_END_S)
+        true = _truth_from(r["truth"], t0, LEFT_TURN_END_S)
         m = compare_trajectories(PoseTrajectory.from_prediction(pred), true)
-        doc["left_turn"] = {k: m[k] for k in ("position_err_m", "yaw_err_deg", "pitch_err_deg", "roll_err_deg",
-                                               "position_rms_m", "yaw_rms_deg", "inaccuracy_pct", "t_end_s")}
+        doc["left_turn"] = {"t0_s": t0}
+        doc["left_turn"].update({k: m[k] for k in ("position_err_m", "yaw_err_deg", "pitch_err_deg", "roll_err_deg",
+                                               "position_rms_m", "yaw_rms_deg", "inaccuracy_pct", "t_end_s")})
         doc["left_turn"]["inaccuracy_channels_pct"] = m["inaccuracy_channels_pct"]
     if predict:
         o = evaluate_warning_frames(r["frames"], r["events"])
@@ -382,7 +398,7 @@ def rollover_task(profile: str, seed: int, scenario: str = "fishhook-suv", model
         pred = Predictor(r["model"].with_params(**params.as_dict()), load_predictor_config()).predict(init)
         t0 = first.t0_ns / 1e9
         end = min(t0 + pred.horizon_reached_s, r["truth"][-1]["t_s"])
-        true = PoseTrajectory.from_snapshots(r["truth"], t0, end)
+        true = _truth_from(r["truth"], t0, end)
         m = compare_trajectories(PoseTrajectory.from_prediction(pred), true)
         doc.update({"prediction_t0_s": t0, "prediction_end_s": m["t_end_s"],
                     "predicted_point_of_no_return_t_s": None if pred.point_of_no_return_t_s is None
