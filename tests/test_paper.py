@@ -72,6 +72,16 @@ def test_snr_is_minus_ten_log_of_the_mean_noise_to_signal_variance_ratio():
     assert math.isnan(P.snr_db({"t_ns": [1, 2], "series": clean[:2]}, {"t_ns": [3, 4], "series": clean[:2]}))
 
 
+def test_truth_between_snapshots_is_interpolated_with_wrapped_angles():
+    a = {"t_s": 1.0, "yaw_v_rad": math.pi - 0.1, "pos_e_m": 10.0}
+    b = {"t_s": 1.01, "yaw_v_rad": -math.pi + 0.1, "pos_e_m": 10.25}
+    by_t = {1_000_000_000: a, 1_010_000_000: b}
+    m = P._truth_at(by_t, 1_002_500_000)
+    assert m["pos_e_m"] == pytest.approx(10.0625) and m["t_s"] == pytest.approx(1.0025)
+    assert m["yaw_v_rad"] == pytest.approx(math.pi - 0.05)  # through +-pi, not through 0
+    assert P._truth_at(by_t, 1_000_000_000) is a and P._truth_at(by_t, 1_012_000_000) is None
+
+
 # ----------------------------------------------------------------- through the real chain
 def test_every_parameter_moves_from_prior_toward_truth_and_mass_and_inertias_within_bounds(ident_run):
     """Acceptance (table1-susp1k): error at 10.25 s below a fifth of the prior error; mass <= 0.5 %,
