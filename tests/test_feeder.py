@@ -139,6 +139,30 @@ def zero_noise_paper():
     return r, truth
 
 
+_WRAPPED = {"roll_g_rad", "pitch_g_rad", "yaw_g_rad", "roll_v_rad", "pitch_v_rad", "yaw_v_rad", "road_bank_rad",
+            "road_grade_rad"}
+
+
+def _truth_interp(truth, t_ns, grid=10_000_000):
+    """Truth at t_ns, linear between the 100 Hz snapshots (angles by their wrapped difference)."""
+    if t_ns in truth:
+        return truth[t_ns]
+    t0 = t_ns - t_ns % grid
+    a, b = truth.get(t0), truth.get(t0 + grid)
+    if a is None or b is None:
+        return None
+    w = (t_ns - t0) / grid
+    out = {}
+    for k, va in a.items():
+        vb = b[k]
+        if not isinstance(va, (int, float)) or isinstance(va, bool) or not isinstance(vb, (int, float)):
+            continue
+        d = math.remainder(vb - va, 2 * math.pi) if k in _WRAPPED else vb - va
+        out[k] = va + w * d
+    out["t_ns"] = t_ns
+    return out
+
+
 def _truth_estimate(tv):
     keys = ("pos_e_m", "pos_n_m", "pos_u_m", "vel_g_mps_e", "vel_g_mps_n", "vel_g_mps_u", "roll_g_rad",
             "pitch_g_rad", "yaw_g_rad", "road_bank_rad", "road_grade_rad", "yaw_v_rad")
@@ -174,8 +198,10 @@ def test_core_definitions_reproduce_the_simulators_slips_and_wheel_angles(zero_n
 
 
 def test_the_chain_gives_the_identifier_what_the_truth_would(zero_noise_paper):
-    """Zero-noise sensors through decode -> system -> feeder vs the feeder fed the truth; the
-    tolerances are about twice the RMS differences the chain reaches (EKF, alpha-beta at 20 Hz)."""
+    """Zero-noise sensors through decode -> system -> feeder vs the feeder fed the truth (at the
+    estimates' times); the tolerances are about twice the RMS differences the chain reaches
+    (measured: xd 1.9 mm/s, yd 4.6 mm/s, zdd 0.002 and ydd 0.014 m/s^2, psid 0.4 mrad/s, slip
+    1.1e-4, alpha 0.19 mrad, G 0.002 m/s^2)."""
     reader, truth = zero_noise_paper
     cfg = SystemConfig.for_profile(1000.0, 0.001, predict=False)
     system = VdpsSystem(MODEL, cfg, origin=DEFAULT_ORIGIN)
@@ -191,16 +217,12 @@ def test_the_chain_gives_the_identifier_what_the_truth_would(zero_noise_paper):
         system.handle(s)
     ref = IdentFeeder(MODEL)
     diffs = {k: [] for k in ("xd", "yd", "zdd", "ydd", "psid", "slip", "alpha", "G")}
-    k = 0
-    for t, tv in sorted(truth.items()):
-        ref.observe(imu([tv[f"specific_force_b_mps2_{a}"] for a in "xyz"], t=t))
-        if t < 1_000_000_000:
+    for a in got:
+        tv = _truth_interp(truth, a.t_ns)  # estimates are not all on the 100 Hz truth grid
+        if a.t_ns < 1_000_000_000 or tv is None:
             continue
-        while k < len(got) and got[k].t_ns < t:
-            k += 1
-        if k == len(got) or got[k].t_ns != t:
-            continue
-        a, b = got[k], ref.inputs(_truth_estimate(tv), _truth_filtered(tv))
+        ref.observe(imu([tv[f"specific_force_b_mps2_{x}"] for x in "xyz"], t=a.t_ns))
+        b = ref.inputs(_truth_estimate(tv), _truth_filtered(tv))
         diffs["xd"].append(a.xd_a_mps - b.xd_a_mps)
         diffs["yd"].append(a.yd_a_mps - b.yd_a_mps)
         diffs["zdd"].append(a.zdd_a_mps2 - b.zdd_a_mps2)
@@ -211,11 +233,11 @@ def test_the_chain_gives_the_identifier_what_the_truth_would(zero_noise_paper):
         diffs["G"] += [x - y for x, y in zip(a.gravity_aux_mps2, b.gravity_aux_mps2)]
     assert len(diffs["xd"]) > 250
     rms = {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in diffs.items()}
-    assert rms["xd"] < 0.005 and rms["yd"] < 0.02  # m/s
-    assert rms["zdd"] < 0.01 and rms["ydd"] < 0.04  # m/s^2
-    assert rms["psid"] < 0.003  # rad/s
-    assert rms["slip"] < 3e-4 and rms["alpha"] < 3e-3
-    assert rms["G"] < 0.006  # m/s^2: road angles within ~0.5 mrad
+    assert rms["xd"] < 0.005 and rms["yd"] < 0.01  # m/s
+    assert rms["zdd"] < 0.005 and rms["ydd"] < 0.03  # m/s^2
+    assert rms["psid"] < 0.001  # rad/s
+    assert rms["slip"] < 3e-4 and rms["alpha"] < 5e-4
+    assert rms["G"] < 0.004  # m/s^2: road angles within ~0.4 mrad
 
 
 def test_vertical_struts_uses_the_body_z_specific_force_aux_the_road_normal():

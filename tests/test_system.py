@@ -53,7 +53,8 @@ def test_outputs_of_every_stage_in_time(paper_run):
     assert kinds == {Innovation, Estimate, FilteredSignals, IdentReport, PredictionReport, CanFrame}
     est = [o for o in out if isinstance(o, Estimate)]
     t = [e.t_ns for e in est]
-    assert t == sorted(t) and all(9_000_000 <= b - a <= 11_000_000 for a, b in zip(t, t[1:]))  # 100 Hz
+    gaps = np.diff(t)
+    assert np.all(gaps > 0) and np.median(gaps) == 10_000_000 and gaps.max() <= 20_000_000  # 100 Hz
     assert len([o for o in out if isinstance(o, IdentReport)]) == 3  # 1 Hz
     preds = [o for o in out if isinstance(o, PredictionReport)]
     assert 20 <= len(preds) <= 26  # 10 Hz cadence over the ~2.4 s after initialisation
@@ -120,6 +121,23 @@ def test_window_means_are_stamped_at_the_window_end_and_never_in_the_past():
     assert c.add(Sample(1, "can.vdps", "suspension", {SUSP[0]: 0.0})) is None  # incomplete: passed on
 
 
+def test_mean_stamping_puts_a_ramp_window_at_its_mean_time():
+    """The system's default (``suspension_stamp = "mean"``): the mean of a window of a ramp is the
+    ramp at the mean sample time, exactly."""
+    c = SuspensionConditioner(MODEL, 100.0, tire_compliance=False, raw_bandwidth_hz=20.0,
+                              rate_bandwidth_hz=10.0, max_gap_s=2.0, stamp="mean")
+    out = []
+    for k in range(45):
+        t = k * 1_000_000 + 300_000
+        out += c.due(t)
+        c.add(_susp(t, (0.05 * t * 1e-9,) * 4))
+    assert [s.t_ns for s in out] == [4_800_000, 14_800_000, 24_800_000, 34_800_000]
+    assert all(s.fields[SUSP[0]] == pytest.approx(0.05 * s.t_ns * 1e-9, abs=1e-15) for s in out)
+    assert SystemConfig().suspension_stamp == "mean"
+    with pytest.raises(ValueError, match="suspension_stamp"):
+        SystemConfig(suspension_stamp="middle")
+
+
 def test_a_ramp_is_extrapolated_to_the_window_end():
     c = SuspensionConditioner(MODEL, 100.0, tire_compliance=False, raw_bandwidth_hz=20.0,
                               rate_bandwidth_hz=10.0, max_gap_s=2.0)
@@ -150,18 +168,17 @@ def test_tire_compliance_adds_the_load_change_over_the_tire_stiffness():
 def test_nees_of_five_seeded_runs_through_the_real_chain():
     """Issue 5's NEES check on the real chain (wire formats -> decode -> system), 5 runs of the
     ISO 3888 lane change, table1-susp1k, 12 s each, epochs after 5 s, two-sided 95 % band of the
-    averaged NEES ([7.28, 15.48] for 5 runs x 11 states). Measured on these seeds: 95.4 % of the
-    epochs inside, mean NEES / n = 0.92. The 25-run version (tools/nees_study.py, band [9.24,
-    12.91]) reaches 78 % inside with mean NEES / n = 0.99: the filter is consistent on average
-    but over-confident during the lane change (averaged NEES up to 1.4 n) and under-confident on
-    the straight after it (0.7 n), which 25 runs resolve and 5 do not. Asserted with a margin:
-    >= 80 % inside, mean NEES / n in 0.8-1.3 (the honest level for 5 runs, not the 90 % goal)."""
+    averaged NEES ([7.28, 15.48] for 5 runs x 11 states). Measured on these seeds: 99.9 % of the
+    epochs inside, mean NEES / n = 0.95. The 25-run version (tools/nees_study.py, band [9.24,
+    12.91]) reaches 90.2 % inside, mean NEES / n = 1.01 (above the band only at the end of the
+    lane change, 5-6.5 s, up to 1.21 n). Asserted with a margin for changes in the estimator's
+    tuning: >= 85 % inside, mean NEES / n in 0.8-1.25."""
     m = _nees_tool()
     runs = [m.run_chain("lane-change-iso3888", 100 + k, duration_s=12.0) for k in range(5)]
     s = m.nees_summary(runs)
     assert s["runs"] == 5 and s["n_states"] == 11 and s["epochs"] >= 690
-    assert s["fraction_inside"] >= 0.80
-    assert 0.8 <= s["mean_nees_per_state"] <= 1.3
+    assert s["fraction_inside"] >= 0.85
+    assert 0.8 <= s["mean_nees_per_state"] <= 1.25
 
 
 def test_gnss_outage_keeps_the_position_bounded_and_recovers_within_2_s():

@@ -52,6 +52,30 @@ TRUTH_KEYS = ("pos_e_m", "pos_n_m", "pos_u_m", "vel_g_mps_e", "vel_g_mps_n", "ve
 WRAPPED = (8, 11)
 
 
+_ANGLES = ("roll_g_rad", "pitch_g_rad", "yaw_g_rad", "road_bank_rad", "road_grade_rad", "yaw_v_rad", "roll_v_rad",
+           "pitch_v_rad")
+
+
+def _truth_at(truth: dict, t_ns: int, grid_ns: int) -> dict | None:
+    """The truth snapshot at t_ns, linearly interpolated between the 100 Hz snapshots (angles
+    by their wrapped difference) when the estimate falls between them."""
+    tv = truth.get(t_ns)
+    if tv is not None:
+        return tv
+    t0 = t_ns - t_ns % grid_ns
+    a, b = truth.get(t0), truth.get(t0 + grid_ns)
+    if a is None or b is None:
+        return None
+    w = (t_ns - t0) / grid_ns
+    out = {}
+    for k in (*TRUTH_KEYS, "roll_v_rad", "pitch_v_rad"):
+        d = b[k] - a[k]
+        if k in _ANGLES:
+            d = math.remainder(d, 2 * math.pi)
+        out[k] = a[k] + w * d
+    return out
+
+
 def study_config(profile, **kw) -> SystemConfig:
     """The chain as ``vdps replay`` runs it, sized for the profile's suspension (a sensor data
     sheet: rate and noise), without identification and prediction (not part of the NEES)."""
@@ -62,8 +86,8 @@ def study_config(profile, **kw) -> SystemConfig:
 
 def run_chain(scenario: str, seed: int, *, profile="table1-susp1k", duration_s: float | None = None,
               faults=(), config: SystemConfig | None = None, vehicle: str = "sedan-model") -> dict:
-    """One simulated drive through decode + system; per estimate on the truth grid: time, filter
-    error (full 12-vector, NaN where the filter does not carry the state), NEES and sigmas."""
+    """One simulated drive through decode + system; per estimate: time, filter error (full
+    12-vector; the truth interpolated to the estimate's time), NEES and sigmas."""
     from vdps_hil.sim.profiles import load_profile
 
     prof = load_profile(profile) if isinstance(profile, str) else profile
@@ -72,6 +96,7 @@ def run_chain(scenario: str, seed: int, *, profile="table1-susp1k", duration_s: 
     buf.seek(0)
     reader = RecordingReader(buf)
     truth = {t: d["values"] for _, t, d in reader.iter_messages(["/truth/state"])}  # harness only
+    grid = min(b - a for a, b in zip(sorted(truth), sorted(truth)[1:]))
     cfg = config or study_config(prof)
     system = VdpsSystem(load_vehicle(vehicle, "model"), cfg, origin=DEFAULT_ORIGIN)
     ekf = system.pipeline.ekf
@@ -83,9 +108,11 @@ def run_chain(scenario: str, seed: int, *, profile="table1-susp1k", duration_s: 
         outs = system.handle(s)
         system.clear_input_log()
         for o in outs:
-            if not isinstance(o, Estimate) or o.t_ns not in truth or not ekf.initialized:
+            if not isinstance(o, Estimate) or not ekf.initialized:
                 continue
-            tv = truth[o.t_ns]
+            tv = _truth_at(truth, o.t_ns, grid)
+            if tv is None:
+                continue
             xt = np.array([tv[k] for k in TRUTH_KEYS])
             if idx is None:
                 idx = ekf.layout.full_index
