@@ -152,3 +152,24 @@ def test_broken_inputs_are_one_line_errors_or_read_as_far_as_they_go(drive, tmp_
     assert code == 0
     doc = json.loads((tmp_path / "c.json").read_text())
     assert doc["estimates_summary"]["count"] > 50 and doc["decode"]["reader"]["problems"]
+
+
+def test_sensor_set_inferred_or_named(drive, tmp_path):
+    """Without --sensorset the set is inferred from the recording (the simulator's: 6-axis IMU,
+    multi-antenna GNSS, suspension: 11 filter states); a named set with a single-antenna GNSS
+    and no suspension runs the 9-state filter (no road angles) on the same recording."""
+    code, _ = run("replay", str(drive), "--no-predict", "--no-identify", "--json", str(tmp_path / "a.json"))
+    assert code == 0
+    a = json.loads((tmp_path / "a.json").read_text())
+    assert a["sensor_set"]["imu"] == "6axis" and a["sensor_set"]["gnss"] == "multi_antenna"
+    assert a["sensor_set"]["suspension"] is True and a["observability"]["in_progress"]["n_states"] == 11
+    (tmp_path / "small.toml").write_text('name = "small"\n[sensors]\nimu = "6axis"\ngnss = "single_antenna"\n'
+                                         'suspension = false\nwheel_speeds = true\n')
+    code, _ = run("replay", str(drive), "--no-predict", "--no-identify", "--sensorset", str(tmp_path / "small.toml"),
+                  "--json", str(tmp_path / "b.json"))
+    assert code == 0
+    b = json.loads((tmp_path / "b.json").read_text())
+    assert b["sensor_set"]["source"] == "small" and b["observability"]["in_progress"]["n_states"] == 9
+    assert b["innovations"]["gnss_att"]["accepted"] == 0 and b["estimates_summary"]["count"] > 250
+    code, text = run("replay", str(drive), "--sensorset", str(tmp_path / "missing.toml"))
+    assert code == 2 and "sensor set" in text and len(text.strip().splitlines()) == 1

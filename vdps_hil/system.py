@@ -104,7 +104,8 @@ from vdps_hil.identification.problems import IdentConfig, Identifier
 from vdps_hil.model.params import IdentifiedParams, Vehicle
 
 __all__ = ["CanFrame", "IdentReport", "PredictionReport", "ReplayError", "SuspensionConditioner", "SystemConfig",
-           "VdpsSystem", "default_pipeline_config", "measure_rates", "output_to_json", "outputs_digest", "replay_file"]
+           "VdpsSystem", "default_pipeline_config", "measure_rates", "output_to_json", "outputs_digest",
+           "probe_recording", "replay_file"]
 
 _SUSP = wheel_fields("susp_deflection_m")
 _MAX_SUSP_LEAD_NS = 50_000_000
@@ -606,11 +607,11 @@ INNOVATION_STATUS = ("accepted", "gated", "nan", "too_old", "disabled", "not_ini
 """``status_code`` of ``/est/innovation/<kind>`` messages: index in this tuple."""
 
 
-def measure_rates(path, seconds: float = 1.0, **decode_kw) -> dict[str, float]:
-    """Sample rate [Hz] per sample kind over the first ``seconds`` of decoded ``/raw/`` data
-    (samples of one instant from one source count once): lets a replay size the suspension
-    averaging from the data instead of a profile name. (Receive-time stamps and a short reorder
-    window: only the counts matter here.)"""
+def probe_recording(path, seconds: float = 3.0, **decode_kw) -> tuple[dict[str, float], dict[str, set]]:
+    """(sample rate [Hz] per kind, catalogue fields per kind) over the first ``seconds`` of the
+    decoded ``/raw/`` data (samples of one instant from one kind count once): lets a replay size
+    the suspension averaging and infer the sensor set from the data instead of a profile name.
+    (Receive-time stamps and a short reorder window: only counts and fields matter here.)"""
     from vdps_hil.record.decode import decode_recording
 
     decode_kw.setdefault("device_time", False)
@@ -619,19 +620,27 @@ def measure_rates(path, seconds: float = 1.0, **decode_kw) -> dict[str, float]:
     first: dict[str, int] = {}
     last: dict[str, int] = {}
     count: dict[str, int] = {}
+    fields: dict[str, set] = {}
     t0 = None
     for s in dec:
         t0 = s.t_ns if t0 is None else t0
         if s.t_ns - t0 > seconds * 1e9:
             break
         k = s.kind
+        fields.setdefault(k, set()).update(n for n, v in s.fields.items() if math.isfinite(v))
         if last.get(k) == s.t_ns:
             continue
         first.setdefault(k, s.t_ns)
         last[k] = s.t_ns
         count[k] = count.get(k, 0) + 1
     dec.close()
-    return {k: (count[k] - 1) * 1e9 / (last[k] - first[k]) for k in count if count[k] > 1 and last[k] > first[k]}
+    rates = {k: (count[k] - 1) * 1e9 / (last[k] - first[k]) for k in count if count[k] > 1 and last[k] > first[k]}
+    return rates, fields
+
+
+def measure_rates(path, seconds: float = 1.0, **decode_kw) -> dict[str, float]:
+    """Sample rate [Hz] per kind over the first ``seconds`` (``probe_recording``)."""
+    return probe_recording(path, seconds, **decode_kw)[0]
 
 
 def _est_docs(o) -> list[tuple[str, int, dict, dict | None]]:
@@ -681,7 +690,8 @@ def _est_docs(o) -> list[tuple[str, int, dict, dict | None]]:
 def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, model=None, dbc=None,
                 signalmap=None, bus_map: Mapping[str, str] | None = None, params=None, save_params=None,
                 config: SystemConfig | None = None, identify: bool = True, predict: bool = True,
-                susp_sigma_m: float = 0.001, paper_faithful=None, copy_raw: bool = True) -> dict:
+                susp_sigma_m: float = 0.001, paper_faithful=None, copy_raw: bool = True,
+                sensorset=None) -> dict:
     """Replay a recording's ``/raw/`` topics through :class:`VdpsSystem` (``vdps replay``).
 
     Decodes only ``/raw/`` (``record.decode``), runs the system, writes ``output`` (MCAP: the
@@ -692,9 +702,11 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     ``params``: a saved parameter file to start the identifier from; ``save_params``: where to
     save the identified parameters; ``model``: a saved workbench model
     (``vdps_hil.workbench.model_file``); ``paper_faithful``: names of the EKF switches set to
-    the paper as printed (``"all"`` for all four). Without ``config`` the suspension window
-    averaging is sized from the measured sample rate and ``susp_sigma_m`` (Table 1: 1 mm).
-    Raises :class:`ReplayError` (one line)."""
+    the paper as printed (``"all"`` for all four); ``sensorset``: a named sensor set
+    (``configs/sensorsets``; default: inferred from the fields the recording carries, e.g. an
+    ESC cluster without suspension -> ``esc3``, no road angles). Without ``config`` the
+    suspension window averaging is sized from the measured sample rate and ``susp_sigma_m``
+    (Table 1: 1 mm). Raises :class:`ReplayError` (one line)."""
     import os
     import time
 
@@ -720,9 +732,13 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     except RecordingError as e:
         raise ReplayError(str(e)) from None
     try:
+        kind_map, nodes, sensors_desc = {}, [], None
         if config is None:
-            config = _replay_config(path, veh, dbc, signalmap, bus_map, susp_sigma_m, paper_faithful,
-                                    identify=identify, predict=predict)
+            config, kind_map, nodes, sensors_desc = _replay_config(
+                path, veh, dbc, signalmap, bus_map, susp_sigma_m, paper_faithful, sensorset,
+                identify=identify, predict=predict)
+        elif sensorset is not None:
+            raise ReplayError("give a sensor set or a config, not both")
         if start is not None:
             config = replace(config, start_params=start)
         state: dict = {"writer": None, "copy": None}
@@ -753,6 +769,10 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
         try:
             for s in dec:
                 summary.sample(s)
+                if kind_map and s.kind in kind_map:
+                    s = Sample(s.t_ns, s.source, kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
+                for node in nodes:
+                    s = node.process(s)
                 outs = system.handle(s)
                 system.clear_input_log()  # a file replay keeps the file, not a copy in memory
                 if outs:
@@ -766,7 +786,7 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     wall = time.perf_counter() - wall0
     doc = summary.document(system, dec, veh)
     doc.update({"input": os.fspath(path), "output": None if output is None else os.fspath(output),
-                "vehicle": veh.name, "wall_time_s": wall,
+                "vehicle": veh.name, "sensor_set": sensors_desc, "wall_time_s": wall,
                 "realtime_factor": (doc["duration_s"] / wall) if wall > 0 and doc["duration_s"] else None})
     if save_params is not None:
         from vdps_hil.identification.persistence import ParamsFileError, save_params as _save
@@ -816,23 +836,44 @@ def _load_workbench_model(path, vehicle: Vehicle, start):
     return p if isinstance(p, IdentifiedParams) else start
 
 
-def _replay_config(path, veh, dbc, signalmap, bus_map, susp_sigma_m, paper_faithful, **kw) -> SystemConfig:
-    from vdps_hil.estimation.ekf import EkfConfig, PaperFaithful
-
+def _replay_config(path, veh, dbc, signalmap, bus_map, susp_sigma_m, paper_faithful, sensorset=None, **kw):
+    """(SystemConfig, kind_map, sample nodes, sensor-set description) for a replay: the sensor
+    set from ``sensorset`` (``configs/sensorsets``: sensors, noise, latencies, kind map,
+    calibration nodes) or inferred from the fields the recording carries
+    (``realcars.infer_sensor_set``); the suspension averaging from its measured rate."""
+    from vdps_hil.estimation.ekf import PaperFaithful
     from vdps_hil.record.decode import DecodeError
+    from vdps_hil.realcars import SensorSetError, infer_sensor_set, load_sensorset
 
     try:
-        rates = measure_rates(path, dbc=dbc, signalmap=signalmap, bus_map=bus_map)
+        rates, fields = probe_recording(path, dbc=dbc, signalmap=signalmap, bus_map=bus_map)
     except DecodeError as e:
         raise ReplayError(str(e)) from None
     pc = default_pipeline_config()
+    nodes: list = []
+    try:
+        if sensorset is not None:
+            sset = load_sensorset(sensorset)
+            keep = {k: getattr(pc, k) for k in ("gnss_speed_sigma_mps",) if k not in sset.pipeline}  # system defaults
+            pc = replace(sset.pipeline_config(**keep), emit_estimates=False, bandwidths=pc.bandwidths)
+            kind_map = dict(sset.kind_map)
+            nodes = sset.calibration_nodes(veh)
+            desc = {"source": sset.name, **sset.sensors.__dict__}
+        else:
+            sensors, kind_map = infer_sensor_set(fields)
+            pc = replace(pc, ekf=replace(pc.ekf, sensors=sensors))
+            desc = {"source": "inferred from the recording", **sensors.__dict__}
+    except SensorSetError as e:
+        raise ReplayError(str(e)) from None
     if paper_faithful:
         names = set(paper_faithful)
         pf = PaperFaithful.all() if "all" in names else PaperFaithful(**{n: True for n in names})
         pc = replace(pc, ekf=replace(pc.ekf, paper_faithful=pf))
     if not (math.isfinite(susp_sigma_m) and susp_sigma_m > 0):
         raise ReplayError(f"suspension sigma must be positive, got {susp_sigma_m!r}")
-    return SystemConfig.for_profile(rates.get("suspension", 1.0), susp_sigma_m, pipeline=pc, **kw)
+    desc["kind_map"] = kind_map
+    cfg = SystemConfig.for_profile(rates.get("suspension", 1.0), susp_sigma_m, pipeline=pc, **kw)
+    return cfg, kind_map, nodes, desc
 
 
 class _Summary:

@@ -15,7 +15,8 @@ Examples:
   vdps sim paper -o paper.mcap && vdps replay paper.mcap -o paper-est.mcap --json -
   vdps replay drive.mcap --vehicle configs/vehicles/sedan-model.toml --save-params sedan.json
   vdps replay drive.mcap --params sedan.json --no-predict --json summary.json
-  vdps replay rav4.mcap --vehicle rav4-model --signalmap toyota_rav4_2017 --dbc toyota.dbc
+  vdps replay rav4.mcap --vehicle rav4-model --signalmap toyota_rav4_2017 --dbc toyota.dbc \\
+      --sensorset rav4-can-ublox
   vdps replay paper.mcap --paper-faithful all --no-identify --no-predict --json -
 
 \b
@@ -39,6 +40,9 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
               help="Signal map (configs/signalmaps/NAME or a .toml path) for a foreign DBC.")
 @click.option("--bus", "bus_map", multiple=True, metavar="REC=MAP",
               help="Decode recording bus REC with the signal map's bus MAP; repeatable.")
+@click.option("--sensorset", default=None, metavar="NAME",
+              help="Sensor set (configs/sensorsets/NAME or a .toml path) [default: inferred from "
+                   "the recording's fields].")
 @click.option("-o", "--output", default=None, metavar="OUT.mcap",
               help="Write a complete recording: the raw topics plus the /est/ topics.")
 @json_option
@@ -52,8 +56,8 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
               help="Suspension sensor noise (1-sigma) [m] (Table 1: 1 mm).")
 @click.option("--paper-faithful", "paper_faithful", multiple=True, type=click.Choice(PAPER_SWITCHES),
               help="EKF correction switched to the paper as printed (repeatable; 'all').")
-def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, output, json_out, params, save_params,
-           no_identify, no_predict, susp_sigma_m, paper_faithful):
+def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, output, json_out, params,
+           save_params, no_identify, no_predict, susp_sigma_m, paper_faithful):
     """Replay FILE.mcap through the estimator, identifier, predictor and warning (the paper's
     Figure 2) using only its /raw/ topics; print a one-line summary."""
     from vdps_hil.system import ReplayError, replay_file
@@ -79,7 +83,7 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, output, json
         doc = replay_file(recording, vehicle=vehicle, output=output, model=model_file, dbc=dbc,
                           signalmap=signalmap, bus_map=buses or None, params=params, save_params=save_params,
                           identify=not no_identify, predict=not no_predict, susp_sigma_m=susp_sigma_m,
-                          paper_faithful=paper_faithful or None)
+                          paper_faithful=paper_faithful or None, sensorset=sensorset)
     except ReplayError as e:
         raise UserError(str(e)) from None
     es = doc["estimates_summary"]
