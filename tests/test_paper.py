@@ -95,7 +95,7 @@ def test_every_parameter_moves_from_prior_toward_truth_and_mass_and_inertias_wit
         assert abs(e[k]) <= 0.10, (k, e[k])
     for k in e:
         assert abs(e[k]) < abs(prior[k]) / 5.0, (k, e[k], prior[k])
-    assert ident_run["t_ident_s"] == pytest.approx(P.T0_S)
+    assert P.T0_S - 0.01 <= ident_run["t_ident_s"] <= P.T0_S + 0.01  # the report at 10.25 s (filter clock)
     sr = ident_run["sigma_ratio"]
     assert all(sr[k] <= 2.0 for k in ("mass_kg", *P.INERTIA)), sr
 
@@ -111,7 +111,8 @@ def test_left_turn_prediction_within_three_metres_and_degrees(ident_run):
 def test_left_turn_prediction_is_bounded_and_no_false_alarm_on_the_left_turn(ident_run):
     """Measured (seed 1): 4.8 m, 4.9 deg at 15 s; tolerance 2x. No warning episode at all."""
     lt = ident_run["left_turn"]
-    assert lt["t_end_s"] == pytest.approx(P.LEFT_TURN_END_S)
+    assert P.T0_S <= lt["t0_s"] <= P.T0_S + 0.01  # the first estimate at or after 10.25 s
+    assert lt["t_end_s"] == pytest.approx(P.LEFT_TURN_END_S, abs=0.011)
     assert lt["position_err_m"] <= 10.0 and abs(lt["yaw_err_deg"]) <= 10.0
     assert ident_run["warning"]["false_alarms"] == 0 and ident_run["warning"]["episodes"] == []
     assert ident_run["warning"]["frames_rejected"] == 0
