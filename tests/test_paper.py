@@ -86,9 +86,10 @@ def test_truth_between_snapshots_is_interpolated_with_wrapped_angles():
 def test_every_parameter_moves_from_prior_toward_truth_and_mass_and_inertias_within_bounds(ident_run):
     """Acceptance (table1-susp1k): error at 10.25 s below a fifth of the prior error; mass <= 0.5 %,
     I_x, I_y, I_z <= 10 % (one seed here; the medians over 20 seeds are in tools/paper_full.py).
-    Measured (seed 1): mass +0.08 %, I_x +1.4 %, I_y -3.8 %, I_z +0.5 %, tracking -3.9..-6.6 %,
-    cornering -3.8 / -4.4 % (secant slopes of the Magic Formula truth). Every sigma-normalised
-    error below 2 except where the tire stiffness differs from the truth's zero-slip slope."""
+    Measured (seed 1, suspension windows stamped at their end / at their mean time): mass +0.08 /
+    +0.10 %, I_x +1.4 / +4.2 %, I_y -3.8 / -4.3 %, I_z +0.5 / -3.5 %, tracking -3.9..-6.6 %,
+    cornering -3.8 / -4.4 and -2.3 / -6.6 % (secant slopes of the Magic Formula truth). Mass and
+    inertias within 2 sigma of the identifier's own sigma."""
     e, prior = ident_run["rel_err"], ident_run["prior_rel_err"]
     assert abs(e["mass_kg"]) <= 0.005
     for k in P.INERTIA:
@@ -100,8 +101,8 @@ def test_every_parameter_moves_from_prior_toward_truth_and_mass_and_inertias_wit
     assert all(sr[k] <= 2.0 for k in ("mass_kg", *P.INERTIA)), sr
 
 
-@pytest.mark.xfail(strict=True, reason="linear-tire predictor (eq 15) vs Magic Formula truth: 4.8 m / 4.9 deg "
-                   "at +4.75 s (seed 1); TRUE parameters and TRUE initial state give 6.0 m / 5.9 deg, the "
+@pytest.mark.xfail(strict=True, reason="linear-tire predictor (eq 15) vs Magic Formula truth: 4.8-7.0 m / "
+                   "4.9-7.0 deg at +4.75 s (seed 1); TRUE parameters and TRUE initial state give 6.0 m / 5.9 deg, the "
                    "predictor with the truth's Magic Formula 0.13 m / 0.15 deg (chain init: 1.05 m / 0.78 deg)")
 def test_left_turn_prediction_within_three_metres_and_degrees(ident_run):
     lt = ident_run["left_turn"]
@@ -109,7 +110,7 @@ def test_left_turn_prediction_within_three_metres_and_degrees(ident_run):
 
 
 def test_left_turn_prediction_is_bounded_and_no_false_alarm_on_the_left_turn(ident_run):
-    """Measured (seed 1): 4.8 m, 4.9 deg at 15 s; tolerance 2x. No warning episode at all."""
+    """Measured (seed 1): 4.8-7.0 m, 4.9-7.0 deg at 15 s; bound 10 m / 10 deg. No warning episode."""
     lt = ident_run["left_turn"]
     assert P.T0_S <= lt["t0_s"] <= P.T0_S + 0.01  # the first estimate at or after 10.25 s
     assert lt["t_end_s"] == pytest.approx(P.LEFT_TURN_END_S, abs=0.011)
