@@ -55,5 +55,5 @@ def paper(quick, profiles, seeds, seed0, workers, json_out):
     def progress(done, total):
         eprint(f"vdps paper: {done}/{total} runs")
     doc = run_paper(opt, progress=progress)
-    click.echo(format_report(doc))
+    click.echo(format_report(doc), err=json_out == "-")  # stdout stays pure JSON with --json -
     write_json(doc, json_out)
