@@ -86,6 +86,14 @@ if ``require_converged`` names identification problems, until they have converge
 missing" when the held inputs (steering, wheel torques) or a rate/wheel speed are missing, else
 0; the node itself sends 3 "fault" for a stale prediction.
 
+File replay (``replay_file``, the library function of ``vdps replay`` and of the batch tasks):
+``record.decode`` (only ``/raw/``) -> optional sensor-set kind map and calibration nodes ->
+``VdpsSystem`` -> ``/est/state`` (values + sigmas), ``/est/innovation/<kind>``, ``/est/filtered``,
+``/est/ident``, ``/est/prediction``, ``/est/can/<bus>`` (the sent frames, vdps.RawCan.v1, tx) in
+an output MCAP that also holds the raw topics copied byte for byte; the summary dict is the
+``--json`` document. The sensor set is named (``configs/sensorsets``) or inferred from the
+fields the recording carries, the suspension averaging sized from its measured rate.
+
 Symbols: t [ns], T window [s], H deflection [m] (compression +), sigma [m], n samples per window.
 """
 
