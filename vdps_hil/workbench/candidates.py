@@ -11,14 +11,16 @@ but missing in the model leaves r = sum_p column_p theta_p.
 adapter                              columns
 ===================================  ===============================================================
 :class:`RegressorCandidate`          the effect's own ``regressors(q)`` (effects linear in their
-                                     parameters: drag, rolling resistance, load-dependent cornering
-                                     stiffness, steering compliance, a user's linear effect)
+                                     parameters whose regressors cover every equation they change:
+                                     drag, rolling resistance, a user's linear effect)
 :class:`MeasurementCandidate`        ``regressors(kin)`` of a sensor effect: m df/dtheta on the
                                      long/lat/vert force balance and the strapdown innovations
 :class:`NumericCandidate`            central differences of the residual in each parameter at the
-                                     effect's generic prior (any user effect without regressors)
-:class:`CrosswindCandidate`          wind east/north components (the effect's direction is unknown):
-                                     differences at 1 m/s of wind from the east and the north
+                                     effect's generic prior (steering compliance, load-dependent
+                                     stiffness -- their regressors omit the roll moment -- and any
+                                     user effect without regressors)
+:class:`CrosswindCandidate`          the wind across the mean direction of travel: the side force and
+                                     yaw moment, first order in the wind
 :class:`LowPressureCandidate`        one tire's radius loss; the wheel (1..4) whose column fits best
 :class:`MagicFormulaCandidate`       saturation: s = (mu_0 / mu)^2 scales the small-slip deviation
                                      of the Magic Formula from the linear tire (F - C alpha ~ -(C
@@ -151,16 +153,18 @@ class Candidate:
         return f"{type(self).__name__}({self.name})"
 
 
+FIT_PARAMS: dict[str, tuple[str, ...]] = {"aero_drag": ("cda_m2",)}
+"""Built-in effects whose other parameters are constants, not fitted (air density)."""
+
+
 class RegressorCandidate(Candidate):
-    """Columns from the effect's own ``regressors(q)`` (linear in its parameters)."""
+    """Columns from the effect's own ``regressors(q)`` (linear in its parameters); parameters
+    without a column on this drive are dropped (held at their defaults)."""
 
     def __init__(self, effect_cls, params=None):
+        if params is None and REGISTRY.get(effect_cls.name) is effect_cls:
+            params = FIT_PARAMS.get(effect_cls.name)
         super().__init__(effect_cls, params)
-        if params is None:
-            self.params = self._probe_params()
-
-    def _probe_params(self) -> tuple[str, ...]:
-        return tuple(self.defaults)
 
     def columns(self, ctx):
         eff = self.effect_cls(**self.defaults)
@@ -209,50 +213,60 @@ class NumericCandidate(Candidate):
 
 
 class CrosswindCandidate(Candidate):
-    """Crosswind with an unknown direction: theta = (wind east, wind north) [m/s]; side-force
-    area and centre of pressure at the effect's generic prior."""
+    """Crosswind: theta = the wind across the drive's mean direction of travel [m/s] (positive
+    toward its left); side-force area and centre of pressure at the effect's generic prior. A head
+    or tail wind is not a crosswind (it would show as drag)."""
 
     def __init__(self, effect_cls):
-        super().__init__(effect_cls, ("wind_east_mps", "wind_north_mps"))
-
-    def phi_steps(self, phi):
-        return np.array([0.5, 0.5])
+        super().__init__(effect_cls, ("crosswind_mps",))
+        self.heading = 0.0
 
     def prior_theta(self):
-        s = self.defaults["wind_speed_mps"]
-        return np.array([s / math.sqrt(2.0), s / math.sqrt(2.0)])
+        return np.array([self.defaults["wind_speed_mps"]])
 
     def columns(self, ctx):
-        h = 1.0
-        base = dict(self.defaults)
-        cols = []
-        for direction in (0.0, math.pi / 2.0):
-            e = self.effect_cls(**{**base, "wind_speed_mps": h, "wind_to_rad": direction})
-            cols.append(ctx.dyn_contribution(e) / h)
-        return np.stack(cols, axis=2), None
+        # the side force of a wind across the car, to first order in the wind: F_y = 1/2 rho C_Y A
+        # |v| w_y,body and M_z = x_cp F_y, w_y,body = (C_g^v w)_y. The effect's side force from the
+        # car's own sideslip (v_air,y = v_y at zero wind) is left out: second order, and it would
+        # let a "wind" mimic a cornering stiffness.
+        from .dataset import dcm_gv_batch
+
+        c = ctx.table.columns
+        idx = ctx.res.index
+        psi = c["yaw_g_rad"][idx]
+        ok = np.isfinite(psi)
+        self.heading = float(np.arctan2(np.mean(np.sin(psi[ok])), np.mean(np.cos(psi[ok])))) if ok.any() else 0.0
+        v = self.defaults
+        k = 0.5 * v["air_density_kgpm3"] * v["side_force_area_m2"]
+        speed = np.hypot(np.hypot(c["vel_g_mps_e"][idx], c["vel_g_mps_n"][idx]), c["vel_g_mps_u"][idx])
+        cg = dcm_gv_batch(c["roll_g_rad"][idx], c["pitch_g_rad"][idx], psi)
+        d = np.array([math.cos(self.heading + math.pi / 2), math.sin(self.heading + math.pi / 2), 0.0])
+        fy = k * speed * (cg[:, 1, :] @ d)
+        out = np.zeros((len(idx), 14, 1))
+        out[:, 1, 0] = fy
+        out[:, 5, 0] = v["cp_x_m"] * fy
+        return np.nan_to_num(out), None
 
     def effect(self, theta):
-        we, wn = float(theta[0]), float(theta[1])
-        return self.effect_cls(**{**self.defaults, "wind_speed_mps": math.hypot(we, wn),
-                                  "wind_to_rad": math.atan2(wn, we)})
+        w = float(theta[0])
+        to = self.heading + (math.pi / 2 if w >= 0 else -math.pi / 2)
+        return self.effect_cls(**{**self.defaults, "wind_speed_mps": abs(w), "wind_to_rad": to})
 
     def report_params(self, theta, sigma):
-        we, wn = float(theta[0]), float(theta[1])
-        s = math.hypot(we, wn)
-        ss = math.hypot(float(sigma[0]), float(sigma[1])) / math.sqrt(2.0)
-        d = math.atan2(wn, we)
-        sd = ss / s if s > 0 else math.pi
-        return {"wind_speed_mps": (s, ss), "wind_to_rad": (d, sd), "wind_east_mps": (we, float(sigma[0])),
-                "wind_north_mps": (wn, float(sigma[1]))}
+        w, sw = float(theta[0]), float(sigma[0])
+        to = self.heading + (math.pi / 2 if w >= 0 else -math.pi / 2)
+        return {"wind_speed_mps": (abs(w), sw), "wind_to_rad": ((to + math.pi) % (2 * math.pi) - math.pi, 0.0),
+                "crosswind_mps": (w, sw)}
 
     def plausible(self, theta):
-        return math.hypot(float(theta[0]), float(theta[1])) <= self.effect_cls.param_specs()["wind_speed_mps"].upper
+        return abs(float(theta[0])) <= self.effect_cls.param_specs()["wind_speed_mps"].upper
+
+    def material(self, phi, fraction: float = 0.1) -> bool:
+        return abs(float(phi[0])) >= fraction * self.defaults["wind_speed_mps"]
 
     def clip_phi(self, phi):
-        phi = np.array(phi, dtype=float)
-        s = math.hypot(phi[0], phi[1])
         top = self.effect_cls.param_specs()["wind_speed_mps"].upper
-        return phi * (top / s) if s > top else phi
+        return np.clip(np.asarray(phi, dtype=float), -top, top)
 
 
 class LowPressureCandidate(Candidate):
@@ -407,7 +421,12 @@ class ParameterCandidate(Candidate):
 
 
 _ADAPTERS = {"crosswind": CrosswindCandidate, "low_pressure_tire": LowPressureCandidate,
-             "magic_formula_tire": MagicFormulaCandidate}
+             "magic_formula_tire": MagicFormulaCandidate,
+             # their regressors name only the lateral and yaw equations (the lateral force also moves
+             # the roll moment at the contact height) and are first order; the core's own change
+             # (central differences at the generic prior) covers every equation
+             "load_dependent_cornering_stiffness": NumericCandidate,
+             "steering_compliance": NumericCandidate}
 
 
 def _has_regressors(cls) -> bool:

@@ -27,8 +27,10 @@ sample size improves by more than ``bic_margin``::
 
     dBIC = n_eff ln(SSE(S + c) / SSE(S)) + p_c ln(n_eff),   n_eff = sum_g n_g / tau_g
 
-(tau_g the integrated autocorrelation time of equation g's residual), (b) EF_c >=
-``min_explained``, (c) the fitted parameters are physically plausible (``ParamSpec`` ranges:
+(tau_g the integrated autocorrelation time of equation g's residual), (b) EF_c > 0 overall and
+>= ``min_explained`` on the candidate's own equations (those holding >= 10 % of its prior-size
+contribution: a sensor bias judged on the GNSS innovations and the force balance, a tire effect
+on the lateral equations), (c) the fitted parameters are physically plausible (``ParamSpec`` ranges:
 negative drag and so on are rejected) and (d) the drive excites it: at its generic prior
 magnitude the effect would stand ``excitation_z`` noise sigmas (effective) above zero. The first
 selected effect is the ``recommendation``.
@@ -73,12 +75,13 @@ class RankingConfig:
     """Thresholds of the ranking (module docstring)."""
 
     micro_block_s: float = 0.5
-    nuisance_knot_s: float = 2.0
+    nuisance_knot_s: float = 5.0
     velocity_sigma_floor_mps: float = 0.02
     velocity_fast_sigma_mps: float = 0.003
     excite_lat_mps2: float = 0.5
     excite_angacc_radps2: float = 0.05
     excite_torque_nm: float = 20.0
+    structure_terms: bool = True
     folds: int = 8
     gap_blocks: int = 1
     bic_margin: float = 10.0
@@ -660,12 +663,7 @@ def _build(table, states, inn, ref: Vehicle, point: _Point, cfg: RankingConfig, 
     res = compute_residuals(table, point.base, point.effects, states=states)
     ctx = Context(table, point.base, point.effects, states, res, inn, cfg.velocity_fast_sigma_mps)
     d = Design(ctx, cfg)
-    if getattr(states, "prior_scale", None) is None:
-        # the residual rows are autocorrelated: their weight against the (independent) priors is
-        # n_eff / n; measured once per drive on the first residual (conservative: slow misfit
-        # lengthens the correlation)
-        states.prior_scale = max(1.0, len(d.y) / _n_eff(d, d.y))
-    d.prior_scale = states.prior_scale
+    d.prior_scale = states.prior_scale if getattr(states, "prior_scale", None) is not None else 1.0
     if getattr(states, "excited_params", None) is None:
         states.excited_params = excited_parameters(table, states, cfg)
     for p in cfg.identify:
@@ -675,16 +673,41 @@ def _build(table, states, inn, ref: Vehicle, point: _Point, cfg: RankingConfig, 
         d.add_block(p, ctx.param_columns(p), None, prior_sigma=[cfg.base_prior_rel_sigma * abs(pv)],
                     prior_center=[pv - getattr(point.base.params, p)])
     names = ["_nuisance", "_smooth", *cfg.identify]
+    if cfg.structure_terms:
+        d.add_block("_structure", structure_columns(res), None)
+        names.insert(2, "_structure")
     for name, c in selected.items():
         xd, xi = c.delta_columns(ctx, point.phis[name])
         if xi is not None:
             d.shift_innovations(xi, point.phis[name])
         d.add_block(name, xd, xi)
         names.append(name)
+    if getattr(states, "prior_scale", None) is None:
+        # the residual rows are autocorrelated: their weight against the (independent) priors is
+        # n_eff / n, measured once per drive on the residual of this first fit
+        cols = d.columns_of(names)
+        th, _ = d.objective(cols)
+        states.prior_scale = max(1.0, len(d.y) / _n_eff(d, d.y - d.matrix(cols) @ th))
+        d.prior_scale = states.prior_scale
+        d._stats = None
     for c in screen:
         xd, xi = c.columns(ctx)
         d.add_block(c.name, xd, xi)
     return ctx, d, d.columns_of(names)
+
+
+def structure_columns(res: EquationResiduals) -> np.ndarray:
+    """Known simplifications of the paper's reduced model, absorbed so that they are not taken
+    for a missing effect (always fitted, no prior): the unsprung masses (about 10 % of the mass)
+    ride with the body in eq 13 but stay on the road when the body rolls, which adds a lateral
+    force ~ m_u h p_dot and makes the lateral inertia differ from the vertical one (a force
+    ~ f_y). Columns: lateral equation ~ roll acceleration, ~ lateral specific force."""
+    n = len(res.t_s)
+    out = np.zeros((n, 14, 2))
+    if n and res.meas is not None:
+        out[:, 1, 0] = res.meas[:, 3]
+        out[:, 1, 1] = res.meas[:, 1]
+    return out
 
 
 def excited_parameters(table: DriveTable, states: RowStates, cfg: RankingConfig) -> set[str]:
@@ -860,10 +883,13 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     lateral = [GROUP_NAMES.index(g) for g in ("lat", "roll", "yaw")]
     lat_ok = "cornering_stiffness_front_nprad" in (states.excited_params or set()) or \
         "cornering_stiffness_front_nprad" not in cfg.identify
+    own_groups: dict[str, np.ndarray] = {}
     for name, c in by_name.items():
         cols = d.blocks[name]
         th = c.prior_theta() * np.array([d.scale[k] for k in cols])
         e_g = np.array([float(th @ Gg[g][np.ix_(cols, cols)] @ th) for g in range(len(GROUP_NAMES))])
+        # the candidate's own equations: where its prior-size contribution has >= 10 % of its energy
+        own_groups[name] = e_g >= 0.1 * e_g.sum() if e_g.sum() > 0 else np.zeros(len(GROUP_NAMES), bool)
         if e_g.sum() > 0 and e_g[lateral].sum() >= 0.5 * e_g.sum() and not lat_ok:
             excit[name] = 0.0
     joints: dict[str, _Joint] = {}
@@ -895,10 +921,12 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
             cvb = j.cv_without if j.cv_without is not None else cv_cur
             sseb = j.sse_without if math.isfinite(j.sse_without) else sse_cur
             ef = 1.0 - j.cv.sum() / max(cvb.sum(), 1e-300)
+            own = own_groups.get(name)
+            ef_own = 1.0 - j.cv[own].sum() / max(cvb[own].sum(), 1e-300) if own is not None and own.any() else ef
             dbic = n_eff * math.log(max(j.sse, 1e-300) / max(sseb, 1e-300)) + len(j.phi) * math.log(n_eff)
-            steps[name] = {"ef": ef, "dbic": dbic, "joint": j, "cv_before": cvb}
+            steps[name] = {"ef": ef, "ef_own": ef_own, "dbic": dbic, "joint": j, "cv_before": cvb}
             joints[name] = j
-            ok = (dbic < -cfg.bic_margin and ef >= cfg.min_explained and c.phi_plausible(j.phi)
+            ok = (dbic < -cfg.bic_margin and ef_own >= cfg.min_explained and ef > 0.0 and c.phi_plausible(j.phi)
                   and c.material(j.phi, cfg.material_fraction))
             if ok and (best is None or ef > best[1]):
                 best = (name, ef, j)
@@ -1068,7 +1096,7 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
         if e.selected and not by_name[e.effect].linear and e.effect in d.ctx.effects:
             contrib[e.effect] = d.add_block(f"_contrib:{e.effect}", d.ctx.removal(e.effect)[:, :, None], None)
     G = d.stats()[0].sum(axis=(0, 1))
-    nu = d.columns_of(["_nuisance", "_smooth"])
+    nu = d.columns_of(["_nuisance", "_smooth", "_structure"])
     if nu:
         gnn = G[np.ix_(nu, nu)]
         gp = G - G[:, nu] @ np.linalg.lstsq(gnn, G[nu, :], rcond=None)[0]

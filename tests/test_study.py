@@ -1,0 +1,55 @@
+"""The study definitions: maneuvers parse, effects exist, hit definition, Wilson interval."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+from scipy.stats import binomtest
+
+from vdps_hil.model.effects import REGISTRY
+from vdps_hil.sim.drive import parse_effect_spec
+from vdps_hil.workbench import study as S
+
+
+def test_every_maneuver_parses_and_every_effect_is_known():
+    for name in S.MANEUVERS:
+        sc = S.scenario(name)
+        assert sc.effect_names == () and sc.duration_s <= 20.0
+    for eff, (man, spec) in S.HIDDEN.items():
+        assert man in S.MANEUVERS and eff in REGISTRY
+        n, params = parse_effect_spec(spec)
+        assert n == eff
+        REGISTRY[n](**params)  # magnitudes are valid
+
+
+def test_issue_magnitudes():
+    assert S.HIDDEN["aero_drag"][1].endswith("cda_m2=0.7")
+    assert "coefficient=0.012" in S.HIDDEN["rolling_resistance"][1]
+    assert "radius_reduction=0.015" in S.HIDDEN["low_pressure_tire"][1]
+    assert "wind_speed_mps=10" in S.HIDDEN["crosswind"][1]
+    assert "lever_x_m=0.5" in S.HIDDEN["imu_lever_arm"][1]
+    b = REGISTRY["imu_bias"]()
+    assert b.accel_bias_x_mps2 == 0.05 and abs(b.gyro_bias_z_radps - 0.1 * 3.141592653589793 / 180) < 1e-12
+
+
+def _rk(rec=None, eq=(), groups=()):
+    return SimpleNamespace(recommendation=rec, equivalent_to=list(eq), groups=[{"members": list(g)} for g in groups])
+
+
+def test_hit_definition():
+    assert S.is_hit(_rk("aero_drag"), "aero_drag")
+    assert S.is_hit(_rk("cornering_stiffness_front", groups=[("cornering_stiffness_front", "steering_compliance")]),
+                    "steering_compliance")
+    assert S.is_hit(_rk("magic_formula_tire", eq=["load_dependent_cornering_stiffness"]),
+                    "load_dependent_cornering_stiffness")
+    assert not S.is_hit(_rk(None), "aero_drag")
+    assert not S.is_hit(_rk(None, groups=[("mass", "imu_bias"), ("aero_drag", "imu_bias")]), "aero_drag")
+    assert not S.is_hit(_rk("crosswind"), "aero_drag")
+
+
+@pytest.mark.parametrize("k, n", [(0, 20), (18, 20), (20, 20), (7, 13)])
+def test_wilson_interval_matches_scipy(k, n):
+    lo, hi = S.wilson_interval(k, n)
+    ci = binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
+    assert lo == pytest.approx(ci.low, abs=1e-9) and hi == pytest.approx(ci.high, abs=1e-9)
