@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from vdps_hil.estimation import synthetic as syn
-from vdps_hil.estimation.observations import (ObsKind, ZrRateBuilder, make_models, suspension_measurement,
-                                              y2_gps_measurement)
+from vdps_hil.estimation.observations import (ObsKind, ZrRateBuilder, make_models, rear_axle_ground_point,
+                                              suspension_measurement, wheel_positions, y2_gps_measurement)
+from vdps_hil.estimation.states import N_EXT, AugStates
 from vdps_hil.model import frames as fr
 from vdps_hil.model.params import load_vehicle
 
@@ -124,3 +125,59 @@ def test_zr_rate_builder():
     assert b.push(10_000_000_000, 0.0, 1e-6) is None  # everything older than 3 s dropped
     with pytest.raises(ValueError):
         ZrRateBuilder(min_baseline_s=1.0, max_baseline_s=0.5)
+
+
+# ---------------------------------------------------------------------------------------------
+# real-car rows: wheel speed and the non-holonomic constraint
+WHEELS = wheel_positions(GEO, VEH.tire.rolling_radius_m)
+
+
+def _x_ext(rng):
+    x = np.zeros(N_EXT)
+    x[:12] = rng.normal(size=12) * np.array([300, 300, 20, 25, 25, 2, .3, .3, 3, .1, .1, 3])
+    x[12:] = rng.normal(size=7) * 0.02
+    return x
+
+
+@pytest.mark.parametrize("kind", [ObsKind.WHEEL_SPEED, ObsKind.NHC])
+def test_real_car_rows_jacobians_on_the_extended_vector(kind, rng):
+    """Both rows with body rates, steering and uneven weights, on the N_EXT vector (the wheel
+    speed depends on k_w): analytic Jacobian against central differences (1e-6)."""
+    model = make_models(LEVER, WHEELS, rear_axle_ground_point(GEO))[kind]
+    for _ in range(20):
+        x = _x_ext(rng)
+        w = tuple(rng.normal(size=3) * 0.3)
+        aux = (w, (0.1, 0.08, 0.0, 0.0), (0.4, 0.1, 0.3, 0.2)) if kind == ObsKind.WHEEL_SPEED else w
+        H = model.jacobian(x, aux)
+        num = np.zeros_like(H)
+        for i in range(H.shape[1]):
+            d = np.zeros(N_EXT)
+            d[i] = 1e-6
+            num[:, i] = (model.h(x + d, aux) - model.h(x - d, aux)) / 2e-6
+        np.testing.assert_allclose(H, num, atol=1e-6, rtol=1e-6)
+        assert H.shape[1] == (N_EXT if kind == ObsKind.WHEEL_SPEED else 12)
+
+
+def test_wheel_speed_and_nhc_physics():
+    """Level car heading north-east at 20 m/s turning left at 0.3 rad/s: the left wheels roll
+    slower than the right ones by w_z * track, their mean is the CG speed; a steered front pair
+    sees cos(d) of it; k_w scales. The rear axle moves sideways by -w_z l_r (NHC) and not
+    vertically."""
+    models = make_models(LEVER, WHEELS, rear_axle_ground_point(GEO))
+    ws, nhc = models[ObsKind.WHEEL_SPEED], models[ObsKind.NHC]
+    psi, u, r = 0.8, 20.0, 0.3
+    x = np.zeros(N_EXT)
+    x[3:5] = u * math.cos(psi), u * math.sin(psi)
+    x[8] = psi
+    w = (0.0, 0.0, r)
+    left = ws.h(x, (w, (0.0,) * 4, (0.0, 0.0, 0.0, 1.0)))[0]  # RL
+    right = ws.h(x, (w, (0.0,) * 4, (0.0, 0.0, 1.0, 0.0)))[0]  # RR
+    assert right - left == pytest.approx(r * 2 * GEO.track_half_rear_m, abs=1e-9)
+    assert ws.h(x, (w, (0.0,) * 4, (0.25,) * 4))[0] == pytest.approx(u, abs=1e-9)
+    assert ws.h(x)[0] == pytest.approx(u, abs=1e-9)
+    d = 0.2  # steered front wheels, no yaw rate: the car's x velocity along each wheel's heading
+    assert ws.h(x, ((0.0, 0.0, 0.0), (d, d, 0.0, 0.0), (0.5, 0.5, 0.0, 0.0)))[0] == pytest.approx(u * math.cos(d))
+    x[AugStates.WHEEL_SCALE] = -0.01
+    assert ws.h(x)[0] == pytest.approx(0.99 * u)
+    np.testing.assert_allclose(nhc.h(x, w), [-r * GEO.l_r_m, 0.0], atol=1e-9)
+    np.testing.assert_allclose(nhc.h(x, None), [0.0, 0.0], atol=1e-9)

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.estimation.states import N_FULL, STATE_NAMES, States, StateLayout
+from vdps_hil.estimation.states import ALL_STATE_NAMES, N_EXT, N_FULL, STATE_NAMES, AugStates, States, StateLayout
 from vdps_hil.model import frames as fr
 
 
@@ -76,3 +76,33 @@ def test_from_full_round_trip(rng):
     np.testing.assert_array_equal(lay.from_full(xf), xf[:11])
     with pytest.raises(ValueError):
         lay.from_full(np.zeros(11))
+
+
+def test_augmented_layout_bias_and_wheel_scale_states(rng):
+    """Bias and wheel-scale states follow the eq-7 states; names, indices, padding of a 12-vector
+    and the N_EXT expansion (E rows of the augmented states are unit rows, E of eq 7 unchanged)."""
+    lay = StateLayout(road_estimated=False, gyro_bias_axes=(2,), accel_bias_axes=(0, 1), wheel_scale=True)
+    assert lay.n == 13 and lay.n_kinematic == 9 and lay.augmented
+    assert lay.names[9:] == ("gyro_bias_z_radps", "accel_bias_x_mps2", "accel_bias_y_mps2", "wheel_speed_scale")
+    assert lay.index(AugStates.BG_Z) == 9 and lay.index(AugStates.BG_X) is None
+    assert lay.index(AugStates.WHEEL_SCALE) == 12 and lay.states[-1] is AugStates.WHEEL_SCALE
+    assert len(ALL_STATE_NAMES) == N_EXT == 19
+    xf = rng.normal(size=12)
+    x = lay.from_full(xf)
+    np.testing.assert_array_equal(x[:9], xf[:9])
+    np.testing.assert_array_equal(x[9:], 0.0)
+    x[9:] = [0.01, 0.2, -0.1, 0.02]
+    xe, e = lay.expand(x, ext=True)
+    assert xe.shape == (N_EXT,) and e.shape == (N_EXT, 13)
+    assert xe[AugStates.BG_Z] == 0.01 and xe[AugStates.BA_Y] == -0.1 and xe[AugStates.BG_X] == 0.0
+    np.testing.assert_array_equal(e[AugStates.WHEEL_SCALE], np.eye(13)[12])
+    x12, e12 = lay.expand(x)
+    assert x12.shape == (12,) and e12.shape == (12, 13) and not e12[:, 9:].any()
+    np.testing.assert_array_equal(lay.from_full(xe), x)
+    vals = lay.augmented_values(x, np.eye(13) * 4.0)
+    assert vals["accel_bias_x_mps2"] == (0.2, 2.0)
+    with pytest.raises(ValueError, match="gyro_bias_axes"):
+        StateLayout(gyro_bias_axes=(3,))
+    with pytest.raises(ValueError, match="accel_bias_axes"):
+        StateLayout(accel_bias_axes=(1, 0))
+    assert not StateLayout().augmented and StateLayout().n_kinematic == 11

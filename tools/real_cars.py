@@ -9,7 +9,11 @@ head to head with openpilot's learned parameters and the observability report.
 
 RTKLIB drive 0708: outages of 5, 10 (and 15) s every 30 s; variants switching off one thing at a
 time: the stated IMU lag, the misalignment, the whole stated rotation, the standstill gyro
-calibration, and using the .pos velocities.
+calibration, the real-car states and rows (bias states, non-holonomic constraint: "plain"), and
+using the .pos velocities (with their own 0.13 s latency, ``Latencies.gnss_vel_s``).
+
+Both cars also run "plain": the eq 7-11 filter without the real-car rows and states the sensor
+sets switch on (wheel speed, non-holonomic constraint, IMU bias states, wheel-speed scale).
 
 Usage::
 
@@ -36,6 +40,8 @@ from vdps_hil.record.importer import CanSource, SerialSource
 from vdps_hil.system import SystemConfig, VdpsSystem
 
 REPO = Path(__file__).resolve().parents[1]
+PLAIN = dict(gyro_bias=False, accel_bias=False, wheel_speed=False, wheel_scale_state=False, nonholonomic=False)
+"""The eq 7-11 filter without the real-car rows and states."""
 
 
 def _tool(name):
@@ -59,8 +65,10 @@ def rav4(data: Path, tmp: Path, quick: bool) -> dict:
     ss = rc.load_sensorset("rav4-can-ublox")
     out: dict = {}
 
-    def run(windows=(), **kw):
+    def run(windows=(), plain=False, **kw):
         cfg = ss.pipeline_config(observability_window_s=None, output_period_s=0.05, **kw)
+        if plain:
+            cfg = dataclasses.replace(cfg, ekf=dataclasses.replace(cfg.ekf, **PLAIN))
         r = rc.run_pipeline(veh, cfg, samples, kind_map=ss.kind_map, origin=ref.origin,
                             drop=rc.gnss_denied(windows, cfg.latencies.gnss_s) if windows else None)
         pa, va = r.track.antenna(veh.mounting.gnss_lever_arm_m)
@@ -73,6 +81,9 @@ def rav4(data: Path, tmp: Path, quick: bool) -> dict:
                                              ref),
             "u-blox": rc.speed_course_errors(fixes.t_s, fixes.speed_mps, fixes.course_rad, ref),
             "wheels": rc.speed_course_errors(tw, vw, np.full_like(vw, np.nan), ref)}
+    rp, _, vap = run(plain=True)
+    rows["filter, plain eq 7-11"] = rc.speed_course_errors(rp.track.t_s, np.hypot(vap[:, 0], vap[:, 1]),
+                                                          np.arctan2(vap[:, 1], vap[:, 0]), ref)
     r0, _, va0 = run(latencies=rc.Latencies())
     rows["filter, no u-blox latency"] = rc.speed_course_errors(r0.track.t_s, np.hypot(va0[:, 0], va0[:, 1]),
                                                                np.arctan2(va0[:, 1], va0[:, 0]), ref)
@@ -81,15 +92,20 @@ def rav4(data: Path, tmp: Path, quick: bool) -> dict:
         print(f"  {k:28s} speed {e['speed_rms_mps']:.3f} m/s (mean {e['speed_mean_mps']:+.3f})  course "
               f"{e['course_rms_deg']:.3f} deg")
     out["baselines"] = rows
+    out["augmented_state"] = {k: list(v) for k, v in r.pipeline.augmented_state().items()}
+    print("RAV4 estimated states beyond eq 7: " + ", ".join(f"{k} {v:+.5f} +- {sg:.5f}"
+                                                           for k, (v, sg) in r.pipeline.augmented_state().items()))
     ty, wz = rc.series(samples, "esc_imu", ["angular_rate_radps_z"])
     wz_w = np.interp(tw, ty, wz[:, 0])
     t0 = ref.t_s[0]
     starts = [5.0, 20.0, 35.0] if quick else list(np.arange(2.0, 38.1, 4.0))
     drift = []
-    print("RAV4: GNSS-denied 20 s windows, error at the end: filter | dead reckoning (wheels + ESC yaw rate)")
+    print("RAV4: GNSS-denied 20 s windows, error at the end: filter | dead reckoning (wheels + ESC yaw rate)"
+          " | plain eq 7-11 filter position")
     for s0 in starts:
         a, b = t0 + s0, t0 + s0 + 20.0
         rr, pa2, va2 = run([(a, b)])
+        rq, paq, _ = run([(a, b)], plain=True)
         tr = rr.track
         i0, i1 = int(np.searchsorted(tr.t_s, a)) - 1, int(np.searchsorted(tr.t_s, b)) - 1
         pr, vr = ref.at([tr.t_s[i1]])
@@ -102,12 +118,18 @@ def rav4(data: Path, tmp: Path, quick: bool) -> dict:
              "dead_reckoning": {"speed_mps": float(dsp[-1] - np.hypot(*vr[0, :2])),
                                 "course_deg": float(np.degrees(rc.wrap_pi(dcrs[-1] - c_ref))),
                                 "position_m": float(np.hypot(*(dp[-1] - pr[0, :2])))}}
+        iq = int(np.searchsorted(rq.track.t_s, b)) - 1
+        prq, _ = ref.at([rq.track.t_s[iq]])
+        d["plain"] = {"position_m": float(np.hypot(*(paq[iq, :2] - prq[0, :2])))}
         drift.append(d)
         f, g = d["filter"], d["dead_reckoning"]
         print(f"  {s0:4.0f}-{s0 + 20:2.0f} s: speed {f['speed_mps']:+7.2f} | {g['speed_mps']:+6.2f} m/s  course "
               f"{f['course_deg']:+6.2f} | {g['course_deg']:+6.2f} deg  position {f['position_m']:6.1f} | "
-              f"{g['position_m']:5.1f} m")
+              f"{g['position_m']:5.1f} | {d['plain']['position_m']:6.1f} m")
     out["gnss_denied_20s"] = drift
+    print(f"  mean position error at the end: filter {np.mean([d['filter']['position_m'] for d in drift]):.1f} m, "
+          f"dead reckoning {np.mean([d['dead_reckoning']['position_m'] for d in drift]):.1f} m, plain "
+          f"{np.mean([d['plain']['position_m'] for d in drift]):.1f} m")
     # head to head
     ren = [dataclasses.replace(s, kind="imu") if s.kind == "esc_imu" else s for s in samples]
     t, u, sw, wzt, cr = rc.steer_signals(ren, r.track)
@@ -159,11 +181,15 @@ def rtklib(data: Path, tmp: Path, quick: bool) -> dict:
         "no misalignment": (dataclasses.replace(veh, mounting=dataclasses.replace(
             mount, imu_rotation_rpy_rad=rc.publisher_mounting_rpy((180.0, 0.0, 180.0)))), {}, True),
         "no standstill gyro calibration": (veh, {}, False),
+        "plain eq 7-11 filter": (veh, {"plain": True}, True),
+        "plain, no standstill calibration": (veh, {"plain": True}, False),
     }
     if not quick:
         variants["no rotation at all"] = (dataclasses.replace(veh, mounting=dataclasses.replace(
             mount, imu_rotation_rpy_rad=(0.0, 0.0, 0.0))), {}, True)
-        variants["with the .pos velocities"] = (veh, {"use_vel": True}, True)
+        variants["with the .pos velocities"] = (veh, {"use_vel": True, "latencies": dataclasses.replace(
+            ss.latencies, gnss_vel_s=rc.velocity_lag(ref))}, True)
+        variants[".pos velocities, one GNSS latency"] = (veh, {"use_vel": True}, True)
     out = {}
     print(f"RTKLIB drive 0708: {len(wins)} outages every 30 s ({', '.join(f'{x:g}' for x in lengths)} s)")
     for name, (v, kw, cal) in variants.items():
@@ -171,14 +197,18 @@ def rtklib(data: Path, tmp: Path, quick: bool) -> dict:
         cfg = ss.pipeline_config(observability_window_s=None, output_period_s=0.05, latencies=kw.get("latencies"))
         if kw.get("use_vel"):
             cfg = dataclasses.replace(cfg, ekf=dataclasses.replace(cfg.ekf, use_gnss_velocity=True))
+        if kw.get("plain"):
+            cfg = dataclasses.replace(cfg, ekf=dataclasses.replace(cfg.ekf, **PLAIN))
         r = rc.run_pipeline(v, cfg, samples, origin=ref.origin, drop=rc.gnss_denied(wins),
                             preprocess=ss.calibration_nodes(v) if cal else ())
         s = rc.summarize_outages(rc.outage_errors(r.track, v.mounting.gnss_lever_arm_m, ref, wins))
         gated = r.pipeline.counters["ekf"]["updates"]["gnss_pos"]["gated"]
-        out[name] = {"outages": s, "gnss_pos_gated": gated, "wall_s": time.perf_counter() - t}
+        out[name] = {"outages": s, "gnss_pos_gated": gated, "reacquisitions": r.pipeline.counters["reacquisitions"],
+                     "augmented_state": {k: list(v) for k, v in r.pipeline.augmented_state().items()},
+                     "wall_s": time.perf_counter() - t}
         print(f"  {name:32s} " + "; ".join(f"{k}: {d['filter_mean_m']:.2f} m vs CV {d['cv_mean_m']:.2f} m "
                                           f"({100 * d['reduction']:.0f} % lower)" for k, d in s.items())
-              + f"; gnss_pos gated {gated}; {out[name]['wall_s']:.1f} s")
+              + f"; gnss_pos gated {gated}, re-acquired {out[name]['reacquisitions']}; {out[name]['wall_s']:.1f} s")
     return out
 
 

@@ -466,14 +466,19 @@ class SensorSetConfig:
 
 _EKF_KEYS = {"gravity_mps2", "imu_rate_hz", "accel_noise_mps2", "gyro_noise_radps", "accel_model_psd",
              "gyro_model_psd", "substitute_accel_sigma_mps2", "substitute_gyro_sigma_radps", "substitute_corr_time_s",
-             "road_angle_rw", "gate_probability", "history_s", "max_step_s"}
+             "road_angle_rw", "gate_probability", "history_s", "max_step_s", "gyro_bias_sigma_radps",
+             "accel_bias_sigma_mps2", "gyro_bias_rw", "accel_bias_rw", "wheel_scale_sigma", "wheel_scale_rw"}
 _PIPE_KEYS = {"predict_period_s", "gnss_pos_sigma_h_m", "gnss_pos_sigma_v_m", "gnss_att_sigma_rad",
               "gnss_speed_sigma_mps", "gnss_course_min_speed_mps", "susp_sigma_m", "init_course_sigma_rad",
-              "init_level_sigma_rad"}
-_LAT_KEYS = {"imu_s", "gnss_s", "suspension_s", "wheel_s"}
+              "init_level_sigma_rad", "wheel_speed_sigma_mps", "wheel_speed_period_s", "wheel_speed_window_s",
+              "wheel_outlier_mps", "wheel_outlier_rel", "wheel_accel_gate_mps2", "wheel_accel_sigma_s",
+              "wheel_long_stiffness_n", "nhc_period_s", "nhc_sigma_lat_mps", "nhc_sigma_vert_mps",
+              "nhc_slip_rad_per_mps2", "nhc_point_sigma_m", "reacquire_after_gated", "reacquire_velocity_sigma_mps"}
+_PIPE_INT_KEYS = {"reacquire_after_gated"}
+_LAT_KEYS = {"imu_s", "gnss_s", "suspension_s", "wheel_s", "gnss_vel_s"}
 _SENSOR_KEYS = {"imu", "gnss", "suspension", "wheel_speeds"}
 _CAL_KEYS = {"speed_still_mps", "min_still_s", "max_age_s"}
-_EKF_BOOL_KEYS = {"use_gnss_velocity"}
+_EKF_BOOL_KEYS = {"use_gnss_velocity", "gyro_bias", "accel_bias", "wheel_speed", "wheel_scale_state", "nonholonomic"}
 
 
 def _finite(v, where: str) -> float:
@@ -525,6 +530,11 @@ def parse_sensorset(text: str, origin: str = "<string>") -> SensorSetConfig:
                 base, conv = k[:-6] + "_radps", math.pi / 180.0
             if base not in keys:
                 raise SensorSetError(f"{origin}[{name}]: unknown key {k!r}")
+            if name == "pipeline" and k in _PIPE_INT_KEYS:
+                if isinstance(v, bool) or not isinstance(v, int):
+                    raise SensorSetError(f"{origin}[{name}].{k}: expected an integer")
+                out[k] = v
+                continue
             out[base] = _finite(v, f"{origin}[{name}].{k}") * conv
         return out
 
@@ -695,6 +705,7 @@ def run_pipeline(vehicle, config: PipelineConfig, samples: Iterable[Sample], *,
     km = dict(kind_map or {})
     lat = config.latencies
     lat_ns = {"imu": int(round(lat.imu_s * 1e9)), "gnss": int(round(lat.gnss_s * 1e9)),
+              "gnss_vel": int(round(lat.gnss_vel_effective_s * 1e9)),
               "suspension": int(round(lat.suspension_s * 1e9)), "wheel": int(round(lat.wheel_s * 1e9))}
     stream = []
     handled: dict[str, int] = {}
@@ -710,7 +721,8 @@ def run_pipeline(vehicle, config: PipelineConfig, samples: Iterable[Sample], *,
         stream.append(s)
     if order_by_effective_time and any(lat_ns.values()):
         def eff(s):
-            g = "gnss" if s.kind.startswith("gnss") else ("wheel" if s.kind.startswith("wheel") else s.kind)
+            g = s.kind if s.kind == "gnss_vel" else (
+                "gnss" if s.kind.startswith("gnss") else ("wheel" if s.kind.startswith("wheel") else s.kind))
             return s.t_ns - lat_ns.get(g, 0)
         stream.sort(key=eff)
     for node in preprocess:

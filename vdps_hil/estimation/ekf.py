@@ -49,6 +49,22 @@ Process noise: white IMU noise sigma per sample at f_imu gives q = sigma^2 / f_i
 input (``kinematics``); axes an ESC cluster does not provide (w_x, w_y, f_z) are substituted by
 0, 0, g with PSD 2 sigma_sub^2 tau_sub (first-order Markov at low frequency). Road angles (and
 psi_v in the faithful (a) variant) are random walks.
+
+Real-car extensions (not in the paper; every one OFF by default, so the paper's Table-1 set
+runs eq 7-11 as before; the sensor sets of real cars in ``configs/sensorsets`` switch them on):
+
+* IMU bias states (``gyro_bias``, ``accel_bias``; ``states.AugStates``): the inputs become
+  w_b = w_meas - b_g, f_b = f_meas - b_a, with b random walks (``gyro_bias_rw`` [rad/s/sqrt(s)],
+  ``accel_bias_rw`` [m/s^2/sqrt(s)]) and prior sigmas ``gyro_bias_sigma_radps``,
+  ``accel_bias_sigma_mps2``; d x_dot / d b_g = -G_w, d x_dot / d b_a = -G_f (G = d f/d [f, w]).
+  Only the axes the IMU has (ESC cluster: b_g,z, b_a,x, b_a,y).
+* Wheel speed (``wheel_speed``): the ``wheel_speed`` observation (``observations.WheelSpeed``),
+  optionally with the scale state k_w (``wheel_scale_state``, random walk ``wheel_scale_rw``).
+* Non-holonomic constraint (``nonholonomic``): the ``nhc`` observation
+  (``observations.NonHolonomic``).
+* Re-acquisition (``reacquire``): after persistent gating of the position the caller resets
+  position, velocity and yaw to the fixes (their cross-covariances dropped) and keeps the rest
+  (attitude, biases); counted ``reacquisitions``.
 """
 
 from __future__ import annotations
@@ -62,8 +78,9 @@ import numpy as np
 from scipy.stats import chi2
 
 from vdps_hil.estimation.kinematics import linearize, step, transition
-from vdps_hil.estimation.observations import ObsKind, make_models
-from vdps_hil.estimation.states import N_FULL, States, StateLayout
+from vdps_hil.estimation.observations import (ObsKind, make_models, rear_axle_ground_point,
+                                              wheel_positions)
+from vdps_hil.estimation.states import N_EXT, N_FULL, AugStates, States, StateLayout
 from vdps_hil.units import GRAVITY_MPS2, deg2rad
 
 _TWO_PI = 2.0 * math.pi
@@ -145,14 +162,31 @@ class EkfConfig:
     history_s: float = 1.0  # latency buffer length [s]; 0 disables late measurements
     max_step_s: float = 0.05  # longest single predict step [s] (longer spans are split)
     update_iterations: int = 3  # iterated-EKF relinearisations for the nonlinear kinds (1 = EKF)
+    # real-car extensions (module docstring); all off for the paper's Table-1 set
+    gyro_bias: bool = False  # gyro bias states b_g (the axes the IMU has)
+    accel_bias: bool = False  # accelerometer bias states b_a
+    gyro_bias_sigma_radps: float = float(deg2rad(0.5))  # prior sigma of b_g
+    accel_bias_sigma_mps2: float = 0.1  # prior sigma of b_a
+    gyro_bias_rw: float = 1e-4  # b_g random walk [rad/s/sqrt(s)]
+    accel_bias_rw: float = 1e-3  # b_a random walk [m/s^2/sqrt(s)]
+    wheel_speed: bool = False  # wheel_speed rows (needs sensors.wheel_speeds)
+    wheel_scale_state: bool = False  # wheel-speed scale state k_w (with wheel_speed)
+    wheel_scale_sigma: float = 0.02  # prior sigma of k_w [-]
+    wheel_scale_rw: float = 1e-4  # k_w random walk [1/sqrt(s)]
+    nonholonomic: bool = False  # nhc rows (no lateral/vertical velocity at the rear axle)
 
     def __post_init__(self):
         for name in ("imu_rate_hz", "accel_noise_mps2", "gyro_noise_radps", "substitute_accel_sigma_mps2",
-                     "substitute_gyro_sigma_radps", "substitute_corr_time_s", "max_step_s"):
+                     "substitute_gyro_sigma_radps", "substitute_corr_time_s", "max_step_s",
+                     "gyro_bias_sigma_radps", "accel_bias_sigma_mps2", "wheel_scale_sigma"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"EkfConfig.{name} must be a positive finite number, got {v!r}")
-        for name in ("accel_model_psd", "gyro_model_psd", "road_angle_rw", "psi_v_rw", "history_s", "gravity_mps2"):
+        for name in ("gyro_bias", "accel_bias", "wheel_speed", "wheel_scale_state", "nonholonomic"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"EkfConfig.{name} must be true or false, got {getattr(self, name)!r}")
+        for name in ("accel_model_psd", "gyro_model_psd", "road_angle_rw", "psi_v_rw", "history_s", "gravity_mps2",
+                     "gyro_bias_rw", "accel_bias_rw", "wheel_scale_rw"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"EkfConfig.{name} must be a non-negative finite number, got {v!r}")
@@ -165,9 +199,29 @@ class EkfConfig:
     def road_estimated(self) -> bool:
         return self.sensors.suspension if self.estimate_road is None else bool(self.estimate_road)
 
+    @property
+    def gyro_bias_axes(self) -> tuple[int, ...]:
+        """Body axes with a gyro bias state (ESC cluster: z only)."""
+        if not self.gyro_bias:
+            return ()
+        return (2,) if self.sensors.imu == "esc3" else (0, 1, 2)
+
+    @property
+    def accel_bias_axes(self) -> tuple[int, ...]:
+        """Body axes with an accelerometer bias state (ESC cluster: x, y)."""
+        if not self.accel_bias:
+            return ()
+        return (0, 1) if self.sensors.imu == "esc3" else (0, 1, 2)
+
+    @property
+    def uses_wheel_speed(self) -> bool:
+        return self.wheel_speed and self.sensors.wheel_speeds
+
     def layout(self) -> StateLayout:
         road = self.road_estimated
-        return StateLayout(road_estimated=road, psi_v_state=road and self.paper_faithful.a_psi_v_zero_rate)
+        return StateLayout(road_estimated=road, psi_v_state=road and self.paper_faithful.a_psi_v_zero_rate,
+                           gyro_bias_axes=self.gyro_bias_axes, accel_bias_axes=self.accel_bias_axes,
+                           wheel_scale=self.uses_wheel_speed and self.wheel_scale_state)
 
     def kinds(self) -> frozenset[ObsKind]:
         """Measurement kinds this configuration uses (eq 9 rows that exist for the sensors)."""
@@ -187,6 +241,10 @@ class EkfConfig:
                 k.add(ObsKind.Y2_SUS_PLANE)
             else:
                 k.add(ObsKind.Y2_SUS_RATE)
+        if self.uses_wheel_speed:
+            k.add(ObsKind.WHEEL_SPEED)
+        if self.nonholonomic:
+            k.add(ObsKind.NHC)
         return frozenset(k)
 
     def input_psd(self) -> np.ndarray:
@@ -235,6 +293,32 @@ class UpdateResult:
 _STATUSES = ("accepted", "gated", "nan", "too_old", "disabled", "not_initialized")
 
 
+def filter_jacobians(layout: StateLayout, x_ext, f_b, w_b) -> tuple[np.ndarray, np.ndarray]:
+    """(F, G) of the continuous model in the filter layout at the extended state ``x_ext``
+    (N_EXT) with the bias-corrected inputs ``f_b``, ``w_b``: F = d x_dot / d x (n x n),
+    G = d x_dot / d [f, w] (n x 6). The bias columns are -G of their input axes (module
+    docstring); augmented states have zero rows (random walks)."""
+    idx = layout.full_index
+    nk = layout.n_kinematic
+    kin = idx[:nk]
+    F12, G12 = linearize(x_ext[:N_FULL], f_b, w_b)
+    if nk == layout.n:
+        return F12[np.ix_(kin, kin)], G12[kin]
+    n = layout.n
+    F = np.zeros((n, n))
+    F[:nk, :nk] = F12[np.ix_(kin, kin)]
+    Gk = G12[kin]
+    for j in range(nk, n):
+        s = int(idx[j])
+        if AugStates.BG_X <= s <= AugStates.BG_Z:
+            F[:nk, j] = -Gk[:, 3 + s - AugStates.BG_X]
+        elif AugStates.BA_X <= s <= AugStates.BA_Z:
+            F[:nk, j] = -Gk[:, s - AugStates.BA_X]
+    G = np.zeros((n, 6))
+    G[:nk] = Gk
+    return F, G
+
+
 @dataclass
 class _Event:
     is_predict: bool
@@ -251,19 +335,26 @@ class MultiRateEKF:
     ``x``/``P`` are the *filter* vector and covariance (``layout``); ``full_state()`` gives the
     12 states of eq 7 with derived/fixed ones filled in."""
 
-    def __init__(self, config: EkfConfig | None = None, gnss_lever_arm_m=(0.0, 0.0, 0.0)):
+    def __init__(self, config: EkfConfig | None = None, gnss_lever_arm_m=(0.0, 0.0, 0.0), wheel_positions_m=None,
+                 nhc_point_m=(0.0, 0.0, 0.0)):
         self.config = config or EkfConfig()
         self.layout = self.config.layout()
         self._idx = self.layout.full_index
         self._n = self.layout.n
+        self._aug = self.layout.augmented
         self._ix = np.ix_(self._idx, self._idx)
-        self._models = make_models(gnss_lever_arm_m)
+        self._models = make_models(gnss_lever_arm_m, wheel_positions_m, nhc_point_m)
         self._kinds = self.config.kinds()
         self._q_in = self.config.input_psd()
-        q_rw = np.zeros(N_FULL)
+        q_rw = np.zeros(N_EXT)
         q_rw[States.PHI_R] = q_rw[States.THETA_R] = self.config.road_angle_rw ** 2
         q_rw[States.PSI_V] = self.config.psi_v_rw ** 2
+        q_rw[AugStates.BG_X:AugStates.BG_Z + 1] = self.config.gyro_bias_rw ** 2
+        q_rw[AugStates.BA_X:AugStates.BA_Z + 1] = self.config.accel_bias_rw ** 2
+        q_rw[AugStates.WHEEL_SCALE] = self.config.wheel_scale_rw ** 2
         self._q_rw = np.diag(q_rw[self._idx])
+        self._pos_bg = [(self.layout.index(AugStates.BG_X + a), a) for a in self.layout.gyro_bias_axes]
+        self._pos_ba = [(self.layout.index(AugStates.BA_X + a), a) for a in self.layout.accel_bias_axes]
         self._g = self.config.gravity_in_model_mps2
         p = self.config.gate_probability
         self._gates = {d: (float(chi2.ppf(p, d)) if p is not None else math.inf) for d in range(1, 7)}
@@ -282,7 +373,7 @@ class MultiRateEKF:
         self._last_innov = np.zeros(0)
         self._kind_counts = {k: dict.fromkeys(_STATUSES, 0) for k in ObsKind}
         self._counts = {"predicts": 0, "nan_resets": 0, "resets": 0, "initializations": 0,
-                        "predict_backwards": 0, "delayed_updates": 0}
+                        "predict_backwards": 0, "delayed_updates": 0, "reacquisitions": 0}
         self.on_predict = None  # optional hook(Phi) for observability tracking
         self.on_update = None  # optional hook(H, R) for observability tracking
 
@@ -291,7 +382,10 @@ class MultiRateEKF:
         """Antenna lever arm from a *model* vehicle file (``mounting.gnss_lever_arm_m``)."""
         if getattr(vehicle, "kind", "model") != "model":
             raise ValueError("the estimator reads only model vehicle files, not truth files")
-        return cls(config, gnss_lever_arm_m=vehicle.mounting.gnss_lever_arm_m)
+        geo = vehicle.geometry
+        return cls(config, gnss_lever_arm_m=vehicle.mounting.gnss_lever_arm_m,
+                   wheel_positions_m=wheel_positions(geo, vehicle.tire.rolling_radius_m),
+                   nhc_point_m=rear_axle_ground_point(geo))
 
     # ---------------------------------------------------------------- read-only properties
     @property
@@ -337,6 +431,23 @@ class MultiRateEKF:
                                                for k, v in self._kind_counts.items()})
         return types.MappingProxyType(d)
 
+    def bias(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """(b_g [rad/s], b_a [m/s^2]) per body axis; 0 for axes without a bias state (and before
+        initialisation)."""
+        bg, ba = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        if self._x is not None:
+            for i, a in self._pos_bg:
+                bg[a] = float(self._x[i])
+            for i, a in self._pos_ba:
+                ba[a] = float(self._x[i])
+        return tuple(bg), tuple(ba)
+
+    def augmented_state(self) -> dict[str, tuple[float, float]]:
+        """{name: (value, sigma)} of the bias and wheel-scale states carried (empty if none)."""
+        if self._x is None:
+            return {}
+        return self.layout.augmented_values(self._x, self._P)
+
     def rejected(self) -> dict[str, int]:
         """Rejections per kind (gated + nan + too_old)."""
         return {k.value: v["gated"] + v["nan"] + v["too_old"] for k, v in self._kind_counts.items()}
@@ -355,6 +466,26 @@ class MultiRateEKF:
         self._wrap()
         self._hist.clear()
         self._counts["initializations"] += 1
+
+    def reacquire(self, t_ns: int, assignments) -> bool:
+        """Re-acquisition after persistent gating (module docstring): at the filter time
+        ``t_ns`` (predicted to first), set the full-vector states of ``assignments``
+        ({full index: (value, sigma)}; states the layout does not carry are ignored), drop their
+        cross-covariances and the latency history. False if not initialised."""
+        if self._x is None or not self.predict_to(int(t_ns)) or self._x is None:
+            return False
+        for s, (v, sig) in assignments.items():
+            i = self.layout.index(s)
+            if i is None or not (math.isfinite(v) and math.isfinite(sig) and sig > 0):
+                continue
+            self._x[i] = v
+            self._P[i, :] = 0.0
+            self._P[:, i] = 0.0
+            self._P[i, i] = sig * sig
+        self._wrap()
+        self._hist.clear()
+        self._counts["reacquisitions"] += 1
+        return True
 
     def reset(self, reason: str = "manual") -> None:
         """Back to uninitialised (x, P, history dropped; counters kept)."""
@@ -396,13 +527,22 @@ class MultiRateEKF:
 
     def _propagate(self, dt: float) -> None:
         idx, n = self._idx, self._n
-        xf = np.zeros(N_FULL)
-        xf[idx] = self._x
-        F, G = linearize(xf, self._f, self._w)
-        xn = step(xf, self._f, self._w, dt, self._g)
-        if n != N_FULL:
-            F = F[self._ix]
-            G = G[idx]
+        if self._aug:
+            xe = np.zeros(N_EXT)
+            xe[idx] = self._x
+            f = self._f - xe[AugStates.BA_X:AugStates.BA_Z + 1]
+            w = self._w - xe[AugStates.BG_X:AugStates.BG_Z + 1]
+            F, G = filter_jacobians(self.layout, xe, f, w)
+            xn = xe.copy()
+            xn[:N_FULL] = step(xe[:N_FULL], f, w, dt, self._g)
+        else:
+            xf = np.zeros(N_FULL)
+            xf[idx] = self._x
+            F, G = linearize(xf, self._f, self._w)
+            xn = step(xf, self._f, self._w, dt, self._g)
+            if n != N_FULL:
+                F = F[self._ix]
+                G = G[idx]
         phi = transition(F, dt)
         qc = (G * self._q_in) @ G.T + self._q_rw
         qd = (phi @ qc @ phi.T + qc) * (0.5 * dt)
@@ -448,9 +588,10 @@ class MultiRateEKF:
             return self._finish(UpdateResult(kind, t_m, "nan", delayed=delayed), count)
         if self._hist_ns > 0:
             self._record(False, t_m, (kind, z.copy(), R.copy(), aux))
-        xf, E = self.layout.expand(self._x)
+        xf, E = self.layout.expand(self._x, ext=self._aug)
         y = model.h(xf, aux)
-        H = model.jacobian(xf, aux) @ E
+        H = model.jacobian(xf, aux)
+        H = H @ (E if H.shape[1] == E.shape[0] else E[:H.shape[1]])
         nu = model.residual(z, y)
         if not ok.all():
             nu, H, R = nu[ok], H[ok], R[np.ix_(ok, ok)]
@@ -479,8 +620,9 @@ class MultiRateEKF:
         for _ in range(self._iterations.get(kind, 1) - 1):
             # iterated EKF (Gauss-Newton): relinearise at the new estimate
             dx = x_new - x0
-            xf_i, E_i = self.layout.expand(x_new)
-            H_i = model.jacobian(xf_i, aux) @ E_i
+            xf_i, E_i = self.layout.expand(x_new, ext=self._aug)
+            H_i = model.jacobian(xf_i, aux)
+            H_i = H_i @ (E_i if H_i.shape[1] == E_i.shape[0] else E_i[:H_i.shape[1]])
             nu_i = model.residual(z, model.h(xf_i, aux))
             if not ok.all():
                 H_i, nu_i = H_i[ok], nu_i[ok]

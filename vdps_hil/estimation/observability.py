@@ -22,15 +22,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vdps_hil.estimation.states import STATE_NAMES, StateLayout
+from vdps_hil.estimation.states import StateLayout
 
 DEFAULT_RTOL = 1e-6
 DEFAULT_PARTICIPATION = 0.5
 
 
 def default_scales(layout: StateLayout) -> np.ndarray:
-    """1 m for positions, 1 m/s for velocities, 0.01 rad for angles (filter layout)."""
-    full = np.array([1.0] * 3 + [1.0] * 3 + [0.01] * 6)
+    """1 m for positions, 1 m/s for velocities, 0.01 rad for angles (filter layout); augmented
+    states: 1e-3 rad/s gyro bias, 0.01 m/s^2 accelerometer bias, 0.01 wheel-speed scale."""
+    full = np.array([1.0] * 3 + [1.0] * 3 + [0.01] * 6 + [1e-3] * 3 + [0.01] * 3 + [0.01])
     return full[layout.full_index]
 
 
@@ -108,8 +109,7 @@ class ObservabilityWindow:
     @classmethod
     def for_layout(cls, layout: StateLayout, **kw) -> "ObservabilityWindow":
         """Names and default scales of an EKF layout."""
-        names = tuple(STATE_NAMES[int(i)] for i in layout.full_index)
-        return cls(names, kw.pop("scales", default_scales(layout)), **kw)
+        return cls(layout.names, kw.pop("scales", default_scales(layout)), **kw)
 
     def attach(self, ekf) -> "ObservabilityWindow":
         ekf.on_predict = self.on_predict

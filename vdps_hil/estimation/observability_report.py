@@ -56,11 +56,11 @@ from typing import Sequence
 
 import numpy as np
 
-from vdps_hil.estimation.ekf import EkfConfig
-from vdps_hil.estimation.kinematics import linearize, transition, vehicle_angles_eq4
+from vdps_hil.estimation.ekf import EkfConfig, filter_jacobians
+from vdps_hil.estimation.kinematics import transition, vehicle_angles_eq4
 from vdps_hil.estimation.observability import DEFAULT_RTOL, ObservabilityReport, default_scales, observability_rank
 from vdps_hil.estimation.observations import ObsKind, make_models
-from vdps_hil.estimation.states import N_FULL, STATE_NAMES, StateLayout
+from vdps_hil.estimation.states import ALL_STATE_NAMES, N_EXT, N_FULL, StateLayout
 
 __all__ = ["Explanation", "WindowExplanation", "StructuralReport", "ProblemReport", "IdentificationMonitor",
            "ObservabilityReportDoc", "explain_null_space", "structural_report", "identification_report",
@@ -71,10 +71,13 @@ STATE_LABELS = {
     "xdot_g_mps": "east velocity", "ydot_g_mps": "north velocity", "zdot_g_mps": "vertical velocity",
     "phi_g_rad": "roll", "theta_g_rad": "pitch", "psi_g_rad": "yaw",
     "phi_r_rad": "road bank", "theta_r_rad": "road grade", "psi_v_rad": "yaw over the road",
+    "gyro_bias_x_radps": "roll-rate bias", "gyro_bias_y_radps": "pitch-rate bias", "gyro_bias_z_radps": "yaw-rate bias",
+    "accel_bias_x_mps2": "longitudinal accelerometer bias", "accel_bias_y_mps2": "lateral accelerometer bias",
+    "accel_bias_z_mps2": "vertical accelerometer bias", "wheel_speed_scale": "wheel-speed scale",
 }
 """Plain words for the state names (``STATE_NAMES``)."""
 
-_SHORT = {n: n.rsplit("_", 1)[0] for n in STATE_NAMES}  # phi_g_rad -> phi_g
+_SHORT = {n: n.rsplit("_", 1)[0] for n in ALL_STATE_NAMES}  # phi_g_rad -> phi_g
 _EPS_FULL = 0.02  # participation >= 1 - eps: the state lies entirely in the null space
 _COEF_MIN = 0.05  # coefficients below this (relative) are not part of a relation
 
@@ -206,7 +209,7 @@ def derived_observability(null_space, layout: StateLayout, x_full, scales=None) 
     d = default_scales(layout) if scales is None else np.asarray(scales, dtype=float)
     out = {}
     for name, g in derived_gradients(x_full).items():
-        gs = g[idx] * d  # d y / d (x / D) in the filter layout
+        gs = np.concatenate([g, np.zeros(N_EXT - N_FULL)])[idx] * d  # d y / d (x / D), filter layout
         norm2 = float(gs @ gs)
         if norm2 <= 0.0:
             continue
@@ -259,28 +262,39 @@ def _generic_states(rng, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 _NOMINAL_SIGMA = {ObsKind.GNSS_POS: 1.0, ObsKind.GNSS_ATT: 0.007, ObsKind.GNSS_VEL: 0.1, ObsKind.Y2_GPS: 0.007,
-                  ObsKind.Y1_SUS: 4e-4, ObsKind.Y2_SUS_PLANE: 0.001, ObsKind.Y2_SUS_RATE: 0.05}
+                  ObsKind.Y1_SUS: 4e-4, ObsKind.Y2_SUS_PLANE: 0.001, ObsKind.Y2_SUS_RATE: 0.05,
+                  ObsKind.WHEEL_SPEED: 0.05, ObsKind.NHC: 0.1}
 """Whitening of the generic analysis: Table 1 sigmas (GNSS 1 m, attitude 0.4 deg, speed 0.1 m/s,
-suspension 1 mm over the wheelbase, heave rate 0.05 m/s)."""
+suspension 1 mm over the wheelbase, heave rate 0.05 m/s); wheel speed 0.05 m/s and the
+non-holonomic constraint 0.1 m/s (pipeline defaults)."""
 
 
-def _blocks_along(xs, fs, ws, layout: StateLayout, kinds, lever_arm, dt: float):
+def _blocks_along(xs, fs, ws, layout: StateLayout, kinds, lever_arm, dt: float, wheel_positions_m=None,
+                  nhc_point_m=(0.0, 0.0, 0.0)):
     """R = nominal sigma^2 I per kind, Phi products along the generic trajectory, H of each kind
     per epoch."""
-    models = make_models(lever_arm)
+    models = make_models(lever_arm, wheel_positions_m, nhc_point_m)
     blocks = []
     phi = np.eye(layout.n)
-    idx = layout.full_index
-    ix = np.ix_(idx, idx)
     for x, f, w in zip(xs, fs, ws):
-        xf, e = layout.expand(layout.from_full(x))
+        xf, e = layout.expand(layout.from_full(x), ext=True)
         for k in kinds:
-            aux = w if k == ObsKind.GNSS_VEL else None
-            h = models[k].jacobian(xf, aux) @ e
+            aux = _generic_aux(k, w)
+            h = models[k].jacobian(xf, aux)
+            h = h @ e[:h.shape[1]]
             blocks.append(h @ phi / _NOMINAL_SIGMA[k])
-        F, _ = linearize(xf, f, w)
-        phi = transition(F[ix], dt) @ phi
+        F, _ = filter_jacobians(layout, xf, f, w)
+        phi = transition(F, dt) @ phi
     return blocks
+
+
+def _generic_aux(kind, w):
+    """The aux argument of a kind along the generic trajectory (body rate w where used)."""
+    if kind in (ObsKind.GNSS_VEL, ObsKind.NHC):
+        return w
+    if kind == ObsKind.WHEEL_SPEED:
+        return (w, (0.0,) * 4, (0.25,) * 4)
+    return None
 
 
 def structural_report(ekf_config: EkfConfig, gnss_lever_arm_m=(0.0, 0.0, 0.0), *, epochs: int = 40,
@@ -303,8 +317,9 @@ def structural_report(ekf_config: EkfConfig, gnss_lever_arm_m=(0.0, 0.0, 0.0), *
     for k in kinds:
         col = np.zeros(layout.n)
         for x, w in zip(xs, ws):
-            xf, e = layout.expand(layout.from_full(x))
-            col += np.abs(models[k].jacobian(xf, w if k == ObsKind.GNSS_VEL else None) @ e).sum(axis=0)
+            xf, e = layout.expand(layout.from_full(x), ext=True)
+            h = models[k].jacobian(xf, _generic_aux(k, w))
+            col += np.abs(h @ e[:h.shape[1]]).sum(axis=0)
         seen[k.value] = col > 0
     why = []
     for ex in expl:
@@ -364,7 +379,7 @@ class WindowExplanation:
 def explain_window(t0_ns: int, t1_ns: int, rep: ObservabilityReport, layout: StateLayout, x_full=None,
                    structural: StructuralReport | None = None) -> WindowExplanation:
     """Explain one pipeline window (``EstimatorPipeline.observability_reports`` entry)."""
-    names = tuple(STATE_NAMES[int(i)] for i in layout.full_index)
+    names = layout.names
     expl = list(explain_null_space(rep.null_space, names))
     derived = {} if x_full is None else derived_observability(rep.null_space, layout, x_full)
     not_exc: tuple[str, ...] = ()

@@ -22,7 +22,26 @@ y2_sus_plane  1    C_g^r(3,:) p = n . p (CG height above one road plane through 
                    origin; correction (c): only valid when that holds)
 y2_sus_rate   1    n . v (rate of the CG height above the *local* road plane; the          (c)
                    locally referenced form of y2^sus, compared with the eq-5 z_r rate)
+wheel_speed   1    (1 + k_w) sum_i a_i [cos d_i, sin d_i, 0] (C_g^v v + w x r_i)           (none)
+                   (weighted mean forward speed of the wheels, module text below)
+nhc           2    [(C_g^v v + w x r_p)_y, (C_g^v v + w x r_p)_z] (non-holonomic             (none)
+                   constraint: no lateral or vertical velocity at the point r_p)
 ============  ===  =====================================================================  =====
+
+Wheel speed (``WheelSpeed``; real cars, not in the paper): wheel i (order FL FR RR RL, centre at
+r_i = (+-l, +-t, r_0 - h_cg) from the CG in body axes, model file geometry) rolls along its
+heading d_i (front: steering wheel angle / steer ratio, rear 0) with the speed
+s_i = cos d_i u_i + sin d_i v_i, (u_i, v_i) = the x, y of C_g^v v + w x r_i. The measurement is
+z = sum_i a_i omega_i r_0 (weights a_i >= 0 summing to 1 over the wheels used, rolling radius
+r_0 from the model file) and h = (1 + k_w) sum_i a_i s_i with k_w the wheel-speed scale state
+(r_0 / r_true - 1; 0 when not carried). aux = (w_b, (d_1..d_4), (a_1..a_4)); w_b is the bias-
+corrected body rate (None: zero rate, straight wheels, equal weights). Slip and braking are
+handled by the pipeline (gate and inflate R).
+
+Non-holonomic constraint (``NonHolonomic``): a wheeled vehicle on the ground does not move
+sideways or vertically at the rear axle: z = [0, 0] with R = diag(sigma_lat^2, sigma_vert^2)
+(the pipeline inflates sigma_lat with the lateral acceleration: tyre slip angles). r_p is the
+rear axle centre on the ground, (-l_r, 0, -h_cg). aux: w_b (None: zero).
 
 The paper's y1^sus also lists C_r^v(3,3) = cos ph_v cos th_v: it is a function of the other two
 (unit column) and its linearisation is parallel to theirs, which makes S singular; it is left
@@ -42,7 +61,7 @@ import numpy as np
 
 from vdps_hil.estimation.kinematics import (dcm_gr_partials, dcm_gv_partials, road_normal,
                                             vehicle_angles_eq4)
-from vdps_hil.estimation.states import N_FULL, wrap_angle
+from vdps_hil.estimation.states import N_EXT, N_FULL, AugStates, wrap_angle
 
 
 class ObsKind(str, enum.Enum):
@@ -55,6 +74,8 @@ class ObsKind(str, enum.Enum):
     Y1_SUS = "y1_sus"
     Y2_SUS_PLANE = "y2_sus_plane"
     Y2_SUS_RATE = "y2_sus_rate"
+    WHEEL_SPEED = "wheel_speed"
+    NHC = "nhc"
 
 
 class ObservationModel:
@@ -265,7 +286,109 @@ class Y2SusRate(ObservationModel):
         return H
 
 
-def make_models(gnss_lever_arm_m=(0.0, 0.0, 0.0)) -> dict[ObsKind, ObservationModel]:
+def _cross(w, r):
+    return (w[1] * r[2] - w[2] * r[1], w[2] * r[0] - w[0] * r[2], w[0] * r[1] - w[1] * r[0])
+
+
+class WheelSpeed(ObservationModel):
+    """Weighted mean forward speed of the wheels [m/s] (module docstring). Works on the full
+    12-vector (k_w = 0) or the extended N_EXT vector (k_w = x[18]); the Jacobian has as many
+    columns as x."""
+
+    kind = ObsKind.WHEEL_SPEED
+    dim = 1
+
+    def __init__(self, wheel_positions_m=None):
+        if wheel_positions_m is None:
+            wheel_positions_m = np.zeros((4, 3))
+        self.wheel_positions_m = np.asarray(wheel_positions_m, dtype=float).reshape(4, 3)
+        self._r = [tuple(float(v) for v in row) for row in self.wheel_positions_m]
+
+    def _terms(self, x, aux):
+        """(A, B, c): sum a_i cos d_i, sum a_i sin d_i and sum a_i [cos d_i, sin d_i] . (w x r_i)."""
+        if aux is None:
+            w, d, a = (0.0, 0.0, 0.0), (0.0,) * 4, (0.25,) * 4
+        else:
+            w, d, a = aux
+        A = B = c = 0.0
+        for ri, di, ai in zip(self._r, d, a):
+            if ai == 0.0:
+                continue
+            cd, sd = math.cos(di), math.sin(di)
+            wr = _cross(w, ri)
+            A += ai * cd
+            B += ai * sd
+            c += ai * (cd * wr[0] + sd * wr[1])
+        return A, B, c
+
+    @staticmethod
+    def _scale(x):
+        return float(x[AugStates.WHEEL_SCALE]) if x.shape[0] > AugStates.WHEEL_SCALE else 0.0
+
+    def h(self, x, aux=None):
+        cgv = dcm_gv_partials(x[6], x[7], x[8])[0]
+        A, B, c = self._terms(x, aux)
+        v = x[3:6]
+        s = A * float(cgv[0] @ v) + B * float(cgv[1] @ v) + c
+        return np.array([(1.0 + self._scale(x)) * s])
+
+    def jacobian(self, x, aux=None):
+        cgv, d_f, d_t, d_p = dcm_gv_partials(x[6], x[7], x[8])
+        A, B, c = self._terms(x, aux)
+        v = x[3:6]
+        k1 = 1.0 + self._scale(x)
+        H = np.zeros((1, x.shape[0] if x.shape[0] >= N_EXT else N_FULL))
+        H[0, 3:6] = k1 * (A * cgv[0] + B * cgv[1])
+        for col, d in ((6, d_f), (7, d_t), (8, d_p)):
+            H[0, col] = k1 * (A * float(d[0] @ v) + B * float(d[1] @ v))
+        if H.shape[1] > AugStates.WHEEL_SCALE:
+            H[0, AugStates.WHEEL_SCALE] = A * float(cgv[0] @ v) + B * float(cgv[1] @ v) + c
+        return H
+
+
+class NonHolonomic(ObservationModel):
+    """Lateral and vertical body velocity [m/s] at the point r_p (module docstring)."""
+
+    kind = ObsKind.NHC
+    dim = 2
+
+    def __init__(self, point_m=(0.0, 0.0, 0.0)):
+        self.point_m = np.asarray(point_m, dtype=float).reshape(3)
+        self._r = tuple(float(v) for v in self.point_m)
+
+    def h(self, x, aux=None):
+        cgv = dcm_gv_partials(x[6], x[7], x[8])[0]
+        wr = (0.0, 0.0, 0.0) if aux is None else _cross(aux, self._r)
+        v = x[3:6]
+        return np.array([float(cgv[1] @ v) + wr[1], float(cgv[2] @ v) + wr[2]])
+
+    def jacobian(self, x, aux=None):
+        cgv, d_f, d_t, d_p = dcm_gv_partials(x[6], x[7], x[8])
+        v = x[3:6]
+        H = np.zeros((2, N_FULL))
+        H[:, 3:6] = cgv[1:3]
+        H[:, 6] = d_f[1:3] @ v
+        H[:, 7] = d_t[1:3] @ v
+        H[:, 8] = d_p[1:3] @ v
+        return H
+
+
+def wheel_positions(geometry, rolling_radius_m: float) -> np.ndarray:
+    """Wheel centres r_i (4 x 3, order FL FR RR RL) from the CG in body axes (x fwd, y left,
+    z up): (l_f, t_f), (l_f, -t_f), (-l_r, -t_r), (-l_r, t_r), height r_0 - h_cg."""
+    z = rolling_radius_m - geometry.h_cg_m
+    lf, lr = geometry.l_f_m, geometry.l_r_m
+    tf, tr = geometry.track_half_front_m, geometry.track_half_rear_m
+    return np.array([[lf, tf, z], [lf, -tf, z], [-lr, -tr, z], [-lr, tr, z]])
+
+
+def rear_axle_ground_point(geometry) -> np.ndarray:
+    """r_p of the non-holonomic constraint: the rear axle centre on the ground (-l_r, 0, -h_cg)."""
+    return np.array([-geometry.l_r_m, 0.0, -geometry.h_cg_m])
+
+
+def make_models(gnss_lever_arm_m=(0.0, 0.0, 0.0), wheel_positions_m=None,
+                nhc_point_m=(0.0, 0.0, 0.0)) -> dict[ObsKind, ObservationModel]:
     """One model instance per kind (the registry the EKF uses)."""
     return {
         ObsKind.GNSS_POS: GnssPosition(gnss_lever_arm_m),
@@ -275,6 +398,8 @@ def make_models(gnss_lever_arm_m=(0.0, 0.0, 0.0)) -> dict[ObsKind, ObservationMo
         ObsKind.Y1_SUS: Y1Sus(),
         ObsKind.Y2_SUS_PLANE: Y2SusPlane(),
         ObsKind.Y2_SUS_RATE: Y2SusRate(),
+        ObsKind.WHEEL_SPEED: WheelSpeed(wheel_positions_m),
+        ObsKind.NHC: NonHolonomic(nhc_point_m),
     }
 
 

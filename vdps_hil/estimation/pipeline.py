@@ -16,7 +16,8 @@ gnss_att        roll/pitch/yaw -> ``gnss_att`` (+ ``y2_gps`` when paper-faithful
 gnss_vel        speed/course -> ``gnss_vel`` (course only above ``gnss_course_min_speed_mps``)
 suspension      deflections -> eq 5 -> ``y1_sus`` and ``y2_sus`` (plane or rate form, EKF
                 correction (c)); alpha-beta (suspension rates)
-wheel_speed     alpha-beta (wheel speeds and accelerations)
+wheel_speed     alpha-beta (wheel speeds and accelerations); with ``EkfConfig.wheel_speed`` the
+                ``wheel_speed`` update (below)
 wheel_torque    latest values (for the identifier)
 steer           latest steering wheel angle (for the identifier)
 ==============  ==========================================================================
@@ -24,6 +25,37 @@ steer           latest steering wheel angle (for the identifier)
 Sensor mounting from the *model* vehicle file: the IMU rotation (body -> sensor, roll-pitch-yaw
 of eq 1, f_b = C_bs^T f_s) and lever arm (f_cg = f_s - w_dot x l - w x (w x l), with w, w_dot
 from the alpha-beta filters), and the GNSS antenna lever arm (EKF ``gnss_pos``/``gnss_vel``).
+
+Real-car extensions (``EkfConfig`` switches, all off for the paper's Table-1 set):
+
+* Wheel speed: every ``wheel_speed_period_s`` the wheel samples of the last ``wheel_speed_window_s``
+  are averaged per wheel (omega_i r_0, r_0 = ``tire.rolling_radius_m`` of the model file, stamped
+  at their mean time). A wheel further than ``wheel_outlier_mps + wheel_outlier_rel |median|``
+  from the median of the four is dropped (locked or spinning; counted ``wheel_outliers``); the
+  mean of the others is z (sign from the filter's forward speed: wheel speeds carry none), with
+  front road-wheel angles d = steering wheel angle / steer ratio. Slip and braking: with
+  a_w = r_0 x the mean alpha-beta wheel acceleration of the wheels used, the update is skipped
+  when |a_w| > ``wheel_accel_gate_mps2`` (counted ``wheel_accel_skipped``) and otherwise::
+
+      sigma^2 = sigma_0^2 + (c_a a_w)^2 + (|z| |T| / (r_0 C_kappa))^2
+
+  sigma_0 ``wheel_speed_sigma_mps``, c_a ``wheel_accel_sigma_s`` [s], |T| the mean absolute wheel
+  torque of the wheels used (when a ``wheel_torque`` source exists) and C_kappa
+  ``wheel_long_stiffness_n`` (slip ratio ~ T / (r_0 C_kappa)).
+* Non-holonomic constraint: every ``nhc_period_s`` after a predict, z = [0, 0] with::
+
+      sigma_lat^2 = sigma_0^2 + (k_beta |a_y| |v|)^2 + (sigma_x w_z)^2
+
+  sigma_0 ``nhc_sigma_lat_mps``; the rear-axle slip angle grows with the lateral acceleration a_y
+  of the mean IMU input (k_beta ``nhc_slip_rad_per_mps2`` [rad/(m/s^2)]); sigma_x
+  ``nhc_point_sigma_m`` is the uncertainty of the rear axle's position along x in the model file
+  (a point l off it moves sideways by w_z l); sigma_vert ``nhc_sigma_vert_mps``.
+* Gyro rates handed to the observation models (lever arms) are bias-corrected with the filter's
+  b_g.
+* Re-acquisition: after ``reacquire_after_gated`` consecutive gated ``gnss_pos`` updates (0: never)
+  position, velocity and yaw are reset to the newest fix (velocity and yaw from the GNSS
+  speed/course when fresh and moving, else from the last two fixes), their cross-covariances
+  dropped, attitude and biases kept (``MultiRateEKF.reacquire``; counted ``reacquisitions``).
 
 Latency per sensor (``Latencies``): a fixed delay subtracted from ``t_ns`` of that kind (an
 adapter that stamps at reception); the EKF applies measurements that are then in its past with
@@ -88,6 +120,11 @@ class Latencies:
     gnss_s: float = 0.0
     suspension_s: float = 0.0
     wheel_s: float = 0.0
+    gnss_vel_s: float | None = None  # GNSS speed/course when it differs from the position (None: gnss_s)
+
+    @property
+    def gnss_vel_effective_s(self) -> float:
+        return self.gnss_s if self.gnss_vel_s is None else self.gnss_vel_s
 
 
 @dataclass(frozen=True)
@@ -115,13 +152,39 @@ class PipelineConfig:
     init_course_sigma_rad: float = 0.1  # yaw from course over ground
     init_velocity_sigma_mps: float = 30.0  # no velocity information at all
     observability_window_s: float | None = 10.0
+    # real-car extensions (module docstring; used only when the EkfConfig switches are on)
+    wheel_speed_sigma_mps: float = 0.05
+    wheel_speed_period_s: float = 0.1
+    wheel_speed_window_s: float = 0.05
+    wheel_outlier_mps: float = 0.3
+    wheel_outlier_rel: float = 0.03
+    wheel_accel_gate_mps2: float = 4.0
+    wheel_accel_sigma_s: float = 0.05
+    wheel_long_stiffness_n: float = 1.0e5
+    nhc_period_s: float = 0.1
+    nhc_sigma_lat_mps: float = 0.1
+    nhc_sigma_vert_mps: float = 0.1
+    nhc_slip_rad_per_mps2: float = 0.005
+    nhc_point_sigma_m: float = 0.3
+    reacquire_after_gated: int = 5
+    reacquire_velocity_sigma_mps: float = 1.0
 
     def __post_init__(self):
         for name in ("predict_period_s", "gnss_pos_sigma_h_m", "gnss_pos_sigma_v_m", "gnss_att_sigma_rad",
-                     "gnss_speed_sigma_mps", "susp_sigma_m", "heave_rate_sigma_mps", "init_max_age_s"):
+                     "gnss_speed_sigma_mps", "susp_sigma_m", "heave_rate_sigma_mps", "init_max_age_s",
+                     "wheel_speed_sigma_mps", "wheel_speed_period_s", "wheel_speed_window_s", "wheel_outlier_mps",
+                     "wheel_accel_gate_mps2", "wheel_long_stiffness_n", "nhc_period_s", "nhc_sigma_lat_mps",
+                     "nhc_sigma_vert_mps", "reacquire_velocity_sigma_mps"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"PipelineConfig.{name} must be a positive finite number, got {v!r}")
+        for name in ("wheel_outlier_rel", "wheel_accel_sigma_s", "nhc_slip_rad_per_mps2", "nhc_point_sigma_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"PipelineConfig.{name} must be a non-negative finite number, got {v!r}")
+        if not (isinstance(self.reacquire_after_gated, int) and self.reacquire_after_gated >= 0):
+            raise ValueError(f"PipelineConfig.reacquire_after_gated must be an integer >= 0, "
+                             f"got {self.reacquire_after_gated!r}")
 
 
 @dataclass(frozen=True)
@@ -213,12 +276,31 @@ class EstimatorPipeline:
         self._last_out = -(1 << 62)
         lat = cfg.latencies
         self._lat = {"imu": int(round(lat.imu_s * 1e9)), "gnss": int(round(lat.gnss_s * 1e9)),
+                     "gnss_vel": int(round(lat.gnss_vel_effective_s * 1e9)),
                      "suspension": int(round(lat.suspension_s * 1e9)), "wheel": int(round(lat.wheel_s * 1e9))}
         m = model_vehicle.mounting
         rot = np.asarray(m.imu_rotation_rpy_rad, dtype=float)
-        self._imu_rot = None if not rot.any() else dcm_gv(rot[0], rot[1], rot[2]).T  # sensor -> body
+        # sensor -> body as plain floats (row-major 3 x 3)
+        self._imu_rot = None if not rot.any() else tuple(
+            tuple(float(v) for v in row) for row in dcm_gv(rot[0], rot[1], rot[2]).T)
         arm = np.asarray(m.imu_lever_arm_m, dtype=float)
-        self._imu_arm = None if not arm.any() else arm
+        self._imu_arm = None if not arm.any() else tuple(float(v) for v in arm)
+        # real-car extensions
+        kinds = self.ekf.kinds
+        self._use_ws = ObsKind.WHEEL_SPEED in kinds
+        self._use_nhc = ObsKind.NHC in kinds
+        self._r0 = float(model_vehicle.tire.rolling_radius_m)
+        sr = float(getattr(model_vehicle.geometry, "steer_ratio", 0.0) or 0.0)
+        self._steer_ratio = sr if sr > 0 and math.isfinite(sr) else 0.0
+        self._ws_recent: list[tuple[int, list[float]]] = []
+        self._ws_period_ns = int(round(cfg.wheel_speed_period_s * 1e9))
+        self._ws_window_ns = int(round(cfg.wheel_speed_window_s * 1e9))
+        self._ws_last = -(1 << 62)
+        self._nhc_period_ns = int(round(cfg.nhc_period_s * 1e9))
+        self._nhc_last = -(1 << 62)
+        self._f_in = (0.0, 0.0, self._g)
+        self._w_in = (0.0, 0.0, 0.0)
+        self._gated_run = 0
         self._lever = np.asarray(m.gnss_lever_arm_m, dtype=float)
         bw = cfg.bandwidths
         self._ab_gyro = TimedAlphaBetaBank(3, bw.angular_rate_hz, bw.max_gap_s)
@@ -239,7 +321,8 @@ class EstimatorPipeline:
         self._susp = None  # (t, SuspensionMeasurement)
         self._zr_rate = ZrRateBuilder(heave_rate_sigma_mps=cfg.heave_rate_sigma_mps)
         self._log: list[Sample] = []
-        self._counts = {"messages": 0, "ignored": 0, "truth_ignored": 0, "invalid": 0, "estimates": 0}
+        self._counts = {"messages": 0, "ignored": 0, "truth_ignored": 0, "invalid": 0, "estimates": 0,
+                        "wheel_outliers": 0, "wheel_accel_skipped": 0, "wheel_too_few": 0, "reacquisitions": 0}
         self._rejected = dict.fromkeys(KINDS, 0)
         self._per_kind = dict.fromkeys(KINDS, 0)
         self._obs_reports: list[tuple[int, int, ObservabilityReport]] = []
@@ -318,6 +401,11 @@ class EstimatorPipeline:
         """Report of the window in progress."""
         return self._obs.report() if self._obs is not None else None
 
+    def augmented_state(self) -> dict[str, tuple[float, float]]:
+        """{name: (value, sigma)} of the EKF's bias and wheel-scale states (empty when the
+        configuration carries none or before initialisation)."""
+        return self.ekf.augmented_state()
+
     def estimate(self) -> Estimate | None:
         """The current estimate (None before initialisation)."""
         if not self.ekf.initialized:
@@ -350,9 +438,13 @@ class EstimatorPipeline:
         if not math.isfinite(f[0] + f[1] + f[2] + w[0] + w[1] + w[2]):
             self._rejected["imu"] += 1
             return
-        if self._imu_rot is not None:
-            f = (self._imu_rot @ np.array(f)).tolist()
-            w = (self._imu_rot @ np.array(w)).tolist()
+        rot = self._imu_rot
+        if rot is not None:
+            r0, r1, r2 = rot
+            f = [r0[0] * f[0] + r0[1] * f[1] + r0[2] * f[2], r1[0] * f[0] + r1[1] * f[1] + r1[2] * f[2],
+                 r2[0] * f[0] + r2[1] * f[1] + r2[2] * f[2]]
+            w = [r0[0] * w[0] + r0[1] * w[1] + r0[2] * w[2], r1[0] * w[0] + r1[1] * w[1] + r1[2] * w[2],
+                 r2[0] * w[0] + r2[1] * w[1] + r2[2] * w[2]]
         self._ab_gyro.update(t, (_NAN, _NAN, w[2]) if self._esc3 else w)
         if self._imu_arm is not None:
             f = self._lever_arm_correction(f)
@@ -374,21 +466,32 @@ class EstimatorPipeline:
             self._flush(t, out)
 
     def _lever_arm_correction(self, f):
-        wv = np.array(self._ab_gyro.x)
-        wd = np.array(self._ab_gyro.v)
-        if not (np.isfinite(wv).all() and np.isfinite(wd).all()):
-            return f
-        arm = self._imu_arm
-        corr = np.cross(wd, arm) + np.cross(wv, np.cross(wv, arm))
-        return [f[0] - corr[0], f[1] - corr[1], f[2] - corr[2]]
+        """f_cg = f_s - w_dot x l - w x (w x l) in plain floats (hot path: once per IMU sample);
+        axes the IMU lacks (NaN in the alpha-beta bank, an ESC cluster's x/y) count as 0."""
+        g = self._ab_gyro
+        wx, wy, wz = (v if v - v == 0.0 else 0.0 for v in g.x)
+        ax, ay, az = (v if v - v == 0.0 else 0.0 for v in g.v)
+        lx, ly, lz = self._imu_arm
+        ux, uy, uz = wy * lz - wz * ly, wz * lx - wx * lz, wx * ly - wy * lx  # w x l
+        return [f[0] - (ay * lz - az * ly) - (wy * uz - wz * uy),
+                f[1] - (az * lx - ax * lz) - (wz * ux - wx * uz),
+                f[2] - (ax * ly - ay * lx) - (wx * uy - wy * ux)]
 
     def _set_mean_input(self) -> None:
         n = self._acc_n
         if n:
             a = self._acc
-            self.ekf.set_input((a[0] / n, a[1] / n, a[2] / n), (a[3] / n, a[4] / n, a[5] / n))
+            self._f_in = (a[0] / n, a[1] / n, a[2] / n)
+            self._w_in = (a[3] / n, a[4] / n, a[5] / n)
+            self.ekf.set_input(self._f_in, self._w_in)
             self._acc = [0.0] * 6
             self._acc_n = 0
+
+    def _rate_corrected(self) -> tuple[float, float, float]:
+        """The last mean gyro input minus the filter's gyro bias [rad/s] (body axes)."""
+        b = self.ekf.bias()[0]
+        w = self._w_in
+        return (w[0] - b[0], w[1] - b[1], w[2] - b[2])
 
     def _flush(self, t: int, out: list) -> None:
         """Predict to t with the mean of the accumulated IMU samples; emit an estimate."""
@@ -400,6 +503,10 @@ class EstimatorPipeline:
                 self._after_reset()
             return
         self._observability_tick()
+        if self._use_nhc and t - self._nhc_last >= self._nhc_period_ns:
+            self._nhc_update(t, out)
+            if not self.ekf.initialized:
+                return
         if self.config.emit_estimates and t - self._last_out >= self._out_ns:
             self._last_out = t
             out.append(self.estimate())
@@ -416,12 +523,26 @@ class EstimatorPipeline:
                 return False
         return True
 
-    def _update(self, kind: ObsKind, z, R, t: int, out: list, aux=None) -> None:
+    def _update(self, kind: ObsKind, z, R, t: int, out: list, aux=None) -> UpdateResult:
         was = self.ekf.initialized
         res = self.ekf.update(kind, z, R, t, aux)
         out.append(Innovation.from_result(res))
         if was and not self.ekf.initialized:
             self._after_reset()
+        return res
+
+    def _nhc_update(self, t: int, out: list) -> None:
+        """Non-holonomic constraint at the filter time (module docstring)."""
+        cfg = self.config
+        self._nhc_last = t
+        x = self.ekf.x
+        speed = math.sqrt(float(x[3]) ** 2 + float(x[4]) ** 2 + float(x[5]) ** 2)
+        ay = self._f_in[1]
+        w = self._rate_corrected()
+        s_lat = math.sqrt(cfg.nhc_sigma_lat_mps ** 2 + (cfg.nhc_slip_rad_per_mps2 * abs(ay) * speed) ** 2
+                          + (cfg.nhc_point_sigma_m * w[2]) ** 2)
+        R = np.diag([s_lat * s_lat, cfg.nhc_sigma_vert_mps ** 2])
+        self._update(ObsKind.NHC, np.zeros(2), R, t, out, aux=w)
 
     def _after_reset(self) -> None:
         self._acc = [0.0] * 6
@@ -470,7 +591,50 @@ class EstimatorPipeline:
             self._try_initialize(t, out)
             return
         if self._predict_for(t):
-            self._update(ObsKind.GNSS_POS, enu, np.diag([sh * sh, sh * sh, sv * sv]), t, out)
+            res = self._update(ObsKind.GNSS_POS, enu, np.diag([sh * sh, sh * sh, sv * sv]), t, out)
+            if res.status == "accepted":
+                self._gated_run = 0
+            elif res.status == "gated":
+                self._gated_run += 1
+                n = self.config.reacquire_after_gated
+                if n and self._gated_run >= n and self.ekf.initialized:
+                    self._reacquire(t, enu, sh, sv)
+
+    def _reacquire(self, t: int, enu, sh: float, sv: float) -> None:
+        """Re-acquisition after persistent gating (module docstring)."""
+        cfg = self.config
+        ekf = self.ekf
+        self._gated_run = 0
+        t_now = max(t, ekf.t_ns)
+        xf, _ = ekf.full_state()
+        yaw, s_yaw = float(xf[States.PSI_G]), None
+        vel, s_vel = None, cfg.init_velocity_sigma_mps
+        max_age = int(cfg.init_max_age_s * 1e9)
+        if self._fresh(self._vel, t) and self._vel[1] >= cfg.gnss_course_min_speed_mps \
+                and math.isfinite(self._vel[2]):
+            sp, crs = self._vel[1], self._vel[2]
+            vel, s_vel = (sp * math.cos(crs), sp * math.sin(crs)), cfg.reacquire_velocity_sigma_mps
+            yaw, s_yaw = crs, cfg.init_course_sigma_rad
+        elif self._prev_fix is not None and 0 < t - self._prev_fix[0] <= max_age:
+            dt = (t - self._prev_fix[0]) * 1e-9
+            vel = ((enu[0] - self._prev_fix[1][0]) / dt, (enu[1] - self._prev_fix[1][1]) / dt)
+            s_vel = math.sqrt(2.0) * sh / dt + cfg.reacquire_velocity_sigma_mps
+            if math.hypot(*vel) >= cfg.gnss_course_min_speed_mps:
+                yaw, s_yaw = math.atan2(vel[1], vel[0]), cfg.init_course_sigma_rad
+        if vel is None:
+            vel = (float(xf[3]), float(xf[4]))
+        c = dcm_gv(float(xf[6]), float(xf[7]), yaw)
+        lead = (t_now - t) * 1e-9  # the fix is older than the filter: carry it forward
+        p = np.asarray(enu, dtype=float) - c.T @ self._lever
+        a = {States.X_G: (p[0] + vel[0] * lead, sh), States.Y_G: (p[1] + vel[1] * lead, sh),
+             States.Z_G: (p[2], sv), States.XDOT_G: (vel[0], s_vel), States.YDOT_G: (vel[1], s_vel),
+             States.ZDOT_G: (0.0, min(s_vel, 2.0))}
+        if s_yaw is not None:
+            a[States.PSI_G] = (yaw, s_yaw)
+        if ekf.reacquire(t_now, a):
+            self._counts["reacquisitions"] += 1
+            self._acc = [0.0] * 6
+            self._acc_n = 0
 
     def _on_gnss_att(self, s: Sample, out: list) -> None:
         t = s.t_ns - self._lat["gnss"]
@@ -496,7 +660,7 @@ class EstimatorPipeline:
             self._update(ObsKind.Y2_GPS, zz, rr, t, out)  # theta_v from eq 4 of the state
 
     def _on_gnss_vel(self, s: Sample, out: list) -> None:
-        t = s.t_ns - self._lat["gnss"]
+        t = s.t_ns - self._lat["gnss_vel"]
         g = s.fields.get
         cfg = self.config
         speed, course = g("gnss_speed_mps", _NAN), g("gnss_course_rad", _NAN)
@@ -549,8 +713,58 @@ class EstimatorPipeline:
     def _on_wheel_speed(self, s: Sample, out: list) -> None:
         t = s.t_ns - self._lat["wheel"]
         g = s.fields.get
-        if self._ab_wheel.update(t, [g(_WS[0], _NAN), g(_WS[1], _NAN), g(_WS[2], _NAN), g(_WS[3], _NAN)]) < 4:
+        w = [g(_WS[0], _NAN), g(_WS[1], _NAN), g(_WS[2], _NAN), g(_WS[3], _NAN)]
+        if self._ab_wheel.update(t, w) < 4:
             self._rejected["wheel_speed"] += 1
+        if not self._use_ws or not self.ekf.initialized:
+            return
+        recent = self._ws_recent
+        recent.append((t, w))
+        while recent and t - recent[0][0] > self._ws_window_ns:
+            recent.pop(0)
+        if t - self._ws_last >= self._ws_period_ns:
+            self._ws_last = t
+            self._wheel_update(out)
+
+    def _wheel_update(self, out: list) -> None:
+        """Wheel-speed update from the recent samples (module docstring: outliers, slip, sign)."""
+        cfg = self.config
+        r0 = self._r0
+        recent = self._ws_recent
+        t_m = int(round(sum(tt for tt, _ in recent) / len(recent)))
+        v = []
+        for i in range(4):
+            vals = [w[i] for _, w in recent if w[i] - w[i] == 0.0]
+            v.append(sum(vals) / len(vals) * r0 if vals else _NAN)
+        avail = [i for i in range(4) if math.isfinite(v[i])]
+        if len(avail) < 2:
+            self._counts["wheel_too_few"] += 1
+            return
+        med = float(np.median([v[i] for i in avail]))
+        tol = cfg.wheel_outlier_mps + cfg.wheel_outlier_rel * abs(med)
+        keep = [i for i in avail if abs(v[i] - med) <= tol]
+        self._counts["wheel_outliers"] += len(avail) - len(keep)
+        if len(keep) < 2:
+            self._counts["wheel_too_few"] += 1
+            return
+        z = sum(v[i] for i in keep) / len(keep)
+        acc = [self._ab_wheel.v[i] for i in keep if self._ab_wheel.v[i] - self._ab_wheel.v[i] == 0.0]
+        a_w = (sum(acc) / len(acc) * r0) if acc else 0.0
+        if abs(a_w) > cfg.wheel_accel_gate_mps2:
+            self._counts["wheel_accel_skipped"] += 1
+            return
+        torque = [abs(self._torque[i]) for i in keep if math.isfinite(self._torque[i])]
+        s_t = abs(z) * (sum(torque) / len(torque)) / (r0 * cfg.wheel_long_stiffness_n) if torque else 0.0
+        var = cfg.wheel_speed_sigma_mps ** 2 + (cfg.wheel_accel_sigma_s * a_w) ** 2 + s_t * s_t
+        x = self.ekf.x
+        c0 = dcm_gv(float(x[6]), float(x[7]), float(x[8]))[0]
+        if float(c0[0] * x[3] + c0[1] * x[4] + c0[2] * x[5]) < -0.3:
+            z = -z  # reversing: wheel speeds carry no sign
+        d = self._steer / self._steer_ratio if (self._steer_ratio and math.isfinite(self._steer)) else 0.0
+        weights = [1.0 / len(keep) if i in keep else 0.0 for i in range(4)]
+        aux = (self._rate_corrected(), (d, d, 0.0, 0.0), weights)
+        if self._predict_for(t_m):
+            self._update(ObsKind.WHEEL_SPEED, np.array([z]), np.array([[var]]), t_m, out, aux=aux)
 
     def _on_wheel_torque(self, s: Sample, out: list) -> None:
         g = s.fields.get
@@ -637,6 +851,9 @@ class EstimatorPipeline:
         if layout.psi_v_state:
             x[11] = vehicle_angles_eq4(x[6:11], with_jacobian=False)[2]
         x0 = layout.from_full(x)
+        ec = cfg.ekf
+        sig_aug = [ec.gyro_bias_sigma_radps] * 3 + [ec.accel_bias_sigma_mps2] * 3 + [ec.wheel_scale_sigma]
+        sig = np.concatenate([sig, sig_aug])
         P0 = np.diag(sig[layout.full_index] ** 2)
         self.ekf.initialize(t, x0, P0)
         self._acc = [0.0] * 6

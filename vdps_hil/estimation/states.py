@@ -29,6 +29,23 @@ written for. The *filter* vector is a subset chosen by configuration (:class:`St
 
 ``StateLayout.expand`` maps a filter vector to the full vector and returns
 E = d x_full / d x_filter (12 x n) so that H_filter = H_full E and P_full = E P E^T.
+
+Augmented states (not in eq 7; optional, for real sensors, ``AugStates``)::
+
+    x_ext = [x_full (12), b_g (3), b_a (3), k_w]       (N_EXT = 19)
+
+=========  =====================  ======  ======================================================
+index      name                   unit    meaning
+=========  =====================  ======  ======================================================
+12..14     gyro_bias_{x,y,z}      rad/s   gyro bias: w_b = w_meas - b_g
+15..17     accel_bias_{x,y,z}     m/s^2   accelerometer bias: f_b = f_meas - b_a
+18         wheel_speed_scale      -       omega_i r_0 = (1 + k_w) v_i: rolling-radius error of
+                                          the model file's r_0 (k_w = r_0 / r_true - 1)
+=========  =====================  ======  ======================================================
+
+A layout carries the bias axes the IMU has (an ESC cluster: b_g,z, b_a,x, b_a,y; a 6-axis IMU:
+all six) when configured; ``expand(x, ext=True)`` gives the N_EXT vector and E (N_EXT x n);
+without ``ext`` the first 12 rows only (what the eq-9 models and the observability report use).
 """
 
 from __future__ import annotations
@@ -39,6 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 N_FULL = 12
+N_EXT = 19
 
 
 class States(enum.IntEnum):
@@ -58,6 +76,21 @@ class States(enum.IntEnum):
     PSI_V = 11
 
 
+class AugStates(enum.IntEnum):
+    """Index of the augmented states in the extended vector (module docstring)."""
+
+    BG_X = 12
+    BG_Y = 13
+    BG_Z = 14
+    BA_X = 15
+    BA_Y = 16
+    BA_Z = 17
+    WHEEL_SCALE = 18
+
+
+GYRO_BIAS = slice(12, 15)
+ACCEL_BIAS = slice(15, 18)
+
 POSITION = slice(0, 3)
 VELOCITY = slice(3, 6)
 ATTITUDE = slice(6, 9)
@@ -68,6 +101,14 @@ STATE_NAMES: tuple[str, ...] = ("x_g_m", "y_g_m", "z_g_m", "xdot_g_mps", "ydot_g
                                 "phi_g_rad", "theta_g_rad", "psi_g_rad", "phi_r_rad", "theta_r_rad",
                                 "psi_v_rad")
 """Output names with units, index-aligned with :class:`States`."""
+
+AUG_STATE_NAMES: tuple[str, ...] = ("gyro_bias_x_radps", "gyro_bias_y_radps", "gyro_bias_z_radps",
+                                    "accel_bias_x_mps2", "accel_bias_y_mps2", "accel_bias_z_mps2",
+                                    "wheel_speed_scale")
+"""Names of the augmented states (``AugStates`` order, index - 12)."""
+
+ALL_STATE_NAMES: tuple[str, ...] = STATE_NAMES + AUG_STATE_NAMES
+"""Names of the extended vector (N_EXT)."""
 
 YAW_STATES = (States.PSI_G, States.PSI_V)
 """States wrapped to [-pi, pi)."""
@@ -89,16 +130,30 @@ class StateLayout:
 
     road_estimated: bool = True
     psi_v_state: bool = False
+    gyro_bias_axes: tuple[int, ...] = ()  # body axes (0 x, 1 y, 2 z) with a gyro bias state
+    accel_bias_axes: tuple[int, ...] = ()  # body axes with an accelerometer bias state
+    wheel_scale: bool = False  # wheel-speed scale state k_w
 
     def __post_init__(self):
         if self.psi_v_state and not self.road_estimated:
             raise ValueError("psi_v can only be a filter state when the road angles are estimated")
+        for name in ("gyro_bias_axes", "accel_bias_axes"):
+            ax = tuple(getattr(self, name))
+            if len(set(ax)) != len(ax) or any(a not in (0, 1, 2) for a in ax) or list(ax) != sorted(ax):
+                raise ValueError(f"StateLayout.{name} must be increasing distinct axes of 0, 1, 2, got {ax!r}")
+            object.__setattr__(self, name, ax)
         idx = list(range(9))
         if self.road_estimated:
             idx += [States.PHI_R, States.THETA_R]
         if self.psi_v_state:
             idx.append(States.PSI_V)
+        n_kin = len(idx)
+        idx += [AugStates.BG_X + a for a in self.gyro_bias_axes]
+        idx += [AugStates.BA_X + a for a in self.accel_bias_axes]
+        if self.wheel_scale:
+            idx.append(AugStates.WHEEL_SCALE)
         object.__setattr__(self, "_idx", np.array(idx, dtype=int))
+        object.__setattr__(self, "_n_kin", n_kin)
         object.__setattr__(self, "_pos", {int(s): i for i, s in enumerate(idx)})
 
     @property
@@ -106,23 +161,33 @@ class StateLayout:
         return len(self._idx)
 
     @property
+    def n_kinematic(self) -> int:
+        """Number of eq-7 states in the filter vector (they come first)."""
+        return self._n_kin
+
+    @property
+    def augmented(self) -> bool:
+        """True when the layout carries bias or wheel-scale states."""
+        return self.n > self._n_kin
+
+    @property
     def full_index(self) -> np.ndarray:
-        """Full-vector index of each filter state (read-only copy)."""
+        """Extended-vector index of each filter state (< 12: eq 7; read-only copy)."""
         return self._idx.copy()
 
     @property
-    def states(self) -> tuple[States, ...]:
-        return tuple(States(int(i)) for i in self._idx)
+    def states(self) -> tuple:
+        return tuple(States(int(i)) if i < N_FULL else AugStates(int(i)) for i in self._idx)
 
     @property
     def names(self) -> tuple[str, ...]:
-        return tuple(STATE_NAMES[int(i)] for i in self._idx)
+        return tuple(ALL_STATE_NAMES[int(i)] for i in self._idx)
 
     @property
     def is_full(self) -> bool:
         return self.n == N_FULL
 
-    def index(self, state: States) -> int | None:
+    def index(self, state) -> int | None:
         """Position of ``state`` in the filter vector, or None if it is derived/fixed."""
         return self._pos.get(int(state))
 
@@ -140,24 +205,29 @@ class StateLayout:
         return a
 
     def from_full(self, x_full) -> np.ndarray:
-        """Pick the filter states out of a full 12-vector."""
+        """Pick the filter states out of a full 12-vector (augmented states 0) or an extended
+        N_EXT-vector."""
         a = np.asarray(x_full, dtype=float)
-        if a.shape != (N_FULL,):
-            raise ValueError(f"full state must have shape ({N_FULL},), got {a.shape}")
+        if a.shape == (N_FULL,) and self.augmented:
+            a = np.concatenate([a, np.zeros(N_EXT - N_FULL)])
+        elif a.shape != (N_FULL,) and a.shape != (N_EXT,):
+            raise ValueError(f"full state must have shape ({N_FULL},) or ({N_EXT},), got {a.shape}")
         return a[self._idx].copy()
 
-    def expand(self, x, with_jacobian: bool = True):
-        """Filter vector -> (full 12-vector, E = d x_full / d x_filter or None).
+    def expand(self, x, with_jacobian: bool = True, ext: bool = False):
+        """Filter vector -> (full 12-vector, E = d x_full / d x_filter or None); with ``ext`` the
+        extended N_EXT-vector and E (N_EXT x n) (augmented states not carried are 0).
 
         Derived psi_v (eq 4) gets its gradient with respect to the five angles in E's last row;
         fixed road angles are zero with zero rows."""
         from vdps_hil.estimation.kinematics import vehicle_angles_eq4  # local: avoid a cycle
 
-        xf = np.zeros(N_FULL)
+        m = N_EXT if ext else N_FULL
+        xf = np.zeros(N_EXT)
         xf[self._idx] = x
         e = None
         if with_jacobian:
-            e = np.zeros((N_FULL, self.n))
+            e = np.zeros((N_EXT, self.n))
             e[self._idx, np.arange(self.n)] = 1.0
         if not self.psi_v_state:
             if with_jacobian:
@@ -169,28 +239,39 @@ class StateLayout:
             else:
                 ang = vehicle_angles_eq4(xf[ANGLES5], with_jacobian=False)
             xf[States.PSI_V] = ang[2]
-        return xf, e
+        if m == N_EXT:
+            return xf, e
+        return xf[:N_FULL].copy(), (None if e is None else e[:N_FULL].copy())
 
     def expand_with_vehicle_angles(self, x):
         """(x_full, E, (phi_v, theta_v, psi_v), d angles / d x_full[6:11]) in one evaluation of
         eq 4 (the pipeline's output path)."""
         from vdps_hil.estimation.kinematics import vehicle_angles_eq4
 
-        xf = np.zeros(N_FULL)
+        xf = np.zeros(N_EXT)
         xf[self._idx] = x
-        e = np.zeros((N_FULL, self.n))
+        e = np.zeros((N_EXT, self.n))
         e[self._idx, np.arange(self.n)] = 1.0
         ang, jac = vehicle_angles_eq4(xf[ANGLES5], with_jacobian=True)
         if not self.psi_v_state:
             for k in range(5 if self.road_estimated else 3):
                 e[States.PSI_V, self._pos[6 + k]] = jac[2, k]
             xf[States.PSI_V] = ang[2]
-        return xf, e, ang, jac
+        return xf[:N_FULL].copy(), e[:N_FULL].copy(), ang, jac
 
     def full_covariance(self, x, p) -> tuple[np.ndarray, np.ndarray]:
-        """(x_full, P_full = E P E^T); fixed states get zero variance."""
+        """(x_full, P_full = E P E^T) of the 12 states of eq 7; fixed states get zero variance."""
         xf, e = self.expand(x)
         return xf, e @ p @ e.T
+
+    def augmented_values(self, x, p=None) -> dict[str, tuple[float, float]]:
+        """{name: (value, sigma)} of the augmented states the layout carries (sigma NaN without
+        ``p``)."""
+        out = {}
+        for i in range(self._n_kin, self.n):
+            s = float("nan") if p is None else float(np.sqrt(max(0.0, p[i, i])))
+            out[ALL_STATE_NAMES[int(self._idx[i])]] = (float(x[i]), s)
+        return out
 
     @classmethod
     def paper(cls) -> "StateLayout":
