@@ -120,8 +120,19 @@ def _xbus_message(mid: int, data: bytes) -> bytes:
     return bytes((PREAMBLE,)) + body + bytes((_checksum(body),))
 
 
+_VALID_ROTATIONS: set = set()
+
+
 def _check_rotation(r: Sequence[Sequence[float]]) -> tuple[tuple[int, int, int], ...]:
-    """Validate a signed permutation matrix with determinant +1 (a proper axis remap)."""
+    """Validate a signed permutation matrix with determinant +1 (a proper axis remap).
+
+    A matrix already validated (as the tuple this returns) is returned at once: the decoder
+    passes its validated rotation with every packet."""
+    try:
+        if r in _VALID_ROTATIONS:
+            return r  # type: ignore[return-value]
+    except TypeError:  # unhashable (lists): validate below
+        pass
     rows = tuple(tuple(int(v) for v in row) for row in r)
     if len(rows) != 3 or any(len(row) != 3 for row in rows):
         raise ValueError("sensor_to_body must be 3x3")
@@ -139,6 +150,7 @@ def _check_rotation(r: Sequence[Sequence[float]]) -> tuple[tuple[int, int, int],
            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]))
     if det != 1:
         raise ValueError("sensor_to_body must be a proper rotation (det +1)")
+    _VALID_ROTATIONS.add(rows)
     return rows
 
 
