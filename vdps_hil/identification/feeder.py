@@ -234,16 +234,22 @@ class IdentFeeder:
         grav = gravity_aux_mps2(phi_r, theta_r, psi_v)
         omega = np.array(filtered.angular_rate_radps, dtype=float)
         omega_dot = np.array(filtered.angular_accel_radps2, dtype=float)
-        f_cg = self._mean_specific_force(int(estimate.t_ns), omega, omega_dot)
+        # an ESC cluster has no roll/pitch rate (NaN): the kinematics below take them as 0, as the
+        # estimator does; the inputs keep them NaN (not measured)
+        w0, wd0 = omega, omega_dot
+        if math.isfinite(omega[2]) and not np.isfinite(omega).all():
+            w0 = np.where(np.isfinite(omega), omega, 0.0)
+            wd0 = np.where(np.isfinite(omega_dot), omega_dot, 0.0)
+        f_cg = self._mean_specific_force(int(estimate.t_ns), w0, wd0)
         a_a = c_ga @ (c_gv.T @ f_cg) + np.array(grav)
-        psi_v_dot = float((c_omega_inv(phi_v, theta_v) @ omega)[2])
+        psi_v_dot = float((c_omega_inv(phi_v, theta_v) @ w0)[2])
         xdd = float(a_a[0] + v_a[1] * psi_v_dot)
         ydd = float(a_a[1] - v_a[0] * psi_v_dot)
         zdd = float(a_a[2]) if self.config.vertical == "aux" else float(f_cg[2] + grav[2])
         t_est = int(estimate.t_ns)
         steer = self._extrapolated(self._steer, t_est, (float(filtered.steer_wheel_angle_rad),))[0]
         torque = self._extrapolated(self._torque, t_est, tuple(filtered.wheel_torque_nm))
-        slip, alpha, delta = self._tire_kinematics(estimate, filtered, c_gv @ v_g, omega, steer)
+        slip, alpha, delta = self._tire_kinematics(estimate, filtered, c_gv @ v_g, w0, steer)
         inp = IdentInputs(
             t_ns=int(estimate.t_ns), xdd_a_mps2=xdd, ydd_a_mps2=ydd, zdd_a_mps2=zdd,
             xd_a_mps=float(v_a[0]), yd_a_mps=float(v_a[1]), psi_v_dot_radps=psi_v_dot,
