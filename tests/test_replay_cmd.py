@@ -173,3 +173,19 @@ def test_sensor_set_inferred_or_named(drive, tmp_path):
     assert b["innovations"]["gnss_att"]["accepted"] == 0 and b["estimates_summary"]["count"] > 250
     code, text = run("replay", str(drive), "--sensorset", str(tmp_path / "missing.toml"))
     assert code == 2 and "sensor set" in text and len(text.strip().splitlines()) == 1
+
+
+def test_replay_json_carries_the_computed_observability_report(tmp_path):
+    """Issue 11: `vdps replay --json` carries the structural rank of the sensor set, the windows
+    with their null spaces explained and each identification problem's information."""
+    from vdps_hil.sim.drive import Drive
+    from vdps_hil.system import replay_file
+    rec = tmp_path / "d.mcap"
+    Drive("paper", profile="table1-susp1k", seed=3, duration_s=4.0).run(str(rec))
+    doc = replay_file(str(rec), predict=False)
+    obs = doc["observability"]
+    assert obs["structural"]["rank"] == obs["structural"]["n_states"] == 11
+    assert obs["structural"]["unobservable"] == []
+    assert set(obs["identification"]) >= {"mass", "tracking", "cornering", "inertia"}
+    for prob in obs["identification"].values():
+        assert "status" in prob and "information_eigenvalues" in prob

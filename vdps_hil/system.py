@@ -105,6 +105,8 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Iterable, Mapping
 
+import numpy as np
+
 from vdps_hil.bus.samples import Sample, wheel_fields
 from vdps_hil.estimation.pipeline import Estimate, EstimatorPipeline, FilteredSignals, Innovation, PipelineConfig
 from vdps_hil.identification.feeder import FeederConfig, IdentFeeder
@@ -982,6 +984,13 @@ class _Summary:
             "decoding": dict(dec.decoding),
             "system": system.status()["counters"],
         }
+        # computed observability (issue 11): structural rank of the sensor set, each window's null
+        # space explained, and each identification problem's information with its cause
+        from vdps_hil.estimation.observability_report import observability_report
+        try:
+            doc["observability"].update(observability_report(system.pipeline, system.identifier).to_json())
+        except (ValueError, np.linalg.LinAlgError) as e:  # a degenerate window must not lose the run
+            doc["observability"]["report_error"] = f"{e.__class__.__name__}: {e}"
         if system.identifier is not None:
             st = system.identifier.status()
             st["prior"] = veh.params.as_dict()
