@@ -71,3 +71,44 @@ def test_unreadable_signal_map_is_one_line(tmp_path):
     p = vdps("log", "--can", "vdps=virtual:x", "--signalmap", bad, "-o", tmp_path / "y.mcap")
     assert p.returncode == 2 and "malformed TOML" in p.stderr
     assert len(p.stderr.strip().splitlines()) == 1
+
+
+def test_pipeline_tap_runs_the_system_live_and_reports_the_warning(tmp_path):
+    """``vdps log --pipeline``: the tap feeds decoded samples to VdpsSystem (the node replay
+    runs), records /est/ topics and the warning frames, and shows the latest warning. Fed a
+    simulated fishhook-suv drive in arrival order, it must report a warning (level >= 2)
+    before the point of no return (3.72 s) and decode its own frames without CRC rejects."""
+    from vdps_hil.cli.log_cmd import PipelineTap
+    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.record.decode import decode_recording
+    from vdps_hil.record.writer import RecordingWriter
+    from vdps_hil.sim.drive import Drive
+
+    rec = tmp_path / "fh.mcap"
+    Drive("fishhook-suv", profile="table1-susp1k", seed=1).run(str(rec))
+    out = tmp_path / "live.mcap"
+    with RecordingWriter(str(out)) as w:
+        tap = PipelineTap(load_vehicle("suv-model", expect_kind="model"), w)
+        assert "no warning frame yet" in tap.status_line()
+        first_warning_t = None
+        for smp in decode_recording(str(rec)):
+            tap([smp])
+            lw = tap.last_warning
+            if first_warning_t is None and lw is not None and lw["warning_level"] >= 2:
+                first_warning_t = lw["t_s"]
+    assert first_warning_t is not None and first_warning_t < 3.72 - 1.0
+    assert "warning level" in tap.status_line()
+    s = tap.summary()
+    assert s["estimates"] > 100 and s["warning_frames"] > 50
+    assert tap._decoder.total_rejected == 0
+    with RecordingReader(str(out)) as r:
+        topics = r.topics()
+    assert "/est/state" in topics and any(t.startswith("/est/can/") for t in topics)
+
+
+def test_pipeline_refuses_a_truth_vehicle_file(tmp_path):
+    p = vdps("log", "--can", "vdps=virtual:x", "--pipeline", "--vehicle", "sedan-truth",
+             "-o", tmp_path / "z.mcap", "--duration", "1")
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1
+    assert "model file is needed" in p.stderr
+    assert not (tmp_path / "z.mcap").exists()

@@ -150,7 +150,8 @@ class LogSession:
 
     def __init__(self, adapters: Sequence[Adapter], writer, *, queue_size: int = 1_000_000,
                  flush_s: float = 0.5, health_s: float = 1.0, status_s: float = 1.0,
-                 status: Callable[[list[str]], None] | None = None, poll_s: float = 0.02):
+                 status: Callable[[list[str]], None] | None = None, poll_s: float = 0.02,
+                 tap: Callable[[list], None] | None = None):
         names = [a.name for a in adapters]
         if len(set(names)) != len(names):
             raise AdapterError(f"two sources share a name: {names}")
@@ -163,6 +164,7 @@ class LogSession:
         self.flush_s, self.health_s, self.status_s = flush_s, health_s, status_s
         self.status = status
         self.poll_s = poll_s
+        self.tap = tap  # called with every drained batch of events after they are written
         self._threads: list[threading.Thread] = []
         self._adapter_stop = threading.Event()
         self.errors: list[str] = []
@@ -185,7 +187,19 @@ class LogSession:
             self.errors.append(f"{a.name}: {type(e).__name__}: {e}")
 
     def status_lines(self) -> list[str]:
-        return [a.status_line() for a in self.adapters]
+        lines = [a.status_line() for a in self.adapters]
+        if self.tap is not None and hasattr(self.tap, "status_line"):
+            lines.append(self.tap.status_line())
+        return lines
+
+    def _write(self, events: list) -> None:
+        self.recorder.write_many(events)
+        if self.tap is not None and events:
+            try:
+                self.tap(events)
+            except Exception as e:  # noqa: BLE001 - the recording must go on whatever the tap does
+                self.errors.append(f"tap: {type(e).__name__}: {e}")
+                self.tap = None
 
     def run(self, stop: threading.Event, duration_s: float | None = None) -> dict:
         """Record until ``stop`` is set or ``duration_s`` elapsed; returns a summary dict."""
@@ -207,7 +221,7 @@ class LogSession:
                 if duration_s is not None and now - t_start >= duration_s:
                     break
                 if sub.wait(0.02):
-                    rec.write_many(sub.drain(20_000))
+                    self._write(sub.drain(20_000))
                 now = time.monotonic()
                 if now >= next_flush:
                     self.writer.flush()
@@ -225,7 +239,7 @@ class LogSession:
             for th in self._threads:
                 th.join(timeout=5.0)
             while len(sub):
-                rec.write_many(sub.drain(100_000))
+                self._write(sub.drain(100_000))
             rec.write_health(self.adapters)
             rec.write_final_health(self.adapters, {"reader_errors": self.errors,
                                                    "queue_high_water": sub.high_water})

@@ -120,9 +120,15 @@ class _Status:
               help="Close the MCAP chunk in progress every S seconds (a crash loses at most "
                    "about that much).")
 @click.option("--quiet", is_flag=True, help="No live status.")
+@click.option("--pipeline", is_flag=True,
+              help="Run the estimator, identifier, predictor and warning live on the decoded "
+                   "samples; its estimates and warning frames are recorded under /est/ and the "
+                   "latest warning shows in the status line.")
+@click.option("--vehicle", default="sedan-model", show_default=True, metavar="FILE",
+              help="Model vehicle file for --pipeline.")
 @json_option
 def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rotate_mb,
-        rotate_s, flush_s, quiet, json_out):
+        rotate_s, flush_s, quiet, pipeline, vehicle, json_out):
     """Record live CAN buses and serial devices losslessly into one MCAP.
 
     \b
@@ -144,6 +150,14 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
         raise UserError("--duration must be positive")
     if flush_s <= 0:
         raise UserError("--flush-s must be positive")
+    tap = None
+    if pipeline:
+        from vdps_hil.model.params import VehicleFileError, load_vehicle
+
+        try:
+            model = load_vehicle(vehicle, expect_kind="model")
+        except VehicleFileError as e:
+            raise UserError(str(e)) from None
     adapters, info, sigmap = build_live_adapters(can_specs, serial_specs, formats, signalmap,
                                                  dbcs)
     for a in adapters:  # devices first: a bad port fails before a file is created
@@ -182,7 +196,9 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
         stop.set()
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    session = LogSession(adapters, writer, flush_s=flush_s, status=_Status(quiet))
+    if pipeline:
+        tap = PipelineTap(model, writer)
+    session = LogSession(adapters, writer, flush_s=flush_s, status=_Status(quiet), tap=tap)
     try:
         summary = session.run(stop, duration)
     finally:
@@ -196,4 +212,62 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
         for ln in session.status_lines():
             eprint("  " + ln)
     summary["files"] = files
+    if tap is not None:
+        summary["pipeline"] = tap.summary()
     write_json(summary, json_out)
+
+
+class PipelineTap:
+    """``vdps log --pipeline``: feeds every decoded sample, in arrival order, to the paper's
+    Figure 2 node (:class:`vdps_hil.system.VdpsSystem`, the same node ``vdps replay`` runs),
+    records its estimates under ``/est/state`` and its VDPS_Warning frames under
+    ``/est/can/<bus>``, and reports the latest warning for the status line. It never sends on
+    the bus (the bench does); the recording lets ``vdps replay`` reproduce the run."""
+
+    def __init__(self, model_vehicle, writer):
+        from vdps_hil.bus.samples import Sample
+        from vdps_hil.codecs.can_codec import VdpsCanDecoder
+        from vdps_hil.system import CanFrame, VdpsSystem
+        from vdps_hil.estimation.pipeline import Estimate
+
+        self._sample_type, self._frame_type, self._est_type = Sample, CanFrame, Estimate
+        self.system = VdpsSystem(model_vehicle)
+        self.writer = writer
+        self._decoder = VdpsCanDecoder(source="pipeline")
+        self.samples = self.estimates = self.frames = 0
+        self.last_warning: dict | None = None
+
+    def __call__(self, events) -> None:
+        for ev in events:
+            if not isinstance(ev, self._sample_type) or not ev.valid:
+                continue
+            self.samples += 1
+            for out in self.system.handle(ev):
+                if isinstance(out, self._est_type):
+                    self.estimates += 1
+                    if self.estimates % 10 == 0:  # 10 Hz into the recording
+                        self.writer.write_estimate("state", out.t_ns, dict(zip(
+                            ("x_g_m", "y_g_m", "z_g_m", "vx_g_mps", "vy_g_mps", "vz_g_mps", "phi_g_rad",
+                             "theta_g_rad", "psi_g_rad", "phi_r_rad", "theta_r_rad", "psi_v_rad"), out.x)))
+                elif isinstance(out, self._frame_type):
+                    self.frames += 1
+                    self.writer.write_json(f"/est/can/{out.bus}", "vdps.RawCan.v1", out.t_ns, {
+                        "t_ns": out.t_ns, "arbitration_id": out.arbitration_id, "is_extended_id": False,
+                        "is_fd": False, "is_remote_frame": False, "is_error_frame": False,
+                        "dlc": len(out.data), "data_hex": out.data.hex(), "direction": "tx"})
+                    for s in self._decoder.decode(out.t_ns, out.arbitration_id, out.data):
+                        if s.kind == "warning":
+                            self.last_warning = dict(s.fields, t_s=out.t_ns / 1e9)
+
+    def status_line(self) -> str:
+        w = self.last_warning
+        if w is None:
+            return f"pipeline: {self.samples} samples, {self.estimates} estimates, no warning frame yet"
+        ttr = w.get("warning_time_to_rollover_s")
+        return (f"pipeline: {self.samples} samples, {self.estimates} estimates; warning level "
+                f"{int(w['warning_level'])} status {int(w['warning_status'])}"
+                + (f", time to rollover {ttr:.2f} s" if ttr is not None and ttr == ttr and ttr != float("inf") else ""))
+
+    def summary(self) -> dict:
+        return {"samples": self.samples, "estimates": self.estimates, "warning_frames": self.frames,
+                "last_warning": self.last_warning}
