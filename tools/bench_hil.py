@@ -12,9 +12,11 @@ For each transport:
   every pipeline cycle (``hil.latency``), the same over the cycles that sent VDPS_Warning, late
   sends, lost data, lead time;
 * then the speeds in increasing order until a run loses data (a CAN frame, an IMU packet or an
-  NMEA line, by the senders' and receivers' counts and the sequence counters): the highest
-  speed with nothing dropped (``max_lossless_speed``), and the pipeline's own verdict
-  (``pipeline_keeps_up``: no loss and every cycle out within 0.25 s).
+  NMEA line, by the devices' and the pipeline's counts, cross-checked by the sequence counters):
+  the highest speed with nothing dropped (``max_lossless_speed``) and the highest speed of the
+  unbroken run from 1x at which the pipeline kept up (``max_keeps_up_speed``: no loss and every
+  cycle out within 0.25 s). With 64 KiB of buffering on the serial wires a pipeline can fall
+  seconds behind before anything is lost: the second figure is the one to plan with.
 
 Bars (issue "HIL bench"): p99 <= 50 ms at 1x (first bar), 10 ms (goal). CI runs the embedded
 bench at a third of the embedded transport's ``max_lossless_speed``
@@ -67,6 +69,8 @@ def main(argv=None) -> int:
                   f"late sends {r['late_sends']}/{r['sends']}, dropped {r['dropped']}, "
                   f"lead {r['warning_lead_time_s']:.2f} s, load {r['load_avg']:.1f}", flush=True)
         best = None
+        keeps_speed = None
+        unbroken = True
         sweep = []
         for sp in speeds:
             r = runs[0] if sp == 1.0 else one(tr, sp, a.scenario)
@@ -77,11 +81,17 @@ def main(argv=None) -> int:
             if r["dropped"]:
                 break
             best = sp
-        out["transports"][tr] = {"at_1x": runs, "sweep": sweep, "max_lossless_speed": best}
-        print(f"{tr:8s} highest speed with nothing dropped: {best}x", flush=True)
+            unbroken = unbroken and r["pipeline_keeps_up"]
+            if unbroken:
+                keeps_speed = sp
+        out["transports"][tr] = {"at_1x": runs, "sweep": sweep, "max_lossless_speed": best,
+                                 "max_keeps_up_speed": keeps_speed}
+        print(f"{tr:8s} highest speed with nothing dropped: {best}x; the pipeline kept up to {keeps_speed}x",
+              flush=True)
     summary = {tr: {"p50_ms": v["at_1x"][0]["warning_latency_ms"]["p50"],
                     "p99_ms": v["at_1x"][0]["warning_latency_ms"]["p99"],
-                    "max_lossless_speed": v["max_lossless_speed"]} for tr, v in out["transports"].items()}
+                    "max_lossless_speed": v["max_lossless_speed"], "max_keeps_up_speed": v["max_keeps_up_speed"],
+                    "load_avg": v["at_1x"][0]["load_avg"]} for tr, v in out["transports"].items()}
     out["summary"] = summary
     print(json.dumps(summary))
     if a.json:
