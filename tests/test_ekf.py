@@ -334,6 +334,8 @@ def test_real_car_switches_decide_kinds_and_layout():
                     gyro_bias=True, accel_bias=True, wheel_speed=True, wheel_scale_state=True)
     assert ObsKind.WHEEL_SPEED not in six.kinds()  # no wheel speeds fitted: no row, no scale state
     assert six.layout().n == 15 and not six.layout().wheel_scale
+    assert EkfConfig(sensors=esc).with_real_car_rows() == cfg
+    assert not EkfConfig(sensors=SensorSet(wheel_speeds=False)).with_real_car_rows().wheel_scale_state
     with pytest.raises(ValueError, match="nonholonomic"):
         EkfConfig(nonholonomic=1)
     with pytest.raises(ValueError, match="gyro_bias_sigma_radps"):

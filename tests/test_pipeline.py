@@ -333,7 +333,7 @@ def test_reacquires_after_persistent_gating():
             east = DEFAULT_ORIGIN.to_geodetic(np.array([40.0, 0.0, 0.0]))[1] - DEFAULT_ORIGIN.lon_deg
             s = dataclasses.replace(s, fields={**s.fields, "gnss_lon_deg": s.fields["gnss_lon_deg"] + east})
         shifted.append(s)
-    p, out = _run(shifted)
+    p, out = _run(shifted, PipelineConfig(reacquire_after_gated=5))
     c = p.counters
     assert c["reacquisitions"] == 1 and c["ekf"]["reacquisitions"] == 1
     inn = [o for o in out if isinstance(o, Innovation) and o.kind == "gnss_pos"]
@@ -343,7 +343,7 @@ def test_reacquires_after_persistent_gating():
     assert abs(e[-1, 0] - 40.0) < 1.5 and abs(e[-1, 1]) < 1.5
     with pytest.raises(ValueError):
         PipelineConfig(reacquire_after_gated=-1)
-    p_off, _ = _run(shifted, PipelineConfig(reacquire_after_gated=0))
+    p_off, _ = _run(shifted)  # the default (paper's set): no re-acquisition
     assert p_off.counters["reacquisitions"] == 0 and p_off.rejected()["ekf.gnss_pos"] > 40
 
 
@@ -368,5 +368,6 @@ def test_real_car_switches_are_off_for_the_paper_set():
     cfg = PipelineConfig()
     e = cfg.ekf
     assert not (e.gyro_bias or e.accel_bias or e.wheel_speed or e.wheel_scale_state or e.nonholonomic)
+    assert cfg.reacquire_after_gated == 0
     assert not e.layout().augmented and e.layout().n == 11
     assert {k.value for k in e.kinds()} == {"gnss_pos", "gnss_vel", "gnss_att", "y1_sus", "y2_sus_rate"}

@@ -199,6 +199,17 @@ class EkfConfig:
     def road_estimated(self) -> bool:
         return self.sensors.suspension if self.estimate_road is None else bool(self.estimate_road)
 
+    def with_real_car_rows(self) -> "EkfConfig":
+        """This configuration with the real-car extensions on (module docstring): IMU bias states,
+        the non-holonomic constraint and, when wheel speeds are fitted, the wheel-speed row and
+        its scale state (what ``configs/sensorsets`` of real cars switch on; e.g. for a sensor set
+        inferred from a recording without multi-antenna attitude)."""
+        import dataclasses
+
+        ws = self.sensors.wheel_speeds
+        return dataclasses.replace(self, gyro_bias=True, accel_bias=True, nonholonomic=True, wheel_speed=ws,
+                                   wheel_scale_state=ws)
+
     @property
     def gyro_bias_axes(self) -> tuple[int, ...]:
         """Body axes with a gyro bias state (ESC cluster: z only)."""
