@@ -110,6 +110,10 @@ class Candidate:
     def phi_effect(self, phi) -> Effect:
         return self.effect(phi)
 
+    def phi_prior_sigma(self):
+        """Gaussian prior sigmas of the fit parameters around the generic prior (None: none)."""
+        return None
+
     def phi_plausible(self, phi) -> bool:
         return self.plausible(phi)
 
@@ -299,7 +303,7 @@ class MagicFormulaCandidate(Candidate):
     profile of the identified model's objective over mu (``profile_range``), the other shape
     factors at their generic priors."""
 
-    profile_range = (0.3, 3.0)
+    profile_range = (0.3, 1.6)
 
     def __init__(self, effect_cls):
         super().__init__(effect_cls, ("saturation_scale",))
@@ -316,11 +320,16 @@ class MagicFormulaCandidate(Candidate):
 
     def to_phi(self, theta):
         s = float(theta[0])
-        mu = self.mu0 / math.sqrt(s) if s > 1e-3 else 2.5
-        return np.array([min(max(mu, 0.3), 2.5)])
+        mu = self.mu0 / math.sqrt(s) if s > 1e-3 else self.profile_range[1]
+        return np.array([min(max(mu, self.profile_range[0]), self.profile_range[1])])
 
     def phi_effect(self, phi):
         return self.effect_cls(**{**self.defaults, "peak_friction": float(min(max(phi[0], 0.05), 1e3))})
+
+    def phi_prior_sigma(self):
+        """Peak friction of a dry road: generic prior 1.0 +- 0.3 -- a drive that never nears the
+        limit cannot identify it, and then the prior keeps it (section 7.3's case)."""
+        return [0.3]
 
     def phi_plausible(self, phi):
         spec = self.effect_cls.param_specs()["peak_friction"]
@@ -333,7 +342,7 @@ class MagicFormulaCandidate(Candidate):
         return np.array([0.03 * max(float(phi[0]), 0.1)])
 
     def material(self, phi, fraction: float = 0.1) -> bool:
-        return float(phi[0]) < 0.9 * self.profile_range[1]
+        return float(phi[0]) < 0.95 * self.profile_range[1]
 
     def clip_phi(self, phi):
         spec = self.effect_cls.param_specs()["peak_friction"]

@@ -47,6 +47,7 @@ in the linear range cannot tell apart. Sigmas: (X'X)^-1 s^2 n / n_eff.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
 from typing import Sequence
 
@@ -75,13 +76,13 @@ class RankingConfig:
     """Thresholds of the ranking (module docstring)."""
 
     micro_block_s: float = 0.5
-    nuisance_knot_s: float = 5.0
+    nuisance_knot_s: float = 2.0
     velocity_sigma_floor_mps: float = 0.02
     velocity_fast_sigma_mps: float = 0.003
     excite_lat_mps2: float = 0.5
     excite_angacc_radps2: float = 0.05
     excite_torque_nm: float = 20.0
-    structure_terms: bool = True
+    structure_terms: bool = False
     folds: int = 8
     gap_blocks: int = 1
     bic_margin: float = 10.0
@@ -677,10 +678,16 @@ def _build(table, states, inn, ref: Vehicle, point: _Point, cfg: RankingConfig, 
         d.add_block("_structure", structure_columns(res), None)
         names.insert(2, "_structure")
     for name, c in selected.items():
-        xd, xi = c.delta_columns(ctx, point.phis[name])
+        phi = point.phis[name]
+        xd, xi = c.delta_columns(ctx, phi)
         if xi is not None:
-            d.shift_innovations(xi, point.phis[name])
-        d.add_block(name, xd, xi)
+            d.shift_innovations(xi, phi)
+        ps = c.phi_prior_sigma()
+        if ps is not None:
+            centre = c.to_phi(c.prior_theta()) - np.asarray(phi, dtype=float)
+            d.add_block(name, xd, xi, prior_sigma=list(ps), prior_center=list(centre))
+        else:
+            d.add_block(name, xd, xi)
         names.append(name)
     if getattr(states, "prior_scale", None) is None:
         # the residual rows are autocorrelated: their weight against the (independent) priors is
@@ -700,13 +707,11 @@ def structure_columns(res: EquationResiduals) -> np.ndarray:
     """Known simplifications of the paper's reduced model, absorbed so that they are not taken
     for a missing effect (always fitted, no prior): the unsprung masses (about 10 % of the mass)
     ride with the body in eq 13 but stay on the road when the body rolls, which adds a lateral
-    force ~ m_u h p_dot and makes the lateral inertia differ from the vertical one (a force
-    ~ f_y). Columns: lateral equation ~ roll acceleration, ~ lateral specific force."""
+    force ~ m_u h p_dot. Column: lateral equation ~ roll acceleration."""
     n = len(res.t_s)
-    out = np.zeros((n, 14, 2))
+    out = np.zeros((n, 14, 1))
     if n and res.meas is not None:
         out[:, 1, 0] = res.meas[:, 3]
-        out[:, 1, 1] = res.meas[:, 1]
     return out
 
 
@@ -925,6 +930,9 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
             ef_own = 1.0 - j.cv[own].sum() / max(cvb[own].sum(), 1e-300) if own is not None and own.any() else ef
             dbic = n_eff * math.log(max(j.sse, 1e-300) / max(sseb, 1e-300)) + len(j.phi) * math.log(n_eff)
             steps[name] = {"ef": ef, "ef_own": ef_own, "dbic": dbic, "joint": j, "cv_before": cvb}
+            if os.environ.get("VDPS_WB_DEBUG"):
+                print(f"[ranking] {name}: ef {ef:.3f} own {ef_own:.3f} dbic {dbic:.1f} phi {j.phi} "
+                      f"plausible {c.phi_plausible(j.phi)} material {c.material(j.phi, cfg.material_fraction)}")
             joints[name] = j
             ok = (dbic < -cfg.bic_margin and ef_own >= cfg.min_explained and ef > 0.0 and c.phi_plausible(j.phi)
                   and c.material(j.phi, cfg.material_fraction))

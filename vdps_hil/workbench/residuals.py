@@ -167,6 +167,10 @@ class _RowModel:
         self.last_ws = [0.0] * 8
         self.last_slip_cols = None
         self._zw = self.model.wheel_centre_z_m
+        tire = self.model.effects.tire
+        self._tire = None if tire is None or tire.name == "linear_tire" else tire
+        self._fz0 = self.model.static_load_n
+        self._calpha = self.model.c_alpha
 
     def residual(self, x, u, env, meas, want_named: bool = False, want_slip: bool = False):
         """(r (14,) list, named quantities or None) at one row; ``meas`` a sequence of 22
@@ -208,6 +212,8 @@ class _RowModel:
             vwz = vz + wx * yi - wy * xi
             vl = (vwx * lx + vwy * ly + vwz * lz) * inv
             kq = (tq + teff - iw * meas[6 + i]) / (ri * self.c_kappa[i])
+            if self._tire is not None:
+                kq = self._slip_for_force(i, rc, kq * self.c_kappa[i], kq)
             r[10 + i] = vl * (1.0 + kq) - ri * meas[10 + i]
             ws[i] = vl
             ws[4 + i] = kq
@@ -245,6 +251,23 @@ class _RowModel:
             r[3] -= rcy * fz_ - rcz * fy
             r[4] -= rcz * fx - rcx * fz_
             r[5] -= rcx * fy - rcy * fx
+
+    def _slip_for_force(self, i: int, rc, fa_target: float, k0: float) -> float:
+        """The slip ratio at which the model's tire law gives the longitudinal force the spin
+        balance measured (Newton from the linear tire's value, at the corner's slip angle and
+        load; combined slip lowers the longitudinal stiffness of a saturating tire)."""
+        tf = self._tire.tire_forces
+        fz, alp = rc[2], rc[4]
+        ck, ca, fz0 = self.c_kappa[i], self._calpha[i], self._fz0[i]
+        k = k0
+        for _ in range(3):
+            f0 = tf(fz, fz0, k, alp, ck, ca)[0]
+            h = 1e-5
+            df = (tf(fz, fz0, k + h, alp, ck, ca)[0] - f0) / h
+            if not df > 0.05 * ck:
+                break
+            k = k + (fa_target - f0) / df
+        return k
 
     def _slip_columns(self, rec, n_b) -> np.ndarray:
         """(14, 8): d(residual)/d(F_a,i) (columns 0-3) -- a longitudinal tire force along the

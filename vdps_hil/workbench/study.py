@@ -42,7 +42,7 @@ from typing import Sequence
 from vdps_hil.sim.profiles import SensorProfile, load_profile
 from vdps_hil.sim.scenarios import Scenario, parse_scenario
 
-__all__ = ["MANEUVERS", "HIDDEN", "scenario", "study_profile", "hidden_drive", "NULL_MANEUVERS", "is_hit",
+__all__ = ["MANEUVERS", "HIDDEN", "TWO_HIDDEN", "cached_drive", "run_job", "scenario", "study_profile", "hidden_drive", "NULL_MANEUVERS", "is_hit",
            "wilson_interval"]
 
 MANEUVERS: dict[str, str] = {
@@ -95,6 +95,15 @@ steer_wheel_angle_rad = { type = "sine", amplitude = 0.2, frequency_hz = 0.25, s
 [driver]
 speed = { type = "const", value = 25.0 }
 """,
+    "accel-weave": """name = "accel-weave"
+duration_s = 18.0
+[initial]
+speed_mps = 15.0
+[inputs]
+steer_wheel_angle_rad = { type = "sine", amplitude = 0.2, frequency_hz = 0.25, start_s = 2.0 }
+[driver]
+speed = { type = "points", points = [[1.0, 15.0], [6.0, 33.0], [9.0, 33.0], [18.0, 14.0]] }
+""",
     "step-steer": """name = "step-steer"
 duration_s = 12.0
 [initial]
@@ -137,6 +146,12 @@ HIDDEN: dict[str, tuple[str, str]] = {
     "imu_lever_arm": ("lane-change", "imu_lever_arm:lever_x_m=0.5"),
 }
 """Effect -> (maneuver, effect spec for ``Drive(effects=[...])``)."""
+
+TWO_HIDDEN: dict[tuple[str, str], str] = {
+    ("aero_drag", "crosswind"): "accel-weave",
+    ("imu_bias", "low_pressure_tire"): "circle-straight",
+}
+"""Two effects hidden at once (the issue's pairs) -> maneuver exciting both."""
 
 NULL_MANEUVERS: tuple[str, ...] = tuple(MANEUVERS)
 
