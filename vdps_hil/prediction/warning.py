@@ -315,14 +315,24 @@ class WarningChain:
         self._pending: list[tuple[int, RolloverAssessment]] = []
         self.frames: list[can.Message] = []
         self.assessments: list[RolloverAssessment] = []
+        self.prediction_failures = 0
+        self.last_failure: str | None = None
 
     def handle(self, t_ns: int, initial_state: PredictorInitialState | None,
                status: int = WarningStatus.VALID) -> list[can.Message]:
         t_ns = int(t_ns)
         if initial_state is not None and self.cadence.due(t_ns):
-            a = RolloverAssessment.from_prediction(self.predictor.predict(initial_state))
-            self.assessments.append(a)
-            self._pending.append((t_ns + self._latency_ns, a))
+            try:
+                a = RolloverAssessment.from_prediction(self.predictor.predict(initial_state))
+            except (OverflowError, ZeroDivisionError, FloatingPointError, ValueError) as e:
+                # a diverging or absurd prediction (e.g. an estimate far outside the model's
+                # range) must not stop the warning path: count it and say "fault" on the bus
+                self.prediction_failures += 1
+                self.last_failure = f"{type(e).__name__}: {e}"
+                status = WarningStatus.FAULT
+            else:
+                self.assessments.append(a)
+                self._pending.append((t_ns + self._latency_ns, a))
         ready = None
         while self._pending and self._pending[0][0] <= t_ns:
             ready = self._pending.pop(0)[1]
