@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: setup
-	$(VENV)/bin/vdps sim paper --duration 15 -o paper.mcap
+	$(VENV)/bin/vdps bench --react -o bench.mcap
 
 test: setup
 	$(PY) -m pytest -q -p no:cacheprovider --timeout 600 tests
