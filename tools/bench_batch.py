@@ -6,7 +6,8 @@ replaying one long recording (``tools/make_long_drive.py``).
 Usage:
   .venv/bin/python tools/bench_batch.py [--drives 8] [--duration 10] [--workers 1 2]
                                         [--dir /tmp/vdps-bench-batch] [--backend dask]
-  .venv/bin/python tools/bench_batch.py --memory long-drive.mcap [--poll 2]
+  .venv/bin/python tools/bench_batch.py --memory long-drive.mcap [--poll 2] [--max-wall S]
+                                        [--fix-pipeline-log] [--log]
 
 Speed-up: the same ``vdps batch replay`` tasks (``system.replay_file`` per drive) on a fresh
 LocalCluster of 1 and of N worker processes; times are the batch alone (cluster start-up
@@ -108,17 +109,40 @@ def speedup(args) -> None:
               f"an estimate for an otherwise idle machine, not a measurement)")
 
 
+def _patch_pipeline_log() -> str:
+    """Run on the worker with ``--fix-pipeline-log``: make ``VdpsSystem.clear_input_log`` also
+    clear the estimator pipeline's own replay log (``EstimatorPipeline._log``), which a file
+    replay otherwise keeps for the whole drive (an experiment of this tool, not the library)."""
+    from vdps_hil.system import VdpsSystem
+
+    orig = VdpsSystem.clear_input_log
+    if getattr(orig, "_bench_patched", False):
+        return "already patched"
+
+    def clear_input_log(self):
+        orig(self)
+        self.pipeline._log.clear()
+    clear_input_log._bench_patched = True
+    VdpsSystem.clear_input_log = clear_input_log
+    return "patched"
+
+
 def memory(args) -> None:
     import psutil
+
+    from vdps_hil.batch.engine import execute
 
     path = args.memory
     size = os.path.getsize(path)
     print(f"bench_batch --memory: {path} ({size / 2**20:.0f} MiB), 1 worker, RSS sampled every "
-          f"{args.poll:g} s")
+          f"{args.poll:g} s" + (", pipeline log cleared (--fix-pipeline-log)" if args.fix_pipeline_log else "")
+          + (f", stopped after {args.max_wall:g} s" if args.max_wall else ""), flush=True)
     (task,) = replay_tasks([path], options={"predict": not args.no_predict})
-    samples: list[tuple[float, float]] = []
+    samples: list[tuple[float, float, float]] = []
     with Engine(EngineConfig(backend="dask", workers=1, dashboard=False)) as eng:
         (pid,) = eng.worker_pids()
+        if args.fix_pipeline_log:
+            eng.client.run(_patch_pipeline_log)
         proc = psutil.Process(pid)
         base_rss = proc.memory_info().rss / 2**20
         stop = threading.Event()
@@ -127,31 +151,47 @@ def memory(args) -> None:
         def poll():
             while not stop.is_set():
                 try:
-                    samples.append((time.perf_counter() - t0, proc.memory_info().rss / 2**20))
+                    samples.append((time.perf_counter() - t0, proc.cpu_times().user + proc.cpu_times().system,
+                                    proc.memory_info().rss / 2**20))
                 except psutil.Error:
                     return
+                if args.log:
+                    t, c, r = samples[-1]
+                    print(f"    t {t:7.0f} s  cpu {c:7.0f} s  rss {r:6.0f} MiB", flush=True)
                 stop.wait(args.poll)
 
         th = threading.Thread(target=poll, daemon=True)
         th.start()
-        (o,) = list(eng.run([task]))
+        fut = eng.client.submit(execute, task.fn, dict(task.kwargs), False, (), pure=False)
+        try:
+            doc = fut.result(timeout=args.max_wall) if args.max_wall else fut.result()
+        except TimeoutError:
+            doc = None
+            fut.cancel()
         stop.set()
         th.join()
-    if not o.ok:
-        raise SystemExit(f"task failed: {o.error}")
-    dur = o.result["duration_s"]
-    print(f"  replayed {dur:.0f} s of drive in {o.run['wall_s']:.0f} s "
-          f"({dur / o.run['wall_s']:.2f}x real time); idle worker RSS {base_rss:.0f} MiB")
-    print(f"  worker peak RSS (getrusage): {o.run['peak_rss_mib']:.0f} MiB")
+    if doc is not None and doc["status"] != "ok":
+        raise SystemExit(f"task failed: {doc['error']}")
+    if doc is not None:
+        dur = doc["result"]["duration_s"]
+        print(f"  replayed {dur:.0f} s of drive in {doc['run']['wall_s']:.0f} s wall, "
+              f"{doc['run']['cpu_s']:.0f} s CPU ({dur / doc['run']['cpu_s']:.2f} s of drive per CPU s); "
+              f"idle worker RSS {base_rss:.0f} MiB")
+        print(f"  worker peak RSS (getrusage): {doc['run']['peak_rss_mib']:.0f} MiB")
+    else:
+        print(f"  stopped after {args.max_wall:g} s (partial: the curve below covers the part replayed); "
+              f"idle worker RSS {base_rss:.0f} MiB")
     if samples:
         n = len(samples)
         marks = sorted({0, n // 10, n // 4, n // 2, 3 * n // 4, n - 1})
-        print("  RSS over the replay [elapsed s: MiB]: "
-              + ", ".join(f"{samples[i][0]:.0f}: {samples[i][1]:.0f}" for i in marks))
-        first_half = max(r for t, r in samples[: n // 2]) if n > 1 else samples[0][1]
-        second_half = max(r for t, r in samples[n // 2:])
+        print("  RSS over the replay [worker CPU s: MiB]: "
+              + ", ".join(f"{samples[i][1]:.0f}: {samples[i][2]:.0f}" for i in marks))
+        h = n // 2
+        first_half = max(r for _, _, r in samples[:max(h, 1)])
+        second_half = max(r for _, _, r in samples[h:])
+        cpu_span = samples[-1][1] - samples[h][1]
         print(f"  max RSS first half {first_half:.0f} MiB, second half {second_half:.0f} MiB "
-              f"(growth {second_half - first_half:+.0f} MiB over {samples[-1][0] / 2:.0f} s)")
+              f"(growth {second_half - first_half:+.0f} MiB; second half spans {cpu_span:.0f} CPU s)")
 
 
 def main() -> None:
@@ -165,6 +205,11 @@ def main() -> None:
                     help="measure one worker replaying FILE instead")
     ap.add_argument("--poll", type=float, default=2.0, help="RSS sampling period [s] (--memory)")
     ap.add_argument("--no-predict", action="store_true", help="--memory: replay without predictor")
+    ap.add_argument("--fix-pipeline-log", action="store_true",
+                    help="--memory: clear the estimator pipeline's replay log in the worker (experiment)")
+    ap.add_argument("--max-wall", type=float, default=None, metavar="S",
+                    help="--memory: stop after S seconds and report the partial curve")
+    ap.add_argument("--log", action="store_true", help="--memory: print every RSS sample")
     args = ap.parse_args()
     if args.memory:
         memory(args)
