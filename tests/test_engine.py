@@ -137,6 +137,15 @@ def test_every_listening_socket_of_the_local_cluster_is_on_localhost(local_engin
     assert info["dashboard"] is None or info["dashboard"].startswith("http://127.0.0.1:")
 
 
+def test_without_dashboard_the_http_servers_still_listen_on_localhost_at_free_ports():
+    before = {port for _, _, port in _listening(_tree(os.getpid()))}
+    with Engine(EngineConfig(backend="dask", workers=1, dashboard=False)) as eng:
+        socks = [s for s in _listening(_tree(os.getpid())) if s[2] not in before]
+        assert eng.info["dashboard"] is None and len(socks) >= 3
+    assert all(ip == "127.0.0.1" for _, ip, _ in socks), socks
+    assert 8787 not in {port for _, _, port in socks}  # never Dask's fixed default port
+
+
 def test_a_worker_killed_mid_batch_has_its_task_retried(drives, serial, local_engine):
     tasks = replay_tasks(drives)
     client = local_engine.client

@@ -300,13 +300,15 @@ class Engine:
             return
         n = cfg.resolved_workers()
         with dask.config.set({"distributed.scheduler.allowed-failures": cfg.allowed_failures}):
+            # The scheduler always runs an HTTP server (health, metrics; the dashboard when
+            # enabled): on 127.0.0.1 at a free port, never Dask's default 0.0.0.0-style ":8787".
             self._cluster = LocalCluster(
                 n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                scheduler_port=0,
-                dashboard_address="127.0.0.1:0" if cfg.dashboard else None,
+                scheduler_port=0, dashboard_address="127.0.0.1:0",
                 worker_dashboard_address="127.0.0.1:0" if cfg.dashboard else None,
                 memory_limit=cfg.memory_limit, silence_logs=logging.ERROR,
-                scheduler_kwargs={"allowed_failures": cfg.allowed_failures})
+                scheduler_kwargs={"allowed_failures": cfg.allowed_failures,
+                                  "dashboard": bool(cfg.dashboard)})
         self._client = Client(self._cluster)
         self.info["workers"] = n
         self.info["scheduler"] = self._cluster.scheduler_address
