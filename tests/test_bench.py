@@ -193,3 +193,17 @@ def test_an_injected_fault_shows_in_the_sequence_counters_not_as_a_bench_loss():
     assert d["faults"] == ["dropped_frames:fraction=0.05"]
     assert d["dropped"] == 0 and d["frames_received"] == d["frames_sent"]  # the wires lost nothing
     assert d["seq_counters"]["can_counter_breaks"] > 0  # the pipeline sees the frames the fault removed
+
+
+def test_the_pipeline_process_never_imports_the_simulator():
+    """python -m vdps_hil.hil.child (the pipeline of --can tcp/pty) cannot reach truth: it does
+    not even import vdps_hil.sim."""
+    import subprocess
+    import sys
+
+    code = ("import sys, vdps_hil.hil.child, vdps_hil.hil.node, vdps_hil.system; "
+            "print('\\n'.join(m for m in sys.modules if m.startswith('vdps_hil')))")
+    mods = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                          check=True).stdout.split()
+    assert "vdps_hil.hil.child" in mods and "vdps_hil.system" in mods
+    assert not [m for m in mods if m == "vdps_hil.sim" or m.startswith("vdps_hil.sim.")]
