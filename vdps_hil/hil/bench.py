@@ -26,11 +26,12 @@ start instant on its command line and stdin; it reports progress on stdout and l
 results (cycle log, sent frames, counters, its part of the recording) in a work directory.
 
 Cross-process transport, measured (``tools/bench_hil.py``, fishhook-suv, 2-core machine): the
-TCP path (socketcand protocol on 127.0.0.1) beat the slcan pty on latency and on the highest
-lossless speed -- python-can's slcan reader waits out its 1 ms serial timeout after every frame
-of a batch, so it must read in small batches (16 frames) and then costs more per frame -- so
-``tcp`` is the cross-process path the tests run; ``pty`` stays for what it models, a USB-CAN
-adapter speaking slcan.
+TCP path (socketcand protocol on 127.0.0.1) had the lower latency in every measurement (p50 and
+p99 at 1x; the slcan pty's p50 was several ms even alone on the machine: python-can's slcan
+reader waits out its 1 ms serial timeout after every frame of a batch, so it must read in small
+batches and costs more per frame); the highest lossless speeds were alike (2-4x). So ``tcp`` is
+the cross-process path the tests run; ``pty`` stays for what it models, a USB-CAN adapter
+speaking slcan (both are tested).
 
 Real time in one Python process: the simulator side, three adapter readers and the pipeline
 share one interpreter lock. The bench lowers the interpreter's switch interval to 1 ms (a
