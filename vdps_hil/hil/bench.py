@@ -26,9 +26,9 @@ start instant on its command line and stdin; it reports progress on stdout and l
 results (cycle log, sent frames, counters, its part of the recording) in a work directory.
 
 Cross-process transport, measured (``tools/bench_hil.py``, fishhook-suv, 2-core machine): the
-TCP path (socketcand protocol on 127.0.0.1) had the lower latency in every measurement (p50 and
-p99 at 1x; the slcan pty's p50 was several ms even alone on the machine: python-can's slcan
-reader waits out its 1 ms serial timeout after every frame of a batch, so it must read in small
+TCP path (socketcand protocol on 127.0.0.1) had the lower median latency in every measurement
+(0.2-4 ms against 2-21 ms for the slcan pty at 1x, machine load 3-9: python-can's slcan reader
+waits out its 1 ms serial timeout after every frame of a batch, so it must read in small
 batches and costs more per frame); the highest lossless speeds were alike (2-4x). So ``tcp`` is
 the cross-process path the tests run; ``pty`` stays for what it models, a USB-CAN adapter
 speaking slcan (both are tested).
