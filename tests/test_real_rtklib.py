@@ -9,7 +9,7 @@ GNSS outages of 5 s and 10 s alternate every 30 s, from 20 s after the car first
 (printed): horizontal error of the filter's antenna position at the last RTK epoch of each
 outage against the RTK solution, and of constant-velocity extrapolation from the last RTK epoch
 before the outage; per outage length the mean over the outages (acceptance: the filter's mean at
-least 50 % lower; with the bias states and the constraint this drive gives 88-90 %, asserted
+least 50 % lower; with the bias states and the constraint this drive gives 88-93 %, asserted
 >= 80 %, with and without the standstill calibration), the largest, and the share of single
 outages where it is halved. Then the stated 0.125 s IMU lag and the stated misalignment are
 switched off, one at a time."""
@@ -109,16 +109,16 @@ def test_outages_at_least_halve_the_constant_velocity_error(drive, published):
     print("  estimated IMU biases: " + ", ".join(f"{k} {v:+.4f} +- {sg:.4f}" for k, (v, sg) in aug.items()))
     assert bias and set(s) == {"5s", "10s"} and s["5s"]["n"] >= 8 and s["10s"]["n"] >= 8
     for k in ("5s", "10s"):
-        assert s[k]["reduction"] >= 0.8, (k, s[k])  # measured 0.90 / 0.88 (was >= 0.5: 0.87 / 0.82)
+        assert s[k]["reduction"] >= 0.8, (k, s[k])  # measured 0.93 / 0.88 (was >= 0.5: 0.87 / 0.82)
     assert c["gnss_pos"]["gated"] == 0  # re-acquires after every outage
-    assert c["nhc"]["accepted"] > 900 and c["nhc"]["gated"] < 0.03 * c["nhc"]["accepted"]  # measured 17 of 989
+    assert c["nhc"]["accepted"] > 900 and c["nhc"]["gated"] < 0.03 * c["nhc"]["accepted"]  # a few, in low-speed turns
     assert abs(aug["gyro_bias_z_radps"][0]) < 3 * aug["gyro_bias_z_radps"][1] + 1e-3  # calibrated before
 
 
 def test_outages_without_the_standstill_calibration(drive, published):
     """The gyro bias states replace the stopgap: without the standstill calibration the filter
-    still halves constant velocity (measured 0.90 / 0.88, asserted >= 0.8), the plain eq 7-11
-    filter without it does worse (measured 0.75 / 0.72), and the z bias the filter estimates is the
+    still halves constant velocity (measured 0.93 / 0.88, asserted >= 0.8), the plain eq 7-11
+    filter without it does worse (measured 0.82 / 0.77), and the z bias the filter estimates is the
     gyro's reading at rest (0.17 deg/s stated; asserted within 0.1 deg/s)."""
     samples, ref, veh, ss, wins, t_move = drive
     r, errs = _run(drive, calibration=False)
@@ -170,7 +170,8 @@ def test_effect_of_the_stated_imu_lag_and_misalignment(drive, published):
           f"{bax['pub']:+.3f} -> {bax['mis']:+.3f} m/s^2 (-g sin 6.79 deg = -1.160), gnss_pos NIS/dof "
           f"{nis['pub']:.2f} -> {nis['mis']:.2f}")
     assert pooled["published"] < pooled["no lag"]
-    assert abs(att_full[0]) < 0.3 and abs(att_full[1]) < 0.3  # measured +0.05 / +0.07 (plain: +0.34 / +0.35)
+    # measured yaw - course -0.27 deg (the car's own sideslip is in it), pitch +0.03 deg (plain: +0.34 / +0.35)
+    assert abs(att_full[0]) < 0.5 and abs(att_full[1]) < 0.2
     assert abs((bax["mis"] - bax["pub"]) + 9.80665 * np.sin(np.radians(6.79))) < 0.25
     assert nis["mis"] > 2.0 * nis["pub"]
     assert abs((att_mis[1] - att_pub[1]) - (-6.79)) < 1.0  # pitch offset = the stated misalignment pitch
