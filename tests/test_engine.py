@@ -27,8 +27,13 @@ from vdps_hil.batch.report import identified_params, parameter_flags, render_htm
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.sim.drive import Drive
 
-distributed = pytest.importorskip("distributed")
-psutil = pytest.importorskip("psutil")
+try:
+    import distributed
+    import psutil
+except ImportError:  # the optional extra 'dask'; CI must have it (these are acceptance tests)
+    if os.environ.get("CI"):
+        raise
+    pytest.skip("distributed (pip install 'vdps-hil[dask]') not installed", allow_module_level=True)
 
 N_DRIVES = 8
 DRIVE_S = 1.0
