@@ -5,20 +5,24 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.vdps-installed
 
-.PHONY: setup run test bench clean
+.PHONY: setup run test bench clean browser
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,mdf]'
+	$(PY) -m pip install --quiet -e '.[test,mdf,dask]'
 	touch $(STAMP)
 
 run: setup
 	$(VENV)/bin/vdps bench --react -o bench.mcap
 
-test: setup
+# headless Chromium for the HTML report tests (Debian package; the tests fail under CI without it)
+browser:
+	@command -v chromium >/dev/null 2>&1 || { (apt-get update -qq && apt-get install -y -qq chromium >/dev/null) || echo "make: could not install chromium (report tests will say so)"; }
+
+test: setup browser
 	$(PY) -m pytest -q -p no:cacheprovider --timeout 600 tests
 
 clean:
