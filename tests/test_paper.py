@@ -110,13 +110,16 @@ def test_left_turn_prediction_within_three_metres_and_degrees(ident_run):
 
 
 def test_left_turn_prediction_is_bounded_and_no_false_alarm_on_the_left_turn(ident_run):
-    """Measured (seed 1): 4.8-7.0 m, 4.9-7.0 deg at 15 s; bound 10 m / 10 deg. No warning episode."""
+    """Measured (seed 1): 4.8-7.0 m, 4.9-7.0 deg at 15 s; bound 10 m / 10 deg. No warning episode;
+    the warnings become valid once the cornering stiffnesses converge (seed 1: ~7 s), so at least
+    a fifth of the frames are valid (not a vacuous check)."""
     lt = ident_run["left_turn"]
     assert P.T0_S <= lt["t0_s"] <= P.T0_S + 0.01  # the first estimate at or after 10.25 s
     assert lt["t_end_s"] == pytest.approx(P.LEFT_TURN_END_S, abs=0.011)
     assert lt["position_err_m"] <= 10.0 and abs(lt["yaw_err_deg"]) <= 10.0
     assert ident_run["warning"]["false_alarms"] == 0 and ident_run["warning"]["episodes"] == []
     assert ident_run["warning"]["frames_rejected"] == 0
+    assert ident_run["warning"]["valid_fraction"] >= 0.2
 
 
 def test_fusion_errors_are_reported_for_every_state(ident_run):
@@ -127,9 +130,12 @@ def test_fusion_errors_are_reported_for_every_state(ident_run):
 
 
 def test_rollover_predicted_and_warned_at_least_one_second_ahead():
-    """fishhook-suv through the chain (suv-model, identifier running): measured lead 2.59 s to the
-    point of no return, 1.08 s to tip-up; acceptance lead >= 1.0 s, zero false alarms."""
+    """fishhook-suv through the chain (suv-model, identifier running, started from the parameters
+    identified on the paper's manoeuvre driven with the SUV): measured lead 2.49 s to the point of
+    no return, 0.97 s to tip-up; acceptance lead >= 1.0 s, zero false alarms, valid warnings."""
     r = P.rollover_task(PROFILE, 1)
+    assert abs(r["calibration"]["rel_err"]["mass_kg"]) <= 0.005
+    assert r["valid_fraction"] >= 0.95
     assert r["predicted"] is True
     assert r["lead_time_s"] >= 1.0
     assert r["false_alarms"] == 0 and r["frames_rejected"] == 0
@@ -137,8 +143,9 @@ def test_rollover_predicted_and_warned_at_least_one_second_ahead():
 
 
 def test_no_false_alarm_on_the_lane_change():
+    """From calibrated parameters (valid warnings for the whole run): no episode, level "none"."""
     r = P.false_alarm_task("lane-change-iso3888", PROFILE, 1)
-    assert r["truth_events"] == 0
+    assert r["truth_events"] == 0 and r["valid_fraction"] >= 0.95 and r["max_level"] == 0
     assert r["false_alarms"] == 0 and r["episodes"] == []
     assert r["frames_accepted"] > 45 * r["duration_s"]  # 50 Hz, a few frames at the start excepted
 

@@ -31,16 +31,27 @@ Experiments (one row of the printed table each)
   held inputs = the last samples before t0) with the parameters identified by then, horizon
   4.75 s, and compared with the truth over 10.25-15 s (``prediction.metrics``: position error
   and yaw error at the horizon's end, paper-style inaccuracy; paper 0.51 %).
+* **Warning validity**: a drive that starts from the model file's priors (deliberately wrong:
+  C_alpha front x1.5, rear x0.6, an oversteering model) sends its warnings with status "not
+  converged" until the cornering problem has converged (``WARNING_REQUIRE_CONVERGED``,
+  ``SystemConfig.require_converged``; sigma/|x| < ``converged_rel_sigma``): from the priors the
+  predictor foresaw rollovers in the paper's sine steering (2 of 20 seeds, at 0.8-2.0 s). The
+  rollover and test-track drives start, as a car does after its first drive, from the
+  parameters the chain identified on a calibration drive of the same vehicle
+  (``ROLLOVER_CALIBRATION`` = ``paper``, seed + 1000; ``vdps replay --save-params/--params``)
+  and their warnings are valid from the start.
 * **Rollover (Fig 9 / the rollover scenario ``fishhook-suv``)**: the SUV fishhook through the
-  whole chain (``suv-model``). ``predicted``: a prediction of the chain's warning path forecast a
+  whole chain (``suv-model``, started from the parameters identified on ``paper`` driven with
+  ``suv-truth``). ``predicted``: a prediction of the chain's warning path forecast a
   point of no return before the truth reached it. Its inaccuracy: the first such prediction,
   re-run from the same estimate, parameters and held inputs, compared with the truth from its
   t0 to the end of the prediction (paper 27.3 % for its own Fig 9 over 10.25-11.5 s).
   **Warning**: the VDPS_Warning frames the chain sent, decoded with CRC and counter checks
   (``evaluate_warning_frames``): lead time to the truth point of no return and to tip-up.
 * **False alarms**: warning episodes (level >= warning, status valid) on ``paper-left-turn`` (every
-  identification seed) and the test-track scenarios ``lane-change-iso3888``, ``sine-sweep`` and
-  ``circle-iso4138`` (sedan), none of which rolls over in the truth.
+  identification seed, from the priors) and the test-track scenarios ``lane-change-iso3888``,
+  ``sine-sweep`` and ``circle-iso4138`` (sedan, from calibrated parameters), none of which
+  rolls over in the truth; with the fraction of frames that were valid.
 * **Table 2 (SNR)**: identification of I_x, I_y, I_z at 10.25 s with the sensor noise scaled by k
   (every Table 1 sigma times k; k = 0 is the zero-noise row, the paper's "infinite"). SNR, as the
   paper's section 8 ("the signal is ... the estimated vehicle dynamics from the sensor fusion
@@ -94,6 +105,11 @@ FUSION_WINDOW_S = (5.0, 10.0)
 IDENT_WINDOW_S = (5.0, T0_S)
 LEFT_TURN_END_S = 15.0
 FALSE_ALARM_SCENARIOS = ("lane-change-iso3888", "sine-sweep", "circle-iso4138")
+WARNING_REQUIRE_CONVERGED = ("cornering",)
+"""A drive that starts from the model file's priors sends valid warnings only once the cornering
+stiffnesses (the predictor's most sensitive parameters) have converged (module docstring)."""
+ROLLOVER_CALIBRATION = "paper"
+"""The drive (same vehicle) whose identified parameters the rollover drive starts from."""
 
 PAPER: dict[str, Any] = {
     "identification_rel_err_pct": {"mass_kg": 5.17e-3, "inertia_x_kgm2": 0.12, "inertia_y_kgm2": 5.05,
@@ -177,7 +193,8 @@ def system_config(profile, *, identify: bool = True, predict: bool = True, ident
 def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", duration_s: float | None = None,
               identify: bool = True, predict: bool = True, ident_config=None, sheet_profile=None,
               ident_report_period_s: float = 0.05, capture_t_s: Sequence[float] = (),
-              capture_all: bool = False, record_inputs: bool = False, fusion_window_s=None) -> dict:
+              capture_all: bool = False, record_inputs: bool = False, fusion_window_s=None,
+              truth_vehicle: str | None = None, system_kw: Mapping[str, Any] | None = None) -> dict:
     """One drive through the real chain (module docstring). Returns a dict:
 
     ``truth`` (the /truth/state snapshots, harness only), ``events`` (/truth/events),
@@ -187,7 +204,9 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
     ``predictions`` (PredictionReport), ``inputs`` (IdentInputs, with ``record_inputs``),
     ``fusion_std`` (per state over ``fusion_window_s``),
     ``status`` (system counters) and ``wall_s``.
-    ``sheet_profile``: the data sheet the chain is configured from (default: ``profile``)."""
+    ``sheet_profile``: the data sheet the chain is configured from (default: ``profile``);
+    ``truth_vehicle``: the simulated vehicle instead of the scenario's; ``system_kw``: further
+    ``SystemConfig`` fields (``require_converged``, ``start_params``)."""
     import can
 
     from vdps_hil.estimation.pipeline import Estimate
@@ -202,7 +221,7 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
     wall0 = time.perf_counter()
     prof = _profile(profile)
     buf = io.BytesIO()
-    Drive(scenario, profile=prof, seed=seed, duration_s=duration_s).run(buf)
+    Drive(scenario, profile=prof, seed=seed, duration_s=duration_s, vehicle=truth_vehicle).run(buf)
     buf.seek(0)
     reader = RecordingReader(buf)
     truth = [d["values"] for _, _, d in reader.iter_messages(["/truth/state"])]  # harness only
@@ -210,7 +229,7 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
     by_t = {int(s["t_ns"]): s for s in truth}
     sheet = _profile(sheet_profile) if sheet_profile is not None else prof
     cfg = system_config(sheet, identify=identify, predict=predict, ident=ident_config,
-                        ident_report_period_s=ident_report_period_s)
+                        ident_report_period_s=ident_report_period_s, **dict(system_kw or {}))
     veh = load_vehicle(model, "model")
     system = VdpsSystem(veh, cfg, origin=DEFAULT_ORIGIN)
     cap_ns = sorted(int(round(t * 1e9)) for t in capture_t_s)  # first estimate at or after each
@@ -363,7 +382,7 @@ def identification_task(profile: str, seed: int, *, predict: bool = True, zero_n
 
         sc = replace(load_scenario(scenario), effect_names=tuple(effects_override))
     r = chain_run(sc, prof, seed, predict=predict, sheet_profile=sheet, capture_t_s=(T0_S,),
-                  fusion_window_s=FUSION_WINDOW_S)
+                  fusion_window_s=FUSION_WINDOW_S, system_kw={"require_converged": WARNING_REQUIRE_CONVERGED})
     tp = truth_params()
     rep = _report_at(r["ident"], T0_S)
     doc: dict = {"profile": profile, "seed": seed, "zero_noise": zero_noise, "wall_s": r["wall_s"]}
@@ -393,20 +412,24 @@ def identification_task(profile: str, seed: int, *, predict: bool = True, zero_n
         doc["left_turn"]["inaccuracy_channels_pct"] = m["inaccuracy_channels_pct"]
     if predict:
         o = evaluate_warning_frames(r["frames"], r["events"])
-        doc["warning"] = {"false_alarms": o.false_alarms, "episodes": o.warning_episodes,
-                          "frames_accepted": o.frames_accepted, "frames_rejected": o.frames_rejected,
-                          "truth_events": len(r["events"])}
+        doc["warning"] = _warning_summary(o, r)
     return doc
 
 
-def rollover_task(profile: str, seed: int, scenario: str = "fishhook-suv", model: str = "suv-model") -> dict:
+def rollover_task(profile: str, seed: int, scenario: str = "fishhook-suv", model: str = "suv-model",
+                  truth_vehicle: str = "suv-truth", calibration: str | None = ROLLOVER_CALIBRATION) -> dict:
     """The rollover scenario through the whole chain: lead time of the sent warning frames and
-    the inaccuracy of the first prediction that forecast the point of no return."""
+    the inaccuracy of the first prediction that forecast the point of no return. With
+    ``calibration`` the chain starts from the parameters it identified on an earlier drive of
+    the same vehicle (that scenario, another seed), as a car keeps them between drives
+    (``vdps replay --save-params`` / ``--params``), and its warnings are valid from the start;
+    without, it starts from the priors and waits for the cornering stiffnesses to converge."""
     from vdps_hil.prediction.metrics import PoseTrajectory, compare_trajectories
     from vdps_hil.prediction.predictor import Predictor, load_predictor_config
     from vdps_hil.prediction.warning import evaluate_warning_frames
 
-    r = chain_run(scenario, profile, seed, model=model, capture_all=True)
+    kw, cal_doc = _start_kw(profile, seed, model, truth_vehicle, calibration)
+    r = chain_run(scenario, profile, seed, model=model, capture_all=True, system_kw=kw)
     o = evaluate_warning_frames(r["frames"], r["events"])
     t_pn = o.truth_point_of_no_return_t_s
     doc: dict = {"profile": str(profile), "seed": seed, "wall_s": r["wall_s"],
@@ -414,7 +437,8 @@ def rollover_task(profile: str, seed: int, scenario: str = "fishhook-suv", model
                  "lead_time_matched_side_s": o.lead_time_matched_side_s,
                  "first_warning_t_s": o.first_warning_t_s, "truth_point_of_no_return_t_s": t_pn,
                  "truth_tip_up_t_s": o.truth_tip_up_t_s, "false_alarms": o.false_alarms,
-                 "frames_rejected": o.frames_rejected}
+                 "frames_rejected": o.frames_rejected, "calibration": cal_doc,
+                 "valid_fraction": _warning_summary(o, r)["valid_fraction"]}
     first = next((p for p in r["predictions"] if p.time_to_point_of_no_return_s is not None
                   and (math.isnan(t_pn) or p.t0_ns / 1e9 < t_pn)), None)
     doc["predicted"] = bool(first is not None and not math.isnan(t_pn))
@@ -433,20 +457,48 @@ def rollover_task(profile: str, seed: int, scenario: str = "fishhook-suv", model
     return doc
 
 
-def false_alarm_task(scenario: str, profile: str, seed: int, max_s: float | None = None) -> dict:
-    """A drive that does not roll over, through the chain: warning episodes sent."""
+def _warning_summary(o, r) -> dict:
+    """False alarms and how much of the run the warning was valid (status 0)."""
+    valid = [d["t_s"] for d in o.decoded if d["valid"]]
+    n = len(o.decoded)
+    return {"false_alarms": o.false_alarms, "episodes": o.warning_episodes, "frames_accepted": o.frames_accepted,
+            "frames_rejected": o.frames_rejected, "truth_events": len(r["events"]),
+            "valid_fraction": len(valid) / n if n else 0.0, "first_valid_t_s": valid[0] if valid else None,
+            "max_level": max((d["level"] for d in o.decoded), default=0)}
+
+
+def _start_kw(profile, seed: int, model: str, truth_vehicle: str | None, calibration: str | None):
+    """SystemConfig fields of a drive: from the parameters identified on a calibration drive of
+    the same vehicle (valid warnings from the start), or from the priors (warnings valid once
+    ``WARNING_REQUIRE_CONVERGED`` have converged); and a summary of the calibration."""
+    if not calibration:
+        return {"require_converged": WARNING_REQUIRE_CONVERGED}, None
+    cal = chain_run(calibration, profile, seed + 1000, model=model, truth_vehicle=truth_vehicle, predict=False,
+                    ident_report_period_s=1.0)
+    start = cal["identifier"].params
+    return ({"start_params": start, "require_converged": ()},
+            {"scenario": calibration, "seed": seed + 1000, "rel_err": relative_errors(start.as_dict(),
+                                                                                       truth_params(model))})
+
+
+def false_alarm_task(scenario: str, profile: str, seed: int, max_s: float | None = None,
+                     calibration: str | None = ROLLOVER_CALIBRATION) -> dict:
+    """A drive that does not roll over, through the chain: warning episodes sent. By default the
+    chain starts from parameters identified on a calibration drive (as ``rollover_task``), so
+    its warnings are valid for the whole run."""
     from vdps_hil.prediction.warning import evaluate_warning_frames
     from vdps_hil.sim.scenarios import load_scenario
 
     dur = load_scenario(scenario).duration_s
     if max_s is not None:
         dur = min(dur, max_s)
-    r = chain_run(scenario, profile, seed, duration_s=dur, ident_report_period_s=1.0)
+    kw, cal_doc = _start_kw(profile, seed, "sedan-model", None, calibration)
+    r = chain_run(scenario, profile, seed, duration_s=dur, ident_report_period_s=1.0, system_kw=kw)
     o = evaluate_warning_frames(r["frames"], r["events"])
-    return {"scenario": scenario, "profile": str(profile), "seed": seed, "duration_s": dur,
-            "false_alarms": o.false_alarms, "episodes": o.warning_episodes, "truth_events": len(r["events"]),
-            "frames_accepted": o.frames_accepted, "frames_rejected": o.frames_rejected,
-            "max_level": max((d["level"] for d in o.decoded), default=0), "wall_s": r["wall_s"]}
+    doc = {"scenario": scenario, "profile": str(profile), "seed": seed, "duration_s": dur, "wall_s": r["wall_s"],
+           "calibration": cal_doc}
+    doc.update(_warning_summary(o, r))
+    return doc
 
 
 def snr_task(profile: str, k: float, seed: int) -> dict:
@@ -675,16 +727,18 @@ def _profile_doc(prof: str, per: dict, opt: PaperOptions, seeds) -> dict:
                 "p90_position_err_m": float(np.percentile([x["position_err_m"] for x in lt], 90)),
                 "p90_yaw_err_deg": float(np.percentile([abs(x["yaw_err_deg"]) for x in lt], 90)),
                 "horizon_s": LEFT_TURN_END_S - T0_S, "paper_inaccuracy_pct": PAPER["left_turn_inaccuracy_pct"]}}
-        doc["per_seed"] = [{k: d.get(k) for k in ("seed", "rel_err", "sigma_ratio", "left_turn")} for d in ident]
+        doc["per_seed"] = [{k: d.get(k) for k in ("seed", "rel_err", "sigma_ratio", "left_turn", "warning")}
+                           for d in ident]
     fa_total = 0
     fa_rows = {}
     if opt.false_alarms:
         lt_fa = sum(d.get("warning", {}).get("false_alarms", 0) for d in ident)
-        fa_rows["paper-left-turn"] = {"runs": len(ident), "false_alarms": lt_fa}
+        fa_rows["paper-left-turn"] = {"runs": len(ident), "false_alarms": lt_fa, "valid_fraction":
+                                      _median([d.get("warning", {}).get("valid_fraction") for d in ident])}
         fa_total += lt_fa
         for d in per["false_alarm"]:
             fa_rows[d["scenario"]] = {"runs": 1, "false_alarms": d["false_alarms"], "duration_s": d["duration_s"],
-                                      "max_level": d["max_level"]}
+                                      "max_level": d["max_level"], "valid_fraction": d["valid_fraction"]}
             fa_total += d["false_alarms"]
     roll = per.get("rollover")
     if roll:
@@ -773,7 +827,8 @@ def format_report(doc: dict) -> str:
                              f"{_f(w['truth_point_of_no_return_t_s'], '{:.2f}')} s), to tip-up "
                              f"{_f(w['lead_to_tipup_s'], '{:.2f}')} s, same-side {_f(w['lead_time_matched_side_s'], '{:.2f}')} s")
             if "false_alarms" in w:
-                runs = ", ".join(f"{k} {v['false_alarms']}/{v['runs']} run(s)" for k, v in w["false_alarm_runs"].items())
+                runs = ", ".join(f"{k} {v['false_alarms']} in {v['runs']} run(s), valid "
+                                 f"{100 * v['valid_fraction']:.0f} %" for k, v in w["false_alarm_runs"].items())
                 lines.append(f"False alarms: {w['false_alarms']} ({runs})")
         if "snr_table" in d:
             lines.append("Table 2: |rel err| % of Ix Iy Iz at 10.25 s vs SNR (SNR = -10 log10 mean over wdot_xyz, "
