@@ -74,6 +74,16 @@ def test_result_layouts_are_read():
         == ["a", "b", "c"]
     assert recommended_effects({"effects": {"recommended": ["d"]}}) == ["d"]
     assert recommended_effects({}) == []
+    # the workbench's diagnosis layout (vdps diagnose --json)
+    diag = {"recommendation": "aero_drag", "equivalent_to": [],
+            "workbench": {"selected": ["aero_drag", "crosswind"],
+                          "identified_parameters": [
+                              {"effect": "mass_kg", "parameters": {"mass_kg": {"value": 1610.0, "sigma": 12.0}}},
+                              {"effect": "x", "parameters": {"inertia_z_kgm2": {"value": None, "sigma": None}}}]}}
+    assert recommended_effects(diag) == ["aero_drag", "crosswind"]
+    assert recommended_effects({"recommendation": "imu_bias"}) == ["imu_bias"]
+    assert recommended_effects({"recommendation": None}) == []
+    assert identified_params(diag) == {"mass_kg": (1610.0, 12.0)}
 
 
 def test_report_page_shows_plots_flags_effects_and_failures(rng, tmp_path):

@@ -11,8 +11,8 @@ import pytest
 
 from vdps_hil.batch.engine import execute, strip_run
 from vdps_hil.batch.keys import tool_version
-from vdps_hil.batch.tasks import (diagnose_drive, drive_ids, replay_drive, replay_tasks,
-                                  worker_info)
+from vdps_hil.batch.tasks import (diagnose_drive, diagnose_tasks, drive_ids, replay_drive,
+                                  replay_tasks, worker_info)
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
 from vdps_hil.system import replay_file
@@ -113,12 +113,16 @@ def test_est_dir_gives_each_drive_its_estimate_recording(drive, tmp_path):
         assert r.topics()["/est/state"].count == doc["result"]["estimates_summary"]["count"]
 
 
-def test_diagnose_without_a_workbench_entry_point_is_a_clear_error(drive):
-    from vdps_hil.batch import tasks as T
-    if T._library("vdps_hil.workbench", "diagnose_file") is not None:
-        pytest.skip("the workbench provides diagnose_file")
-    with pytest.raises(RuntimeError, match="workbench"):
-        diagnose_drive(drive)
+def test_diagnose_task_checks_its_options_and_passes_the_workbench_refusal_on(drive):
+    with pytest.raises(ValueError, match="unknown diagnose option"):
+        diagnose_drive(drive, options={"save_model": "x.toml"})
+    with pytest.raises(ValueError, match="not settable"):
+        diagnose_tasks([drive], options={"effect_files": ["x.py"]})
+    # a 2 s drive is too short for the workbench's cross-validated ranking: a one-line failure
+    doc = execute("vdps_hil.batch.tasks:diagnose_drive",
+                  {"path": drive, "options": {"with_simulation": False}})
+    assert doc["status"] == "failed" and doc["error"]["type"] == "ValueError"
+    assert "\n" not in doc["error"]["message"]
 
 
 def test_worker_info_reports_the_tool_version():

@@ -59,10 +59,21 @@ def _num(v) -> float | None:
 
 def identified_params(result: Mapping[str, Any] | None) -> dict[str, tuple[float, float | None]]:
     """``{parameter: (value, sigma)}`` from a task result: an ``identification`` /
-    ``identified`` entry holding ``params`` and ``sigmas`` dicts (the ``IdentReport`` layout),
-    or ``{name: {"value", "sigma"}}``. Empty when the result has none."""
+    ``identified`` entry holding ``params`` and ``sigmas`` dicts (the replay's
+    ``Identifier.status`` layout), or ``{name: {"value", "sigma"}}``, or the workbench's
+    ``workbench.identified_parameters`` entries (diagnosis). Empty when the result has none."""
     if not isinstance(result, Mapping):
         return {}
+    wb = result.get("workbench")
+    if isinstance(wb, Mapping) and isinstance(wb.get("identified_parameters"), list):
+        out = {}
+        for entry in wb["identified_parameters"]:
+            params = entry.get("parameters") if isinstance(entry, Mapping) else None
+            for k, v in (params or {}).items():
+                if isinstance(v, Mapping) and _num(v.get("value")) is not None:
+                    out[str(k)] = (_num(v["value"]), _num(v.get("sigma")))
+        if out:
+            return out
     for key in ("identification", "identified", "ident"):
         block = result.get(key)
         if not isinstance(block, Mapping):
@@ -97,10 +108,19 @@ def prior_params(result: Mapping[str, Any] | None) -> dict[str, float]:
 
 
 def recommended_effects(result: Mapping[str, Any] | None) -> list[str]:
-    """Effect names a diagnosis recommends: ``recommended_effects`` (names or dicts with
-    ``name``/``effect``), or ``recommendations`` / ``effects.recommended`` likewise."""
+    """Effect names a diagnosis recommends, best first: the workbench's forward selection
+    (``workbench.selected``; the first is its ``recommendation``), or ``recommended_effects``
+    (names or dicts with ``name``/``effect``), or ``recommendations`` / ``effects.recommended``
+    likewise, or the single ``recommendation``."""
     if not isinstance(result, Mapping):
         return []
+    wb = result.get("workbench")
+    if isinstance(wb, Mapping) and isinstance(wb.get("selected"), list):
+        sel = [str(n) for n in wb["selected"] if isinstance(n, str)]
+        rec = result.get("recommendation")
+        if isinstance(rec, str) and rec not in sel:
+            sel.insert(0, rec)
+        return sel
     cands = [result.get("recommended_effects"), result.get("recommendations")]
     eff = result.get("effects")
     if isinstance(eff, Mapping):
@@ -116,7 +136,8 @@ def recommended_effects(result: Mapping[str, Any] | None) -> list[str]:
                     if isinstance(n, str):
                         names.append(n)
             return names
-    return []
+    rec = result.get("recommendation")
+    return [rec] if isinstance(rec, str) else []
 
 
 def drive_summary(result: Mapping[str, Any] | None) -> dict:

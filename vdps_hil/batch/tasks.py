@@ -15,7 +15,9 @@ Task functions
     ``vdps_hil.system.replay_file`` (what ``vdps replay`` does) on one recording: estimates,
     innovations, identified parameters with sigmas, prediction summary, decoder counters.
 ``diagnose_drive(path, vehicle, options)``
-    The workbench diagnosis of one recording (``vdps_hil.workbench``).
+    The workbench diagnosis of one recording (``vdps diagnose``: ``workbench.diagnosis``). The
+    workbench holds the decoded drive in memory (its ranking cross-validates over the whole
+    drive table): its memory grows with the drive, unlike the replay's.
 ``worker_info()``
     A probe: the worker's tool version (a remote cluster must run the client's code).
 ``snr_trial``, ``weighting_trial``, ``effect_trial``
@@ -30,7 +32,6 @@ signal map), the effect list and the tool version.
 from __future__ import annotations
 
 import hashlib
-import importlib
 import os
 import re
 from pathlib import Path
@@ -41,7 +42,7 @@ from vdps_hil.batch.keys import DigestCache, task_key
 
 __all__ = ["drive_ids", "replay_drive", "diagnose_drive", "replay_tasks", "diagnose_tasks",
            "worker_info", "snr_trial", "weighting_trial", "effect_trial", "DEFAULT_MODEL",
-           "REPLAY_OPTIONS", "NoRawData"]
+           "REPLAY_OPTIONS", "DIAGNOSE_OPTIONS", "NoRawData"]
 
 DEFAULT_MODEL = "sedan-model"
 _ID_BAD = re.compile(r"[^A-Za-z0-9._-]+")
@@ -63,14 +64,6 @@ def drive_ids(paths: Sequence[str | os.PathLike]) -> list[str]:
 # --------------------------------------------------------------------------- task functions
 class NoRawData(ValueError):
     """A recording with no readable raw record (one line)."""
-
-
-def _library(module: str, attr: str):
-    try:
-        mod = importlib.import_module(module)
-    except ImportError:
-        return None
-    return getattr(mod, attr, None)
 
 
 REPLAY_OPTIONS = ("model", "dbc", "signalmap", "bus_map", "params", "identify", "predict",
@@ -108,22 +101,42 @@ def replay_drive(path: str, *, vehicle: str = DEFAULT_MODEL,
     return doc
 
 
+DIAGNOSE_OPTIONS = ("model", "dbc", "signalmap", "add", "with_simulation")
+"""Keyword arguments of ``vdps_hil.workbench.diagnosis.diagnose`` a batch may set (user effect
+code and ``save_model`` are per-drive choices a batch does not make)."""
+DIAGNOSE_FILE_OPTIONS = ("model", "dbc", "signalmap")
+
+
 def _diagnose_fn():
-    fn = _library("vdps_hil.workbench", "diagnose_file")
-    if fn is None:
-        raise RuntimeError("the model workbench (vdps_hil.workbench.diagnose_file) is not "
-                           "available in this installation")
-    return fn
+    try:
+        from vdps_hil.workbench.diagnosis import diagnose
+    except ImportError as e:
+        raise RuntimeError(f"the model workbench (vdps_hil.workbench.diagnosis) is not available: "
+                           f"{e}") from None
+    return diagnose
 
 
 def diagnose_drive(path: str, *, vehicle: str = DEFAULT_MODEL,
                    options: Mapping[str, Any] | None = None) -> dict:
-    """Workbench diagnosis of one recording (``vdps_hil.workbench.diagnose_file``, what
-    ``vdps diagnose`` does); timing fields (``wall_time_s``, ``wall_s``) moved under "run"."""
-    doc = _diagnose_fn()(path, vehicle=vehicle, **dict(options or {}))
-    if not isinstance(doc, dict):
-        raise TypeError(f"diagnose_file returned {type(doc).__name__}, not a dict")
-    return _timing_to_run(doc, ("wall_time_s", "wall_s", "realtime_factor"))
+    """The workbench diagnosis of one recording (``vdps_hil.workbench.diagnosis.diagnose``, what
+    ``vdps diagnose`` does): ranking of the effect candidates, recommendation, identified
+    parameters, residuals before/after. The workbench's timings go under "run". Note: the
+    workbench decodes the whole drive into memory (its cross-validated ranking needs the drive
+    table), unlike the replay."""
+    from vdps_hil.model.params import load_vehicle
+
+    opts = dict(options or {})
+    unknown = sorted(set(opts) - set(DIAGNOSE_OPTIONS))
+    if unknown:
+        raise ValueError(f"unknown diagnose option(s): {', '.join(unknown)}")
+    if "add" in opts:
+        opts["add"] = tuple(opts["add"])
+    diagnose = _diagnose_fn()
+    doc = diagnose(path, load_vehicle(vehicle, "model"), **opts).to_json()
+    wb = doc.get("workbench") if isinstance(doc.get("workbench"), dict) else {}
+    timings = wb.pop("timings_s", None)
+    doc["run"] = {"timings_s": timings}
+    return doc
 
 
 # --------------------------------------------------------------------------------- builders
@@ -179,11 +192,15 @@ def replay_tasks(paths: Sequence[str | os.PathLike], *, vehicle: str = DEFAULT_M
 
 def diagnose_tasks(paths: Sequence[str | os.PathLike], *, vehicle: str = DEFAULT_MODEL,
                    options: Mapping[str, Any] | None = None, effects: Iterable[str] = (),
-                   file_options: Iterable[str] = ("config", "model"),
                    digests: DigestCache | None = None) -> list[Task]:
-    """One ``diagnose_drive`` task per recording (keys as ``replay_tasks``)."""
+    """One ``diagnose_drive`` task per recording (keys as ``replay_tasks``; ``options`` from
+    :data:`DIAGNOSE_OPTIONS`)."""
+    options = dict(options or {})
+    bad = sorted(set(options) - set(DIAGNOSE_OPTIONS))
+    if bad:
+        raise ValueError(f"diagnose option(s) not settable in a batch: {', '.join(bad)}")
     return _drive_tasks("diagnose", "vdps_hil.batch.tasks:diagnose_drive", paths, vehicle=vehicle,
-                        options=options, file_options=file_options, effects=effects,
+                        options=options, file_options=DIAGNOSE_FILE_OPTIONS, effects=effects,
                         digests=digests)
 
 
@@ -276,7 +293,9 @@ def effect_trial(effect: str | None, seed: int, maneuver: str | None = None,
     drive of ``maneuver`` with nothing hidden), simulated into a temporary file, diagnosed
     from its ``/raw/`` topics with the model vehicle file (``diagnose_drive``). Returns the
     recommended effects, ``hit`` (the hidden effect is the first recommendation) and
-    ``found`` (it is among them); for a null drive ``false_alarm`` (anything recommended)."""
+    ``found`` (it is among them); for a null drive ``false_alarm`` (anything recommended).
+    ``options``: diagnosis options (default: no simulation-error runs, which the hit rate does
+    not need)."""
     import tempfile
 
     from vdps_hil.batch.report import recommended_effects
@@ -296,7 +315,8 @@ def effect_trial(effect: str | None, seed: int, maneuver: str | None = None,
     with tempfile.TemporaryDirectory(prefix="vdps-effect-") as d:
         path = os.path.join(d, "drive.mcap")
         hidden_drive(path, maneuver, specs, seed=int(seed))
-        diag = diagnose_drive(path, vehicle=vehicle, options=options)
+        diag = diagnose_drive(path, vehicle=vehicle,
+                              options={"with_simulation": False} if options is None else options)
     rec = recommended_effects(diag)
     doc = {"effect": effect, "maneuver": maneuver, "seed": int(seed), "recommended": rec}
     if effect is not None:

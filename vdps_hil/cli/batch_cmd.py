@@ -243,30 +243,39 @@ def replay(patterns, vehicle, model_file, params, dbc, signalmap, bus_map, no_id
 
 @batch.command("diagnose", epilog=_ENGINE_HELP)
 @click.argument("patterns", nargs=-1, required=True, metavar="GLOB...")
-@click.option("--vehicle", default="sedan-model", show_default=True, metavar="FILE",
-              help="Model vehicle file or name.")
-@click.option("--config", default=None, metavar="FILE", help="Workbench configuration file.")
-@click.option("--effect", "effects", multiple=True, metavar="NAME",
-              help="Candidate effect to test (repeatable; default: the workbench's list).")
+@click.option("--vehicle", default="sedan-model", show_default=True, metavar="MODEL_FILE",
+              help="Model vehicle file or name (never a truth file).")
+@click.option("--model", "model_file", default=None, metavar="FILE",
+              help="A model written by vdps diagnose --save-model (parameters and effects).")
+@click.option("--dbc", default=None, metavar="FILE", help="DBC of a foreign CAN bus (with --signalmap).")
+@click.option("--signalmap", default=None, metavar="FILE", help="Signal map of the CAN frames to bus fields.")
+@click.option("--add", "add", multiple=True, metavar="NAME",
+              help="Add an effect on every drive, re-identify, before/after; repeatable.")
+@click.option("--no-simulation", is_flag=True, help="Skip the predictor runs (simulation error).")
 @engine_options
-def diagnose(patterns, vehicle, config, effects, workers, scheduler, backend, allowed_failures,
-             no_dashboard, out_dir, json_out, report_dir, force, rehash, quiet):
+def diagnose(patterns, vehicle, model_file, dbc, signalmap, add, no_simulation, workers, scheduler,
+             backend, allowed_failures, no_dashboard, out_dir, json_out, report_dir, force, rehash, quiet):
     """Diagnose every recording matching GLOB... with the model workbench (one task per
-    recording): where the model fails and which effects it recommends."""
+    recording, as vdps diagnose): which effects each drive recommends, identified parameters,
+    residuals; the fleet report counts the recommendations across the drives."""
     from vdps_hil.batch.keys import DigestCache
     from vdps_hil.batch.tasks import diagnose_tasks
 
     cfg = _engine_config(workers, scheduler, backend, allowed_failures, no_dashboard)
     paths = expand_inputs(patterns)
     out = _out(out_dir, "diagnose")
+    for name, f in (("--model", model_file), ("--dbc", dbc)):
+        if f is not None and not os.path.isfile(f):
+            raise UserError(f"{name} {f}: no such file")
+    if (dbc is None) != (signalmap is None) and dbc is not None:
+        raise UserError("--dbc needs --signalmap (which frames feed which fields)")
+    options = {k: v for k, v in {"model": model_file, "dbc": dbc, "signalmap": signalmap,
+                                 "add": list(add) or None}.items() if v is not None}
+    if no_simulation:
+        options["with_simulation"] = False
     digests = DigestCache(out / ".digests.json", enabled=not rehash)
-    options = {"config": config} if config is not None else {}
-    if config is not None and not os.path.isfile(config):
-        raise UserError(f"--config {config}: no such file")
-    if effects:
-        options["effects"] = list(effects)
-    tasks = diagnose_tasks(paths, vehicle=_vehicle_file(vehicle), options=options,
-                           effects=effects, digests=digests)
+    tasks = diagnose_tasks(paths, vehicle=_vehicle_file(vehicle), options=options, effects=add,
+                           digests=digests)
     _run("diagnose", tasks, cfg, out, force=force, quiet=quiet, json_out=json_out,
          report_dir=report_dir, digests=digests,
          options={"vehicle": vehicle, **options, "inputs": len(paths)})
