@@ -6,7 +6,6 @@ workbench entry point."""
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pytest

@@ -24,7 +24,9 @@ Studies
                sigmas) and k = 0 (zero-noise sensors); the median SNR at k = 1 gives the
                noise scale of each target, k = 10^((SNR(1) - target) / 20) (the estimation
                error scales with k, ``vdps_hil.paper``); stage 2: every seed at each target's
-               k. Per row: measured SNR and |relative error| of I_x, I_y, I_z at 10.25 s.
+               k. The SNR of a trial is measured against the zero-noise trial of the same seed
+               (``paper.snr_db``). Per row: measured SNR and |relative error| of I_x, I_y, I_z
+               at 10.25 s.
 ``weighting``  Table 3. Every (noise scale, seed): the inertia problem re-run on the chain's
                identifier inputs with Q_4 = diag(q, q, q) for the paper's four q. Per (noise
                scale, q): convergence time per inertia (over the seeds that converged, with
@@ -40,7 +42,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -181,7 +183,9 @@ def _ok_results(outs: Mapping[str, Any], ids: Sequence[str]) -> list[dict]:
 
 
 def _snr(opt: StudyOptions, stage) -> dict:
-    from vdps_hil.paper import INERTIA, PAPER
+    import numpy as np
+
+    from vdps_hil.paper import INERTIA, PAPER, snr_db
 
     seeds = opt.seed_list
     ids: dict[str, list[str]] = {"k0": [], "k1": []}
@@ -192,12 +196,24 @@ def _snr(opt: StudyOptions, stage) -> dict:
             ids[label].append(tid)
             tasks.append(_task("snr", tid, {"profile": opt.profile, "k": k, "seed": s}))
     outs = stage("snr stage 1 (k = 1, k = 0)", tasks)
-    snr1 = summary([r["snr_db"] for r in _ok_results(outs, ids["k1"])])
+
+    def series(r):
+        return {"t_ns": list(r.get("t_ns") or []),
+                "series": np.asarray(r.get("series") or [], dtype=float).reshape(len(r.get("t_ns") or []), -1)}
+
+    ref = {r["seed"]: series(r) for r in _ok_results(outs, ids["k0"])}
+
+    def snr_of(r):
+        if r["k"] == 0.0:
+            return math.inf  # the reference itself: the paper's "infinite" row
+        return snr_db(series(r), ref[r["seed"]]) if r["seed"] in ref else None
+
+    snr1 = summary([snr_of(r) for r in _ok_results(outs, ids["k1"])])
     rows = [("zero-noise", 0.0, None, ids["k0"]), ("profile (k = 1)", 1.0, None, ids["k1"])]
     notes = []
     if snr1["median"] is None:
-        notes.append("no SNR measured at k = 1 (every snr_trial returned none): the target-SNR rows "
-                     "need it and were not run")
+        notes.append("no SNR at k = 1 (no zero-noise reference of the same seed, or too few "
+                     "samples): the target-SNR rows need it and were not run")
     else:
         tasks2 = []
         for target in opt.snr_targets_db:
@@ -216,11 +232,12 @@ def _snr(opt: StudyOptions, stage) -> dict:
             (PAPER["snr_table"][None] if k == 0.0 else None)
         table.append({
             "label": label, "noise_scale": k, "target_snr_db": target, "trials": len(tl),
-            "ok": len(res), "snr_db": summary([r["snr_db"] for r in res]),
+            "ok": len(res), "snr_db": None if k == 0.0 else summary([snr_of(r) for r in res]),
             "abs_rel_err_pct": {n: summary([abs(r["rel_err"][n]) * 100.0 for r in res]) for n in INERTIA},
             "paper_rel_err_pct": dict(zip(INERTIA, paper)) if paper else None})
-    return {"definition": "SNR = 10 log10(sum var(wdot_hat) / sum var(wdot_hat - wdot)) over 5-10.25 s "
-                          "(vdps_hil.paper); |rel err| of the inertias at 10.25 s of the paper scenario",
+    return {"definition": "SNR = -10 log10 of the mean over the six SNR series of var(s_k - s_0) / var(s_k), "
+                          "s_0 the zero-noise run of the same seed (vdps_hil.paper.snr_db); |rel err| of the "
+                          "inertias at 10.25 s of the paper scenario",
             "snr_at_k1_db": snr1, "table": table, "notes": notes}
 
 
@@ -320,7 +337,8 @@ def format_study(doc: Mapping[str, Any]) -> str:
         for r in doc["table"]:
             ours = "  ".join(f"{_ms(r['abs_rel_err_pct'][n]):>16s}" for n in names)
             pap = " ".join(f"{v:6.2f}" for v in r["paper_rel_err_pct"].values()) if r["paper_rel_err_pct"] else "-"
-            lines.append(f"  {r['label']:16s} k {r['noise_scale']:<8.3g} SNR {_ms(r['snr_db'], '{:.1f}'):>14s} dB"
+            snr = "infinite" if r["snr_db"] is None else _ms(r["snr_db"], "{:.1f}") + " dB"
+            lines.append(f"  {r['label']:16s} k {r['noise_scale']:<8.3g} SNR {snr:>17s}"
                          f"  {ours}   paper {pap}  [{r['ok']}/{r['trials']}]")
     elif doc["study"] == "weighting":
         lines.append(f"  Table 3: time to within 10 % [s] of Ix, Iy, Iz (mean +- sd over converged "

@@ -224,8 +224,10 @@ def _timing_to_run(doc: dict, keys: Iterable[str] = ("wall_s",)) -> dict:
 
 def snr_trial(profile: str, k: float, seed: int) -> dict:
     """One trial of the SNR study (paper Table 2): the paper-scenario drive with every Table 1
-    sigma times ``k`` through the real chain; the measured SNR of the inertia problem's inputs
-    and the relative error of I_x, I_y, I_z at 10.25 s (``vdps_hil.paper.snr_task``)."""
+    sigma times ``k`` through the real chain (``vdps_hil.paper.snr_task``): the relative error
+    of I_x, I_y, I_z at 10.25 s and the SNR series (``t_ns``, ``series``: the inertia problem's
+    omega_dot and moments at the estimate instants of 5-10.25 s). The SNR needs the zero-noise
+    trial of the same seed; the study computes it (``paper.snr_db``)."""
     from vdps_hil.paper import snr_task
 
     return _timing_to_run(snr_task(profile, float(k), int(seed)))
