@@ -290,6 +290,12 @@ class LowPressureCandidate(Candidate):
                 best, best_x, self.wheel = gain, X, w
         return best_x, None
 
+    def delta_columns(self, ctx, phi):
+        """The wheel chosen when the candidate was screened stays (the residual it explained is
+        gone from the model's residual once it is selected)."""
+        eff = self.effect_cls(**{**self.defaults, "wheel": float(self.wheel)})
+        return ctx.dyn_from_regressors(eff, self.params), None
+
     def effect(self, theta):
         return self.effect_cls(**{**self.defaults, "wheel": float(self.wheel), "radius_reduction": float(theta[0])})
 

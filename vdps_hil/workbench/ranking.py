@@ -27,10 +27,10 @@ sample size improves by more than ``bic_margin``::
 
     dBIC = n_eff ln(SSE(S + c) / SSE(S)) + p_c ln(n_eff),   n_eff = sum_g n_g / tau_g
 
-(tau_g the integrated autocorrelation time of equation g's residual), (b) EF_c > 0 overall and
->= ``min_explained`` on the candidate's own equations (those holding >= 10 % of its prior-size
-contribution: a sensor bias judged on the GNSS innovations and the force balance, a tire effect
-on the lateral equations), (c) the fitted parameters are physically plausible (``ParamSpec`` ranges:
+(tau_g the integrated autocorrelation time of equation g's residual), (b) EF_c >=
+``min_explained_overall`` (a sensor effect instead: >= ``min_explained_innovations`` of the GNSS/IMU
+innovations, where a sensor error must show) and >= ``min_explained`` on the candidate's own
+equations (those holding >= 10 % of its prior-size contribution), (c) the fitted parameters are physically plausible (``ParamSpec`` ranges:
 negative drag and so on are rejected) and (d) the drive excites it: at its generic prior
 magnitude the effect would stand ``excitation_z`` noise sigmas (effective) above zero. The first
 selected effect is the ``recommendation``.
@@ -87,6 +87,8 @@ class RankingConfig:
     gap_blocks: int = 1
     bic_margin: float = 10.0
     min_explained: float = 0.05
+    min_explained_overall: float = 0.1
+    min_explained_innovations: float = 0.5
     material_fraction: float = 0.1
     corr_threshold: float = 0.95
     excitation_z: float = 5.0
@@ -888,6 +890,20 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     lateral = [GROUP_NAMES.index(g) for g in ("lat", "roll", "yaw")]
     lat_ok = "cornering_stiffness_front_nprad" in (states.excited_params or set()) or \
         "cornering_stiffness_front_nprad" not in cfg.identify
+    # a candidate whose prior-size contribution the ten parameters reproduce (R^2 >= 0.95^2) is
+    # the same as a re-identification on this drive (e.g. steering compliance and the front
+    # cornering stiffness in the linear range): never a recommendation, reported as a group
+    base_cols = d.columns_of(list(cfg.identify))
+    base_equiv: dict[str, float] = {}
+    if base_cols:
+        gbb_ = G[np.ix_(base_cols, base_cols)]
+        for name, c in by_name.items():
+            cols = d.blocks[name]
+            th = c.prior_theta() * np.array([d.scale[k] for k in cols])
+            vv = float(th @ G[np.ix_(cols, cols)] @ th)
+            gbv = G[np.ix_(base_cols, cols)] @ th
+            if vv > 0:
+                base_equiv[name] = float(gbv @ np.linalg.lstsq(gbb_, gbv, rcond=None)[0]) / vv
     own_groups: dict[str, np.ndarray] = {}
     for name, c in by_name.items():
         cols = d.blocks[name]
@@ -932,10 +948,20 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
             steps[name] = {"ef": ef, "ef_own": ef_own, "dbic": dbic, "joint": j, "cv_before": cvb}
             if os.environ.get("VDPS_WB_DEBUG"):
                 print(f"[ranking] {name}: ef {ef:.3f} own {ef_own:.3f} dbic {dbic:.1f} phi {j.phi} "
+                      f"inn {1.0 - j.cv[-3:].sum() / max(cvb[-3:].sum(), 1e-300):.3f} "
                       f"plausible {c.phi_plausible(j.phi)} material {c.material(j.phi, cfg.material_fraction)}")
             joints[name] = j
-            ok = (dbic < -cfg.bic_margin and ef_own >= cfg.min_explained and ef > 0.0 and c.phi_plausible(j.phi)
-                  and c.material(j.phi, cfg.material_fraction))
+            inn_g = np.array([GROUP_NAMES.index(g) for g in INNOVATION_GROUPS])
+            ef_inn = 1.0 - j.cv[inn_g].sum() / max(cvb[inn_g].sum(), 1e-300)
+            steps[name]["ef_innovations"] = ef_inn
+            # enough of the residual overall -- or, for a sensor effect, of the GNSS/IMU
+            # innovations, where a sensor error shows even when the force balance hardly sees it
+            evidence = ef >= cfg.min_explained_overall or (
+                c.family == "measurement" and ef_inn >= cfg.min_explained_innovations)
+            if base_equiv.get(name, 0.0) >= cfg.corr_threshold ** 2:
+                evidence = False  # the same as re-identifying a parameter: reported as a group
+            ok = (dbic < -cfg.bic_margin and ef_own >= cfg.min_explained and ef > 0.0 and evidence
+                  and c.phi_plausible(j.phi) and c.material(j.phi, cfg.material_fraction))
             if ok and (best is None or ef > best[1]):
                 best = (name, ef, j)
         if best is None:

