@@ -209,3 +209,45 @@ def test_identification_through_the_chain_finds_the_mass():
     for n in ("tracking_stiffness_1_n", "cornering_stiffness_front_nprad"):  # moved towards the truth
         assert abs(getattr(system.params, n) - getattr(truth, n)) < 0.5 * abs(getattr(MODEL.params, n) - getattr(truth, n))
     assert math.isfinite(system.identifier.sigmas["mass_kg"])
+
+
+@pytest.mark.parametrize("stamp", ["end", "mean"])
+def test_identifier_deflection_and_rate_are_carried_to_the_estimate_time(stamp):
+    """The identifier's (H, H_dot) at an estimate instant: a 1 Hz sine of 2 cm sampled at 1 kHz,
+    100 Hz windows, 20 Hz alpha-beta. Held at the filter's last update, H lags ~5 ms and H_dot
+    ~18 ms (13 ms derivative lag + the update's age); carried forward and led
+    (``raw_filtered(t)``) the errors drop to a fifth (H) and a seventh (H_dot) of the held ones
+    (measured, both stampings: H 0.11 vs 0.93 mm, H_dot 1.1 vs 13.1 mm/s RMS). A 1 Hz sensor
+    (table1) is never extrapolated."""
+    amp, w = 0.02, 2 * math.pi
+
+    def run(lead):
+        c = SuspensionConditioner(MODEL, 100.0, tire_compliance=False, raw_bandwidth_hz=20.0,
+                                  rate_bandwidth_hz=10.0, max_gap_s=2.0, rate_lead=lead, stamp=stamp)
+        eh, ehd, eh0, ehd0 = [], [], [], []
+        for k in range(3000):
+            t = k * 1_000_000 + 300_000
+            c.due(t)
+            c.add(_susp(t, (amp * math.sin(w * t * 1e-9),) * 4))
+            if k > 1000 and k % 10 == 5:  # an estimate instant
+                h, hd = c.raw_filtered(t)
+                h0, hd0 = c.raw_filtered()
+                eh.append(h[0] - amp * math.sin(w * t * 1e-9))
+                ehd.append(hd[0] - amp * w * math.cos(w * t * 1e-9))
+                eh0.append(h0[0] - amp * math.sin(w * t * 1e-9))
+                ehd0.append(hd0[0] - amp * w * math.cos(w * t * 1e-9))
+        rms = lambda e: float(np.sqrt(np.mean(np.square(e))))  # noqa: E731
+        return rms(eh), rms(ehd), rms(eh0), rms(ehd0)
+
+    h, hd, h0, hd0 = run(True)
+    assert h < 0.2 * h0 and hd < 0.15 * hd0
+    _, hd_nolead, _, _ = run(False)
+    assert hd_nolead > 5 * hd  # the lead is what fixes the rate
+    slow = SuspensionConditioner(MODEL, 1.0, tire_compliance=False, raw_bandwidth_hz=20.0,
+                                 rate_bandwidth_hz=10.0, max_gap_s=2.0, stamp=stamp)
+    for k in range(3):
+        slow.due(k * 1_000_000_000)
+        slow.add(_susp(k * 1_000_000_000, (0.01 * k,) * 4))
+    t = 2_500_000_000
+    slow.due(t)
+    assert slow.raw_filtered(t) == slow.raw_filtered()
