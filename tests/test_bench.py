@@ -6,7 +6,8 @@ estimates of a live run are bit-identical to replaying its recording in the reco
 order; every socket the bench listens on is bound to 127.0.0.1.
 
 CI_SPEED is a third of the highest speed at which tools/bench_hil.py showed nothing dropped for
-the embedded transport (3x on the 2-core CI machine, measured under load: 1x here)."""
+the embedded transport while running at that speed (3x on this 2-core machine with other jobs
+at load 3 and at load 8): 1x here."""
 
 from __future__ import annotations
 
