@@ -25,6 +25,23 @@ Memory: ``run.peak_rss_mib`` of each task is the worker process's peak resident 
 (``getrusage``), so the maximum over a worker's tasks is that worker's peak. With ``--memory``
 one task runs on a 1-worker cluster while this process samples the worker's RSS (psutil)
 every ``--poll`` seconds: the curve shows whether memory grows with the drive (it must not).
+
+Measured (this 2-core VM, shared with other jobs: load average 3.6-6.9 during the run)
+-----------------------------------------------------------------------------------------
+8 drives of 10 s, LocalCluster: 1 worker 64.0 s, 2 workers 37.4 s: speed-up 1.71x wall
+(1.67x with cluster start-up, ~1 s); results identical. Task CPU 36.2 s vs 35.7 s in total
+(no per-task overhead from parallelism), split 17.8 / 17.9 s: the contention-free estimate is
+2.01x; the workers got about half a core each from the shared machine (CPU share 57 % / 48 %).
+Peak RSS per worker 231-238 MiB.
+
+One-hour drive (``make_long_drive.py``: 'paper', table1-susp1k, 997 MiB, 12.7 M messages),
+one worker: 1587 s of worker CPU (2.27 s of drive per CPU s), peak RSS 359 MiB with
+``--fix-pipeline-log`` (RSS at 1/139/345/729/1065/1585 CPU s: 125/257/299/328/342/358 MiB;
+the remaining slope, ~35 MiB/h, is the warning chain keeping every sent frame and assessment).
+Without the fix the worker grew by ~3.4 MiB per CPU s (1.55 GiB after 389 CPU s, stopped
+there): extrapolated ~5.6 GiB for the hour (an extrapolation, not a measurement):
+``EstimatorPipeline`` appends every sample to its replay log and ``VdpsSystem.clear_input_log``
+does not clear it.
 """
 
 from __future__ import annotations
