@@ -37,7 +37,8 @@ Peak RSS per worker 231-238 MiB.
 One-hour drive (``make_long_drive.py``: 'paper', table1-susp1k, 997 MiB, 12.7 M messages),
 one worker: 1587 s of worker CPU (2.27 s of drive per CPU s), peak RSS 359 MiB with
 ``--fix-pipeline-log`` (RSS at 1/139/345/729/1065/1585 CPU s: 125/257/299/328/342/358 MiB;
-the remaining slope, ~35 MiB/h, is the warning chain keeping every sent frame and assessment).
+the remaining slope, ~55 MiB per hour of drive, is mostly the warning chain keeping every
+sent frame and assessment).
 Without the fix the worker grew by ~3.4 MiB per CPU s (1.55 GiB after 389 CPU s, stopped
 there): extrapolated ~5.6 GiB for the hour (an extrapolation, not a measurement):
 ``EstimatorPipeline`` appends every sample to its replay log and ``VdpsSystem.clear_input_log``
