@@ -491,8 +491,10 @@ class VdpsSystem:
         return tuple(self._log)
 
     def clear_input_log(self) -> None:
-        """Forget the recorded inputs (a long replay that does not need them)."""
+        """Forget the recorded inputs (a long replay that does not need them), the system's
+        and its estimator pipeline's (otherwise a one-hour replay holds every sample)."""
         self._log.clear()
+        self.pipeline._log.clear()
 
     @property
     def last_estimate(self) -> Estimate | None:
