@@ -38,8 +38,9 @@ VARS = ("v_x", "v_y", "r", "r_dot", "a_y", "delta")
 def term_to_effect(eq: str, term: str) -> str | None:
     """The effect an engineer would read from a SINDy term on an equation (crude by design: SINDy
     names polynomial terms, not physical effects)."""
-    t = term.replace(" ", "")
-    deg = sum(int(p.split("^")[1]) if "^" in p else 1 for p in t.split("*") if p and p != "1")
+    parts = [p for p in term.replace("*", " ").split() if p and p != "1"]
+    deg = sum(int(p.split("^")[1]) if "^" in p else 1 for p in parts)
+    t = "*".join(parts) if parts else "1"
     if eq.startswith("wheel_speed"):
         return "low_pressure_tire" if "romega" in t else None
     if eq == "long":
