@@ -139,6 +139,20 @@ class Recorder:
             self._fail("metadata", e)
 
 
+def open_all(adapters: Sequence[Adapter], errors: tuple = (AdapterError,)) -> None:
+    """Open every adapter, or none: on one of ``errors`` the ones already open are closed
+    again and the error is raised."""
+    opened = []
+    try:
+        for a in adapters:
+            a.open()
+            opened.append(a)
+    except errors:
+        for a in opened:
+            a.close()
+        raise
+
+
 class LogSession:
     """Record live adapters until stopped.
 
@@ -170,15 +184,7 @@ class LogSession:
         self.errors: list[str] = []
 
     def open(self) -> None:
-        opened = []
-        try:
-            for a in self.adapters:
-                a.open()
-                opened.append(a)
-        except AdapterError:
-            for a in opened:
-                a.close()
-            raise
+        open_all(self.adapters)
 
     def _reader(self, a: Adapter) -> None:
         try:

@@ -267,15 +267,9 @@ class PipelineNode:
 
     # --- lifecycle ------------------------------------------------------------------------------
     def open(self) -> None:
-        opened = []
-        try:
-            for a in self.adapters:
-                a.open()
-                opened.append(a)
-        except Exception:
-            for a in opened:
-                a.close()
-            raise
+        from vdps_hil.adapters.session import open_all
+
+        open_all(self.adapters, errors=(Exception,))
 
     def _reader(self, a) -> None:
         try:
