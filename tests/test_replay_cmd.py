@@ -130,13 +130,23 @@ def test_bad_options_are_one_line_errors(drive, args, needle):
     assert code == 2 and needle in text and len(text.strip().splitlines()) == 1
 
 
-def test_model_file_is_accepted_only_when_the_workbench_defines_it(drive, tmp_path):
-    if importlib.util.find_spec("vdps_hil.workbench.model_file") is None:
-        code, text = run("replay", str(drive), "--model", str(tmp_path / "m.json"))
-        assert code == 2 and "not supported yet" in text
-    else:
-        code, text = run("replay", str(drive), "--model", str(tmp_path / "missing.json"))
-        assert code == 2 and len(text.strip().splitlines()) == 1
+def test_saved_workbench_model_is_used(drive, tmp_path):
+    """``--model`` takes a ``vdps diagnose --save-model`` file: exit 0 and the JSON names the
+    effects the predictor got; a missing file or --params with --model is one line, exit 2."""
+    from vdps_hil.model.effects import REGISTRY, EffectSet
+    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.workbench.model_file import save_model
+
+    m = save_model(tmp_path / "m.toml", load_vehicle("sedan-model", "model"),
+                   EffectSet([REGISTRY["aero_drag"](cda_m2=0.7)]))
+    out = tmp_path / "r.json"
+    code, text = run("replay", str(drive), "--model", str(m), "--json", str(out))
+    assert code == 0, text
+    assert json.loads(out.read_text())["model"]["predictor_effects"] == ["aero_drag"]
+    code, text = run("replay", str(drive), "--model", str(tmp_path / "missing.json"))
+    assert code == 2 and len(text.strip().splitlines()) == 1
+    code, text = run("replay", str(drive), "--model", str(m), "--params", str(m))
+    assert code == 2 and "not both" in text and len(text.strip().splitlines()) == 1
 
 
 def test_broken_inputs_are_one_line_errors_or_read_as_far_as_they_go(drive, tmp_path):

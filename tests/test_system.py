@@ -251,3 +251,70 @@ def test_identifier_deflection_and_rate_are_carried_to_the_estimate_time(stamp):
     t = 2_500_000_000
     slow.due(t)
     assert slow.raw_filtered(t) == slow.raw_filtered()
+
+
+# ---------------------------------------------------------------- saved workbench models (--model)
+
+def test_predictor_effects_join_a_workbench_model():
+    """The workbench model's dynamics join the configured effects; its tire replaces the
+    configured tire; its measurement effects stay out of the predictor."""
+    from vdps_hil.model.effects import REGISTRY, EffectSet
+    from vdps_hil.system import predictor_effects
+
+    base = EffectSet([REGISTRY["linear_tire"]()])
+    wb = EffectSet([REGISTRY["aero_drag"](cda_m2=0.9), REGISTRY["magic_formula_tire"](), REGISTRY["imu_bias"]()])
+    names = sorted(e.name for e in predictor_effects(base, wb))
+    assert names == ["aero_drag", "magic_formula_tire"]
+    names = sorted(e.name for e in predictor_effects(base, EffectSet([REGISTRY["aero_drag"]()])))
+    assert names == ["aero_drag", "linear_tire"]
+
+
+def test_system_predictor_uses_the_saved_model_drag():
+    """Physics: a held-input prediction from 25 m/s with zero torque loses about
+    0.5 rho CdA v^2 / m * 5 s more speed with the model's CdA = 2 m^2 (766 N at 25 m/s, about
+    0.45 m/s^2 on 1700 kg, falling with v): 1.5-3.0 m/s more, from the same state."""
+    from vdps_hil.model.effects import REGISTRY, EffectSet
+    from vdps_hil.prediction.predictor import PredictorInitialState
+
+    veh = load_vehicle("sedan-model", "model").with_params(mass_kg=1700.0)
+    r = veh.tire.rolling_radius_m if hasattr(veh, "tire") and hasattr(veh.tire, "rolling_radius_m") else 0.3
+    init = PredictorInitialState(t_ns=0, pos_g_m=(0, 0, 0.55), vel_g_mps=(25.0, 0, 0), euler_g_rad=(0, 0, 0),
+                                 road_bank_rad=0.0, road_grade_rad=0.0, rate_b_radps=(0, 0, 0),
+                                 wheel_speed_radps=(25.0 / r,) * 4)
+    end = {}
+    for label, eff in (("plain", None), ("drag", EffectSet([REGISTRY["aero_drag"](cda_m2=2.0)]))):
+        system = VdpsSystem(veh, SystemConfig(identify=False, model_effects=eff))
+        res = system._chain.predictor.predict(init)
+        end[label] = float(res.vel_b_mps[-1][0])
+    assert 1.5 <= end["plain"] - end["drag"] <= 3.0, end
+
+
+def test_replay_with_a_saved_model(tmp_path):
+    """``replay_file(model=...)`` reads a ``vdps diagnose --save-model`` file: its parameters
+    start the identifier, its effects join the predictor, the JSON says so; --params with
+    --model and a broken model file are one-line errors."""
+    from vdps_hil.model.effects import REGISTRY, EffectSet
+    from vdps_hil.system import ReplayError, replay_file
+    from vdps_hil.workbench.model_file import save_model
+
+    drive = tmp_path / "paper.mcap"
+    Drive("paper", seed=5, duration_s=2.0).run(drive)
+    veh = load_vehicle("sedan-model", "model")
+    m = save_model(tmp_path / "m.toml", veh.with_params(inertia_x_kgm2=1400.0),
+                   EffectSet([REGISTRY["aero_drag"](cda_m2=0.7), REGISTRY["imu_bias"]()]))
+    doc = replay_file(drive, model=m, predict=False)
+    assert doc["model"]["predictor_effects"] == ["aero_drag"]
+    assert doc["model"]["not_applied"] == ["imu_bias"]
+    # the file's parameters are the identifier's start (the vehicle file's prior Ix is 715)
+    from vdps_hil.system import _load_workbench_model
+
+    start, effects, _ = _load_workbench_model(m, veh)
+    assert start.inertia_x_kgm2 == 1400.0 and veh.params.inertia_x_kgm2 == 715.0
+    assert [e.name for e in effects] == ["aero_drag", "imu_bias"]
+    with pytest.raises(ReplayError, match="not both"):
+        replay_file(drive, model=m, params=m)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(Path(m).read_text().replace('"aero_drag"', '"no_such_effect"'))
+    with pytest.raises(ReplayError) as e:
+        replay_file(drive, model=bad)
+    assert len(str(e.value).splitlines()) == 1 and "no_such_effect" in str(e.value)

@@ -247,6 +247,7 @@ class SystemConfig:
     warning_node: Any = None  # WarningNodeConfig
     warning_bus: str = "vdps"
     require_converged: tuple[str, ...] = ()
+    model_effects: Any = None  # EffectSet of a saved workbench model (its dynamics join the predictor)
 
     def __post_init__(self):
         for name in ("estimate_period_s", "ident_period_s", "ident_report_period_s"):
@@ -438,7 +439,11 @@ class VdpsSystem:
                 dpol, dnode = load_warning_config()
                 pol, node = pol or dpol, node or dnode
             params = self._params()
-            self._chain = WarningChain(Predictor(model_vehicle.with_params(**params.as_dict()), pcfg), pol, node)
+            peff = None
+            if cfg.model_effects is not None:
+                peff = predictor_effects(Predictor(model_vehicle, pcfg).effects, cfg.model_effects)
+            self._chain = WarningChain(Predictor(model_vehicle.with_params(**params.as_dict()), pcfg, peff),
+                                       pol, node)
             self._chain_params = params
         self._log: list[Sample] = []
         self._last_estimate: Estimate | None = None
@@ -728,6 +733,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     wall0 = time.perf_counter()
     veh = _load_model_vehicle(vehicle)
     start = None
+    if params is not None and model is not None:
+        raise ReplayError("give --params or --model (a saved model carries its parameters), not both")
     if params is not None:
         from vdps_hil.identification.persistence import ParamsFileError, load_params
 
@@ -735,8 +742,9 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
             start = load_params(params, veh).params
         except ParamsFileError as e:
             raise ReplayError(str(e)) from None
+    model_effects, model_doc = None, None
     if model is not None:
-        start = _load_workbench_model(model, veh, start)
+        start, model_effects, model_doc = _load_workbench_model(model, veh)
     if save_params is not None and not identify:
         raise ReplayError("--save-params needs the identifier (drop --no-identify)")
     try:
@@ -753,6 +761,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
             raise ReplayError("give a sensor set or a config, not both")
         if start is not None:
             config = replace(config, start_params=start)
+        if model_effects is not None:
+            config = replace(config, model_effects=model_effects)
         state: dict = {"writer": None, "copy": None}
         sink = None
         if output is not None:
@@ -800,6 +810,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     doc.update({"input": os.fspath(path), "output": None if output is None else os.fspath(output),
                 "vehicle": veh.name, "sensor_set": sensors_desc, "wall_time_s": wall,
                 "realtime_factor": (doc["duration_s"] / wall) if wall > 0 and doc["duration_s"] else None})
+    if model_doc is not None:
+        doc["model"] = model_doc
     if save_params is not None:
         from vdps_hil.identification.persistence import ParamsFileError, save_params as _save
 
@@ -827,25 +839,37 @@ def _load_model_vehicle(vehicle) -> Vehicle:
         raise ReplayError(str(e).splitlines()[0]) from None
 
 
-def _load_workbench_model(path, vehicle: Vehicle, start):
-    """A saved workbench model (effects + identified parameters): only when the workbench's
-    ``model_file`` module exists (it defines the format); its ``load_model_file(path, vehicle)``
-    result's ``params`` start the identifier."""
-    import importlib
+def predictor_effects(base, model_effects):
+    """The predictor's configured effects (``base``, e.g. the paper's ``linear_tire``) with a
+    saved workbench model's *dynamics* effects joined: a tire model in the workbench model
+    replaces the configured tire, any other effect is added (an effect of the same name is
+    taken from the workbench model). Measurement effects are not part of the predictor."""
+    from vdps_hil.model.effects import EffectSet
+    from vdps_hil.model.effects.base import TireModel
+
+    added = list(EffectSet(model_effects).dynamics)
+    names = {e.name for e in added}
+    new_tire = any(isinstance(e, TireModel) for e in added)
+    keep = [e for e in base if e.name not in names and not (new_tire and isinstance(e, TireModel))]
+    return EffectSet(keep + added)
+
+
+def _load_workbench_model(path, vehicle: Vehicle):
+    """A saved workbench model (``vdps diagnose --save-model``; format and checks in
+    ``vdps_hil.workbench.model_file``): (identified parameters that start the identifier, the
+    model's effects for the predictor, a summary for the JSON). Errors are one line."""
+    from vdps_hil.workbench.model_file import ModelFileError, load_model
 
     try:
-        mod = importlib.import_module("vdps_hil.workbench.model_file")
-    except ImportError:
-        raise ReplayError("--model: saved workbench models are not supported yet") from None
-    loader = getattr(mod, "load_model_file", None)
-    if loader is None:
-        raise ReplayError("--model: saved workbench models are not supported yet")
-    try:
-        m = loader(path, vehicle)
-    except (OSError, ValueError) as e:
-        raise ReplayError(f"--model {path}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
-    p = getattr(m, "params", None)
-    return p if isinstance(p, IdentifiedParams) else start
+        veh, effects, mf = load_model(path, vehicle)
+    except (ModelFileError, OSError, ValueError) as e:
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ReplayError(f"--model: {msg}") from None
+    doc = {"file": str(path), "vehicle": mf.vehicle, "source": mf.source,
+           "effects": [e.name for e in effects],
+           "predictor_effects": [e.name for e in effects.dynamics],
+           "not_applied": [e.name for e in effects if e not in effects.dynamics]}
+    return veh.params, effects, doc
 
 
 def _replay_config(path, veh, dbc, signalmap, bus_map, susp_sigma_m, paper_faithful, sensorset=None, **kw):

@@ -38,7 +38,8 @@ drive torque cut, brake pressure 0 -> full in 300 ms, 2500 N m per wheel on all 
 @click.option("--vehicle", default=None, metavar="FILE",
               help="Truth vehicle file or name for the simulator (default: the scenario's).")
 @click.option("--model", default=None, metavar="FILE",
-              help="Model vehicle file for the pipeline (default: the truth file's pair, e.g. suv-model).")
+              help="Model vehicle file for the pipeline (default: the truth file's pair, e.g. suv-model), "
+                   "or a saved workbench model (vdps diagnose --save-model).")
 @click.option("--effect", "effects", multiple=True, metavar="NAME",
               help="Switch on an effect in the simulator (NAME or NAME:param=value,...); repeatable.")
 @click.option("--fault", "faults", multiple=True, metavar="NAME",

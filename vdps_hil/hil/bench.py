@@ -138,12 +138,41 @@ def model_for(truth_name: str) -> str:
 
 def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float):
     """The VDPS pipeline for the bench: ``VdpsSystem`` with the model vehicle file and the
-    suspension sensor's rate and noise (its data sheet, from the sensor profile; not truth)."""
+    suspension sensor's rate and noise (its data sheet, from the sensor profile; not truth).
+
+    ``model`` may also be a saved workbench model (``vdps diagnose --save-model``, schema
+    ``vdps-model``): then the vehicle file it names, its identified parameters as the
+    identifier's start and its dynamics effects in the predictor, as ``vdps replay --model``."""
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.system import SystemConfig, VdpsSystem
 
-    vehicle = load_vehicle(model, "model")
-    return VdpsSystem(vehicle, SystemConfig.for_profile(susp_rate_hz, susp_sigma_m))
+    saved = _saved_workbench_model(model)
+    if saved is None:
+        vehicle = load_vehicle(model, "model")
+        return VdpsSystem(vehicle, SystemConfig.for_profile(susp_rate_hz, susp_sigma_m))
+    from vdps_hil.workbench.model_file import ModelFileError, load_model
+
+    try:
+        vehicle = load_vehicle(saved.vehicle, "model")
+        refined, effects, _ = load_model(model, vehicle)
+    except (ModelFileError, ValueError) as e:
+        raise BenchError(f"--model {model}: {str(e).splitlines()[0]}") from None
+    cfg = SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=refined.params, model_effects=effects)
+    return VdpsSystem(vehicle, cfg)
+
+
+def _saved_workbench_model(path: str):
+    """The parsed workbench model file at ``path``, or None when ``path`` is not one (a vehicle
+    file or name)."""
+    from vdps_hil.workbench.model_file import ModelFileError, read_model
+
+    p = Path(path)
+    if p.suffix.lower() not in (".toml", ".json") or not p.is_file():
+        return None
+    try:
+        return read_model(p)
+    except ModelFileError:
+        return None
 
 
 @dataclass
