@@ -247,7 +247,8 @@ class SystemConfig:
     warning_node: Any = None  # WarningNodeConfig
     warning_bus: str = "vdps"
     require_converged: tuple[str, ...] = ()
-    model_effects: Any = None  # EffectSet of a saved workbench model (its dynamics join the predictor)
+    model_effects: Any = None  # EffectSet of a saved workbench model: dynamics join the predictor,
+    # IMU measurement effects are removed from the readings (estimation.imu_correction)
 
     def __post_init__(self):
         for name in ("estimate_period_s", "ident_period_s", "ident_report_period_s"):
@@ -445,6 +446,13 @@ class VdpsSystem:
             self._chain = WarningChain(Predictor(model_vehicle.with_params(**params.as_dict()), pcfg, peff),
                                        pol, node)
             self._chain_params = params
+        self._imu_corr = None
+        if cfg.model_effects is not None:
+            from vdps_hil.estimation.imu_correction import ImuEffectCorrection
+            from vdps_hil.model.effects.base import MeasurementEffect
+
+            meas = [e for e in cfg.model_effects if isinstance(e, MeasurementEffect)]
+            self._imu_corr = ImuEffectCorrection(meas) if meas else None
         self._log: list[Sample] = []
         self._last_estimate: Estimate | None = None
         self.counters = {"samples": 0, "estimates": 0, "ident_updates": 0, "predictions": 0, "frames": 0,
@@ -455,6 +463,8 @@ class VdpsSystem:
         """Consume one bus sample; returns the outputs it caused (module docstring)."""
         self._log.append(sample)
         self.counters["samples"] += 1
+        if self._imu_corr is not None:  # a saved model's IMU effects taken out (estimation.imu_correction)
+            sample = self._imu_corr.process(sample)
         out: list = []
         cond = self._susp
         if cond is not None:
@@ -857,7 +867,9 @@ def predictor_effects(base, model_effects):
 def _load_workbench_model(path, vehicle: Vehicle):
     """A saved workbench model (``vdps diagnose --save-model``; format and checks in
     ``vdps_hil.workbench.model_file``): (identified parameters that start the identifier, the
-    model's effects for the predictor, a summary for the JSON). Errors are one line."""
+    model's effects: dynamics for the predictor, IMU measurement effects taken out of the
+    readings by ``VdpsSystem``; a summary for the JSON). Errors are one line."""
+    from vdps_hil.model.effects.base import MeasurementEffect
     from vdps_hil.workbench.model_file import ModelFileError, load_model
 
     try:
@@ -868,7 +880,7 @@ def _load_workbench_model(path, vehicle: Vehicle):
     doc = {"file": str(path), "vehicle": mf.vehicle, "source": mf.source,
            "effects": [e.name for e in effects],
            "predictor_effects": [e.name for e in effects.dynamics],
-           "not_applied": [e.name for e in effects if e not in effects.dynamics]}
+           "imu_corrected": [e.name for e in effects if isinstance(e, MeasurementEffect)]}
     return veh.params, effects, doc
 
 
