@@ -102,8 +102,11 @@ def test_every_parameter_moves_from_prior_toward_truth_and_mass_and_inertias_wit
 
 
 @pytest.mark.xfail(strict=True, reason="linear-tire predictor (eq 15) vs Magic Formula truth: 4.8-7.0 m / "
-                   "4.9-7.0 deg at +4.75 s (seed 1); TRUE parameters and TRUE initial state give 6.0 m / 5.9 deg, the "
-                   "predictor with the truth's Magic Formula 0.13 m / 0.15 deg (chain init: 1.05 m / 0.78 deg)")
+                   "4.9-7.0 deg at +4.75 s (seed 1: 6.95 m / 7.00 deg); TRUE parameters and TRUE initial state give "
+                   "6.0 m / 5.9 deg, the predictor with the truth's Magic Formula 0.13 m / 0.15 deg (chain init: "
+                   "1.05 m / 0.78 deg). The held turn's slips (front 3.0 deg, a_y 6.3 m/s^2) exceed the sine's "
+                   "(1.8 deg): stiffnesses fitted to the truth's own forces over the sine leave 5.5-5.7 m / 5.5-5.7 "
+                   "deg, the turn's own secant 0.69 m (tools/left_turn_budget.py)")
 def test_left_turn_prediction_within_three_metres_and_degrees(ident_run):
     lt = ident_run["left_turn"]
     assert lt["position_err_m"] <= 3.0 and abs(lt["yaw_err_deg"]) <= 3.0
