@@ -126,6 +126,8 @@ from vdps_hil.model.core import Env, Inputs, Model, ackermann_angles
 from vdps_hil.model.effects import EffectConfigError, EffectSet, effects_from_names
 from vdps_hil.model.frames import compose_absolute, decompose_vehicle, dcm_global_to_vehicle
 from vdps_hil.model.params import CONFIG_DIR, IdentifiedParams, Vehicle
+from vdps_hil.model.reduced import ReducedLinearCore
+from vdps_hil.model.reduced import supports as reduced_supports
 from vdps_hil.model.rollover import RolloverMonitor
 from vdps_hil.units import NS_PER_S
 
@@ -481,7 +483,7 @@ class Predictor:
     truth). ``effects``: an EffectSet replacing the config's effect names (the workbench)."""
 
     def __init__(self, vehicle: Vehicle, config: PredictorConfig | None = None,
-                 effects: EffectSet | None = None):
+                 effects: EffectSet | None = None, *, fast: bool = True):
         if vehicle.kind != "model":
             raise ValueError(f"the predictor takes a model vehicle file, not a {vehicle.kind!r} file")
         self.config = config or PredictorConfig()
@@ -506,12 +508,17 @@ class Predictor:
         lay = self.model.layout
         self._wheel_slice = lay.wheel_spin
         self._n_state = lay.size
+        self.reduced_core = ReducedLinearCore(self.model) if fast and reduced_supports(self.model) else None
+        """The specialised evaluation of the same core (:mod:`vdps_hil.model.reduced`) when the
+        model allows it (the paper's reduced model and effect set) and ``fast``; else None and
+        every step calls ``model.f`` (the generic path, also the reference of the fast one)."""
 
     # ----------------------------------------------------------------- construction helpers
     def with_params(self, params: IdentifiedParams | Mapping[str, float]) -> "Predictor":
         """A new predictor with the identified parameters (never mutates this one)."""
         d = params.as_dict() if isinstance(params, IdentifiedParams) else dict(params)
-        return Predictor(self.vehicle.with_params(**d), self.config, self.effects)
+        return Predictor(self.vehicle.with_params(**d), self.config, self.effects,
+                         fast=self.reduced_core is not None)
 
     # ----------------------------------------------------------------- initial state
     def core_state(self, init: PredictorInitialState) -> tuple[list[float], Env, np.ndarray]:
@@ -588,6 +595,9 @@ class Predictor:
             mode, held, src = "driven", None, inputs
         else:
             raise TypeError("inputs must be None, Inputs, an InputTrajectory or a callable u(t_rel_s)")
+        if self.reduced_core is not None:
+            run = self._propagate_reduced(x, env, held, None if held is not None else src)
+            return self._result(init, *run[:3], env, offset, *run[3:5], mode, *run[5:])
         h = cfg.step_s
         n_steps = cfg.n_steps
         f = self.model.f
@@ -699,6 +709,100 @@ class Predictor:
                 stop = "non_finite"
                 break
         return self._result(init, xs, fzs, ts, env, offset, monitor, stop, mode, n, n_eval)
+
+    def _propagate_reduced(self, x: list, env: Env, held: Inputs | None, src: InputSource | None):
+        """The integration loop of :meth:`predict` on :class:`ReducedLinearCore` (same steps,
+        same stop rules and the same ROS2 W-method as the generic loop; the wheel-spin Jacobian
+        in closed form instead of a forward difference). Returns (states, loads, times, monitor,
+        stop reason, steps, f-evaluations)."""
+        cfg = self.config
+        core = self.reduced_core
+        F, jacobian, inputs_of = core.f, core.wheel_spin_jacobian, core.inputs
+        h = cfg.step_s
+        n_steps, out_every, jac_every = cfg.n_steps, cfg.output_every, cfg.jacobian_every
+        ros2, coupling = cfg.integrator == "ros2", cfg.jacobian_coupling
+        stop_ponr = cfg.stop_at_point_of_no_return
+        gh, h15, h05 = ROS2_GAMMA * h, 1.5 * h, 0.5 * h
+        monitor = RolloverMonitor(self.model.static_load_n, self._track_half_m,
+                                  self.vehicle.geometry.h_cg_m)
+        update = monitor.update
+        radii, corner_xy = self.model.rolling_radius_m, self.model.corner_xy
+        vfloor = self.model.slip_speed_floor_mps
+        w0, w1, w2, w3 = 1.0, 1.0, 1.0, 1.0
+        cvx, cvy, cwz = [0.0] * 4, [0.0] * 4, [0.0] * 4
+        atan2, asin, tan, sin, cos, isfinite = math.atan2, math.asin, math.tan, math.sin, math.cos, math.isfinite
+        uc = inputs_of(held) if held is not None else None
+        xs: list[list[float]] = []
+        fzs: list = []
+        ts: list[float] = []
+        stop = "horizon"
+        n = n_eval = 0
+        while True:
+            t_rel = n * h
+            if src is not None:
+                uc = inputs_of(src(t_rel))
+            f0, fz, (nx, ny, nz), kap, den = F(x, uc, env)
+            n_eval += 1
+            phi_v = atan2(ny, nz)  # road-relative roll, n_b = C_r^v e_z
+            record = n % out_every == 0 or n == n_steps
+            if record:
+                tt = tan(asin(max(-1.0, min(1.0, nx))))
+                xs.append(x)
+                fzs.append(fz)
+                ts.append(t_rel)
+                update(t_rel, fz, phi_v, x[9] - tt * sin(phi_v) * x[10] - tt * cos(phi_v) * x[11])
+                if stop_ponr and monitor.point_of_no_return is not None:
+                    stop = "point_of_no_return"
+                    break
+            if abs(phi_v) > ROLL_LIMIT_RAD:
+                stop = "roll_limit"
+                if not record:
+                    xs.append(x), fzs.append(fz), ts.append(t_rel)
+                break
+            if n >= n_steps:
+                break
+            if ros2:
+                if n % jac_every == 0:
+                    jd = jacobian(x, uc, fz, den)
+                    for k in range(4):
+                        if jd[k] > 0.0 or jd[k] != jd[k]:
+                            jd[k] = 0.0
+                    w0, w1, w2, w3 = (1.0 / (1.0 - gh * jd[0]), 1.0 / (1.0 - gh * jd[1]),
+                                      1.0 / (1.0 - gh * jd[2]), 1.0 / (1.0 - gh * jd[3]))
+                    if coupling:
+                        # d omega_dot / d v_l = J_kk * (d kappa / d v_l) / (d kappa / d omega)
+                        above = abs(x[6]) > vfloor
+                        for k in range(4):
+                            fac = -jd[k] * ((1.0 + kap[k]) if above else 1.0) / radii[k]
+                            cd, sd = uc[0][k]
+                            xi, yi = corner_xy[k]
+                            cvx[k] = gh * fac * cd
+                            cvy[k] = gh * fac * sd
+                            cwz[k] = gh * fac * (xi * sd - yi * cd)
+                k1 = f0
+                a6, a7, a11 = k1[6], k1[7], k1[11]
+                k1[12] = (k1[12] + cvx[0] * a6 + cvy[0] * a7 + cwz[0] * a11) * w0
+                k1[13] = (k1[13] + cvx[1] * a6 + cvy[1] * a7 + cwz[1] * a11) * w1
+                k1[14] = (k1[14] + cvx[2] * a6 + cvy[2] * a7 + cwz[2] * a11) * w2
+                k1[15] = (k1[15] + cvx[3] * a6 + cvy[3] * a7 + cwz[3] * a11) * w3
+                k2 = F([a + h * b for a, b in zip(x, k1)], uc, env)[0]
+                n_eval += 1
+                k2 = [c - 2.0 * b for b, c in zip(k1, k2)]
+                a6, a7, a11 = k2[6], k2[7], k2[11]
+                k2[12] = (k2[12] + cvx[0] * a6 + cvy[0] * a7 + cwz[0] * a11) * w0
+                k2[13] = (k2[13] + cvx[1] * a6 + cvy[1] * a7 + cwz[1] * a11) * w1
+                k2[14] = (k2[14] + cvx[2] * a6 + cvy[2] * a7 + cwz[2] * a11) * w2
+                k2[15] = (k2[15] + cvx[3] * a6 + cvy[3] * a7 + cwz[3] * a11) * w3
+                x = [a + h15 * b + h05 * c for a, b, c in zip(x, k1, k2)]
+            else:
+                f1 = F([a + h * b for a, b in zip(x, f0)], uc, env)[0]
+                n_eval += 1
+                x = [a + h05 * (b + c) for a, b, c in zip(x, f0, f1)]
+            n += 1
+            if not isfinite(x[6] + x[9] + x[12] + x[3] + x[4]):
+                stop = "non_finite"
+                break
+        return xs, fzs, ts, monitor, stop, n, n_eval
 
     def _result(self, init, xs, fzs, ts, env: Env, offset, monitor: RolloverMonitor, stop: str,
                 mode: str, n_steps: int, n_eval: int) -> PredictionResult:
