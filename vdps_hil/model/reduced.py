@@ -79,7 +79,8 @@ class ReducedLinearCore:
             ax = veh.axle(i)
             x_i, y_i = model.corner_xy[i]
             corners.append((i, x_i, y_i, ax.spring_c1_npm, ax.spring_c2_per_m, ax.spring_c3_m,
-                            ax.static_compression_m, ax.damper_nspm, model.rolling_radius_m[i],
+                            ax.static_compression_m + veh.tire.rolling_radius_m, ax.damper_nspm,
+                            model.rolling_radius_m[i],
                             model.c_kappa[i], model.c_alpha[i], model.m_u[i] * GRAVITY_MPS2))
         self.corners = tuple(corners)
         self.f = self._build()
@@ -98,7 +99,7 @@ class ReducedLinearCore:
         brakes = uc[2]
         wb = BRAKE_HOLD_SPEED_RADPS
         out = []
-        for (i, _x, _y, _c1, _c2, _c3, _sc, _ds, ri, ckap, _ca, _mg) in self.corners:
+        for (i, _x, _y, _c1, _c2, _c3, _sr, _ds, ri, ckap, _ca, _mg) in self.corners:
             jd = -(ri * ckap * ri / den[i]) * iw_inv if fz[i] > 0.0 else 0.0
             b = brakes[i]
             if b != 0.0:
@@ -152,69 +153,76 @@ class ReducedLinearCore:
             va = vx + wy * zw
             vb = vy - wx * zw
             csd, torques, brakes = uc
-            Fx = Fy = Fz = Mx = My = Mz = 0.0
+            Fx = Fy = Fz = Syz = Sxz = Sz = Hx = Hy = Hz = 0.0
             wd = [0.0, 0.0, 0.0, 0.0]
             fzs = [0.0, 0.0, 0.0, 0.0]
             kaps = [0.0, 0.0, 0.0, 0.0]
             dens = [0.0, 0.0, 0.0, 0.0]
-            for (i, xi, yi, c1, c2, c3, sc, ds, ri, ckap, calp, mug) in corners:
+            for (i, xi, yi, c1, c2, c3, sr, ds, ri, ckap, calp, mug) in corners:
                 # eq 14: rigid tire, deflection from the pose over the road plane
                 hw = hc + nx * xi + ny * yi
                 vwx = va - wz * yi
                 vwy = vb + wz * xi
                 vwz = vz + wx * yi - wy * xi
-                hsp = sc + r_load - hw
+                vn = nx * vwx + ny * vwy + nz * vwz
+                hsp = sr - hw
                 fsp = c1 * exp(c2 * (hsp - c3)) * hsp
                 if fsp + mug <= 0.0:  # eq 14 clamp: lift-off
                     fz = 0.0
                 else:
-                    fz = fsp - ds * (nx * vwx + ny * vwy + nz * vwz) + mug
+                    fz = fsp - ds * vn + mug
                     if fz < 0.0:
                         fz = 0.0
-                # eq 15-16: wheel axes in the road plane
+                # eq 15-16: e_l = (c - (c.n) n) / |.|, c = (cos d, sin d, 0); e_t = n x e_l = (n x c) / |.|
                 cd, sd = csd[i]
                 hn = cd * nx + sd * ny
-                lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
-                inv = 1.0 / sqrt(lx * lx + ly * ly + lz * lz)
-                lx, ly, lz = lx * inv, ly * inv, lz * inv
-                tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
-                vl = vwx * lx + vwy * ly + vwz * lz
+                inv = 1.0 / sqrt(1.0 - hn * hn)
+                vl = (vwx * cd + vwy * sd - hn * vn) * inv
                 den = vl if vl > 0.0 else -vl
                 if den < vfloor:
                     den = vfloor
                 om = x[12 + i]
                 kap = (ri * om - vl) / den
-                if fz > 0.0:
-                    fa = ckap * kap
-                    fb = -calp * atan((vwx * tx + vwy * ty + vwz * tz) / den)
-                else:
-                    fa = fb = 0.0
-                ftx = fa * lx + fb * tx + fz * nx
-                fty = fa * ly + fb * ty + fz * ny
-                ftz = fa * lz + fb * tz + fz * nz
-                rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz  # contact point
-                Mx += rcy * ftz - rcz * fty
-                My += rcz * ftx - rcx * ftz
-                Mz += rcx * fty - rcy * ftx
-                Fx += ftx
-                Fy += fty
-                Fz += ftz
                 tq = torques[i]
                 b = brakes[i]
                 if b != 0.0:
                     s = om / wb
                     tq -= b * (1.0 if s > 1.0 else (-1.0 if s < -1.0 else s))
-                wd[i] = (tq - ri * fa) * iw_inv
                 fzs[i] = fz
                 kaps[i] = kap
                 dens[i] = den
+                if fz <= 0.0:  # a wheel off the ground carries no force
+                    wd[i] = tq * iw_inv
+                    continue
+                fa = ckap * kap
+                ncz = nx * sd - ny * cd
+                vt = (nz * (vwy * cd - vwx * sd) + vwz * ncz) * inv
+                fb = -calp * atan(vt / den)
+                # F_tire = F_a e_l + F_b e_t + F_z n = A c + B (n x c) + (F_z - A (c.n)) n
+                A, B = fa * inv, fb * inv
+                C = fz - A * hn
+                ftx = A * cd - B * nz * sd + C * nx
+                fty = A * sd + B * nz * cd + C * ny
+                ftz = B * ncz + C * nz
+                Fx += ftx
+                Fy += fty
+                Fz += ftz
+                # moment about the CG at the contact point r_w - h_w n: summed as
+                # sum r_w x F_tire - n x sum h_w F_tire (all r_w share z_w)
+                Syz += yi * ftz
+                Sxz += xi * ftz
+                Sz += xi * fty - yi * ftx
+                Hx += hw * ftx
+                Hy += hw * fty
+                Hz += hw * ftz
+                wd[i] = (tq - ri * fa) * iw_inv
             ax_ = Fx * inv_m + gx
             ay_ = Fy * inv_m + gy
             az_ = Fz * inv_m + gz
             ux, uy, uz = gx - ax_, gy - ay_, gz - az_
-            Mx += s_muy * uz - zs_mu * uy
-            My += zs_mu * ux - s_mux * uz
-            Mz += s_mux * uy - s_muy * ux
+            Mx = Syz - zw * Fy - (ny * Hz - nz * Hy) + s_muy * uz - zs_mu * uy
+            My = zw * Fx - Sxz - (nz * Hx - nx * Hz) + zs_mu * ux - s_mux * uz
+            Mz = Sz - (nx * Hy - ny * Hx) + s_mux * uy - s_muy * ux
             tth = sth / cth
             return ([c00 * vx + c10 * vy + c20 * vz, c01 * vx + c11 * vy + c21 * vz,
                      c02 * vx + c12 * vy + c22 * vz,

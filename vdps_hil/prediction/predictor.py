@@ -711,10 +711,10 @@ class Predictor:
         return self._result(init, xs, fzs, ts, env, offset, monitor, stop, mode, n, n_eval)
 
     def _propagate_reduced(self, x: list, env: Env, held: Inputs | None, src: InputSource | None):
-        """The integration loop of :meth:`predict` on :class:`ReducedLinearCore` (same steps,
-        same stop rules and the same ROS2 W-method as the generic loop; the wheel-spin Jacobian
-        in closed form instead of a forward difference). Returns (states, loads, times, monitor,
-        stop reason, steps, f-evaluations)."""
+        """The integration loop of :meth:`predict` on :class:`ReducedLinearCore`: the same steps,
+        stop rules and ROS2 W-method as the generic loop, with the wheel-spin Jacobian in closed
+        form instead of a forward difference and the W-solve written out for the four wheel rows.
+        Returns (states, loads, times, monitor, stop reason, steps, f-evaluations)."""
         cfg = self.config
         core = self.reduced_core
         F, jacobian, inputs_of = core.f, core.wheel_spin_jacobian, core.inputs
@@ -728,8 +728,9 @@ class Predictor:
         update = monitor.update
         radii, corner_xy = self.model.rolling_radius_m, self.model.corner_xy
         vfloor = self.model.slip_speed_floor_mps
-        w0, w1, w2, w3 = 1.0, 1.0, 1.0, 1.0
-        cvx, cvy, cwz = [0.0] * 4, [0.0] * 4, [0.0] * 4
+        w0 = w1 = w2 = w3 = 1.0
+        cx0 = cx1 = cx2 = cx3 = cy0 = cy1 = cy2 = cy3 = cz0 = cz1 = cz2 = cz3 = 0.0
+        uc_c = kc = None
         atan2, asin, tan, sin, cos, isfinite = math.atan2, math.asin, math.tan, math.sin, math.cos, math.isfinite
         uc = inputs_of(held) if held is not None else None
         xs: list[list[float]] = []
@@ -761,43 +762,48 @@ class Predictor:
                 break
             if n >= n_steps:
                 break
-            if ros2:
-                if n % jac_every == 0:
-                    jd = jacobian(x, uc, fz, den)
-                    for k in range(4):
-                        if jd[k] > 0.0 or jd[k] != jd[k]:
-                            jd[k] = 0.0
-                    w0, w1, w2, w3 = (1.0 / (1.0 - gh * jd[0]), 1.0 / (1.0 - gh * jd[1]),
-                                      1.0 / (1.0 - gh * jd[2]), 1.0 / (1.0 - gh * jd[3]))
-                    if coupling:
-                        # d omega_dot / d v_l = J_kk * (d kappa / d v_l) / (d kappa / d omega)
-                        above = abs(x[6]) > vfloor
-                        for k in range(4):
-                            fac = -jd[k] * ((1.0 + kap[k]) if above else 1.0) / radii[k]
-                            cd, sd = uc[0][k]
-                            xi, yi = corner_xy[k]
-                            cvx[k] = gh * fac * cd
-                            cvy[k] = gh * fac * sd
-                            cwz[k] = gh * fac * (xi * sd - yi * cd)
-                k1 = f0
-                a6, a7, a11 = k1[6], k1[7], k1[11]
-                k1[12] = (k1[12] + cvx[0] * a6 + cvy[0] * a7 + cwz[0] * a11) * w0
-                k1[13] = (k1[13] + cvx[1] * a6 + cvy[1] * a7 + cwz[1] * a11) * w1
-                k1[14] = (k1[14] + cvx[2] * a6 + cvy[2] * a7 + cwz[2] * a11) * w2
-                k1[15] = (k1[15] + cvx[3] * a6 + cvy[3] * a7 + cwz[3] * a11) * w3
-                k2 = F([a + h * b for a, b in zip(x, k1)], uc, env)[0]
-                n_eval += 1
-                k2 = [c - 2.0 * b for b, c in zip(k1, k2)]
-                a6, a7, a11 = k2[6], k2[7], k2[11]
-                k2[12] = (k2[12] + cvx[0] * a6 + cvy[0] * a7 + cwz[0] * a11) * w0
-                k2[13] = (k2[13] + cvx[1] * a6 + cvy[1] * a7 + cwz[1] * a11) * w1
-                k2[14] = (k2[14] + cvx[2] * a6 + cvy[2] * a7 + cwz[2] * a11) * w2
-                k2[15] = (k2[15] + cvx[3] * a6 + cvy[3] * a7 + cwz[3] * a11) * w3
-                x = [a + h15 * b + h05 * c for a, b, c in zip(x, k1, k2)]
-            else:
+            if not ros2:
                 f1 = F([a + h * b for a, b in zip(x, f0)], uc, env)[0]
                 n_eval += 1
                 x = [a + h05 * (b + c) for a, b, c in zip(x, f0, f1)]
+            else:
+                if n % jac_every == 0:
+                    j0, j1, j2, j3 = [0.0 if (j > 0.0 or j != j) else j for j in jacobian(x, uc, fz, den)]
+                    w0, w1, w2, w3 = (1.0 / (1.0 - gh * j0), 1.0 / (1.0 - gh * j1),
+                                      1.0 / (1.0 - gh * j2), 1.0 / (1.0 - gh * j3))
+                    if coupling:
+                        if uc is not uc_c:
+                            # gh / r_i times (cos d_i, sin d_i, x_i sin d_i - y_i cos d_i): v_l -> v_x, v_y, omega_z
+                            uc_c = uc
+                            kc = ([gh / radii[k] * uc[0][k][0] for k in range(4)]
+                                  + [gh / radii[k] * uc[0][k][1] for k in range(4)]
+                                  + [gh / radii[k] * (corner_xy[k][0] * uc[0][k][1] - corner_xy[k][1] * uc[0][k][0])
+                                     for k in range(4)])
+                        # d omega_dot / d v_l = J_kk * (d kappa / d v_l) / (d kappa / d omega)
+                        if abs(x[6]) > vfloor:
+                            q = (-j0 * (1.0 + kap[0]), -j1 * (1.0 + kap[1]), -j2 * (1.0 + kap[2]),
+                                 -j3 * (1.0 + kap[3]))
+                        else:
+                            q = (-j0, -j1, -j2, -j3)
+                        (cx0, cx1, cx2, cx3, cy0, cy1, cy2, cy3, cz0, cz1, cz2, cz3) = [
+                            a * b for a, b in zip(q + q + q, kc)]
+                # stage 1: k1 = W^-1 f(x_n) (W = I on the body rows)
+                k1 = f0
+                a6, a7, a11 = k1[6], k1[7], k1[11]
+                k1[12] = (k1[12] + cx0 * a6 + cy0 * a7 + cz0 * a11) * w0
+                k1[13] = (k1[13] + cx1 * a6 + cy1 * a7 + cz1 * a11) * w1
+                k1[14] = (k1[14] + cx2 * a6 + cy2 * a7 + cz2 * a11) * w2
+                k1[15] = (k1[15] + cx3 * a6 + cy3 * a7 + cz3 * a11) * w3
+                # stage 2: k2 = W^-1 (f(x_n + h k1) - 2 k1); x_n+1 = x_n + 3/2 h k1 + 1/2 h k2
+                f1 = F([a + h * b for a, b in zip(x, k1)], uc, env)[0]
+                n_eval += 1
+                xn = [a + h15 * b + h05 * (c - 2.0 * b) for a, b, c in zip(x, k1, f1)]  # body rows
+                a6, a7, a11 = f1[6] - 2.0 * k1[6], f1[7] - 2.0 * k1[7], f1[11] - 2.0 * k1[11]
+                xn[12] = x[12] + h15 * k1[12] + h05 * (f1[12] - 2.0 * k1[12] + cx0 * a6 + cy0 * a7 + cz0 * a11) * w0
+                xn[13] = x[13] + h15 * k1[13] + h05 * (f1[13] - 2.0 * k1[13] + cx1 * a6 + cy1 * a7 + cz1 * a11) * w1
+                xn[14] = x[14] + h15 * k1[14] + h05 * (f1[14] - 2.0 * k1[14] + cx2 * a6 + cy2 * a7 + cz2 * a11) * w2
+                xn[15] = x[15] + h15 * k1[15] + h05 * (f1[15] - 2.0 * k1[15] + cx3 * a6 + cy3 * a7 + cz3 * a11) * w3
+                x = xn
             n += 1
             if not isfinite(x[6] + x[9] + x[12] + x[3] + x[4]):
                 stop = "non_finite"
