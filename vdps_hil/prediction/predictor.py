@@ -83,12 +83,22 @@ component): 0.88 m after 5 s of the left turn at h = 10 ms; with it 2.7 mm. Meas
 explicit RK2 at 1 ms (``tools/bench_predictor.py``, true parameters, 5 s)::
 
     case                     h = 10 ms (default)          h = 20 ms
-    left turn (Fig 8)        2.7 mm, 0.001 deg, 15 ms     5.6 mm, 0.005 deg, 7.5 ms
+    left turn (Fig 8)        2.7 mm, 0.001 deg, 7 ms      5.6 mm, 0.005 deg, 3.7 ms
     T2 = T3 = 1000 N m       0.22 m, 0.21 deg             0.44 m, 0.42 deg
     fishhook-suv (to PONR)   4 mm, 0.59 deg, same PONR    6 mm, 0.98 deg, same PONR
 
-(time of one 5 s prediction in pure Python; explicit RK2 at 1 ms takes 97 ms). ``rk2`` (Heun,
-explicit) is available for reference and needs h below the wheel-spin stability limit.
+(CPU time of one 5 s prediction in pure Python, best of 15; explicit RK2 at 1 ms takes 56 ms).
+``rk2`` (Heun, explicit) is available for reference and needs h below the wheel-spin stability
+limit.
+
+Evaluation of the core: with the paper's model and effect set (reduced model, ``linear_tire``
+alone or with static rolling-radius factors) the steps call
+:class:`vdps_hil.model.reduced.ReducedLinearCore` -- the same equations as ``Model.f``
+specialised once per model and per input value, with the wheel-spin Jacobian in closed form
+(equal to the forward difference of ``Model.f``) -- instead of the generic ``Model.f``. Same
+trajectory to rounding (3e-13 m, 2e-13 deg; ``tests/test_predictor.py``); 14.6 -> 6.6-7.3 ms per
+5 s prediction (``tools/bench_predictor.py``). Every other effect set, the ``unsprung_dof``
+variant and ``Predictor(..., fast=False)`` take the generic path.
 
 Stop conditions: the horizon, the predicted point of no return (``model.rollover`` definition,
 applied to the predicted trajectory; with ``stop_at_point_of_no_return``), |phi_v| > 85 deg or a
