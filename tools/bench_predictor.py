@@ -23,14 +23,15 @@ Usage::
     .venv/bin/python tools/bench_predictor.py [--repeat 15] [--json out.json]
 
 First bar: <= 20 ms for a 5 s prediction; goal 5 ms. Measured (CPU time, best of 15, Python
-3.11, shared 2-core VM, load average 1-5; left turn / Fig 9 rollover, 5 s, 500 steps, 1001
-f-evaluations)::
+3.11, shared 2-core VM at load average 5-6; 5 s horizon, 500 steps)::
 
-    generic core path (before)      14.6 ms / 14.8 ms     (1251 f-evaluations)
-    configured (reduced core)        6.6 ms /  6.7 ms     difference to the generic path <= 3e-13 m,
-                                                          2e-13 deg, same stop and PONR
-    fishhook-suv (stops at PONR)     1.3 ms (generic 2.8 ms)
+                                    left turn (Fig 8)   T2 = T3 = 1000 N m   fishhook-suv (to PONR)
+    generic core path (Model.f)     15.0 ms (1251 f)    14.7 ms              2.8 ms
+    configured (reduced core)        7.3 ms (1001 f)     7.3 ms              1.4 ms
+    configured vs generic           2e-14 m, 2e-13 deg  1e-13 m, 2e-13 deg   5e-14 deg, same PONR
 
+(the code before this change: 14.6 ms for the left turn at load 0.3; the generic path here
+already has the RolloverMonitor early exit of this change.)
 The 5 ms goal is not met in pure Python: one evaluation of the reduced core costs ~4.2 us
 (1000 per prediction, ~4.2 ms), the ROS2 bookkeeping ~2 us per step. A compiled kernel of the
 same equations (numba, not a dependency) would be the way below it.
