@@ -3,7 +3,10 @@ loses nothing (senders' and receivers' counts, sequence counters), warns >= 1 s 
 of no return and rolls over without the ECU but not with it; no warning on paper-left-turn; the
 pipeline in its own process over the loopback-only TCP transport (and the slcan pty); the
 estimates of a live run are bit-identical to replaying its recording in the recorded input
-order; every socket the bench listens on is bound to 127.0.0.1.
+order; every socket the bench listens on is bound to 127.0.0.1. The rollover runs start the
+pipeline from parameters identified on a calibration drive of the same SUV (``--params``, as a
+car after its first drive): from the model file's priors the system's validity rule keeps every
+frame "not converged" through the 3.7 s fishhook (the cornering problem has not converged).
 
 CI_SPEED is a third of the highest speed at which tools/bench_hil.py showed nothing dropped for
 the embedded transport while running at that speed (3x on this 2-core machine with other jobs
@@ -36,7 +39,22 @@ def assert_nothing_lost(d: dict) -> None:
 
 
 @pytest.fixture(scope="module")
-def rollover_run(tmp_path_factory):
+def calibrated_params(tmp_path_factory):
+    """Parameters the chain identifies on the paper's drive of the SUV (the paper harness's
+    rollover calibration, seed 1000), saved as ``vdps replay --save-params`` does."""
+    from vdps_hil.identification.persistence import save_params
+    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.paper import ROLLOVER_CALIBRATION, chain_run
+
+    cal = chain_run(ROLLOVER_CALIBRATION, load_profile("table1-susp1k"), 1000, model="suv-model",
+                    truth_vehicle="suv-truth", predict=False, ident_report_period_s=1.0)
+    path = tmp_path_factory.mktemp("params") / "suv.json"
+    save_params(path, cal["identifier"].params, load_vehicle("suv-model"))
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def rollover_run(tmp_path_factory, calibrated_params):
     out = tmp_path_factory.mktemp("bench") / "fishhook.mcap"
     seen = []
 
@@ -44,13 +62,14 @@ def rollover_run(tmp_path_factory):
         s["listening"] = listening_sockets(s["pids"]["simulator"])
         seen.append(s)
 
-    r = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, output=str(out))).run(status)
+    r = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, output=str(out),
+                          params=calibrated_params)).run(status)
     return r.to_json(), out, seen
 
 
 def test_embedded_bench_loses_nothing_warns_early_and_rolls_over_without_the_ecu(rollover_run):
     d, _, seen = rollover_run
-    assert d["transport"] == "virtual" and d["speed"] == CI_SPEED and not d["react"]
+    assert d["transport"] == "virtual" and d["speed"] == CI_SPEED and not d["react"] and d["params"]
     assert_nothing_lost(d)
     assert d["rolled_over"] and d["stop_reason"] == "point_of_no_return"
     assert d["lead_reference"] == "this_run"
@@ -91,7 +110,7 @@ def test_recording_has_the_standard_layout(rollover_run):
     assert topics["/truth/state"].count >= 370  # 100 Hz to 3.72 s
 
 
-def test_live_estimates_are_bit_identical_to_a_replay_in_the_recorded_input_order(rollover_run):
+def test_live_estimates_are_bit_identical_to_a_replay_in_the_recorded_input_order(rollover_run, calibrated_params):
     _, out, _ = rollover_run
     with RecordingReader(out) as r:
         samples = input_order_samples(r)
@@ -99,7 +118,7 @@ def test_live_estimates_are_bit_identical_to_a_replay_in_the_recorded_input_orde
                 for topic in ("/est/state", "/est/prediction", "/est/ident")}
     assert not any(s.source.startswith("/truth") or s.kind.startswith("truth") for s in samples)
     p = load_profile("table1-susp1k")
-    system = make_system("suv-model", p.suspension.rate_hz, p.suspension.sigma_m)
+    system = make_system("suv-model", p.suspension.rate_hz, p.suspension.sigma_m, calibrated_params)
     replayed: dict = {k: [] for k in live}
     for s in samples:
         for o in system.handle(s):
@@ -115,8 +134,9 @@ def test_live_estimates_are_bit_identical_to_a_replay_in_the_recorded_input_orde
                                      for k, v in vals.items()}
 
 
-def test_with_react_the_ecu_brakes_and_the_suv_stays_upright():
-    d = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, react=True)).run().to_json()
+def test_with_react_the_ecu_brakes_and_the_suv_stays_upright(calibrated_params):
+    d = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, react=True,
+                          params=calibrated_params)).run().to_json()
     assert_nothing_lost(d)
     assert not d["rolled_over"] and d["stop_reason"] == "duration" and d["duration_s"] == pytest.approx(7.0)
     e = d["ecu"]
@@ -136,9 +156,11 @@ def test_no_warning_on_paper_left_turn():
     assert d["warning_frames_accepted"] > 0  # the warning is on the bus, 50 Hz ...
     assert math.isnan(d["first_warning_t_s"]) and d["false_alarms"] == 0  # ... never at level >= 2
     assert d["ecu"]["first_warning_t_s"] is None and d["ecu"]["max_level"] < 2
+    # from the priors: "not converged" until the cornering problem converges, then valid
+    assert 0 < d["warning_frames_not_valid"] < d["warning_frames_accepted"]
 
 
-def test_cross_process_bench_over_loopback_tcp():
+def test_cross_process_bench_over_loopback_tcp(calibrated_params):
     """The pipeline in its own process (python -m vdps_hil.hil.child), CAN over the socketcand
     protocol on 127.0.0.1 (the transport tools/bench_hil.py chose), serial on ptys; while it runs
     every socket either process listens on is on 127.0.0.1."""
@@ -148,7 +170,8 @@ def test_cross_process_bench_over_loopback_tcp():
         for pid in set(s["pids"].values()):
             sockets.extend(listening_sockets(pid))
 
-    d = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, can="tcp")).run(status).to_json()
+    d = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, can="tcp",
+                          params=calibrated_params)).run(status).to_json()
     assert d["transport"] == "tcp" and d["can"]["listen"].startswith("127.0.0.1:")
     assert_nothing_lost(d)
     assert d["rolled_over"] and d["warning_lead_time_s"] >= 1.0
@@ -175,6 +198,7 @@ def test_cross_process_bench_over_slcan_on_a_pty(tmp_path):
     ({"can": "tcp", "sim_can": "virtual:x"}, "--sim-can applies"),
     ({"faults": ("no_such_fault",)}, "unknown fault"),
     ({"vehicle": "sedan-model"}, "truth file is needed"),
+    ({"params": "/nonexistent/p.json"}, "cannot read"),
 ])
 def test_bad_configurations_are_one_line_errors(kw, words):
     with pytest.raises(BenchError) as e:

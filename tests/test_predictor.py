@@ -149,6 +149,50 @@ def test_ros2_at_10_ms_matches_rk2_at_1_ms(left_turn):
     assert np.max(np.linalg.norm(diag.pos_g_m - ref.pos_g_m, axis=1)) > 0.3
 
 
+def _assert_same_prediction(a, b, tol_m=1e-6, tol_deg=1e-6):
+    assert a.stop_reason == b.stop_reason and a.n_steps == b.n_steps and np.array_equal(a.t_s, b.t_s)
+    assert a.point_of_no_return_t_s == b.point_of_no_return_t_s and a.tip_up_t_s == b.tip_up_t_s
+    assert np.max(np.linalg.norm(a.pos_g_m - b.pos_g_m, axis=1)) < tol_m
+    assert np.degrees(np.max(np.abs(a.euler_v_rad - b.euler_v_rad))) < tol_deg
+    assert np.max(np.abs(a.normal_load_n - b.normal_load_n)) < 1e-3
+
+
+def test_fast_path_equals_the_generic_core_path(left_turn, paper_drive):
+    """The paper's configuration runs on model/reduced.py (the same equations specialised, the
+    wheel-spin Jacobian in closed form); ``fast=False`` steps the generic ``Model.f`` (the path
+    every other effect set takes). Same trajectory to 1 um / 1e-6 deg (measured ~1e-13) for held
+    inputs (ros2 default, ros2 without coupling, rk2), recorded inputs and a predicted rollover."""
+    sc, sim, snap, true_vehicle = left_turn
+    init = PredictorInitialState.from_truth_for_tests_only(snap)
+    for cfg in (PredictorConfig(), PredictorConfig(jacobian_coupling=False, output_every=3, horizon_s=2.0),
+                PredictorConfig(integrator="rk2", step_s=0.001, output_every=10, horizon_s=1.0)):
+        fast = Predictor(true_vehicle, cfg)
+        assert fast.reduced_core is not None
+        _assert_same_prediction(fast.predict(init), Predictor(true_vehicle, cfg, fast=False).predict(init))
+    # recorded inputs (the workbench's mode), with brakes
+    sc2, sim2 = paper_drive
+    rec = [s for s in sim2.truth if 5.1 - 1e-9 <= s["t_s"] <= 7.1 + 1e-9]
+    traj = InputTrajectory(np.array([s["t_s"] - 5.1 for s in rec]),
+                           np.array([s["steer_wheel_angle_rad"] for s in rec]),
+                           np.array([[s[f"wheel_torque_nm_{i}"] for i in range(1, 5)] for s in rec]),
+                           np.full((len(rec), 4), 150.0))
+    init2 = PredictorInitialState.from_truth_for_tests_only(rec[0])
+    cfg = PredictorConfig(horizon_s=2.0)
+    _assert_same_prediction(Predictor(true_vehicle, cfg).predict(init2, traj),
+                            Predictor(true_vehicle, cfg, fast=False).predict(init2, traj))
+    # a predicted rollover (stops at the point of no return)
+    sim3 = Simulator(scenario=load_scenario("fishhook-suv"))
+    sim3.step_to(1.9 + 1e-9)
+    suv = load_vehicle("suv-model").with_params(**sim3.scenario.vehicle.params.as_dict())
+    init3 = PredictorInitialState.from_truth_for_tests_only(sim3.snapshot())
+    a = Predictor(suv).predict(init3)
+    assert a.stop_reason == "point_of_no_return"
+    _assert_same_prediction(a, Predictor(suv, fast=False).predict(init3))
+    # other effect sets take the generic path
+    assert Predictor(true_vehicle, effects=sc.effect_set()).reduced_core is None
+    assert Predictor(true_vehicle).with_params({}).reduced_core is not None
+
+
 def test_held_and_input_driven_agree_for_constant_inputs(left_turn):
     sc, sim, snap, true_vehicle = left_turn
     init = PredictorInitialState.from_truth_for_tests_only(snap)

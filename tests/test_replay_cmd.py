@@ -118,6 +118,26 @@ def test_save_params_then_start_from_them(drive, tmp_path):
     assert code == 2 and "sedan-model" in text and len(text.strip().splitlines()) == 1
 
 
+def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_path):
+    """``vdps replay`` applies the system's validity rule by default: from the model file's priors
+    the warnings say "not converged" until the cornering problem converges (then valid); with
+    ``--params`` they are valid at once: only the chain ticks before the EKF initialises are "not
+    converged", as many as in a run without the identifier (nothing to wait for)."""
+    from vdps_hil.identification.persistence import save_params
+
+    saved = tmp_path / "p.json"
+    save_params(saved, load_vehicle("sedan-model").params, load_vehicle("sedan-model"))
+    st = {}
+    for name, extra in (("priors", ()), ("params", ("--params", str(saved))), ("no-ident", ("--no-identify",))):
+        code, _ = run("replay", str(drive), *extra, "--json", str(tmp_path / f"{name}.json"))
+        assert code == 0
+        st[name] = json.loads((tmp_path / f"{name}.json").read_text())["system"]["status"]
+    assert st["params"]["not_converged"] == st["no-ident"]["not_converged"] > 0
+    assert st["priors"]["not_converged"] >= st["params"]["not_converged"] + 50  # >= 0.5 s waiting
+    assert st["priors"]["valid"] > 0  # converged within the 3 s drive (seed 5)
+    assert sum(st["priors"].values()) == sum(st["params"].values())
+
+
 @pytest.mark.parametrize("args,needle", [
     (["--vehicle", "sedan-truth"], "truth file"),
     (["--dbc", "x.dbc"], "--signalmap"),

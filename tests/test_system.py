@@ -75,7 +75,59 @@ def test_warning_frames_decode_with_crc_and_counter_at_50_hz(paper_run):
     assert np.max(gaps) <= 30_000_000 and np.mean(gaps == 20_000_000) > 0.95  # a change is sent at once
     assert max(int(s.fields["warning_level"]) for s in got) < 2  # no warning (caution allowed)
     status = [int(s.fields["warning_status"]) for s in got]
-    assert status[-1] == 0 and status.count(0) > 0.9 * len(status)
+    # from the priors: "not converged" (1) until the cornering problem converges (~1.2 s here), then valid
+    assert set(status) <= {0, 1, 2} and status[0] == 1 and status[-1] == 0 and status.count(0) > 0.3 * len(status)
+
+
+def _live_status(cfg, samples):
+    """Step a live system; per decoded VDPS_Warning: (t_s, status, cornering converged before and
+    after the sample that sent it, EKF initialised)."""
+    system = VdpsSystem(MODEL, cfg)
+    dec, rows = VdpsCanDecoder(), []
+    for smp in samples:
+        before = system.identifier.converged["cornering"]
+        out = system.handle(smp)
+        after = system.identifier.converged["cornering"]
+        for o in out:
+            if isinstance(o, CanFrame):
+                for d in dec.decode(o.t_ns, o.arbitration_id, o.data):
+                    rows.append((o.t_ns * 1e-9, int(d.fields["warning_status"]), before, after,
+                                 system.pipeline.ekf.initialized))
+    return system, rows
+
+
+def test_warning_from_the_priors_is_valid_only_while_the_cornering_problem_has_converged(paper_samples):
+    """The system's default validity rule (configs/prediction/default.toml [warning]
+    require_converged = ["cornering"]): started from the model file's priors, every frame says
+    "not converged" (1) while the identifier's cornering problem has not converged and "valid" (0)
+    while it has (both phases occur in this 2.5 s drive: it converges at ~1.2 s)."""
+    system, rows = _live_status(SystemConfig.for_profile(1000.0, 0.001), paper_samples)
+    assert system.require_converged == ("cornering",)
+    settled = [r for r in rows if r[2] == r[3] and r[4] and r[1] != 2]  # the flag did not flip within the sample
+    assert len(settled) > 0.9 * len(rows)
+    assert all(r[1] == (0 if r[3] else 1) for r in settled)
+    assert sum(1 for r in settled if r[1] == 1) >= 10 and sum(1 for r in settled if r[1] == 0) >= 10
+
+
+def test_warning_from_identified_parameters_is_valid_at_once(paper_samples):
+    """Started from identified parameters (``start_params``, what ``--params`` sets): no gate, the
+    frames are valid from the node's first prediction after the EKF initialises, whatever the
+    identifier's flags; an explicit
+    ``require_converged`` overrides the rule either way; unknown problem names are refused."""
+    system, rows = _live_status(SystemConfig.for_profile(1000.0, 0.001, start_params=MODEL.params), paper_samples)
+    assert system.require_converged == ()
+    after_init = [r for r in rows if r[4]]
+    first_valid = next(k for k, r in enumerate(after_init) if r[1] == 0)
+    # the node says 1 until its first prediction is in (prediction_latency_s 20 ms): one frame here
+    assert after_init[first_valid][0] - after_init[0][0] <= 0.021
+    assert not any(r[1] == 1 for r in after_init[first_valid:])
+    assert any(not r[3] for r in after_init[first_valid:])  # valid although cornering had not converged yet
+    # explicit overrides
+    assert VdpsSystem(MODEL, SystemConfig(require_converged=())).require_converged == ()
+    assert VdpsSystem(MODEL, SystemConfig(start_params=MODEL.params,
+                                          require_converged=("mass",))).require_converged == ("mass",)
+    with pytest.raises(ValueError, match="unknown identification problem"):
+        VdpsSystem(MODEL, SystemConfig(require_converged=("cornering_stiffness",)))
 
 
 def test_replay_of_the_input_log_is_bit_identical(paper_samples):

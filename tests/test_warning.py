@@ -68,6 +68,20 @@ def test_warning_config_file_and_errors():
         WarningNodeConfig(period_s=0.0)
 
 
+def test_validity_rule_in_the_config_file():
+    """``require_converged`` (the system's validity rule, module docstring "Validity"): the file
+    names the cornering problem; names are checked against the identification problems."""
+    pol, _ = load_warning_config()
+    assert pol.require_converged == ("cornering",) == WarningPolicy().require_converged
+    pol, _ = warning_config_from_table({"require_converged": ["mass", "inertia"]})
+    assert pol.require_converged == ("mass", "inertia")
+    assert warning_config_from_table({"require_converged": []})[0].require_converged == ()
+    with pytest.raises(PredictionConfigError, match="unknown identification problem 'cornering_stiffness'"):
+        warning_config_from_table({"require_converged": ["cornering_stiffness"]})
+    with pytest.raises(PredictionConfigError, match="require_converged: expected a list"):
+        warning_config_from_table({"require_converged": "cornering"})
+
+
 # ----------------------------------------------------------------------------- the node
 def test_node_sends_at_50_hz_with_valid_crc_and_counter():
     node = WarningNode(WarningPolicy(), WarningNodeConfig(period_s=0.02, max_prediction_age_s=10.0))

@@ -33,8 +33,9 @@ Experiments (one row of the printed table each)
   and yaw error at the horizon's end, paper-style inaccuracy; paper 0.51 %).
 * **Warning validity**: a drive that starts from the model file's priors (deliberately wrong:
   C_alpha front x1.5, rear x0.6, an oversteering model) sends its warnings with status "not
-  converged" until the cornering problem has converged (``WARNING_REQUIRE_CONVERGED``,
-  ``SystemConfig.require_converged``; sigma/|x| < ``converged_rel_sigma``): from the priors the
+  converged" until the cornering problem has converged (the system's default policy:
+  ``require_converged`` in ``configs/prediction/default.toml`` ``[warning]``, applied when the
+  identifier starts from the priors; sigma/|x| < ``converged_rel_sigma``): from the priors the
   predictor foresaw rollovers in the paper's sine steering (2 of 20 seeds, at 0.8-2.0 s). The
   rollover and test-track drives start, as a car does after its first drive, from the
   parameters the chain identified on a calibration drive of the same vehicle
@@ -105,9 +106,6 @@ FUSION_WINDOW_S = (5.0, 10.0)
 IDENT_WINDOW_S = (5.0, T0_S)
 LEFT_TURN_END_S = 15.0
 FALSE_ALARM_SCENARIOS = ("lane-change-iso3888", "sine-sweep", "circle-iso4138")
-WARNING_REQUIRE_CONVERGED = ("cornering",)
-"""A drive that starts from the model file's priors sends valid warnings only once the cornering
-stiffnesses (the predictor's most sensitive parameters) have converged (module docstring)."""
 ROLLOVER_CALIBRATION = "paper"
 """The drive (same vehicle) whose identified parameters the rollover drive starts from."""
 
@@ -382,7 +380,7 @@ def identification_task(profile: str, seed: int, *, predict: bool = True, zero_n
 
         sc = replace(load_scenario(scenario), effect_names=tuple(effects_override))
     r = chain_run(sc, prof, seed, predict=predict, sheet_profile=sheet, capture_t_s=(T0_S,),
-                  fusion_window_s=FUSION_WINDOW_S, system_kw={"require_converged": WARNING_REQUIRE_CONVERGED})
+                  fusion_window_s=FUSION_WINDOW_S)
     tp = truth_params()
     rep = _report_at(r["ident"], T0_S)
     doc: dict = {"profile": profile, "seed": seed, "zero_noise": zero_noise, "wall_s": r["wall_s"]}
@@ -469,14 +467,15 @@ def _warning_summary(o, r) -> dict:
 
 def _start_kw(profile, seed: int, model: str, truth_vehicle: str | None, calibration: str | None):
     """SystemConfig fields of a drive: from the parameters identified on a calibration drive of
-    the same vehicle (valid warnings from the start), or from the priors (warnings valid once
-    ``WARNING_REQUIRE_CONVERGED`` have converged); and a summary of the calibration."""
+    the same vehicle (valid warnings from the start), or from the priors (warnings valid once the
+    warning policy's ``require_converged`` problems have converged: the system's default rule);
+    and a summary of the calibration."""
     if not calibration:
-        return {"require_converged": WARNING_REQUIRE_CONVERGED}, None
+        return {}, None
     cal = chain_run(calibration, profile, seed + 1000, model=model, truth_vehicle=truth_vehicle, predict=False,
                     ident_report_period_s=1.0)
     start = cal["identifier"].params
-    return ({"start_params": start, "require_converged": ()},
+    return ({"start_params": start},
             {"scenario": calibration, "seed": seed + 1000, "rel_err": relative_errors(start.as_dict(),
                                                                                        truth_params(model))})
 

@@ -81,10 +81,13 @@ wheel speeds and suspension (the pipeline's own defaults are 5/5/2 Hz). The iner
 the 1 Hz excitation of the paper's scenario by tens of degrees and I_x came out 3x too high on
 a zero-noise drive (+215 %; 20 Hz: +33 %).
 
-Warning status sent with each frame: 1 "not converged" until the EKF is initialised (and,
-if ``require_converged`` names identification problems, until they have converged), 2 "sensor
-missing" when the held inputs (steering, wheel torques) or a rate/wheel speed are missing, else
-0; the node itself sends 3 "fault" for a stale prediction.
+Warning status sent with each frame: 1 "not converged" until the EKF is initialised and, when
+the identifier started from the model file's priors (no ``start_params``, i.e. no ``--params``),
+until the identification problems named in the warning policy's ``require_converged``
+(``configs/prediction/default.toml``: ``["cornering"]``) have converged; 2 "sensor missing" when
+the held inputs (steering, wheel torques) or a rate/wheel speed are missing, else 0; the node
+itself sends 3 "fault" for a stale prediction. ``SystemConfig.require_converged`` set to a tuple
+overrides that rule (``()``: never gate).
 
 File replay (``replay_file``, the library function of ``vdps replay`` and of the batch tasks):
 ``record.decode`` (only ``/raw/``) -> optional sensor-set kind map and calibration nodes ->
@@ -246,7 +249,7 @@ class SystemConfig:
     warning_policy: Any = None  # WarningPolicy
     warning_node: Any = None  # WarningNodeConfig
     warning_bus: str = "vdps"
-    require_converged: tuple[str, ...] = ()
+    require_converged: tuple[str, ...] | None = None  # None: the warning policy's, if started from the priors
     model_effects: Any = None  # EffectSet of a saved workbench model: dynamics join the predictor,
     # IMU measurement effects are removed from the readings (estimation.imu_correction)
 
@@ -430,6 +433,8 @@ class VdpsSystem:
         self.identifier = Identifier(model_vehicle, cfg.ident, start=cfg.start_params) if cfg.identify else None
         self._chain = None
         self._chain_params = None
+        self.require_converged: tuple[str, ...] = ()
+        """Problems whose convergence makes a warning valid (module docstring); () = no gate."""
         if cfg.predict:
             from vdps_hil.prediction.predictor import Predictor, load_predictor_config
             from vdps_hil.prediction.warning import WarningChain, load_warning_config
@@ -446,6 +451,12 @@ class VdpsSystem:
             self._chain = WarningChain(Predictor(model_vehicle.with_params(**params.as_dict()), pcfg, peff),
                                        pol, node)
             self._chain_params = params
+            rc = cfg.require_converged
+            if rc is None:  # the policy's rule: gate only a chain started from the priors
+                rc = getattr(pol, "require_converged", ()) if cfg.start_params is None else ()
+            self.require_converged = tuple(rc)
+            if self.identifier is not None and not set(rc) <= set(self.identifier.converged):
+                raise ValueError(f"require_converged: unknown identification problem in {rc!r}")
         self._imu_corr = None
         if cfg.model_effects is not None:
             from vdps_hil.estimation.imu_correction import ImuEffectCorrection
@@ -600,9 +611,9 @@ class VdpsSystem:
                 status = WarningStatus.VALID
             except ValueError:
                 status = WarningStatus.SENSOR_MISSING
-            if status == WarningStatus.VALID and self.config.require_converged and self.identifier is not None:
+            if status == WarningStatus.VALID and self.require_converged and self.identifier is not None:
                 conv = self.identifier.converged
-                if not all(conv.get(n, False) for n in self.config.require_converged):
+                if not all(conv.get(n, False) for n in self.require_converged):
                     status = WarningStatus.NOT_CONVERGED
         elif self.pipeline.ekf.initialized:
             return  # between estimate instants: the chain runs at the estimate cadence

@@ -58,10 +58,14 @@ drive torque cut, brake pressure 0 -> full in 300 ms, 2500 N m per wheel on all 
 @click.option("--profile", default=None, metavar="NAME", help="Sensor profile [default: table1-susp1k].")
 @click.option("-o", "--output", default=None, metavar="FILE.mcap",
               help="Record the session: raw topics as the pipeline received them, /decoded, /est, /truth.")
+@click.option("--params", default=None, metavar="FILE",
+              help="Start the pipeline from saved identified parameters (vdps replay --save-params): "
+                   "warnings valid at once [default: the model file's priors, warnings valid once "
+                   "the cornering stiffnesses converge].")
 @click.option("--quiet", is_flag=True, help="No live status line.")
 @json_option
 def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec, sim_can, react, seed, profile,
-          output, quiet, json_out):
+          output, params, quiet, json_out):
     """Run the hardware-in-the-loop bench on one machine with nothing plugged in: the simulated
     vehicle on CAN and serial ports in real time, the live pipeline, its warning on CAN, a
     simulated ECU. Prints what happened: warning time, lead time, ECU action, upright or not."""
@@ -78,7 +82,7 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
     try:
         cfg = BenchConfig(scenario=scenario, vehicle=vehicle, model=model, effects=tuple(effects),
                           faults=tuple(faults), duration_s=duration_s, speed=speed, can=can_spec, sim_can=sim_can,
-                          react=react, output=output, seed=seed, profile=profile)
+                          react=react, output=output, seed=seed, profile=profile, params=params)
         b = Bench(cfg)
     except (BenchError, ValueError) as e:
         raise UserError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None

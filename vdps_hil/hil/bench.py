@@ -56,6 +56,13 @@ Results (``BenchResult.to_json``): the ``--json`` keys of ``vdps bench`` (``hil`
 seconds per wall second achieved), ``late_sends``; plus details (IMU packets, pipeline keeps
 up, ECU actions, first warning, truth events, transport).
 
+Warning validity: the pipeline is the system's (:class:`vdps_hil.system.VdpsSystem`) with its
+default rule: started from the model file's priors its frames say "not converged" until the
+cornering problem has converged (a few seconds of driving; never within a 3.7 s fishhook), so
+lead times count no frame; ``params`` (``--params FILE``, a file saved by ``vdps replay
+--save-params``) starts it from identified parameters, as a car after its first drive, and its
+frames are valid at once.
+
 The pipeline *keeps up* when nothing was lost and its slowest output cycle was out within
 ``max_lag_s`` (default 0.25 s wall) of its input: a pipeline falling behind shows as a growing
 latency and, once the wires' buffers are full, as lost data.
@@ -88,7 +95,7 @@ from .latency import CycleLog, cycle_latencies, latency_summary, lead_times, ref
 from .pacing import DEFAULT_LATE_TOLERANCE_S, BenchClock
 from .transports import PtySerialDevice, parse_transport
 
-__all__ = ["BenchConfig", "Bench", "BenchResult", "BenchError", "make_system", "model_for",
+__all__ = ["BenchConfig", "Bench", "BenchResult", "BenchError", "make_system", "model_for", "start_params",
            "IMU_PACKET_BYTES"]
 
 IMU_PACKET_BYTES = 47
@@ -124,6 +131,7 @@ class BenchConfig:
     max_lag_s: float = 0.25
     switch_interval_s: float | None = 0.001
     start_delay_s: float = 0.3
+    params: str | None = None  # saved identified parameters the pipeline starts from (module docstring)
 
 
 def model_for(truth_name: str) -> str:
@@ -136,20 +144,34 @@ def model_for(truth_name: str) -> str:
     raise BenchError(f"no model file paired with vehicle {truth_name!r}: give --model FILE")
 
 
-def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float):
+def start_params(model: str, params: str):
+    """The identified parameters saved in ``params`` for the model vehicle file ``model``
+    (``ParamsFileError``, a ValueError, when the file is unusable)."""
+    from vdps_hil.identification.persistence import load_params
+    from vdps_hil.model.params import load_vehicle
+
+    return load_params(params, load_vehicle(model, "model")).params
+
+
+def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: str | None = None):
     """The VDPS pipeline for the bench: ``VdpsSystem`` with the model vehicle file and the
-    suspension sensor's rate and noise (its data sheet, from the sensor profile; not truth).
+    suspension sensor's rate and noise (its data sheet, from the sensor profile; not truth),
+    started from the priors or from a saved parameter file ``params``.
 
     ``model`` may also be a saved workbench model (``vdps diagnose --save-model``, schema
     ``vdps-model``): then the vehicle file it names, its identified parameters as the
-    identifier's start and its dynamics effects in the predictor, as ``vdps replay --model``."""
+    identifier's start and its effects in the chain, as ``vdps replay --model`` (with a
+    parameter file as well: refused)."""
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.system import SystemConfig, VdpsSystem
 
     saved = _saved_workbench_model(model)
     if saved is None:
         vehicle = load_vehicle(model, "model")
-        return VdpsSystem(vehicle, SystemConfig.for_profile(susp_rate_hz, susp_sigma_m))
+        start = start_params(model, params) if params is not None else None
+        return VdpsSystem(vehicle, SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=start))
+    if params is not None:
+        raise BenchError("give --params or a saved workbench model as --model (it carries its parameters), not both")
     from vdps_hil.workbench.model_file import ModelFileError, load_model
 
     try:
@@ -211,6 +233,11 @@ class Bench:
             raise BenchError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
         truth = c.vehicle or self.drive.scenario.raw.get("vehicle") or self.drive.vehicle.name
         self.model = c.model or model_for(str(truth))
+        if c.params is not None:
+            try:
+                start_params(self.model, c.params)
+            except (ValueError, OSError) as e:
+                raise BenchError(str(e).splitlines()[0]) from None
 
     # ------------------------------------------------------------------------------------------
     def run(self, status: Callable[[dict], None] | None = None) -> BenchResult:
@@ -415,7 +442,7 @@ class Bench:
         doc = {
             "scenario": self.drive.scenario.name, "vehicle": self.drive.vehicle.name, "model": self.model,
             "profile": self.drive.profile.name, "seed": self.drive.seed, "transport": self.transport.name,
-            "can": side.can.describe(), "speed": c.speed, "react": c.react,
+            "can": side.can.describe(), "speed": c.speed, "react": c.react, "params": c.params,
             "effects": list(self.drive.effect_set.names), "faults": [str(f) for f in c.faults],
             "duration_s": sim_s, "wall_time_s": wall,
             "realtime_factor": sim_s / wall if wall > 0 else math.nan,
@@ -458,7 +485,7 @@ class _LocalPipeline:
 
         try:
             sp = bench.drive.profile.suspension
-            system = make_system(bench.model, sp.rate_hz, sp.sigma_m)
+            system = make_system(bench.model, sp.rate_hz, sp.sigma_m, bench.config.params)
         except (ValueError, OSError) as e:
             raise BenchError(str(e).splitlines()[0]) from None
         self.node = PipelineNode(system, can_dev.pipeline_spec, serial["imu"].port, serial["gnss"].port, clock,
@@ -530,6 +557,8 @@ class _ChildPipeline:
                "--speed", repr(c.speed), "--work", str(work)]
         if self.part is not None:
             cmd += ["--output", str(self.part)]
+        if c.params is not None:
+            cmd += ["--params", str(c.params)]
         if c.switch_interval_s:
             cmd += ["--switch-interval", repr(c.switch_interval_s)]
         env = dict(os.environ)

@@ -43,6 +43,7 @@ def main(argv=None) -> int:
     ap.add_argument("--speed", type=float, required=True)
     ap.add_argument("--work", required=True)
     ap.add_argument("--output", default=None)
+    ap.add_argument("--params", default=None)
     ap.add_argument("--switch-interval", type=float, default=None)
     a = ap.parse_args(argv)
     # python-can's socketcand client logs every TCP read that splits a frame ("Got incomplete
@@ -63,7 +64,7 @@ def main(argv=None) -> int:
     clock = BenchClock(a.speed)
     writer = None
     try:
-        system = make_system(a.model, a.susp_rate_hz, a.susp_sigma_m)
+        system = make_system(a.model, a.susp_rate_hz, a.susp_sigma_m, a.params)
         if a.output:
             writer = RecordingWriter(a.output, metadata={"source": "vdps bench (pipeline process)"},
                                      sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)

@@ -51,16 +51,23 @@ class RolloverMonitor:
         self.static_loads_n = tuple(float(s) for s in static_loads_n)
         self.tip_angle_rad = static_tip_angle_rad(track_half_m, h_cg_m)
         self._low_since = {"left": None, "right": None}
+        self._thr = tuple(TIP_UP_LOAD_FRACTION * s for s in self.static_loads_n)
         self.tip_up: RolloverEvent | None = None
         self.point_of_no_return: RolloverEvent | None = None
         self.events: list[RolloverEvent] = []
 
     def update(self, t_s: float, normal_loads_n, roll_rel_road_rad: float,
                roll_rate_rel_road_radps: float) -> list[RolloverEvent]:
-        new: list[RolloverEvent] = []
         fz = normal_loads_n
-        thr = [TIP_UP_LOAD_FRACTION * s for s in self.static_loads_n]
-        low = {"left": fz[0] < thr[0] and fz[3] < thr[3], "right": fz[1] < thr[1] and fz[2] < thr[2]}
+        thr = self._thr
+        low_l = fz[0] < thr[0] and fz[3] < thr[3]
+        low_r = fz[1] < thr[1] and fz[2] < thr[2]
+        ls = self._low_since
+        if (not (low_l or low_r) and ls["left"] is None and ls["right"] is None
+                and (self.point_of_no_return is not None or abs(roll_rel_road_rad) <= self.tip_angle_rad)):
+            return []  # nothing can change (the common case; called every step by the predictor)
+        new: list[RolloverEvent] = []
+        low = {"left": low_l, "right": low_r}
         for side in ("left", "right"):
             if low[side]:
                 if self._low_since[side] is None:

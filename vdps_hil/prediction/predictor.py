@@ -83,12 +83,22 @@ component): 0.88 m after 5 s of the left turn at h = 10 ms; with it 2.7 mm. Meas
 explicit RK2 at 1 ms (``tools/bench_predictor.py``, true parameters, 5 s)::
 
     case                     h = 10 ms (default)          h = 20 ms
-    left turn (Fig 8)        2.7 mm, 0.001 deg, 15 ms     5.6 mm, 0.005 deg, 7.5 ms
+    left turn (Fig 8)        2.7 mm, 0.001 deg, 7 ms      5.6 mm, 0.005 deg, 3.7 ms
     T2 = T3 = 1000 N m       0.22 m, 0.21 deg             0.44 m, 0.42 deg
     fishhook-suv (to PONR)   4 mm, 0.59 deg, same PONR    6 mm, 0.98 deg, same PONR
 
-(time of one 5 s prediction in pure Python; explicit RK2 at 1 ms takes 97 ms). ``rk2`` (Heun,
-explicit) is available for reference and needs h below the wheel-spin stability limit.
+(CPU time of one 5 s prediction in pure Python, best of 15; explicit RK2 at 1 ms takes 56 ms).
+``rk2`` (Heun, explicit) is available for reference and needs h below the wheel-spin stability
+limit.
+
+Evaluation of the core: with the paper's model and effect set (reduced model, ``linear_tire``
+alone or with static rolling-radius factors) the steps call
+:class:`vdps_hil.model.reduced.ReducedLinearCore` -- the same equations as ``Model.f``
+specialised once per model and per input value, with the wheel-spin Jacobian in closed form
+(equal to the forward difference of ``Model.f``) -- instead of the generic ``Model.f``. Same
+trajectory to rounding (3e-13 m, 2e-13 deg; ``tests/test_predictor.py``); 14.6 -> 6.6-7.3 ms per
+5 s prediction (``tools/bench_predictor.py``). Every other effect set, the ``unsprung_dof``
+variant and ``Predictor(..., fast=False)`` take the generic path.
 
 Stop conditions: the horizon, the predicted point of no return (``model.rollover`` definition,
 applied to the predicted trajectory; with ``stop_at_point_of_no_return``), |phi_v| > 85 deg or a
@@ -126,6 +136,8 @@ from vdps_hil.model.core import Env, Inputs, Model, ackermann_angles
 from vdps_hil.model.effects import EffectConfigError, EffectSet, effects_from_names
 from vdps_hil.model.frames import compose_absolute, decompose_vehicle, dcm_global_to_vehicle
 from vdps_hil.model.params import CONFIG_DIR, IdentifiedParams, Vehicle
+from vdps_hil.model.reduced import ReducedLinearCore
+from vdps_hil.model.reduced import supports as reduced_supports
 from vdps_hil.model.rollover import RolloverMonitor
 from vdps_hil.units import NS_PER_S
 
@@ -481,7 +493,7 @@ class Predictor:
     truth). ``effects``: an EffectSet replacing the config's effect names (the workbench)."""
 
     def __init__(self, vehicle: Vehicle, config: PredictorConfig | None = None,
-                 effects: EffectSet | None = None):
+                 effects: EffectSet | None = None, *, fast: bool = True):
         if vehicle.kind != "model":
             raise ValueError(f"the predictor takes a model vehicle file, not a {vehicle.kind!r} file")
         self.config = config or PredictorConfig()
@@ -506,12 +518,17 @@ class Predictor:
         lay = self.model.layout
         self._wheel_slice = lay.wheel_spin
         self._n_state = lay.size
+        self.reduced_core = ReducedLinearCore(self.model) if fast and reduced_supports(self.model) else None
+        """The specialised evaluation of the same core (:mod:`vdps_hil.model.reduced`) when the
+        model allows it (the paper's reduced model and effect set) and ``fast``; else None and
+        every step calls ``model.f`` (the generic path, also the reference of the fast one)."""
 
     # ----------------------------------------------------------------- construction helpers
     def with_params(self, params: IdentifiedParams | Mapping[str, float]) -> "Predictor":
         """A new predictor with the identified parameters (never mutates this one)."""
         d = params.as_dict() if isinstance(params, IdentifiedParams) else dict(params)
-        return Predictor(self.vehicle.with_params(**d), self.config, self.effects)
+        return Predictor(self.vehicle.with_params(**d), self.config, self.effects,
+                         fast=self.reduced_core is not None)
 
     # ----------------------------------------------------------------- initial state
     def core_state(self, init: PredictorInitialState) -> tuple[list[float], Env, np.ndarray]:
@@ -588,6 +605,9 @@ class Predictor:
             mode, held, src = "driven", None, inputs
         else:
             raise TypeError("inputs must be None, Inputs, an InputTrajectory or a callable u(t_rel_s)")
+        if self.reduced_core is not None:
+            run = self._propagate_reduced(x, env, held, None if held is not None else src)
+            return self._result(init, *run[:3], env, offset, *run[3:5], mode, *run[5:])
         h = cfg.step_s
         n_steps = cfg.n_steps
         f = self.model.f
@@ -699,6 +719,106 @@ class Predictor:
                 stop = "non_finite"
                 break
         return self._result(init, xs, fzs, ts, env, offset, monitor, stop, mode, n, n_eval)
+
+    def _propagate_reduced(self, x: list, env: Env, held: Inputs | None, src: InputSource | None):
+        """The integration loop of :meth:`predict` on :class:`ReducedLinearCore`: the same steps,
+        stop rules and ROS2 W-method as the generic loop, with the wheel-spin Jacobian in closed
+        form instead of a forward difference and the W-solve written out for the four wheel rows.
+        Returns (states, loads, times, monitor, stop reason, steps, f-evaluations)."""
+        cfg = self.config
+        core = self.reduced_core
+        F, jacobian, inputs_of = core.f, core.wheel_spin_jacobian, core.inputs
+        h = cfg.step_s
+        n_steps, out_every, jac_every = cfg.n_steps, cfg.output_every, cfg.jacobian_every
+        ros2, coupling = cfg.integrator == "ros2", cfg.jacobian_coupling
+        stop_ponr = cfg.stop_at_point_of_no_return
+        gh, h15, h05 = ROS2_GAMMA * h, 1.5 * h, 0.5 * h
+        monitor = RolloverMonitor(self.model.static_load_n, self._track_half_m,
+                                  self.vehicle.geometry.h_cg_m)
+        update = monitor.update
+        radii, corner_xy = self.model.rolling_radius_m, self.model.corner_xy
+        vfloor = self.model.slip_speed_floor_mps
+        w0 = w1 = w2 = w3 = 1.0
+        cx0 = cx1 = cx2 = cx3 = cy0 = cy1 = cy2 = cy3 = cz0 = cz1 = cz2 = cz3 = 0.0
+        uc_c = kc = None
+        atan2, asin, tan, sin, cos, isfinite = math.atan2, math.asin, math.tan, math.sin, math.cos, math.isfinite
+        uc = inputs_of(held) if held is not None else None
+        xs: list[list[float]] = []
+        fzs: list = []
+        ts: list[float] = []
+        stop = "horizon"
+        n = n_eval = 0
+        while True:
+            t_rel = n * h
+            if src is not None:
+                uc = inputs_of(src(t_rel))
+            f0, fz, (nx, ny, nz), kap, den = F(x, uc, env)
+            n_eval += 1
+            phi_v = atan2(ny, nz)  # road-relative roll, n_b = C_r^v e_z
+            record = n % out_every == 0 or n == n_steps
+            if record:
+                tt = tan(asin(max(-1.0, min(1.0, nx))))
+                xs.append(x)
+                fzs.append(fz)
+                ts.append(t_rel)
+                update(t_rel, fz, phi_v, x[9] - tt * sin(phi_v) * x[10] - tt * cos(phi_v) * x[11])
+                if stop_ponr and monitor.point_of_no_return is not None:
+                    stop = "point_of_no_return"
+                    break
+            if abs(phi_v) > ROLL_LIMIT_RAD:
+                stop = "roll_limit"
+                if not record:
+                    xs.append(x), fzs.append(fz), ts.append(t_rel)
+                break
+            if n >= n_steps:
+                break
+            if not ros2:
+                f1 = F([a + h * b for a, b in zip(x, f0)], uc, env)[0]
+                n_eval += 1
+                x = [a + h05 * (b + c) for a, b, c in zip(x, f0, f1)]
+            else:
+                if n % jac_every == 0:
+                    j0, j1, j2, j3 = [0.0 if (j > 0.0 or j != j) else j for j in jacobian(x, uc, fz, den)]
+                    w0, w1, w2, w3 = (1.0 / (1.0 - gh * j0), 1.0 / (1.0 - gh * j1),
+                                      1.0 / (1.0 - gh * j2), 1.0 / (1.0 - gh * j3))
+                    if coupling:
+                        if uc is not uc_c:
+                            # gh / r_i times (cos d_i, sin d_i, x_i sin d_i - y_i cos d_i): v_l -> v_x, v_y, omega_z
+                            uc_c = uc
+                            kc = ([gh / radii[k] * uc[0][k][0] for k in range(4)]
+                                  + [gh / radii[k] * uc[0][k][1] for k in range(4)]
+                                  + [gh / radii[k] * (corner_xy[k][0] * uc[0][k][1] - corner_xy[k][1] * uc[0][k][0])
+                                     for k in range(4)])
+                        # d omega_dot / d v_l = J_kk * (d kappa / d v_l) / (d kappa / d omega)
+                        if abs(x[6]) > vfloor:
+                            q = (-j0 * (1.0 + kap[0]), -j1 * (1.0 + kap[1]), -j2 * (1.0 + kap[2]),
+                                 -j3 * (1.0 + kap[3]))
+                        else:
+                            q = (-j0, -j1, -j2, -j3)
+                        (cx0, cx1, cx2, cx3, cy0, cy1, cy2, cy3, cz0, cz1, cz2, cz3) = [
+                            a * b for a, b in zip(q + q + q, kc)]
+                # stage 1: k1 = W^-1 f(x_n) (W = I on the body rows)
+                k1 = f0
+                a6, a7, a11 = k1[6], k1[7], k1[11]
+                k1[12] = (k1[12] + cx0 * a6 + cy0 * a7 + cz0 * a11) * w0
+                k1[13] = (k1[13] + cx1 * a6 + cy1 * a7 + cz1 * a11) * w1
+                k1[14] = (k1[14] + cx2 * a6 + cy2 * a7 + cz2 * a11) * w2
+                k1[15] = (k1[15] + cx3 * a6 + cy3 * a7 + cz3 * a11) * w3
+                # stage 2: k2 = W^-1 (f(x_n + h k1) - 2 k1); x_n+1 = x_n + 3/2 h k1 + 1/2 h k2
+                f1 = F([a + h * b for a, b in zip(x, k1)], uc, env)[0]
+                n_eval += 1
+                xn = [a + h15 * b + h05 * (c - 2.0 * b) for a, b, c in zip(x, k1, f1)]  # body rows
+                a6, a7, a11 = f1[6] - 2.0 * k1[6], f1[7] - 2.0 * k1[7], f1[11] - 2.0 * k1[11]
+                xn[12] = x[12] + h15 * k1[12] + h05 * (f1[12] - 2.0 * k1[12] + cx0 * a6 + cy0 * a7 + cz0 * a11) * w0
+                xn[13] = x[13] + h15 * k1[13] + h05 * (f1[13] - 2.0 * k1[13] + cx1 * a6 + cy1 * a7 + cz1 * a11) * w1
+                xn[14] = x[14] + h15 * k1[14] + h05 * (f1[14] - 2.0 * k1[14] + cx2 * a6 + cy2 * a7 + cz2 * a11) * w2
+                xn[15] = x[15] + h15 * k1[15] + h05 * (f1[15] - 2.0 * k1[15] + cx3 * a6 + cy3 * a7 + cz3 * a11) * w3
+                x = xn
+            n += 1
+            if not isfinite(x[6] + x[9] + x[12] + x[3] + x[4]):
+                stop = "non_finite"
+                break
+        return xs, fzs, ts, monitor, stop, n, n_eval
 
     def _result(self, init, xs, fzs, ts, env: Env, offset, monitor: RolloverMonitor, stop: str,
                 mode: str, n_steps: int, n_eval: int) -> PredictionResult:

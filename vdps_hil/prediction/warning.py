@@ -40,6 +40,17 @@ caller's (estimator/identifier not converged, a sensor missing); 3 (fault) when 
 prediction is older than ``max_prediction_age_s``; 1 until the first prediction arrives. The
 level is sent whatever the status: a receiver acts on it only when the status is 0.
 
+Validity (``require_converged``)
+--------------------------------
+The predictor runs with the parameters identified so far. When the identifier started from the
+model file's priors (a first drive: no ``--params`` / ``SystemConfig.start_params``), the system
+(:class:`vdps_hil.system.VdpsSystem`) sends status 1 "not converged" until every identification
+problem named in ``require_converged`` (default ``["cornering"]``: the cornering stiffnesses, the
+predictor's most sensitive parameters) has converged (``Identifier.converged``: every sigma/|x|
+below ``converged_rel_sigma``); started from identified parameters, frames are valid at once.
+From the sedan-model priors (C_alpha front x1.5, rear x0.6: an oversteering model) the predictor
+foresaw rollovers in the paper's sine steering before the cornering problem converged.
+
 Lead time (acceptance figures)
 ------------------------------
 ``lead_time_s = t_PONR,truth - t(first valid frame with level >= warning)``, and
@@ -156,12 +167,25 @@ class WarningPolicy:
     caution_ltr: float = 0.9
     caution_on_predicted_rollover: bool = True
     hold_s: float = 0.5
+    require_converged: tuple[str, ...] = ("cornering",)
+    """Validity (module docstring, "Validity"): identification problems that must have converged
+    before a frame is sent with status 0 when the identifier started from the priors."""
 
     def __post_init__(self):
         for n in ("reaction_time_s", "margin_s", "imminent_time_s", "caution_ltr", "hold_s"):
             v = getattr(self, n)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise PredictionConfigError(f"warning.{n} must be a finite number >= 0, got {v!r}")
+        from vdps_hil.identification.problems import PROBLEM_NAMES
+
+        rc = self.require_converged
+        if isinstance(rc, str) or not all(isinstance(n, str) for n in rc):
+            raise PredictionConfigError(f"warning.require_converged must be a list of problem names, got {rc!r}")
+        unknown = sorted(set(rc) - set(PROBLEM_NAMES))
+        if unknown:
+            raise PredictionConfigError(f"warning.require_converged: unknown identification problem {unknown[0]!r} "
+                                        f"(known: {', '.join(PROBLEM_NAMES)})")
+        object.__setattr__(self, "require_converged", tuple(rc))
         if self.imminent_time_s > self.warning_time_s:
             raise PredictionConfigError("warning.imminent_time_s must not exceed reaction_time_s + margin_s")
 
@@ -215,6 +239,8 @@ def warning_config_from_table(t: Mapping, where: str = "[warning]") -> tuple[War
         raise PredictionConfigError(f"{where}: unknown key {unknown[0]!r}")
     if "caution_on_predicted_rollover" in t and not isinstance(t["caution_on_predicted_rollover"], bool):
         raise PredictionConfigError(f"{where}.caution_on_predicted_rollover: expected true or false")
+    if "require_converged" in t and not isinstance(t["require_converged"], list):
+        raise PredictionConfigError(f"{where}.require_converged: expected a list of problem names")
     pol = WarningPolicy(**{k: v for k, v in t.items() if k in _POLICY_KEYS})
     node = WarningNodeConfig(**{k: v for k, v in t.items() if k in _NODE_KEYS})
     return pol, node
