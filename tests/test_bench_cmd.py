@@ -99,6 +99,8 @@ def test_the_words_say_warning_time_lead_ecu_action_outcome_and_recording():
     (["--vehicle", "sedan-model"], "truth file is needed"),
     (["--fault", "no_such_fault"], "unknown fault"),
     (["-o", "/no/such/dir/x.mcap"], "does not exist"),
+    (["--calibrate", "no-such-scenario", "--quiet"], "--calibrate no-such-scenario"),
+    (["--calibrate", "paper", "--params", "p.json"], "not both"),
 ])
 def test_errors_are_one_line_with_exit_status_2(args, words, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -112,3 +114,19 @@ def test_help_shows_examples_and_the_transports(capsys):
     assert main(["bench", "--help"]) == 0
     out = capsys.readouterr().out
     assert "vdps bench --react -o bench.mcap" in out and "socketcan:vcan0" in out and "127.0.0.1" in out
+
+
+def test_calibrate_starts_the_pipeline_from_a_calibration_drive(tmp_path, capsys):
+    """``--calibrate paper``: the same SUV first drives the paper's scenario offline, the chain
+    identifies its parameters, and the bench's pipeline starts from them, so its warnings are
+    valid from the start (``make run`` uses this). 1.5 s of the fishhook at 1x."""
+    js = tmp_path / "b.json"
+    rc = main(["bench", "--calibrate", "paper", "--duration", "1.5", "--quiet", "--json", str(js)])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "calibration: pipeline started from the parameters identified on 'paper'" in text
+    doc = json.loads(js.read_text())
+    assert doc["calibration"]["scenario"] == "paper" and doc["calibration"]["converged"]["cornering"]
+    # valid from the first prediction on: only a frame sent before the estimator's first
+    # estimate may say "sensor missing" (from the priors about 240 frames say "not converged")
+    assert doc["params"] is not None and doc["warning_frames_not_valid"] <= 2 < doc["warning_frames_accepted"]

@@ -62,16 +62,21 @@ drive torque cut, brake pressure 0 -> full in 300 ms, 2500 N m per wheel on all 
               help="Start the pipeline from saved identified parameters (vdps replay --save-params): "
                    "warnings valid at once [default: the model file's priors, warnings valid once "
                    "the cornering stiffnesses converge].")
+@click.option("--calibrate", "calibrate_on", default=None, metavar="SCENARIO",
+              help="First drive SCENARIO (e.g. paper) with the same vehicle, offline, replay it with the "
+                   "identifier and start the pipeline from the parameters it identified (as --params).")
 @click.option("--quiet", is_flag=True, help="No live status line.")
 @json_option
 def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec, sim_can, react, seed, profile,
-          output, params, quiet, json_out):
+          output, params, calibrate_on, quiet, json_out):
     """Run the hardware-in-the-loop bench on one machine with nothing plugged in: the simulated
     vehicle on CAN and serial ports in real time, the live pipeline, its warning on CAN, a
     simulated ECU. Prints what happened: warning time, lead time, ECU action, upright or not."""
+    import tempfile
+    from dataclasses import replace
     from pathlib import Path
 
-    from vdps_hil.hil.bench import Bench, BenchConfig, BenchError
+    from vdps_hil.hil.bench import Bench, BenchConfig, BenchError, calibrate
 
     if output is not None:
         out = Path(output)
@@ -79,12 +84,23 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
             raise UserError(f"-o {output}: is a directory")
         if not out.parent.exists():
             raise UserError(f"-o {output}: directory {out.parent} does not exist")
+    if calibrate_on is not None and params is not None:
+        raise UserError("give --params or --calibrate, not both")
+    cal = None
+    tmp = tempfile.TemporaryDirectory(prefix="vdps-bench-cal-")
     try:
         cfg = BenchConfig(scenario=scenario, vehicle=vehicle, model=model, effects=tuple(effects),
                           faults=tuple(faults), duration_s=duration_s, speed=speed, can=can_spec, sim_can=sim_can,
                           react=react, output=output, seed=seed, profile=profile, params=params)
         b = Bench(cfg)
+        if calibrate_on is not None:
+            if not quiet:
+                click.echo(f"calibration: simulating '{calibrate_on}' with {b.truth_vehicle} and identifying "
+                           f"its parameters (offline) ...", err=True)
+            cal = calibrate(calibrate_on, b.truth_vehicle, b.model, tmp.name, profile=profile, seed=seed + 1000)
+            b = Bench(replace(cfg, params=cal["params"]))
     except (BenchError, ValueError) as e:
+        tmp.cleanup()
         raise UserError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
     to_stderr = json_out == "-"
     status = None if quiet else _StatusLine(sys.stderr)
@@ -97,6 +113,12 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
     if status is not None:
         status.end()
     doc = result.to_json()
+    tmp.cleanup()
+    if cal is not None:
+        conv = ", ".join(k for k, v in cal["converged"].items() if v) or "none"
+        doc["calibration"] = {k: v for k, v in cal.items() if k != "params"}
+        click.echo(f"calibration: pipeline started from the parameters identified on '{cal['scenario']}' "
+                   f"(seed {cal['seed']}, {cal['cpu_s']:.1f} s CPU; converged: {conv})", err=to_stderr)
     for line in describe(doc):
         click.echo(line, err=to_stderr)
     write_json(doc, json_out)

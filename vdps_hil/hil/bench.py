@@ -95,7 +95,7 @@ from .latency import CycleLog, cycle_latencies, latency_summary, lead_times, ref
 from .pacing import DEFAULT_LATE_TOLERANCE_S, BenchClock
 from .transports import PtySerialDevice, parse_transport
 
-__all__ = ["BenchConfig", "Bench", "BenchResult", "BenchError", "make_system", "model_for", "start_params",
+__all__ = ["BenchConfig", "Bench", "BenchResult", "BenchError", "calibrate", "make_system", "model_for", "start_params",
            "IMU_PACKET_BYTES"]
 
 IMU_PACKET_BYTES = 47
@@ -151,6 +151,28 @@ def start_params(model: str, params: str):
     from vdps_hil.model.params import load_vehicle
 
     return load_params(params, load_vehicle(model, "model")).params
+
+
+def calibrate(scenario: str, truth_vehicle: str, model: str, directory: str | os.PathLike, *,
+              profile: str | None = None, seed: int = 1000) -> dict:
+    """A calibration drive before the bench, as a car's first drive: the simulator drives
+    ``scenario`` with the bench's truth vehicle, the drive is recorded and replayed through the
+    chain with the identifier (``vdps replay --save-params``), and the identified parameters are
+    saved in ``directory``. Returns {scenario, seed, params (file), converged (per problem),
+    cpu_s}. The chain of the replay reads only the recording's /raw/ topics and the model file."""
+    from vdps_hil.sim.drive import CONFIG_ERRORS, DEFAULT_PROFILE, Drive
+    from vdps_hil.system import ReplayError, replay_file
+
+    d = Path(directory)
+    rec, out = d / f"calibration-{scenario}.mcap", d / f"calibration-{scenario}-params.json"
+    t0 = time.process_time()
+    try:
+        Drive(scenario, profile=profile or DEFAULT_PROFILE, seed=seed, vehicle=truth_vehicle).run(rec)
+        doc = replay_file(rec, vehicle=model, predict=False, save_params=out)
+    except CONFIG_ERRORS + (ReplayError,) as e:
+        raise BenchError(f"--calibrate {scenario}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
+    return {"scenario": scenario, "seed": seed, "params": str(out),
+            "converged": dict(doc["identification"]["converged"]), "cpu_s": time.process_time() - t0}
 
 
 def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: str | None = None):
@@ -232,6 +254,7 @@ class Bench:
         except CONFIG_ERRORS as e:
             raise BenchError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
         truth = c.vehicle or self.drive.scenario.raw.get("vehicle") or self.drive.vehicle.name
+        self.truth_vehicle = str(truth)  # the file or name the simulator drives (calibrate() drives it too)
         self.model = c.model or model_for(str(truth))
         if c.params is not None:
             try:
