@@ -98,6 +98,8 @@ def test_pipeline_tap_runs_the_system_live_and_reports_the_warning(tmp_path):
                 first_warning_t = lw["t_s"]
     assert first_warning_t is not None and first_warning_t < 3.72 - 1.0
     assert "warning level" in tap.status_line()
+    # from the priors the frames say whether they are valid yet (in words)
+    assert "valid" in tap.status_line()
     s = tap.summary()
     assert s["estimates"] > 100 and s["warning_frames"] > 50
     assert tap._decoder.total_rejected == 0
@@ -111,4 +113,14 @@ def test_pipeline_refuses_a_truth_vehicle_file(tmp_path):
              "-o", tmp_path / "z.mcap", "--duration", "1")
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1
     assert "model file is needed" in p.stderr
+    assert not (tmp_path / "z.mcap").exists()
+
+
+def test_pipeline_params_errors_are_one_line(tmp_path):
+    """``--params`` belongs to ``--pipeline``; an unreadable file is one line, exit 2, no file."""
+    for args, words in ((["--params", tmp_path / "p.json"], "--params applies to --pipeline"),
+                        (["--pipeline", "--params", tmp_path / "missing.json"], "cannot read")):
+        p = vdps("log", "--can", "vdps=virtual:x", *args, "-o", tmp_path / "z.mcap", "--duration", "1")
+        assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
+        assert words in p.stderr
     assert not (tmp_path / "z.mcap").exists()

@@ -126,9 +126,12 @@ class _Status:
                    "latest warning shows in the status line.")
 @click.option("--vehicle", default="sedan-model", show_default=True, metavar="FILE",
               help="Model vehicle file for --pipeline.")
+@click.option("--params", default=None, metavar="FILE",
+              help="--pipeline starts from saved identified parameters (vdps replay --save-params): "
+                   "warnings valid at once [default: the priors, valid once the cornering stiffnesses converge].")
 @json_option
 def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rotate_mb,
-        rotate_s, flush_s, quiet, pipeline, vehicle, json_out):
+        rotate_s, flush_s, quiet, pipeline, vehicle, params, json_out):
     """Record live CAN buses and serial devices losslessly into one MCAP.
 
     \b
@@ -158,6 +161,16 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
             model = load_vehicle(vehicle, expect_kind="model")
         except VehicleFileError as e:
             raise UserError(str(e)) from None
+        start = None
+        if params is not None:
+            from vdps_hil.identification.persistence import ParamsFileError, load_params
+
+            try:
+                start = load_params(params, model).params
+            except ParamsFileError as e:
+                raise UserError(str(e).splitlines()[0]) from None
+    elif params is not None:
+        raise UserError("--params applies to --pipeline")
     adapters, info, sigmap = build_live_adapters(can_specs, serial_specs, formats, signalmap,
                                                  dbcs)
     for a in adapters:  # devices first: a bad port fails before a file is created
@@ -197,7 +210,7 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     if pipeline:
-        tap = PipelineTap(model, writer)
+        tap = PipelineTap(model, writer, start)
     session = LogSession(adapters, writer, flush_s=flush_s, status=_Status(quiet), tap=tap)
     try:
         summary = session.run(stop, duration)
@@ -224,14 +237,14 @@ class PipelineTap:
     ``/est/can/<bus>``, and reports the latest warning for the status line. It never sends on
     the bus (the bench does); the recording lets ``vdps replay`` reproduce the run."""
 
-    def __init__(self, model_vehicle, writer):
+    def __init__(self, model_vehicle, writer, start_params=None):
         from vdps_hil.bus.samples import Sample
         from vdps_hil.codecs.can_codec import VdpsCanDecoder
-        from vdps_hil.system import CanFrame, VdpsSystem
+        from vdps_hil.system import CanFrame, SystemConfig, VdpsSystem
         from vdps_hil.estimation.pipeline import Estimate
 
         self._sample_type, self._frame_type, self._est_type = Sample, CanFrame, Estimate
-        self.system = VdpsSystem(model_vehicle)
+        self.system = VdpsSystem(model_vehicle, SystemConfig(start_params=start_params))
         self.writer = writer
         self._decoder = VdpsCanDecoder(source="pipeline")
         self.samples = self.estimates = self.frames = 0
@@ -264,8 +277,10 @@ class PipelineTap:
         if w is None:
             return f"pipeline: {self.samples} samples, {self.estimates} estimates, no warning frame yet"
         ttr = w.get("warning_time_to_rollover_s")
+        st = int(w["warning_status"])
+        words = {0: "valid", 1: "not valid: not converged", 2: "not valid: sensor missing", 3: "not valid: fault"}
         return (f"pipeline: {self.samples} samples, {self.estimates} estimates; warning level "
-                f"{int(w['warning_level'])} status {int(w['warning_status'])}"
+                f"{int(w['warning_level'])} ({words.get(st, f'status {st}')})"
                 + (f", time to rollover {ttr:.2f} s" if ttr is not None and ttr == ttr and ttr != float("inf") else ""))
 
     def summary(self) -> dict:
