@@ -371,3 +371,29 @@ def test_real_car_switches_are_off_for_the_paper_set():
     assert cfg.reacquire_after_gated == 0
     assert not e.layout().augmented and e.layout().n == 11
     assert {k.value for k in e.kinds()} == {"gnss_pos", "gnss_vel", "gnss_att", "y1_sus", "y2_sus_rate"}
+
+
+def test_wheel_speed_half_frames_are_not_rejects():
+    """The chassis bus carries the four wheel speeds in two frames (front, rear): each half is a
+    good sample, not a reject; a half with a bad value and a sample with no wheel speed are.
+    The filtered wheel speeds equal those of the same values in four-wheel samples."""
+    rng = np.random.default_rng(4)
+    halves, wholes = [], []
+    for k in range(200):
+        t = 1_000_000 * k
+        w = (20.0 + 0.01 * k + 0.02 * rng.standard_normal(4)).tolist()
+        halves += [Sample(t, "can.vdps", "wheel_speed", {"wheel_speed_radps_1": w[0], "wheel_speed_radps_2": w[1],
+                                                         "seq_counter": float(k % 256)}),
+                   Sample(t, "can.vdps", "wheel_speed", {"wheel_speed_radps_3": w[2], "wheel_speed_radps_4": w[3],
+                                                         "seq_counter": float(k % 256)})]
+        wholes.append(Sample(t, "can.vdps", "wheel_speed", dict(zip(
+            [f"wheel_speed_radps_{i}" for i in range(1, 5)], w))))
+    p_half, _ = _run(halves)
+    p_whole, _ = _run(wholes)
+    assert p_half.rejected()["wheel_speed"] == 0
+    assert p_half.filtered().wheel_speed_radps == p_whole.filtered().wheel_speed_radps
+    assert p_half.filtered().wheel_accel_radps2 == p_whole.filtered().wheel_accel_radps2
+    bad = [Sample(200_000_000, "can.vdps", "wheel_speed", {"wheel_speed_radps_3": math.nan, "wheel_speed_radps_4": 1.0}),
+           Sample(201_000_000, "can.vdps", "wheel_speed", {"seq_counter": 3.0})]
+    p_bad, _ = _run(halves + bad)
+    assert p_bad.rejected()["wheel_speed"] == 2

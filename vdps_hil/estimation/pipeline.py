@@ -99,6 +99,7 @@ _AR = axis_fields("angular_rate_radps")
 _SUSP = wheel_fields("susp_deflection_m")
 _WS = wheel_fields("wheel_speed_radps")
 _WT = wheel_fields("wheel_torque_nm")
+_WS_INDEX = {n: i for i, n in enumerate(_WS)}
 _NAN = math.nan
 
 
@@ -713,12 +714,21 @@ class EstimatorPipeline:
 
     def _on_wheel_speed(self, s: Sample, out: list) -> None:
         t = s.t_ns - self._lat["wheel"]
-        g = s.fields.get
-        w = [g(_WS[0], _NAN), g(_WS[1], _NAN), g(_WS[2], _NAN), g(_WS[3], _NAN)]
-        if self._ab_wheel.update(t, w) < 4:
+        # the wheels this sample carries (a CAN frame carries two of the four): a sample is
+        # rejected when it carries none or one of its values is unusable
+        idx, vals = [], []
+        for name, v in s.fields.items():
+            i = _WS_INDEX.get(name)
+            if i is not None:
+                idx.append(i)
+                vals.append(v)
+        if not idx or self._ab_wheel.update(t, vals, idx) < len(idx):
             self._rejected["wheel_speed"] += 1
         if not self._use_ws or not self.ekf.initialized:
             return
+        w = [_NAN, _NAN, _NAN, _NAN]
+        for i, v in zip(idx, vals):
+            w[i] = v
         recent = self._ws_recent
         recent.append((t, w))
         while recent and t - recent[0][0] > self._ws_window_ns:
