@@ -531,19 +531,20 @@ class VdpsSystem:
     # ------------------------------------------------------------------ internals
     def _step(self, s: Sample, out: list) -> None:
         p = self.pipeline
-        for o in p.handle(s):
-            if isinstance(o, Estimate):  # the system takes its own (module docstring)
-                continue
-            out.append(o)
+        res = p.handle(s)
+        if res:
+            out.extend(o for o in res if not isinstance(o, Estimate))  # the system takes its own (docstring)
         ekf = p.ekf
         if not ekf.initialized:
-            self._chain_tick(s.t_ns, None, out)
+            if self._chain is not None:
+                self._chain_tick(s.t_ns, None, out)
             return
         t = ekf.t_ns
         if self._next_est is None:
             self._next_est = t
         if t < self._next_est:
-            self._chain_tick(s.t_ns, None, out)
+            if self._chain is not None:
+                self._chain_tick(s.t_ns, None, out)
             return
         self._next_est = t - t % self._est_ns + self._est_ns
         est = p.estimate()
@@ -778,15 +779,20 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
         system = VdpsSystem(veh, config)
         system.clear_input_log()
         summary = _Summary()
+        handle, count = system.handle, summary.sample
+        n = 0
         try:
             for s in dec:
-                summary.sample(s)
+                count(s)
                 if kind_map and s.kind in kind_map:
                     s = Sample(s.t_ns, s.source, kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
                 for node in nodes:
                     s = node.process(s)
-                outs = system.handle(s)
-                system.clear_input_log()  # a file replay keeps the file, not a copy in memory
+                outs = handle(s)
+                n += 1
+                if n >= 4096:  # a file replay keeps the file, not a copy in memory
+                    system.clear_input_log()
+                    n = 0
                 if outs:
                     summary.outputs(outs, state["writer"])
             summary.outputs(system.finish(), state["writer"])
@@ -903,9 +909,15 @@ class _Summary:
         self.pred = {"predictions": 0, "rollover_predicted": 0, "min_time_to_point_of_no_return_s": None}
         self.frames = {"sent": 0, "max_level": 0}
         self.writer_errors = 0
+        self._keys: dict[str, dict[str, str]] = {}  # source -> kind -> "source/kind"
 
     def sample(self, s: Sample) -> None:
-        k = f"{s.source}/{s.kind}"
+        src = self._keys.get(s.source)
+        if src is None:
+            src = self._keys[s.source] = {}
+        k = src.get(s.kind)
+        if k is None:
+            k = src[s.kind] = f"{s.source}/{s.kind}"
         self.samples[k] = self.samples.get(k, 0) + 1
         if self.t_first is None:
             self.t_first = s.t_ns

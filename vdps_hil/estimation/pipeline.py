@@ -346,7 +346,7 @@ class EstimatorPipeline:
         self._counts["messages"] += 1
         kind = sample.kind
         fn = self._handlers.get(kind)
-        if fn is None or sample.source.startswith("/truth"):
+        if fn is None or sample.source[:6] == "/truth":
             if kind.startswith("truth") or sample.source.startswith("/truth"):
                 self._counts["truth_ignored"] += 1
             else:
