@@ -397,3 +397,47 @@ def test_wheel_speed_half_frames_are_not_rejects():
            Sample(201_000_000, "can.vdps", "wheel_speed", {"seq_counter": 3.0})]
     p_bad, _ = _run(halves + bad)
     assert p_bad.rejected()["wheel_speed"] == 2
+
+
+def _imu_late_by_chunks(samples, chunk_ns=5_000_000):
+    """Live arrival order: the IMU's samples come in read chunks, each after the other sensors'
+    samples of its window (a serial read window late), everything else on time."""
+    def key(s):
+        if s.kind == "imu":
+            return ((s.t_ns // chunk_ns + 1) * chunk_ns, 1)
+        return (s.t_ns, 0)
+    return sorted(samples, key=key)
+
+
+def test_measurements_wait_for_the_imu_up_to_their_time():
+    """A measurement that arrives before the IMU samples up to its time is held until they have
+    arrived: the IMU-late arrival order gives exactly the outputs of the time order (measurements
+    first at equal times). Without the hold (imu_hold_s = 0) the filter advances on a stale IMU
+    mean and the estimates differ."""
+    samples = list(_samples()[:12000])
+    in_time = sorted(samples, key=lambda s: (s.t_ns, s.kind == "imu"))
+    late = _imu_late_by_chunks(samples)
+    assert late != in_time
+    p_ref, out_ref = _run(in_time)
+    p_late, out_late = _run(late)
+    out_late += p_late.finish()
+    assert p_late.counters["held"] > 1000 and p_late.counters["hold_expired"] == 0
+    inn = lambda out: [(o.t_ns, o.kind, o.status, o.innovation) for o in out if isinstance(o, Innovation)]
+    assert len(inn(out_ref)) > 50 and inn(out_late) == inn(out_ref)
+    assert p_late.estimate() == p_ref.estimate()
+    p_old, out_old = _run(late, PipelineConfig(imu_hold_s=0.0))
+    assert p_old.counters["held"] == 0
+    assert max(abs(a - b) for a, b in zip(p_old.estimate().x, p_ref.estimate().x)) > 1e-6
+
+
+def test_held_measurements_are_released_when_the_imu_stops():
+    """The IMU stops at 4 s: the GNSS and chassis samples after it wait at most imu_hold_s of
+    sample time, then go on (counted), so the filter still takes the GNSS updates."""
+    samples = [s for s in _samples()[:12000] if not (s.kind == "imu" and s.t_ns > 4_000_000_000)]
+    p, out = _run(samples, PipelineConfig(imu_hold_s=0.05))
+    c = p.counters
+    assert c["hold_expired"] > 1500 and 40 <= c["holding"] <= 60  # the last 50 ms (1 kHz wheel speeds)
+    p.finish()
+    assert p.counters["holding"] == 0 and p.counters["hold_expired"] == c["hold_expired"]
+    late_updates = [o for o in out if isinstance(o, Innovation) and o.kind == "gnss_pos" and o.t_ns > 4.5e9]
+    assert late_updates

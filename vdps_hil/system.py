@@ -467,11 +467,15 @@ class VdpsSystem:
         return out
 
     def finish(self) -> list:
-        """End of the input: release a suspension window still open (replay of a file)."""
+        """End of the input: release a suspension window still open and the measurements the
+        pipeline still holds (replay of a file)."""
         out: list = []
         if self._susp is not None:
             for s in self._susp.finish():
                 self._step(s, out)
+        res = self.pipeline.finish()
+        if res:
+            self._after(res, self.pipeline.ekf.t_ns or 0, out)
         return out
 
     @classmethod
@@ -530,21 +534,25 @@ class VdpsSystem:
 
     # ------------------------------------------------------------------ internals
     def _step(self, s: Sample, out: list) -> None:
+        self._after(self.pipeline.handle(s), s.t_ns, out)
+
+    def _after(self, res: list, t_sample: int, out: list) -> None:
+        """The pipeline's outputs ``res`` for a sample of time ``t_sample``: pass them on, take
+        an estimate when the filter has passed the next estimate instant, identify, predict."""
         p = self.pipeline
-        res = p.handle(s)
         if res:
             out.extend(o for o in res if not isinstance(o, Estimate))  # the system takes its own (docstring)
         ekf = p.ekf
         if not ekf.initialized:
             if self._chain is not None:
-                self._chain_tick(s.t_ns, None, out)
+                self._chain_tick(t_sample, None, out)
             return
         t = ekf.t_ns
         if self._next_est is None:
             self._next_est = t
         if t < self._next_est:
             if self._chain is not None:
-                self._chain_tick(s.t_ns, None, out)
+                self._chain_tick(t_sample, None, out)
             return
         self._next_est = t - t % self._est_ns + self._est_ns
         est = p.estimate()
@@ -704,7 +712,7 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                 signalmap=None, bus_map: Mapping[str, str] | None = None, params=None, save_params=None,
                 config: SystemConfig | None = None, identify: bool = True, predict: bool = True,
                 susp_sigma_m: float = 0.001, paper_faithful=None, copy_raw: bool = True,
-                sensorset=None) -> dict:
+                sensorset=None, input_order: str = "time") -> dict:
     """Replay a recording's ``/raw/`` topics through :class:`VdpsSystem` (``vdps replay``).
 
     Decodes only ``/raw/`` (``record.decode``), runs the system, writes ``output`` (MCAP: the
@@ -719,7 +727,11 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     (``configs/sensorsets``; default: inferred from the fields the recording carries, e.g. an
     ESC cluster without suspension -> ``esc3``, no road angles). Without ``config`` the
     suspension window averaging is sized from the measured sample rate and ``susp_sigma_m``
-    (Table 1: 1 mm). Raises :class:`ReplayError` (one line)."""
+    (Table 1: 1 mm). ``input_order``: ``"time"`` (the decoded ``/raw/`` samples in time order) or
+    ``"recorded"`` (the ``/decoded/`` samples in the order a live system received them, metadata
+    ``hil.input_order`` of a ``vdps bench -o`` recording: the replay reproduces the live
+    estimates; the ``/raw/`` topics are still decoded for the counters and copied). Raises
+    :class:`ReplayError` (one line)."""
     import os
     import time
 
@@ -740,11 +752,24 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
         start = _load_workbench_model(model, veh, start)
     if save_params is not None and not identify:
         raise ReplayError("--save-params needs the identifier (drop --no-identify)")
+    if input_order not in ("time", "recorded"):
+        raise ReplayError(f"input order must be 'time' or 'recorded', got {input_order!r}")
     try:
         reader = RecordingReader(path)
     except RecordingError as e:
         raise ReplayError(str(e)) from None
     try:
+        recorded = None
+        if input_order == "recorded":
+            from vdps_hil.hil.node import INPUT_ORDER_METADATA, input_order_samples
+
+            if INPUT_ORDER_METADATA not in reader.metadata():
+                raise ReplayError(f"{os.fspath(path)}: no recorded input order (metadata {INPUT_ORDER_METADATA}, "
+                                  "written by vdps bench -o); use --input-order time")
+            try:
+                recorded = input_order_samples(reader)
+            except (ValueError, KeyError, IndexError, TypeError) as e:
+                raise ReplayError(f"{os.fspath(path)}: recorded input order unreadable: {e}") from None
         kind_map, nodes, sensors_desc = {}, [], None
         if config is None:
             config, kind_map, nodes, sensors_desc = _replay_config(
@@ -781,8 +806,13 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
         summary = _Summary()
         handle, count = system.handle, summary.sample
         n = 0
+        source = dec
+        if recorded is not None:
+            for _ in dec:  # the decoders' counters, and the raw copy
+                pass
+            source = recorded
         try:
-            for s in dec:
+            for s in source:
                 count(s)
                 if kind_map and s.kind in kind_map:
                     s = Sample(s.t_ns, s.source, kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
