@@ -421,7 +421,7 @@ def test_measurements_wait_for_the_imu_up_to_their_time():
     p_ref, out_ref = _run(in_time)
     p_late, out_late = _run(late)
     out_late += p_late.finish()
-    assert p_late.counters["held"] > 1000 and p_late.counters["hold_expired"] == 0
+    assert p_late.counters["held"] >= 50 and p_late.counters["hold_expired"] == 0
     inn = lambda out: [(o.t_ns, o.kind, o.status, o.innovation) for o in out if isinstance(o, Innovation)]
     assert len(inn(out_ref)) > 50 and inn(out_late) == inn(out_ref)
     assert p_late.estimate() == p_ref.estimate()
@@ -431,13 +431,15 @@ def test_measurements_wait_for_the_imu_up_to_their_time():
 
 
 def test_held_measurements_are_released_when_the_imu_stops():
-    """The IMU stops at 4 s: the GNSS and chassis samples after it wait at most imu_hold_s of
-    sample time, then go on (counted), so the filter still takes the GNSS updates."""
+    """The IMU stops at 4 s: the GNSS and suspension samples after it wait at most imu_hold_s of
+    sample time, then go on (counted), so the filter still takes the GNSS updates; what is held
+    at the end of the input goes with finish()."""
     samples = [s for s in _samples()[:12000] if not (s.kind == "imu" and s.t_ns > 4_000_000_000)]
-    p, out = _run(samples, PipelineConfig(imu_hold_s=0.05))
+    last = max(i for i, s in enumerate(samples) if s.kind == "gnss_pos")
+    p, out = _run(samples[:last + 1], PipelineConfig(imu_hold_s=0.05))
     c = p.counters
-    assert c["hold_expired"] > 1500 and 40 <= c["holding"] <= 60  # the last 50 ms (1 kHz wheel speeds)
-    p.finish()
+    assert c["hold_expired"] >= 15 and c["holding"] >= 1
+    assert [o for o in out if isinstance(o, Innovation) and o.kind == "gnss_pos" and o.t_ns > 4.5e9]
+    tail = p.finish()
     assert p.counters["holding"] == 0 and p.counters["hold_expired"] == c["hold_expired"]
-    late_updates = [o for o in out if isinstance(o, Innovation) and o.kind == "gnss_pos" and o.t_ns > 4.5e9]
-    assert late_updates
+    assert any(isinstance(o, Innovation) and o.kind == "gnss_pos" for o in tail)

@@ -540,10 +540,12 @@ class _DecodePlan:
     is ``float(raw * scale + offset)`` with the conversion's own scale and offset, which is what
     cantools' ``raw_to_scaled`` computes (:func:`_from_raw`; tested on every raw value)."""
 
-    __slots__ = ("compiled", "names", "crc", "counter", "counter_name", "status", "values")
+    __slots__ = ("spec", "compiled", "names", "crc", "counter", "counter_name", "status", "values")
 
     def __init__(self, spec: MessageSpec):
         from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
+
+        self.spec = spec
 
         try:
             self.compiled = compile_message(spec.message)
@@ -626,15 +628,15 @@ class VdpsCanDecoder:
         except (TypeError, ValueError, OverflowError):
             self._bus["malformed"] += 1
             return []
-        spec = None if is_extended_id else self._by_id.get(aid)
-        if spec is None:
+        plan = None if is_extended_id else self._plan.get(aid)
+        if plan is None:
             self._bus["unknown_id_extended" if is_extended_id else "unknown_id"] += 1
             return []
+        spec = plan.spec
         counts = self._counts[spec.name]
         if len(payload) != spec.dlc:
             counts["dlc_mismatch"] += 1
             return []
-        plan = self._plan[aid]
         if plan.compiled is not None:
             raw = plan.compiled.raw(payload)
         else:

@@ -72,6 +72,13 @@ class CompiledMessage:
         self._be = tuple(be)
 
     def raw(self, data: bytes) -> list[int]:
+        if not self._be:  # Intel only (the project's DBC): signals in order
+            x = int.from_bytes(data, "little")
+            vals = []
+            for _, shift, mask, sign in self._le:
+                u = (x >> shift) & mask
+                vals.append(u - (sign << 1) if sign and u >= sign else u)
+            return vals
         out = [0] * len(self.names)
         if self._le:
             x = int.from_bytes(data, "little")

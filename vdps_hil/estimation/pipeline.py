@@ -72,10 +72,12 @@ Sequencing (``imu_hold_s``, default 50 ms): the filter predicts to a measurement
 mean of the IMU samples it has. A measurement that arrives before the IMU samples up to its time
 (live: a CAN frame up to a serial read window ahead of the IMU packets of the same instant) would
 make it advance on a stale mean and then count those IMU samples into the next interval. So a
-sample (other than the IMU) whose time is later than the newest IMU sample's is held until an IMU
-sample at or after its time arrives, and the held ones go first, in time order -- the order a
-time-ordered input has anyway -- or until the newest sample time has moved ``imu_hold_s`` past its
-arrival (the IMU stopped; counted ``hold_expired``). ``finish()`` releases what is held at the end
+measurement that can advance the filter (GNSS, suspension; wheel speeds when the filter takes
+them) whose time is later than the newest IMU sample's is held until an IMU sample at or after
+its time arrives, and the held ones go first, in time order -- the order a time-ordered input has
+anyway -- or until the newest sample time has moved ``imu_hold_s`` past its arrival (the IMU
+stopped; counted ``hold_expired``). Other samples (torques, steering, wheel speeds feeding only
+the alpha-beta filters) go on at once. ``finish()`` releases what is held at the end
 of the input. Before the first IMU sample nothing is held. Times are compared with the
 per-sensor latencies removed.
 
@@ -351,8 +353,9 @@ class EstimatorPipeline:
         # sequencing: measurements later than the newest IMU sample wait for it (module docstring)
         self._hold_ns = int(round(cfg.imu_hold_s * 1e9))
         self._kind_lat = {"gnss_pos": self._lat["gnss"], "gnss_att": self._lat["gnss"],
-                          "gnss_vel": self._lat["gnss_vel"], "suspension": self._lat["suspension"],
-                          "wheel_speed": self._lat["wheel"]}
+                          "gnss_vel": self._lat["gnss_vel"], "suspension": self._lat["suspension"]}
+        if self._use_ws:  # only then do wheel speeds update (and advance) the filter
+            self._kind_lat["wheel_speed"] = self._lat["wheel"]
         self._imu_mark: int | None = None  # newest IMU sample time (latency removed)
         self._newest = -(1 << 62)  # newest sample time seen
         self._held: list = []  # heap of (t, seq, arrival time, sample, handler)
@@ -383,9 +386,17 @@ class EstimatorPipeline:
             return []
         out: list = []
         if self._hold_ns:
-            self._sequence(sample, kind, fn, out)
-        else:
-            fn(sample, out)
+            t_s = sample.t_ns
+            if t_s > self._newest:
+                self._newest = t_s
+            if self._held or kind in self._kind_lat:
+                self._sequence(sample, kind, fn, out)
+                return out
+            if kind == "imu":  # nothing held: only the mark moves
+                t = t_s - self._lat["imu"]
+                if self._imu_mark is None or t > self._imu_mark:
+                    self._imu_mark = t
+        fn(sample, out)
         return out
 
     def _sequence(self, sample: Sample, kind: str, fn, out: list) -> None:
@@ -393,8 +404,6 @@ class EstimatorPipeline:
         "Sequencing")."""
         held = self._held
         t_s = sample.t_ns
-        if t_s > self._newest:
-            self._newest = t_s
         if kind == "imu":
             t = t_s - self._lat["imu"]
             while held and held[0][0] <= t:
@@ -404,13 +413,13 @@ class EstimatorPipeline:
                 self._imu_mark = t
             fn(sample, out)
         else:
-            t = t_s - self._kind_lat.get(kind, 0)
-            if self._imu_mark is None or t <= self._imu_mark:
+            lat = self._kind_lat.get(kind)
+            if lat is None or self._imu_mark is None or t_s - lat <= self._imu_mark:
                 fn(sample, out)
             else:
                 self._held_seq += 1
                 self._counts["held"] += 1
-                heapq.heappush(held, (t, self._held_seq, self._newest, sample, fn))
+                heapq.heappush(held, (t_s - lat, self._held_seq, self._newest, sample, fn))
         while held and self._newest - held[0][2] >= self._hold_ns:  # the IMU has stopped
             h = heapq.heappop(held)
             self._counts["hold_expired"] += 1
