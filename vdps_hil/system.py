@@ -118,6 +118,7 @@ __all__ = ["CanFrame", "IdentReport", "PredictionReport", "ReplayError", "Suspen
            "probe_recording", "replay_file"]
 
 _SUSP = wheel_fields("susp_deflection_m")
+_NEVER = 1 << 62
 _MAX_SUSP_LEAD_NS = 50_000_000
 """The identifier's H, H_dot are carried forward / led only over at most 50 ms (five 100 Hz
 windows); a slower suspension sensor (table1's 1 Hz) gets the filter's values unchanged."""
@@ -303,6 +304,7 @@ class SuspensionConditioner:
         self._t_prev: list[int | None] = [None] * 4
         self._ab_rate = TimedAlphaBetaBank(4, rate_bandwidth_hz, max_gap_s)
         self._k: int | None = None
+        self.due_ns = _NEVER  # end of the open window (``due`` has nothing before it)
         self._sum = [0.0, 0.0, 0.0, 0.0]
         self._t = 0
         self._n = 0
@@ -365,6 +367,7 @@ class SuspensionConditioner:
         t, h = int(round(self._t / n)), [v / n for v in self._sum]
         t_end = (self._k + 1) * self.period_ns
         self._k, self._sum, self._t, self._n = None, [0.0, 0.0, 0.0, 0.0], 0, 0
+        self.due_ns = _NEVER
         self.windows += 1
         self.merged += n
         return self._condition(t, self._src, h, max(t_end, t) if self.stamp == "end" else t)
@@ -392,6 +395,7 @@ class SuspensionConditioner:
         k = s.t_ns // self.period_ns
         if self._k is None:
             self._k, self._src = k, s.source
+            self.due_ns = (k + 1) * self.period_ns
         sm = self._sum
         sm[0] += h[0]
         sm[1] += h[1]
@@ -453,8 +457,9 @@ class VdpsSystem:
         out: list = []
         cond = self._susp
         if cond is not None:
-            for s in cond.due(sample.t_ns):
-                self._step(s, out)
+            if sample.t_ns >= cond.due_ns:
+                for s in cond.due(sample.t_ns):
+                    self._step(s, out)
             if sample.kind == "suspension":
                 ready = cond.add(sample)
                 if ready is not None:
