@@ -669,6 +669,15 @@ def measure_rates(path, seconds: float = 1.0, **decode_kw) -> dict[str, float]:
     return probe_recording(path, seconds, **decode_kw)[0]
 
 
+_INNOVATION_KEYS = tuple(f"innovation_{i}" for i in range(8))
+_FILTERED_SIZES = (3, 3, 4, 4, 4, 4, 4)
+_FILTERED_KEYS = (*(f"{stem}_{a}" for stem in ("angular_rate_radps", "angular_accel_radps2") for a in "xyz"),
+                  *(f"{stem}_{i}" for stem in ("wheel_speed_radps", "wheel_accel_radps2", "susp_deflection_m",
+                                               "susp_rate_mps", "wheel_torque_nm") for i in range(1, 5)),
+                  "steer_wheel_angle_rad")
+"""Keys of /est/filtered in the order the general loop of ``_est_docs`` writes them."""
+
+
 def _est_docs(o) -> list[tuple[str, int, dict, dict | None]]:
     """(topic, t_ns, values, sigmas) documents of one system output for ``/est/``."""
     from vdps_hil.estimation.states import STATE_NAMES
@@ -684,10 +693,16 @@ def _est_docs(o) -> list[tuple[str, int, dict, dict | None]]:
                 "accepted": 1.0 if o.status == "accepted" else 0.0, "delayed": 1.0 if o.delayed else 0.0}
         sig = {}
         for i, (v, s) in enumerate(zip(o.innovation, o.innovation_sigma)):
-            vals[f"innovation_{i}"] = v
-            sig[f"innovation_{i}"] = s
+            k = _INNOVATION_KEYS[i] if i < len(_INNOVATION_KEYS) else f"innovation_{i}"
+            vals[k] = v
+            sig[k] = s
         return [(f"/est/innovation/{o.kind}", o.t_ns, vals, sig)]
     if isinstance(o, FilteredSignals):
+        groups = (o.angular_rate_radps, o.angular_accel_radps2, o.wheel_speed_radps, o.wheel_accel_radps2,
+                  o.susp_deflection_m, o.susp_rate_mps, o.wheel_torque_nm)
+        if tuple(len(g) for g in groups) == _FILTERED_SIZES:  # the keys below, precomputed
+            return [("/est/filtered", o.t_ns, dict(zip(_FILTERED_KEYS, (*groups[0], *groups[1], *groups[2],
+                     *groups[3], *groups[4], *groups[5], *groups[6], o.steer_wheel_angle_rad))), None)]
         vals = {}
         for stem, v in (("angular_rate_radps", o.angular_rate_radps), ("angular_accel_radps2", o.angular_accel_radps2)):
             vals.update({f"{stem}_{a}": x for a, x in zip("xyz", v)})

@@ -190,6 +190,7 @@ class RecordingWriter:
         self.stats = WriterStats()
         self._serial_meta: dict[str, tuple[str, str]] = {}
         self._can_topics: dict[str, str] = {}
+        self._est_topics: set[str] = set()  # estimate topics already checked (absolute)
         self._closed = True
         self._open_file(path)
 
@@ -419,10 +420,13 @@ class RecordingWriter:
     def write_estimate(self, topic: str, t_ns: int, values: Mapping[str, float],
                        sigmas: Mapping[str, float] | None = None) -> None:
         """Estimator output on ``/est/...`` (``"ekf"`` -> ``/est/ekf``)."""
-        if not topic.startswith("/"):
-            topic = S.EST_PREFIX + topic
-        if not S.check_topic(topic).startswith(S.EST_PREFIX):
-            raise ValueError(f"estimate topic must be under {S.EST_PREFIX}: {topic}")
+        if topic not in self._est_topics:
+            if not topic.startswith("/"):
+                topic = S.EST_PREFIX + topic
+            if not S.check_topic(topic).startswith(S.EST_PREFIX):
+                raise ValueError(f"estimate topic must be under {S.EST_PREFIX}: {topic}")
+            if len(self._est_topics) < 1024:
+                self._est_topics.add(topic)  # checked once
         # = write_json(topic, ESTIMATE, t_ns, estimate_doc(...)): the same bytes, written directly
         # when every value is a plain float (a replay writes thousands of these per second)
         S.check_time_ns("t_ns", t_ns)
