@@ -73,11 +73,11 @@ from __future__ import annotations
 
 import base64
 import heapq
-from binascii import unhexlify
 import json
 import math
 import os
 import re
+from binascii import unhexlify
 from typing import Callable, Iterator, Mapping
 
 from vdps_hil.bus.samples import Sample
