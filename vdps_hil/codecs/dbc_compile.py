@@ -14,7 +14,8 @@ as an integer::
 (n the message length in bytes; ``start``/``len`` the DBC start bit and length). Nothing is
 generated or evaluated from the DBC's text: the layout becomes tuples of integers.
 :func:`compile_message` refuses (``NotCompilable``) what this does not cover -- float signals,
-multiplexed messages, signals outside the payload -- and the callers then keep cantools.
+multiplexed and container messages, signals outside the payload or overlapping each other (a
+non-strict DBC) -- and the callers then keep cantools.
 Equality with cantools' own decoding is tested on every message of the project's DBCs and on
 random layouts of both byte orders (hypothesis, ``tests/test_dbc_compile.py``).
 """
@@ -61,13 +62,21 @@ class CompiledMessage:
     def __init__(self, message):
         if getattr(message, "is_multiplexed", lambda: False)():
             raise NotCompilable(f"{message.name}: multiplexed message")
+        if getattr(message, "is_container", False):
+            raise NotCompilable(f"{message.name}: container message")
         self.name = message.name
         self.length = int(message.length)
         self.names = tuple(s.name for s in message.signals)
         le, be = [], []
+        used: set[tuple[int, int]] = set()  # (byte, bit) of every signal bit
         for i, s in enumerate(message.signals):
             big, shift, mask, sign = signal_extractor(s, self.length)
             (be if big else le).append((i, shift, mask, sign))
+            bits = {((self.length - 1 - b // 8) if big else b // 8, b % 8)
+                    for b in range(shift, shift + mask.bit_length())}
+            if bits & used:  # a non-strict DBC: leave its overlapping layout to cantools
+                raise NotCompilable(f"{message.name}.{s.name}: overlaps another signal")
+            used |= bits
         self._le = tuple(le)
         self._be = tuple(be)
 
