@@ -528,8 +528,8 @@ class DecodedRecording:
         return st
 
     # ---------------------------------------------------------------- iteration
-    def __iter__(self) -> "DecodedRecording":
-        return self
+    def __iter__(self) -> Iterator[Sample]:
+        return self._it  # the generator itself: a for loop then skips __next__ below
 
     def __next__(self) -> Sample:
         return next(self._it)
