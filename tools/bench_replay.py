@@ -21,15 +21,15 @@ Usage::
 
     .venv/bin/python tools/bench_replay.py [--duration 30] [--repeat 2] [--json FILE]
 
-Measured (``--duration 30 --repeat 3``, 2-core shared VM, load average 4.3-7.0 during the run,
+Measured (``--duration 30 --repeat 3``, 2-core shared VM, load average 3.2-4.8 during the run,
 i.e. other processes on both cores: CPU-time figures are inflated by the contention)::
 
     RTF [x]                 decode  estimator  +identify  +predict | vdps replay -o: est.  +ident.  full
     table1         before     19       44          -          -     |                  8.2      -      2.4
-                   now        38.1     48.8       14.2        4.2   |                 12.9     7.4     3.2
+                   now        37.8     47.7       13.9        4.1   |                 12.6     7.2     3.1
     table1-susp1k  before     17       11          -          -     |                  3.6      -      1.9
-                   now        28.9     11.6        7.1        3.2   |                  5.5     4.3     2.3
-    EKF cycle inside the chain: 142 us (table1) / 196 us (table1-susp1k) per 10 ms
+                   now        28.1     11.3        7.1        3.1   |                  5.5     4.1     2.4
+    EKF cycle inside the chain: 145 us (table1) / 209 us (table1-susp1k) per 10 ms
 
 ("before": the figures of the previous session, also on a loaded machine.) Load-independent
 comparison, user-space instructions per replay of a 20 s drive (``perf stat -e instructions:u``,
