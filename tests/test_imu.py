@@ -249,3 +249,24 @@ def test_fuzz_garbage_and_corrupted_packets_interleaved(rng):
     noise = ImuDecoder()
     for _ in range(200):
         assert noise.feed(0, rng.bytes(int(rng.integers(0, 500)))) == []
+
+
+@settings(max_examples=300, deadline=None)
+@given(raw=st.binary(min_size=24, max_size=24), seq=st.integers(0, 0xFFFF), stf=st.integers(0, 0xFFFFFFFF),
+       rot=st.sampled_from([((1, 0, 0), (0, 1, 0), (0, 0, 1)), ((0, -1, 0), (1, 0, 0), (0, 0, 1)),
+                            ((-1, 0, 0), (0, -1, 0), (0, 0, 1))]))
+def test_standard_layout_fast_path_equals_the_general_parser(raw, seq, stf, rot):
+    """decode_mtdata2 reads the standard 4-XDI layout with one struct call; the same items
+    followed by an (ignored) unknown zero-length XDI go through the general loop: same packet,
+    same rejects, for any float32 bit patterns (NaN, inf, -0.0, subnormals)."""
+    from vdps_hil.codecs.imu import decode_mtdata2
+
+    data = (struct.pack(">HBH", 0x1020, 2, seq) + struct.pack(">HBI", 0x1060, 4, stf)
+            + struct.pack(">HB", 0x4020, 12) + raw[:12] + struct.pack(">HB", 0x8020, 12) + raw[12:])
+    results = []
+    for d in (data, data + struct.pack(">HB", 0x7F00, 0)):
+        try:
+            results.append(decode_mtdata2(d, rot))
+        except Exception as e:  # noqa: BLE001 - the codec's reject exception (ImuDecoder counts it)
+            results.append(("rejected", type(e).__name__, getattr(e, "reason", None)))
+    assert repr(results[0]) == repr(results[1])

@@ -371,3 +371,75 @@ def test_real_car_switches_are_off_for_the_paper_set():
     assert cfg.reacquire_after_gated == 0
     assert not e.layout().augmented and e.layout().n == 11
     assert {k.value for k in e.kinds()} == {"gnss_pos", "gnss_vel", "gnss_att", "y1_sus", "y2_sus_rate"}
+
+
+def test_wheel_speed_half_frames_are_not_rejects():
+    """The chassis bus carries the four wheel speeds in two frames (front, rear): each half is a
+    good sample, not a reject; a half with a bad value and a sample with no wheel speed are.
+    The filtered wheel speeds equal those of the same values in four-wheel samples."""
+    rng = np.random.default_rng(4)
+    halves, wholes = [], []
+    for k in range(200):
+        t = 1_000_000 * k
+        w = (20.0 + 0.01 * k + 0.02 * rng.standard_normal(4)).tolist()
+        halves += [Sample(t, "can.vdps", "wheel_speed", {"wheel_speed_radps_1": w[0], "wheel_speed_radps_2": w[1],
+                                                         "seq_counter": float(k % 256)}),
+                   Sample(t, "can.vdps", "wheel_speed", {"wheel_speed_radps_3": w[2], "wheel_speed_radps_4": w[3],
+                                                         "seq_counter": float(k % 256)})]
+        wholes.append(Sample(t, "can.vdps", "wheel_speed", dict(zip(
+            [f"wheel_speed_radps_{i}" for i in range(1, 5)], w))))
+    p_half, _ = _run(halves)
+    p_whole, _ = _run(wholes)
+    assert p_half.rejected()["wheel_speed"] == 0
+    assert p_half.filtered().wheel_speed_radps == p_whole.filtered().wheel_speed_radps
+    assert p_half.filtered().wheel_accel_radps2 == p_whole.filtered().wheel_accel_radps2
+    bad = [Sample(200_000_000, "can.vdps", "wheel_speed", {"wheel_speed_radps_3": math.nan, "wheel_speed_radps_4": 1.0}),
+           Sample(201_000_000, "can.vdps", "wheel_speed", {"seq_counter": 3.0})]
+    p_bad, _ = _run(halves + bad)
+    assert p_bad.rejected()["wheel_speed"] == 2
+
+
+def _imu_late_by_chunks(samples, chunk_ns=5_000_000):
+    """Live arrival order: the IMU's samples come in read chunks, each after the other sensors'
+    samples of its window (a serial read window late), everything else on time."""
+    def key(s):
+        if s.kind == "imu":
+            return ((s.t_ns // chunk_ns + 1) * chunk_ns, 1)
+        return (s.t_ns, 0)
+    return sorted(samples, key=key)
+
+
+def test_measurements_wait_for_the_imu_up_to_their_time():
+    """A measurement that arrives before the IMU samples up to its time is held until they have
+    arrived: the IMU-late arrival order gives exactly the outputs of the time order (measurements
+    first at equal times). Without the hold (imu_hold_s = 0) the filter advances on a stale IMU
+    mean and the estimates differ."""
+    samples = list(_samples()[:12000])
+    in_time = sorted(samples, key=lambda s: (s.t_ns, s.kind == "imu"))
+    late = _imu_late_by_chunks(samples)
+    assert late != in_time
+    p_ref, out_ref = _run(in_time)
+    p_late, out_late = _run(late)
+    out_late += p_late.finish()
+    assert p_late.counters["held"] >= 50 and p_late.counters["hold_expired"] == 0
+    inn = lambda out: [(o.t_ns, o.kind, o.status, o.innovation) for o in out if isinstance(o, Innovation)]
+    assert len(inn(out_ref)) > 50 and inn(out_late) == inn(out_ref)
+    assert p_late.estimate() == p_ref.estimate()
+    p_old, out_old = _run(late, PipelineConfig(imu_hold_s=0.0))
+    assert p_old.counters["held"] == 0
+    assert max(abs(a - b) for a, b in zip(p_old.estimate().x, p_ref.estimate().x)) > 1e-6
+
+
+def test_held_measurements_are_released_when_the_imu_stops():
+    """The IMU stops at 4 s: the GNSS and suspension samples after it wait at most imu_hold_s of
+    sample time, then go on (counted), so the filter still takes the GNSS updates; what is held
+    at the end of the input goes with finish()."""
+    samples = [s for s in _samples()[:12000] if not (s.kind == "imu" and s.t_ns > 4_000_000_000)]
+    last = max(i for i, s in enumerate(samples) if s.kind == "gnss_pos")
+    p, out = _run(samples[:last + 1], PipelineConfig(imu_hold_s=0.05))
+    c = p.counters
+    assert c["hold_expired"] >= 15 and c["holding"] >= 1
+    assert [o for o in out if isinstance(o, Innovation) and o.kind == "gnss_pos" and o.t_ns > 4.5e9]
+    tail = p.finish()
+    assert p.counters["holding"] == 0 and p.counters["hold_expired"] == c["hold_expired"]
+    assert any(isinstance(o, Innovation) and o.kind == "gnss_pos" for o in tail)

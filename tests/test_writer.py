@@ -236,3 +236,71 @@ def test_close_is_idempotent_and_exceptions_still_close(tmp_path):
     assert len(_mcap_messages(path)) == 1  # a complete, indexed file
     with open(path, "rb") as f:
         assert make_reader(f).get_summary().statistics.message_count == 1
+
+
+def test_fast_message_path_writes_the_same_file_as_the_mcap_library(tmp_path):
+    """The writer's own add_message (``_fast_add_message``) and mcap's Writer.add_message give
+    byte-identical files: same records, statistics, message indexes and chunk boundaries (small
+    chunks so that many close; log times not monotonic across topics)."""
+    import random
+
+    rng = random.Random(7)
+    msgs = []
+    for k in range(3000):
+        t = 1_000_000 * k + rng.randrange(-3_000_000, 3_000_000) + 10_000_000
+        msgs.append((rng.choice(("a", "b", "c")), t, rng.randbytes(rng.randrange(0, 40))))
+    files = []
+    for fast in (True, False):
+        p = tmp_path / f"{fast}.mcap"
+        w = RecordingWriter(p, chunk_size=4096, sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
+        if not fast:
+            w._add_message = w._mcap.add_message
+        else:
+            assert w._add_message != w._mcap.add_message  # the fast path is in use
+        for dev, t, data in msgs:
+            w.write_serial(dev, t, data)
+        w.write_estimate("x", 5, {"v": 1.0})
+        w.close()
+        files.append(p.read_bytes())
+    assert files[0] == files[1]
+    with open(tmp_path / "True.mcap", "rb") as f:
+        n = sum(1 for _ in make_reader(f).iter_messages())
+    assert n == len(msgs) + 1
+
+
+def test_write_estimate_payload_equals_the_generic_json_path(tmp_path):
+    """write_estimate's single cleaning pass writes the bytes write_json(estimate_doc) writes,
+    for floats, NaN/inf, numpy scalars, ints and bools."""
+    import numpy as np
+
+    vals = {"a": 0.1, "b": math.nan, "c": -math.inf, "d": np.float64(2.5), "e": 3, "f": True, "g": -0.0}
+    sig = {"a": 1e-300, "b": np.float32(0.5), "c": math.inf}
+    payloads = []
+    for fast in (True, False):
+        buf = io.BytesIO()
+        with RecordingWriter(buf, sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS) as w:
+            if fast:
+                w.write_estimate("/est/x", 9, vals, sig)
+            else:
+                w.write_json("/est/x", S.ESTIMATE, 9, S.estimate_doc(9, vals, sig))
+        buf.seek(0)
+        payloads.append([m.data for _, _, m in make_reader(buf).iter_messages()])
+    assert payloads[0] == payloads[1] and len(payloads[0]) == 1
+
+
+@settings(max_examples=300, deadline=None)
+@given(vals=st.dictionaries(st.text(max_size=8), st.floats(allow_nan=True, allow_infinity=True), max_size=8),
+       sig=st.none() | st.dictionaries(st.sampled_from(["a", 'b"', "é", "x_g_m"]), st.floats(), max_size=4),
+       t_ns=st.integers(0, 2**62))
+def test_direct_estimate_encoding_equals_json_dumps(vals, sig, t_ns):
+    """The direct encoding of float-only estimates is byte-identical to json.dumps of the
+    cleaned document (any keys, NaN/inf, -0.0, subnormals)."""
+    from vdps_hil.record.writer import _clean_flat, _float_object
+
+    doc = {"t_ns": t_ns, "values": _clean_flat(vals)}
+    if sig is not None:
+        doc["sigmas"] = _clean_flat(sig)
+    ref = json.dumps(doc, separators=(",", ":"), allow_nan=False)
+    v, s = _float_object(vals), "" if sig is None else _float_object(sig)
+    got = f'{{"t_ns":{t_ns},"values":{v}' + (f',"sigmas":{s}}}' if sig is not None else "}")
+    assert got == ref

@@ -20,6 +20,41 @@ per-kind cost from ``tools/bench_ekf.py``'s micro-benchmark when it is present.
 Usage::
 
     .venv/bin/python tools/bench_replay.py [--duration 30] [--repeat 2] [--json FILE]
+
+Measured (``--duration 30 --repeat 3``, 2-core shared VM, load average 3.2-4.8 during the run,
+i.e. other processes on both cores: CPU-time figures are inflated by the contention)::
+
+    RTF [x]                 decode  estimator  +identify  +predict | vdps replay -o: est.  +ident.  full
+    table1         before     19       44          -          -     |                  8.2      -      2.4
+                   now        37.8     47.7       13.9        4.1   |                 12.6     7.2     3.1
+    table1-susp1k  before     17       11          -          -     |                  3.6      -      1.9
+                   now        28.1     11.3        7.1        3.1   |                  5.5     4.1     2.4
+    EKF cycle inside the chain: 145 us (table1) / 209 us (table1-susp1k) per 10 ms
+
+("before": the figures of the previous session, also on a loaded machine.) Load-independent
+comparison, user-space instructions per replay of a 20 s drive (``perf stat -e instructions:u``,
+two replays minus one, imports excluded): ``vdps replay -o`` estimator only, table1 17.9 G ->
+14.4 G (-20 %), table1-susp1k 41.5 G -> 36.1 G (-13 %); complete (identification +
+prediction), table1 72.5 G -> 69.1 G (-5 %). Outputs unchanged: every ``/raw/`` and ``/est/``
+message of the output MCAP and the ``--json`` document are identical to before except
+``rejected.wheel_speed`` (no longer counts each half of the four wheel speeds).
+
+Where the time goes (table1, 20 s, estimator only, ``-o``; instructions): decoding 40 % (IMU
+stream and clock alignment 14 %, CAN frames 13 %, MCAP reading 6 %, reorder buffer the rest),
+the system 33 % (the EKF itself about a third of it; per-sample handling of the 1 kHz IMU and
+the 2 x 1 kHz wheel-speed half-frames the rest), copying the raw topics 9 %, encoding the
+``/est/`` topics 11 % (mostly ``float.__repr__``, the bytes must stay those of ``json.dumps``),
+the probe of the first 3 s (suspension rate, sensor set) 6 %. With a 1 kHz suspension the EKF's
+delayed y1_sus updates (window means stamped at their mean time, re-propagating the history)
+dominate. With identification and prediction (table1, from the figures above): the 5 s predictor
+(a new prediction at 10 Hz, about 17 ms CPU each) takes about 55 % of the complete replay's CPU
+time and the identifier with its feeder about 16 %; rebuilding the predictor for every new
+parameter set (``with_params``, 100 Hz) about 2 % (cProfile). The first bar (20x) is not
+reached for the whole ``vdps replay -o`` path: decode and estimator are each well above it, but
+the chain of Python objects per sample (64 000 samples from 48 000 raw records per 20 s at
+Table-1 rates) and the byte-identical JSON output leave ~13x on this machine; the EKF's
+small-matrix numpy calls cannot be fused or reordered without changing the estimates in their
+last bits (BLAS sums differ from Python's: 110 864 of 120 000 3x3 products differed in a test).
 """
 
 from __future__ import annotations

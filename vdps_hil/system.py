@@ -121,6 +121,7 @@ __all__ = ["CanFrame", "IdentReport", "PredictionReport", "ReplayError", "Suspen
            "probe_recording", "replay_file"]
 
 _SUSP = wheel_fields("susp_deflection_m")
+_NEVER = 1 << 62
 _MAX_SUSP_LEAD_NS = 50_000_000
 """The identifier's H, H_dot are carried forward / led only over at most 50 ms (five 100 Hz
 windows); a slower suspension sensor (table1's 1 Hz) gets the filter's values unchanged."""
@@ -308,6 +309,7 @@ class SuspensionConditioner:
         self._t_prev: list[int | None] = [None] * 4
         self._ab_rate = TimedAlphaBetaBank(4, rate_bandwidth_hz, max_gap_s)
         self._k: int | None = None
+        self.due_ns = _NEVER  # end of the open window (``due`` has nothing before it)
         self._sum = [0.0, 0.0, 0.0, 0.0]
         self._t = 0
         self._n = 0
@@ -370,6 +372,7 @@ class SuspensionConditioner:
         t, h = int(round(self._t / n)), [v / n for v in self._sum]
         t_end = (self._k + 1) * self.period_ns
         self._k, self._sum, self._t, self._n = None, [0.0, 0.0, 0.0, 0.0], 0, 0
+        self.due_ns = _NEVER
         self.windows += 1
         self.merged += n
         return self._condition(t, self._src, h, max(t_end, t) if self.stamp == "end" else t)
@@ -397,6 +400,7 @@ class SuspensionConditioner:
         k = s.t_ns // self.period_ns
         if self._k is None:
             self._k, self._src = k, s.source
+            self.due_ns = (k + 1) * self.period_ns
         sm = self._sum
         sm[0] += h[0]
         sm[1] += h[1]
@@ -479,8 +483,9 @@ class VdpsSystem:
         out: list = []
         cond = self._susp
         if cond is not None:
-            for s in cond.due(sample.t_ns):
-                self._step(s, out)
+            if sample.t_ns >= cond.due_ns:
+                for s in cond.due(sample.t_ns):
+                    self._step(s, out)
             if sample.kind == "suspension":
                 ready = cond.add(sample)
                 if ready is not None:
@@ -493,11 +498,15 @@ class VdpsSystem:
         return out
 
     def finish(self) -> list:
-        """End of the input: release a suspension window still open (replay of a file)."""
+        """End of the input: release a suspension window still open and the measurements the
+        pipeline still holds (replay of a file)."""
         out: list = []
         if self._susp is not None:
             for s in self._susp.finish():
                 self._step(s, out)
+        res = self.pipeline.finish()
+        if res:
+            self._after(res, self.pipeline.ekf.t_ns or 0, out)
         return out
 
     @classmethod
@@ -556,20 +565,25 @@ class VdpsSystem:
 
     # ------------------------------------------------------------------ internals
     def _step(self, s: Sample, out: list) -> None:
+        self._after(self.pipeline.handle(s), s.t_ns, out)
+
+    def _after(self, res: list, t_sample: int, out: list) -> None:
+        """The pipeline's outputs ``res`` for a sample of time ``t_sample``: pass them on, take
+        an estimate when the filter has passed the next estimate instant, identify, predict."""
         p = self.pipeline
-        for o in p.handle(s):
-            if isinstance(o, Estimate):  # the system takes its own (module docstring)
-                continue
-            out.append(o)
+        if res:
+            out.extend(o for o in res if not isinstance(o, Estimate))  # the system takes its own (docstring)
         ekf = p.ekf
         if not ekf.initialized:
-            self._chain_tick(s.t_ns, None, out)
+            if self._chain is not None:
+                self._chain_tick(t_sample, None, out)
             return
         t = ekf.t_ns
         if self._next_est is None:
             self._next_est = t
         if t < self._next_est:
-            self._chain_tick(s.t_ns, None, out)
+            if self._chain is not None:
+                self._chain_tick(t_sample, None, out)
             return
         self._next_est = t - t % self._est_ns + self._est_ns
         est = p.estimate()
@@ -681,6 +695,15 @@ def measure_rates(path, seconds: float = 1.0, **decode_kw) -> dict[str, float]:
     return probe_recording(path, seconds, **decode_kw)[0]
 
 
+_INNOVATION_KEYS = tuple(f"innovation_{i}" for i in range(8))
+_FILTERED_SIZES = (3, 3, 4, 4, 4, 4, 4)
+_FILTERED_KEYS = (*(f"{stem}_{a}" for stem in ("angular_rate_radps", "angular_accel_radps2") for a in "xyz"),
+                  *(f"{stem}_{i}" for stem in ("wheel_speed_radps", "wheel_accel_radps2", "susp_deflection_m",
+                                               "susp_rate_mps", "wheel_torque_nm") for i in range(1, 5)),
+                  "steer_wheel_angle_rad")
+"""Keys of /est/filtered in the order the general loop of ``_est_docs`` writes them."""
+
+
 def _est_docs(o) -> list[tuple[str, int, dict, dict | None]]:
     """(topic, t_ns, values, sigmas) documents of one system output for ``/est/``."""
     from vdps_hil.estimation.states import STATE_NAMES
@@ -696,10 +719,16 @@ def _est_docs(o) -> list[tuple[str, int, dict, dict | None]]:
                 "accepted": 1.0 if o.status == "accepted" else 0.0, "delayed": 1.0 if o.delayed else 0.0}
         sig = {}
         for i, (v, s) in enumerate(zip(o.innovation, o.innovation_sigma)):
-            vals[f"innovation_{i}"] = v
-            sig[f"innovation_{i}"] = s
+            k = _INNOVATION_KEYS[i] if i < len(_INNOVATION_KEYS) else f"innovation_{i}"
+            vals[k] = v
+            sig[k] = s
         return [(f"/est/innovation/{o.kind}", o.t_ns, vals, sig)]
     if isinstance(o, FilteredSignals):
+        groups = (o.angular_rate_radps, o.angular_accel_radps2, o.wheel_speed_radps, o.wheel_accel_radps2,
+                  o.susp_deflection_m, o.susp_rate_mps, o.wheel_torque_nm)
+        if tuple(len(g) for g in groups) == _FILTERED_SIZES:  # the keys below, precomputed
+            return [("/est/filtered", o.t_ns, dict(zip(_FILTERED_KEYS, (*groups[0], *groups[1], *groups[2],
+                     *groups[3], *groups[4], *groups[5], *groups[6], o.steer_wheel_angle_rad))), None)]
         vals = {}
         for stem, v in (("angular_rate_radps", o.angular_rate_radps), ("angular_accel_radps2", o.angular_accel_radps2)):
             vals.update({f"{stem}_{a}": x for a, x in zip("xyz", v)})
@@ -729,7 +758,7 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                 signalmap=None, bus_map: Mapping[str, str] | None = None, params=None, save_params=None,
                 config: SystemConfig | None = None, identify: bool = True, predict: bool = True,
                 susp_sigma_m: float = 0.001, paper_faithful=None, copy_raw: bool = True,
-                sensorset=None) -> dict:
+                sensorset=None, input_order: str = "time") -> dict:
     """Replay a recording's ``/raw/`` topics through :class:`VdpsSystem` (``vdps replay``).
 
     Decodes only ``/raw/`` (``record.decode``), runs the system, writes ``output`` (MCAP: the
@@ -744,7 +773,11 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     (``configs/sensorsets``; default: inferred from the fields the recording carries, e.g. an
     ESC cluster without suspension -> ``esc3``, no road angles). Without ``config`` the
     suspension window averaging is sized from the measured sample rate and ``susp_sigma_m``
-    (Table 1: 1 mm). Raises :class:`ReplayError` (one line)."""
+    (Table 1: 1 mm). ``input_order``: ``"time"`` (the decoded ``/raw/`` samples in time order) or
+    ``"recorded"`` (the ``/decoded/`` samples in the order a live system received them, metadata
+    ``hil.input_order`` of a ``vdps bench -o`` recording: the replay reproduces the live
+    estimates; the ``/raw/`` topics are still decoded for the counters and copied). Raises
+    :class:`ReplayError` (one line)."""
     import os
     import time
 
@@ -768,11 +801,24 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
         start, model_effects, model_doc = _load_workbench_model(model, veh)
     if save_params is not None and not identify:
         raise ReplayError("--save-params needs the identifier (drop --no-identify)")
+    if input_order not in ("time", "recorded"):
+        raise ReplayError(f"input order must be 'time' or 'recorded', got {input_order!r}")
     try:
         reader = RecordingReader(path)
     except RecordingError as e:
         raise ReplayError(str(e)) from None
     try:
+        recorded = None
+        if input_order == "recorded":
+            from vdps_hil.hil.node import INPUT_ORDER_METADATA, input_order_samples
+
+            if INPUT_ORDER_METADATA not in reader.metadata():
+                raise ReplayError(f"{os.fspath(path)}: no recorded input order (metadata {INPUT_ORDER_METADATA}, "
+                                  "written by vdps bench -o); use --input-order time")
+            try:
+                recorded = input_order_samples(reader)
+            except (ValueError, KeyError, IndexError, TypeError) as e:
+                raise ReplayError(f"{os.fspath(path)}: recorded input order unreadable: {e}") from None
         kind_map, nodes, sensors_desc = {}, [], None
         if config is None:
             config, kind_map, nodes, sensors_desc = _replay_config(
@@ -809,15 +855,25 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
         system = VdpsSystem(veh, config)
         system.clear_input_log()
         summary = _Summary()
+        handle, count = system.handle, summary.sample
+        n = 0
+        source = dec
+        if recorded is not None:
+            for _ in dec:  # the decoders' counters, and the raw copy
+                pass
+            source = recorded
         try:
-            for s in dec:
-                summary.sample(s)
+            for s in source:
+                count(s)
                 if kind_map and s.kind in kind_map:
                     s = Sample(s.t_ns, s.source, kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
                 for node in nodes:
                     s = node.process(s)
-                outs = system.handle(s)
-                system.clear_input_log()  # a file replay keeps the file, not a copy in memory
+                outs = handle(s)
+                n += 1
+                if n >= 4096:  # a file replay keeps the file, not a copy in memory
+                    system.clear_input_log()
+                    n = 0
                 if outs:
                     summary.outputs(outs, state["writer"])
             summary.outputs(system.finish(), state["writer"])
@@ -950,9 +1006,15 @@ class _Summary:
         self.pred = {"predictions": 0, "rollover_predicted": 0, "min_time_to_point_of_no_return_s": None}
         self.frames = {"sent": 0, "max_level": 0}
         self.writer_errors = 0
+        self._keys: dict[str, dict[str, str]] = {}  # source -> kind -> "source/kind"
 
     def sample(self, s: Sample) -> None:
-        k = f"{s.source}/{s.kind}"
+        src = self._keys.get(s.source)
+        if src is None:
+            src = self._keys[s.source] = {}
+        k = src.get(s.kind)
+        if k is None:
+            k = src[s.kind] = f"{s.source}/{s.kind}"
         self.samples[k] = self.samples.get(k, 0) + 1
         if self.t_first is None:
             self.t_first = s.t_ns

@@ -446,6 +446,17 @@ class _Compiled:
             self.counter_mod = 1 << sig.length
 
 
+def _compile(message):
+    """(compiled layout, conversions) of a cantools message, or None when it does not compile."""
+    from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
+
+    try:
+        comp = compile_message(message)
+    except NotCompilable:
+        return None
+    return comp, tuple(s.conversion for s in message.signals)
+
+
 class SignalMapDecoder:
     """Decode one bus's frames with its DBC and signal map into bus samples.
 
@@ -462,6 +473,7 @@ class SignalMapDecoder:
                                   "dlc_mismatch", "undecodable", "checksum_mismatch",
                                   "counter_jump", "missing_signal")}
         self._by_key: dict[tuple[int, bool], _Compiled | None] = {}
+        self._fast: dict[tuple[int, bool], tuple | None] = {}  # compiled layouts (None: cantools)
         self._dbc_msgs: dict[tuple[int, bool], Any] = {}
         for m in db.messages:
             self._dbc_msgs[(m.frame_id, bool(m.is_extended_frame))] = m
@@ -504,9 +516,9 @@ class SignalMapDecoder:
                 return []
             c["unmapped"] += 1
             if self.bus_map.decode_all:
-                self._try_decode(m, data)
+                self._try_decode(m, data, key)
             return []
-        vals = self._try_decode(comp.message, data)
+        vals = self._try_decode(comp.message, data, key)
         if vals is None:
             return []
         rule = comp.rule
@@ -540,9 +552,21 @@ class SignalMapDecoder:
         return [Sample(t_ns=int(t_ns), source=self.source, kind=rule.kind, fields=fields,
                        valid=valid)]
 
-    def _try_decode(self, m, data: bytes):
+    def _try_decode(self, m, data: bytes, key=None):
+        """The scaled signal values (cantools' ``decode(..., scaling=True)``), or None (counted).
+        A frame of the message's length goes through the message's compiled layout
+        (``codecs.dbc_compile``; each value by the signal's own cantools conversion) when the
+        layout compiles, otherwise and for other lengths through cantools."""
         c = self._c
         n = len(data)
+        if n == m.length and key is not None:
+            fast = self._fast.get(key, False)
+            if fast is False:
+                fast = self._fast[key] = _compile(m)
+            if fast is not None:
+                comp, convs = fast
+                return {name: conv.raw_to_scaled(r, False)
+                        for name, conv, r in zip(comp.names, convs, comp.raw(bytes(data)))}
         if n != m.length:
             c["dlc_mismatch"] += 1
         try:

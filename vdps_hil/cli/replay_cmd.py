@@ -20,8 +20,8 @@ Examples:
   vdps replay paper.mcap --paper-faithful all --no-identify --no-predict --json -
 
 \b
-Only /raw/ topics are read (never /truth/ or /decoded/). Output topics: the /raw/ topics
-copied, /est/state (12 states of eq 7 + road-relative angles, with sigmas),
+Only /raw/ topics are read (never /truth/; /decoded/ only with --input-order recorded).
+Output topics: the /raw/ topics copied, /est/state (12 states of eq 7 + road-relative angles, with sigmas),
 /est/innovation/<kind> (innovation, sigma, NIS, status), /est/filtered (alpha-beta),
 /est/ident (identified parameters, sigmas), /est/prediction (rollover assessment),
 /est/can/vdps (the VDPS_Warning frames the system sent)."""
@@ -56,8 +56,12 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
               help="Suspension sensor noise (1-sigma) [m] (Table 1: 1 mm).")
 @click.option("--paper-faithful", "paper_faithful", multiple=True, type=click.Choice(PAPER_SWITCHES),
               help="EKF correction switched to the paper as printed (repeatable; 'all').")
+@click.option("--input-order", "input_order", type=click.Choice(("time", "recorded")), default="time",
+              show_default=True,
+              help="time: the /raw/ topics decoded, in time order; recorded: the /decoded/ samples in the "
+                   "order the live system received them (a vdps bench -o recording), reproducing its estimates.")
 def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, output, json_out, params,
-           save_params, no_identify, no_predict, susp_sigma_m, paper_faithful):
+           save_params, no_identify, no_predict, susp_sigma_m, paper_faithful, input_order):
     """Replay FILE.mcap through the estimator, identifier, predictor and warning (the paper's
     Figure 2) using only its /raw/ topics; print a one-line summary."""
     from vdps_hil.system import ReplayError, replay_file
@@ -83,7 +87,7 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
         doc = replay_file(recording, vehicle=vehicle, output=output, model=model_file, dbc=dbc,
                           signalmap=signalmap, bus_map=buses or None, params=params, save_params=save_params,
                           identify=not no_identify, predict=not no_predict, susp_sigma_m=susp_sigma_m,
-                          paper_faithful=paper_faithful or None, sensorset=sensorset)
+                          paper_faithful=paper_faithful or None, sensorset=sensorset, input_order=input_order)
     except ReplayError as e:
         raise UserError(str(e)) from None
     es = doc["estimates_summary"]

@@ -156,8 +156,9 @@ def _check_rotation(r: Sequence[Sequence[float]]) -> tuple[tuple[int, int, int],
 
 def _apply(r, v) -> tuple[float, float, float]:
     """r @ v for a 3x3 r (tuple of rows) and a 3-vector."""
-    x, y, z = (r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2] for i in range(3))
-    return (x, y, z)
+    (a, b, c), (d, e, f), (g, h, i) = r
+    x, y, z = v
+    return (a * x + b * y + c * z, d * x + e * y + f * z, g * x + h * y + i * z)
 
 
 def _apply_t(r, v) -> tuple[float, float, float]:
@@ -239,10 +240,24 @@ def _vec3(xdi: int, payload: bytes) -> tuple[float, float, float]:
     raise _Bad("unsupported_format", f"XDI {xdi:04X}")
 
 
+_STANDARD = struct.Struct(">HBHHBIHB3fHB3f")
+_STANDARD_HEAD = (XDI_PACKET_COUNTER, 2, XDI_SAMPLE_TIME_FINE, 4, XDI_ACCELERATION, 12, XDI_RATE_OF_TURN, 12)
+"""PacketCounter, SampleTimeFine, Acceleration and RateOfTurn (float32) in this order: the
+general loop below gives the same packet; this reads it with one struct call."""
+
+
 def decode_mtdata2(data: bytes, sensor_to_body=SENSOR_TO_BODY) -> ImuPacket:
     """Decode the DATA of one MTData2 message (raises ``ValueError`` subclasses on malformed
     payloads; ``ImuDecoder`` turns them into counted rejects). Unknown XDIs are skipped."""
     r = _check_rotation(sensor_to_body)
+    if len(data) == _STANDARD.size:  # the layout encode_imu_packet writes: one unpack
+        (x1, s1, counter, x2, s2, stf, x3, s3, ax, ay, az, x4, s4, gx, gy, gz) = _STANDARD.unpack(data)
+        if (x1, s1, x2, s2, x3, s3, x4, s4) == _STANDARD_HEAD:
+            if not math.isfinite(ax + ay + az):  # float32 values: the sum cannot overflow
+                raise _Bad("malformed_payload", "non-finite acceleration")
+            if not math.isfinite(gx + gy + gz):
+                raise _Bad("malformed_payload", "non-finite rate of turn")
+            return ImuPacket(counter, stf, _apply(r, (ax, ay, az)), _apply(r, (gx, gy, gz)))
     i, n = 0, len(data)
     counter = stf = None
     acc = gyr = None

@@ -237,13 +237,13 @@ class TimedAlphaBetaBank:
         self._gains: dict[int, tuple[float, float, float]] = {}
         self._dt_s = math.nan
 
-    def update(self, t_ns: int, values) -> int:
-        """Feed one value per signal (NaN: skipped for that signal); returns how many were used."""
+    def update(self, t_ns: int, values, indices=None) -> int:
+        """Feed one value per signal (NaN: skipped for that signal); returns how many were used.
+        ``indices``: the signals ``values`` belong to when a sample carries only some of them
+        (the others are left alone, not counted as rejected)."""
         used = 0
         xs, vs, ts, gains = self.x, self.v, self.t, self._gains
-        i = -1
-        for z in values:
-            i += 1
+        for i, z in zip(range(len(xs)) if indices is None else indices, values):
             if z - z != 0.0:  # NaN or +-inf
                 self.rejected[i] += 1
                 continue

@@ -68,6 +68,19 @@ course), velocity from speed/course or the difference of two fixes, road angles 
 suspension sample with eq 4 (road normal n = (C_g^v)^T C_r^v e_3), position = fix - (C_g^v)^T l.
 After a NaN reset of the EKF the next fix re-initialises.
 
+Sequencing (``imu_hold_s``, default 50 ms): the filter predicts to a measurement's time with the
+mean of the IMU samples it has. A measurement that arrives before the IMU samples up to its time
+(live: a CAN frame up to a serial read window ahead of the IMU packets of the same instant) would
+make it advance on a stale mean and then count those IMU samples into the next interval. So a
+measurement that can advance the filter (GNSS, suspension; wheel speeds when the filter takes
+them) whose time is later than the newest IMU sample's is held until an IMU sample at or after
+its time arrives, and the held ones go first, in time order -- the order a time-ordered input has
+anyway -- or until the newest sample time has moved ``imu_hold_s`` past its arrival (the IMU
+stopped; counted ``hold_expired``). Other samples (torques, steering, wheel speeds feeding only
+the alpha-beta filters) go on at once. ``finish()`` releases what is held at the end
+of the input. Before the first IMU sample nothing is held. Times are compared with the
+per-sensor latencies removed.
+
 Replay: every sample handed to ``handle`` is appended to ``input_log``; feeding the same
 samples to a fresh pipeline (``EstimatorPipeline.replay``) reproduces the outputs exactly.
 The pipeline never reads simulator truth: it accepts only a model vehicle file and ignores
@@ -76,6 +89,7 @@ The pipeline never reads simulator truth: it accepts only a model vehicle file a
 
 from __future__ import annotations
 
+import heapq
 import math
 from dataclasses import dataclass, field
 
@@ -99,6 +113,7 @@ _AR = axis_fields("angular_rate_radps")
 _SUSP = wheel_fields("susp_deflection_m")
 _WS = wheel_fields("wheel_speed_radps")
 _WT = wheel_fields("wheel_torque_nm")
+_WS_INDEX = {n: i for i, n in enumerate(_WS)}
 _NAN = math.nan
 
 
@@ -169,6 +184,7 @@ class PipelineConfig:
     nhc_point_sigma_m: float = 0.3
     reacquire_after_gated: int = 0  # off for the paper's set (its 10 dB SNR runs gate 5 fixes in a row)
     reacquire_velocity_sigma_mps: float = 1.0
+    imu_hold_s: float = 0.05  # sequencing (module docstring): longest hold of a measurement; 0: off
 
     def __post_init__(self):
         for name in ("predict_period_s", "gnss_pos_sigma_h_m", "gnss_pos_sigma_v_m", "gnss_att_sigma_rad",
@@ -179,7 +195,8 @@ class PipelineConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"PipelineConfig.{name} must be a positive finite number, got {v!r}")
-        for name in ("wheel_outlier_rel", "wheel_accel_sigma_s", "nhc_slip_rad_per_mps2", "nhc_point_sigma_m"):
+        for name in ("wheel_outlier_rel", "wheel_accel_sigma_s", "nhc_slip_rad_per_mps2", "nhc_point_sigma_m",
+                     "imu_hold_s"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"PipelineConfig.{name} must be a non-negative finite number, got {v!r}")
@@ -333,6 +350,17 @@ class EstimatorPipeline:
         if cfg.observability_window_s:
             self._obs = ObservabilityWindow.for_layout(self.ekf.layout).attach(self.ekf)
             self._obs_ns = int(round(cfg.observability_window_s * 1e9))
+        # sequencing: measurements later than the newest IMU sample wait for it (module docstring)
+        self._hold_ns = int(round(cfg.imu_hold_s * 1e9))
+        self._kind_lat = {"gnss_pos": self._lat["gnss"], "gnss_att": self._lat["gnss"],
+                          "gnss_vel": self._lat["gnss_vel"], "suspension": self._lat["suspension"]}
+        if self._use_ws:  # only then do wheel speeds update (and advance) the filter
+            self._kind_lat["wheel_speed"] = self._lat["wheel"]
+        self._imu_mark: int | None = None  # newest IMU sample time (latency removed)
+        self._newest = -(1 << 62)  # newest sample time seen
+        self._held: list = []  # heap of (t, seq, arrival time, sample, handler)
+        self._held_seq = 0
+        self._counts.update(held=0, hold_expired=0)
         self._handlers = {"imu": self._on_imu, "gnss_pos": self._on_gnss_pos, "gnss_att": self._on_gnss_att,
                           "gnss_vel": self._on_gnss_vel, "suspension": self._on_suspension,
                           "wheel_speed": self._on_wheel_speed, "wheel_torque": self._on_wheel_torque,
@@ -345,7 +373,7 @@ class EstimatorPipeline:
         self._counts["messages"] += 1
         kind = sample.kind
         fn = self._handlers.get(kind)
-        if fn is None or sample.source.startswith("/truth"):
+        if fn is None or sample.source[:6] == "/truth":
             if kind.startswith("truth") or sample.source.startswith("/truth"):
                 self._counts["truth_ignored"] += 1
             else:
@@ -357,7 +385,52 @@ class EstimatorPipeline:
             self._rejected[kind] += 1
             return []
         out: list = []
+        if self._hold_ns:
+            t_s = sample.t_ns
+            if t_s > self._newest:
+                self._newest = t_s
+            if self._held or kind in self._kind_lat:
+                self._sequence(sample, kind, fn, out)
+                return out
+            if kind == "imu":  # nothing held: only the mark moves
+                t = t_s - self._lat["imu"]
+                if self._imu_mark is None or t > self._imu_mark:
+                    self._imu_mark = t
         fn(sample, out)
+        return out
+
+    def _sequence(self, sample: Sample, kind: str, fn, out: list) -> None:
+        """Hand ``sample`` on now or hold it until the IMU has reached its time (module docstring,
+        "Sequencing")."""
+        held = self._held
+        t_s = sample.t_ns
+        if kind == "imu":
+            t = t_s - self._lat["imu"]
+            while held and held[0][0] <= t:
+                h = heapq.heappop(held)
+                h[4](h[3], out)
+            if self._imu_mark is None or t > self._imu_mark:
+                self._imu_mark = t
+            fn(sample, out)
+        else:
+            lat = self._kind_lat.get(kind)
+            if lat is None or self._imu_mark is None or t_s - lat <= self._imu_mark:
+                fn(sample, out)
+            else:
+                self._held_seq += 1
+                self._counts["held"] += 1
+                heapq.heappush(held, (t_s - lat, self._held_seq, self._newest, sample, fn))
+        while held and self._newest - held[0][2] >= self._hold_ns:  # the IMU has stopped
+            h = heapq.heappop(held)
+            self._counts["hold_expired"] += 1
+            h[4](h[3], out)
+
+    def finish(self) -> list:
+        """End of the input: the measurements still held (in time order); their outputs."""
+        out: list = []
+        while self._held:
+            h = heapq.heappop(self._held)
+            h[4](h[3], out)
         return out
 
     @classmethod
@@ -381,6 +454,7 @@ class EstimatorPipeline:
     @property
     def counters(self) -> dict:
         d = dict(self._counts)
+        d["holding"] = len(self._held)  # held now (sequencing)
         d["per_kind"] = dict(self._per_kind)
         d["ekf"] = self.ekf.counters
         return d
@@ -713,12 +787,21 @@ class EstimatorPipeline:
 
     def _on_wheel_speed(self, s: Sample, out: list) -> None:
         t = s.t_ns - self._lat["wheel"]
-        g = s.fields.get
-        w = [g(_WS[0], _NAN), g(_WS[1], _NAN), g(_WS[2], _NAN), g(_WS[3], _NAN)]
-        if self._ab_wheel.update(t, w) < 4:
+        # the wheels this sample carries (a CAN frame carries two of the four): a sample is
+        # rejected when it carries none or one of its values is unusable
+        idx, vals = [], []
+        for name, v in s.fields.items():
+            i = _WS_INDEX.get(name)
+            if i is not None:
+                idx.append(i)
+                vals.append(v)
+        if not idx or self._ab_wheel.update(t, vals, idx) < len(idx):
             self._rejected["wheel_speed"] += 1
         if not self._use_ws or not self.ekf.initialized:
             return
+        w = [_NAN, _NAN, _NAN, _NAN]
+        for i, v in zip(idx, vals):
+            w[i] = v
         recent = self._ws_recent
         recent.append((t, w))
         while recent and t - recent[0][0] > self._ws_window_ns:

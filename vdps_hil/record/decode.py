@@ -77,6 +77,7 @@ import json
 import math
 import os
 import re
+from binascii import unhexlify
 from typing import Callable, Iterator, Mapping
 
 from vdps_hil.bus.samples import Sample
@@ -381,12 +382,13 @@ class _CanStream:
     def feed_raw(self, t_ns: int, data: bytes) -> list[Sample]:
         m = _FAST_CAN.search(data)
         if m is not None:
+            aid, ext, hx = m.groups()
             try:
-                payload = bytes.fromhex(m.group(3).decode("ascii"))
-            except ValueError:
+                payload = unhexlify(hx)
+            except ValueError:  # binascii.Error: odd length
                 payload = None
             if payload is not None:
-                return self.dec.decode(t_ns, int(m.group(1)), payload, m.group(2) == b"true")
+                return self.dec.decode(t_ns, int(aid), payload, ext == b"true")
         try:
             doc = json.loads(data)
         except ValueError:
@@ -526,8 +528,8 @@ class DecodedRecording:
         return st
 
     # ---------------------------------------------------------------- iteration
-    def __iter__(self) -> "DecodedRecording":
-        return self
+    def __iter__(self) -> Iterator[Sample]:
+        return self._it  # the generator itself: a for loop then skips __next__ below
 
     def __next__(self) -> Sample:
         return next(self._it)
@@ -542,6 +544,7 @@ class DecodedRecording:
         sink = self._raw_sink
         can_pre, ser_pre = S.RAW_CAN_PREFIX, S.RAW_SERIAL_PREFIX
         ncan, nser = len(can_pre), len(ser_pre)
+        can_feed: dict = {}  # topic -> the CAN stream's feed_raw (None: undecoded)
         try:
             for rec in self.reader.iter_records(prefixes=(S.RAW_PREFIX,)):
                 self._raw_records += 1
@@ -549,12 +552,15 @@ class DecodedRecording:
                     sink(rec)
                 topic, t = rec.topic, rec.t_ns
                 out = ()
-                if topic.startswith(can_pre):
-                    st = self._can_stream(topic[ncan:])
-                    if st is None:
+                feed = can_feed.get(topic, False)
+                if feed is not False or topic.startswith(can_pre):
+                    if feed is False:
+                        st = self._can_stream(topic[ncan:])
+                        feed = can_feed[topic] = None if st is None else st.feed_raw
+                    if feed is None:
                         self._undecoded[topic] = self._undecoded.get(topic, 0) + 1
                     else:
-                        out = st.feed_raw(t, rec.data)
+                        out = feed(t, rec.data)
                 elif topic.startswith(ser_pre):
                     st = self._serial_stream(topic[nser:])
                     if st is None:

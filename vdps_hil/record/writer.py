@@ -23,8 +23,10 @@ The writer is safe to share between threads (one lock around each message).
 
 from __future__ import annotations
 
+import io
 import json
 import os
+import struct
 import threading
 import time
 from dataclasses import dataclass, field
@@ -68,6 +70,100 @@ class WriterStats:
         return sum(self.messages.values())
 
 
+_MESSAGE_RECORD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log_time, publish_time
+
+
+def _fast_add_message(mcap_writer):
+    """``mcap_writer.add_message`` without its per-message objects (a Message dataclass, eight
+    small writes and a seek back per record: about 5 us, the largest share of copying a
+    replay's raw topics), or None when the mcap library's internals are not the ones this was
+    written against (then the library's own method is used). Same bytes, statistics, message
+    indexes and chunk boundaries as the library (``tests/test_writer.py`` compares the files)."""
+    from mcap.opcode import Opcode
+    from mcap.records import MessageIndex
+
+    class _MessageIndex(MessageIndex):
+        """Written with one pack of all its (log_time, offset) pairs instead of two calls each."""
+
+        def write(self, stream) -> None:
+            recs = self.records
+            stream.start_record(Opcode.MESSAGE_INDEX)
+            stream.write2(self.channel_id)
+            stream.write4(len(recs) * 16)
+            stream.write(struct.pack(f"<{2 * len(recs)}Q", *[v for r in recs for v in r]))
+            stream.finish_record()
+
+    st = getattr(mcap_writer, "_Writer__statistics", None)
+    cb = getattr(mcap_writer, "_Writer__chunk_builder", None)
+    finalize = getattr(mcap_writer, "_Writer__maybe_finalize_chunk", None)
+    rw = getattr(cb, "record_writer", None)
+    if st is None or cb is None or finalize is None or not isinstance(getattr(rw, "_buffer", None), io.BytesIO) \
+            or not all(hasattr(cb, a) for a in ("num_messages", "message_start_time", "message_end_time",
+                                                 "message_indices")) \
+            or not all(hasattr(st, a) for a in ("message_count", "message_start_time", "message_end_time",
+                                                 "channel_message_counts")):
+        return None
+    pack = _MESSAGE_RECORD.pack
+
+    def add_message(channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0) -> None:
+        if st.message_count == 0:
+            st.message_start_time = log_time
+        elif log_time < st.message_start_time:
+            st.message_start_time = log_time
+        if log_time > st.message_end_time:
+            st.message_end_time = log_time
+        st.channel_message_counts[channel_id] += 1
+        st.message_count += 1
+        if cb.num_messages == 0:
+            cb.message_start_time = log_time
+        elif log_time < cb.message_start_time:
+            cb.message_start_time = log_time
+        if log_time > cb.message_end_time:
+            cb.message_end_time = log_time
+        mi = cb.message_indices.get(channel_id)
+        if mi is None:
+            mi = cb.message_indices[channel_id] = _MessageIndex(channel_id=channel_id, records=[])
+        buf = rw._buffer
+        mi.records.append((log_time, buf.tell()))
+        cb.num_messages += 1
+        buf.write(pack(0x05, 22 + len(data), channel_id, sequence, log_time, publish_time))
+        buf.write(data)
+        finalize()
+
+    return add_message
+
+
+_JSON_KEYS: dict[str, str] = {}
+
+
+def _float_object(d: Mapping[str, Any]) -> str | None:
+    """The compact JSON object ``json.dumps(clean_json(dict(d)), separators=(",", ":"))`` of a
+    flat mapping of str keys to plain floats (non-finite -> null; json writes a float with
+    ``float.__repr__``), or None when some key or value is of another type (the caller then
+    takes the general path)."""
+    parts = []
+    keys = _JSON_KEYS
+    rep = float.__repr__
+    for k, v in d.items():
+        if type(v) is not float or type(k) is not str:
+            return None
+        q = keys.get(k)
+        if q is None:
+            if len(keys) > 4096:
+                keys.clear()
+            q = keys[k] = json.dumps(k) + ":"
+        parts.append(q + (rep(v) if v - v == 0.0 else "null"))
+    return "{" + ",".join(parts) + "}"
+
+
+def _clean_flat(d: Mapping[str, Any]) -> dict:
+    """``schemas.clean_json(dict(d))`` for a flat mapping, without recursion for plain floats."""
+    out = {}
+    for k, v in d.items():
+        out[str(k)] = (v if v - v == 0.0 else None) if type(v) is float else S.clean_json(v)
+    return out
+
+
 class RecordingWriter:
     """Write one MCAP recording.
 
@@ -94,6 +190,7 @@ class RecordingWriter:
         self.stats = WriterStats()
         self._serial_meta: dict[str, tuple[str, str]] = {}
         self._can_topics: dict[str, str] = {}
+        self._est_topics: set[str] = set()  # estimate topics already checked (absolute)
         self._closed = True
         self._open_file(path)
 
@@ -129,6 +226,7 @@ class RecordingWriter:
                             use_statistics=True, use_summary_offsets=True, enable_crcs=True)
         self._channels: dict[str, _Channel] = {}
         self._schema_ids: dict[str, int] = {}
+        self._add_message = _fast_add_message(self._mcap) or self._mcap.add_message
         self._mcap.start(profile="", library=f"vdps-hil/{_TOOL_VERSION} {_MCAP_LIBRARY}")
         self._mcap.add_metadata(S.METADATA_NAME, self._metadata)
         self._stream.flush()
@@ -182,7 +280,7 @@ class RecordingWriter:
                 self.stats.time_backwards[topic] = self.stats.time_backwards.get(topic, 0) + 1
             else:
                 ch.last_t_ns = t_ns
-            self._mcap.add_message(ch.id, log_time, payload, t_ns, ch.seq)
+            self._add_message(ch.id, log_time, payload, t_ns, ch.seq)
             ch.seq = (ch.seq + 1) & 0xFFFFFFFF
             self.stats.messages[topic] = self.stats.messages.get(topic, 0) + 1
 
@@ -322,11 +420,27 @@ class RecordingWriter:
     def write_estimate(self, topic: str, t_ns: int, values: Mapping[str, float],
                        sigmas: Mapping[str, float] | None = None) -> None:
         """Estimator output on ``/est/...`` (``"ekf"`` -> ``/est/ekf``)."""
-        if not topic.startswith("/"):
-            topic = S.EST_PREFIX + topic
-        if not S.check_topic(topic).startswith(S.EST_PREFIX):
-            raise ValueError(f"estimate topic must be under {S.EST_PREFIX}: {topic}")
-        self.write_json(topic, S.ESTIMATE, t_ns, S.estimate_doc(t_ns, values, sigmas))
+        if topic not in self._est_topics:
+            if not topic.startswith("/"):
+                topic = S.EST_PREFIX + topic
+            if not S.check_topic(topic).startswith(S.EST_PREFIX):
+                raise ValueError(f"estimate topic must be under {S.EST_PREFIX}: {topic}")
+            if len(self._est_topics) < 1024:
+                self._est_topics.add(topic)  # checked once
+        # = write_json(topic, ESTIMATE, t_ns, estimate_doc(...)): the same bytes, written directly
+        # when every value is a plain float (a replay writes thousands of these per second)
+        S.check_time_ns("t_ns", t_ns)
+        v = _float_object(values)
+        sg = "" if sigmas is None else _float_object(sigmas)
+        if v is not None and sg is not None:
+            payload = (f'{{"t_ns":{int(t_ns)},"values":{v}' + (f',"sigmas":{sg}}}' if sigmas is not None else "}")
+                       ).encode()
+        else:
+            doc = {"t_ns": t_ns, "values": _clean_flat(values)}
+            if sigmas is not None:
+                doc["sigmas"] = _clean_flat(sigmas)
+            payload = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
+        self._write(topic, S.ESTIMATE, t_ns, payload, None, {})
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
         """An extra MCAP metadata record (values converted to str, non-str as JSON)."""
