@@ -403,6 +403,12 @@ class SuspensionConditioner:
 
 
 # --------------------------------------------------------------------------------- the node
+WARNING_HISTORY = 100
+"""Sent warning frames and assessments the system's warning chain keeps (the most recent; 2 s of
+frames at 50 Hz): its outputs carry every frame and prediction as they happen, so the chain
+keeps only counts and a recent window and memory does not grow with the drive."""
+
+
 class VdpsSystem:
     """Figure 2 as one pure node (module docstring)."""
 
@@ -438,7 +444,8 @@ class VdpsSystem:
                 dpol, dnode = load_warning_config()
                 pol, node = pol or dpol, node or dnode
             params = self._params()
-            self._chain = WarningChain(Predictor(model_vehicle.with_params(**params.as_dict()), pcfg), pol, node)
+            self._chain = WarningChain(Predictor(model_vehicle.with_params(**params.as_dict()), pcfg), pol, node,
+                                       keep=WARNING_HISTORY)
             self._chain_params = params
         self._log: list[Sample] = []
         self._last_estimate: Estimate | None = None
@@ -595,13 +602,13 @@ class VdpsSystem:
         if init is not None and params is not self._chain_params:
             chain.predictor = chain.predictor.with_params(params)
             self._chain_params = params
-        n_before = len(chain.assessments)
+        n_before = chain.assessments_total
         frames = chain.handle(t_ns, init, status)
         key = {WarningStatus.VALID: "valid", WarningStatus.NOT_CONVERGED: "not_converged",
                WarningStatus.SENSOR_MISSING: "sensor_missing"}[status]
         self.counters["status"][key] += 1
-        if len(chain.assessments) > n_before:
-            a = chain.assessments[-1]
+        if chain.assessments_total > n_before:
+            a = chain.last_assessment
             self.counters["predictions"] += 1
             out.append(PredictionReport(a.t0_ns, a.time_to_point_of_no_return_s, a.time_to_tip_up_s, a.peak_ltr,
                                         a.peak_roll_rad, a.horizon_s, a.stop_reason))
