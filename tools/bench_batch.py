@@ -26,7 +26,13 @@ Memory: ``run.peak_rss_mib`` of each task is the worker process's peak resident 
 one task runs on a 1-worker cluster while this process samples the worker's RSS (psutil)
 every ``--poll`` seconds: the curve shows whether memory grows with the drive (it must not).
 
-Measured (this 2-core VM, shared with other jobs: load average 3.6-6.9 during the run)
+Measured (this 2-core VM, quiet: load average 0.4 before the run)
+-----------------------------------------------------------------
+``bench_batch.py --drives 8 --duration 10 --workers 1 2``: 1 worker 31.4 s, 2 workers 16.5 s:
+speed-up 1.90x (batch only; the same with cluster start-up), results identical; peak RSS per
+worker 203-207 MiB; contention-free estimate from the task CPU times 1.94x.
+
+Earlier run on the same VM while it was loaded (shared with other jobs: load average 3.6-6.9)
 -----------------------------------------------------------------------------------------
 8 drives of 10 s, LocalCluster: 1 worker 64.0 s, 2 workers 37.4 s: speed-up 1.71x wall
 (1.67x with cluster start-up, ~1 s); results identical. Task CPU 36.2 s vs 35.7 s in total
