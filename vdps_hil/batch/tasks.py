@@ -19,7 +19,7 @@ Task functions
     batch passes only the path; the workbench itself holds every decoded raw sample of the
     drive (~2 MiB per second of a Table 1 drive), and its ranking builds dense columns whose
     count grows with the drive too, so its memory grows with the square of the drive's length
-    (measured, one process, table1-susp1k, with_simulation off: peak RSS 0.64 / 2.4 / 10.5 GiB
+    (measured, one process, table1-susp1k, with_simulation off: peak RSS 637 / 2438 / 10527 MiB
     for 30 / 60 / 120 s drives). Diagnose drives of minutes, not hours (or cut them); a worker
     over its memory limit is restarted and the task retried, then reported failed.
 ``worker_info()``
