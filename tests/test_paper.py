@@ -72,6 +72,36 @@ def test_snr_is_minus_ten_log_of_the_mean_noise_to_signal_variance_ratio():
     assert math.isnan(P.snr_db({"t_ns": [1, 2], "series": clean[:2]}, {"t_ns": [3, 4], "series": clean[:2]}))
 
 
+def _saturating_runs(seed: int = 7):
+    """A zero-noise series and the same series with a noise error e (linear in k), two channels
+    so noisy at k = 1 that their noise-to-signal ratio saturates (var(e) = 4 and 9 x var(s_0))."""
+    rng = np.random.default_rng(seed)
+    t = list(range(2000))
+    clean = rng.normal(0.0, 1.0, (2000, 6)) * np.array([1, 2, 3, 100, 200, 300])
+    e = rng.normal(0.0, 1.0, (2000, 6)) * np.array([0.03, 0.45, 0.1, 200.0, 600.0, 3.0])
+    return t, clean, e
+
+
+def test_snr_noise_scale_gives_the_target_snr_of_the_definition():
+    t, clean, e = _saturating_runs()
+    ref = {"t_ns": t, "series": clean}
+    run1 = {"t_ns": t, "series": clean + e}
+    snr1 = P.snr_db(run1, ref)
+    for target in (30.0, 20.0, 10.0):
+        k = P.snr_noise_scale(run1, ref, target)
+        got = P.snr_db({"t_ns": t, "series": clean + k * e}, ref)
+        assert got == pytest.approx(target, abs=1e-6)  # the model is exact for an error linear in k
+        # the 20 log10 rule misses because var(s_k) holds the noise too (this drive: by > 3 dB)
+        k_rule = 10 ** ((snr1 - target) / 20)
+        assert abs(P.snr_db({"t_ns": t, "series": clean + k_rule * e}, ref) - target) > 3.0
+        # from a run at another noise scale the same k follows
+        half = {"t_ns": t, "series": clean + 0.5 * e}
+        assert P.snr_noise_scale(half, ref, target, run_k=0.5) == pytest.approx(k, rel=1e-9)
+    # every ratio saturates at 1 as k grows: SNR >= 0 dB, a negative target is out of reach
+    assert math.isnan(P.snr_noise_scale(run1, ref, -1.0))
+    assert math.isnan(P.snr_noise_scale(run1, {"t_ns": [-1, -2], "series": clean[:2]}, 20.0))
+
+
 def test_truth_between_snapshots_is_interpolated_with_wrapped_angles():
     a = {"t_s": 1.0, "yaw_v_rad": math.pi - 0.1, "pos_e_m": 10.0}
     b = {"t_s": 1.01, "yaw_v_rad": -math.pi + 0.1, "pos_e_m": 10.25}

@@ -232,6 +232,29 @@ def test_replay_with_another_policy_reproduces_the_chain():
     assert late.lead_time_s < o.lead_time_s
 
 
+def test_a_bounded_chain_sends_the_same_frames_and_keeps_only_a_recent_window():
+    """``keep`` bounds what the chain stores (a system's chain over a long drive), never what it
+    sends: same frames as the chain that keeps everything, counts over the whole run, the last
+    ``keep`` frames and assessments kept."""
+    sc = load_scenario("fishhook-suv")
+    sim = Simulator(scenario=sc)
+    sim.run()
+    pred = Predictor(load_vehicle("suv-model").with_params(**sc.vehicle.params.as_dict()), load_predictor_config())
+    full = WarningChain(pred, *load_warning_config())
+    small = WarningChain(pred, *load_warning_config(), keep=7)
+    for s in sim.truth[:250]:  # 2.5 s at 100 Hz: 25 predictions, ~125 frames, level changes
+        init = PredictorInitialState.from_truth_for_tests_only(s)
+        assert [bytes(f.data) for f in small.handle(s["t_ns"], init)] == \
+            [bytes(f.data) for f in full.handle(s["t_ns"], init)]
+    assert len(full.assessments) >= 20 and len(full.frames) >= 100
+    assert (small.frames_total, small.assessments_total) == (len(full.frames), len(full.assessments))
+    assert len(small.frames) == len(small.assessments) == 7
+    assert [bytes(f.data) for f in small.frames] == [bytes(f.data) for f in full.frames[-7:]]
+    assert list(small.assessments) == full.assessments[-7:] and small.last_assessment == full.assessments[-1]
+    with pytest.raises(ValueError, match="keep"):
+        WarningChain(pred, keep=-1)
+
+
 # ----------------------------------------------------------------------------- codec boundary
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402

@@ -26,7 +26,13 @@ Memory: ``run.peak_rss_mib`` of each task is the worker process's peak resident 
 one task runs on a 1-worker cluster while this process samples the worker's RSS (psutil)
 every ``--poll`` seconds: the curve shows whether memory grows with the drive (it must not).
 
-Measured (this 2-core VM, shared with other jobs: load average 3.6-6.9 during the run)
+Measured (this 2-core VM, quiet: load average 0.4 before the run)
+-----------------------------------------------------------------
+``bench_batch.py --drives 8 --duration 10 --workers 1 2``: 1 worker 31.4 s, 2 workers 16.5 s:
+speed-up 1.90x (batch only; the same with cluster start-up), results identical; peak RSS per
+worker 203-207 MiB; contention-free estimate from the task CPU times 1.94x.
+
+Earlier run on the same VM while it was loaded (shared with other jobs: load average 3.6-6.9)
 -----------------------------------------------------------------------------------------
 8 drives of 10 s, LocalCluster: 1 worker 64.0 s, 2 workers 37.4 s: speed-up 1.71x wall
 (1.67x with cluster start-up, ~1 s); results identical. Task CPU 36.2 s vs 35.7 s in total
@@ -34,15 +40,29 @@ Measured (this 2-core VM, shared with other jobs: load average 3.6-6.9 during th
 2.01x; the workers got about half a core each from the shared machine (CPU share 57 % / 48 %).
 Peak RSS per worker 231-238 MiB.
 
-One-hour drive (``make_long_drive.py``: 'paper', table1-susp1k, 997 MiB, 12.7 M messages),
-one worker: 1587 s of worker CPU (2.27 s of drive per CPU s), peak RSS 359 MiB with
-``--fix-pipeline-log`` (RSS at 1/139/345/729/1065/1585 CPU s: 125/257/299/328/342/358 MiB;
-the remaining slope, ~55 MiB per hour of drive, is mostly the warning chain keeping every
-sent frame and assessment).
-Without the fix the worker grew by ~3.4 MiB per CPU s (1.55 GiB after 389 CPU s, stopped
-there): extrapolated ~5.6 GiB for the hour (an extrapolation, not a measurement):
-``EstimatorPipeline`` appends every sample to its replay log and ``VdpsSystem.clear_input_log``
-does not clear it.
+One-hour drive (``make_long_drive.py -o /tmp/h10/long-drive.mcap``: 'paper', table1-susp1k, seed
+0, 997 MiB, 12.7 M messages), one worker, library as it is now (the estimator pipeline's log
+cleared, the warning chain keeping counts and its last 100 frames/assessments,
+``system.WARNING_HISTORY``): ``bench_batch.py --memory /tmp/h10/long-drive.mcap --poll 5``:
+3600 s of drive in 1507 s of worker CPU (2.39 s of drive per CPU s; 3083 s wall, load average
+4-7 from other jobs), **peak RSS 328 MiB** (getrusage); RSS at 0/103/290/405/663/1025/1505 CPU s:
+63 (idle worker)/266/308/327/327/327/327 MiB: it rises over the first ~16 min of drive, then
+stays at 327 MiB to the end (growth 0 MiB over the last ~44 min of drive).
+
+Before the warning-chain bound (same drive and machine, with ``--fix-pipeline-log``): 1587 s of
+worker CPU (2.27 s of drive per CPU s), peak RSS 359 MiB (RSS at 1/139/345/729/1065/1585 CPU
+s: 125/257/299/328/342/358 MiB; the remaining slope, ~55 MiB per hour of drive, was the warning
+chain keeping every sent frame and assessment: ~230 B each, 50 frames/s).
+Before the pipeline-log fix the worker grew by ~3.4 MiB per CPU s (1.55 GiB after 389 CPU s,
+stopped there): extrapolated ~5.6 GiB for the hour (an extrapolation, not a measurement):
+``EstimatorPipeline`` appended every sample to its replay log and ``VdpsSystem.clear_input_log``
+did not clear it (it does now; ``--fix-pipeline-log`` is kept for the comparison).
+
+Diagnose (not this tool: ``vdps_hil.batch.tasks.diagnose_drive`` in one process,
+with_simulation off, drives from ``make_long_drive.py --duration 30/60/120``): peak RSS
+637 / 2438 / 10527 MiB. The workbench holds every decoded sample (~2 MiB per second of drive)
+and its ranking's dense columns grow with the square of the drive length: a one-hour drive
+cannot be diagnosed in one piece (``batch.tasks`` docstring).
 """
 
 from __future__ import annotations

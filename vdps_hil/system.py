@@ -412,6 +412,12 @@ class SuspensionConditioner:
 
 
 # --------------------------------------------------------------------------------- the node
+WARNING_HISTORY = 100
+"""Sent warning frames and assessments the system's warning chain keeps (the most recent; 2 s of
+frames at 50 Hz): its outputs carry every frame and prediction as they happen, so the chain
+keeps only counts and a recent window and memory does not grow with the drive."""
+
+
 class VdpsSystem:
     """Figure 2 as one pure node (module docstring)."""
 
@@ -453,7 +459,7 @@ class VdpsSystem:
             if cfg.model_effects is not None:
                 peff = predictor_effects(Predictor(model_vehicle, pcfg).effects, cfg.model_effects)
             self._chain = WarningChain(Predictor(model_vehicle.with_params(**params.as_dict()), pcfg, peff),
-                                       pol, node)
+                                       pol, node, keep=WARNING_HISTORY)
             self._chain_params = params
             rc = cfg.require_converged
             if rc is None:  # the policy's rule: gate only a chain started from the priors
@@ -635,13 +641,13 @@ class VdpsSystem:
         if init is not None and params is not self._chain_params:
             chain.predictor = chain.predictor.with_params(params)
             self._chain_params = params
-        n_before = len(chain.assessments)
+        n_before = chain.assessments_total
         frames = chain.handle(t_ns, init, status)
         key = {WarningStatus.VALID: "valid", WarningStatus.NOT_CONVERGED: "not_converged",
                WarningStatus.SENSOR_MISSING: "sensor_missing"}[status]
         self.counters["status"][key] += 1
-        if len(chain.assessments) > n_before:
-            a = chain.assessments[-1]
+        if chain.assessments_total > n_before:
+            a = chain.last_assessment
             self.counters["predictions"] += 1
             out.append(PredictionReport(a.t0_ns, a.time_to_point_of_no_return_s, a.time_to_tip_up_s, a.peak_ltr,
                                         a.peak_roll_rad, a.horizon_s, a.stop_reason))

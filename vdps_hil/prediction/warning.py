@@ -68,9 +68,10 @@ from __future__ import annotations
 
 import enum
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Mapping, MutableSequence, Sequence
 
 import can
 import numpy as np
@@ -329,18 +330,30 @@ class WarningChain:
     """The warning path as one pure object: ``handle(t_ns, initial_state, status)`` predicts at
     the configured cadence (held inputs) and feeds the node; a prediction started at t0 is used
     from t0 + ``prediction_latency_s`` on (its compute time on the target). ``initial_state``
-    None: no estimate now (status should then say why). Keeps every frame in ``frames`` and
-    every (t0_ns, assessment) in ``assessments``."""
+    None: no estimate now (status should then say why).
+
+    Storage: ``frames`` (the sent frames) and ``assessments`` (one per prediction, t0 inside)
+    keep the most recent ``keep`` of each (``keep`` None: all of them, for a study of one
+    drive that evaluates the frames afterwards, e.g. :func:`evaluate_warning_frames`); a
+    long-running system passes a bound so memory does not grow with the drive (50 frames per
+    second otherwise). Counts over the whole run: ``frames_total``, ``assessments_total``; the
+    latest assessment: ``last_assessment``."""
 
     def __init__(self, predictor: Predictor, policy: WarningPolicy | None = None,
-                 node_config: WarningNodeConfig | None = None):
+                 node_config: WarningNodeConfig | None = None, keep: int | None = None):
+        if keep is not None and (isinstance(keep, bool) or not isinstance(keep, int) or keep < 0):
+            raise ValueError(f"keep must be None or an integer >= 0, got {keep!r}")
         self.predictor = predictor
         self.node = WarningNode(policy, node_config)
         self.cadence = Cadence(predictor.config.cadence_hz)
         self._latency_ns = int(round(self.node.config.prediction_latency_s * NS_PER_S))
-        self._pending: list[tuple[int, RolloverAssessment]] = []
-        self.frames: list[can.Message] = []
-        self.assessments: list[RolloverAssessment] = []
+        self._pending: deque[tuple[int, RolloverAssessment]] = deque()
+        self.keep = keep
+        self.frames: MutableSequence[can.Message] = [] if keep is None else deque(maxlen=keep)
+        self.assessments: MutableSequence[RolloverAssessment] = [] if keep is None else deque(maxlen=keep)
+        self.frames_total = 0
+        self.assessments_total = 0
+        self.last_assessment: RolloverAssessment | None = None
         self.prediction_failures = 0
         self.last_failure: str | None = None
 
@@ -358,12 +371,15 @@ class WarningChain:
                 status = WarningStatus.FAULT
             else:
                 self.assessments.append(a)
+                self.assessments_total += 1
+                self.last_assessment = a
                 self._pending.append((t_ns + self._latency_ns, a))
         ready = None
         while self._pending and self._pending[0][0] <= t_ns:
-            ready = self._pending.pop(0)[1]
+            ready = self._pending.popleft()[1]
         out = self.node.handle(t_ns, ready, status)
         self.frames.extend(out)
+        self.frames_total += len(out)
         return out
 
 
