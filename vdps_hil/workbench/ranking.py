@@ -59,7 +59,7 @@ from vdps_hil.model.params import Vehicle
 
 from .candidates import BASE_PARAMS, PARAM_ALIASES, PARAM_LABELS, Candidate, ParameterCandidate, default_candidates
 from .dataset import DriveTable
-from .residuals import (EQUATIONS, EquationResiduals, Innovations, RowStates, compute_innovations,
+from .residuals import (DYNAMIC_EQUATIONS, EQUATIONS, EquationResiduals, Innovations, RowStates, compute_innovations,
                         compute_residuals, parameter_columns, row_states)
 
 __all__ = ["RankingConfig", "Ranking", "RankEntry", "Context", "Design", "rank", "identify_base",
@@ -89,6 +89,7 @@ class RankingConfig:
     min_explained: float = 0.05
     min_explained_overall: float = 0.1
     min_explained_innovations: float = 0.5
+    min_explained_dynamics: float = 0.2
     material_fraction: float = 0.1
     corr_threshold: float = 0.95
     excitation_z: float = 5.0
@@ -956,8 +957,17 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
             steps[name]["ef_innovations"] = ef_inn
             # enough of the residual overall -- or, for a sensor effect, of the GNSS/IMU
             # innovations, where a sensor error shows even when the force balance hardly sees it
+            # or, for an effect on the force balance alone (no kinematic rows among its own
+            # equations), of the ten balance equations of eq 13
+            dyn_g = np.arange(len(DYNAMIC_EQUATIONS))
+            ef_dyn = 1.0 - j.cv[dyn_g].sum() / max(cvb[dyn_g].sum(), 1e-300)
+            steps[name]["ef_dynamics"] = ef_dyn
+            balance_only = own is not None and own.any() and not own[len(DYNAMIC_EQUATIONS):].any()
             evidence = ef >= cfg.min_explained_overall or (
-                c.family == "measurement" and ef_inn >= cfg.min_explained_innovations)
+                c.family == "measurement" and ef_inn >= cfg.min_explained_innovations) or (
+                balance_only and ef_dyn >= cfg.min_explained_dynamics)
+            if os.environ.get("VDPS_WB_DEBUG"):
+                print(f"[ranking] {name}: ef_dyn {ef_dyn:.3f} balance_only {balance_only}")
             if base_equiv.get(name, 0.0) >= cfg.corr_threshold ** 2:
                 evidence = False  # the same as re-identifying a parameter: reported as a group
             ok = (dbic < -cfg.bic_margin and ef_own >= cfg.min_explained and ef > 0.0 and evidence
