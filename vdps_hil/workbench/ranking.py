@@ -87,8 +87,8 @@ class RankingConfig:
     gap_blocks: int = 1
     bic_margin: float = 10.0
     min_explained: float = 0.05
-    min_explained_overall: float = 0.1
-    min_explained_innovations: float = 0.5
+    min_explained_overall: float = 0.2
+    min_explained_innovations: float = 0.8
     min_explained_dynamics: float = 0.2
     material_fraction: float = 0.1
     corr_threshold: float = 0.95
@@ -1035,7 +1035,7 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     entries.sort(key=lambda e: (order.index(e.effect) if e.effect in order else len(order),
                                 -(e.explained_fraction if math.isfinite(e.explained_fraction) else -1)))
     params = _parameter_entries(d, d.ctx, vehicle, point.base, always, ratio, s2, cfg)
-    _groups(d, by_name, entries, params, always, thetas, cfg, n_eff, sse_fin, selected)
+    _groups(d, by_name, entries, params, always, thetas, cfg, n_eff, sse_fin, selected, point.phis)
     groups = _group_list(entries, params)
     rec = order[0] if order else None
     eq_to = []
@@ -1129,7 +1129,7 @@ def _cv_shifted(d: Design, cols, k: int, shift: float) -> np.ndarray:
 
 
 def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingConfig, n_eff: float = 1.0,
-            sse: float = 1.0, selected=()) -> None:
+            sse: float = 1.0, selected=(), phis: dict | None = None) -> None:
     """Fill each entry's ``group`` (module docstring), in Gram-matrix form with the GNSS
     nuisance partialled out."""
     r2min = cfg.corr_threshold ** 2
@@ -1177,7 +1177,10 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
         elif e.selected:
             # the selected effect's contribution: its change columns times its value (linear
             # candidates) or its prior-size direction (nonlinear ones)
-            phi = np.array([v for v, _ in list(e.parameters.values())[:len(cols)]])
+            if phis and e.effect in phis:
+                phi = np.asarray(phis[e.effect], dtype=float)
+            else:
+                phi = np.array([v for v, _ in list(e.parameters.values())[:len(cols)]])
             th = (phi if c.linear and len(phi) == len(cols) else np.ones(len(cols))) * np.array([d.scale[k] for k in cols])
         else:
             theta = thetas[e.effect]
@@ -1189,6 +1192,8 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
             if other == e.effect:
                 continue
             r2, th_o = mimic(th, cols, other, fitted)
+            if os.environ.get("VDPS_WB_DEBUG") and r2 > 0.5:
+                print(f"[groups] {e.effect} ~ {other}: r2 {r2:.3f} plausible {by_name[other].plausible(th_o)}")
             if r2 >= r2min and by_name[other].plausible(th_o):
                 grp.append(other)
         for p in params:
