@@ -22,9 +22,9 @@ adapter                              columns
 :class:`CrosswindCandidate`          the wind across the mean direction of travel: the side force and
                                      yaw moment, first order in the wind
 :class:`LowPressureCandidate`        one tire's radius loss; the wheel (1..4) whose column fits best
-:class:`MagicFormulaCandidate`       saturation: s = (mu_0 / mu)^2 scales the small-slip deviation
-                                     of the Magic Formula from the linear tire (F - C alpha ~ -(C
-                                     alpha)^3 / (mu F_z)^2); mu refined on the residual afterwards
+:class:`MagicFormulaCandidate`       ``--add``'s tire: the peak friction mu itself, a profile of the
+                                     identified model's objective (the ranking uses
+                                     :class:`TireSaturationCandidate` instead)
 :class:`TireSaturationCandidate`    the ranking's saturation column: s times the generic Magic
                                      Formula's pure-lateral departure from the linear tire (linear
                                      in s, judged beyond the re-identified stiffnesses)
