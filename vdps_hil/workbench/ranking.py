@@ -44,7 +44,11 @@ columns reproduce c's fitted contribution d_c with R^2 >= ``corr_threshold``^2 (
 re-identified parameter that moved from the model file's value is an entry of its own (its
 explained fraction is that of its re-identification) and the effects that would explain the same
 change form its group -- e.g. the front cornering stiffness and steering compliance, which a drive
-in the linear range cannot tell apart. Sigmas: (X'X)^-1 s^2 n / n_eff.
+in the linear range cannot tell apart. The recommendation's group also takes in a rival that
+passed every selection test on its own (first round) and whose fitted contribution the
+recommendation reproduces: both explain the residual, so the drive does not tell them apart
+(e.g. tire saturation and load-dependent stiffness on a 5 m/s^2 sine sweep, where either wins the
+held-out comparison depending on the seed). Sigmas: (X'X)^-1 s^2 n / n_eff.
 """
 
 from __future__ import annotations
@@ -983,6 +987,8 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
                 evidence = False  # the same as re-identifying a parameter: reported as a group
             ok = (dbic < -cfg.bic_margin and ef_own >= cfg.min_explained and ef > 0.0 and evidence
                   and c.phi_plausible(j.phi) and c.material(j.phi, cfg.material_fraction))
+            if not selected:
+                steps[name]["eligible_first"] = bool(ok)
             if ok and (best is None or ef > best[1]):
                 best = (name, ef, j)
         if best is None:
@@ -1051,7 +1057,16 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     rec = order[0] if order else None
     eq_to = []
     if rec:
-        eq_to = [g for g in next(e for e in entries if e.effect == rec).group if g != rec]
+        rec_e = next(e for e in entries if e.effect == rec)
+        # a rival that passed every selection test on its own in the first round and whose fitted
+        # contribution the recommendation reproduces: both explain the residual, the drive does
+        # not tell them apart (the one with the larger held-out explained fraction leads)
+        for e in entries:
+            if (e.effect != rec and rec in e.group and steps.get(e.effect, {}).get("eligible_first")
+                    and e.effect not in rec_e.group):
+                rec_e.group = (rec_e.group or [rec]) + [e.effect]
+        eq_to = [g for g in rec_e.group if g != rec]
+        groups = _group_list(entries, params)
     rk = Ranking(entries=entries, parameters=params, recommendation=rec, equivalent_to=eq_to, selected=order,
                  groups=groups, messages=[], n_eff=n_eff, n_rows=n_rows, base_vehicle=point.base,
                  reference_vehicle=vehicle, effects=point.effects, context=d.ctx, design=d, candidates=by_name,
