@@ -29,7 +29,8 @@ sample size improves by more than ``bic_margin``::
 
 (tau_g the integrated autocorrelation time of equation g's residual), (b) EF_c >=
 ``min_explained_overall`` -- or, for a sensor effect, >= ``min_explained_innovations`` of the
-GNSS/IMU innovations, where a sensor error must show; or, for an effect whose own equations are
+GNSS/IMU innovations, where a sensor error must show (on the force balance alone a sensor effect
+needs >= ``min_explained_sensor_balance`` overall); or, for a non-sensor effect whose own equations are
 all force/moment balances (no wheel-speed rows), >= ``min_explained_dynamics`` of the ten balance
 equations (the kinematic wheel-speed rows, whose whitened misfit dominates the total on a
 circle, do not dilute it) -- and >= ``min_explained`` on the candidate's own equations (those
@@ -88,7 +89,10 @@ class RankingConfig:
     overall or >= 0.95 of the innovations), the largest of a false recommendation 0.16 (IMU
     lever arm on the weaving straight, overall and balance) and 0.56 of the innovations (IMU
     bias on accel-coast). ``min_explained_overall`` = ``min_explained_dynamics`` = 0.2 and
-    ``min_explained_innovations`` = 0.8 sit between the two."""
+    ``min_explained_innovations`` = 0.8 sit between the two. A sensor effect judged on the force
+    balance instead of its innovations needs ``min_explained_sensor_balance`` = 0.3 overall: on
+    the weaving straight with nothing hidden the lever arm reached 0.15-0.20 (seeds 102, 1000,
+    1004), on the lane change with 0.5 m hidden it explains 0.55-0.73."""
 
     micro_block_s: float = 0.5
     nuisance_knot_s: float = 2.0
@@ -105,6 +109,7 @@ class RankingConfig:
     min_explained_overall: float = 0.2
     min_explained_innovations: float = 0.8
     min_explained_dynamics: float = 0.2
+    min_explained_sensor_balance: float = 0.3
     material_fraction: float = 0.1
     corr_threshold: float = 0.95
     excitation_z: float = 5.0
@@ -978,9 +983,14 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
             ef_dyn = 1.0 - j.cv[dyn_g].sum() / max(cvb[dyn_g].sum(), 1e-300)
             steps[name]["ef_dynamics"] = ef_dyn
             balance_only = own is not None and own.any() and not own[len(DYNAMIC_EQUATIONS):].any()
-            evidence = ef >= cfg.min_explained_overall or (
-                c.family == "measurement" and ef_inn >= cfg.min_explained_innovations) or (
-                balance_only and ef_dyn >= cfg.min_explained_dynamics)
+            if c.family == "measurement":
+                # a sensor error shows in the innovations; through the force balance alone it
+                # must explain more, as its several parameters also fit the reduced model's own
+                # shortcomings (a lateral force lagging the slip looks like a lever arm on a weave)
+                evidence = ef_inn >= cfg.min_explained_innovations or ef >= max(
+                    cfg.min_explained_overall, cfg.min_explained_sensor_balance)
+            else:
+                evidence = ef >= cfg.min_explained_overall or (balance_only and ef_dyn >= cfg.min_explained_dynamics)
             if os.environ.get("VDPS_WB_DEBUG"):
                 print(f"[ranking] {name}: ef_dyn {ef_dyn:.3f} balance_only {balance_only}")
             if base_equiv.get(name, 0.0) >= cfg.corr_threshold ** 2:
