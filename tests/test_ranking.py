@@ -123,8 +123,9 @@ def test_known_group_load_dependent_stiffness_and_tire_saturation(runs):
 
 
 def test_saturation_is_told_apart_from_load_dependent_stiffness_on_the_circle_ramp(runs):
-    """On the circle ramped to 7 m/s^2 the load-dependent stiffness would need a negative load
-    slope to mimic the saturation: saturation is recommended, not grouped with it."""
+    """On the circle ramped to 7 m/s^2 the load-dependent stiffness reproduces the saturation only
+    with implausible values (a negative load slope) and a significantly worse fit: saturation is
+    recommended, not grouped with it."""
     for s in SEEDS:
         r = runs[("hidden", "magic_formula_tire", s)]
         assert r["recommendation"] == "magic_formula_tire", (s, r["recommendation"], r["messages"])
