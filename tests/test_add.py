@@ -108,7 +108,8 @@ def _predict(tab, model, truth):
 
 @pytest.mark.xfail(strict=True, reason=(
     "measured (seed 7): linear tire 30.7 %, Magic Formula fitted before 10.25 s 23.0 % (peak friction 1.01; "
-    "last session 41.0 % with mu 0.74; the change came with commits merged before this branch), truth's own parameters and tire "
+    "last session 41.0 % with mu 0.74; the change came with commits merged before this branch), "
+    "truth's own parameters and tire "
     "23.2 %: the floor is the estimate the prediction starts from (z_a channel 77 %: the EKF's height)"))
 def test_rollover_prediction_with_the_tire_fitted_before_the_start(rollover):
     """Paper section 7.3: the rollover prediction from 10.25 s. The baseline is our own linear

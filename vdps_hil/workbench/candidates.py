@@ -47,7 +47,8 @@ from vdps_hil.model.effects import REGISTRY, EffectSet
 from vdps_hil.model.effects.base import DynamicsEffect, Effect, MeasurementEffect, TireModel
 
 __all__ = ["Candidate", "RegressorCandidate", "MeasurementCandidate", "NumericCandidate", "CrosswindCandidate",
-           "LowPressureCandidate", "MagicFormulaCandidate", "TireSaturationCandidate", "saturation_columns", "ParameterCandidate", "candidate_for",
+           "LowPressureCandidate", "MagicFormulaCandidate", "TireSaturationCandidate", "saturation_columns",
+           "ParameterCandidate", "candidate_for",
            "default_candidates", "BASE_PARAMS", "PARAM_LABELS"]
 
 BASE_PARAMS: tuple[str, ...] = ("mass_kg", "inertia_x_kgm2", "inertia_y_kgm2", "inertia_z_kgm2",

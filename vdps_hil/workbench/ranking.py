@@ -34,8 +34,8 @@ needs >= ``min_explained_sensor_balance`` overall); or, for a non-sensor effect 
 all force/moment balances (no wheel-speed rows), >= ``min_explained_dynamics`` of the ten balance
 equations (the kinematic wheel-speed rows, whose whitened misfit dominates the total on a
 circle, do not dilute it) -- and >= ``min_explained`` on the candidate's own equations (those
-holding >= 10 % of its prior-size contribution), (c) the fitted parameters are physically plausible (``ParamSpec`` ranges:
-negative drag and so on are rejected) and (d) the drive excites it: at its generic prior
+holding >= 10 % of its prior-size contribution), (c) the fitted parameters are physically
+plausible (``ParamSpec`` ranges: negative drag and so on are rejected) and (d) the drive excites it: at its generic prior
 magnitude the effect would stand ``excitation_z`` noise sigmas (effective) above zero. The first
 selected effect is the ``recommendation``.
 
