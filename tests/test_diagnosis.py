@@ -83,7 +83,9 @@ def test_add_through_the_diagnosis_fills_after(stripped, monkeypatch, tmp_path):
     path, vdir = stripped
     monkeypatch.setattr(P, "VEHICLE_DIR", vdir)
     veh = P.load_vehicle("sedan-model")
-    dg = diagnose(path, veh, add=["aero_drag"], save_model=tmp_path / "m.json")
+    # the before/after simulation errors of --add are tested in test_add (held-out refits); here
+    # the residual tables and the saved model
+    dg = diagnose(path, veh, add=["aero_drag"], save_model=tmp_path / "m.json", with_simulation=False)
     doc = dg.to_json()
     assert doc["after"]["residual_rms"]["long"] < 0.2 * doc["before"]["residual_rms"]["long"]
     from vdps_hil.workbench.model_file import load_model

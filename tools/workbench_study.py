@@ -14,6 +14,13 @@ Usage::
     .venv/bin/python tools/workbench_study.py --effects aero_drag,crosswind --seeds 5
     .venv/bin/python tools/workbench_study.py --magnitude aero_drag:cda_m2=0.1,0.2,0.35,0.7 --seeds 10
     .venv/bin/python tools/workbench_study.py --add --seeds 5     # --add reductions per effect
+    .venv/bin/python tools/workbench_study.py --seeds 20 --jobs 1 --runs study.jsonl   # resumable
+
+``--runs FILE.jsonl`` makes the study incremental: every finished drive is appended to the file
+as one JSON line, and a later call with the same file skips the drives already there (same kind,
+effect, maneuver, seed, magnitude and --add); stop it at any time and call it again. The summary
+is always over every matching run in the file, so a 20-seed study can be built up in pieces
+(``--first-seed`` and ``--seeds`` select which seeds a call adds).
 """
 
 from __future__ import annotations
@@ -24,7 +31,7 @@ import os
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
@@ -46,6 +53,8 @@ def main(argv=None) -> int:
     ap.add_argument("--add", action="store_true", help="also run --add on hidden and null drives")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--runs", default=None, help="JSON-lines file of finished runs: append, skip what is there")
+    ap.add_argument("--summary-only", action="store_true", help="summarize the --runs file, run nothing")
     a = ap.parse_args(argv)
     effects = [e for e in a.effects.split(",") if e]
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
@@ -70,20 +79,53 @@ def main(argv=None) -> int:
                 jobs.append({"kind": "magnitude", "effect": eff, "maneuver": HIDDEN[eff][0],
                              "specs": [f"{eff}:{param}={v}"], "seed": s, "magnitude": float(v), "add": None})
     t0 = time.perf_counter()
-    results = []
+    done = _load_runs(a.runs) if a.runs else {}
+    wanted = {_job_key(j) for j in jobs}
+    results = [r for k, r in done.items() if k in wanted]
+    # seed by seed, so a stopped study covers every effect and maneuver about equally
+    todo = sorted((j for j in jobs if _job_key(j) not in done), key=lambda j: j["seed"])
+    if a.summary_only:
+        todo = []
+    if done:
+        print(f"{len(results)} of {len(jobs)} drives already in {a.runs}; {len(todo)} to run", flush=True)
     with ProcessPoolExecutor(max_workers=a.jobs) as ex:
-        for r in ex.map(_one, jobs):
+        futs = [ex.submit(_one, j) for j in todo]
+        for f in as_completed(futs):
+            r = f.result()
             results.append(r)
+            if a.runs:
+                with open(a.runs, "a") as fh:
+                    fh.write(json.dumps(r, default=str) + "\n")
             tag = r.get("effect") or f"null/{r['maneuver']}"
             print(f"  {r['kind']:9s} {tag:36s} seed {r['seed']}: rec {r.get('recommendation')} "
                   f"hit {r.get('hit')} ({r.get('wall_s', 0):.1f} s)", flush=True)
     summary = summarize(results)
     print_summary(summary)
-    print(f"wall time {time.perf_counter() - t0:.0f} s for {len(jobs)} drives")
+    print(f"wall time {time.perf_counter() - t0:.0f} s for {len(todo)} new drives ({len(results)} in the summary)")
     if a.json:
         with open(a.json, "w") as f:
             json.dump({"summary": summary, "runs": results}, f, indent=1, default=str)
     return 0
+
+
+def _job_key(job: dict) -> str:
+    return json.dumps([job["kind"], job.get("effect"), job["maneuver"], int(job["seed"]), job.get("magnitude"),
+                       job.get("add")])
+
+
+def _load_runs(path: str) -> dict[str, dict]:
+    """Finished runs of an earlier call (a torn last line, from a stopped run, is ignored)."""
+    out: dict[str, dict] = {}
+    if not os.path.exists(path):
+        return out
+    with open(path) as fh:
+        for line in fh:
+            try:
+                r = json.loads(line)
+            except ValueError:
+                continue
+            out[_job_key(r)] = r
+    return out
 
 
 def summarize(results: list[dict]) -> dict:

@@ -22,9 +22,12 @@ adapter                              columns
 :class:`CrosswindCandidate`          the wind across the mean direction of travel: the side force and
                                      yaw moment, first order in the wind
 :class:`LowPressureCandidate`        one tire's radius loss; the wheel (1..4) whose column fits best
-:class:`MagicFormulaCandidate`       saturation: s = (mu_0 / mu)^2 scales the small-slip deviation
-                                     of the Magic Formula from the linear tire (F - C alpha ~ -(C
-                                     alpha)^3 / (mu F_z)^2); mu refined on the residual afterwards
+:class:`MagicFormulaCandidate`       ``--add``'s tire: the peak friction mu itself, a profile of the
+                                     identified model's objective (the ranking uses
+                                     :class:`TireSaturationCandidate` instead)
+:class:`TireSaturationCandidate`    the ranking's saturation column: s times the generic Magic
+                                     Formula's pure-lateral departure from the linear tire (linear
+                                     in s, judged beyond the re-identified stiffnesses)
 :class:`ParameterCandidate`          one of the ten identified parameters (eq 20-23): finite
                                      differences of the residual in that parameter
 ===================================  ===============================================================
@@ -44,7 +47,8 @@ from vdps_hil.model.effects import REGISTRY, EffectSet
 from vdps_hil.model.effects.base import DynamicsEffect, Effect, MeasurementEffect, TireModel
 
 __all__ = ["Candidate", "RegressorCandidate", "MeasurementCandidate", "NumericCandidate", "CrosswindCandidate",
-           "LowPressureCandidate", "MagicFormulaCandidate", "ParameterCandidate", "candidate_for",
+           "LowPressureCandidate", "MagicFormulaCandidate", "TireSaturationCandidate", "saturation_columns",
+           "ParameterCandidate", "candidate_for",
            "default_candidates", "BASE_PARAMS", "PARAM_LABELS"]
 
 BASE_PARAMS: tuple[str, ...] = ("mass_kg", "inertia_x_kgm2", "inertia_y_kgm2", "inertia_z_kgm2",
@@ -409,6 +413,91 @@ class MagicFormulaCandidate(Candidate):
         return spec.lower <= mu <= spec.upper
 
 
+class TireSaturationCandidate(Candidate):
+    """Tire saturation as the ranking judges it: theta = s, the saturation scale, multiplies the
+    pure-lateral departure of the generic Magic Formula (``magic_formula_tire`` at its
+    ``ParamSpec`` defaults, peak friction mu_0) from the linear tire, per tire i::
+
+        dF_b,i = s [F_MF(alpha_i, F_z,i; mu_0) - C_alpha,i alpha_i]
+               = s C_alpha,i alpha_i (g(Y_i) / Y_i - 1),   Y_i = C_alpha,i alpha_i / (mu(F_z,i) F_z,i)
+
+    mapped onto eq 13 through the lateral force's direction and lever arm (the columns of the
+    cornering stiffnesses, ``EquationResiduals.lateral_unit``). To lowest order the departure is
+    cubic, dF ~ -k (C alpha)^3 / (mu F_z)^2, so s ~ (mu_0 / mu)^2: a tire with peak friction mu
+    saturates s times as much as the generic one. The column is linear in s, so the ranking fits
+    it together with the re-identified cornering stiffnesses and judges it on held-out blocks:
+    only the saturation beyond what re-identified (secant) linear stiffnesses explain counts.
+    Only the lateral force is modelled (no combined slip): the longitudinal forces are taken from
+    the measured spin balance anyway (``ranking`` nuisance), and the combined-slip change of the
+    wheel-speed rows would let the slip-stiffness priors speak for or against the tire.
+
+    Plausible: s > 0 (a tire gives less force than linear at large slip, never more) with an
+    implied peak friction mu_0 / sqrt(s) above the effect's lower bound. The upper bound of the
+    peak friction is not applied to this estimate: it is biased high (measured s = 0.35-0.48 on
+    the circle ramp with the generic tire as truth, i.e. mu ~ 1.5 instead of 1.0 -- the slowly
+    varying body-velocity nuisance takes up part of a slowly growing saturation); ``--add`` fits
+    the peak friction itself (:class:`MagicFormulaCandidate`). Material: s >= ``fraction``."""
+
+    def __init__(self, effect_cls):
+        super().__init__(effect_cls, ("saturation_scale",))
+        self.mu0 = float(self.defaults["peak_friction"])
+
+    def prior_theta(self):
+        return np.array([1.0])
+
+    def columns(self, ctx):
+        return saturation_columns(ctx.res, self.effect_cls(**self.defaults))[:, :, None], None
+
+    def _mu(self, s: float) -> float:
+        return self.mu0 / math.sqrt(s) if s > 1e-9 else math.inf
+
+    def effect(self, theta):
+        spec = self.effect_cls.param_specs()["peak_friction"]
+        mu = self._mu(float(theta[0]))
+        return self.effect_cls(**{**self.defaults, "peak_friction": min(max(mu, spec.lower), spec.upper)})
+
+    def report_params(self, theta, sigma):
+        s, ss = float(theta[0]), float(sigma[0])
+        mu = self._mu(s)
+        smu = 0.5 * mu * ss / s if s > 0 else math.nan
+        return {"peak_friction": (mu, smu), "saturation_scale": (s, ss)}
+
+    def plausible(self, theta):
+        s = float(theta[0])
+        return s > 0 and self._mu(s) >= self.effect_cls.param_specs()["peak_friction"].lower
+
+    def material(self, phi, fraction: float = 0.1) -> bool:
+        return float(phi[0]) >= fraction
+
+    def clip_phi(self, phi):
+        lower = self.effect_cls.param_specs()["peak_friction"].lower
+        return np.clip(np.asarray(phi, dtype=float), 0.0, (self.mu0 / lower) ** 2)
+
+
+def saturation_columns(res, tire) -> np.ndarray:
+    """(n, 14): the change of the model side of eq 13 when every tire's lateral force follows
+    ``tire`` (pure lateral slip, kappa = 0) instead of the linear tire, at the rows' slip angles,
+    normal loads and cornering stiffnesses (``TireSaturationCandidate``)."""
+    n = len(res.t_s)
+    out = np.zeros((n, 14))
+    unit = res.lateral_unit
+    if unit is None or not n:
+        return out
+    tf = tire.tire_forces
+    for j, q in enumerate(res.quantities):
+        for i in range(1, 5):
+            a = q.get(f"slip_angle_rad_{i}")
+            fz = q.get(f"normal_load_n_{i}")
+            ca = q.get(f"cornering_stiffness_nprad_{i}")
+            if a is None or fz is None or ca is None or not (fz > 0 and abs(a) > 1e-9):
+                continue
+            ratio = tf(fz, q[f"static_load_n_{i}"], 0.0, a, 1.0, ca)[1] / (ca * a) - 1.0
+            # lateral_unit = d r / d C_alpha,i = -(direction) alpha_i; the model side moves by
+            # (direction) dF_b = (direction) alpha_i C_alpha,i ratio
+            out[j] -= unit[j, :, i - 1] * ca * ratio
+    return np.nan_to_num(out)
+
+
 class ParameterCandidate(Candidate):
     """One of the ten identified parameters (a re-identification, not an effect)."""
 
@@ -477,6 +566,9 @@ def default_candidates(model_effects: EffectSet, extra: Sequence[type[Effect]] =
         if name in have or name == "linear_tire":
             continue
         if issubclass(cls, TireModel) and model_effects.tire is not None and model_effects.tire.name != "linear_tire":
+            continue
+        if cls is REGISTRY.get("magic_formula_tire"):
+            out.append(TireSaturationCandidate(cls))  # the ranking's form; --add fits mu itself
             continue
         out.append(candidate_for(cls))
     return out

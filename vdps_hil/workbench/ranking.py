@@ -28,10 +28,14 @@ sample size improves by more than ``bic_margin``::
     dBIC = n_eff ln(SSE(S + c) / SSE(S)) + p_c ln(n_eff),   n_eff = sum_g n_g / tau_g
 
 (tau_g the integrated autocorrelation time of equation g's residual), (b) EF_c >=
-``min_explained_overall`` (a sensor effect instead: >= ``min_explained_innovations`` of the GNSS/IMU
-innovations, where a sensor error must show) and >= ``min_explained`` on the candidate's own
-equations (those holding >= 10 % of its prior-size contribution), (c) the fitted parameters are physically plausible (``ParamSpec`` ranges:
-negative drag and so on are rejected) and (d) the drive excites it: at its generic prior
+``min_explained_overall`` -- or, for a sensor effect, >= ``min_explained_innovations`` of the
+GNSS/IMU innovations, where a sensor error must show (on the force balance alone a sensor effect
+needs >= ``min_explained_sensor_balance`` overall); or, for a non-sensor effect whose own equations are
+all force/moment balances (no wheel-speed rows), >= ``min_explained_dynamics`` of the ten balance
+equations (the kinematic wheel-speed rows, whose whitened misfit dominates the total on a
+circle, do not dilute it) -- and >= ``min_explained`` on the candidate's own equations (those
+holding >= 10 % of its prior-size contribution), (c) the fitted parameters are physically
+plausible (``ParamSpec`` ranges: negative drag and so on are rejected) and (d) the drive excites it: at its generic prior
 magnitude the effect would stand ``excitation_z`` noise sigmas (effective) above zero. The first
 selected effect is the ``recommendation``.
 
@@ -41,7 +45,11 @@ columns reproduce c's fitted contribution d_c with R^2 >= ``corr_threshold``^2 (
 re-identified parameter that moved from the model file's value is an entry of its own (its
 explained fraction is that of its re-identification) and the effects that would explain the same
 change form its group -- e.g. the front cornering stiffness and steering compliance, which a drive
-in the linear range cannot tell apart. Sigmas: (X'X)^-1 s^2 n / n_eff.
+in the linear range cannot tell apart. The recommendation's group also takes in a rival that
+passed every selection test on its own (first round) and whose fitted contribution the
+recommendation reproduces: both explain the residual, so the drive does not tell them apart
+(e.g. tire saturation and load-dependent stiffness on a 5 m/s^2 sine sweep, where either wins the
+held-out comparison depending on the seed). Sigmas: (X'X)^-1 s^2 n / n_eff.
 """
 
 from __future__ import annotations
@@ -59,7 +67,7 @@ from vdps_hil.model.params import Vehicle
 
 from .candidates import BASE_PARAMS, PARAM_ALIASES, PARAM_LABELS, Candidate, ParameterCandidate, default_candidates
 from .dataset import DriveTable
-from .residuals import (EQUATIONS, EquationResiduals, Innovations, RowStates, compute_innovations,
+from .residuals import (DYNAMIC_EQUATIONS, EQUATIONS, EquationResiduals, Innovations, RowStates, compute_innovations,
                         compute_residuals, parameter_columns, row_states)
 
 __all__ = ["RankingConfig", "Ranking", "RankEntry", "Context", "Design", "rank", "identify_base",
@@ -73,7 +81,18 @@ _INN_GROUP = {0: 14, 1: 14, 2: 14, 3: 15, 4: 15, 5: 16, 6: 16, 7: 16}
 
 @dataclass(frozen=True)
 class RankingConfig:
-    """Thresholds of the ranking (module docstring)."""
+    """Thresholds of the ranking (module docstring).
+
+    The evidence thresholds were set from the hidden-effect study (seeds 100-103, every effect
+    and every nothing-hidden maneuver): the smallest explained fraction of a true hit on its
+    evidence path was 0.29 (tire saturation, balance equations; every other effect >= 0.47
+    overall or >= 0.95 of the innovations), the largest of a false recommendation 0.16 (IMU
+    lever arm on the weaving straight, overall and balance) and 0.56 of the innovations (IMU
+    bias on accel-coast). ``min_explained_overall`` = ``min_explained_dynamics`` = 0.2 and
+    ``min_explained_innovations`` = 0.8 sit between the two. A sensor effect judged on the force
+    balance instead of its innovations needs ``min_explained_sensor_balance`` = 0.3 overall: on
+    the weaving straight with nothing hidden the lever arm reached 0.15-0.20 (seeds 102, 1000,
+    1004), on the lane change with 0.5 m hidden it explains 0.55-0.73."""
 
     micro_block_s: float = 0.5
     nuisance_knot_s: float = 2.0
@@ -87,8 +106,10 @@ class RankingConfig:
     gap_blocks: int = 1
     bic_margin: float = 10.0
     min_explained: float = 0.05
-    min_explained_overall: float = 0.1
-    min_explained_innovations: float = 0.5
+    min_explained_overall: float = 0.2
+    min_explained_innovations: float = 0.8
+    min_explained_dynamics: float = 0.2
+    min_explained_sensor_balance: float = 0.3
     material_fraction: float = 0.1
     corr_threshold: float = 0.95
     excitation_z: float = 5.0
@@ -956,12 +977,28 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
             steps[name]["ef_innovations"] = ef_inn
             # enough of the residual overall -- or, for a sensor effect, of the GNSS/IMU
             # innovations, where a sensor error shows even when the force balance hardly sees it
-            evidence = ef >= cfg.min_explained_overall or (
-                c.family == "measurement" and ef_inn >= cfg.min_explained_innovations)
+            # or, for an effect on the force balance alone (no kinematic rows among its own
+            # equations), of the ten balance equations of eq 13
+            dyn_g = np.arange(len(DYNAMIC_EQUATIONS))
+            ef_dyn = 1.0 - j.cv[dyn_g].sum() / max(cvb[dyn_g].sum(), 1e-300)
+            steps[name]["ef_dynamics"] = ef_dyn
+            balance_only = own is not None and own.any() and not own[len(DYNAMIC_EQUATIONS):].any()
+            if c.family == "measurement":
+                # a sensor error shows in the innovations; through the force balance alone it
+                # must explain more, as its several parameters also fit the reduced model's own
+                # shortcomings (a lateral force lagging the slip looks like a lever arm on a weave)
+                evidence = ef_inn >= cfg.min_explained_innovations or ef >= max(
+                    cfg.min_explained_overall, cfg.min_explained_sensor_balance)
+            else:
+                evidence = ef >= cfg.min_explained_overall or (balance_only and ef_dyn >= cfg.min_explained_dynamics)
+            if os.environ.get("VDPS_WB_DEBUG"):
+                print(f"[ranking] {name}: ef_dyn {ef_dyn:.3f} balance_only {balance_only}")
             if base_equiv.get(name, 0.0) >= cfg.corr_threshold ** 2:
                 evidence = False  # the same as re-identifying a parameter: reported as a group
             ok = (dbic < -cfg.bic_margin and ef_own >= cfg.min_explained and ef > 0.0 and evidence
                   and c.phi_plausible(j.phi) and c.material(j.phi, cfg.material_fraction))
+            if not selected:
+                steps[name]["eligible_first"] = bool(ok)
             if ok and (best is None or ef > best[1]):
                 best = (name, ef, j)
         if best is None:
@@ -1025,12 +1062,21 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     entries.sort(key=lambda e: (order.index(e.effect) if e.effect in order else len(order),
                                 -(e.explained_fraction if math.isfinite(e.explained_fraction) else -1)))
     params = _parameter_entries(d, d.ctx, vehicle, point.base, always, ratio, s2, cfg)
-    _groups(d, by_name, entries, params, always, thetas, cfg, n_eff, sse_fin, selected)
+    _groups(d, by_name, entries, params, always, thetas, cfg, n_eff, sse_fin, selected, point.phis)
     groups = _group_list(entries, params)
     rec = order[0] if order else None
     eq_to = []
     if rec:
-        eq_to = [g for g in next(e for e in entries if e.effect == rec).group if g != rec]
+        rec_e = next(e for e in entries if e.effect == rec)
+        # a rival that passed every selection test on its own in the first round and whose fitted
+        # contribution the recommendation reproduces: both explain the residual, the drive does
+        # not tell them apart (the one with the larger held-out explained fraction leads)
+        for e in entries:
+            if (e.effect != rec and rec in e.group and steps.get(e.effect, {}).get("eligible_first")
+                    and e.effect not in rec_e.group):
+                rec_e.group = (rec_e.group or [rec]) + [e.effect]
+        eq_to = [g for g in rec_e.group if g != rec]
+        groups = _group_list(entries, params)
     rk = Ranking(entries=entries, parameters=params, recommendation=rec, equivalent_to=eq_to, selected=order,
                  groups=groups, messages=[], n_eff=n_eff, n_rows=n_rows, base_vehicle=point.base,
                  reference_vehicle=vehicle, effects=point.effects, context=d.ctx, design=d, candidates=by_name,
@@ -1119,7 +1165,7 @@ def _cv_shifted(d: Design, cols, k: int, shift: float) -> np.ndarray:
 
 
 def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingConfig, n_eff: float = 1.0,
-            sse: float = 1.0, selected=()) -> None:
+            sse: float = 1.0, selected=(), phis: dict | None = None) -> None:
     """Fill each entry's ``group`` (module docstring), in Gram-matrix form with the GNSS
     nuisance partialled out."""
     r2min = cfg.corr_threshold ** 2
@@ -1167,7 +1213,10 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
         elif e.selected:
             # the selected effect's contribution: its change columns times its value (linear
             # candidates) or its prior-size direction (nonlinear ones)
-            phi = np.array([v for v, _ in list(e.parameters.values())[:len(cols)]])
+            if phis and e.effect in phis:
+                phi = np.asarray(phis[e.effect], dtype=float)
+            else:
+                phi = np.array([v for v, _ in list(e.parameters.values())[:len(cols)]])
             th = (phi if c.linear and len(phi) == len(cols) else np.ones(len(cols))) * np.array([d.scale[k] for k in cols])
         else:
             theta = thetas[e.effect]
@@ -1179,6 +1228,8 @@ def _groups(d: Design, by_name, entries, params, current, thetas, cfg: RankingCo
             if other == e.effect:
                 continue
             r2, th_o = mimic(th, cols, other, fitted)
+            if os.environ.get("VDPS_WB_DEBUG") and r2 > 0.5:
+                print(f"[groups] {e.effect} ~ {other}: r2 {r2:.3f} plausible {by_name[other].plausible(th_o)}")
             if r2 >= r2min and by_name[other].plausible(th_o):
                 grp.append(other)
         for p in params:

@@ -153,8 +153,10 @@ def _effect_words(rk, e) -> str:
         mu, smu = _pv(e, "peak_friction")
         a = _saturation_angle_deg(rk, mu)
         where = f"above {a:.1f} deg slip angle " if math.isfinite(a) else ""
-        return (f"{where}the lateral force falls below the linear tire (peak friction mu = {mu:.2f} +- {smu:.2f}, "
-                "Magic Formula shape at its generic prior)")
+        sat = e.parameters.get("saturation_scale")
+        scale = (f"{sat[0]:.2f} +- {sat[1]:.2f} times the generic tire's saturation, i.e. " if sat else "")
+        return (f"{where}the lateral force falls below the linear tire ({scale}peak friction mu = {mu:.2f} +- "
+                f"{smu:.2f} with the Magic Formula shape at its generic prior)")
     if name == "load_dependent_cornering_stiffness":
         a, sa = _pv(e, "load_slope")
         b, sb = _pv(e, "load_degression")
@@ -232,6 +234,15 @@ def describe_ranking(rk) -> list[str]:
     for g in rk.groups:
         mem = g["members"]
         if rk.recommendation and rk.recommendation in mem:
+            rec = rk.recommendation
+            if mem[0] != rec and mem[0] not in rk.equivalent_to:
+                # another candidate's fit is reproduced by the recommended effect, not the other
+                # way round: the recommendation is the better explanation, the other one is not
+                # ruled out
+                lead = EFFECT_LABELS.get(mem[0], mem[0])
+                out.append(f"also consistent with this drive: {lead} (what it would explain, "
+                           f"{EFFECT_LABELS.get(rec, rec)} explains too, and significantly more; "
+                           f"{group_maneuver(mem)} would separate them)")
             continue
         lead = mem[0]
         alts = mem[1:]
