@@ -235,7 +235,7 @@ def add_effects(table: DriveTable, vehicle: Vehicle, effects: EffectSet, names: 
                 registry=None, user_effects: Sequence[type[Effect]] = (), reestimate=None, **kw) -> AddResult:
     """``--add NAME ...``: build the candidates by name and compute the before/after tables.
     ``reestimate(measurement_effects) -> DriveTable``: re-runs the estimator with sensor effects
-    taken out of the IMU readings (the CLI passes one over the decoded samples)."""
+    taken out of the IMU readings (the diagnosis passes one that decodes the recording again)."""
     from vdps_hil.model.effects import REGISTRY
 
     reg = dict(registry if registry is not None else REGISTRY)
