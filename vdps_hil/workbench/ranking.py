@@ -379,30 +379,19 @@ class Design:
 
     # --- sufficient statistics
     def stats(self):
+        """(G, c, yy, cnt) per (micro block, row group): G a :class:`_BlockGram` (X_bg^T X_bg
+        without the dense (blocks, groups, p, p) array), c = X_bg^T y_bg, yy = y_bg^T y_bg, rows."""
         if self._stats is None:
-            x = np.column_stack(self.cols) if self.cols else np.zeros((len(self.y), 0))
             ng = len(GROUP_NAMES)
-            p = x.shape[1]
-            G = np.zeros((self.n_blocks, ng, p, p))
-            c = np.zeros((self.n_blocks, ng, p))
-            yy = np.zeros((self.n_blocks, ng))
-            cnt = np.zeros((self.n_blocks, ng))
             key = self.block * ng + self.group
-            order = np.argsort(key, kind="stable")
-            ks = key[order]
-            bounds = np.flatnonzero(np.diff(ks)) + 1
-            starts = np.r_[0, bounds]
-            ends = np.r_[bounds, len(ks)]
-            for s0, s1 in zip(starts, ends):
-                rows = order[s0:s1]
-                b, g = divmod(int(ks[s0]), ng)
-                xs = x[rows]
-                ys = self.y[rows]
-                G[b, g] = xs.T @ xs
-                c[b, g] = xs.T @ ys
-                yy[b, g] = ys @ ys
-                cnt[b, g] = len(rows)
-            self._stats = (G, c, yy, cnt)
+            shape = (self.n_blocks, ng)
+            size = self.n_blocks * ng
+            c = np.zeros(shape + (len(self.cols),))
+            for j, col in enumerate(self.cols):
+                c[:, :, j] = np.bincount(key, col * self.y, minlength=size).reshape(shape)
+            yy = np.bincount(key, self.y * self.y, minlength=size).reshape(shape)
+            cnt = np.bincount(key, minlength=size).reshape(shape).astype(float)
+            self._stats = (_BlockGram(self, key), c, yy, cnt)
         return self._stats
 
     def folds(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -459,9 +448,8 @@ class Design:
         return th, float(per.sum()), per
 
     def _sse_groups(self, G, c, yy, cols, th):
-        Gc = G[:, :, cols][:, :, :, cols]
         cc = c[:, :, cols]
-        v = yy - 2.0 * np.einsum("bgp,p->bg", cc, th) + np.einsum("bgpq,p,q->bg", Gc, th, th)
+        v = yy - 2.0 * np.einsum("bgp,p->bg", cc, th) + G.quad(cols, th)
         return v.sum(axis=0)
 
     def cv(self, cols: Sequence[int]) -> np.ndarray:
@@ -482,6 +470,116 @@ class Design:
 
     def matrix(self, cols: Sequence[int]) -> np.ndarray:
         return np.column_stack([self.cols[k] for k in cols]) if cols else np.zeros((len(self.y), 0))
+
+
+class _BlockGram:
+    """The Gram matrices G_bg = X_bg^T X_bg of the design's rows per (micro block b, row group g)
+    as ``Design.stats`` needs them, without storing the (blocks, groups, p, p) array: p grows
+    with the drive through the smooth velocity columns (one pair per ``nuisance_knot_s``), so
+    that array grew with the cube of the drive's length. Held: the total (p, p) and the total
+    per group (groups, p, p); sums over a set of blocks are computed from the rows of the blocks
+    left out (or in, whichever is fewer) and cached (the folds repeat); per-(b, g) quadratic
+    forms theta^T G_bg theta = |X_bg theta|^2 and columns G_bg[:, k] come from the rows.
+
+    Indexing as the array: ``G[blocks]`` (a subset of blocks), ``G.sum(axis=(0, 1))``,
+    ``G.sum(axis=0)``, ``G[:, :, :, k]``, ``G[:, :, k, k]``; ``G.quad(cols, th)`` is
+    einsum("bgpq,p,q->bg", G[:, :, cols][:, :, :, cols], th, th)."""
+
+    def __init__(self, d: "Design", key: np.ndarray, blocks: np.ndarray | None = None, shared: dict | None = None):
+        self.d = d
+        self.cols = list(d.cols)  # the columns when the statistics were taken (Design copies share the list)
+        self.key = key
+        self.ng = len(GROUP_NAMES)
+        self.blocks = np.arange(d.n_blocks) if blocks is None else np.asarray(blocks, dtype=int)
+        self._shared = shared if shared is not None else {}
+        self._rows = None
+
+    def _x(self, rows: np.ndarray | None) -> np.ndarray:
+        cols = self.cols
+        if rows is None:
+            return np.column_stack(cols) if cols else np.zeros((len(self.d.y), 0))
+        return np.column_stack([c[rows] for c in cols]) if cols else np.zeros((len(rows), 0))
+
+    def _totals(self):
+        if "total" not in self._shared:
+            x = self._x(None)
+            p = x.shape[1]
+            per = np.zeros((self.ng, p, p))
+            g_all = self.d.group
+            for g in range(self.ng):
+                xs = x[g_all == g]
+                if len(xs):
+                    per[g] = xs.T @ xs
+            self._shared["per_group"] = per
+            self._shared["total"] = per.sum(axis=0)
+        return self._shared["total"], self._shared["per_group"]
+
+    def rows(self) -> np.ndarray:
+        if self._rows is None:
+            inside = np.zeros(self.d.n_blocks, bool)
+            inside[self.blocks] = True
+            self._rows = np.flatnonzero(inside[self.d.block])
+        return self._rows
+
+    def __getitem__(self, idx):
+        if isinstance(idx, tuple):
+            return self._entries(idx)
+        if isinstance(idx, slice) and idx == slice(None):
+            return self
+        return _BlockGram(self.d, self.key, self.blocks[idx], self._shared)
+
+    def _entries(self, idx):
+        """G[:, :, :, k] -> (b, g, p) and G[:, :, k, k] -> (b, g) on this block subset."""
+        if len(idx) != 4 or idx[0] != slice(None) or idx[1] != slice(None):
+            raise IndexError("unsupported _BlockGram index")
+        k = idx[3]
+        rows = self.rows()
+        key = self.key[rows]
+        size = self.d.n_blocks * self.ng
+        shape = (self.d.n_blocks, self.ng)
+        xk = self.cols[k][rows]
+        if idx[2] == slice(None):
+            out = np.zeros(shape + (len(self.cols),))
+            for j, col in enumerate(self.cols):
+                out[:, :, j] = np.bincount(key, col[rows] * xk, minlength=size).reshape(shape)
+            return out[self.blocks]
+        j = idx[2]
+        return np.bincount(key, self.cols[j][rows] * xk, minlength=size).reshape(shape)[self.blocks]
+
+    def sum(self, axis):
+        total, per = self._totals()
+        full = len(self.blocks) == self.d.n_blocks and np.array_equal(self.blocks, np.arange(self.d.n_blocks))
+        if axis == 0 or tuple(axis) == (0,):
+            if full:
+                return per.copy()
+            raise ValueError("_BlockGram.sum(axis=0) only over all blocks")
+        if tuple(axis) != (0, 1):
+            raise ValueError("unsupported _BlockGram.sum axis")
+        if full:
+            return total.copy()
+        ck = ("sum", self.blocks.tobytes())
+        if ck not in self._shared:
+            rows = self.rows()
+            if 2 * len(rows) <= len(self.d.y):
+                x = self._x(rows)
+                self._shared[ck] = x.T @ x
+            else:
+                out = np.ones(len(self.d.y), bool)
+                out[rows] = False
+                x = self._x(np.flatnonzero(out))
+                self._shared[ck] = total - x.T @ x
+        return self._shared[ck].copy()
+
+    def quad(self, cols: Sequence[int], th: np.ndarray) -> np.ndarray:
+        """theta^T G_bg[cols, cols] theta per (block of this subset, group): (b, g)."""
+        rows = self.rows()
+        r = np.zeros(len(rows))
+        for j, k in enumerate(cols):
+            if th[j] != 0.0:
+                r += th[j] * self.cols[k][rows]
+        size = self.d.n_blocks * self.ng
+        q = np.bincount(self.key[rows], r * r, minlength=size).reshape(self.d.n_blocks, self.ng)
+        return q[self.blocks]
 
 
 # ----------------------------------------------------------------------------------- results
@@ -1157,9 +1255,8 @@ def _cv_shifted(d: Design, cols, k: int, shift: float) -> np.ndarray:
     cols = list(cols)
     for held, train in d.folds():
         th = d._solve(G[train].sum(axis=(0, 1)), c2[train].sum(axis=(0, 1)), cols)
-        Gc = G[held][:, :, cols][:, :, :, cols]
         cc = c2[held][:, :, cols]
-        v = yy2[held] - 2.0 * np.einsum("bgp,p->bg", cc, th) + np.einsum("bgpq,p,q->bg", Gc, th, th)
+        v = yy2[held] - 2.0 * np.einsum("bgp,p->bg", cc, th) + G[held].quad(cols, th)
         out += v.sum(axis=0)
     return out
 
