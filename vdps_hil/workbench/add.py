@@ -132,7 +132,7 @@ def cleaned_rms(table: DriveTable, model: FittedModel, vehicle: Vehicle, config:
     inn = compute_innovations(table)
     _, d, cols = _build(table, states, inn, vehicle, _Point(model.vehicle, model.effects, {}), cfg, {})
     th, _ = d.objective(cols)
-    r = d.y - d.matrix(cols) @ th
+    r = d.y - d.predict(cols, th)
     ctx = d.ctx
     n, e = ctx.y_dyn.shape
     dyn = r[:d.n_dyn_rows].reshape(n, e) * ctx.sig[None, :]

@@ -159,16 +159,18 @@ class Context:
             self._fs = 1.0 - 1.0 / np.sqrt(1.0 + s2 * s2)
         self.y_dyn = self.project(self.y_dyn[:, :, None])[:, :, 0]
 
-    def _hard(self, a: np.ndarray) -> np.ndarray:
-        u = self._u
+    def _hard(self, a: np.ndarray, sl: slice = slice(None)) -> np.ndarray:
+        u = self._u[sl]
         return a - np.einsum("nek,nkp->nep", u, np.einsum("nek,nep->nkp", u, a))
 
-    def project(self, a: np.ndarray) -> np.ndarray:
+    def project(self, a: np.ndarray, sl: slice = slice(None)) -> np.ndarray:
         """Remove the row-wise nuisance directions from whitened columns (n, E, p): the
-        longitudinal tire forces exactly, the fast velocity errors in proportion to their sigma."""
-        a = self._hard(a)
-        u = self._us * self._fs[:, None, :]
-        return a - np.einsum("nek,nkp->nep", u, np.einsum("nek,nep->nkp", self._us, a))
+        longitudinal tire forces exactly, the fast velocity errors in proportion to their sigma.
+        ``sl``: the used rows ``a`` holds (all by default)."""
+        a = self._hard(a, sl)
+        us = self._us[sl]
+        u = us * self._fs[sl][:, None, :]
+        return a - np.einsum("nek,nkp->nep", u, np.einsum("nek,nep->nkp", us, a))
 
     def smooth_columns(self, knot_s: float, floor_mps: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
         """The estimator's slowly varying body-velocity errors (delta v_x, delta v_y) as
@@ -196,6 +198,39 @@ class Context:
                 out[:, :, 2 * j + c] = self.res.nuisance[:, :, c] * phi[:, None]
                 sig[2 * j + c] = max(float(np.median(sc[near])) if near.any() else floor_mps, floor_mps)
         return out, sig
+
+    def smooth_bands(self, knot_s: float, floor_mps: float = 0.02) -> tuple[list, np.ndarray]:
+        """:meth:`smooth_columns` without the dense (n_all, 14, 2K) array (quadratic in the drive
+        length): each hat function is non-zero over two knot intervals only, so each column is
+        returned whitened and projected on the used rows it touches: [(first used row, (r, E))]
+        per column, and the prior sigmas."""
+        t = self.res.t_s
+        if not len(t):
+            return [], np.zeros(0)
+        tsig, tc = self.table.sigma, self.table.columns
+        idx = self.res.index
+        sv = np.hypot(tsig["vel_g_mps_e"], tsig["vel_g_mps_n"])[idx] / math.sqrt(2.0)
+        speed = np.hypot(tc["vel_g_mps_e"], tc["vel_g_mps_n"])[idx]
+        svy = np.hypot(sv, speed * tsig["yaw_g_rad"][idx])
+        t0, t1 = float(t[0]), float(t[-1])
+        k = max(1, int(math.ceil((t1 - t0) / knot_s)))
+        knots = np.linspace(t0, t1, k + 1)
+        dk = knots[1] - knots[0] if k else 1.0
+        used = np.flatnonzero(self.rows)
+        bands, sig = [], np.zeros(2 * (k + 1))
+        for j, tk in enumerate(knots):
+            i0, i1 = np.searchsorted(t, [tk - dk, tk + dk], side="left")[0], np.searchsorted(t, tk + dk, side="right")
+            phi_all = np.clip(1.0 - np.abs(t[i0:i1] - tk) / dk, 0.0, None)
+            r0, r1 = np.searchsorted(used, [i0, i1])
+            rows = used[r0:r1]
+            phi = np.clip(1.0 - np.abs(t[rows] - tk) / dk, 0.0, None)
+            for c, sc in enumerate((sv, svy)):
+                scn = sc[i0:i1]
+                near = (phi_all > 0) & np.isfinite(scn)
+                sig[2 * j + c] = max(float(np.median(scn[near])) if near.any() else floor_mps, floor_mps)
+                a = self.res.nuisance[rows][:, self.avail, c] * phi[:, None] / self.sig[None, :]
+                bands.append((int(r0), self.project(np.nan_to_num(a)[:, :, None], slice(r0, r1))[:, :, 0]))
+        return bands, sig
 
     def whiten_project(self, x14: np.ndarray) -> np.ndarray:
         """(n_all, 14, p) in equation units -> whitened, projected (n, E, p) on the used rows."""
@@ -308,9 +343,28 @@ class Design:
         if len(inn):
             nu = inn.nuisance / inn.sigma[:, None]
             self.add_block("_nuisance", None, nu)
-        sm, sm_sig = ctx.smooth_columns(config.nuisance_knot_s, config.velocity_sigma_floor_mps)
-        if sm.shape[2]:
-            self.add_block("_smooth", sm, None, prior_sigma=list(sm_sig))
+        sm, sm_sig = ctx.smooth_bands(config.nuisance_knot_s, config.velocity_sigma_floor_mps)
+        if sm:
+            self._add_band_block("_smooth", sm, sm_sig)
+
+    def _add_band_block(self, name: str, bands, prior_sigma) -> None:
+        """Add columns non-zero on a run of dynamic rows only ([(first used row, (r, E))], whitened
+        and projected), stored as :class:`_Band` (memory linear in the drive length)."""
+        e = self.ctx.y_dyn.shape[1]
+        n = len(self.y)
+        idx = []
+        for j, (r0, a) in enumerate(bands):
+            v = a.reshape(-1)
+            s = float(np.sqrt(np.sum(v * v) / n)) if n else 0.0
+            s = s if s > 0 else 1.0
+            self.scale.append(s)
+            self.cols.append(_Band(n, r0 * e, v / s))
+            self.prior_w.append(1.0 / (prior_sigma[j] * s) ** 2 if prior_sigma[j] > 0 else 0.0)
+            self.prior_c.append(0.0)
+            self.names.append(f"{name}[{j}]")
+            idx.append(len(self.cols) - 1)
+        self.blocks[name] = idx
+        self._stats = None
 
     def add_block(self, name: str, x_dyn: np.ndarray | None, x_inn: np.ndarray | None,
                   prior_sigma: Sequence[float] | None = None, prior_center: Sequence[float] | None = None) -> list[int]:
@@ -375,7 +429,7 @@ class Design:
         self._stats = None
 
     def has_signal(self, name: str) -> bool:
-        return any(s > 0 and np.any(self.cols[k] != 0) for k in self.blocks[name] for s in [self.scale[k]])
+        return any(s > 0 and np.any(_vals(self.cols[k]) != 0) for k in self.blocks[name] for s in [self.scale[k]])
 
     # --- sufficient statistics
     def stats(self):
@@ -388,7 +442,7 @@ class Design:
             size = self.n_blocks * ng
             c = np.zeros(shape + (len(self.cols),))
             for j, col in enumerate(self.cols):
-                c[:, :, j] = np.bincount(key, col * self.y, minlength=size).reshape(shape)
+                c[:, :, j] = _keysum(key, col, self.y, size).reshape(shape)
             yy = np.bincount(key, self.y * self.y, minlength=size).reshape(shape)
             cnt = np.bincount(key, minlength=size).reshape(shape).astype(float)
             self._stats = (_BlockGram(self, key), c, yy, cnt)
@@ -469,7 +523,93 @@ class Design:
         return [k for n in names for k in self.blocks.get(n, [])]
 
     def matrix(self, cols: Sequence[int]) -> np.ndarray:
-        return np.column_stack([self.cols[k] for k in cols]) if cols else np.zeros((len(self.y), 0))
+        return np.column_stack([_dense(self.cols[k]) for k in cols]) if cols else np.zeros((len(self.y), 0))
+
+    def predict(self, cols: Sequence[int], th) -> np.ndarray:
+        """X[:, cols] theta without forming X."""
+        out = np.zeros(len(self.y))
+        for k, v in zip(cols, th):
+            c = self.cols[k]
+            if isinstance(c, _Band):
+                out[c.lo:c.hi] += v * c.vals
+            else:
+                out += v * c
+        return out
+
+
+class _Band:
+    """A design column that is zero outside the rows [lo, lo + len(vals)) (a smooth velocity
+    column: a hat function spans two knot intervals)."""
+
+    __slots__ = ("n", "lo", "vals")
+
+    def __init__(self, n: int, lo: int, vals: np.ndarray):
+        self.n, self.lo, self.vals = n, lo, vals
+
+    @property
+    def hi(self) -> int:
+        return self.lo + len(self.vals)
+
+    def dense(self) -> np.ndarray:
+        out = np.zeros(self.n)
+        out[self.lo:self.hi] = self.vals
+        return out
+
+
+def _dense(col) -> np.ndarray:
+    return col.dense() if isinstance(col, _Band) else col
+
+
+def _vals(col) -> np.ndarray:
+    return col.vals if isinstance(col, _Band) else col
+
+
+def _take(col, rows: np.ndarray) -> np.ndarray:
+    """col[rows] for sorted row indices (a band without expanding it)."""
+    if not isinstance(col, _Band):
+        return col[rows]
+    out = np.zeros(len(rows))
+    i0, i1 = np.searchsorted(rows, [col.lo, col.hi])
+    out[i0:i1] = col.vals[rows[i0:i1] - col.lo]
+    return out
+
+
+def _keysum(key: np.ndarray, col, w: np.ndarray, size: int) -> np.ndarray:
+    """sum of col * w per key value (bincount; a band over its rows only)."""
+    if isinstance(col, _Band):
+        return np.bincount(key[col.lo:col.hi], col.vals * w[col.lo:col.hi], minlength=size)
+    return np.bincount(key, col * w, minlength=size)
+
+
+def _gram(cols: Sequence, rows: np.ndarray) -> np.ndarray:
+    """X[rows]^T X[rows] for sorted row indices: dense columns as a matrix product, band
+    columns only against what overlaps them (linear in the drive length)."""
+    p = len(cols)
+    g = np.zeros((p, p))
+    dense = [k for k, c in enumerate(cols) if not isinstance(c, _Band)]
+    bands = [k for k, c in enumerate(cols) if isinstance(c, _Band)]
+    d = np.column_stack([cols[k][rows] for k in dense]) if dense else np.zeros((len(rows), 0))
+    if dense:
+        g[np.ix_(dense, dense)] = d.T @ d
+    seg = []
+    for k in bands:
+        c = cols[k]
+        i0, i1 = (int(i) for i in np.searchsorted(rows, [c.lo, c.hi]))
+        v = c.vals[rows[i0:i1] - c.lo]
+        seg.append((i0, i1, v, k))
+        if dense:
+            gd = d[i0:i1].T @ v
+            g[dense, k] = gd
+            g[k, dense] = gd
+    seg.sort(key=lambda z: z[0])
+    for a, (i0, i1, va, ka) in enumerate(seg):
+        for j0, j1, vb, kb in seg[a:]:
+            if j0 >= i1:
+                break
+            lo, hi = max(i0, j0), min(i1, j1)
+            if lo < hi:
+                g[ka, kb] = g[kb, ka] = float(va[lo - i0:hi - i0] @ vb[lo - j0:hi - j0])
+    return g
 
 
 class _BlockGram:
@@ -494,22 +634,15 @@ class _BlockGram:
         self._shared = shared if shared is not None else {}
         self._rows = None
 
-    def _x(self, rows: np.ndarray | None) -> np.ndarray:
-        cols = self.cols
-        if rows is None:
-            return np.column_stack(cols) if cols else np.zeros((len(self.d.y), 0))
-        return np.column_stack([c[rows] for c in cols]) if cols else np.zeros((len(rows), 0))
-
     def _totals(self):
         if "total" not in self._shared:
-            x = self._x(None)
-            p = x.shape[1]
+            p = len(self.cols)
             per = np.zeros((self.ng, p, p))
             g_all = self.d.group
             for g in range(self.ng):
-                xs = x[g_all == g]
-                if len(xs):
-                    per[g] = xs.T @ xs
+                rows = np.flatnonzero(g_all == g)
+                if len(rows):
+                    per[g] = _gram(self.cols, rows)
             self._shared["per_group"] = per
             self._shared["total"] = per.sum(axis=0)
         return self._shared["total"], self._shared["per_group"]
@@ -537,14 +670,14 @@ class _BlockGram:
         key = self.key[rows]
         size = self.d.n_blocks * self.ng
         shape = (self.d.n_blocks, self.ng)
-        xk = self.cols[k][rows]
+        xk = _take(self.cols[k], rows)
         if idx[2] == slice(None):
             out = np.zeros(shape + (len(self.cols),))
             for j, col in enumerate(self.cols):
-                out[:, :, j] = np.bincount(key, col[rows] * xk, minlength=size).reshape(shape)
+                out[:, :, j] = np.bincount(key, _take(col, rows) * xk, minlength=size).reshape(shape)
             return out[self.blocks]
         j = idx[2]
-        return np.bincount(key, self.cols[j][rows] * xk, minlength=size).reshape(shape)[self.blocks]
+        return np.bincount(key, _take(self.cols[j], rows) * xk, minlength=size).reshape(shape)[self.blocks]
 
     def sum(self, axis):
         total, per = self._totals()
@@ -561,13 +694,11 @@ class _BlockGram:
         if ck not in self._shared:
             rows = self.rows()
             if 2 * len(rows) <= len(self.d.y):
-                x = self._x(rows)
-                self._shared[ck] = x.T @ x
+                self._shared[ck] = _gram(self.cols, rows)
             else:
                 out = np.ones(len(self.d.y), bool)
                 out[rows] = False
-                x = self._x(np.flatnonzero(out))
-                self._shared[ck] = total - x.T @ x
+                self._shared[ck] = total - _gram(self.cols, np.flatnonzero(out))
         return self._shared[ck].copy()
 
     def quad(self, cols: Sequence[int], th: np.ndarray) -> np.ndarray:
@@ -576,7 +707,12 @@ class _BlockGram:
         r = np.zeros(len(rows))
         for j, k in enumerate(cols):
             if th[j] != 0.0:
-                r += th[j] * self.cols[k][rows]
+                c = self.cols[k]
+                if isinstance(c, _Band):
+                    i0, i1 = np.searchsorted(rows, [c.lo, c.hi])
+                    r[i0:i1] += th[j] * c.vals[rows[i0:i1] - c.lo]
+                else:
+                    r += th[j] * c[rows]
         size = self.d.n_blocks * self.ng
         q = np.bincount(self.key[rows], r * r, minlength=size).reshape(self.d.n_blocks, self.ng)
         return q[self.blocks]
@@ -815,7 +951,7 @@ def _build(table, states, inn, ref: Vehicle, point: _Point, cfg: RankingConfig, 
         # n_eff / n, measured once per drive on the residual of this first fit
         cols = d.columns_of(names)
         th, _ = d.objective(cols)
-        states.prior_scale = max(1.0, len(d.y) / _n_eff(d, d.y - d.matrix(cols) @ th))
+        states.prior_scale = max(1.0, len(d.y) / _n_eff(d, d.y - d.predict(cols, th)))
         d.prior_scale = states.prior_scale
         d._stats = None
     for c in screen:
@@ -985,7 +1121,7 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
         xd, xi = c.columns(ctx)
         d.add_block(c.name, xd, xi)
     th0, sse_cur = d.objective(always)
-    r0 = d.y - d.matrix(always) @ th0
+    r0 = d.y - d.predict(always, th0)
     n_eff = _n_eff(d, r0)
     n_rows = len(d.y)
     ratio = n_eff / n_rows
@@ -1193,7 +1329,8 @@ def rk_message(rk: Ranking, e: RankEntry) -> str:
 
 def _group_has_signal(d: Design, name: str, g: int) -> bool:
     rows = d.group == g
-    return any(np.any(d.cols[k][rows] != 0) for k in d.blocks[name])
+    rows = np.flatnonzero(rows)
+    return any(np.any(_take(d.cols[k], rows) != 0) for k in d.blocks[name])
 
 
 def _theta_of(d: Design, name: str, cols: Sequence[int], th: np.ndarray) -> np.ndarray:
