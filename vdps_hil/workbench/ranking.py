@@ -172,38 +172,13 @@ class Context:
         u = us * self._fs[sl][:, None, :]
         return a - np.einsum("nek,nkp->nep", u, np.einsum("nek,nep->nkp", us, a))
 
-    def smooth_columns(self, knot_s: float, floor_mps: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
-        """The estimator's slowly varying body-velocity errors (delta v_x, delta v_y) as
-        piecewise-linear functions of time (hat functions every ``knot_s``): (n_all, 14, 2K),
-        and their prior sigmas: the estimator's own velocity sigma near each knot (floored)."""
-        t = self.res.t_s
-        if not len(t):
-            return np.zeros((0, 14, 0)), np.zeros(0)
-        tsig, tc = self.table.sigma, self.table.columns
-        idx = self.res.index
-        sv = np.hypot(tsig["vel_g_mps_e"], tsig["vel_g_mps_n"])[idx] / math.sqrt(2.0)
-        # the body lateral velocity also inherits the heading error: v sigma_psi
-        speed = np.hypot(tc["vel_g_mps_e"], tc["vel_g_mps_n"])[idx]
-        svy = np.hypot(sv, speed * tsig["yaw_g_rad"][idx])
-        t0, t1 = float(t[0]), float(t[-1])
-        k = max(1, int(math.ceil((t1 - t0) / knot_s)))
-        knots = np.linspace(t0, t1, k + 1)
-        dk = knots[1] - knots[0] if k else 1.0
-        out = np.zeros((len(t), 14, 2 * (k + 1)))
-        sig = np.zeros(2 * (k + 1))
-        for j, tk in enumerate(knots):
-            phi = np.clip(1.0 - np.abs(t - tk) / dk, 0.0, None)
-            for c, sc in enumerate((sv, svy)):
-                near = (phi > 0) & np.isfinite(sc)
-                out[:, :, 2 * j + c] = self.res.nuisance[:, :, c] * phi[:, None]
-                sig[2 * j + c] = max(float(np.median(sc[near])) if near.any() else floor_mps, floor_mps)
-        return out, sig
-
     def smooth_bands(self, knot_s: float, floor_mps: float = 0.02) -> tuple[list, np.ndarray]:
-        """:meth:`smooth_columns` without the dense (n_all, 14, 2K) array (quadratic in the drive
-        length): each hat function is non-zero over two knot intervals only, so each column is
-        returned whitened and projected on the used rows it touches: [(first used row, (r, E))]
-        per column, and the prior sigmas."""
+        """The estimator's slowly varying body-velocity errors (delta v_x, delta v_y) as
+        piecewise-linear functions of time (hat functions every ``knot_s``), and their prior
+        sigmas: the estimator's own velocity sigma near each knot (floored). Each hat function is
+        non-zero over two knot intervals only, so each of the 2(K+1) columns is returned whitened
+        and projected on the used rows it touches, [(first used row, (r, E))], never as a dense
+        (rows, 14, 2(K+1)) array (that grew with the square of the drive's length)."""
         t = self.res.t_s
         if not len(t):
             return [], np.zeros(0)
@@ -211,6 +186,7 @@ class Context:
         idx = self.res.index
         sv = np.hypot(tsig["vel_g_mps_e"], tsig["vel_g_mps_n"])[idx] / math.sqrt(2.0)
         speed = np.hypot(tc["vel_g_mps_e"], tc["vel_g_mps_n"])[idx]
+        # the body lateral velocity also inherits the heading error: v sigma_psi
         svy = np.hypot(sv, speed * tsig["yaw_g_rad"][idx])
         t0, t1 = float(t[0]), float(t[-1])
         k = max(1, int(math.ceil((t1 - t0) / knot_s)))
@@ -219,7 +195,7 @@ class Context:
         used = np.flatnonzero(self.rows)
         bands, sig = [], np.zeros(2 * (k + 1))
         for j, tk in enumerate(knots):
-            i0, i1 = np.searchsorted(t, [tk - dk, tk + dk], side="left")[0], np.searchsorted(t, tk + dk, side="right")
+            i0, i1 = np.searchsorted(t, tk - dk, side="left"), np.searchsorted(t, tk + dk, side="right")
             phi_all = np.clip(1.0 - np.abs(t[i0:i1] - tk) / dk, 0.0, None)
             r0, r1 = np.searchsorted(used, [i0, i1])
             rows = used[r0:r1]
