@@ -132,7 +132,7 @@ def cleaned_rms(table: DriveTable, model: FittedModel, vehicle: Vehicle, config:
     inn = compute_innovations(table)
     _, d, cols = _build(table, states, inn, vehicle, _Point(model.vehicle, model.effects, {}), cfg, {})
     th, _ = d.objective(cols)
-    r = d.y - d.matrix(cols) @ th
+    r = d.y - d.predict(cols, th)
     ctx = d.ctx
     n, e = ctx.y_dyn.shape
     dyn = r[:d.n_dyn_rows].reshape(n, e) * ctx.sig[None, :]
@@ -235,7 +235,7 @@ def add_effects(table: DriveTable, vehicle: Vehicle, effects: EffectSet, names: 
                 registry=None, user_effects: Sequence[type[Effect]] = (), reestimate=None, **kw) -> AddResult:
     """``--add NAME ...``: build the candidates by name and compute the before/after tables.
     ``reestimate(measurement_effects) -> DriveTable``: re-runs the estimator with sensor effects
-    taken out of the IMU readings (the CLI passes one over the decoded samples)."""
+    taken out of the IMU readings (the diagnosis passes one that decodes the recording again)."""
     from vdps_hil.model.effects import REGISTRY
 
     reg = dict(registry if registry is not None else REGISTRY)

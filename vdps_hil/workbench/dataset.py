@@ -54,7 +54,8 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Iterable, Mapping, Sequence
+from array import array
+from typing import Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 from scipy.signal import butter, filtfilt
@@ -64,7 +65,7 @@ from vdps_hil.estimation.pipeline import EstimatorPipeline, Innovation, Pipeline
 from vdps_hil.model.effects.base import ImuKinematics, MeasurementEffect
 from vdps_hil.model.params import Vehicle
 
-__all__ = ["DatasetConfig", "DatasetError", "DriveTable", "decode_raw", "load_drive", "build_table",
+__all__ = ["DatasetConfig", "DatasetError", "DriveTable", "decode_raw", "iter_raw", "load_drive", "build_table",
            "EstimatorRun", "run_estimator", "dcm_gv_batch", "remove_imu_effects"]
 
 _SF = axis_fields("specific_force_mps2")
@@ -72,6 +73,14 @@ _AR = axis_fields("angular_rate_radps")
 _WS = wheel_fields("wheel_speed_radps")
 _WT = wheel_fields("wheel_torque_nm")
 _SUSP = wheel_fields("susp_deflection_m")
+_GNSS_POS = ("gnss_lat_deg", "gnss_lon_deg", "gnss_alt_m", "gnss_geoid_sep_m", "gnss_pos_sigma_h_m",
+             "gnss_pos_sigma_v_m", "gnss_fix_quality")
+_GNSS_ATT = ("gnss_roll_rad", "gnss_pitch_rad", "gnss_yaw_rad", "gnss_roll_sigma_rad", "gnss_pitch_sigma_rad",
+             "gnss_yaw_sigma_rad")
+_GNSS_VEL = ("gnss_speed_mps", "gnss_course_rad")
+_STREAM_FIELDS = {"imu": tuple(_SF) + tuple(_AR), "wheel_speed": tuple(_WS), "suspension": tuple(_SUSP),
+                  "steer": ("steer_wheel_angle_rad",), "wheel_torque": tuple(_WT), "gnss_pos": _GNSS_POS,
+                  "gnss_att": _GNSS_ATT, "gnss_vel": _GNSS_VEL}
 STATE_COLUMNS = ("pos_g_m_e", "pos_g_m_n", "pos_g_m_u", "vel_g_mps_e", "vel_g_mps_n", "vel_g_mps_u",
                  "roll_g_rad", "pitch_g_rad", "yaw_g_rad", "road_bank_rad", "road_grade_rad")
 """Table names of the EKF states 0..10 of eq 7 (``psi_v`` follows from them, eq 4)."""
@@ -107,15 +116,21 @@ class DatasetConfig:
 
 
 # ----------------------------------------------------------------------------------- decoding
-def decode_raw(path: str | os.PathLike, *, dbc=None, signalmap=None) -> list[Sample]:
-    """The decoded ``/raw/`` samples of a recording in t_ns order (nothing else is read)."""
+def iter_raw(path: str | os.PathLike, *, dbc=None, signalmap=None) -> Iterator[Sample]:
+    """The decoded ``/raw/`` samples of a recording in t_ns order, one at a time (nothing else
+    is read, nothing is held: memory does not grow with the drive's length)."""
     from vdps_hil.record.decode import DecodeError, decode_recording
 
     try:
-        dec = decode_recording(path, dbc=dbc, signalmap=signalmap)
-        return list(dec)
+        yield from decode_recording(path, dbc=dbc, signalmap=signalmap)
     except DecodeError as e:
         raise DatasetError(str(e)) from None
+
+
+def decode_raw(path: str | os.PathLike, *, dbc=None, signalmap=None) -> list[Sample]:
+    """The decoded ``/raw/`` samples of a recording in t_ns order, as a list (about 2 MiB per
+    second of drive: the workbench itself streams with :func:`iter_raw`)."""
+    return list(iter_raw(path, dbc=dbc, signalmap=signalmap))
 
 
 # ----------------------------------------------------------------------------------- estimator
@@ -127,7 +142,7 @@ class EstimatorRun:
     est_t_ns: np.ndarray
     est_x: np.ndarray
     est_sigma: np.ndarray
-    innovations: list[Innovation]
+    innovations: "InnovationLog | list[Innovation]"
     origin: object
     counters: dict
 
@@ -139,12 +154,14 @@ def run_estimator(samples: Sequence[Sample], vehicle: Vehicle, config: PipelineC
     p = EstimatorPipeline(vehicle, config)
     step = int(round(period_s * 1e9))
     nxt = None
-    ts, xs, ss, innov = [], [], [], []
-    for s in samples:
+    ts, xs, ss, innov = [], [], [], InnovationLog()
+    for i, s in enumerate(samples):
         out = p.handle(s)
+        if i % 4096 == 4095:
+            p._log.clear()  # its replay log (input_log) would hold the whole drive (as system.replay_file)
         for o in out:
             if isinstance(o, Innovation):
-                innov.append(o)
+                innov.add(o)
         t = s.t_ns
         if nxt is None:
             nxt = (t // step + 1) * step
@@ -159,6 +176,49 @@ def run_estimator(samples: Sequence[Sample], vehicle: Vehicle, config: PipelineC
         raise DatasetError("the estimator never initialised (no GNSS fix with a heading in the recording)")
     return EstimatorRun(np.array(ts, dtype=np.int64), np.array(xs), np.array(ss), innov, p.origin,
                         dict(p.counters))
+
+
+class InnovationLog:
+    """The estimator's innovations per measurement kind as packed arrays (an Innovation object
+    per update would hold ~0.6 kB: 2000 updates per second of drive)."""
+
+    def __init__(self):
+        self._k: dict[str, dict[str, array]] = {}
+
+    def add(self, o: Innovation) -> None:
+        d = self._k.get(o.kind)
+        if d is None:
+            d = self._k[o.kind] = {"t": array("q"), "nis": array("d"), "dof": array("d"), "acc": array("b"),
+                                   "n": array("l"), "inn": array("d"), "sig": array("d")}
+        d["t"].append(o.t_ns)
+        d["nis"].append(o.nis)
+        d["dof"].append(o.dof)
+        d["acc"].append(o.status == "accepted")
+        d["n"].append(len(o.innovation))
+        d["inn"].extend(o.innovation)
+        m = len(o.innovation)
+        sg = list(o.innovation_sigma)[:m]
+        d["sig"].extend(sg + [math.nan] * (m - len(sg)))
+
+    def __len__(self) -> int:
+        return sum(len(d["t"]) for d in self._k.values())
+
+    def tables(self, rel) -> dict[str, dict[str, np.ndarray]]:
+        """As ``DriveTable.innovations``: per kind t_s, nis, dof, accepted, innovation / sigma
+        (rows padded with NaN to the kind's widest update)."""
+        out = {}
+        for kind, d in self._k.items():
+            n = np.frombuffer(d["n"], dtype=np.int_) if len(d["n"]) else np.zeros(0, int)
+            w = int(n.max()) if len(n) else 0
+            inn = np.full((len(n), w), np.nan)
+            sg = np.full((len(n), w), np.nan)
+            cols = np.arange(w)[None, :] < n[:, None]
+            inn[cols] = np.frombuffer(d["inn"], dtype=float)
+            sg[cols] = np.frombuffer(d["sig"], dtype=float)
+            out[kind] = {"t_s": rel(np.frombuffer(d["t"], dtype=np.int64)), "nis": np.array(d["nis"], dtype=float),
+                         "dof": np.array(d["dof"], dtype=float), "accepted": np.array(d["acc"], dtype=bool),
+                         "innovation": inn, "sigma": sg}
+        return out
 
 
 # ----------------------------------------------------------------------------------- helpers
@@ -199,15 +259,49 @@ class _Smoother:
         return filtfilt(b, a, y, axis=0)
 
 
-def _stream(samples: Iterable[Sample], kind: str, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    """(t_ns (n,), values (n, k)) of one sample kind; a field missing in a sample -> NaN."""
-    t, v = [], []
-    for s in samples:
-        if s.kind == kind and s.valid:
-            f = s.fields
-            t.append(s.t_ns)
-            v.append([f.get(n, math.nan) for n in names])
-    return np.array(t, dtype=np.int64), np.array(v, dtype=float).reshape(len(t), len(names))
+class Streams:
+    """The valid samples of each kind the table uses, collected in one pass as packed arrays
+    (t_ns, and the kind's fields with NaN where a sample lacks one): 8 bytes a value, so a
+    drive is never held as Sample objects. ``count``: every sample seen."""
+
+    def __init__(self, kinds: Mapping[str, Sequence[str]] | None = None):
+        self.names = {k: tuple(v) for k, v in (kinds or _STREAM_FIELDS).items()}
+        self._t = {k: array("q") for k in self.names}
+        self._v = {k: array("d") for k in self.names}
+        self.count = 0
+
+    def add(self, s: Sample) -> None:
+        self.count += 1
+        names = self.names.get(s.kind)
+        if names is None or not s.valid:
+            return
+        f = s.fields
+        self._t[s.kind].append(s.t_ns)
+        self._v[s.kind].extend([f.get(n, math.nan) for n in names])
+
+    def tap(self, samples: Iterable[Sample]) -> Iterator[Sample]:
+        """Pass the samples through, collecting them on the way."""
+        for s in samples:
+            self.add(s)
+            yield s
+
+    def get(self, kind: str, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+        """(t_ns (n,), values (n, k)) of ``names`` of one kind."""
+        have = self.names[kind]
+        t = np.frombuffer(self._t[kind], dtype=np.int64).copy() if len(self._t[kind]) else np.zeros(0, np.int64)
+        v = np.frombuffer(self._v[kind], dtype=float).reshape(len(t), len(have)) if len(t) else np.zeros((0, len(have)))
+        return t, v[:, [have.index(n) for n in names]].copy()
+
+
+def _stream(samples, kind: str, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(t_ns (n,), values (n, k)) of one sample kind (from :class:`Streams` or a sample
+    sequence); a field missing in a sample -> NaN."""
+    if not isinstance(samples, Streams):
+        st = Streams({kind: names})
+        for s in samples:
+            st.add(s)
+        samples = st
+    return samples.get(kind, names)
 
 
 def _uniform(t_ns: np.ndarray, v: np.ndarray, t0_ns: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
@@ -257,20 +351,30 @@ def remove_imu_effects(samples: Sequence[Sample], effects: Sequence[MeasurementE
                        cutoff_hz: float = 10.0) -> list[Sample]:
     """IMU samples with the measurement effects removed to first order (module docstring):
     f = f_meas - (apply(f_meas, kin) - f_meas); other samples unchanged."""
-    effects = [e for e in effects if isinstance(e, MeasurementEffect)]
-    if not effects:
-        return list(samples)
+    return list(_imu_corrected(samples, effects, _gyro_track(samples, cutoff_hz)))
+
+
+def _gyro_track(samples: Iterable[Sample], cutoff_hz: float):
+    """(t_base_ns, grid [s], smoothed rate, its derivative) of the gyro, or None (one pass)."""
     t_ns, w = _stream(samples, "imu", _AR)
     t_base = int(t_ns[0]) if len(t_ns) else 0
     tg, wg, rate = _uniform(t_ns, w, t_base)
     if rate <= 0:
-        return list(samples)
+        return None
     ws = _Smoother(cutoff_hz)(wg, rate)
-    wd = np.gradient(ws, 1.0 / rate, axis=0)
-    out = []
+    return t_base, tg, ws, np.gradient(ws, 1.0 / rate, axis=0)
+
+
+def _imu_corrected(samples: Iterable[Sample], effects: Sequence[MeasurementEffect], track) -> Iterator[Sample]:
+    """The samples with the effects taken out of the IMU ones (``track``: :func:`_gyro_track`)."""
+    effects = [e for e in effects if isinstance(e, MeasurementEffect)]
+    if not effects or track is None:
+        yield from samples
+        return
+    t_base, tg, ws, wd = track
     for s in samples:
         if s.kind != "imu" or not s.valid:
-            out.append(s)
+            yield s
             continue
         ts = (s.t_ns - t_base) * 1e-9
         om = tuple(float(np.interp(ts, tg, ws[:, k])) for k in range(3))
@@ -283,8 +387,7 @@ def remove_imu_effects(samples: Sequence[Sample], effects: Sequence[MeasurementE
             for k, v in applied.items():
                 if k in corr and k in f0:
                     corr[k] = corr[k] - (v - f0[k])
-        out.append(Sample(s.t_ns, s.source, s.kind, corr, s.wall_time_ns, s.valid))
-    return out
+        yield Sample(s.t_ns, s.source, s.kind, corr, s.wall_time_ns, s.valid)
 
 
 # ----------------------------------------------------------------------------------- table
@@ -344,10 +447,16 @@ class DriveTable:
                           dict(self.rates_hz), self.vehicle, dict(self.counters))
 
 
-def build_table(samples: Sequence[Sample], run: EstimatorRun, vehicle: Vehicle,
+def build_table(samples: Streams | Sequence[Sample], run: EstimatorRun, vehicle: Vehicle,
                 config: DatasetConfig | None = None) -> DriveTable:
-    """Put the estimator's outputs and the smoothed sensor signals on one grid."""
+    """Put the estimator's outputs and the smoothed sensor signals on one grid (``samples``:
+    the drive's :class:`Streams`, or its samples)."""
     cfg = config or DatasetConfig()
+    if not isinstance(samples, Streams):
+        st = Streams()
+        for s in samples:
+            st.add(s)
+        samples = st
     sm = _Smoother(cfg.cutoff_hz)
     t_first = int(run.est_t_ns[0]) + int(round(cfg.settle_s * 1e9))
     t_last = int(run.est_t_ns[-1])
@@ -436,7 +545,7 @@ def build_table(samples: Sequence[Sample], run: EstimatorRun, vehicle: Vehicle,
     # --- GNSS as measured (for the innovations of the measurement effects)
     gnss = _gnss_tables(samples, run.origin, rel)
     innov = _innovation_tables(run.innovations, rel)
-    counters = {"estimator": run.counters, "samples": len(samples)}
+    counters = {"estimator": run.counters, "samples": samples.count}
     return DriveTable(t0_ns, grid, cols, sig, gnss, innov, rates, vehicle, counters)
 
 
@@ -474,8 +583,7 @@ def _complementary_velocity(t: np.ndarray, v_est: np.ndarray, c_gv: np.ndarray, 
 
 def _gnss_tables(samples, origin, rel) -> dict[str, dict[str, np.ndarray]]:
     out: dict[str, dict[str, np.ndarray]] = {}
-    t, v = _stream(samples, "gnss_pos", ["gnss_lat_deg", "gnss_lon_deg", "gnss_alt_m", "gnss_geoid_sep_m",
-                                         "gnss_pos_sigma_h_m", "gnss_pos_sigma_v_m", "gnss_fix_quality"])
+    t, v = _stream(samples, "gnss_pos", _GNSS_POS)
     if len(t) and origin is not None:
         sep = np.where(np.isfinite(v[:, 3]), v[:, 3], 0.0)
         ok = np.isfinite(v[:, 0] + v[:, 1] + v[:, 2]) & ~(v[:, 6] <= 0)
@@ -483,18 +591,19 @@ def _gnss_tables(samples, origin, rel) -> dict[str, dict[str, np.ndarray]]:
         enu = enu.reshape(-1, 3)
         out["pos"] = {"t_s": rel(t[ok]), "e_m": enu[:, 0], "n_m": enu[:, 1], "u_m": enu[:, 2],
                       "sigma_h_m": v[ok, 4], "sigma_v_m": v[ok, 5]}
-    t, v = _stream(samples, "gnss_att", ["gnss_roll_rad", "gnss_pitch_rad", "gnss_yaw_rad", "gnss_roll_sigma_rad",
-                                         "gnss_pitch_sigma_rad", "gnss_yaw_sigma_rad"])
+    t, v = _stream(samples, "gnss_att", _GNSS_ATT)
     if len(t):
         out["att"] = {"t_s": rel(t), "roll_rad": v[:, 0], "pitch_rad": v[:, 1], "yaw_rad": v[:, 2],
                       "roll_sigma_rad": v[:, 3], "pitch_sigma_rad": v[:, 4], "yaw_sigma_rad": v[:, 5]}
-    t, v = _stream(samples, "gnss_vel", ["gnss_speed_mps", "gnss_course_rad"])
+    t, v = _stream(samples, "gnss_vel", _GNSS_VEL)
     if len(t):
         out["vel"] = {"t_s": rel(t), "speed_mps": v[:, 0], "course_rad": v[:, 1]}
     return out
 
 
-def _innovation_tables(innovations: Sequence[Innovation], rel) -> dict[str, dict[str, np.ndarray]]:
+def _innovation_tables(innovations, rel) -> dict[str, dict[str, np.ndarray]]:
+    if isinstance(innovations, InnovationLog):
+        return innovations.tables(rel)
     by: dict[str, list[Innovation]] = {}
     for o in innovations:
         by.setdefault(o.kind, []).append(o)
@@ -515,28 +624,40 @@ def _innovation_tables(innovations: Sequence[Innovation], rel) -> dict[str, dict
 
 def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap=None,
                config: DatasetConfig | None = None, imu_effects: Sequence[MeasurementEffect] = (),
-               samples: Sequence[Sample] | None = None) -> DriveTable:
+               samples: Iterable[Sample] | None = None) -> DriveTable:
     """Recording (``/raw/`` only) + model vehicle -> :class:`DriveTable`.
 
     ``samples``: already decoded samples (skips decoding); ``imu_effects``: measurement effects
-    taken out of the IMU readings before the estimator runs (module docstring)."""
+    taken out of the IMU readings before the estimator runs (module docstring). The samples
+    stream through the estimator while the table's signals are collected as packed arrays
+    (:class:`Streams`); with ``imu_effects`` the recording is decoded twice (the gyro track
+    first, then the corrected samples), so no list of samples is ever held."""
     if getattr(vehicle, "kind", None) != "model":
         raise DatasetError("the workbench reads only a model vehicle file (kind = \"model\")")
     cfg = config or DatasetConfig()
-    if samples is None:
-        samples = decode_raw(path, dbc=dbc, signalmap=signalmap)
-    if not samples:
-        raise DatasetError(f"{path}: no decodable /raw/ samples")
+
+    def source() -> Iterable[Sample]:
+        return iter_raw(path, dbc=dbc, signalmap=signalmap) if samples is None else samples
+
+    if samples is not None and imu_effects and iter(samples) is samples:
+        samples = list(samples)  # a one-shot iterator cannot be read twice
+    feed = source()
     if imu_effects:
-        samples = remove_imu_effects(samples, imu_effects, cfg.cutoff_hz)
-    run = run_estimator(samples, vehicle, cfg.pipeline, cfg.period_s)
-    return build_table(samples, run, vehicle, cfg)
+        feed = _imu_corrected(source(), imu_effects, _gyro_track(feed, cfg.cutoff_hz))
+    streams = Streams()
+    try:
+        run = run_estimator(streams.tap(feed), vehicle, cfg.pipeline, cfg.period_s)
+    except DatasetError:
+        if not streams.count:
+            raise DatasetError(f"{path}: no decodable /raw/ samples") from None
+        raise
+    return build_table(streams, run, vehicle, cfg)
 
 
-def table_from_samples(samples: Sequence[Sample], vehicle: Vehicle, config: DatasetConfig | None = None,
+def table_from_samples(samples: Iterable[Sample], vehicle: Vehicle, config: DatasetConfig | None = None,
                        imu_effects: Sequence[MeasurementEffect] = ()) -> DriveTable:
-    """As :func:`load_drive` from decoded samples."""
-    return load_drive("<samples>", vehicle, config=config, imu_effects=imu_effects, samples=list(samples))
+    """As :func:`load_drive` from decoded samples (a sequence or an iterator)."""
+    return load_drive("<samples>", vehicle, config=config, imu_effects=imu_effects, samples=samples)
 
 
 def column_names(kind: str) -> Mapping[str, tuple[str, ...]]:

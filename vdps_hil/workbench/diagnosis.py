@@ -34,7 +34,7 @@ from vdps_hil.model.effects.base import Effect
 from vdps_hil.model.params import Vehicle
 
 from .add import AddResult, FittedModel, add_effects, cleaned_rms
-from .dataset import DatasetConfig, DriveTable, decode_raw, table_from_samples
+from .dataset import DatasetConfig, DriveTable, load_drive
 from .ranking import Ranking, RankingConfig, rank
 from .regimes import RegimeBins, Window, regime_bins, worst_windows
 from .residuals import EquationResiduals, SimErrors, compute_residuals, simulation_errors
@@ -173,12 +173,10 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
         from .model_file import load_model
 
         vehicle, model_effects, _ = load_model(model, vehicle, user_effects)
-    say("decoding /raw/ topics")
-    samples = decode_raw(path, dbc=dbc, signalmap=signalmap)
-    tm["decode"] = time.perf_counter() - t0
-    say(f"running the estimator on {len(samples)} samples")
-    table = table_from_samples(samples, vehicle, dataset_config)
-    tm["estimator"] = time.perf_counter() - t0 - tm["decode"]
+    say("decoding /raw/ topics and running the estimator")
+    table = load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=dataset_config)
+    tm["decode_estimator"] = time.perf_counter() - t0
+    say(f"{table.counters.get('samples', 0)} samples, {len(table)} rows")
     say("identifying the model and ranking the candidates")
     t1 = time.perf_counter()
     rk = rank(table, vehicle, model_effects, user_effects=user_effects, config=ranking_config)
@@ -202,7 +200,8 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
 
         def reestimate(meas_effects):
             say("re-running the estimator with the sensor effects taken out of the IMU readings")
-            return table_from_samples(samples, vehicle, dataset_config, imu_effects=meas_effects)
+            return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=dataset_config,
+                              imu_effects=meas_effects)
 
         add_res = add_effects(table, vehicle, model_effects, list(add), user_effects=user_effects,
                               reestimate=reestimate, config=ranking_config, with_simulation=with_simulation,

@@ -159,43 +159,54 @@ class Context:
             self._fs = 1.0 - 1.0 / np.sqrt(1.0 + s2 * s2)
         self.y_dyn = self.project(self.y_dyn[:, :, None])[:, :, 0]
 
-    def _hard(self, a: np.ndarray) -> np.ndarray:
-        u = self._u
+    def _hard(self, a: np.ndarray, sl: slice = slice(None)) -> np.ndarray:
+        u = self._u[sl]
         return a - np.einsum("nek,nkp->nep", u, np.einsum("nek,nep->nkp", u, a))
 
-    def project(self, a: np.ndarray) -> np.ndarray:
+    def project(self, a: np.ndarray, sl: slice = slice(None)) -> np.ndarray:
         """Remove the row-wise nuisance directions from whitened columns (n, E, p): the
-        longitudinal tire forces exactly, the fast velocity errors in proportion to their sigma."""
-        a = self._hard(a)
-        u = self._us * self._fs[:, None, :]
-        return a - np.einsum("nek,nkp->nep", u, np.einsum("nek,nep->nkp", self._us, a))
+        longitudinal tire forces exactly, the fast velocity errors in proportion to their sigma.
+        ``sl``: the used rows ``a`` holds (all by default)."""
+        a = self._hard(a, sl)
+        us = self._us[sl]
+        u = us * self._fs[sl][:, None, :]
+        return a - np.einsum("nek,nkp->nep", u, np.einsum("nek,nep->nkp", us, a))
 
-    def smooth_columns(self, knot_s: float, floor_mps: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    def smooth_bands(self, knot_s: float, floor_mps: float = 0.02) -> tuple[list, np.ndarray]:
         """The estimator's slowly varying body-velocity errors (delta v_x, delta v_y) as
-        piecewise-linear functions of time (hat functions every ``knot_s``): (n_all, 14, 2K),
-        and their prior sigmas: the estimator's own velocity sigma near each knot (floored)."""
+        piecewise-linear functions of time (hat functions every ``knot_s``), and their prior
+        sigmas: the estimator's own velocity sigma near each knot (floored). Each hat function is
+        non-zero over two knot intervals only, so each of the 2(K+1) columns is returned whitened
+        and projected on the used rows it touches, [(first used row, (r, E))], never as a dense
+        (rows, 14, 2(K+1)) array (that grew with the square of the drive's length)."""
         t = self.res.t_s
         if not len(t):
-            return np.zeros((0, 14, 0)), np.zeros(0)
+            return [], np.zeros(0)
         tsig, tc = self.table.sigma, self.table.columns
         idx = self.res.index
         sv = np.hypot(tsig["vel_g_mps_e"], tsig["vel_g_mps_n"])[idx] / math.sqrt(2.0)
-        # the body lateral velocity also inherits the heading error: v sigma_psi
         speed = np.hypot(tc["vel_g_mps_e"], tc["vel_g_mps_n"])[idx]
+        # the body lateral velocity also inherits the heading error: v sigma_psi
         svy = np.hypot(sv, speed * tsig["yaw_g_rad"][idx])
         t0, t1 = float(t[0]), float(t[-1])
         k = max(1, int(math.ceil((t1 - t0) / knot_s)))
         knots = np.linspace(t0, t1, k + 1)
         dk = knots[1] - knots[0] if k else 1.0
-        out = np.zeros((len(t), 14, 2 * (k + 1)))
-        sig = np.zeros(2 * (k + 1))
+        used = np.flatnonzero(self.rows)
+        bands, sig = [], np.zeros(2 * (k + 1))
         for j, tk in enumerate(knots):
-            phi = np.clip(1.0 - np.abs(t - tk) / dk, 0.0, None)
+            i0, i1 = np.searchsorted(t, tk - dk, side="left"), np.searchsorted(t, tk + dk, side="right")
+            phi_all = np.clip(1.0 - np.abs(t[i0:i1] - tk) / dk, 0.0, None)
+            r0, r1 = np.searchsorted(used, [i0, i1])
+            rows = used[r0:r1]
+            phi = np.clip(1.0 - np.abs(t[rows] - tk) / dk, 0.0, None)
             for c, sc in enumerate((sv, svy)):
-                near = (phi > 0) & np.isfinite(sc)
-                out[:, :, 2 * j + c] = self.res.nuisance[:, :, c] * phi[:, None]
-                sig[2 * j + c] = max(float(np.median(sc[near])) if near.any() else floor_mps, floor_mps)
-        return out, sig
+                scn = sc[i0:i1]
+                near = (phi_all > 0) & np.isfinite(scn)
+                sig[2 * j + c] = max(float(np.median(scn[near])) if near.any() else floor_mps, floor_mps)
+                a = self.res.nuisance[rows][:, self.avail, c] * phi[:, None] / self.sig[None, :]
+                bands.append((int(r0), self.project(np.nan_to_num(a)[:, :, None], slice(r0, r1))[:, :, 0]))
+        return bands, sig
 
     def whiten_project(self, x14: np.ndarray) -> np.ndarray:
         """(n_all, 14, p) in equation units -> whitened, projected (n, E, p) on the used rows."""
@@ -308,9 +319,28 @@ class Design:
         if len(inn):
             nu = inn.nuisance / inn.sigma[:, None]
             self.add_block("_nuisance", None, nu)
-        sm, sm_sig = ctx.smooth_columns(config.nuisance_knot_s, config.velocity_sigma_floor_mps)
-        if sm.shape[2]:
-            self.add_block("_smooth", sm, None, prior_sigma=list(sm_sig))
+        sm, sm_sig = ctx.smooth_bands(config.nuisance_knot_s, config.velocity_sigma_floor_mps)
+        if sm:
+            self._add_band_block("_smooth", sm, sm_sig)
+
+    def _add_band_block(self, name: str, bands, prior_sigma) -> None:
+        """Add columns non-zero on a run of dynamic rows only ([(first used row, (r, E))], whitened
+        and projected), stored as :class:`_Band` (memory linear in the drive length)."""
+        e = self.ctx.y_dyn.shape[1]
+        n = len(self.y)
+        idx = []
+        for j, (r0, a) in enumerate(bands):
+            v = a.reshape(-1)
+            s = float(np.sqrt(np.sum(v * v) / n)) if n else 0.0
+            s = s if s > 0 else 1.0
+            self.scale.append(s)
+            self.cols.append(_Band(n, r0 * e, v / s))
+            self.prior_w.append(1.0 / (prior_sigma[j] * s) ** 2 if prior_sigma[j] > 0 else 0.0)
+            self.prior_c.append(0.0)
+            self.names.append(f"{name}[{j}]")
+            idx.append(len(self.cols) - 1)
+        self.blocks[name] = idx
+        self._stats = None
 
     def add_block(self, name: str, x_dyn: np.ndarray | None, x_inn: np.ndarray | None,
                   prior_sigma: Sequence[float] | None = None, prior_center: Sequence[float] | None = None) -> list[int]:
@@ -375,34 +405,23 @@ class Design:
         self._stats = None
 
     def has_signal(self, name: str) -> bool:
-        return any(s > 0 and np.any(self.cols[k] != 0) for k in self.blocks[name] for s in [self.scale[k]])
+        return any(s > 0 and np.any(_vals(self.cols[k]) != 0) for k in self.blocks[name] for s in [self.scale[k]])
 
     # --- sufficient statistics
     def stats(self):
+        """(G, c, yy, cnt) per (micro block, row group): G a :class:`_BlockGram` (X_bg^T X_bg
+        without the dense (blocks, groups, p, p) array), c = X_bg^T y_bg, yy = y_bg^T y_bg, rows."""
         if self._stats is None:
-            x = np.column_stack(self.cols) if self.cols else np.zeros((len(self.y), 0))
             ng = len(GROUP_NAMES)
-            p = x.shape[1]
-            G = np.zeros((self.n_blocks, ng, p, p))
-            c = np.zeros((self.n_blocks, ng, p))
-            yy = np.zeros((self.n_blocks, ng))
-            cnt = np.zeros((self.n_blocks, ng))
             key = self.block * ng + self.group
-            order = np.argsort(key, kind="stable")
-            ks = key[order]
-            bounds = np.flatnonzero(np.diff(ks)) + 1
-            starts = np.r_[0, bounds]
-            ends = np.r_[bounds, len(ks)]
-            for s0, s1 in zip(starts, ends):
-                rows = order[s0:s1]
-                b, g = divmod(int(ks[s0]), ng)
-                xs = x[rows]
-                ys = self.y[rows]
-                G[b, g] = xs.T @ xs
-                c[b, g] = xs.T @ ys
-                yy[b, g] = ys @ ys
-                cnt[b, g] = len(rows)
-            self._stats = (G, c, yy, cnt)
+            shape = (self.n_blocks, ng)
+            size = self.n_blocks * ng
+            c = np.zeros(shape + (len(self.cols),))
+            for j, col in enumerate(self.cols):
+                c[:, :, j] = _keysum(key, col, self.y, size).reshape(shape)
+            yy = np.bincount(key, self.y * self.y, minlength=size).reshape(shape)
+            cnt = np.bincount(key, minlength=size).reshape(shape).astype(float)
+            self._stats = (_BlockGram(self, key), c, yy, cnt)
         return self._stats
 
     def folds(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -459,9 +478,8 @@ class Design:
         return th, float(per.sum()), per
 
     def _sse_groups(self, G, c, yy, cols, th):
-        Gc = G[:, :, cols][:, :, :, cols]
         cc = c[:, :, cols]
-        v = yy - 2.0 * np.einsum("bgp,p->bg", cc, th) + np.einsum("bgpq,p,q->bg", Gc, th, th)
+        v = yy - 2.0 * np.einsum("bgp,p->bg", cc, th) + G.quad(cols, th)
         return v.sum(axis=0)
 
     def cv(self, cols: Sequence[int]) -> np.ndarray:
@@ -481,7 +499,199 @@ class Design:
         return [k for n in names for k in self.blocks.get(n, [])]
 
     def matrix(self, cols: Sequence[int]) -> np.ndarray:
-        return np.column_stack([self.cols[k] for k in cols]) if cols else np.zeros((len(self.y), 0))
+        return np.column_stack([_dense(self.cols[k]) for k in cols]) if cols else np.zeros((len(self.y), 0))
+
+    def predict(self, cols: Sequence[int], th) -> np.ndarray:
+        """X[:, cols] theta without forming X."""
+        out = np.zeros(len(self.y))
+        for k, v in zip(cols, th):
+            c = self.cols[k]
+            if isinstance(c, _Band):
+                out[c.lo:c.hi] += v * c.vals
+            else:
+                out += v * c
+        return out
+
+
+class _Band:
+    """A design column that is zero outside the rows [lo, lo + len(vals)) (a smooth velocity
+    column: a hat function spans two knot intervals)."""
+
+    __slots__ = ("n", "lo", "vals")
+
+    def __init__(self, n: int, lo: int, vals: np.ndarray):
+        self.n, self.lo, self.vals = n, lo, vals
+
+    @property
+    def hi(self) -> int:
+        return self.lo + len(self.vals)
+
+    def dense(self) -> np.ndarray:
+        out = np.zeros(self.n)
+        out[self.lo:self.hi] = self.vals
+        return out
+
+
+def _dense(col) -> np.ndarray:
+    return col.dense() if isinstance(col, _Band) else col
+
+
+def _vals(col) -> np.ndarray:
+    return col.vals if isinstance(col, _Band) else col
+
+
+def _take(col, rows: np.ndarray) -> np.ndarray:
+    """col[rows] for sorted row indices (a band without expanding it)."""
+    if not isinstance(col, _Band):
+        return col[rows]
+    out = np.zeros(len(rows))
+    i0, i1 = np.searchsorted(rows, [col.lo, col.hi])
+    out[i0:i1] = col.vals[rows[i0:i1] - col.lo]
+    return out
+
+
+def _keysum(key: np.ndarray, col, w: np.ndarray, size: int) -> np.ndarray:
+    """sum of col * w per key value (bincount; a band over its rows only)."""
+    if isinstance(col, _Band):
+        return np.bincount(key[col.lo:col.hi], col.vals * w[col.lo:col.hi], minlength=size)
+    return np.bincount(key, col * w, minlength=size)
+
+
+def _gram(cols: Sequence, rows: np.ndarray) -> np.ndarray:
+    """X[rows]^T X[rows] for sorted row indices: dense columns as a matrix product, band
+    columns only against what overlaps them (linear in the drive length)."""
+    p = len(cols)
+    g = np.zeros((p, p))
+    dense = [k for k, c in enumerate(cols) if not isinstance(c, _Band)]
+    bands = [k for k, c in enumerate(cols) if isinstance(c, _Band)]
+    d = np.column_stack([cols[k][rows] for k in dense]) if dense else np.zeros((len(rows), 0))
+    if dense:
+        g[np.ix_(dense, dense)] = d.T @ d
+    seg = []
+    for k in bands:
+        c = cols[k]
+        i0, i1 = (int(i) for i in np.searchsorted(rows, [c.lo, c.hi]))
+        v = c.vals[rows[i0:i1] - c.lo]
+        seg.append((i0, i1, v, k))
+        if dense:
+            gd = d[i0:i1].T @ v
+            g[dense, k] = gd
+            g[k, dense] = gd
+    seg.sort(key=lambda z: z[0])
+    for a, (i0, i1, va, ka) in enumerate(seg):
+        for j0, j1, vb, kb in seg[a:]:
+            if j0 >= i1:
+                break
+            lo, hi = max(i0, j0), min(i1, j1)
+            if lo < hi:
+                g[ka, kb] = g[kb, ka] = float(va[lo - i0:hi - i0] @ vb[lo - j0:hi - j0])
+    return g
+
+
+class _BlockGram:
+    """The Gram matrices G_bg = X_bg^T X_bg of the design's rows per (micro block b, row group g)
+    as ``Design.stats`` needs them, without storing the (blocks, groups, p, p) array: p grows
+    with the drive through the smooth velocity columns (one pair per ``nuisance_knot_s``), so
+    that array grew with the cube of the drive's length. Held: the total (p, p) and the total
+    per group (groups, p, p); sums over a set of blocks are computed from the rows of the blocks
+    left out (or in, whichever is fewer) and cached (the folds repeat); per-(b, g) quadratic
+    forms theta^T G_bg theta = |X_bg theta|^2 and columns G_bg[:, k] come from the rows.
+
+    Indexing as the array: ``G[blocks]`` (a subset of blocks), ``G.sum(axis=(0, 1))``,
+    ``G.sum(axis=0)``, ``G[:, :, :, k]``, ``G[:, :, k, k]``; ``G.quad(cols, th)`` is
+    einsum("bgpq,p,q->bg", G[:, :, cols][:, :, :, cols], th, th)."""
+
+    def __init__(self, d: "Design", key: np.ndarray, blocks: np.ndarray | None = None, shared: dict | None = None):
+        self.d = d
+        self.cols = list(d.cols)  # the columns when the statistics were taken (Design copies share the list)
+        self.key = key
+        self.ng = len(GROUP_NAMES)
+        self.blocks = np.arange(d.n_blocks) if blocks is None else np.asarray(blocks, dtype=int)
+        self._shared = shared if shared is not None else {}
+        self._rows = None
+
+    def _totals(self):
+        if "total" not in self._shared:
+            p = len(self.cols)
+            per = np.zeros((self.ng, p, p))
+            g_all = self.d.group
+            for g in range(self.ng):
+                rows = np.flatnonzero(g_all == g)
+                if len(rows):
+                    per[g] = _gram(self.cols, rows)
+            self._shared["per_group"] = per
+            self._shared["total"] = per.sum(axis=0)
+        return self._shared["total"], self._shared["per_group"]
+
+    def rows(self) -> np.ndarray:
+        if self._rows is None:
+            inside = np.zeros(self.d.n_blocks, bool)
+            inside[self.blocks] = True
+            self._rows = np.flatnonzero(inside[self.d.block])
+        return self._rows
+
+    def __getitem__(self, idx):
+        if isinstance(idx, tuple):
+            return self._entries(idx)
+        if isinstance(idx, slice) and idx == slice(None):
+            return self
+        return _BlockGram(self.d, self.key, self.blocks[idx], self._shared)
+
+    def _entries(self, idx):
+        """G[:, :, :, k] -> (b, g, p) and G[:, :, k, k] -> (b, g) on this block subset."""
+        if len(idx) != 4 or idx[0] != slice(None) or idx[1] != slice(None):
+            raise IndexError("unsupported _BlockGram index")
+        k = idx[3]
+        rows = self.rows()
+        key = self.key[rows]
+        size = self.d.n_blocks * self.ng
+        shape = (self.d.n_blocks, self.ng)
+        xk = _take(self.cols[k], rows)
+        if idx[2] == slice(None):
+            out = np.zeros(shape + (len(self.cols),))
+            for j, col in enumerate(self.cols):
+                out[:, :, j] = np.bincount(key, _take(col, rows) * xk, minlength=size).reshape(shape)
+            return out[self.blocks]
+        j = idx[2]
+        return np.bincount(key, _take(self.cols[j], rows) * xk, minlength=size).reshape(shape)[self.blocks]
+
+    def sum(self, axis):
+        total, per = self._totals()
+        full = len(self.blocks) == self.d.n_blocks and np.array_equal(self.blocks, np.arange(self.d.n_blocks))
+        if axis == 0 or tuple(axis) == (0,):
+            if full:
+                return per.copy()
+            raise ValueError("_BlockGram.sum(axis=0) only over all blocks")
+        if tuple(axis) != (0, 1):
+            raise ValueError("unsupported _BlockGram.sum axis")
+        if full:
+            return total.copy()
+        ck = ("sum", self.blocks.tobytes())
+        if ck not in self._shared:
+            rows = self.rows()
+            if 2 * len(rows) <= len(self.d.y):
+                self._shared[ck] = _gram(self.cols, rows)
+            else:
+                out = np.ones(len(self.d.y), bool)
+                out[rows] = False
+                self._shared[ck] = total - _gram(self.cols, np.flatnonzero(out))
+        return self._shared[ck].copy()
+
+    def quad(self, cols: Sequence[int], th: np.ndarray) -> np.ndarray:
+        """theta^T G_bg[cols, cols] theta per (block of this subset, group): (b, g)."""
+        rows = self.rows()
+        r = np.zeros(len(rows))
+        for j, k in enumerate(cols):
+            if th[j] != 0.0:
+                c = self.cols[k]
+                if isinstance(c, _Band):
+                    i0, i1 = np.searchsorted(rows, [c.lo, c.hi])
+                    r[i0:i1] += th[j] * c.vals[rows[i0:i1] - c.lo]
+                else:
+                    r += th[j] * c[rows]
+        size = self.d.n_blocks * self.ng
+        q = np.bincount(self.key[rows], r * r, minlength=size).reshape(self.d.n_blocks, self.ng)
+        return q[self.blocks]
 
 
 # ----------------------------------------------------------------------------------- results
@@ -717,7 +927,7 @@ def _build(table, states, inn, ref: Vehicle, point: _Point, cfg: RankingConfig, 
         # n_eff / n, measured once per drive on the residual of this first fit
         cols = d.columns_of(names)
         th, _ = d.objective(cols)
-        states.prior_scale = max(1.0, len(d.y) / _n_eff(d, d.y - d.matrix(cols) @ th))
+        states.prior_scale = max(1.0, len(d.y) / _n_eff(d, d.y - d.predict(cols, th)))
         d.prior_scale = states.prior_scale
         d._stats = None
     for c in screen:
@@ -887,7 +1097,7 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
         xd, xi = c.columns(ctx)
         d.add_block(c.name, xd, xi)
     th0, sse_cur = d.objective(always)
-    r0 = d.y - d.matrix(always) @ th0
+    r0 = d.y - d.predict(always, th0)
     n_eff = _n_eff(d, r0)
     n_rows = len(d.y)
     ratio = n_eff / n_rows
@@ -1095,7 +1305,8 @@ def rk_message(rk: Ranking, e: RankEntry) -> str:
 
 def _group_has_signal(d: Design, name: str, g: int) -> bool:
     rows = d.group == g
-    return any(np.any(d.cols[k][rows] != 0) for k in d.blocks[name])
+    rows = np.flatnonzero(rows)
+    return any(np.any(_take(d.cols[k], rows) != 0) for k in d.blocks[name])
 
 
 def _theta_of(d: Design, name: str, cols: Sequence[int], th: np.ndarray) -> np.ndarray:
@@ -1157,9 +1368,8 @@ def _cv_shifted(d: Design, cols, k: int, shift: float) -> np.ndarray:
     cols = list(cols)
     for held, train in d.folds():
         th = d._solve(G[train].sum(axis=(0, 1)), c2[train].sum(axis=(0, 1)), cols)
-        Gc = G[held][:, :, cols][:, :, :, cols]
         cc = c2[held][:, :, cols]
-        v = yy2[held] - 2.0 * np.einsum("bgp,p->bg", cc, th) + np.einsum("bgpq,p,q->bg", Gc, th, th)
+        v = yy2[held] - 2.0 * np.einsum("bgp,p->bg", cc, th) + G[held].quad(cols, th)
         out += v.sum(axis=0)
     return out
 
