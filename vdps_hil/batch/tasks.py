@@ -16,12 +16,14 @@ Task functions
     innovations, identified parameters with sigmas, prediction summary, decoder counters.
 ``diagnose_drive(path, vehicle, options)``
     The workbench diagnosis of one recording (``vdps diagnose``: ``workbench.diagnosis``). The
-    batch passes only the path; the workbench itself holds every decoded raw sample of the
-    drive (~2 MiB per second of a Table 1 drive), and its ranking builds dense columns whose
-    count grows with the drive too, so its memory grows with the square of the drive's length
-    (measured, one process, table1-susp1k, with_simulation off: peak RSS 637 / 2438 / 10527 MiB
-    for 30 / 60 / 120 s drives). Diagnose drives of minutes, not hours (or cut them); a worker
-    over its memory limit is restarted and the task retried, then reported failed.
+    batch passes only the path; the workbench streams the recording through the estimator into
+    packed arrays (no list of samples), and its ranking stores the smooth nuisance columns as
+    bands, so its memory grows linearly with the drive's length, by about 180 MiB per minute
+    of a Table 1 drive (``tools/bench_diagnose.py``, table1-susp1k, with_simulation off: peak
+    RSS 373 / 450 / 640 MiB for 30 / 60 / 120 s drives; before: 637 / 2438 / 10527 MiB,
+    quadratic), unlike the replay's, which stays constant. Diagnose drives of minutes, not
+    hours (or cut them); a worker over its memory limit is restarted and the task retried, then
+    reported failed.
 ``worker_info()``
     A probe: the worker's tool version (a remote cluster must run the client's code).
 ``snr_trial``, ``weighting_trial``, ``effect_trial``
@@ -124,9 +126,8 @@ def diagnose_drive(path: str, *, vehicle: str = DEFAULT_MODEL,
                    options: Mapping[str, Any] | None = None) -> dict:
     """The workbench diagnosis of one recording (``vdps_hil.workbench.diagnosis.diagnose``, what
     ``vdps diagnose`` does): ranking of the effect candidates, recommendation, identified
-    parameters, residuals before/after. The workbench's timings go under "run". Note: the
-    workbench decodes the whole drive into memory and its ranking's memory grows with the
-    square of the drive's length (module docstring), unlike the replay."""
+    parameters, residuals before/after. The workbench's timings go under "run". Its memory
+    grows by about 180 MiB per minute of drive (module docstring), unlike the replay's."""
     from vdps_hil.model.params import load_vehicle
 
     opts = dict(options or {})
