@@ -256,7 +256,8 @@ def run_job(job: dict) -> dict:
         if job.get("effect"):
             out["hit"] = is_hit(rk, job["effect"])
         if job.get("add"):
-            r = add_effects(tab, veh, EffectSet(), [job["add"]])
+            r = add_effects(tab, veh, EffectSet(), [job["add"]],
+                            reestimate=lambda meas: load_drive(path, veh, imu_effects=meas))
             out["add_before"] = r.before.get("simulation_error")
             out["add_after"] = r.after.get("simulation_error")
             out["add_parameters"] = r.parameters
