@@ -17,6 +17,7 @@ from vdps_hil.identification.problems import mass_regressor, load_ident_config
 from vdps_hil.model.frames import (compose_absolute, dcm_global_to_vehicle, decompose_vehicle, gravity_in_aux,
                                    skew)
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.paper import truth_at
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
@@ -139,30 +140,6 @@ def zero_noise_paper():
     return r, truth
 
 
-_WRAPPED = {"roll_g_rad", "pitch_g_rad", "yaw_g_rad", "roll_v_rad", "pitch_v_rad", "yaw_v_rad", "road_bank_rad",
-            "road_grade_rad"}
-
-
-def _truth_interp(truth, t_ns, grid=10_000_000):
-    """Truth at t_ns, linear between the 100 Hz snapshots (angles by their wrapped difference)."""
-    if t_ns in truth:
-        return truth[t_ns]
-    t0 = t_ns - t_ns % grid
-    a, b = truth.get(t0), truth.get(t0 + grid)
-    if a is None or b is None:
-        return None
-    w = (t_ns - t0) / grid
-    out = {}
-    for k, va in a.items():
-        vb = b[k]
-        if not isinstance(va, (int, float)) or isinstance(va, bool) or not isinstance(vb, (int, float)):
-            continue
-        d = math.remainder(vb - va, 2 * math.pi) if k in _WRAPPED else vb - va
-        out[k] = va + w * d
-    out["t_ns"] = t_ns
-    return out
-
-
 def _truth_estimate(tv):
     keys = ("pos_e_m", "pos_n_m", "pos_u_m", "vel_g_mps_e", "vel_g_mps_n", "vel_g_mps_u", "roll_g_rad",
             "pitch_g_rad", "yaw_g_rad", "road_bank_rad", "road_grade_rad", "yaw_v_rad")
@@ -218,7 +195,7 @@ def test_the_chain_gives_the_identifier_what_the_truth_would(zero_noise_paper):
     ref = IdentFeeder(MODEL)
     diffs = {k: [] for k in ("xd", "yd", "zdd", "ydd", "psid", "slip", "alpha", "G")}
     for a in got:
-        tv = _truth_interp(truth, a.t_ns)  # estimates are not all on the 100 Hz truth grid
+        tv = truth_at(truth, a.t_ns)  # estimates are not all on the 100 Hz truth grid
         if a.t_ns < 1_000_000_000 or tv is None:
             continue
         ref.observe(imu([tv[f"specific_force_b_mps2_{x}"] for x in "xyz"], t=a.t_ns))

@@ -106,10 +106,10 @@ def test_truth_between_snapshots_is_interpolated_with_wrapped_angles():
     a = {"t_s": 1.0, "yaw_v_rad": math.pi - 0.1, "pos_e_m": 10.0}
     b = {"t_s": 1.01, "yaw_v_rad": -math.pi + 0.1, "pos_e_m": 10.25}
     by_t = {1_000_000_000: a, 1_010_000_000: b}
-    m = P._truth_at(by_t, 1_002_500_000)
+    m = P.truth_at(by_t, 1_002_500_000)
     assert m["pos_e_m"] == pytest.approx(10.0625) and m["t_s"] == pytest.approx(1.0025)
     assert m["yaw_v_rad"] == pytest.approx(math.pi - 0.05)  # through +-pi, not through 0
-    assert P._truth_at(by_t, 1_000_000_000) is a and P._truth_at(by_t, 1_012_000_000) is None
+    assert P.truth_at(by_t, 1_000_000_000) is a and P.truth_at(by_t, 1_012_000_000) is None
 
 
 # ----------------------------------------------------------------- through the real chain

@@ -41,6 +41,7 @@ from scipy.stats import chi2
 
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.paper import truth_at
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
@@ -50,30 +51,6 @@ TRUTH_KEYS = ("pos_e_m", "pos_n_m", "pos_u_m", "vel_g_mps_e", "vel_g_mps_n", "ve
               "pitch_g_rad", "yaw_g_rad", "road_bank_rad", "road_grade_rad", "yaw_v_rad")
 """Truth names of the 12 states of eq 7 (``STATE_NAMES`` order)."""
 WRAPPED = (8, 11)
-
-
-_ANGLES = ("roll_g_rad", "pitch_g_rad", "yaw_g_rad", "road_bank_rad", "road_grade_rad", "yaw_v_rad", "roll_v_rad",
-           "pitch_v_rad")
-
-
-def _truth_at(truth: dict, t_ns: int, grid_ns: int) -> dict | None:
-    """The truth snapshot at t_ns, linearly interpolated between the 100 Hz snapshots (angles
-    by their wrapped difference) when the estimate falls between them."""
-    tv = truth.get(t_ns)
-    if tv is not None:
-        return tv
-    t0 = t_ns - t_ns % grid_ns
-    a, b = truth.get(t0), truth.get(t0 + grid_ns)
-    if a is None or b is None:
-        return None
-    w = (t_ns - t0) / grid_ns
-    out = {}
-    for k in (*TRUTH_KEYS, "roll_v_rad", "pitch_v_rad"):
-        d = b[k] - a[k]
-        if k in _ANGLES:
-            d = math.remainder(d, 2 * math.pi)
-        out[k] = a[k] + w * d
-    return out
 
 
 def study_config(profile, **kw) -> SystemConfig:
@@ -110,7 +87,7 @@ def run_chain(scenario: str, seed: int, *, profile="table1-susp1k", duration_s: 
         for o in outs:
             if not isinstance(o, Estimate) or not ekf.initialized:
                 continue
-            tv = _truth_at(truth, o.t_ns, grid)
+            tv = truth_at(truth, o.t_ns, grid)
             if tv is None:
                 continue
             xt = np.array([tv[k] for k in TRUTH_KEYS])

@@ -264,7 +264,7 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
                     except ValueError:
                         init = None
                     out["captured"][o.t_ns] = (init, system.params)
-                tv = _truth_at(by_t, o.t_ns) if fusion_window_s else None
+                tv = truth_at(by_t, o.t_ns) if fusion_window_s else None
                 if tv is not None and ekf.initialized:
                     if fusion_window_s and fusion_window_s[0] <= tv["t_s"] <= fusion_window_s[1]:
                         fus_rows.append(_fusion_error(o, tv))
@@ -288,21 +288,23 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
     return out
 
 
-_TRUTH_GRID_NS = 10_000_000
+TRUTH_GRID_NS = 10_000_000
 _ANGLES = {"roll_g_rad", "pitch_g_rad", "yaw_g_rad", "roll_v_rad", "pitch_v_rad", "yaw_v_rad", "road_bank_rad",
            "road_grade_rad"}
 
 
-def _truth_at(by_t: Mapping[int, Mapping], t_ns: int) -> dict | None:
+def truth_at(by_t: Mapping[int, Mapping], t_ns: int, grid_ns: int = TRUTH_GRID_NS) -> dict | None:
     """The truth snapshot at ``t_ns``: exact on the 100 Hz grid, else linear between the two
-    neighbouring snapshots (angles along their wrapped difference); None outside."""
+    neighbouring snapshots (angles along their wrapped difference) with ``t_ns`` set; None
+    outside. For scoring harnesses (this module, tools/nees_study.py, tests) only: the chain
+    never reads truth."""
     if t_ns in by_t:
         return by_t[t_ns]
-    t0 = t_ns - t_ns % _TRUTH_GRID_NS
-    a, b = by_t.get(t0), by_t.get(t0 + _TRUTH_GRID_NS)
+    t0 = t_ns - t_ns % grid_ns
+    a, b = by_t.get(t0), by_t.get(t0 + grid_ns)
     if a is None or b is None:
         return None
-    w = (t_ns - t0) / _TRUTH_GRID_NS
+    w = (t_ns - t0) / grid_ns
     out = {}
     for k, va in a.items():
         vb = b.get(k)
@@ -310,6 +312,7 @@ def _truth_at(by_t: Mapping[int, Mapping], t_ns: int) -> dict | None:
             continue
         d = math.remainder(vb - va, 2 * math.pi) if k in _ANGLES else vb - va
         out[k] = va + w * d
+    out["t_ns"] = t_ns
     return out
 
 

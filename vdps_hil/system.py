@@ -457,7 +457,10 @@ class VdpsSystem:
             params = self._params()
             peff = None
             if cfg.model_effects is not None:
-                peff = predictor_effects(Predictor(model_vehicle, pcfg).effects, cfg.model_effects)
+                from vdps_hil.model.effects import effects_from_names
+
+                peff = predictor_effects(effects_from_names(pcfg.effects, {}, pcfg.effect_params),
+                                         cfg.model_effects)
             self._chain = WarningChain(Predictor(model_vehicle.with_params(**params.as_dict()), pcfg, peff),
                                        pol, node, keep=WARNING_HISTORY)
             self._chain_params = params

@@ -307,6 +307,13 @@ class LowPressureCandidate(Candidate):
         return {"wheel": (float(self.wheel), 0.0), "radius_reduction": (float(theta[0]), float(sigma[0]))}
 
 
+def _saturation_report(s: float, s_sigma: float, mu: float) -> dict[str, tuple[float, float]]:
+    """Reported parameters of a saturation scale s (sigma s_sigma) and the peak friction mu it
+    implies, mu = mu_0 / sqrt(s): sigma_mu = mu s_sigma / (2 s) to first order."""
+    smu = 0.5 * mu * s_sigma / s if s > 0 else math.nan
+    return {"peak_friction": (mu, smu), "saturation_scale": (s, s_sigma)}
+
+
 class MagicFormulaCandidate(Candidate):
     """Tire saturation: theta = s = (mu_0/mu)^2 scales the Magic Formula's departure from the
     linear tire at the generic prior mu_0 (module docstring) for screening; the joint fit is a
@@ -400,10 +407,7 @@ class MagicFormulaCandidate(Candidate):
         return theta, self.mu
 
     def report_params(self, theta, sigma):
-        s, ss = float(theta[0]), float(sigma[0])
-        mu = self._mu(theta)
-        smu = 0.5 * mu * ss / s if s > 0 else math.nan
-        return {"peak_friction": (mu, smu), "saturation_scale": (s, ss)}
+        return _saturation_report(float(theta[0]), float(sigma[0]), self._mu(theta))
 
     def plausible(self, theta):
         if not float(theta[0]) > 0:
@@ -457,10 +461,7 @@ class TireSaturationCandidate(Candidate):
         return self.effect_cls(**{**self.defaults, "peak_friction": min(max(mu, spec.lower), spec.upper)})
 
     def report_params(self, theta, sigma):
-        s, ss = float(theta[0]), float(sigma[0])
-        mu = self._mu(s)
-        smu = 0.5 * mu * ss / s if s > 0 else math.nan
-        return {"peak_friction": (mu, smu), "saturation_scale": (s, ss)}
+        return _saturation_report(float(theta[0]), float(sigma[0]), self._mu(float(theta[0])))
 
     def plausible(self, theta):
         s = float(theta[0])

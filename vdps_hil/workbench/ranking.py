@@ -1072,6 +1072,19 @@ def _interp_base(a: Vehicle, b: Vehicle, w: float, cfg: RankingConfig) -> Vehicl
                             for p in cfg.identify})
 
 
+def _prior_contribution(G: np.ndarray, base: list, d, name: str, c) -> tuple[float, float]:
+    """(v, v_base) of candidate ``name`` at its generic prior magnitude: v = th' G_cc th, its
+    weighted sum of squares over the drive, and v_base = g' G_bb^+ g (g = G_bc th), the part of
+    it the ``base`` columns reproduce (0 without base columns)."""
+    cols = d.blocks[name]
+    th = c.prior_theta() * np.array([d.scale[k] for k in cols])
+    vv = float(th @ G[np.ix_(cols, cols)] @ th)
+    if not len(base):
+        return vv, 0.0
+    gbv = G[np.ix_(base, cols)] @ th
+    return vv, float(gbv @ np.linalg.lstsq(G[np.ix_(base, base)], gbv, rcond=None)[0])
+
+
 def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effect] = (), *,
          candidates: Sequence[Candidate] | None = None, user_effects: Sequence[type[Effect]] = (),
          config: RankingConfig | None = None, mask: np.ndarray | None = None) -> Ranking:
@@ -1105,15 +1118,9 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     # excitation of every candidate at its generic prior magnitude (beyond what the base absorbs)
     excit = {}
     G = d.stats()[0].sum(axis=(0, 1))
-    gbb = G[np.ix_(always, always)]
     for name, c in by_name.items():
-        cols = d.blocks[name]
-        th = c.prior_theta() * np.array([d.scale[k] for k in cols])
-        vv = float(th @ G[np.ix_(cols, cols)] @ th)
-        gbv = G[np.ix_(always, cols)] @ th
-        if len(always):
-            vv -= float(gbv @ np.linalg.lstsq(gbb, gbv, rcond=None)[0])
-        excit[name] = math.sqrt(max(vv, 0.0) * ratio)
+        vv, vb = _prior_contribution(G, always, d, name, c)
+        excit[name] = math.sqrt(max(vv - vb, 0.0) * ratio)
     # an effect that acts through the tires' lateral forces cannot be judged when the tires carry
     # no lateral load: the slip angles are then the estimator's noise (as for the cornering
     # stiffnesses, ``excited_parameters``)
@@ -1127,14 +1134,10 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     base_cols = d.columns_of(list(cfg.identify))
     base_equiv: dict[str, float] = {}
     if base_cols:
-        gbb_ = G[np.ix_(base_cols, base_cols)]
         for name, c in by_name.items():
-            cols = d.blocks[name]
-            th = c.prior_theta() * np.array([d.scale[k] for k in cols])
-            vv = float(th @ G[np.ix_(cols, cols)] @ th)
-            gbv = G[np.ix_(base_cols, cols)] @ th
+            vv, vb = _prior_contribution(G, base_cols, d, name, c)
             if vv > 0:
-                base_equiv[name] = float(gbv @ np.linalg.lstsq(gbb_, gbv, rcond=None)[0]) / vv
+                base_equiv[name] = vb / vv
     own_groups: dict[str, np.ndarray] = {}
     for name, c in by_name.items():
         cols = d.blocks[name]
