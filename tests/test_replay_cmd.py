@@ -201,8 +201,10 @@ def test_sensor_set_inferred_or_named(drive, tmp_path):
     b = json.loads((tmp_path / "b.json").read_text())
     assert b["sensor_set"]["source"] == "small" and b["observability"]["in_progress"]["n_states"] == 9
     assert b["innovations"]["gnss_att"]["accepted"] == 0 and b["estimates_summary"]["count"] > 250
-    code, text = run("replay", str(drive), "--sensorset", str(tmp_path / "missing.toml"))
+    code, text = run("replay", str(drive), "--sensorset", str(tmp_path / "missing.toml"),
+                     "-o", str(tmp_path / "never.mcap"))
     assert code == 2 and "sensor set" in text and len(text.strip().splitlines()) == 1
+    assert not (tmp_path / "never.mcap").exists()  # a refused configuration writes nothing
 
 
 def test_replay_json_carries_the_computed_observability_report(tmp_path):

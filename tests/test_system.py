@@ -20,7 +20,7 @@ from vdps_hil.record.decode import decode_recording
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.profiles import load_profile
 from vdps_hil.system import (CanFrame, IdentReport, PredictionReport, SuspensionConditioner, SystemConfig,
-                             VdpsSystem, outputs_digest)
+                             VdpsSystem, outputs_digest, sample_stats)
 
 MODEL = load_vehicle("sedan-model")
 SUSP = [f"susp_deflection_m_{i}" for i in range(1, 5)]
@@ -393,3 +393,26 @@ def test_saved_imu_bias_is_taken_out_of_the_readings(tmp_path):
     for kind in ("gnss_pos", "gnss_att"):
         assert fixed[kind]["accepted"] >= 0.95 * fixed[kind]["updates"], fixed[kind]
         assert plain[kind]["accepted"] < 0.8 * plain[kind]["updates"], plain[kind]
+
+
+def test_sample_stats_takes_the_first_seconds_and_leaves_the_rest():
+    """``sample_stats`` (the replay's sensor-set probe, run on the decoder the replay then goes on
+    reading): the samples it takes plus those left in the iterator are the whole stream, in order;
+    rates count one instant of one kind once (two wheel half-frames at 1 kHz -> 1000 Hz, not
+    2000); fields are those with a finite value."""
+    stream = []
+    for i in range(5000):  # 5 s: IMU at 1 kHz, wheel half-frames at 1 kHz, suspension at 10 Hz
+        t = i * 1_000_000
+        stream.append(Sample(t, "imu", "imu", {"angular_rate_radps_z": 0.1, "specific_force_mps2_x": math.nan}))
+        stream.append(Sample(t, "can", "wheel_speed", {"wheel_speed_radps_1": 1.0, "wheel_speed_radps_2": 1.0}))
+        stream.append(Sample(t, "can", "wheel_speed", {"wheel_speed_radps_3": 1.0, "wheel_speed_radps_4": 1.0}))
+        if i % 100 == 0:
+            stream.append(Sample(t, "can", "suspension", {"susp_deflection_m_1": 0.0}))
+    it = iter(stream)
+    taken, rates, fields = sample_stats(it, 3.0)
+    assert taken + list(it) == stream
+    assert taken[-1].t_ns > 3_000_000_000 >= taken[-2].t_ns  # the window ends with the first sample after it
+    assert rates["imu"] == pytest.approx(1000.0, rel=1e-9) and rates["wheel_speed"] == pytest.approx(1000.0, rel=1e-9)
+    assert rates["suspension"] == pytest.approx(10.0, rel=1e-9)
+    assert fields["imu"] == {"angular_rate_radps_z"}
+    assert fields["wheel_speed"] == {f"wheel_speed_radps_{i}" for i in range(1, 5)}

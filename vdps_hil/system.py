@@ -103,10 +103,11 @@ Symbols: t [ns], T window [s], H deflection [m] (compression +), sigma [m], n sa
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -118,7 +119,7 @@ from vdps_hil.model.params import IdentifiedParams, Vehicle
 
 __all__ = ["CanFrame", "IdentReport", "PredictionReport", "ReplayError", "SuspensionConditioner", "SystemConfig",
            "VdpsSystem", "default_pipeline_config", "measure_rates", "output_to_json", "outputs_digest",
-           "probe_recording", "replay_file"]
+           "probe_recording", "replay_file", "sample_stats"]
 
 _SUSP = wheel_fields("susp_deflection_m")
 _NEVER = 1 << 62
@@ -668,24 +669,45 @@ INNOVATION_STATUS = ("accepted", "gated", "nan", "too_old", "disabled", "not_ini
 """``status_code`` of ``/est/innovation/<kind>`` messages: index in this tuple."""
 
 
-def probe_recording(path, seconds: float = 3.0, **decode_kw) -> tuple[dict[str, float], dict[str, set]]:
+PROBE_SECONDS = 3.0
+"""A replay infers its sensor set and suspension rate from this much of the decoded data."""
+
+
+def probe_recording(path, seconds: float = PROBE_SECONDS, **decode_kw) -> tuple[dict[str, float], dict[str, set]]:
     """(sample rate [Hz] per kind, catalogue fields per kind) over the first ``seconds`` of the
-    decoded ``/raw/`` data (samples of one instant from one kind count once): lets a replay size
-    the suspension averaging and infer the sensor set from the data instead of a profile name.
-    (Receive-time stamps and a short reorder window: only counts and fields matter here.)"""
+    decoded ``/raw/`` data (``sample_stats``): lets a replay size the suspension averaging and
+    infer the sensor set from the data instead of a profile name. (Receive-time stamps and a
+    short reorder window by default: only counts and fields matter here.)"""
     from vdps_hil.record.decode import decode_recording
 
     decode_kw.setdefault("device_time", False)
     decode_kw.setdefault("reorder_window_s", 0.02)
     dec = decode_recording(path, **decode_kw)
+    try:
+        _, rates, fields = sample_stats(dec, seconds)
+    finally:
+        dec.close()
+    return rates, fields
+
+
+def sample_stats(samples: Iterator[Sample], seconds: float = PROBE_SECONDS
+                 ) -> tuple[list[Sample], dict[str, float], dict[str, set]]:
+    """Take the samples of the first ``seconds`` from the iterator ``samples`` (plus the first
+    sample after them, which ends the window): (the samples taken, in order; sample rate [Hz]
+    per kind; catalogue fields with a finite value per kind). Samples of one instant from one
+    kind count once in the rate. ``vdps replay`` feeds the samples taken to the system after
+    configuring it from the rest, so the recording is decoded once."""
+    taken: list[Sample] = []
     first: dict[str, int] = {}
     last: dict[str, int] = {}
     count: dict[str, int] = {}
     fields: dict[str, set] = {}
     t0 = None
-    for s in dec:
+    span_ns = seconds * 1e9
+    for s in samples:
+        taken.append(s)
         t0 = s.t_ns if t0 is None else t0
-        if s.t_ns - t0 > seconds * 1e9:
+        if s.t_ns - t0 > span_ns:
             break
         k = s.kind
         fields.setdefault(k, set()).update(n for n, v in s.fields.items() if math.isfinite(v))
@@ -694,9 +716,8 @@ def probe_recording(path, seconds: float = 3.0, **decode_kw) -> tuple[dict[str, 
         first.setdefault(k, s.t_ns)
         last[k] = s.t_ns
         count[k] = count.get(k, 0) + 1
-    dec.close()
     rates = {k: (count[k] - 1) * 1e9 / (last[k] - first[k]) for k in count if count[k] > 1 and last[k] > first[k]}
-    return rates, fields
+    return taken, rates, fields
 
 
 def measure_rates(path, seconds: float = 1.0, **decode_kw) -> dict[str, float]:
@@ -828,24 +849,21 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                 recorded = input_order_samples(reader)
             except (ValueError, KeyError, IndexError, TypeError) as e:
                 raise ReplayError(f"{os.fspath(path)}: recorded input order unreadable: {e}") from None
-        kind_map, nodes, sensors_desc = {}, [], None
-        if config is None:
-            config, kind_map, nodes, sensors_desc = _replay_config(
-                path, veh, dbc, signalmap, bus_map, susp_sigma_m, paper_faithful, sensorset,
-                identify=identify, predict=predict)
-        elif sensorset is not None:
+        if config is not None and sensorset is not None:
             raise ReplayError("give a sensor set or a config, not both")
-        if start is not None:
-            config = replace(config, start_params=start)
-        if model_effects is not None:
-            config = replace(config, model_effects=model_effects)
-        state: dict = {"writer": None, "copy": None}
+        # the output is opened at the first /raw/ record (its clock); records read before the
+        # configuration is known (the first PROBE_SECONDS) wait, so a refused configuration
+        # writes nothing
+        state: dict = {"writer": None, "copy": None, "pending": None if config is not None else []}
         sink = None
         if output is not None:
             from vdps_hil.record.writer import RecordingWriter
 
             def sink(rec):
-                if state["writer"] is None:  # opened at the first raw record: keep its clock
+                if state["pending"] is not None:
+                    state["pending"].append(rec)
+                    return
+                if state["writer"] is None:
                     epoch = max(0, rec.log_time_ns - rec.t_ns) if rec.log_time_ns else None
                     try:
                         state["writer"] = RecordingWriter(
@@ -859,19 +877,31 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                     state["copy"](rec)
         try:
             dec = decode_recording(reader, dbc=dbc, signalmap=signalmap, bus_map=bus_map, raw_sink=sink)
-        except DecodeError as e:
-            raise ReplayError(str(e)) from None
-        system = VdpsSystem(veh, config)
-        system.clear_input_log()
-        summary = _Summary()
-        handle, count = system.handle, summary.sample
-        n = 0
-        source = dec
-        if recorded is not None:
-            for _ in dec:  # the decoders' counters, and the raw copy
-                pass
-            source = recorded
-        try:
+            samples = iter(dec)
+            head: list[Sample] = []
+            kind_map, nodes, sensors_desc = {}, [], None
+            if config is None:  # the sensor set and suspension rate from the first seconds, decoded once
+                head, rates, fields = sample_stats(samples)
+                config, kind_map, nodes, sensors_desc = _replay_config(
+                    rates, fields, veh, susp_sigma_m, paper_faithful, sensorset, identify=identify, predict=predict)
+                pending, state["pending"] = state["pending"], None
+                if sink is not None:
+                    for rec in pending:
+                        sink(rec)
+            if start is not None:
+                config = replace(config, start_params=start)
+            if model_effects is not None:
+                config = replace(config, model_effects=model_effects)
+            system = VdpsSystem(veh, config)
+            system.clear_input_log()
+            summary = _Summary()
+            handle, count = system.handle, summary.sample
+            n = 0
+            source = itertools.chain(head, samples)
+            if recorded is not None:
+                for _ in samples:  # the decoders' counters, and the raw copy
+                    pass
+                source = recorded
             for s in source:
                 count(s)
                 if kind_map and s.kind in kind_map:
@@ -886,6 +916,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                 if outs:
                     summary.outputs(outs, state["writer"])
             summary.outputs(system.finish(), state["writer"])
+        except DecodeError as e:
+            raise ReplayError(str(e)) from None
         finally:
             if state["writer"] is not None:
                 state["writer"].close()
@@ -960,19 +992,16 @@ def _load_workbench_model(path, vehicle: Vehicle):
     return veh.params, effects, doc
 
 
-def _replay_config(path, veh, dbc, signalmap, bus_map, susp_sigma_m, paper_faithful, sensorset=None, **kw):
-    """(SystemConfig, kind_map, sample nodes, sensor-set description) for a replay: the sensor
-    set from ``sensorset`` (``configs/sensorsets``: sensors, noise, latencies, kind map,
+def _replay_config(rates: Mapping[str, float], fields: Mapping[str, set], veh, susp_sigma_m, paper_faithful,
+                   sensorset=None, **kw):
+    """(SystemConfig, kind_map, sample nodes, sensor-set description) for a replay, from the
+    sample ``rates`` and ``fields`` of the recording's first seconds (``sample_stats``): the
+    sensor set from ``sensorset`` (``configs/sensorsets``: sensors, noise, latencies, kind map,
     calibration nodes) or inferred from the fields the recording carries
     (``realcars.infer_sensor_set``); the suspension averaging from its measured rate."""
     from vdps_hil.estimation.ekf import PaperFaithful
-    from vdps_hil.record.decode import DecodeError
     from vdps_hil.realcars import SensorSetError, infer_sensor_set, load_sensorset
 
-    try:
-        rates, fields = probe_recording(path, dbc=dbc, signalmap=signalmap, bus_map=bus_map)
-    except DecodeError as e:
-        raise ReplayError(str(e)) from None
     pc = default_pipeline_config()
     nodes: list = []
     try:
