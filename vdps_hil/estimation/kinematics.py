@@ -138,21 +138,25 @@ def vehicle_angles_eq4(a5, with_jacobian: bool = True):
     (phi_v, theta_v, psi_v) [rad], and the 3 x 5 Jacobian if asked."""
     cgv, dgv_f, dgv_t, dgv_p = dcm_gv_partials(float(a5[0]), float(a5[1]), float(a5[2]))
     cgr, dgr_f, dgr_t = dcm_gr_partials(float(a5[3]), float(a5[4]))
-    c = cgv @ cgr.T
-    c02 = max(-1.0, min(1.0, float(c[0, 2])))
-    ang = np.array([math.atan2(c[1, 2], c[2, 2]), math.asin(c02), math.atan2(c[0, 1], c[0, 0])])
+    cgr_t = cgr.T
+    # the 3 x 3 products in numpy, the scalar formulas below on plain floats (the same IEEE
+    # operations as on numpy scalars, without their per-element overhead: a hot path)
+    (c00, c01, c02), (_, _, c12), (_, _, c22) = (cgv @ cgr_t).tolist()
+    c02 = max(-1.0, min(1.0, c02))
+    ang = np.array([math.atan2(c12, c22), math.asin(c02), math.atan2(c01, c00)])
     if not with_jacobian:
         return ang
-    dcs = (dgv_f @ cgr.T, dgv_t @ cgr.T, dgv_p @ cgr.T, cgv @ dgr_f.T, cgv @ dgr_t.T)
-    jac = np.empty((3, 5))
-    n_phi = c[1, 2] ** 2 + c[2, 2] ** 2
-    n_psi = c[0, 0] ** 2 + c[0, 1] ** 2
+    dcs = (dgv_f @ cgr_t, dgv_t @ cgr_t, dgv_p @ cgr_t, cgv @ dgr_f.T, cgv @ dgr_t.T)
+    n_phi = c12 ** 2 + c22 ** 2
+    n_psi = c00 ** 2 + c01 ** 2
     ct = math.sqrt(max(1e-300, 1.0 - c02 * c02))
-    for k, d in enumerate(dcs):
-        jac[0, k] = (c[2, 2] * d[1, 2] - c[1, 2] * d[2, 2]) / n_phi
-        jac[1, k] = d[0, 2] / ct
-        jac[2, k] = (c[0, 0] * d[0, 1] - c[0, 1] * d[0, 0]) / n_psi
-    return ang, jac
+    rows: tuple[list, list, list] = ([], [], [])
+    for d in dcs:
+        (d00, d01, d02), (_, _, d12), (_, _, d22) = d.tolist()
+        rows[0].append((c22 * d12 - c12 * d22) / n_phi)
+        rows[1].append(d02 / ct)
+        rows[2].append((c00 * d01 - c01 * d00) / n_psi)
+    return ang, np.array(rows)
 
 
 def road_relative_dcm(a5) -> np.ndarray:
@@ -219,7 +223,7 @@ def transition(F: np.ndarray, dt_s: float) -> np.ndarray:
     phi = fd @ fd
     phi *= 0.5
     phi += fd
-    phi[np.diag_indices_from(phi)] += 1.0
+    phi.flat[::phi.shape[0] + 1] += 1.0  # the diagonal
     return phi
 
 
