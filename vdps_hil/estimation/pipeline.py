@@ -91,6 +91,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -310,7 +311,7 @@ class EstimatorPipeline:
         self._r0 = float(model_vehicle.tire.rolling_radius_m)
         sr = float(getattr(model_vehicle.geometry, "steer_ratio", 0.0) or 0.0)
         self._steer_ratio = sr if sr > 0 and math.isfinite(sr) else 0.0
-        self._ws_recent: list[tuple[int, list[float]]] = []
+        self._ws_recent: deque[tuple[int, list[float]]] = deque()
         self._ws_period_ns = int(round(cfg.wheel_speed_period_s * 1e9))
         self._ws_window_ns = int(round(cfg.wheel_speed_window_s * 1e9))
         self._ws_last = -(1 << 62)
@@ -805,7 +806,7 @@ class EstimatorPipeline:
         recent = self._ws_recent
         recent.append((t, w))
         while recent and t - recent[0][0] > self._ws_window_ns:
-            recent.pop(0)
+            recent.popleft()
         if t - self._ws_last >= self._ws_period_ns:
             self._ws_last = t
             self._wheel_update(out)
