@@ -488,9 +488,9 @@ class EstimatorPipeline:
             return None
         xf, e, ang, jac = self.ekf.layout.expand_with_vehicle_angles(self.ekf.x)
         pf = e @ self.ekf.P @ e.T
-        sig = np.sqrt(np.maximum(np.diag(pf), 0.0))
+        sig = np.sqrt(np.maximum(pf.diagonal(), 0.0))
         pa = jac @ pf[6:11, 6:11] @ jac.T
-        sa = np.sqrt(np.maximum(np.diag(pa), 0.0))
+        sa = np.sqrt(np.maximum(pa.diagonal(), 0.0))
         return Estimate(self.ekf.t_ns, tuple(xf.tolist()), tuple(sig.tolist()), tuple(ang.tolist()), tuple(sa.tolist()))
 
     def filtered(self) -> FilteredSignals:

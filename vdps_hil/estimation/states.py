@@ -226,6 +226,8 @@ class StateLayout:
         fixed road angles are zero with zero rows."""
         from vdps_hil.estimation.kinematics import vehicle_angles_eq4  # local: avoid a cycle
 
+        if with_jacobian and not ext and not self.psi_v_state:  # the EKF's update path: the same (x, E)
+            return self.expand_with_vehicle_angles(x)[:2]
         m = N_EXT if ext else N_FULL
         xf = np.zeros(N_EXT)
         xf[self._idx] = x
