@@ -113,6 +113,7 @@ import numpy as np
 
 from vdps_hil.bus.samples import Sample, wheel_fields
 from vdps_hil.estimation.pipeline import Estimate, EstimatorPipeline, FilteredSignals, Innovation, PipelineConfig
+from vdps_hil.estimation.states import STATE_NAMES
 from vdps_hil.identification.feeder import FeederConfig, IdentFeeder
 from vdps_hil.identification.problems import IdentConfig, Identifier
 from vdps_hil.model.params import IdentifiedParams, Vehicle
@@ -725,6 +726,8 @@ def measure_rates(path, seconds: float = 1.0, **decode_kw) -> dict[str, float]:
     return probe_recording(path, seconds, **decode_kw)[0]
 
 
+_STATE_KEYS = (*STATE_NAMES, "phi_v_rad", "theta_v_rad", "psi_v_rad")
+"""Keys of /est/state: the 12 states of eq 7 and the vehicle angles of eq 4."""
 _INNOVATION_KEYS = tuple(f"innovation_{i}" for i in range(8))
 _FILTERED_SIZES = (3, 3, 4, 4, 4, 4, 4)
 _FILTERED_KEYS = (*(f"{stem}_{a}" for stem in ("angular_rate_radps", "angular_accel_radps2") for a in "xyz"),
@@ -736,10 +739,8 @@ _FILTERED_KEYS = (*(f"{stem}_{a}" for stem in ("angular_rate_radps", "angular_ac
 
 def _est_docs(o) -> list[tuple[str, int, dict, dict | None]]:
     """(topic, t_ns, values, sigmas) documents of one system output for ``/est/``."""
-    from vdps_hil.estimation.states import STATE_NAMES
-
     if isinstance(o, Estimate):
-        names = (*STATE_NAMES, "phi_v_rad", "theta_v_rad", "psi_v_rad")
+        names = _STATE_KEYS
         vals = dict(zip(names, (*o.x, *o.vehicle_angles_rad)))
         sig = dict(zip(names, (*o.sigma, *o.vehicle_angles_sigma_rad)))
         return [("/est/state", o.t_ns, vals, sig)]

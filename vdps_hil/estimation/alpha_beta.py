@@ -223,7 +223,7 @@ class TimedAlphaBetaBank:
     ``TimedAlphaBeta`` with its own state and time, sharing the bandwidth and the gain cache
     (one call per sample instead of n). ``rejected[i]`` counts skipped non-finite values."""
 
-    __slots__ = ("bandwidth_hz", "max_gap_ns", "x", "v", "t", "rejected", "restarts", "_gains", "_dt_s")
+    __slots__ = ("bandwidth_hz", "max_gap_ns", "x", "v", "t", "rejected", "restarts", "_gains", "_lag_s")
 
     def __init__(self, n: int, bandwidth_hz: float, max_gap_s: float = 0.5):
         critically_damped_gains(bandwidth_hz, 1e-3)  # validates
@@ -234,21 +234,22 @@ class TimedAlphaBetaBank:
         self.t: list[int | None] = [None] * n
         self.rejected = [0] * n
         self.restarts = 0
-        self._gains: dict[int, tuple[float, float, float]] = {}
-        self._dt_s = math.nan
+        self._gains: dict[int, tuple[float, float, float, float]] = {}  # ns interval -> (alpha, beta/T, T, lag)
+        self._lag_s = math.nan
 
     def update(self, t_ns: int, values, indices=None) -> int:
         """Feed one value per signal (NaN: skipped for that signal); returns how many were used.
         ``indices``: the signals ``values`` belong to when a sample carries only some of them
         (the others are left alone, not counted as rejected)."""
         used = 0
-        xs, vs, ts, gains = self.x, self.v, self.t, self._gains
+        xs, vs, ts, gains, max_gap = self.x, self.v, self.t, self._gains, self.max_gap_ns
+        g = None  # the gains of the last filter step, if any
         for i, z in zip(range(len(xs)) if indices is None else indices, values):
             if z - z != 0.0:  # NaN or +-inf
                 self.rejected[i] += 1
                 continue
             t0 = ts[i]
-            if t0 is None or t_ns - t0 > self.max_gap_ns:
+            if t0 is None or t_ns - t0 > max_gap:
                 if t0 is not None:
                     self.restarts += 1
                 xs[i], vs[i], ts[i] = z, 0.0, t_ns
@@ -262,22 +263,21 @@ class TimedAlphaBetaBank:
             if g is None:
                 dt = d * 1e-9
                 a, b = critically_damped_gains(self.bandwidth_hz, dt)
-                g = (a, b / dt, dt)
+                g = (a, b / dt, dt, derivative_lag_s(a, b, dt))
                 if len(gains) < 256:
                     gains[d] = g
-            a, bt, dt = g
+            a, bt, dt, _ = g
             xp = xs[i] + dt * vs[i]
             r = z - xp
             xs[i] = xp + a * r
             vs[i] += bt * r
             ts[i] = t_ns
-            self._dt_s = dt
             used += 1
+        if g is not None:
+            self._lag_s = g[3]
         return used
 
     @property
     def lag_s(self) -> float:
-        if not math.isfinite(self._dt_s):
-            return math.nan
-        a, b = critically_damped_gains(self.bandwidth_hz, self._dt_s)
-        return derivative_lag_s(a, b, self._dt_s)
+        """Derivative lag at the sampling period of the last filter step (NaN before one)."""
+        return self._lag_s

@@ -69,6 +69,7 @@ runs eq 7-11 as before; the sensor sets of real cars in ``configs/sensorsets`` s
 
 from __future__ import annotations
 
+import bisect
 import math
 import types
 from collections import deque
@@ -328,6 +329,10 @@ def filter_jacobians(layout: StateLayout, x_ext, f_b, w_b) -> tuple[np.ndarray, 
     G = np.zeros((n, 6))
     G[:nk] = Gk
     return F, G
+
+
+def _event_end(ev: "_Event") -> int:
+    return ev.t1
 
 
 @dataclass
@@ -676,16 +681,16 @@ class MultiRateEKF:
         hist = self._hist
         if not hist or hist[0].t0 > t_m:
             return self._finish(UpdateResult(kind, t_m, "too_old", delayed=True), True)
-        i = next((k for k, ev in enumerate(hist) if ev.t1 > t_m), None)
-        if i is None:  # nothing after t_m: cannot happen since t_m < self._t, but be safe
+        # the first event ending after t_m (the history is in processing order, so its end
+        # times t1 never decrease: each event ends at or after the filter time it starts from)
+        i = bisect.bisect_right(hist, t_m, key=_event_end)
+        if i == len(hist):  # nothing after t_m: cannot happen since t_m < self._t, but be safe
             return self._apply(kind, z, R, self._t, aux, count=True, delayed=True)
-        events = list(hist)
-        later = events[i:]
-        first = later[0]
+        first = hist[i]
         if first.t0 > t_m:  # history does not reach back to t_m
             return self._finish(UpdateResult(kind, t_m, "too_old", delayed=True), True)
-        while len(hist) > i:
-            hist.pop()
+        later = [hist.pop() for _ in range(len(hist) - i)]
+        later.reverse()
         f_now, w_now = self._f, self._w
         self._x, self._P, self._t = first.x0.copy(), first.p0.copy(), first.t0
         self._counts["delayed_updates"] += 1

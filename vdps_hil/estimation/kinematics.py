@@ -109,6 +109,14 @@ def road_normal(phi_r: float, theta_r: float):
             np.array([-cf * ct, 0.0, -cf * st]))
 
 
+def _euler_rate_values(phi: float, theta: float, wx: float, wy: float, wz: float) -> tuple[float, float, float]:
+    """C_omega^-1(phi, theta) w as three floats (``euler_rates``)."""
+    sf, cf = math.sin(phi), math.cos(phi)
+    st, ct = math.sin(theta), math.cos(theta)
+    a = sf * wy + cf * wz
+    return wx - st / ct * a, -cf * wy + sf * wz, a / ct
+
+
 def euler_rates(phi: float, theta: float, w) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """([phi', theta', psi'] = C_omega^-1(phi, theta) w, d/dphi, d/dtheta).
 
@@ -120,7 +128,7 @@ def euler_rates(phi: float, theta: float, w) -> tuple[np.ndarray, np.ndarray, np
     a = sf * wy + cf * wz
     b = cf * wy - sf * wz
     t = st / ct
-    rates = np.array([wx - t * a, -cf * wy + sf * wz, a / ct])
+    rates = np.array(_euler_rate_values(phi, theta, wx, wy, wz))
     d_phi = np.array([-t * b, a, b / ct])
     d_theta = np.array([-a / (ct * ct), 0.0, a * st / (ct * ct)])
     return rates, d_phi, d_theta
@@ -138,21 +146,25 @@ def vehicle_angles_eq4(a5, with_jacobian: bool = True):
     (phi_v, theta_v, psi_v) [rad], and the 3 x 5 Jacobian if asked."""
     cgv, dgv_f, dgv_t, dgv_p = dcm_gv_partials(float(a5[0]), float(a5[1]), float(a5[2]))
     cgr, dgr_f, dgr_t = dcm_gr_partials(float(a5[3]), float(a5[4]))
-    c = cgv @ cgr.T
-    c02 = max(-1.0, min(1.0, float(c[0, 2])))
-    ang = np.array([math.atan2(c[1, 2], c[2, 2]), math.asin(c02), math.atan2(c[0, 1], c[0, 0])])
+    cgr_t = cgr.T
+    # the 3 x 3 products in numpy, the scalar formulas below on plain floats (the same IEEE
+    # operations as on numpy scalars, without their per-element overhead: a hot path)
+    (c00, c01, c02), (_, _, c12), (_, _, c22) = (cgv @ cgr_t).tolist()
+    c02 = max(-1.0, min(1.0, c02))
+    ang = np.array([math.atan2(c12, c22), math.asin(c02), math.atan2(c01, c00)])
     if not with_jacobian:
         return ang
-    dcs = (dgv_f @ cgr.T, dgv_t @ cgr.T, dgv_p @ cgr.T, cgv @ dgr_f.T, cgv @ dgr_t.T)
-    jac = np.empty((3, 5))
-    n_phi = c[1, 2] ** 2 + c[2, 2] ** 2
-    n_psi = c[0, 0] ** 2 + c[0, 1] ** 2
+    dcs = (dgv_f @ cgr_t, dgv_t @ cgr_t, dgv_p @ cgr_t, cgv @ dgr_f.T, cgv @ dgr_t.T)
+    n_phi = c12 ** 2 + c22 ** 2
+    n_psi = c00 ** 2 + c01 ** 2
     ct = math.sqrt(max(1e-300, 1.0 - c02 * c02))
-    for k, d in enumerate(dcs):
-        jac[0, k] = (c[2, 2] * d[1, 2] - c[1, 2] * d[2, 2]) / n_phi
-        jac[1, k] = d[0, 2] / ct
-        jac[2, k] = (c[0, 0] * d[0, 1] - c[0, 1] * d[0, 0]) / n_psi
-    return ang, jac
+    rows: tuple[list, list, list] = ([], [], [])
+    for d in dcs:
+        (d00, d01, d02), (_, _, d12), (_, _, d22) = d.tolist()
+        rows[0].append((c22 * d12 - c12 * d22) / n_phi)
+        rows[1].append(d02 / ct)
+        rows[2].append((c00 * d01 - c01 * d00) / n_psi)
+    return ang, np.array(rows)
 
 
 def road_relative_dcm(a5) -> np.ndarray:
@@ -196,20 +208,21 @@ def step(x, f_b, w_b, dt_s: float, gravity_mps2: float = GRAVITY_MPS2) -> np.nda
     Returns the new full state; angles are not wrapped here."""
     x = np.asarray(x, dtype=float)
     fb = np.asarray(f_b, dtype=float)
-    a0 = x[6:9]
-    r0 = euler_rates(a0[0], a0[1], w_b)[0]
-    am = a0 + 0.5 * dt_s * r0
-    rm = euler_rates(am[0], am[1], w_b)[0]
-    a1 = a0 + dt_s * rm
-    c0 = dcm_gv(a0[0], a0[1], a0[2])
-    c1 = dcm_gv(a1[0], a1[1], a1[2])
-    acc = 0.5 * ((c0.T + c1.T) @ fb)
-    acc[2] -= gravity_mps2
+    # the 3 x 3 product in numpy, the element-wise formulas on plain floats (the same IEEE
+    # operations as numpy's on 3-vectors, without their overhead: once per predict)
+    px, py, pz, vx, vy, vz, phi, theta, psi = x[:9].tolist()
+    w = (float(w_b[0]), float(w_b[1]), float(w_b[2]))
+    h = 0.5 * dt_s
+    r0 = _euler_rate_values(phi, theta, *w)
+    rm = _euler_rate_values(phi + h * r0[0], theta + h * r0[1], *w)  # at the midpoint attitude
+    a1 = (phi + dt_s * rm[0], theta + dt_s * rm[1], psi + dt_s * rm[2])
+    c0 = dcm_gv(phi, theta, psi)
+    c1 = dcm_gv(*a1)
+    ax, ay, az = ((c0.T + c1.T) @ fb).tolist()
+    acc = (0.5 * ax, 0.5 * ay, 0.5 * az - gravity_mps2)
+    v1 = (vx + dt_s * acc[0], vy + dt_s * acc[1], vz + dt_s * acc[2])
     out = x.copy()
-    v1 = x[3:6] + dt_s * acc
-    out[0:3] = x[0:3] + 0.5 * dt_s * (x[3:6] + v1)
-    out[3:6] = v1
-    out[6:9] = a1
+    out[:9] = (px + h * (vx + v1[0]), py + h * (vy + v1[1]), pz + h * (vz + v1[2]), *v1, *a1)
     return out
 
 
@@ -219,7 +232,7 @@ def transition(F: np.ndarray, dt_s: float) -> np.ndarray:
     phi = fd @ fd
     phi *= 0.5
     phi += fd
-    phi[np.diag_indices_from(phi)] += 1.0
+    phi.flat[::phi.shape[0] + 1] += 1.0  # the diagonal
     return phi
 
 

@@ -156,10 +156,15 @@ class GnssVelocity(ObservationModel):
 
     def __init__(self, lever_arm_m=(0.0, 0.0, 0.0)):
         self.lever_arm_m = np.asarray(lever_arm_m, dtype=float).reshape(3)
+        self._arm = tuple(self.lever_arm_m.tolist())
 
     def _va(self, x, aux):
         parts = dcm_gv_partials(x[6], x[7], x[8])
-        u = np.zeros(3) if aux is None else np.cross(np.asarray(aux, dtype=float), self.lever_arm_m)
+        if aux is None:
+            u = np.zeros(3)
+        else:  # w x l, the products and differences of np.cross on plain floats (cheaper for one 3-vector)
+            (w0, w1, w2), (l0, l1, l2) = (float(v) for v in aux), self._arm
+            u = np.array([w1 * l2 - w2 * l1, w2 * l0 - w0 * l2, w0 * l1 - w1 * l0])
         return x[3:6] + parts[0].T @ u, u, parts
 
     def h(self, x, aux=None):

@@ -91,6 +91,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -310,7 +311,7 @@ class EstimatorPipeline:
         self._r0 = float(model_vehicle.tire.rolling_radius_m)
         sr = float(getattr(model_vehicle.geometry, "steer_ratio", 0.0) or 0.0)
         self._steer_ratio = sr if sr > 0 and math.isfinite(sr) else 0.0
-        self._ws_recent: list[tuple[int, list[float]]] = []
+        self._ws_recent: deque[tuple[int, list[float]]] = deque()
         self._ws_period_ns = int(round(cfg.wheel_speed_period_s * 1e9))
         self._ws_window_ns = int(round(cfg.wheel_speed_window_s * 1e9))
         self._ws_last = -(1 << 62)
@@ -487,9 +488,9 @@ class EstimatorPipeline:
             return None
         xf, e, ang, jac = self.ekf.layout.expand_with_vehicle_angles(self.ekf.x)
         pf = e @ self.ekf.P @ e.T
-        sig = np.sqrt(np.maximum(np.diag(pf), 0.0))
+        sig = np.sqrt(np.maximum(pf.diagonal(), 0.0))
         pa = jac @ pf[6:11, 6:11] @ jac.T
-        sa = np.sqrt(np.maximum(np.diag(pa), 0.0))
+        sa = np.sqrt(np.maximum(pa.diagonal(), 0.0))
         return Estimate(self.ekf.t_ns, tuple(xf.tolist()), tuple(sig.tolist()), tuple(ang.tolist()), tuple(sa.tolist()))
 
     def filtered(self) -> FilteredSignals:
@@ -805,7 +806,7 @@ class EstimatorPipeline:
         recent = self._ws_recent
         recent.append((t, w))
         while recent and t - recent[0][0] > self._ws_window_ns:
-            recent.pop(0)
+            recent.popleft()
         if t - self._ws_last >= self._ws_period_ns:
             self._ws_last = t
             self._wheel_update(out)

@@ -155,6 +155,10 @@ class StateLayout:
         object.__setattr__(self, "_idx", np.array(idx, dtype=int))
         object.__setattr__(self, "_n_kin", n_kin)
         object.__setattr__(self, "_pos", {int(s): i for i, s in enumerate(idx)})
+        # d x_full / d x_filter of the carried eq-7 states (12 x n selection; the output path copies it)
+        sel = np.zeros((N_FULL, len(idx)))
+        sel[np.array(idx[:n_kin], dtype=int), np.arange(n_kin)] = 1.0
+        object.__setattr__(self, "_sel_full", sel)
 
     @property
     def n(self) -> int:
@@ -222,6 +226,8 @@ class StateLayout:
         fixed road angles are zero with zero rows."""
         from vdps_hil.estimation.kinematics import vehicle_angles_eq4  # local: avoid a cycle
 
+        if with_jacobian and not ext and not self.psi_v_state:  # the EKF's update path: the same (x, E)
+            return self.expand_with_vehicle_angles(x)[:2]
         m = N_EXT if ext else N_FULL
         xf = np.zeros(N_EXT)
         xf[self._idx] = x
@@ -248,16 +254,16 @@ class StateLayout:
         eq 4 (the pipeline's output path)."""
         from vdps_hil.estimation.kinematics import vehicle_angles_eq4
 
-        xf = np.zeros(N_EXT)
-        xf[self._idx] = x
-        e = np.zeros((N_EXT, self.n))
-        e[self._idx, np.arange(self.n)] = 1.0
+        nk = self._n_kin
+        xf = np.zeros(N_FULL)
+        xf[self._idx[:nk]] = x[:nk]
+        e = self._sel_full.copy()
         ang, jac = vehicle_angles_eq4(xf[ANGLES5], with_jacobian=True)
         if not self.psi_v_state:
             for k in range(5 if self.road_estimated else 3):
                 e[States.PSI_V, self._pos[6 + k]] = jac[2, k]
             xf[States.PSI_V] = ang[2]
-        return xf[:N_FULL].copy(), e[:N_FULL].copy(), ang, jac
+        return xf, e, ang, jac
 
     def full_covariance(self, x, p) -> tuple[np.ndarray, np.ndarray]:
         """(x_full, P_full = E P E^T) of the 12 states of eq 7; fixed states get zero variance."""
