@@ -644,17 +644,18 @@ def decode_recording(source: str | os.PathLike | RecordingReader, *, dbc: str | 
 def raw_copier(reader: RecordingReader, writer) -> Callable[[RawRecord], None]:
     """A ``raw_sink`` writing each ``/raw/`` record unchanged (same bytes, ``t_ns``, ``log_time``
     and channel metadata) to ``writer`` (a :class:`~vdps_hil.record.writer.RecordingWriter`)."""
-    meta: dict[str, tuple[str, dict]] = {}
+    meta: dict[str, tuple[str, dict] | None] = {}  # topic -> (schema, channel metadata); None: not copied
     schemas = {S.RAW_CAN_PREFIX: S.RAW_CAN, S.RAW_SERIAL_PREFIX: S.RAW_SERIAL}
+    copy = writer.copy_message
 
     def sink(rec: RawRecord) -> None:
-        m = meta.get(rec.topic)
-        if m is None:
-            schema = next((v for k, v in schemas.items() if rec.topic.startswith(k)), None)
-            if schema is None:
-                return
-            m = meta[rec.topic] = (schema, reader.channel_metadata(rec.topic))
-        writer._write(rec.topic, m[0], rec.t_ns, rec.data, rec.log_time_ns or None, m[1])
+        topic, t_ns, log_time_ns, _, data = rec
+        m = meta.get(topic, False)
+        if m is False:
+            schema = next((v for k, v in schemas.items() if topic.startswith(k)), None)
+            m = meta[topic] = None if schema is None else (schema, reader.channel_metadata(topic))
+        if m is not None:
+            copy(topic, m[0], t_ns, data, log_time_ns, m[1])
 
     return sink
 

@@ -63,6 +63,10 @@ class RotatingRecordingWriter(RecordingWriter):
         if due:
             self.rotate()
 
+    def copy_message(self, topic, schema_name, t_ns, payload, log_time_ns, channel_metadata={}):
+        """One ``_write`` per copied message (no queue), so that rotation is checked after each."""
+        self._write(topic, schema_name, t_ns, payload, log_time_ns or None, channel_metadata)
+
     def rotate(self) -> None:
         """Close the current file and continue in the next one now."""
         with self._lock:
