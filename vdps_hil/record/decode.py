@@ -376,6 +376,7 @@ class _CanStream:
     def __init__(self, bus: str, decoder, info: dict):
         self.bus = bus
         self.dec = decoder
+        self._decode_frame = getattr(decoder, "decode_frame", decoder.decode)  # typed fields: no conversions
         self.info = info
         self.malformed = 0
 
@@ -388,7 +389,7 @@ class _CanStream:
             except ValueError:  # binascii.Error: odd length
                 payload = None
             if payload is not None:
-                return self.dec.decode(t_ns, int(aid), payload, ext == b"true")
+                return self._decode_frame(t_ns, int(aid), payload, ext == b"true")
         try:
             doc = json.loads(data)
         except ValueError:

@@ -186,7 +186,7 @@ class _MessageIndex(MessageIndex):
         stream.start_record(Opcode.MESSAGE_INDEX)
         stream.write2(self.channel_id)
         stream.write4(len(recs) * 16)
-        stream.write(struct.pack(f"<{2 * len(recs)}Q", *[v for r in recs for v in r]))
+        stream.write(struct.pack(f"<{2 * len(recs)}Q", *chain.from_iterable(recs)))
         stream.finish_record()
 
 
