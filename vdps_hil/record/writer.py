@@ -9,7 +9,8 @@ key) and ``log_time`` = wall-clock UTC ns::
              = time.time_ns() at write     otherwise (live, no wall time supplied)
 
 Chunks are ZSTD-compressed and closed when their uncompressed content exceeds ``chunk_size``
-bytes (about 64 KiB by default), so a crash loses at most the chunk in progress (call
+bytes (about 64 KiB by default), so a crash loses at most the chunk in progress and the
+copied messages still queued (:meth:`RecordingWriter.copy_message`; call
 :meth:`RecordingWriter.flush` to bound that in time). The file opens with a Header and the
 ``vdps.recording`` metadata record, so even a file cut off by a crash tells what it is.
 
