@@ -61,14 +61,14 @@ def test_bad_limits():
 
 
 def test_copied_messages_rotate_like_written_ones(tmp_path):
-    """copy_message on a rotating writer writes each copy at once (no queue), so rotation by
-    time splits copies exactly where it splits direct writes."""
+    """A rotating writer's copier writes each copy at once (no queue), so rotation by time
+    splits copies exactly where it splits direct writes."""
     from vdps_hil.record import schemas as S
 
     w = RotatingRecordingWriter(tmp_path / "out.mcap", max_s=1.0, metadata={"mode": "test"})
+    copy = w.copier(lambda topic: (S.RAW_SERIAL, {"device": "imu", "baud": "", "format": ""}))
     for i in range(2500):
-        w.copy_message("/raw/serial/imu", S.RAW_SERIAL, i * 1_000_000, b'{"k":%d}' % i, 1 + i,
-                       {"device": "imu", "baud": "", "format": ""})
+        copy(("/raw/serial/imu", i * 1_000_000, 1 + i, 0, b'{"k":%d}' % i))
     w.close()
     counts = []
     for f in w.files:

@@ -285,7 +285,7 @@ def _copy_messages(seed: int, n: int):
 
 
 def test_copied_messages_read_back_equal_with_valid_indexes_and_statistics(tmp_path):
-    """copy_message (queued, written in runs) next to direct writes: the mcap library reads the
+    """Copies (queued, written in runs) next to direct writes: the mcap library reads the
     same messages through the summary's chunk and message indexes as _write gives, with the same
     statistics and per-topic sequence numbers; our reader agrees (small chunks so many close)."""
     msgs = _copy_messages(3, 3000)
@@ -293,12 +293,12 @@ def test_copied_messages_read_back_equal_with_valid_indexes_and_statistics(tmp_p
     for how in ("copy", "write"):
         p = paths[how] = tmp_path / f"{how}.mcap"
         with RecordingWriter(p, chunk_size=2048, sim_epoch_ns=EPOCH) as w:
+            copy = w.copier(lambda topic: (S.RAW_SERIAL, {"device": topic[-1], "baud": "", "format": ""}))
             for k, (topic, t, log, data) in enumerate(msgs):
-                meta = {"device": topic[-1], "baud": "", "format": ""}
                 if how == "copy":
-                    w.copy_message(topic, S.RAW_SERIAL, t, data, log, meta)
+                    copy((topic, t, log, 0, data))
                 else:
-                    w._write(topic, S.RAW_SERIAL, t, data, log, meta)
+                    w._write(topic, S.RAW_SERIAL, t, data, log, {"device": topic[-1], "baud": "", "format": ""})
                 if k % 97 == 0:
                     w.write_estimate("x", k, {"v": float(k)})
         assert w.stats.total == 3000 + 31 and not w.stats.time_backwards
@@ -329,8 +329,9 @@ def test_copy_runs_write_the_same_file_as_one_library_call_per_message(tmp_path)
         w = RecordingWriter(p, chunk_size=1500, sim_epoch_ns=EPOCH)
         if not runs:
             w._appender, w._add_message = None, w._mcap.add_message
+        copy = w.copier(lambda topic: (S.RAW_SERIAL, {}))
         for topic, t, log, data in msgs:
-            w.copy_message(topic, S.RAW_SERIAL, t, data, log)
+            copy((topic, t, log, 7, data))
         w.close()
         files.append(p.read_bytes())
     assert files[0] == files[1]
@@ -339,23 +340,28 @@ def test_copy_runs_write_the_same_file_as_one_library_call_per_message(tmp_path)
 def test_copy_keeps_per_topic_order_sequence_wrap_and_time_rules(tmp_path):
     """A direct write on a copied topic comes after the copies queued before it; sequence
     numbers wrap modulo 2^32 inside a run; log time 0 takes the writer's rule; backwards t_ns
-    are counted; an out-of-range log time is an error at the call."""
+    are counted; topics the channel function refuses are not copied; an out-of-range log time
+    and a schema clash are errors at the call."""
     p = tmp_path / "c.mcap"
+    a = "/raw/serial/a"
     with RecordingWriter(p, sim_epoch_ns=EPOCH) as w:
-        w.copy_message("/raw/serial/a", S.RAW_SERIAL, 1, b"1", 0)
+        copy = w.copier(lambda topic: (S.RAW_SERIAL, {}) if topic == a else None)
+        copy((a, 1, 0, 9, b"1"))
+        copy(("/raw/other", 1, 0, 9, b"x"))  # not copied
         w.flush()  # written: the next sequence number can be set
-        w._channels["/raw/serial/a"].seq = 2**32 - 2
-        w.copy_message("/raw/serial/a", S.RAW_SERIAL, 2, b"2", EPOCH + 7)
-        w.copy_message("/raw/serial/a", S.RAW_SERIAL, 3, b"3", EPOCH + 8)
-        w.copy_message("/raw/serial/a", S.RAW_SERIAL, 2, b"4", EPOCH + 9)  # backwards
-        w._write("/raw/serial/a", S.RAW_SERIAL, 5, b"5", None)
+        w._channels[a].seq = 2**32 - 2
+        for t, log, data in ((2, EPOCH + 7, b"2"), (3, EPOCH + 8, b"3"), (2, EPOCH + 9, b"4")):  # 4: backwards
+            copy((a, t, log, 0, data))
+        w._write(a, S.RAW_SERIAL, 5, b"5", None)
         with pytest.raises(ValueError, match="out of range"):
-            w.copy_message("/raw/serial/a", S.RAW_SERIAL, 6, b"6", 2**64 - 1)
+            copy((a, 6, 2**64 - 1, 0, b"6"))
+        w.write_json("/raw/serial/b", S.TRUTH, 1, {"t_ns": 1})
         with pytest.raises(ValueError, match="already carries"):
-            w.copy_message("/raw/serial/a", S.RAW_CAN, 6, b"6", 0)
-    assert w.stats.messages == {"/raw/serial/a": 5} and w.stats.time_backwards == {"/raw/serial/a": 1}
+            w.copier(lambda topic: (S.RAW_SERIAL, {}))(("/raw/serial/b", 2, 0, 0, b"7"))
+    assert w.stats.messages == {a: 5, "/raw/serial/b": 1} and w.stats.time_backwards == {a: 1}
     with open(p, "rb") as f:
-        got = [(m.data, m.sequence, m.log_time, m.publish_time) for _, _, m in make_reader(f).iter_messages(log_time_order=False)]
+        got = [(m.data, m.sequence, m.log_time, m.publish_time) for _, ch, m in
+               make_reader(f).iter_messages(log_time_order=False) if ch.topic == a]
     assert got == [(b"1", 0, EPOCH + 1, 1), (b"2", 2**32 - 2, EPOCH + 7, 2), (b"3", 2**32 - 1, EPOCH + 8, 3),
                    (b"4", 0, EPOCH + 9, 2), (b"5", 1, EPOCH + 5, 5)]
 

@@ -645,20 +645,13 @@ def decode_recording(source: str | os.PathLike | RecordingReader, *, dbc: str | 
 def raw_copier(reader: RecordingReader, writer) -> Callable[[RawRecord], None]:
     """A ``raw_sink`` writing each ``/raw/`` record unchanged (same bytes, ``t_ns``, ``log_time``
     and channel metadata) to ``writer`` (a :class:`~vdps_hil.record.writer.RecordingWriter`)."""
-    meta: dict[str, tuple[str, dict] | None] = {}  # topic -> (schema, channel metadata); None: not copied
     schemas = {S.RAW_CAN_PREFIX: S.RAW_CAN, S.RAW_SERIAL_PREFIX: S.RAW_SERIAL}
-    copy = writer.copy_message
 
-    def sink(rec: RawRecord) -> None:
-        topic, t_ns, log_time_ns, _, data = rec
-        m = meta.get(topic, False)
-        if m is False:
-            schema = next((v for k, v in schemas.items() if topic.startswith(k)), None)
-            m = meta[topic] = None if schema is None else (schema, reader.channel_metadata(topic))
-        if m is not None:
-            copy(topic, m[0], t_ns, data, log_time_ns, m[1])
+    def channel_of(topic: str) -> tuple[str, dict] | None:
+        schema = next((v for k, v in schemas.items() if topic.startswith(k)), None)
+        return None if schema is None else (schema, reader.channel_metadata(topic))
 
-    return sink
+    return writer.copier(channel_of)
 
 
 def copy_raw_topics(source: str | os.PathLike, target: str | os.PathLike) -> int:

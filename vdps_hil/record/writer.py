@@ -10,13 +10,13 @@ key) and ``log_time`` = wall-clock UTC ns::
 
 Chunks are ZSTD-compressed and closed when their uncompressed content exceeds ``chunk_size``
 bytes (about 64 KiB by default), so a crash loses at most the chunk in progress and the
-copied messages still queued (:meth:`RecordingWriter.copy_message`; call
+copied messages still queued (:meth:`RecordingWriter.copier`; call
 :meth:`RecordingWriter.flush` to bound that in time). The file opens with a Header and the
 ``vdps.recording`` metadata record, so even a file cut off by a crash tells what it is.
 
 Extension points (used by rotation, recovery and python-can registration): every message
 goes through :meth:`RecordingWriter.write_json` / ``_write``, except messages copied from
-another recording (:meth:`RecordingWriter.copy_message`: queued, then written in runs per
+another recording (:meth:`RecordingWriter.copier`: queued, then written in runs per
 channel); per-file state (channels, schemas, the mcap writer) lives in ``_open_file`` /
 ``_finish_file``, so a rotating writer closes one file and opens the next with the same
 metadata.
@@ -36,7 +36,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from itertools import accumulate, chain, repeat
-from typing import IO, Any, Mapping, Sequence
+from typing import IO, Any, Callable, Mapping, Sequence
 
 from mcap.opcode import Opcode
 from mcap.records import MessageIndex
@@ -65,7 +65,7 @@ class _CopyRun:
     """Copied messages of one channel queued for :meth:`RecordingWriter._write_copies`."""
 
     channel: _Channel
-    queue: list[tuple[int, int, bytes]] = field(default_factory=list)  # (t_ns, log_time, payload)
+    queue: list[tuple] = field(default_factory=list)  # (topic, t_ns, log_time, sequence, payload)
 
 
 _COPY_QUEUE = 256
@@ -286,7 +286,7 @@ class RecordingWriter:
         self._schema_ids: dict[str, int] = {}
         self._appender = _MessageAppender.attach(self._mcap)
         self._add_message = self._mcap.add_message if self._appender is None else self._appender.add
-        self._copies: dict[str, _CopyRun] = {}  # copied messages not written yet, per topic
+        self._copies: dict[str, _CopyRun | None] = {}  # copies not written yet per topic (None: not copied)
         self._copies_queued = 0
         self._mcap.start(profile="", library=f"vdps-hil/{_TOOL_VERSION} {_MCAP_LIBRARY}")
         self._mcap.add_metadata(S.METADATA_NAME, self._metadata)
@@ -338,7 +338,7 @@ class RecordingWriter:
             ch = self._channels.get(topic)
             if ch is None or ch.schema != schema_name:
                 ch = self._channel(topic, schema_name, channel_metadata)  # raises on mismatch
-            if topic in self._copies:
+            if self._copies.get(topic):
                 self._write_copies()  # the topic's queued copies go first: per-topic order
             if t_ns < ch.last_t_ns:
                 self.stats.time_backwards[topic] = self.stats.time_backwards.get(topic, 0) + 1
@@ -348,49 +348,61 @@ class RecordingWriter:
             ch.seq = (ch.seq + 1) & 0xFFFFFFFF
             self.stats.messages[topic] = self.stats.messages.get(topic, 0) + 1
 
-    def copy_message(self, topic: str, schema_name: str, t_ns: int, payload: bytes, log_time_ns: int,
-                     channel_metadata: Mapping[str, str] = {}) -> None:
-        """Append a message read from another recording unchanged: ``payload`` as stored there,
-        its ``t_ns`` (publish_time) and ``log_time_ns`` (int; 0 = none: the log-time rule of the
-        module docstring), the channel registered with ``channel_metadata`` at the first copy.
+    def copier(self, channel_of: Callable[[str], tuple[str, Mapping[str, str]] | None]
+               ) -> Callable[[tuple], None]:
+        """A function appending messages read from another recording unchanged: each a
+        ``(topic, t_ns, log_time_ns, sequence, payload)`` tuple (a reader's ``RawRecord``; the
+        sequence is not kept, this file numbers its own). ``channel_of(topic)`` gives, at a
+        topic's first message, its schema name and channel metadata, or None: not copied. A
+        ``log_time_ns`` of 0 means none (the log-time rule of the module docstring).
 
-        The same message as ``_write`` gives (statistics, sequence numbers, time-order counts),
+        The same messages as ``_write`` gives (statistics, sequence numbers, time-order counts),
         written later: copies are queued and written in runs of one channel each (one pack and
         one write per run, see ``_MessageAppender.add_run``) when ``_COPY_QUEUE`` messages are
-        queued over all topics, when the topic is written directly, and at ``flush``/``close``
-        (``stats`` counts them then). A file therefore holds a topic's copies up to
+        queued over all topics, when a copied topic is written directly, and at ``flush`` /
+        ``close`` (``stats`` counts them then). A file therefore holds a topic's copies up to
         ``_COPY_QUEUE`` messages after the messages written directly next to them (in ``t_ns``
         order per topic still), and a crash loses those queued copies with the chunk in
         progress."""
-        with self._lock:
-            if self._closed:
-                raise ValueError("recording is closed")
-            if not 0 < log_time_ns <= S.MAX_TIME_NS:  # none given (0), or the error of an invalid one
-                log_time_ns = self._log_time(t_ns, log_time_ns or None)
-            run = self._copies.get(topic)
-            if run is None or run.channel.schema != schema_name:
-                run = self._copy_run(topic, schema_name, channel_metadata)
-            run.queue.append((t_ns, log_time_ns, payload))
-            self._copies_queued += 1
-            if self._copies_queued >= _COPY_QUEUE:
-                self._write_copies()
+        lock, max_ns = self._lock, S.MAX_TIME_NS
 
-    def _copy_run(self, topic: str, schema_name: str, channel_metadata: Mapping[str, str]) -> "_CopyRun":
+        def copy(rec: tuple) -> None:
+            with lock:
+                if self._closed:
+                    raise ValueError("recording is closed")
+                run = self._copies.get(rec[0], False)
+                if run is False:
+                    run = self._copy_run(rec[0], channel_of)
+                if run is None:
+                    return
+                if not 0 < rec[2] <= max_ns:  # none given (0), or the error of an invalid one
+                    rec = (rec[0], rec[1], self._log_time(rec[1], rec[2] or None), rec[3], rec[4])
+                run.queue.append(rec)
+                self._copies_queued += 1
+                if self._copies_queued >= _COPY_QUEUE:
+                    self._write_copies()
+
+        return copy
+
+    def _copy_run(self, topic: str, channel_of) -> "_CopyRun | None":
+        """The queue of a topic's copies (its channel registered now), None if not copied."""
+        how = channel_of(topic)
+        if how is None:
+            self._copies[topic] = None
+            return None
         ch = self._channels.get(topic)
-        if ch is None or ch.schema != schema_name:
-            ch = self._channel(topic, schema_name, channel_metadata)  # raises on mismatch
-        run = self._copies.get(topic)
-        if run is None:
-            run = self._copies[topic] = _CopyRun(ch)
+        if ch is None or ch.schema != how[0]:
+            ch = self._channel(topic, how[0], how[1])  # raises on a schema mismatch
+        run = self._copies[topic] = _CopyRun(ch)
         return run
 
     def _write_copies(self) -> None:
         """Write every queued copy (lock held)."""
         for topic, run in self._copies.items():
-            if not run.queue:
+            if run is None or not run.queue:
                 continue
             ch, n = run.channel, len(run.queue)
-            t_ns, log_time, payload = zip(*run.queue)
+            _, t_ns, log_time, _, payload = zip(*run.queue)
             run.queue.clear()
             if ch.last_t_ns <= t_ns[0] and all(map(operator.le, t_ns, t_ns[1:])):
                 ch.last_t_ns = t_ns[-1]  # in order: the common case
