@@ -669,7 +669,7 @@ class VdpsCanDecoder:
         fields[plan.counter_name] = float(c)
         counts["accepted"] += 1
         valid = plan.status < 0 or raw[plan.status] == 0
-        return [Sample(t_ns=t_ns, source=self._source, kind=spec.kind, fields=fields, valid=valid)]
+        return [Sample(t_ns, self._source, spec.kind, fields, 0, valid)]  # positional: the hot path
 
     def _check_counter(self, spec: MessageSpec, c: int, t_ns: int, counts: dict) -> str | None:
         st = self._seq[spec.name]

@@ -189,8 +189,7 @@ class ClockAligner:
 
 
 def _restamp(s: Sample, t_ns: int) -> Sample:
-    return Sample(t_ns=t_ns, source=s.source, kind=s.kind, fields=s.fields, wall_time_ns=s.wall_time_ns,
-                  valid=s.valid)
+    return Sample(t_ns, s.source, s.kind, s.fields, s.wall_time_ns, s.valid)  # every field, in order
 
 
 class DeviceStamper:
