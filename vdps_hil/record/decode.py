@@ -643,7 +643,9 @@ def decode_recording(source: str | os.PathLike | RecordingReader, *, dbc: str | 
 
 def raw_copier(reader: RecordingReader, writer) -> Callable[[RawRecord], None]:
     """A ``raw_sink`` writing each ``/raw/`` record unchanged (same bytes, ``t_ns``, ``log_time``
-    and channel metadata) to ``writer`` (a :class:`~vdps_hil.record.writer.RecordingWriter`)."""
+    and channel metadata) to ``writer`` (a :class:`~vdps_hil.record.writer.RecordingWriter`;
+    its :meth:`~vdps_hil.record.writer.RecordingWriter.copier` queues the records and writes
+    them in runs per channel)."""
     schemas = {S.RAW_CAN_PREFIX: S.RAW_CAN, S.RAW_SERIAL_PREFIX: S.RAW_SERIAL}
 
     def channel_of(topic: str) -> tuple[str, dict] | None:
