@@ -58,3 +58,21 @@ def test_rotation_by_size(tmp_path):
 def test_bad_limits():
     with pytest.raises(ValueError):
         RotatingRecordingWriter("x.mcap", max_bytes=0)
+
+
+def test_copied_messages_rotate_like_written_ones(tmp_path):
+    """A rotating writer's copier writes each copy at once (no queue), so rotation by time
+    splits copies exactly where it splits direct writes."""
+    from vdps_hil.record import schemas as S
+
+    w = RotatingRecordingWriter(tmp_path / "out.mcap", max_s=1.0, metadata={"mode": "test"})
+    copy = w.copier(lambda topic: (S.RAW_SERIAL, {"device": "imu", "baud": "", "format": ""}))
+    for i in range(2500):
+        copy(("/raw/serial/imu", i * 1_000_000, 1 + i, 0, b'{"k":%d}' % i))
+    w.close()
+    counts = []
+    for f in w.files:
+        with RecordingReader(f) as r:
+            counts.append([int(rec.data[5:-1]) for rec in r.iter_records()])
+    assert [len(c) for c in counts] == [1001, 1001, 498]
+    assert sum(counts, []) == list(range(2500))

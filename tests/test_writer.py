@@ -16,6 +16,7 @@ from mcap.stream_reader import StreamReader
 from vdps_hil import __version__
 from vdps_hil.bus.samples import Sample
 from vdps_hil.record import schemas as S
+from vdps_hil.record.reader import RecordingReader
 from vdps_hil.record.writer import RecordingWriter
 
 EPOCH = S.DEFAULT_SIM_EPOCH_NS
@@ -266,6 +267,103 @@ def test_fast_message_path_writes_the_same_file_as_the_mcap_library(tmp_path):
     with open(tmp_path / "True.mcap", "rb") as f:
         n = sum(1 for _ in make_reader(f).iter_messages())
     assert n == len(msgs) + 1
+
+
+def _copy_messages(seed: int, n: int):
+    """(topic, t_ns, log_time, payload) on three serial topics, per-topic t_ns increasing,
+    log times not monotonic across topics."""
+    import random
+
+    rng = random.Random(seed)
+    last = {}
+    out = []
+    for k in range(n):
+        topic = rng.choice(("/raw/serial/a", "/raw/serial/b", "/raw/serial/c"))
+        t = last[topic] = last.get(topic, 0) + rng.randrange(1, 2_000_000)
+        out.append((topic, t, EPOCH + t + rng.randrange(0, 5_000_000), rng.randbytes(rng.randrange(0, 60))))
+    return out
+
+
+def test_copied_messages_read_back_equal_with_valid_indexes_and_statistics(tmp_path):
+    """Copies (queued, written in runs) next to direct writes: the mcap library reads the
+    same messages through the summary's chunk and message indexes as _write gives, with the same
+    statistics and per-topic sequence numbers; our reader agrees (small chunks so many close)."""
+    msgs = _copy_messages(3, 3000)
+    paths = {}
+    for how in ("copy", "write"):
+        p = paths[how] = tmp_path / f"{how}.mcap"
+        with RecordingWriter(p, chunk_size=2048, sim_epoch_ns=EPOCH) as w:
+            copy = w.copier(lambda topic: (S.RAW_SERIAL, {"device": topic[-1], "baud": "", "format": ""}))
+            for k, (topic, t, log, data) in enumerate(msgs):
+                if how == "copy":
+                    copy((topic, t, log, 0, data))
+                else:
+                    w._write(topic, S.RAW_SERIAL, t, data, log, {"device": topic[-1], "baud": "", "format": ""})
+                if k % 97 == 0:
+                    w.write_estimate("x", k, {"v": float(k)})
+        assert w.stats.total == 3000 + 31 and not w.stats.time_backwards
+    got = {}
+    for how, p in paths.items():
+        with open(p, "rb") as f:
+            r = make_reader(f)
+            summary = r.get_summary()
+            assert summary.statistics.message_count == 3031
+            counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
+            got[how] = (counts, sorted((ch.topic, m.sequence, m.log_time, m.publish_time, m.data)
+                                       for _, ch, m in r.iter_messages(log_time_order=True)))
+        assert len(summary.chunk_indexes) > 20
+    assert got["copy"] == got["write"]
+    with RecordingReader(paths["copy"]) as r:
+        mine = [(x.topic, x.t_ns, x.log_time_ns, x.data) for x in r.iter_records(prefixes="/raw/")]
+    assert not r.problems and sorted(mine) == sorted(msgs)
+
+
+def test_copy_runs_write_the_same_file_as_one_library_call_per_message(tmp_path):
+    """_MessageAppender.add_run (one pack and write per run, cut at chunk boundaries) gives the
+    bytes of the mcap library's add_message once per message: same records, statistics,
+    message indexes and chunk boundaries."""
+    msgs = _copy_messages(5, 3000)
+    files = []
+    for runs in (True, False):
+        p = tmp_path / f"{runs}.mcap"
+        w = RecordingWriter(p, chunk_size=1500, sim_epoch_ns=EPOCH)
+        if not runs:
+            w._appender, w._add_message = None, w._mcap.add_message
+        copy = w.copier(lambda topic: (S.RAW_SERIAL, {}))
+        for topic, t, log, data in msgs:
+            copy((topic, t, log, 7, data))
+        w.close()
+        files.append(p.read_bytes())
+    assert files[0] == files[1]
+
+
+def test_copy_keeps_per_topic_order_sequence_wrap_and_time_rules(tmp_path):
+    """A direct write on a copied topic comes after the copies queued before it; sequence
+    numbers wrap modulo 2^32 inside a run; log time 0 takes the writer's rule; backwards t_ns
+    are counted; topics the channel function refuses are not copied; an out-of-range log time
+    and a schema clash are errors at the call."""
+    p = tmp_path / "c.mcap"
+    a = "/raw/serial/a"
+    with RecordingWriter(p, sim_epoch_ns=EPOCH) as w:
+        copy = w.copier(lambda topic: (S.RAW_SERIAL, {}) if topic == a else None)
+        copy((a, 1, 0, 9, b"1"))
+        copy(("/raw/other", 1, 0, 9, b"x"))  # not copied
+        w.flush()  # written: the next sequence number can be set
+        w._channels[a].seq = 2**32 - 2
+        for t, log, data in ((2, EPOCH + 7, b"2"), (3, EPOCH + 8, b"3"), (2, EPOCH + 9, b"4")):  # 4: backwards
+            copy((a, t, log, 0, data))
+        w._write(a, S.RAW_SERIAL, 5, b"5", None)
+        with pytest.raises(ValueError, match="out of range"):
+            copy((a, 6, 2**64 - 1, 0, b"6"))
+        w.write_json("/raw/serial/b", S.TRUTH, 1, {"t_ns": 1})
+        with pytest.raises(ValueError, match="already carries"):
+            w.copier(lambda topic: (S.RAW_SERIAL, {}))(("/raw/serial/b", 2, 0, 0, b"7"))
+    assert w.stats.messages == {a: 5, "/raw/serial/b": 1} and w.stats.time_backwards == {a: 1}
+    with open(p, "rb") as f:
+        got = [(m.data, m.sequence, m.log_time, m.publish_time) for _, ch, m in
+               make_reader(f).iter_messages(log_time_order=False) if ch.topic == a]
+    assert got == [(b"1", 0, EPOCH + 1, 1), (b"2", 2**32 - 2, EPOCH + 7, 2), (b"3", 2**32 - 1, EPOCH + 8, 3),
+                   (b"4", 0, EPOCH + 9, 2), (b"5", 1, EPOCH + 5, 5)]
 
 
 def test_write_estimate_payload_equals_the_generic_json_path(tmp_path):

@@ -628,6 +628,11 @@ class VdpsCanDecoder:
         except (TypeError, ValueError, OverflowError):
             self._bus["malformed"] += 1
             return []
+        return self.decode_frame(t_ns, aid, payload, bool(is_extended_id))
+
+    def decode_frame(self, t_ns: int, aid: int, payload: bytes, is_extended_id: bool) -> list[Sample]:
+        """``decode`` of a frame whose fields already have their types (int, int, bytes, bool),
+        e.g. parsed from a recording: no conversions."""
         plan = None if is_extended_id else self._plan.get(aid)
         if plan is None:
             self._bus["unknown_id_extended" if is_extended_id else "unknown_id"] += 1
@@ -664,7 +669,7 @@ class VdpsCanDecoder:
         fields[plan.counter_name] = float(c)
         counts["accepted"] += 1
         valid = plan.status < 0 or raw[plan.status] == 0
-        return [Sample(t_ns=t_ns, source=self._source, kind=spec.kind, fields=fields, valid=valid)]
+        return [Sample(t_ns, self._source, spec.kind, fields, 0, valid)]  # positional: the hot path
 
     def _check_counter(self, spec: MessageSpec, c: int, t_ns: int, counts: dict) -> str | None:
         st = self._seq[spec.name]

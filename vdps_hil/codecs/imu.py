@@ -65,6 +65,7 @@ from vdps_hil.codecs.framing import BITS_PER_BYTE_8N1, message_time_ns
 PREAMBLE = 0xFA
 BID_MASTER = 0xFF
 MID_MTDATA2 = 0x36
+_MTDATA2_START = bytes((PREAMBLE, BID_MASTER, MID_MTDATA2))  # how an MTData2 message begins
 MID_ERROR = 0x42
 
 XDI_PACKET_COUNTER = 0x1020
@@ -455,7 +456,7 @@ class ImuDecoder:
     def _inner_message(self, buf: bytearray, i: int, end: int, n: int) -> int:
         """Index of a valid MTData2 message starting inside ``buf[i+1:end]`` (0 if none, -1 if
         one may start there but its bytes have not all arrived)."""
-        sig = bytes((PREAMBLE, BID_MASTER, MID_MTDATA2))
+        sig = _MTDATA2_START
         j = buf.find(sig, i + 1, end + 2)
         while 0 <= j < end:
             status, _, head, end_j = self._probe(buf, j, n)
@@ -496,4 +497,4 @@ class ImuDecoder:
                     c["seq_gaps"] += gap
             self._last_counter = pkt.packet_counter
         c["samples"] += 1
-        return Sample(t_ns=int(t_msg), source=self.source, kind="imu", fields=fields)
+        return Sample(int(t_msg), self.source, "imu", fields)  # (t_ns, source, kind, fields)

@@ -189,8 +189,7 @@ class ClockAligner:
 
 
 def _restamp(s: Sample, t_ns: int) -> Sample:
-    return Sample(t_ns=t_ns, source=s.source, kind=s.kind, fields=s.fields, wall_time_ns=s.wall_time_ns,
-                  valid=s.valid)
+    return Sample(t_ns, s.source, s.kind, s.fields, s.wall_time_ns, s.valid)  # every field, in order
 
 
 class DeviceStamper:
@@ -376,6 +375,7 @@ class _CanStream:
     def __init__(self, bus: str, decoder, info: dict):
         self.bus = bus
         self.dec = decoder
+        self._decode_frame = getattr(decoder, "decode_frame", decoder.decode)  # typed fields: no conversions
         self.info = info
         self.malformed = 0
 
@@ -388,7 +388,7 @@ class _CanStream:
             except ValueError:  # binascii.Error: odd length
                 payload = None
             if payload is not None:
-                return self.dec.decode(t_ns, int(aid), payload, ext == b"true")
+                return self._decode_frame(t_ns, int(aid), payload, ext == b"true")
         try:
             doc = json.loads(data)
         except ValueError:
@@ -643,20 +643,16 @@ def decode_recording(source: str | os.PathLike | RecordingReader, *, dbc: str | 
 
 def raw_copier(reader: RecordingReader, writer) -> Callable[[RawRecord], None]:
     """A ``raw_sink`` writing each ``/raw/`` record unchanged (same bytes, ``t_ns``, ``log_time``
-    and channel metadata) to ``writer`` (a :class:`~vdps_hil.record.writer.RecordingWriter`)."""
-    meta: dict[str, tuple[str, dict]] = {}
+    and channel metadata) to ``writer`` (a :class:`~vdps_hil.record.writer.RecordingWriter`;
+    its :meth:`~vdps_hil.record.writer.RecordingWriter.copier` queues the records and writes
+    them in runs per channel)."""
     schemas = {S.RAW_CAN_PREFIX: S.RAW_CAN, S.RAW_SERIAL_PREFIX: S.RAW_SERIAL}
 
-    def sink(rec: RawRecord) -> None:
-        m = meta.get(rec.topic)
-        if m is None:
-            schema = next((v for k, v in schemas.items() if rec.topic.startswith(k)), None)
-            if schema is None:
-                return
-            m = meta[rec.topic] = (schema, reader.channel_metadata(rec.topic))
-        writer._write(rec.topic, m[0], rec.t_ns, rec.data, rec.log_time_ns or None, m[1])
+    def channel_of(topic: str) -> tuple[str, dict] | None:
+        schema = next((v for k, v in schemas.items() if topic.startswith(k)), None)
+        return None if schema is None else (schema, reader.channel_metadata(topic))
 
-    return sink
+    return writer.copier(channel_of)
 
 
 def copy_raw_topics(source: str | os.PathLike, target: str | os.PathLike) -> int:

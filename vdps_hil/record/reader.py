@@ -265,9 +265,10 @@ class RecordingReader:
             m = Metadata.read(_body_stream(body))
             self._metadata.append((m.name, dict(m.metadata)))
 
-    def _chunk_records(self, offset: int) -> list[tuple]:
+    def _chunk_records(self, offset: int, cids: set[int] | None = None) -> list[tuple]:
         """Records inside the chunk at ``offset``: ``(MESSAGE, cid, seq, log_t, pub_t, data)``
-        tuples; schema and channel records are indexed on the way (scan mode)."""
+        tuples of the channels ``cids`` (None: all); schema and channel records are indexed on
+        the way (scan mode)."""
         rec = self._read_record_at(offset)
         if rec is None or rec[0] != Opcode.CHUNK:
             raise ValueError(f"no chunk record at byte {offset}")
@@ -300,15 +301,17 @@ class RecordingReader:
                 raise ValueError("record overruns its chunk")
             if op == Opcode.MESSAGE:
                 cid, seq, log_t, pub_t = unpack_msg(data, body)
-                out.append((op, cid, seq, log_t, pub_t, data[body + 22:end]))
+                if cids is None or cid in cids:
+                    out.append((op, cid, seq, log_t, pub_t, data[body + 22:end]))
             elif op in (Opcode.SCHEMA, Opcode.CHANNEL) and self._indexing:
                 self._meta_record(op, data[body:end])
             pos = end
         return out
 
-    def _block_messages(self, block: _Block) -> list[tuple]:
+    def _block_messages(self, block: _Block, cids: set[int]) -> list[tuple]:
+        """Message tuples (as ``_chunk_records``) of the channels ``cids`` in a block."""
         if block.opcode == Opcode.CHUNK:
-            return self._chunk_records(block.offset)
+            return self._chunk_records(block.offset, cids)
         rec = self._read_record_at(block.offset)
         if rec is None:
             raise ValueError(f"message record at byte {block.offset} incomplete")
@@ -385,7 +388,7 @@ class RecordingReader:
             if block.channels is not None and block.channels.isdisjoint(cids):
                 continue
             try:
-                records = self._block_messages(block)
+                records = self._block_messages(block, cids)
             except Exception as e:  # noqa: BLE001 - damaged block: note it, read the rest
                 note = f"block at byte {block.offset} unreadable, skipped: {_one_line(e)}"
                 if note not in self.problems:  # once per file, not once per pass

@@ -63,6 +63,20 @@ class RotatingRecordingWriter(RecordingWriter):
         if due:
             self.rotate()
 
+    def copier(self, channel_of):
+        """``RecordingWriter.copier`` with one ``_write`` per message (no queue), so that rotation
+        is checked after each."""
+        how: dict = {}
+
+        def copy(rec) -> None:
+            topic, t_ns, log_time_ns, _, payload = rec
+            if topic not in how:
+                how[topic] = channel_of(topic)
+            if how[topic] is not None:
+                self._write(topic, how[topic][0], t_ns, payload, log_time_ns or None, how[topic][1])
+
+        return copy
+
     def rotate(self) -> None:
         """Close the current file and continue in the next one now."""
         with self._lock:

@@ -9,29 +9,37 @@ key) and ``log_time`` = wall-clock UTC ns::
              = time.time_ns() at write     otherwise (live, no wall time supplied)
 
 Chunks are ZSTD-compressed and closed when their uncompressed content exceeds ``chunk_size``
-bytes (about 64 KiB by default), so a crash loses at most the chunk in progress (call
+bytes (about 64 KiB by default), so a crash loses at most the chunk in progress and the
+copied messages still queued (:meth:`RecordingWriter.copier`; call
 :meth:`RecordingWriter.flush` to bound that in time). The file opens with a Header and the
 ``vdps.recording`` metadata record, so even a file cut off by a crash tells what it is.
 
 Extension points (used by rotation, recovery and python-can registration): every message
-goes through :meth:`RecordingWriter.write_json` / ``_write``; per-file state (channels,
-schemas, the mcap writer) lives in ``_open_file`` / ``_finish_file``, so a rotating writer
-closes one file and opens the next with the same metadata.
+goes through :meth:`RecordingWriter.write_json` / ``_write``, except messages copied from
+another recording (:meth:`RecordingWriter.copier`: queued, then written in runs per
+channel); per-file state (channels, schemas, the mcap writer) lives in ``_open_file`` /
+``_finish_file``, so a rotating writer closes one file and opens the next with the same
+metadata.
 
 The writer is safe to share between threads (one lock around each message).
 """
 
 from __future__ import annotations
 
+import bisect
 import io
 import json
+import operator
 import os
 import struct
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import IO, Any, Mapping
+from itertools import accumulate, chain, repeat
+from typing import IO, Any, Callable, Mapping, Sequence
 
+from mcap.opcode import Opcode
+from mcap.records import MessageIndex
 from mcap.writer import CompressionType, IndexType, Writer
 from mcap.writer import LIBRARY_IDENTIFIER as _MCAP_LIBRARY
 
@@ -53,6 +61,18 @@ class _Channel:
 
 
 @dataclass
+class _CopyRun:
+    """Copied messages of one channel queued for :meth:`RecordingWriter._write_copies`."""
+
+    channel: _Channel
+    queue: list[tuple] = field(default_factory=list)  # (topic, t_ns, log_time, sequence, payload)
+
+
+_COPY_QUEUE = 256
+"""Copied messages queued at most (over all topics) before they are written."""
+
+
+@dataclass
 class WriterStats:
     """What the writer has done: messages per topic and per-topic time-order violations.
 
@@ -71,66 +91,104 @@ class WriterStats:
 
 
 _MESSAGE_RECORD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log_time, publish_time
+_MESSAGE_RECORD_BYTES = _MESSAGE_RECORD.size  # 31: record header (9) + message header (22)
 
 
-def _fast_add_message(mcap_writer):
-    """``mcap_writer.add_message`` without its per-message objects (a Message dataclass, eight
-    small writes and a seek back per record: about 5 us, the largest share of copying a
-    replay's raw topics), or None when the mcap library's internals are not the ones this was
-    written against (then the library's own method is used). Same bytes, statistics, message
-    indexes and chunk boundaries as the library (``tests/test_writer.py`` compares the files)."""
-    from mcap.opcode import Opcode
-    from mcap.records import MessageIndex
+class _MessageAppender:
+    """Appends message records to the chunk in progress of an mcap ``Writer`` without the
+    library's per-message objects (a Message dataclass, eight small writes and a seek back per
+    record: about 5 us, the largest share of copying a replay's raw topics). Same bytes,
+    statistics, message indexes and chunk boundaries as ``Writer.add_message`` called once per
+    message (``tests/test_writer.py`` compares the files).
 
-    class _MessageIndex(MessageIndex):
-        """Written with one pack of all its (log_time, offset) pairs instead of two calls each."""
+    ``add`` writes one message; ``add_run`` a run of messages of one channel with one pack and
+    one write per run piece: the run is cut where the library would close the chunk (after the
+    message that takes the chunk past ``chunk_size``)."""
 
-        def write(self, stream) -> None:
-            recs = self.records
-            stream.start_record(Opcode.MESSAGE_INDEX)
-            stream.write2(self.channel_id)
-            stream.write4(len(recs) * 16)
-            stream.write(struct.pack(f"<{2 * len(recs)}Q", *[v for r in recs for v in r]))
-            stream.finish_record()
+    def __init__(self, stats, chunk_builder, record_writer, maybe_finalize, chunk_size: int):
+        self._st, self._cb, self._rw = stats, chunk_builder, record_writer
+        self._finalize = maybe_finalize
+        self._chunk_size = chunk_size
 
-    st = getattr(mcap_writer, "_Writer__statistics", None)
-    cb = getattr(mcap_writer, "_Writer__chunk_builder", None)
-    finalize = getattr(mcap_writer, "_Writer__maybe_finalize_chunk", None)
-    rw = getattr(cb, "record_writer", None)
-    if st is None or cb is None or finalize is None or not isinstance(getattr(rw, "_buffer", None), io.BytesIO) \
-            or not all(hasattr(cb, a) for a in ("num_messages", "message_start_time", "message_end_time",
-                                                 "message_indices")) \
-            or not all(hasattr(st, a) for a in ("message_count", "message_start_time", "message_end_time",
-                                                 "channel_message_counts")):
-        return None
-    pack = _MESSAGE_RECORD.pack
+    @classmethod
+    def attach(cls, mcap_writer) -> "_MessageAppender | None":
+        """The appender of ``mcap_writer``, or None when the mcap library's internals are not
+        the ones this was written against (then the library's own add_message is used)."""
+        st = getattr(mcap_writer, "_Writer__statistics", None)
+        cb = getattr(mcap_writer, "_Writer__chunk_builder", None)
+        finalize = getattr(mcap_writer, "_Writer__maybe_finalize_chunk", None)
+        chunk_size = getattr(mcap_writer, "_Writer__chunk_size", None)
+        rw = getattr(cb, "record_writer", None)
+        if st is None or cb is None or finalize is None or type(chunk_size) is not int \
+                or not isinstance(getattr(rw, "_buffer", None), io.BytesIO) \
+                or not all(hasattr(cb, a) for a in ("num_messages", "message_start_time", "message_end_time",
+                                                     "message_indices")) \
+                or not all(hasattr(st, a) for a in ("message_count", "message_start_time", "message_end_time",
+                                                     "channel_message_counts")):
+            return None
+        return cls(st, cb, rw, finalize, chunk_size)
 
-    def add_message(channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0) -> None:
-        if st.message_count == 0:
-            st.message_start_time = log_time
-        elif log_time < st.message_start_time:
-            st.message_start_time = log_time
-        if log_time > st.message_end_time:
-            st.message_end_time = log_time
-        st.channel_message_counts[channel_id] += 1
-        st.message_count += 1
-        if cb.num_messages == 0:
-            cb.message_start_time = log_time
-        elif log_time < cb.message_start_time:
-            cb.message_start_time = log_time
-        if log_time > cb.message_end_time:
-            cb.message_end_time = log_time
+    def _account(self, channel_id: int, n: int, t_min: int, t_max: int):
+        """Statistics and chunk times of ``n`` messages with log times in [t_min, t_max]; the
+        channel's message index of the chunk in progress."""
+        st, cb = self._st, self._cb
+        if st.message_count == 0 or t_min < st.message_start_time:
+            st.message_start_time = t_min
+        if t_max > st.message_end_time:
+            st.message_end_time = t_max
+        st.channel_message_counts[channel_id] += n
+        st.message_count += n
+        if cb.num_messages == 0 or t_min < cb.message_start_time:
+            cb.message_start_time = t_min
+        if t_max > cb.message_end_time:
+            cb.message_end_time = t_max
+        cb.num_messages += n
         mi = cb.message_indices.get(channel_id)
         if mi is None:
             mi = cb.message_indices[channel_id] = _MessageIndex(channel_id=channel_id, records=[])
-        buf = rw._buffer
-        mi.records.append((log_time, buf.tell()))
-        cb.num_messages += 1
-        buf.write(pack(0x05, 22 + len(data), channel_id, sequence, log_time, publish_time))
-        buf.write(data)
-        finalize()
+        return mi.records
 
-    return add_message
+    def add(self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0) -> None:
+        """``Writer.add_message`` (same signature)."""
+        index = self._account(channel_id, 1, log_time, log_time)
+        buf = self._rw._buffer
+        index.append((log_time, buf.tell()))
+        buf.write(_MESSAGE_RECORD.pack(0x05, 22 + len(data), channel_id, sequence, log_time, publish_time))
+        buf.write(data)
+        self._finalize()
+
+    def add_run(self, channel_id: int, sequence: int, log_times: Sequence[int], payloads: Sequence[bytes],
+                publish_times: Sequence[int]) -> None:
+        """Messages ``k = 0..n-1`` of one channel with sequence numbers ``sequence + k`` (the
+        caller keeps them below 2^32), as ``add`` once per message in that order."""
+        n = len(payloads)
+        ends = list(accumulate(map(_MESSAGE_RECORD_BYTES.__add__, map(len, payloads))))  # run offsets
+        headers = list(map(_MESSAGE_RECORD.pack, repeat(0x05), map((22).__add__, map(len, payloads)),
+                           repeat(channel_id), range(sequence, sequence + n), log_times, publish_times))
+        i = 0
+        while i < n:
+            base = ends[i - 1] if i else 0  # run offset of message i
+            start = self._rw._buffer.tell()  # its offset in the chunk
+            # the chunk closes after the first message ending past chunk_size
+            k = min(bisect.bisect_right(ends, self._chunk_size - start + base, i) + 1, n)
+            piece = log_times[i:k]
+            index = self._account(channel_id, k - i, min(piece), max(piece))
+            index.extend(zip(piece, map((start - base).__add__, chain((base,), ends[i:k - 1]))))
+            self._rw._buffer.writelines(chain.from_iterable(zip(headers[i:k], payloads[i:k])))
+            self._finalize()
+            i = k
+
+
+class _MessageIndex(MessageIndex):
+    """Written with one pack of all its (log_time, offset) pairs instead of two calls each."""
+
+    def write(self, stream) -> None:
+        recs = self.records
+        stream.start_record(Opcode.MESSAGE_INDEX)
+        stream.write2(self.channel_id)
+        stream.write4(len(recs) * 16)
+        stream.write(struct.pack(f"<{2 * len(recs)}Q", *chain.from_iterable(recs)))
+        stream.finish_record()
 
 
 _JSON_KEYS: dict[str, str] = {}
@@ -226,7 +284,10 @@ class RecordingWriter:
                             use_statistics=True, use_summary_offsets=True, enable_crcs=True)
         self._channels: dict[str, _Channel] = {}
         self._schema_ids: dict[str, int] = {}
-        self._add_message = _fast_add_message(self._mcap) or self._mcap.add_message
+        self._appender = _MessageAppender.attach(self._mcap)
+        self._add_message = self._mcap.add_message if self._appender is None else self._appender.add
+        self._copies: dict[str, _CopyRun | None] = {}  # copies not written yet per topic (None: not copied)
+        self._copies_queued = 0
         self._mcap.start(profile="", library=f"vdps-hil/{_TOOL_VERSION} {_MCAP_LIBRARY}")
         self._mcap.add_metadata(S.METADATA_NAME, self._metadata)
         self._stream.flush()
@@ -234,6 +295,7 @@ class RecordingWriter:
 
     def _finish_file(self) -> None:
         try:
+            self._write_copies()
             self._mcap.finish()
             self._stream.flush()
         finally:
@@ -276,6 +338,8 @@ class RecordingWriter:
             ch = self._channels.get(topic)
             if ch is None or ch.schema != schema_name:
                 ch = self._channel(topic, schema_name, channel_metadata)  # raises on mismatch
+            if self._copies.get(topic):
+                self._write_copies()  # the topic's queued copies go first: per-topic order
             if t_ns < ch.last_t_ns:
                 self.stats.time_backwards[topic] = self.stats.time_backwards.get(topic, 0) + 1
             else:
@@ -283,6 +347,79 @@ class RecordingWriter:
             self._add_message(ch.id, log_time, payload, t_ns, ch.seq)
             ch.seq = (ch.seq + 1) & 0xFFFFFFFF
             self.stats.messages[topic] = self.stats.messages.get(topic, 0) + 1
+
+    def copier(self, channel_of: Callable[[str], tuple[str, Mapping[str, str]] | None]
+               ) -> Callable[[tuple], None]:
+        """A function appending messages read from another recording unchanged: each a
+        ``(topic, t_ns, log_time_ns, sequence, payload)`` tuple (a reader's ``RawRecord``; the
+        sequence is not kept, this file numbers its own). ``channel_of(topic)`` gives, at a
+        topic's first message, its schema name and channel metadata, or None: not copied. A
+        ``log_time_ns`` of 0 means none (the log-time rule of the module docstring).
+
+        The same messages as ``_write`` gives (statistics, sequence numbers, time-order counts),
+        written later: copies are queued and written in runs of one channel each (one pack and
+        one write per run, see ``_MessageAppender.add_run``) when ``_COPY_QUEUE`` messages are
+        queued over all topics, when a copied topic is written directly, and at ``flush`` /
+        ``close`` (``stats`` counts them then). A file therefore holds a topic's copies up to
+        ``_COPY_QUEUE`` messages after the messages written directly next to them (in ``t_ns``
+        order per topic still), and a crash loses those queued copies with the chunk in
+        progress."""
+        lock, max_ns = self._lock, S.MAX_TIME_NS
+
+        def copy(rec: tuple) -> None:
+            with lock:
+                if self._closed:
+                    raise ValueError("recording is closed")
+                run = self._copies.get(rec[0], False)
+                if run is False:
+                    run = self._copy_run(rec[0], channel_of)
+                if run is None:
+                    return
+                if not 0 < rec[2] <= max_ns:  # none given (0), or the error of an invalid one
+                    rec = (rec[0], rec[1], self._log_time(rec[1], rec[2] or None), rec[3], rec[4])
+                run.queue.append(rec)
+                self._copies_queued += 1
+                if self._copies_queued >= _COPY_QUEUE:
+                    self._write_copies()
+
+        return copy
+
+    def _copy_run(self, topic: str, channel_of) -> "_CopyRun | None":
+        """The queue of a topic's copies (its channel registered now), None if not copied."""
+        how = channel_of(topic)
+        if how is None:
+            self._copies[topic] = None
+            return None
+        ch = self._channels.get(topic)
+        if ch is None or ch.schema != how[0]:
+            ch = self._channel(topic, how[0], how[1])  # raises on a schema mismatch
+        run = self._copies[topic] = _CopyRun(ch)
+        return run
+
+    def _write_copies(self) -> None:
+        """Write every queued copy (lock held)."""
+        for topic, run in self._copies.items():
+            if run is None or not run.queue:
+                continue
+            ch, n = run.channel, len(run.queue)
+            _, t_ns, log_time, _, payload = zip(*run.queue)
+            run.queue.clear()
+            if ch.last_t_ns <= t_ns[0] and all(map(operator.le, t_ns, t_ns[1:])):
+                ch.last_t_ns = t_ns[-1]  # in order: the common case
+            else:
+                for t in t_ns:
+                    if t < ch.last_t_ns:
+                        self.stats.time_backwards[topic] = self.stats.time_backwards.get(topic, 0) + 1
+                    else:
+                        ch.last_t_ns = t
+            self.stats.messages[topic] = self.stats.messages.get(topic, 0) + n
+            if self._appender is not None and ch.seq + n <= 1 << 32:
+                self._appender.add_run(ch.id, ch.seq, log_time, payload, t_ns)
+            else:  # the library's add_message, or sequence numbers wrapping inside the run
+                for k in range(n):
+                    self._add_message(ch.id, log_time[k], payload[k], t_ns[k], (ch.seq + k) & 0xFFFFFFFF)
+            ch.seq = (ch.seq + n) & 0xFFFFFFFF
+        self._copies_queued = 0
 
     def write_json(self, topic: str, schema_name: str, t_ns: int, doc: Mapping[str, Any], *,
                    wall_time_ns: int | None = None,
@@ -462,6 +599,7 @@ class RecordingWriter:
         """Close the chunk in progress and push everything written so far to the OS."""
         with self._lock:
             if not self._closed:
+                self._write_copies()
                 self._mcap.flush()
 
     def close(self) -> None:
