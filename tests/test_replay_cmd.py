@@ -58,7 +58,8 @@ def test_replay_without_truth_equals_replay_with_truth(drive, tmp_path):
     assert code == 0
     _OPENED = []
     try:
-        code, _ = run("replay", str(raw_only), "-o", str(tmp_path / "b.mcap"), "--json", str(tmp_path / "b.json"))
+        code, _ = run("replay", str(raw_only), "-o", str(tmp_path / "b.mcap"), "--json", str(tmp_path / "b.json"),
+                      "--jobs", "1")  # one process: the audit hook sees every file the replay opens
     finally:
         opened, _OPENED = _OPENED, None
     assert code == 0
@@ -148,6 +149,14 @@ def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_p
 def test_bad_options_are_one_line_errors(drive, args, needle):
     code, text = run("replay", str(drive), "--no-predict", *args)
     assert code == 2 and needle in text and len(text.strip().splitlines()) == 1
+
+
+def test_jobs_out_of_range_is_one_line(drive, capsys):
+    from vdps_hil.cli.main import main
+
+    assert main(["replay", str(drive), "--jobs", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "--jobs" in err and len(err.strip().splitlines()) == 1
 
 
 def test_saved_workbench_model_is_used(drive, tmp_path):

@@ -126,6 +126,11 @@ class Sample:
         if not isinstance(self.t_ns, int):
             raise TypeError(f"t_ns must be int nanoseconds, got {type(self.t_ns).__name__}")
 
+    def __reduce__(self):
+        # pickled as its constructor call (the dataclass default sets each slot by name, twice
+        # as slow to load): ``vdps replay --jobs 2`` sends every decoded sample between processes
+        return (Sample, (self.t_ns, self.source, self.kind, self.fields, self.wall_time_ns, self.valid))
+
     def get(self, name: str, default: float = math.nan) -> float:
         return self.fields.get(name, default)
 

@@ -4,6 +4,7 @@ predictions and warning frames."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import click
@@ -60,8 +61,12 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
               show_default=True,
               help="time: the /raw/ topics decoded, in time order; recorded: the /decoded/ samples in the "
                    "order the live system received them (a vdps bench -o recording), reproducing its estimates.")
+@click.option("--jobs", type=click.IntRange(1, 2), default=None, metavar="N",
+              help="2: decode the recording and write the output in a second process while this one runs "
+                   "the system (same output, less wall time) [default: 2 on a machine with two or more "
+                   "cores, else 1].")
 def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, output, json_out, params,
-           save_params, no_identify, no_predict, susp_sigma_m, paper_faithful, input_order):
+           save_params, no_identify, no_predict, susp_sigma_m, paper_faithful, input_order, jobs):
     """Replay FILE.mcap through the estimator, identifier, predictor and warning (the paper's
     Figure 2) using only its /raw/ topics; print a one-line summary."""
     from vdps_hil.system import ReplayError, replay_file
@@ -87,7 +92,8 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
         doc = replay_file(recording, vehicle=vehicle, output=output, model=model_file, dbc=dbc,
                           signalmap=signalmap, bus_map=buses or None, params=params, save_params=save_params,
                           identify=not no_identify, predict=not no_predict, susp_sigma_m=susp_sigma_m,
-                          paper_faithful=paper_faithful or None, sensorset=sensorset, input_order=input_order)
+                          paper_faithful=paper_faithful or None, sensorset=sensorset, input_order=input_order,
+                          jobs=jobs if jobs is not None else (2 if (os.cpu_count() or 1) >= 2 else 1))
     except ReplayError as e:
         raise UserError(str(e)) from None
     es = doc["estimates_summary"]

@@ -1,0 +1,386 @@
+"""The recording side of a replay (``vdps replay``): decoding the ``/raw/`` topics and writing
+the output recording, in this process or in a second one (``--jobs 2``).
+
+A replay's costs split in two: the recording side (MCAP chunks, CAN frames, IMU packets, NMEA
+sentences, device clocks, the reorder buffer; copying the raw topics and writing the ``/est/``
+topics) and the system on the decoded samples. :class:`LocalRecordingSide` does the former in
+this process. :class:`RecordingProcess` runs a ``LocalRecordingSide`` in a child interpreter
+(``python -m vdps_hil.record.replay_io``) with the same interface: the child decodes and writes
+while the parent runs the system, so on two free cores the wall time is set by the slower side
+instead of the sum. The output holds the same messages either way (tested).
+
+Interface (both): iterate the decoded samples (in order); ``start_output(metadata)`` once the
+replay's configuration is accepted (raw records read before it wait, so a refused configuration
+writes nothing; the output is opened at the first raw record, whose clock it keeps);
+``writer``: where the system's outputs go (``write_json``, ``write_estimate``), ``None`` without
+an output or before it opened; ``finish()`` closes the output; ``abort()`` on an error; after the
+iteration ``counters``, ``rejected()`` and ``decoding`` as a ``DecodedRecording`` has them.
+Errors are :class:`ReplayIOError` (one line).
+
+Wire between the processes: frames of an 8-byte little-endian length and a pickle (protocol 5)
+of ``(tag, payload)``. Child -> parent: ``("samples", [Sample, ...])`` batches, ``("end",
+decoder state)``, ``("closed", None)``, ``("error", one line)``. Parent -> child: ``("go",
+metadata)``, ``("calls", [(method, args, kwargs), ...])`` (writer methods, allow-listed),
+``("close", None)``. The pickles are made by the two processes themselves from plain data
+(samples, numbers, strings); bytes read from a recording are never unpickled. The child
+inherits stderr, reads the parent's frames on a thread (so neither side can block the other on
+a full pipe), stops quietly when the parent goes away, and is killed by ``abort()``. The pipe's
+buffer bounds how far the child decodes ahead, so memory stays flat on long drives.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import queue
+import struct
+import subprocess
+import sys
+import threading
+from typing import Any, Iterator, Mapping
+
+from vdps_hil.bus.samples import Sample
+
+BATCH = 2048
+"""Samples per frame: large enough that the per-frame cost vanishes, small enough that the
+parent starts early."""
+
+CALLS_PER_FRAME = 512
+"""Writer calls the parent collects before it sends them."""
+
+WRITER_CALLS = frozenset({"write_json", "write_estimate"})
+"""The writer methods the parent may ask the child to call."""
+
+_LEN = struct.Struct("<Q")
+
+
+class ReplayIOError(ValueError):
+    """The recording side cannot go on (unreadable input, output not writable, the second
+    process failed): one line."""
+
+
+def _one_line(e: BaseException) -> str:
+    text = str(e)
+    return text.splitlines()[0] if text else type(e).__name__
+
+
+# ----------------------------------------------------------------------------- in this process
+class LocalRecordingSide:
+    """Decoding and writing in this process (module docstring). ``reader``: an open
+    :class:`~vdps_hil.record.reader.RecordingReader` or a path."""
+
+    def __init__(self, reader, *, dbc=None, signalmap=None, bus_map: Mapping[str, str] | None = None,
+                 output=None, copy_raw: bool = True):
+        from vdps_hil.record.decode import DecodeError, decode_recording
+
+        self.output = output
+        self.copy_raw = bool(copy_raw)
+        self.writer = None
+        self._pending: list | None = []  # raw records read before start_output
+        self._metadata: dict | None = None
+        self._copy = None
+        self._reader = None
+        try:
+            self.dec = decode_recording(reader, dbc=dbc, signalmap=signalmap, bus_map=bus_map,
+                                        raw_sink=self._sink if output is not None else None)
+        except DecodeError as e:
+            raise ReplayIOError(_one_line(e)) from None
+        self._reader = self.dec.reader
+        self._it = iter(self.dec)
+
+    def __iter__(self) -> Iterator[Sample]:
+        return self
+
+    def __next__(self) -> Sample:
+        from vdps_hil.record.decode import DecodeError
+
+        try:
+            return next(self._it)
+        except DecodeError as e:
+            raise ReplayIOError(_one_line(e)) from None
+
+    def _sink(self, rec) -> None:
+        if self._pending is not None:
+            self._pending.append(rec)
+            return
+        if self.writer is None:  # opened at the first raw record: keep its clock
+            from vdps_hil.record.decode import raw_copier
+            from vdps_hil.record.writer import RecordingWriter
+
+            epoch = max(0, rec.log_time_ns - rec.t_ns) if rec.log_time_ns else None
+            try:
+                self.writer = RecordingWriter(self.output, sim_epoch_ns=epoch, metadata=self._metadata)
+            except OSError as e:
+                raise ReplayIOError(f"cannot write {self.output}: {e.strerror or e}") from None
+            self._copy = raw_copier(self._reader, self.writer)
+        if self.copy_raw:
+            self._copy(rec)
+
+    def start_output(self, metadata: Mapping[str, Any]) -> None:
+        """The configuration is accepted: write the raw records read so far and go on."""
+        self._metadata = dict(metadata)
+        pending, self._pending = self._pending, None
+        if self.output is not None:
+            for rec in pending or ():
+                self._sink(rec)
+
+    @property
+    def counters(self) -> dict:
+        return self.dec.counters
+
+    def rejected(self) -> dict:
+        return self.dec.rejected()
+
+    @property
+    def decoding(self) -> dict:
+        return self.dec.decoding
+
+    def finish(self) -> None:
+        """Close the output (complete file)."""
+        if self.writer is not None and not self.writer.closed:
+            self.writer.close()
+
+    def abort(self) -> None:
+        """An error: close what is open (the output stays a readable file of what was written)."""
+        self.finish()
+
+
+# ----------------------------------------------------------------------------- second process
+def _send(out, tag: str, payload) -> None:
+    blob = pickle.dumps((tag, payload), protocol=5)
+    out.write(_LEN.pack(len(blob)) + blob if len(blob) < 65536 else _LEN.pack(len(blob)))
+    if len(blob) >= 65536:
+        out.write(blob)
+
+
+def _receive(inp):
+    """One frame from the binary stream ``inp``, or None at its end."""
+    head = inp.read(_LEN.size)
+    if len(head) < _LEN.size:
+        return None
+    n, = _LEN.unpack(head)
+    blob = inp.read(n)
+    if len(blob) < n:
+        return None
+    return pickle.loads(blob)
+
+
+class _CallForwarder:
+    """The parent's ``writer``: collects the writer calls for the child."""
+
+    def __init__(self, proc: "RecordingProcess"):
+        self._proc = proc
+
+    def write_json(self, *args, **kwargs) -> None:
+        self._proc._call("write_json", args, kwargs)
+
+    def write_estimate(self, *args, **kwargs) -> None:
+        self._proc._call("write_estimate", args, kwargs)
+
+
+class RecordingProcess:
+    """The recording side in a child process (module docstring); ``path``: the recording."""
+
+    def __init__(self, path, *, dbc=None, signalmap=None, bus_map: Mapping[str, str] | None = None,
+                 output=None, copy_raw: bool = True):
+        args = {"path": os.fspath(path), "dbc": None if dbc is None else os.fspath(dbc),
+                "signalmap": None if signalmap is None else os.fspath(signalmap),
+                "bus_map": dict(bus_map or {}), "output": None if output is None else os.fspath(output),
+                "copy_raw": bool(copy_raw)}
+        self._proc = subprocess.Popen([sys.executable, "-m", __name__, json.dumps(args)],
+                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self.writer = None if output is None else _CallForwarder(self)
+        self._calls: list = []
+        self._state: dict | None = None
+        self._it = self._run()
+
+    def __iter__(self) -> Iterator[Sample]:
+        return self._it
+
+    def __next__(self) -> Sample:
+        return next(self._it)
+
+    # parent -> child
+    def _to_child(self, tag: str, payload) -> None:
+        try:
+            _send(self._proc.stdin, tag, payload)
+            self._proc.stdin.flush()
+        except (BrokenPipeError, ValueError):  # the child has gone: its own frame says why
+            pass
+
+    def _call(self, name: str, args, kwargs) -> None:
+        self._calls.append((name, args, kwargs))
+        if len(self._calls) >= CALLS_PER_FRAME:
+            self._flush_calls()
+
+    def _flush_calls(self) -> None:
+        if self._calls:
+            calls, self._calls = self._calls, []
+            self._to_child("calls", calls)
+
+    def start_output(self, metadata: Mapping[str, Any]) -> None:
+        self._to_child("go", dict(metadata))
+
+    # child -> parent
+    def _frame(self):
+        msg = _receive(self._proc.stdout)
+        if msg is None:
+            code = self._proc.wait()
+            raise ReplayIOError(f"the replay's decoding process ended without a result (exit status {code})")
+        tag, payload = msg
+        if tag == "error":
+            raise ReplayIOError(str(payload))
+        return tag, payload
+
+    def _run(self) -> Iterator[Sample]:
+        while True:
+            tag, payload = self._frame()
+            if tag == "samples":
+                yield from payload
+                self._flush_calls()
+            elif tag == "end":
+                self._state = payload
+                return
+            else:
+                raise ReplayIOError(f"the replay's decoding process sent an unexpected {tag!r}")
+
+    def _end_state(self) -> dict:
+        if self._state is None:
+            raise RuntimeError("the decoder's counters are known at the end of the samples")
+        return self._state
+
+    @property
+    def counters(self) -> dict:
+        return self._end_state()["counters"]
+
+    def rejected(self) -> dict:
+        return self._end_state()["rejected"]
+
+    @property
+    def decoding(self) -> dict:
+        return self._end_state()["decoding"]
+
+    def finish(self) -> None:
+        """Send the last writer calls, let the child close the output, wait for it."""
+        self._flush_calls()
+        self._to_child("close", None)
+        try:
+            while True:
+                tag, _ = self._frame()
+                if tag == "closed":
+                    break
+        finally:
+            self.abort()
+
+    def abort(self) -> None:
+        """Stop the child (if it still runs) and release the pipes: with both pipes closed it
+        ends at its next frame (closing the output it has written so far) or is killed."""
+        p = self._proc
+        for f in (p.stdout, p.stdin):
+            try:
+                f.close()
+            except (BrokenPipeError, OSError):
+                pass
+        if p.poll() is None:
+            try:
+                p.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+    def __del__(self):
+        try:
+            if self._proc.poll() is None:
+                self._proc.kill()
+                self._proc.wait()
+        except Exception:  # interpreter shutdown
+            pass
+
+
+def _child(args: dict) -> int:
+    """The child: decode, send the samples, write the output as the parent says."""
+    from vdps_hil.record.reader import RecordingError, RecordingReader
+
+    out = sys.stdout.buffer
+    inbox: queue.SimpleQueue = queue.SimpleQueue()
+
+    def listen():  # the parent's frames, as they come
+        inp = sys.stdin.buffer
+        while True:
+            try:
+                msg = _receive(inp)
+            except Exception:  # a broken frame: treated as the end
+                msg = None
+            inbox.put(msg or ("eof", None))
+            if msg is None or msg[0] == "close":
+                return
+
+    threading.Thread(target=listen, name="replay-io-inbox", daemon=True).start()
+    side = None
+
+    def serve(block: bool) -> bool:
+        """Carry out the parent's frames waiting (all of them up to close with ``block``);
+        True once the parent said close (or went away)."""
+        while True:
+            try:
+                tag, payload = inbox.get() if block else inbox.get_nowait()
+            except queue.Empty:
+                return False
+            if tag == "go":
+                side.start_output(payload)
+            elif tag == "calls":
+                w = side.writer
+                if w is not None:
+                    for name, a, kw in payload:
+                        if name in WRITER_CALLS:
+                            getattr(w, name)(*a, **kw)
+            elif tag in ("close", "eof"):
+                return True
+
+    try:
+        try:
+            side = LocalRecordingSide(RecordingReader(args["path"]), dbc=args["dbc"], signalmap=args["signalmap"],
+                                      bus_map=args["bus_map"] or None, output=args["output"],
+                                      copy_raw=args["copy_raw"])
+            batch: list[Sample] = []
+            for s in side:
+                batch.append(s)
+                if len(batch) >= BATCH:
+                    _send(out, "samples", batch)
+                    out.flush()
+                    batch = []
+                    serve(False)
+            if batch:
+                _send(out, "samples", batch)
+            _send(out, "end", {"counters": side.counters, "rejected": dict(side.rejected()),
+                               "decoding": dict(side.decoding)})
+            out.flush()
+            while not serve(True):
+                pass
+            side.finish()
+        except (ReplayIOError, RecordingError) as e:
+            _send(out, "error", _one_line(e))
+            out.flush()
+            return 1
+        except Exception as e:  # a bug: one line to the parent instead of a traceback
+            _send(out, "error", f"the replay's decoding process failed: {type(e).__name__}: {_one_line(e)}")
+            out.flush()
+            return 1
+        _send(out, "closed", None)
+        out.flush()
+        os._exit(0)  # the output is closed and said so: skip the interpreter's teardown the parent waits for
+    except BrokenPipeError:  # the parent stopped reading (a refused configuration, Ctrl-C)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, out.fileno())  # nothing left to flush at exit
+        if side is not None:
+            side.abort()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return _child(json.loads((sys.argv[1:] if argv is None else argv)[0]))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
