@@ -6,7 +6,7 @@ Filter cycle (driven by sample timestamps, integer ns)::
                     P <- Phi P Phi^T + Q_d,   Phi = I + F dt + (F dt)^2 / 2
                     Q_d = (Phi Q_c Phi^T + Q_c) dt / 2,  Q_c = G diag(q_u) G^T + diag(q_rw)
     update(kind,z): nu = z - h(x) (angles wrapped),  S = H P H^T + R,  NIS = nu^T S^-1 nu
-                    gate: NIS > chi2.ppf(p_gate, dof) -> rejected and counted
+                    gate: NIS > chi2_quantile(p_gate, dof) -> rejected and counted
                     K = P H^T S^-1,  x <- x + K nu
                     P <- (I - K H) P (I - K H)^T + K R K^T                      (Joseph form)
                     nonlinear kinds: iterated EKF, x_i+1 = x + K_i (z - h(x_i) - H_i (x - x_i)),
@@ -76,13 +76,73 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
 
 from vdps_hil.estimation.kinematics import linearize, step, transition
 from vdps_hil.estimation.observations import (ObsKind, make_models, rear_axle_ground_point,
                                               wheel_positions)
 from vdps_hil.estimation.states import N_EXT, N_FULL, AugStates, States, StateLayout
 from vdps_hil.units import GRAVITY_MPS2, deg2rad
+
+
+def _chi2_tails(x: float, dof: int) -> tuple[float, float]:
+    """(lower, upper) tail of the chi-square distribution with integer ``dof`` >= 1 at ``x``,
+    each in closed form without cancellation: with h = x/2 and the series
+    s = e^-h sum_{i<dof/2} h^i / i! (even dof) or e^-h sum_{i<(dof-1)/2} h^(i+1/2) / Gamma(i+3/2)
+    (odd dof), upper = s (even) or erfc(sqrt h) + s (odd); lower = 1 - s (even) or
+    erf(sqrt h) - s (odd) (the regularised incomplete gamma functions of dof/2, h)."""
+    if not x > 0.0:
+        return 0.0, 1.0
+    h = 0.5 * x
+    if dof % 2 == 0:
+        term = total = 1.0
+        for i in range(1, dof // 2):
+            term *= h / i
+            total += term
+        s = math.exp(-h) * total
+        return 1.0 - s, s
+    r = math.sqrt(h)
+    s = 0.0
+    if dof > 1:
+        term = total = r / math.gamma(1.5)
+        for i in range(1, dof // 2):
+            term *= h / (i + 0.5)
+            total += term
+        s = math.exp(-h) * total
+    return math.erf(r) - s, math.erfc(r) + s
+
+
+def chi2_cdf(x: float, dof: int) -> float:
+    """Chi-square CDF for an integer ``dof`` >= 1 (:func:`_chi2_tails`)."""
+    return _chi2_tails(x, dof)[0]
+
+
+def chi2_quantile(p: float, dof: int) -> float:
+    """The ``p`` quantile of the chi-square distribution with integer ``dof`` (the innovation
+    gate), by bisection to adjacent doubles on the lower tail (p <= 0.5) or on the upper tail
+    against 1 - p (exact in floating point for p > 0.5), so a gate probability near 1 keeps its
+    precision. Tested against scipy's ``chi2.ppf``; computed here because importing
+    ``scipy.stats`` costs every replay, bench and logger process ~0.4 s."""
+    if not 0.0 < p < 1.0 or int(dof) != dof or dof < 1:
+        raise ValueError(f"chi2_quantile needs 0 < p < 1 and an integer dof >= 1, got p={p!r}, dof={dof!r}")
+    upper = p > 0.5
+    q = 1.0 - p if upper else p
+
+    def below(x: float) -> bool:  # is x below the quantile?
+        lo_tail, up_tail = _chi2_tails(x, dof)
+        return up_tail > q if upper else lo_tail < q
+
+    lo, hi = 0.0, float(dof) + 10.0
+    while below(hi):
+        lo, hi = hi, 2.0 * hi
+    while True:
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:  # adjacent doubles
+            return hi
+        if below(mid):
+            lo = mid
+        else:
+            hi = mid
+
 
 _TWO_PI = 2.0 * math.pi
 _IMU_KINDS = ("6axis", "esc3")
@@ -373,7 +433,7 @@ class MultiRateEKF:
         self._pos_ba = [(self.layout.index(AugStates.BA_X + a), a) for a in self.layout.accel_bias_axes]
         self._g = self.config.gravity_in_model_mps2
         p = self.config.gate_probability
-        self._gates = {d: (float(chi2.ppf(p, d)) if p is not None else math.inf) for d in range(1, 7)}
+        self._gates = {d: (chi2_quantile(p, d) if p is not None else math.inf) for d in range(1, 7)}
         self._yaw_pos = [i for i, s in enumerate(self._idx) if s in (States.PSI_G, States.PSI_V)]
         self._iterations = {k: self.config.update_iterations for k in NONLINEAR_KINDS}
         self._hist_ns = int(round(self.config.history_s * 1e9))
