@@ -880,15 +880,17 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
             system = VdpsSystem(veh, config)
             system.clear_input_log()
             summary = _Summary()
-            handle, count = system.handle, summary.sample
+            handle = system.handle
             n = 0
             source = itertools.chain(head, side)
+            count = None  # the decoded samples are counted by the recording side
             if recorded is not None:
                 for _ in side:  # the decoders' counters, and the raw copy
                     pass
-                source = recorded
+                source, count = recorded, summary.sample
             for s in source:
-                count(s)
+                if count is not None:
+                    count(s)
                 if kind_map and s.kind in kind_map:
                     s = Sample(s.t_ns, s.source, kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
                 for node in nodes:
@@ -902,6 +904,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                     summary.outputs(outs, side.writer)
             summary.outputs(system.finish(), side.writer)
             side.finish()
+            if count is None:
+                summary.take_counts(side.sample_counts)
         except ReplayIOError as e:
             raise ReplayError(str(e)) from None
         finally:
@@ -1044,6 +1048,11 @@ class _Summary:
         if self.t_first is None:
             self.t_first = s.t_ns
         self.t_last = s.t_ns
+
+    def take_counts(self, counts: Mapping) -> None:
+        """The samples counted elsewhere (``record.replay_io``'s ``sample_counts``)."""
+        self.samples = dict(counts["per_source_kind"])
+        self.t_first, self.t_last = counts["t_first_ns"], counts["t_last_ns"]
 
     def outputs(self, outs, writer) -> None:
         for o in outs:

@@ -14,7 +14,9 @@ replay's configuration is accepted (raw records read before it wait, so a refuse
 writes nothing; the output is opened at the first raw record, whose clock it keeps);
 ``writer``: where the system's outputs go (``write_json``, ``write_estimate``), ``None`` without
 an output or before it opened; ``finish()`` closes the output; ``abort()`` on an error; after the
-iteration ``counters``, ``rejected()`` and ``decoding`` as a ``DecodedRecording`` has them.
+iteration ``counters``, ``rejected()`` and ``decoding`` as a ``DecodedRecording`` has them, and
+``sample_counts`` (samples per source and kind, first and last sample time: counted by the side
+that decodes, so the system's process does not).
 Errors are :class:`ReplayIOError` (one line).
 
 Wire between the processes: frames of an 8-byte little-endian length and a pickle (protocol 5)
@@ -81,6 +83,9 @@ class LocalRecordingSide:
         self._metadata: dict | None = None
         self._copy = None
         self._reader = None
+        self._counts: dict[tuple[str, str], int] = {}
+        self._t_first: int | None = None
+        self._t_last: int | None = None
         try:
             self.dec = decode_recording(reader, dbc=dbc, signalmap=signalmap, bus_map=bus_map,
                                         raw_sink=self._sink if output is not None else None)
@@ -93,12 +98,28 @@ class LocalRecordingSide:
         return self
 
     def __next__(self) -> Sample:
-        from vdps_hil.record.decode import DecodeError
-
         try:
-            return next(self._it)
-        except DecodeError as e:
-            raise ReplayIOError(_one_line(e)) from None
+            s = next(self._it)
+        except ValueError as e:
+            from vdps_hil.record.decode import DecodeError
+
+            if isinstance(e, DecodeError):
+                raise ReplayIOError(_one_line(e)) from None
+            raise
+        key = (s.source, s.kind)
+        counts = self._counts
+        counts[key] = counts.get(key, 0) + 1
+        if self._t_first is None:
+            self._t_first = s.t_ns
+        self._t_last = s.t_ns
+        return s
+
+    @property
+    def sample_counts(self) -> dict:
+        """{"source/kind": samples decoded}, first and last sample time [ns] (the replay
+        summary's ``messages_read`` and duration)."""
+        return {"per_source_kind": {f"{a}/{b}": n for (a, b), n in self._counts.items()},
+                "t_first_ns": self._t_first, "t_last_ns": self._t_last}
 
     def _sink(self, rec) -> None:
         if self._pending is not None:
@@ -254,6 +275,10 @@ class RecordingProcess:
     def counters(self) -> dict:
         return self._end_state()["counters"]
 
+    @property
+    def sample_counts(self) -> dict:
+        return self._end_state()["sample_counts"]
+
     def rejected(self) -> dict:
         return self._end_state()["rejected"]
 
@@ -354,7 +379,7 @@ def _child(args: dict) -> int:
             if batch:
                 _send(out, "samples", batch)
             _send(out, "end", {"counters": side.counters, "rejected": dict(side.rejected()),
-                               "decoding": dict(side.decoding)})
+                               "decoding": dict(side.decoding), "sample_counts": side.sample_counts})
             out.flush()
             while not serve(True):
                 pass
