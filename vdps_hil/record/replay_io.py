@@ -169,10 +169,10 @@ class LocalRecordingSide:
 
 # ----------------------------------------------------------------------------- second process
 def _send(out, tag: str, payload) -> None:
+    """One frame to the buffered binary stream ``out`` (flushed by the caller)."""
     blob = pickle.dumps((tag, payload), protocol=5)
-    out.write(_LEN.pack(len(blob)) + blob if len(blob) < 65536 else _LEN.pack(len(blob)))
-    if len(blob) >= 65536:
-        out.write(blob)
+    out.write(_LEN.pack(len(blob)))
+    out.write(blob)
 
 
 def _receive(inp):
@@ -327,6 +327,9 @@ def _child(args: dict) -> int:
     """The child: decode, send the samples, write the output as the parent says."""
     from vdps_hil.record.reader import RecordingError, RecordingReader
 
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle: it closes the pipes
     out = sys.stdout.buffer
     inbox: queue.SimpleQueue = queue.SimpleQueue()
 
