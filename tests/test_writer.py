@@ -17,7 +17,7 @@ from vdps_hil import __version__
 from vdps_hil.bus.samples import Sample
 from vdps_hil.record import schemas as S
 from vdps_hil.record.reader import RecordingReader
-from vdps_hil.record.writer import RecordingWriter
+from vdps_hil.record.writer import RecordingWriter, estimate_payload, json_payload
 
 EPOCH = S.DEFAULT_SIM_EPOCH_NS
 
@@ -402,3 +402,34 @@ def test_direct_estimate_encoding_equals_json_dumps(vals, sig, t_ns):
     v, s = _float_object(vals), "" if sig is None else _float_object(sig)
     got = f'{{"t_ns":{t_ns},"values":{v}' + (f',"sigmas":{s}}}' if sig is not None else "}")
     assert got == ref
+
+
+def test_messages_encoded_elsewhere_are_written_as_write_json_and_write_estimate_write_them(tmp_path):
+    """``vdps replay --jobs 2`` encodes in one process (``json_payload``, ``estimate_payload``)
+    and writes in the other (``write_encoded``): the same messages as the direct calls, incl.
+    NaN -> null; ``write_encoded`` checks topic, schema, time and payload type."""
+    vals = {"a": 1.5, "b": math.nan, "c": -0.0}
+    sig = {"a": 0.25, "b": 1e-300, "c": math.inf}
+    doc = S.raw_can_doc(1_000, 0x123, b"\x01\x02", direction="tx")
+    with RecordingWriter(tmp_path / "direct.mcap", sim_epoch_ns=0) as w:
+        w.write_estimate("state", 1_000, vals, sig)
+        w.write_estimate("/est/plain", 2_000, {"x": 3.0})
+        w.write_json("/est/can/vdps", S.RAW_CAN, 1_000, doc, channel_metadata={"bus": "vdps"})
+    with RecordingWriter(tmp_path / "encoded.mcap", sim_epoch_ns=0) as w:
+        w.write_encoded("/est/state", S.ESTIMATE, 1_000, estimate_payload(1_000, vals, sig))
+        w.write_encoded("/est/plain", S.ESTIMATE, 2_000, estimate_payload(2_000, {"x": 3.0}))
+        w.write_encoded("/est/can/vdps", S.RAW_CAN, 1_000, json_payload("/est/can/vdps", S.RAW_CAN, 1_000, doc),
+                        channel_metadata={"bus": "vdps"})
+        for bad, exc in (((("/est/x", S.ESTIMATE, 1, "text")), TypeError), ((("/est/x", "no.Such", 1, b"{}")), KeyError),
+                         ((("no topic", S.ESTIMATE, 1, b"{}")), ValueError), ((("/est/x", S.ESTIMATE, -5, b"{}")), ValueError)):
+            with pytest.raises(exc):
+                w.write_encoded(*bad)
+    a, b = _mcap_messages(tmp_path / "direct.mcap"), _mcap_messages(tmp_path / "encoded.mcap")
+    assert a == b and len(a) == 3
+
+    def data(path):
+        with open(path, "rb") as f:
+            return [(ch.metadata, m.data) for _, ch, m in make_reader(f).iter_messages(log_time_order=True)]
+
+    assert data(tmp_path / "direct.mcap") == data(tmp_path / "encoded.mcap")  # byte for byte
+    assert json.loads(estimate_payload(1_000, vals, sig))["values"]["b"] is None

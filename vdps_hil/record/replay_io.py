@@ -15,15 +15,15 @@ writes nothing; the output is opened at the first raw record, whose clock it kee
 ``writer``: where the system's outputs go (``write_json``, ``write_estimate``), ``None`` without
 an output or before it opened; ``finish()`` closes the output; ``abort()`` on an error; after the
 iteration ``counters``, ``rejected()`` and ``decoding`` as a ``DecodedRecording`` has them, and
-``sample_counts`` (samples per source and kind, first and last sample time: counted by the side
-that decodes, so the system's process does not).
+``sample_counts`` (samples per source and kind, first and last sample time).
 Errors are :class:`ReplayIOError` (one line).
 
 Wire between the processes: frames of an 8-byte little-endian length and a pickle (protocol 5)
 of ``(tag, payload)``. Child -> parent: ``("samples", [Sample, ...])`` batches, ``("end",
 decoder state)``, ``("closed", None)``, ``("error", one line)``. Parent -> child: ``("go",
-metadata)``, ``("calls", [(method, args, kwargs), ...])`` (writer methods, allow-listed),
-``("close", None)``. The pickles are made by the two processes themselves from plain data
+metadata)``, ``("calls", [(method, args, kwargs), ...])`` (``write_encoded`` of messages the parent
+encoded with the writer's own functions: the child's decoding is the longer side, so the parent
+takes the encoding), ``("close", None)``. The pickles are made by the two processes themselves from plain data
 (samples, numbers, strings); bytes read from a recording are never unpickled. The child
 inherits stderr, reads the parent's frames on a thread (so neither side can block the other on
 a full pipe), stops quietly when the parent goes away, and is killed by ``abort()``. The pipe's
@@ -51,8 +51,8 @@ parent starts early."""
 CALLS_PER_FRAME = 512
 """Writer calls the parent collects before it sends them."""
 
-WRITER_CALLS = frozenset({"write_json", "write_estimate"})
-"""The writer methods the parent may ask the child to call."""
+WRITER_CALLS = frozenset({"write_encoded"})
+"""The writer methods the parent may ask the child to call (messages the parent encoded)."""
 
 _LEN = struct.Struct("<Q")
 
@@ -67,13 +67,36 @@ def _one_line(e: BaseException) -> str:
     return text.splitlines()[0] if text else type(e).__name__
 
 
+class _SampleCounter:
+    """Samples per source and kind, first and last sample time (the replay summary's
+    ``messages_read`` and duration), counted as the samples are handed out."""
+
+    __slots__ = ("counts", "t_first", "t_last")
+
+    def __init__(self):
+        self.counts: dict[tuple[str, str], int] = {}
+        self.t_first: int | None = None
+        self.t_last: int | None = None
+
+    def count(self, s: Sample) -> None:
+        key = (s.source, s.kind)
+        self.counts[key] = self.counts.get(key, 0) + 1
+        if self.t_first is None:
+            self.t_first = s.t_ns
+        self.t_last = s.t_ns
+
+    def document(self) -> dict:
+        return {"per_source_kind": {f"{a}/{b}": n for (a, b), n in self.counts.items()},
+                "t_first_ns": self.t_first, "t_last_ns": self.t_last}
+
+
 # ----------------------------------------------------------------------------- in this process
 class LocalRecordingSide:
     """Decoding and writing in this process (module docstring). ``reader``: an open
     :class:`~vdps_hil.record.reader.RecordingReader` or a path."""
 
     def __init__(self, reader, *, dbc=None, signalmap=None, bus_map: Mapping[str, str] | None = None,
-                 output=None, copy_raw: bool = True):
+                 output=None, copy_raw: bool = True, count_samples: bool = True):
         from vdps_hil.record.decode import DecodeError, decode_recording
 
         self.output = output
@@ -83,9 +106,7 @@ class LocalRecordingSide:
         self._metadata: dict | None = None
         self._copy = None
         self._reader = None
-        self._counts: dict[tuple[str, str], int] = {}
-        self._t_first: int | None = None
-        self._t_last: int | None = None
+        self._counter = _SampleCounter() if count_samples else None  # the child leaves it to the parent
         try:
             self.dec = decode_recording(reader, dbc=dbc, signalmap=signalmap, bus_map=bus_map,
                                         raw_sink=self._sink if output is not None else None)
@@ -106,20 +127,13 @@ class LocalRecordingSide:
             if isinstance(e, DecodeError):
                 raise ReplayIOError(_one_line(e)) from None
             raise
-        key = (s.source, s.kind)
-        counts = self._counts
-        counts[key] = counts.get(key, 0) + 1
-        if self._t_first is None:
-            self._t_first = s.t_ns
-        self._t_last = s.t_ns
+        if self._counter is not None:
+            self._counter.count(s)
         return s
 
     @property
     def sample_counts(self) -> dict:
-        """{"source/kind": samples decoded}, first and last sample time [ns] (the replay
-        summary's ``messages_read`` and duration)."""
-        return {"per_source_kind": {f"{a}/{b}": n for (a, b), n in self._counts.items()},
-                "t_first_ns": self._t_first, "t_last_ns": self._t_last}
+        return self._counter.document()
 
     def _sink(self, rec) -> None:
         if self._pending is not None:
@@ -187,17 +201,47 @@ def _receive(inp):
     return pickle.loads(blob)
 
 
-class _CallForwarder:
-    """The parent's ``writer``: collects the writer calls for the child."""
+def _widen_pipes(*files) -> None:
+    """Give the pipes a 1 MiB buffer where the system allows (Linux ``F_SETPIPE_SZ``), so one
+    side can run a few frames ahead instead of waiting for the other at every frame."""
+    try:
+        import fcntl
+    except ImportError:  # not a POSIX system
+        return
+    setsz = getattr(fcntl, "F_SETPIPE_SZ", 1031)
+    for f in files:
+        try:
+            fcntl.fcntl(f.fileno(), setsz, 1 << 20)
+        except OSError:  # above the system's limit (fs.pipe-max-size): keep the default
+            pass
+
+
+class _EncodingForwarder:
+    """The parent's ``writer``: encodes each message as ``RecordingWriter`` would (the same
+    functions, so the same bytes and the same checks, raised here) and queues it for the child,
+    which writes it (``write_encoded``). Encoding here balances the two processes: the child's
+    decoding is the longer side."""
 
     def __init__(self, proc: "RecordingProcess"):
+        from vdps_hil.record import schemas as S
+        from vdps_hil.record.writer import estimate_payload, estimate_topic, json_payload
+
         self._proc = proc
+        self._estimate = S.ESTIMATE
+        self._est_payload, self._est_topic, self._json_payload = estimate_payload, estimate_topic, json_payload
+        self._topics: dict[str, str] = {}  # estimate topic as given -> checked absolute topic
 
-    def write_json(self, *args, **kwargs) -> None:
-        self._proc._call("write_json", args, kwargs)
+    def write_json(self, topic: str, schema_name: str, t_ns: int, doc, *, wall_time_ns: int | None = None,
+                   channel_metadata: Mapping[str, str] | None = None) -> None:
+        payload = self._json_payload(topic, schema_name, t_ns, doc)
+        self._proc._call("write_encoded", (topic, schema_name, t_ns, payload),
+                         {"wall_time_ns": wall_time_ns, "channel_metadata": channel_metadata})
 
-    def write_estimate(self, *args, **kwargs) -> None:
-        self._proc._call("write_estimate", args, kwargs)
+    def write_estimate(self, topic: str, t_ns: int, values, sigmas=None) -> None:
+        full = self._topics.get(topic)
+        if full is None:
+            full = self._topics[topic] = self._est_topic(topic)
+        self._proc._call("write_encoded", (full, self._estimate, t_ns, self._est_payload(t_ns, values, sigmas)), {})
 
 
 class RecordingProcess:
@@ -211,7 +255,12 @@ class RecordingProcess:
                 "copy_raw": bool(copy_raw)}
         self._proc = subprocess.Popen([sys.executable, "-m", __name__, json.dumps(args)],
                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE)
-        self.writer = None if output is None else _CallForwarder(self)
+        _widen_pipes(self._proc.stdin, self._proc.stdout)
+        self._outbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._sender = threading.Thread(target=self._send_frames, name="replay-io-send", daemon=True)
+        self._sender.start()
+        self.writer = None if output is None else _EncodingForwarder(self)
+        self._counter = _SampleCounter()
         self._calls: list = []
         self._state: dict | None = None
         self._it = self._run()
@@ -224,10 +273,22 @@ class RecordingProcess:
 
     # parent -> child
     def _to_child(self, tag: str, payload) -> None:
+        """Queue a frame for the child; a thread writes it, so this process never waits on a
+        full pipe while the child waits for it to read (both sides keep going)."""
+        blob = pickle.dumps((tag, payload), protocol=5)
+        self._outbox.put(_LEN.pack(len(blob)) + blob)
+
+    def _send_frames(self) -> None:
+        """The writer thread: frames from the outbox to the child's stdin until None."""
+        stdin = self._proc.stdin
         try:
-            _send(self._proc.stdin, tag, payload)
-            self._proc.stdin.flush()
-        except (BrokenPipeError, ValueError):  # the child has gone: its own frame says why
+            while True:
+                frame = self._outbox.get()
+                if frame is None:
+                    break
+                stdin.write(frame)
+                stdin.flush()
+        except (BrokenPipeError, OSError, ValueError):  # the child has gone: its own frame says why
             pass
 
     def _call(self, name: str, args, kwargs) -> None:
@@ -258,7 +319,10 @@ class RecordingProcess:
         while True:
             tag, payload = self._frame()
             if tag == "samples":
-                yield from payload
+                count = self._counter.count
+                for s in payload:
+                    count(s)
+                    yield s
                 self._flush_calls()
             elif tag == "end":
                 self._state = payload
@@ -277,7 +341,7 @@ class RecordingProcess:
 
     @property
     def sample_counts(self) -> dict:
-        return self._end_state()["sample_counts"]
+        return self._counter.document()
 
     def rejected(self) -> dict:
         return self._end_state()["rejected"]
@@ -302,10 +366,12 @@ class RecordingProcess:
         """Stop the child (if it still runs) and release the pipes: with both pipes closed it
         ends at its next frame (closing the output it has written so far) or is killed."""
         p = self._proc
+        self._outbox.put(None)
+        self._sender.join(timeout=5.0)  # returns at once unless a write is stuck on a full pipe
         for f in (p.stdout, p.stdin):
             try:
                 f.close()
-            except (BrokenPipeError, OSError):
+            except (BrokenPipeError, OSError, ValueError):
                 pass
         if p.poll() is None:
             try:
@@ -370,7 +436,7 @@ def _child(args: dict) -> int:
         try:
             side = LocalRecordingSide(RecordingReader(args["path"]), dbc=args["dbc"], signalmap=args["signalmap"],
                                       bus_map=args["bus_map"] or None, output=args["output"],
-                                      copy_raw=args["copy_raw"])
+                                      copy_raw=args["copy_raw"], count_samples=False)
             batch: list[Sample] = []
             for s in side:
                 batch.append(s)
@@ -382,7 +448,7 @@ def _child(args: dict) -> int:
             if batch:
                 _send(out, "samples", batch)
             _send(out, "end", {"counters": side.counters, "rejected": dict(side.rejected()),
-                               "decoding": dict(side.decoding), "sample_counts": side.sample_counts})
+                               "decoding": dict(side.decoding)})
             out.flush()
             while not serve(True):
                 pass

@@ -46,7 +46,7 @@ from mcap.writer import LIBRARY_IDENTIFIER as _MCAP_LIBRARY
 from vdps_hil import __version__ as _TOOL_VERSION
 from vdps_hil.record import schemas as S
 
-__all__ = ["RecordingWriter", "WriterStats"]
+__all__ = ["RecordingWriter", "WriterStats", "estimate_payload", "estimate_topic", "json_payload"]
 
 _RESERVED_KEYS = ("layout_version", "tool", "tool_version", "mcap_library", "log_time",
                   "publish_time", "sim_epoch_ns", "message_encoding")
@@ -220,6 +220,46 @@ def _clean_flat(d: Mapping[str, Any]) -> dict:
     for k, v in d.items():
         out[str(k)] = (v if v - v == 0.0 else None) if type(v) is float else S.clean_json(v)
     return out
+
+
+def json_payload(topic: str, schema_name: str, t_ns: int, doc: Mapping[str, Any]) -> bytes:
+    """The bytes ``RecordingWriter.write_json`` writes for ``doc`` (topic, time and schema
+    checked; ``t_ns`` added when the schema has it; non-finite floats -> null)."""
+    S.check_topic(topic)
+    S.check_time_ns("t_ns", t_ns)
+    if schema_name not in S.SCHEMAS:
+        raise KeyError(f"unknown schema {schema_name!r}; register it with "
+                       "vdps_hil.record.schemas.register_schema()")
+    doc = S.clean_json(dict(doc))
+    if "t_ns" in S.SCHEMAS[schema_name].get("properties", {}):
+        if doc.setdefault("t_ns", t_ns) != t_ns:
+            raise ValueError(f"doc t_ns {doc['t_ns']} differs from t_ns {t_ns}")
+    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
+
+
+def estimate_topic(topic: str) -> str:
+    """The absolute, checked topic of an estimate (``"ekf"`` -> ``/est/ekf``)."""
+    if not topic.startswith("/"):
+        topic = S.EST_PREFIX + topic
+    if not S.check_topic(topic).startswith(S.EST_PREFIX):
+        raise ValueError(f"estimate topic must be under {S.EST_PREFIX}: {topic}")
+    return topic
+
+
+def estimate_payload(t_ns: int, values: Mapping[str, float], sigmas: Mapping[str, float] | None = None) -> bytes:
+    """The bytes of an estimate message (schema ``ESTIMATE``): = ``json_payload`` of
+    ``{"t_ns", "values", "sigmas"}``, written directly when every value is a plain float (a
+    replay writes thousands of these per second)."""
+    S.check_time_ns("t_ns", t_ns)
+    v = _float_object(values)
+    sg = "" if sigmas is None else _float_object(sigmas)
+    if v is not None and sg is not None:
+        return (f'{{"t_ns":{int(t_ns)},"values":{v}' + (f',"sigmas":{sg}}}' if sigmas is not None else "}")
+                ).encode()
+    doc = {"t_ns": t_ns, "values": _clean_flat(values)}
+    if sigmas is not None:
+        doc["sigmas"] = _clean_flat(sigmas)
+    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
 
 
 class RecordingWriter:
@@ -429,16 +469,20 @@ class RecordingWriter:
         When the schema has a ``t_ns`` property, ``doc`` gets ``t_ns`` added if absent (a
         different ``t_ns`` inside is an error). Non-finite floats become null.
         """
+        self._write(topic, schema_name, t_ns, json_payload(topic, schema_name, t_ns, doc), wall_time_ns,
+                    channel_metadata or {})
+
+    def write_encoded(self, topic: str, schema_name: str, t_ns: int, payload: bytes, *,
+                      wall_time_ns: int | None = None, channel_metadata: Mapping[str, str] | None = None) -> None:
+        """Write a message already encoded by :func:`json_payload` or :func:`estimate_payload`
+        (elsewhere, e.g. in the other process of ``vdps replay --jobs 2``): the topic, schema
+        and time are checked as ``write_json`` checks them; the payload must be bytes."""
         S.check_topic(topic)
         S.check_time_ns("t_ns", t_ns)
         if schema_name not in S.SCHEMAS:
-            raise KeyError(f"unknown schema {schema_name!r}; register it with "
-                           "vdps_hil.record.schemas.register_schema()")
-        doc = S.clean_json(dict(doc))
-        if "t_ns" in S.SCHEMAS[schema_name].get("properties", {}):
-            if doc.setdefault("t_ns", t_ns) != t_ns:
-                raise ValueError(f"doc t_ns {doc['t_ns']} differs from t_ns {t_ns}")
-        payload = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
+            raise KeyError(f"unknown schema {schema_name!r}")
+        if not isinstance(payload, bytes):
+            raise TypeError(f"payload must be bytes, got {type(payload).__name__}")
         self._write(topic, schema_name, t_ns, payload, wall_time_ns, channel_metadata or {})
 
     # --- typed helpers --------------------------------------------------------------------------
@@ -558,26 +602,10 @@ class RecordingWriter:
                        sigmas: Mapping[str, float] | None = None) -> None:
         """Estimator output on ``/est/...`` (``"ekf"`` -> ``/est/ekf``)."""
         if topic not in self._est_topics:
-            if not topic.startswith("/"):
-                topic = S.EST_PREFIX + topic
-            if not S.check_topic(topic).startswith(S.EST_PREFIX):
-                raise ValueError(f"estimate topic must be under {S.EST_PREFIX}: {topic}")
+            topic = estimate_topic(topic)
             if len(self._est_topics) < 1024:
                 self._est_topics.add(topic)  # checked once
-        # = write_json(topic, ESTIMATE, t_ns, estimate_doc(...)): the same bytes, written directly
-        # when every value is a plain float (a replay writes thousands of these per second)
-        S.check_time_ns("t_ns", t_ns)
-        v = _float_object(values)
-        sg = "" if sigmas is None else _float_object(sigmas)
-        if v is not None and sg is not None:
-            payload = (f'{{"t_ns":{int(t_ns)},"values":{v}' + (f',"sigmas":{sg}}}' if sigmas is not None else "}")
-                       ).encode()
-        else:
-            doc = {"t_ns": t_ns, "values": _clean_flat(values)}
-            if sigmas is not None:
-                doc["sigmas"] = _clean_flat(sigmas)
-            payload = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
-        self._write(topic, S.ESTIMATE, t_ns, payload, None, {})
+        self._write(topic, S.ESTIMATE, t_ns, estimate_payload(t_ns, values, sigmas), None, {})
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
         """An extra MCAP metadata record (values converted to str, non-str as JSON)."""
