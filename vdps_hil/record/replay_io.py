@@ -36,6 +36,7 @@ import json
 import os
 import pickle
 import queue
+import signal
 import struct
 import subprocess
 import sys
@@ -392,8 +393,6 @@ class RecordingProcess:
 def _child(args: dict) -> int:
     """The child: decode, send the samples, write the output as the parent says."""
     from vdps_hil.record.reader import RecordingError, RecordingReader
-
-    import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle: it closes the pipes
     out = sys.stdout.buffer
