@@ -396,11 +396,8 @@ def load_dbc(path: str | os.PathLike, *, strict: bool = True) -> DbcDescription:
     p = Path(path).resolve()
     if not p.is_file():
         raise SignalMapError(f"DBC {p}: no such file")
-    quiet = logging.getLogger("cantools")
-    level = quiet.level
-    quiet.setLevel(logging.ERROR)  # "Overwriting message ..." for repeated names: expected
     try:
-        db = load_description(p, strict=strict)
+        db = load_description(p, strict=strict)  # cantools' warnings silenced there
     except Exception as e:  # noqa: BLE001 - OSError, cantools raises many types
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
         if strict:
@@ -413,8 +410,6 @@ def load_dbc(path: str | os.PathLike, *, strict: bool = True) -> DbcDescription:
                                      "dbc_strict = false in the signal map to load it anyway") \
                     from None
         raise SignalMapError(f"DBC {p}: cannot load: {msg}") from None
-    finally:
-        quiet.setLevel(level)
     if not strict:
         log.warning("DBC %s loaded with strict=False (the signal map allows it)", p)
     return db

@@ -164,11 +164,18 @@ class DbcDescription:
 # ---------------------------------------------------------------------------------------------
 def _parse(data: bytes, strict: bool):
     """cantools' ``load_file`` of these bytes: cp1252 with errors replaced, universal newlines
-    (without its optional pickle cache, ``CANTOOLS_CACHE_DIR``)."""
+    (without its optional pickle cache, ``CANTOOLS_CACHE_DIR``). cantools' warnings
+    ("Overwriting message ..." for names a real DBC repeats: expected) are silenced."""
     import cantools
 
     text = io.TextIOWrapper(io.BytesIO(data), encoding=DBC_ENCODING, errors="replace").read()
-    return cantools.database.load_string(text, database_format="dbc", strict=strict)
+    quiet = logging.getLogger("cantools")
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)
+    try:
+        return cantools.database.load_string(text, database_format="dbc", strict=strict)
+    finally:
+        quiet.setLevel(level)
 
 
 def _scalar_attrs(attrs) -> dict[str, Any]:
