@@ -1,4 +1,6 @@
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -7,6 +9,29 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 REAL_DATA = SHARED / "data" / "real"
+
+
+_CACHE_ENV = "VDPS_CACHE_DIR"
+_saved_cache_env: list = []
+
+
+def pytest_configure(config):
+    """The DBC description cache (vdps_hil.codecs.dbc_cache) of the test run: a fresh temporary
+    directory, never the user's ~/.cache; set before collection (test modules load DBCs at
+    import) and inherited by subprocesses."""
+    _saved_cache_env.append(os.environ.get(_CACHE_ENV))
+    os.environ[_CACHE_ENV] = tempfile.mkdtemp(prefix="vdps-test-cache-")
+
+
+def pytest_unconfigure(config):
+    if not _saved_cache_env:
+        return
+    shutil.rmtree(os.environ.get(_CACHE_ENV, ""), ignore_errors=True)
+    old = _saved_cache_env.pop()
+    if old is None:
+        os.environ.pop(_CACHE_ENV, None)
+    else:
+        os.environ[_CACHE_ENV] = old
 
 
 @pytest.fixture

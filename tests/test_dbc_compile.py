@@ -4,6 +4,7 @@ chassis decoder's compiled path gives the same samples and counters as cantools'
 
 from __future__ import annotations
 
+import math
 import random
 
 import pytest
@@ -77,15 +78,21 @@ def test_float_and_out_of_payload_signals_are_not_compiled():
 
 
 def test_scaled_values_equal_cantools_conversion_on_every_raw_value():
-    """_DecodePlan's float(raw * scale + offset) == _from_raw (cantools' raw_to_scaled) for
-    every raw value each value signal of the DBC can carry."""
+    """_DecodePlan's float(raw * scale + offset) == _from_raw == cantools' own raw_to_scaled
+    for every raw value each value signal of the DBC can carry (TTR sentinel: inf)."""
     dbc = cc.load_dbc()
     for spec in dbc.messages.values():
         plan = cc._DecodePlan(spec)
+        cantools_sig = {s.name: s for s in dbc.db.get_message_by_name(spec.name).signals}
         for (name, _, lo, hi, scale, offset, ttr), sig in zip(plan.values, spec.values):
             assert name == sig.name
+            conv = cantools_sig[name].conversion
             for r in range(lo, hi + 1):
-                assert float(r * scale + offset) == cc._from_raw(sig, r) or (ttr and r == cc.TTR_NONE_RAW)
+                x = float(conv.raw_to_scaled(r, decode_choices=False))
+                if ttr and r == cc.TTR_NONE_RAW:
+                    assert cc._from_raw(sig, r) == math.inf
+                    continue
+                assert float(r * scale + offset) == x == cc._from_raw(sig, r)
 
 
 def _frames(seed: int, n: int) -> list[tuple[int, int, bytes]]:

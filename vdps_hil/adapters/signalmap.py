@@ -3,8 +3,9 @@
 A signal map (``configs/signalmaps/*.toml``, read with tomllib: nothing in it can execute) says,
 per CAN bus, which message -- **by frame ID**, because real DBCs repeat message names -- and
 which of its signals give which catalogue field (:mod:`vdps_hil.bus.samples`), with the unit of
-the DBC value and an optional scale, offset, sign and transform. Decoding uses cantools (never a
-hand-written DBC parser).
+the DBC value and an optional scale, offset, sign and transform. The DBC is parsed by cantools
+(never by hand) and its description cached as JSON (``codecs.dbc_cache``): frames of layouts
+that compile are decoded without importing cantools, the others by cantools.
 
 Conversion of one mapped value (signals listed together are summed first)::
 
@@ -73,6 +74,7 @@ from types import MappingProxyType
 from typing import Any, Callable, Mapping
 
 from vdps_hil.bus.samples import FIELDS, Sample
+from vdps_hil.codecs.dbc_cache import DbcDescription, load_description
 
 __all__ = ["SignalMap", "BusMap", "MessageRule", "SignalRule", "SignalMapError",
            "SignalMapDecoder", "load_signalmap", "load_dbc", "build_decoder", "CHECKSUMS",
@@ -387,24 +389,20 @@ def load_signalmap(path: str | os.PathLike) -> SignalMap:
     return _parse(doc, p, text)
 
 
-def load_dbc(path: str | os.PathLike, *, strict: bool = True):
-    """Load a DBC with cantools (``strict=False`` logs that it does). SignalMapError on
-    failure, suggesting ``dbc_strict = false`` when only the strict checks fail."""
-    import cantools
-
+def load_dbc(path: str | os.PathLike, *, strict: bool = True) -> DbcDescription:
+    """Load a DBC: its description (``codecs.dbc_cache``: cached, else parsed by cantools;
+    ``strict=False`` logs that it is lax). SignalMapError on failure, suggesting
+    ``dbc_strict = false`` when only the strict checks fail."""
     p = Path(path).resolve()
     if not p.is_file():
         raise SignalMapError(f"DBC {p}: no such file")
-    quiet = logging.getLogger("cantools")
-    level = quiet.level
-    quiet.setLevel(logging.ERROR)  # "Overwriting message ..." for repeated names: expected
     try:
-        db = cantools.database.load_file(str(p), database_format="dbc", strict=strict)
-    except Exception as e:  # noqa: BLE001 - cantools raises many types
+        db = load_description(p, strict=strict)  # cantools' warnings silenced there
+    except Exception as e:  # noqa: BLE001 - OSError, cantools raises many types
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
         if strict:
             try:
-                cantools.database.load_file(str(p), database_format="dbc", strict=False)
+                load_description(p, strict=False)
             except Exception:  # noqa: BLE001
                 pass
             else:
@@ -412,19 +410,9 @@ def load_dbc(path: str | os.PathLike, *, strict: bool = True):
                                      "dbc_strict = false in the signal map to load it anyway") \
                     from None
         raise SignalMapError(f"DBC {p}: cannot load: {msg}") from None
-    finally:
-        quiet.setLevel(level)
     if not strict:
         log.warning("DBC %s loaded with strict=False (the signal map allows it)", p)
     return db
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 16), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 # --- the decoder ----------------------------------------------------------------------------
@@ -447,7 +435,7 @@ class _Compiled:
 
 
 def _compile(message):
-    """(compiled layout, conversions) of a cantools message, or None when it does not compile."""
+    """(compiled layout, conversions) of a DBC message, or None when it does not compile."""
     from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
 
     try:
@@ -462,7 +450,8 @@ class SignalMapDecoder:
 
     Same interface as ``VdpsCanDecoder``: ``decode(t_ns, arbitration_id, data,
     is_extended_id) -> list[Sample]`` never raises on frame content; ``counters`` (module
-    docstring). ``source``: the samples' source (default ``can.<bus>``).
+    docstring). ``db``: the DBC from :func:`load_dbc` (a cantools database works too);
+    ``source``: the samples' source (default ``can.<bus>``).
     """
 
     def __init__(self, bus_map: BusMap, db, *, source: str | None = None):
@@ -555,8 +544,8 @@ class SignalMapDecoder:
     def _try_decode(self, m, data: bytes, key=None):
         """The scaled signal values (cantools' ``decode(..., scaling=True)``), or None (counted).
         A frame of the message's length goes through the message's compiled layout
-        (``codecs.dbc_compile``; each value by the signal's own cantools conversion) when the
-        layout compiles, otherwise and for other lengths through cantools."""
+        (``codecs.dbc_compile``; each value by the signal's conversion, cantools' arithmetic)
+        when the layout compiles, otherwise and for other lengths through cantools."""
         c = self._c
         n = len(data)
         if n == m.length and key is not None:
@@ -594,7 +583,7 @@ def build_decoder(sigmap: SignalMap, bus: str, dbc_path: str | os.PathLike | Non
                              f"(pass --dbc {bm.dbc_name or 'FILE'})")
     db = load_dbc(path, strict=bm.dbc_strict)
     generic = SignalMapDecoder(bm, db, source=source)  # checks the map against the DBC
-    digest = file_sha256(path)
+    digest = db.sha256  # of the bytes described
     if bm.dbc_sha256 and bm.dbc_sha256 != digest:
         log.warning("DBC %s differs from the one signal map %s was written for (sha256 %s...)",
                     path, sigmap.name, bm.dbc_sha256[:12])

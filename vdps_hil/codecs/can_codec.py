@@ -1,9 +1,11 @@
 """CAN codec for the vdps chassis bus (``dbc/vdps.dbc``): encoders, a counting decoder, the
 DBC quantisation and the bus load.
 
-The DBC is read with cantools (never parsed by hand here); this module adds what a DBC cannot
-say: which catalogue fields a frame carries, the rolling-counter and CRC rules, and how the
-simulator reproduces the wire quantisation exactly.
+The DBC is read with cantools (never parsed by hand here), through the JSON cache of
+``codecs.dbc_cache``: decoding a recording needs neither cantools nor python-can once the DBC
+has been parsed (cantools is imported by the encoders and for layouts that do not compile).
+This module adds what a DBC cannot say: which catalogue fields a frame carries, the
+rolling-counter and CRC rules, and how the simulator reproduces the wire quantisation exactly.
 
 Signal scaling (DBC linear conversion)
 --------------------------------------
@@ -129,13 +131,15 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from types import MappingProxyType
-from typing import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Iterable, Mapping, Sequence
 
-import can
-import cantools
 import numpy as np
 
 from vdps_hil.bus.samples import FIELDS, Sample
+from vdps_hil.codecs.dbc_cache import DbcDescription, load_description
+
+if TYPE_CHECKING:
+    import can
 
 DEFAULT_DBC_PATH = Path(__file__).resolve().parents[2] / "dbc" / "vdps.dbc"
 """The repository's chassis DBC (``dbc/vdps.dbc``)."""
@@ -224,7 +228,7 @@ class SignalSpec:
     raw_min: int
     raw_max: int
     unit: str
-    signal: object  # the cantools Signal
+    signal: object  # the codecs.dbc_cache SignalDescription
 
     @property
     def resolution(self) -> float:
@@ -243,7 +247,7 @@ class MessageSpec:
     values: tuple[SignalSpec, ...]  # catalogue fields carried (counter and CRC excluded)
     counter: SignalSpec
     crc: SignalSpec | None
-    message: object  # the cantools Message
+    message: object  # the codecs.dbc_cache MessageDescription (encode/decode: cantools')
 
     @property
     def field_names(self) -> tuple[str, ...]:
@@ -251,7 +255,8 @@ class MessageSpec:
 
 
 class VdpsDbc:
-    """The loaded DBC (cantools database) plus the per-message specs this codec needs.
+    """The loaded DBC (its cached description; ``db``: the cantools database, parsed when asked
+    for) plus the per-message specs this codec needs.
 
     ``VdpsDbc(path)`` raises :class:`DbcError` (one line) if the file is unreadable or breaks a
     rule the codec relies on: standard IDs, a ``VdpsKind`` attribute per message, exactly one
@@ -262,13 +267,13 @@ class VdpsDbc:
     def __init__(self, path: str | Path | None = None):
         self.path = Path(path) if path is not None else DEFAULT_DBC_PATH
         try:
-            self.db = cantools.database.load_file(str(self.path), database_format="dbc", strict=True)
-        except Exception as e:  # cantools raises several types; one line for the user
+            self.description: DbcDescription = load_description(self.path, strict=True)
+        except Exception as e:  # OSError, cantools' several types; one line for the user
             msg = str(e).splitlines()[0] if str(e) else type(e).__name__
             raise DbcError(f"{self.path}: cannot load DBC: {msg}") from None
-        baud = self.db.dbc.attributes.get("Baudrate") if self.db.dbc else None
-        self.bitrate_bps = int(baud.value) if baud is not None else 1_000_000
-        specs = [self._message_spec(m) for m in self.db.messages]
+        baud = self.description.attributes.get("Baudrate")
+        self.bitrate_bps = int(baud) if baud is not None else 1_000_000
+        specs = [self._message_spec(m) for m in self.description.messages]
         self.messages: Mapping[str, MessageSpec] = MappingProxyType({s.name: s for s in specs})
         self.by_id: Mapping[int, MessageSpec] = MappingProxyType({s.frame_id: s for s in specs})
         field_to: dict[str, tuple[MessageSpec, SignalSpec]] = {}
@@ -278,6 +283,11 @@ class VdpsDbc:
                     raise DbcError(f"{self.path}: field {sig.name} carried by two messages")
                 field_to[sig.name] = (spec, sig)
         self.field_signal: Mapping[str, tuple[MessageSpec, SignalSpec]] = MappingProxyType(field_to)
+
+    @property
+    def db(self):
+        """The cantools database (imports cantools and parses the DBC on first use)."""
+        return self.description.cantools()
 
     def _fail(self, what: str):
         raise DbcError(f"{self.path}: {what}")
@@ -303,8 +313,7 @@ class VdpsDbc:
     def _message_spec(self, m) -> MessageSpec:
         if m.is_extended_frame or m.is_fd or m.is_container:
             self._fail(f"{m.name}: only classic CAN frames with 11-bit IDs are supported")
-        attr = m.dbc.attributes.get("VdpsKind") if m.dbc else None
-        kind = attr.value if attr is not None else ""
+        kind = m.attributes.get("VdpsKind", "")
         if not kind:
             self._fail(f"{m.name}: missing message attribute VdpsKind")
         sigs = [self._signal_spec(m, s) for s in m.signals]
@@ -369,7 +378,8 @@ def _phys_clip(sig: SignalSpec) -> tuple[float, float]:
 
 
 def _from_raw(sig: SignalSpec, raw: int) -> float:
-    """Raw integer -> physical value via cantools' conversion (TTR sentinel -> +inf)."""
+    """Raw integer -> physical value via the DBC conversion (cantools' ``raw_to_scaled``
+    arithmetic, ``codecs.dbc_cache``; TTR sentinel -> +inf)."""
     if _is_ttr(sig) and raw == TTR_NONE_RAW:
         return math.inf
     return float(sig.signal.conversion.raw_to_scaled(raw, decode_choices=False))
@@ -420,6 +430,8 @@ def encode_fields(message_name: str, fields: Mapping[str, float], counter: int, 
     data = bytearray(spec.message.encode(raw, scaling=False, strict=True))
     if spec.crc is not None:
         data[0] = crc8_j1850(data[1:])
+    import can
+
     return can.Message(timestamp=t_ns / 1e9, arbitration_id=spec.frame_id, is_extended_id=False,
                        dlc=spec.dlc, data=bytes(data))
 
