@@ -76,9 +76,11 @@ def test_unreadable_signal_map_is_one_line(tmp_path):
 def test_pipeline_tap_runs_the_system_live_and_reports_the_warning(tmp_path):
     """``vdps log --pipeline``: the tap feeds decoded samples to VdpsSystem (the node replay
     runs), records /est/ topics and the warning frames, and shows the latest warning. Fed a
-    simulated fishhook-suv drive in arrival order, it must report a warning (level >= 2)
-    before the point of no return (3.72 s) and decode its own frames without CRC rejects."""
+    simulated fishhook-suv drive in arrival order, it holds the first 3 s of data to size the
+    system, then its frames (in data time) must carry a warning (level >= 2) more than 1 s
+    before the point of no return (3.72 s), and decode without CRC rejects."""
     from vdps_hil.cli.log_cmd import PipelineTap
+    from vdps_hil.codecs.can_codec import VdpsCanDecoder
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.record.decode import decode_recording
     from vdps_hil.record.writer import RecordingWriter
@@ -89,23 +91,25 @@ def test_pipeline_tap_runs_the_system_live_and_reports_the_warning(tmp_path):
     out = tmp_path / "live.mcap"
     with RecordingWriter(str(out)) as w:
         tap = PipelineTap(load_vehicle("suv-model", expect_kind="model"), w)
-        assert "no warning frame yet" in tap.status_line()
-        first_warning_t = None
+        assert "sizing from the first 3 s" in tap.status_line()
         for smp in decode_recording(str(rec)):
             tap([smp])
-            lw = tap.last_warning
-            if first_warning_t is None and lw is not None and lw["warning_level"] >= 2:
-                first_warning_t = lw["t_s"]
-    assert first_warning_t is not None and first_warning_t < 3.72 - 1.0
+        assert tap.settings["probe_rates_hz"]["suspension"] > 900  # the 1 kHz suspension, measured
+        tap.finish()
     assert "warning level" in tap.status_line()
     # from the priors the frames say whether they are valid yet (in words)
     assert "valid" in tap.status_line()
     s = tap.summary()
-    assert s["estimates"] > 100 and s["warning_frames"] > 50
+    assert s["estimates"] > 100 and s["warning_frames"] > 50 and s["input_order_recorded"]
     assert tap._decoder.total_rejected == 0
+    dec = VdpsCanDecoder(source="check")
     with RecordingReader(str(out)) as r:
         topics = r.topics()
-    assert "/est/state" in topics and any(t.startswith("/est/can/") for t in topics)
+        levels = [(t, smp.fields["warning_level"]) for _, t, doc in r.iter_messages(topics=["/est/can/vdps"])
+                  for smp in dec.decode(t, doc["arbitration_id"], bytes.fromhex(doc["data_hex"]))]
+    assert "/est/state" in topics
+    first_warning_t = min(t for t, lvl in levels if lvl >= 2) / 1e9
+    assert first_warning_t < 3.72 - 1.0
 
 
 def test_pipeline_refuses_a_truth_vehicle_file(tmp_path):
