@@ -128,3 +128,59 @@ def test_pipeline_params_errors_are_one_line(tmp_path):
         assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
         assert words in p.stderr
     assert not (tmp_path / "z.mcap").exists()
+
+
+def _est(path):
+    with RecordingReader(path) as r:
+        return {t: {m.t_ns: m.data for m in r.iter_records(topics=[t])}
+                for t in ("/est/state", "/est/can/vdps")}
+
+
+def _live_pipeline_run(tmp_path, *logger_args):
+    """A 5 s `vdps log --pipeline` on the emulated devices (slcan, IMU, GNSS on ptys), stopped by
+    SIGTERM: the log's JSON summary."""
+    rig = Rig(tmp_path, seconds=5.0, logger_args=("--pipeline", *logger_args))
+    try:
+        rig.sent()
+        time.sleep(0.8)
+        rig.logger.send_signal(signal.SIGTERM)
+        rc = rig.logger.wait(60)
+        err = rig.logger.stderr.read()
+    finally:
+        rig.close()
+    assert rc == 0, err[-800:]
+    return json.loads((tmp_path / "log.json").read_text())
+
+
+def test_pipeline_input_order_lets_replay_reproduce_the_live_estimates(tmp_path):
+    """`vdps log --pipeline -o` on live devices records its input order and the settings its
+    system was sized from; `vdps replay --input-order recorded` then computes, at every time the
+    tap recorded, the same /est/state message byte for byte, and the same warning frames; a
+    replay with another vehicle is refused in one line."""
+    summary = _live_pipeline_run(tmp_path)
+    assert summary["pipeline"]["input_order_recorded"] and summary["pipeline"]["error"] is None
+    live = _est(tmp_path / "out.mcap")
+    assert len(live["/est/state"]) > 10 and len(live["/est/can/vdps"]) > 50
+    p = vdps("replay", tmp_path / "out.mcap", "--input-order", "recorded", "-o", tmp_path / "r.mcap")
+    assert p.returncode == 0, p.stderr[-800:]
+    again = _est(tmp_path / "r.mcap")
+    assert {t: again["/est/state"].get(t) for t in live["/est/state"]} == live["/est/state"]
+    assert again["/est/can/vdps"] == live["/est/can/vdps"]
+    p = vdps("replay", tmp_path / "out.mcap", "--input-order", "recorded", "--vehicle", "suv-model")
+    assert p.returncode == 2 and "give --vehicle sedan-model" in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
+
+
+def test_rotated_pipeline_log_records_no_input_order(tmp_path):
+    """With --rotate-s every file is a complete recording with the tap's /est/ messages, but no
+    input order (a replay of one file would start a fresh system): replay says so in one line."""
+    summary = _live_pipeline_run(tmp_path, "--rotate-s", "2")
+    assert not summary["pipeline"]["input_order_recorded"]
+    files = summary["files"]
+    assert len(files) >= 2
+    for f in files:
+        with RecordingReader(f) as r:
+            assert "hil.input_order" not in r.metadata()
+    assert any(_est(f)["/est/state"] for f in files)
+    p = vdps("replay", files[0], "--input-order", "recorded")
+    assert p.returncode == 2 and "no recorded input order" in p.stderr
