@@ -53,7 +53,7 @@ class InputOrder:
         if k is None:
             k = self._topics[key] = len(self._topics)
             if k == 256:  # one byte per sample no longer does
-                self._order = array("H", self._order)
+                self._order = array("H", iter(self._order))  # (a bytearray would be taken as raw bytes)
         self._order.append(k)
 
     def metadata(self, **settings: Any) -> dict[str, str]:
@@ -78,7 +78,8 @@ def read_input_order(reader) -> tuple[list[Sample], dict[str, Any]]:
     Raises ValueError (also KeyError, IndexError, TypeError for a damaged record)."""
     md: Mapping[str, str] | None = reader.metadata().get(INPUT_ORDER_METADATA)
     if md is None:
-        raise ValueError(f"no {INPUT_ORDER_METADATA} metadata in this recording")
+        raise ValueError(f"no {INPUT_ORDER_METADATA} metadata in this recording (written by vdps bench -o "
+                         "and vdps log --pipeline -o)")
     topics = json.loads(md["topics"])
     if not isinstance(topics, list) or not all(isinstance(t, str) and t.startswith(S.DECODED_PREFIX)
                                                for t in topics):
