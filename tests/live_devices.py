@@ -32,7 +32,8 @@ def vdps(*args, **kw) -> subprocess.CompletedProcess:
 class Rig:
     """Emulator + logger. ``start()`` returns when both run and the stream has begun."""
 
-    def __init__(self, d: Path, seconds: float, *, extra_fps: int = 0, flush_s: float = 0.5):
+    def __init__(self, d: Path, seconds: float, *, extra_fps: int = 0, flush_s: float = 0.5,
+                 logger_args: tuple = ()):
         self.d = d
         self.seconds = seconds
         self.out = d / "out.mcap"
@@ -45,9 +46,10 @@ class Rig:
              "--can", f"vdps=slcan:{d / 'can'},sleep_after_open=0",
              "--serial", f"imu={d / 'imu'}@921600", "--serial", f"gnss={d / 'gnss'}@115200",
              "-o", str(self.out), "--flush-s", str(flush_s), "--quiet",
-             "--json", str(d / "log.json")],
+             "--json", str(d / "log.json"), *map(str, logger_args)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        if not wait_for(self.out, 60):
+        rotating = any(str(a).startswith("--rotate") for a in logger_args)
+        if not wait_for(d / "out_0000.mcap" if rotating else self.out, 60):
             self.logger.kill()
             self.close()
             raise AssertionError(f"logger did not start: {self.logger.stderr.read()[-800:]}")

@@ -76,9 +76,11 @@ def test_unreadable_signal_map_is_one_line(tmp_path):
 def test_pipeline_tap_runs_the_system_live_and_reports_the_warning(tmp_path):
     """``vdps log --pipeline``: the tap feeds decoded samples to VdpsSystem (the node replay
     runs), records /est/ topics and the warning frames, and shows the latest warning. Fed a
-    simulated fishhook-suv drive in arrival order, it must report a warning (level >= 2)
-    before the point of no return (3.72 s) and decode its own frames without CRC rejects."""
+    simulated fishhook-suv drive in arrival order, it holds the first 3 s of data to size the
+    system, then its frames (in data time) must carry a warning (level >= 2) more than 1 s
+    before the point of no return (3.72 s), and decode without CRC rejects."""
     from vdps_hil.cli.log_cmd import PipelineTap
+    from vdps_hil.codecs.can_codec import VdpsCanDecoder
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.record.decode import decode_recording
     from vdps_hil.record.writer import RecordingWriter
@@ -89,23 +91,25 @@ def test_pipeline_tap_runs_the_system_live_and_reports_the_warning(tmp_path):
     out = tmp_path / "live.mcap"
     with RecordingWriter(str(out)) as w:
         tap = PipelineTap(load_vehicle("suv-model", expect_kind="model"), w)
-        assert "no warning frame yet" in tap.status_line()
-        first_warning_t = None
+        assert "sizing from the first 3 s" in tap.status_line()
         for smp in decode_recording(str(rec)):
             tap([smp])
-            lw = tap.last_warning
-            if first_warning_t is None and lw is not None and lw["warning_level"] >= 2:
-                first_warning_t = lw["t_s"]
-    assert first_warning_t is not None and first_warning_t < 3.72 - 1.0
+        assert tap.settings["probe_rates_hz"]["suspension"] > 900  # the 1 kHz suspension, measured
+        tap.finish()
     assert "warning level" in tap.status_line()
     # from the priors the frames say whether they are valid yet (in words)
     assert "valid" in tap.status_line()
     s = tap.summary()
-    assert s["estimates"] > 100 and s["warning_frames"] > 50
+    assert s["estimates"] > 100 and s["warning_frames"] > 50 and s["input_order_recorded"]
     assert tap._decoder.total_rejected == 0
+    dec = VdpsCanDecoder(source="check")
     with RecordingReader(str(out)) as r:
         topics = r.topics()
-    assert "/est/state" in topics and any(t.startswith("/est/can/") for t in topics)
+        levels = [(t, smp.fields["warning_level"]) for _, t, doc in r.iter_messages(topics=["/est/can/vdps"])
+                  for smp in dec.decode(t, doc["arbitration_id"], bytes.fromhex(doc["data_hex"]))]
+    assert "/est/state" in topics
+    first_warning_t = min(t for t, lvl in levels if lvl >= 2) / 1e9
+    assert first_warning_t < 3.72 - 1.0
 
 
 def test_pipeline_refuses_a_truth_vehicle_file(tmp_path):
@@ -124,3 +128,59 @@ def test_pipeline_params_errors_are_one_line(tmp_path):
         assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
         assert words in p.stderr
     assert not (tmp_path / "z.mcap").exists()
+
+
+def _est(path):
+    with RecordingReader(path) as r:
+        return {t: {m.t_ns: m.data for m in r.iter_records(topics=[t])}
+                for t in ("/est/state", "/est/can/vdps")}
+
+
+def _live_pipeline_run(tmp_path, *logger_args):
+    """A 5 s `vdps log --pipeline` on the emulated devices (slcan, IMU, GNSS on ptys), stopped by
+    SIGTERM: the log's JSON summary."""
+    rig = Rig(tmp_path, seconds=5.0, logger_args=("--pipeline", *logger_args))
+    try:
+        rig.sent()
+        time.sleep(0.8)
+        rig.logger.send_signal(signal.SIGTERM)
+        rc = rig.logger.wait(60)
+        err = rig.logger.stderr.read()
+    finally:
+        rig.close()
+    assert rc == 0, err[-800:]
+    return json.loads((tmp_path / "log.json").read_text())
+
+
+def test_pipeline_input_order_lets_replay_reproduce_the_live_estimates(tmp_path):
+    """`vdps log --pipeline -o` on live devices records its input order and the settings its
+    system was sized from; `vdps replay --input-order recorded` then computes, at every time the
+    tap recorded, the same /est/state message byte for byte, and the same warning frames; a
+    replay with another vehicle is refused in one line."""
+    summary = _live_pipeline_run(tmp_path)
+    assert summary["pipeline"]["input_order_recorded"] and summary["pipeline"]["error"] is None
+    live = _est(tmp_path / "out.mcap")
+    assert len(live["/est/state"]) > 10 and len(live["/est/can/vdps"]) > 50
+    p = vdps("replay", tmp_path / "out.mcap", "--input-order", "recorded", "-o", tmp_path / "r.mcap")
+    assert p.returncode == 0, p.stderr[-800:]
+    again = _est(tmp_path / "r.mcap")
+    assert {t: again["/est/state"].get(t) for t in live["/est/state"]} == live["/est/state"]
+    assert again["/est/can/vdps"] == live["/est/can/vdps"]
+    p = vdps("replay", tmp_path / "out.mcap", "--input-order", "recorded", "--vehicle", "suv-model")
+    assert p.returncode == 2 and "give --vehicle sedan-model" in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
+
+
+def test_rotated_pipeline_log_records_no_input_order(tmp_path):
+    """With --rotate-s every file is a complete recording with the tap's /est/ messages, but no
+    input order (a replay of one file would start a fresh system): replay says so in one line."""
+    summary = _live_pipeline_run(tmp_path, "--rotate-s", "2")
+    assert not summary["pipeline"]["input_order_recorded"]
+    files = summary["files"]
+    assert len(files) >= 2
+    for f in files:
+        with RecordingReader(f) as r:
+            assert "hil.input_order" not in r.metadata()
+    assert any(_est(f)["/est/state"] for f in files)
+    p = vdps("replay", files[0], "--input-order", "recorded")
+    assert p.returncode == 2 and "no recorded input order" in p.stderr

@@ -97,7 +97,7 @@ def test_node_handles_records_and_logs_every_sample_in_arrival_order(drive_recor
 
 def test_input_order_needs_a_bench_recording(drive_recording):
     with RecordingReader(io.BytesIO(drive_recording)) as r:
-        with pytest.raises(ValueError, match="not a bench recording"):
+        with pytest.raises(ValueError, match="no hil.input_order metadata"):
             input_order_samples(r)
 
 

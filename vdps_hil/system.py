@@ -120,7 +120,7 @@ from vdps_hil.model.params import IdentifiedParams, Vehicle
 
 __all__ = ["CanFrame", "IdentReport", "PredictionReport", "ReplayError", "SuspensionConditioner", "SystemConfig",
            "VdpsSystem", "default_pipeline_config", "measure_rates", "output_to_json", "outputs_digest",
-           "probe_recording", "replay_file", "sample_stats"]
+           "probe_recording", "recorded_config", "replay_file", "sample_stats", "write_output"]
 
 _SUSP = wheel_fields("susp_deflection_m")
 _NEVER = 1 << 62
@@ -673,6 +673,9 @@ INNOVATION_STATUS = ("accepted", "gated", "nan", "too_old", "disabled", "not_ini
 PROBE_SECONDS = 3.0
 """A replay infers its sensor set and suspension rate from this much of the decoded data."""
 
+DEFAULT_SUSP_SIGMA_M = 0.001
+"""Suspension deflection sigma of a replay (``--susp-sigma``; Table 1: 1 mm)."""
+
 
 def probe_recording(path, seconds: float = PROBE_SECONDS, **decode_kw) -> tuple[dict[str, float], dict[str, set]]:
     """(sample rate [Hz] per kind, catalogue fields per kind) over the first ``seconds`` of the
@@ -788,7 +791,7 @@ def _est_docs(o) -> list[tuple[str, int, dict, dict | None]]:
 def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, model=None, dbc=None,
                 signalmap=None, bus_map: Mapping[str, str] | None = None, params=None, save_params=None,
                 config: SystemConfig | None = None, identify: bool = True, predict: bool = True,
-                susp_sigma_m: float = 0.001, paper_faithful=None, copy_raw: bool = True,
+                susp_sigma_m: float = DEFAULT_SUSP_SIGMA_M, paper_faithful=None, copy_raw: bool = True,
                 sensorset=None, input_order: str = "time", jobs: int = 1) -> dict:
     """Replay a recording's ``/raw/`` topics through :class:`VdpsSystem` (``vdps replay``).
 
@@ -806,8 +809,9 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     suspension window averaging is sized from the measured sample rate and ``susp_sigma_m``
     (Table 1: 1 mm). ``input_order``: ``"time"`` (the decoded ``/raw/`` samples in time order) or
     ``"recorded"`` (the ``/decoded/`` samples in the order a live system received them, metadata
-    ``hil.input_order`` of a ``vdps bench -o`` recording: the replay reproduces the live
-    estimates; the ``/raw/`` topics are still decoded for the counters and copied). ``jobs``: 2
+    ``hil.input_order`` of a ``vdps bench -o`` or ``vdps log --pipeline -o`` recording: the replay
+    reproduces the live estimates; the ``/raw/`` topics are still decoded for the counters and
+    copied; a log's recorded settings (``recorded_config``) must match and size the config). ``jobs``: 2
     decodes the recording and writes the output in a second process (``record.replay_io``)
     while this one runs the system: the same messages, less wall time on two free cores (the
     ``recorded`` order always runs in one). Raises :class:`ReplayError` (one line)."""
@@ -843,16 +847,21 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     except RecordingError as e:
         raise ReplayError(str(e)) from None
     try:
-        recorded = None
+        recorded, probe = None, None
         if input_order == "recorded":
-            from vdps_hil.hil.node import INPUT_ORDER_METADATA, input_order_samples
+            from vdps_hil.record.input_order import INPUT_ORDER_METADATA, read_input_order
 
             if INPUT_ORDER_METADATA not in reader.metadata():
                 raise ReplayError(f"{os.fspath(path)}: no recorded input order (metadata {INPUT_ORDER_METADATA}, "
-                                  "written by vdps bench -o); use --input-order time")
+                                  "written by vdps bench -o and vdps log --pipeline -o without rotation); "
+                                  "use --input-order time")
             try:
-                recorded = input_order_samples(reader)
-            except (ValueError, KeyError, IndexError, TypeError) as e:
+                recorded, settings = read_input_order(reader)
+                if config is None:
+                    probe = recorded_config(settings, veh, start, susp_sigma_m)
+            except ReplayError:
+                raise
+            except (ValueError, KeyError, IndexError, TypeError, AttributeError) as e:
                 raise ReplayError(f"{os.fspath(path)}: recorded input order unreadable: {e}") from None
         if config is not None and sensorset is not None:
             raise ReplayError("give a sensor set or a config, not both")
@@ -868,7 +877,7 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
             head: list[Sample] = []
             kind_map, nodes, sensors_desc = {}, [], None
             if config is None:  # the sensor set and suspension rate from the first seconds, decoded once
-                head, rates, fields = sample_stats(side)
+                head, rates, fields = sample_stats(side) if probe is None else ([], *probe)
                 config, kind_map, nodes, sensors_desc = _replay_config(
                     rates, fields, veh, susp_sigma_m, paper_faithful, sensorset, identify=identify, predict=predict)
             side.start_output({"source": "vdps replay", "input": os.path.basename(os.fspath(path)),
@@ -933,6 +942,31 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
             raise ReplayError(str(e)) from None
         doc["saved_params"] = os.fspath(save_params)
     return doc
+
+
+def recorded_config(settings: Mapping[str, Any], veh: Vehicle, start: IdentifiedParams | None,
+                    susp_sigma_m: float) -> tuple[dict[str, float], dict[str, set]] | None:
+    """The probe statistics (rates [Hz] per kind, fields per kind) a live ``vdps log --pipeline``
+    sized its system from, recorded with its input order (``system`` setting), or None (a bench
+    recording: the replay probes the ``/raw/`` topics). The live system's vehicle, starting
+    parameters and suspension sigma must be the replay's, else ReplayError names the option:
+    ``--input-order recorded`` is for reproducing the live run."""
+    sysd = settings.get("system")
+    if sysd is None:
+        return None
+    if sysd["vehicle_sha256"] != veh.source_sha256:
+        raise ReplayError(f"the live system ran vehicle {sysd['vehicle']!r} (another file than {veh.name!r}): "
+                          f"give --vehicle {sysd['vehicle']} to reproduce it")
+    mine = None if start is None else _clean(start.as_dict())
+    if sysd["start_params"] != mine:
+        raise ReplayError("the live system started from " + (
+            "the priors: drop --params/--model" if sysd["start_params"] is None else
+            f"the parameters of {sysd.get('params_file')!r}: give them as --params") + " to reproduce it")
+    if sysd["susp_sigma_m"] != susp_sigma_m:
+        raise ReplayError(f"the live system used --susp-sigma {sysd['susp_sigma_m']!r}: give it to reproduce it")
+    rates = {str(k): float(v) for k, v in sysd["probe_rates_hz"].items()}
+    fields = {str(k): {str(f) for f in v} for k, v in sysd["probe_fields"].items()}
+    return rates, fields
 
 
 def _load_model_vehicle(vehicle) -> Vehicle:
@@ -1020,6 +1054,19 @@ def _replay_config(rates: Mapping[str, float], fields: Mapping[str, set], veh, s
     return cfg, kind_map, nodes, desc
 
 
+def write_output(o, writer) -> None:
+    """One system output into a RecordingWriter in the ``vdps replay`` layout: a ``CanFrame`` on
+    ``/est/can/<bus>`` (vdps.RawCan.v1, tx), the others by ``_est_docs``."""
+    from vdps_hil.record import schemas as S
+
+    if isinstance(o, CanFrame):
+        doc = S.raw_can_doc(o.t_ns, o.arbitration_id, o.data, direction="tx")
+        writer.write_json(f"/est/can/{o.bus}", S.RAW_CAN, o.t_ns, doc, channel_metadata={"bus": o.bus})
+        return
+    for topic, t, vals, sig in _est_docs(o):
+        writer.write_estimate(topic, t, vals, sig)
+
+
 class _Summary:
     """Running summary of a replay (the ``--json`` document)."""
 
@@ -1083,18 +1130,7 @@ class _Summary:
                 self.frames["sent"] += 1
                 self.frames["max_level"] = max(self.frames["max_level"], (o.data[1] >> 4) & 0x3)
             if writer is not None:
-                self._write(o, writer)
-
-    @staticmethod
-    def _write(o, writer) -> None:
-        from vdps_hil.record import schemas as S
-
-        if isinstance(o, CanFrame):
-            doc = S.raw_can_doc(o.t_ns, o.arbitration_id, o.data, direction="tx")
-            writer.write_json(f"/est/can/{o.bus}", S.RAW_CAN, o.t_ns, doc, channel_metadata={"bus": o.bus})
-            return
-        for topic, t, vals, sig in _est_docs(o):
-            writer.write_estimate(topic, t, vals, sig)
+                write_output(o, writer)
 
     def document(self, system: "VdpsSystem", dec, veh: Vehicle) -> dict:
         from vdps_hil.estimation.states import STATE_NAMES

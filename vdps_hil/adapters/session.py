@@ -90,7 +90,9 @@ class Recorder:
             first = str(e).splitlines()[0] if str(e) else ""
             self.problems.append(f"{what}: {type(e).__name__}: {first}")
 
-    def write(self, ev) -> None:
+    def write(self, ev) -> bool:
+        """Write one event; True when it is in the recording (for a sample: its ``/decoded/``
+        record, even if its ``/gnss/fix`` copy was refused)."""
         w = self.writer
         try:
             if isinstance(ev, RawCan):
@@ -102,13 +104,17 @@ class Recorder:
             elif isinstance(ev, Sample):
                 w.write_sample(ev)
                 if self.location_fix and ev.kind == "gnss_pos":
-                    w.write_location_fix(ev)
+                    try:
+                        w.write_location_fix(ev)
+                    except (ValueError, TypeError, KeyError, OverflowError) as e:
+                        self._fail(ev.source, e)  # counted; the sample itself is written
             else:
                 raise TypeError(f"not an adapter event: {type(ev).__name__}")
         except (ValueError, TypeError, KeyError, OverflowError) as e:
             self._fail(getattr(ev, "source", "?"), e)
-            return
+            return False
         self.written += 1
+        return True
 
     def write_many(self, events: Iterable) -> None:
         for ev in events:
@@ -178,7 +184,7 @@ class LogSession:
         self.flush_s, self.health_s, self.status_s = flush_s, health_s, status_s
         self.status = status
         self.poll_s = poll_s
-        self.tap = tap  # called with every drained batch of events after they are written
+        self.tap = tap  # called with the events of every drained batch the recording took
         self._threads: list[threading.Thread] = []
         self._adapter_stop = threading.Event()
         self.errors: list[str] = []
@@ -199,8 +205,12 @@ class LogSession:
         return lines
 
     def _write(self, events: list) -> None:
-        self.recorder.write_many(events)
-        if self.tap is not None and events:
+        if self.tap is None:
+            self.recorder.write_many(events)
+            return
+        write = self.recorder.write
+        events = [ev for ev in events if write(ev)]  # the tap sees what the file holds
+        if events:
             try:
                 self.tap(events)
             except Exception as e:  # noqa: BLE001 - the recording must go on whatever the tap does

@@ -122,8 +122,10 @@ class _Status:
 @click.option("--quiet", is_flag=True, help="No live status.")
 @click.option("--pipeline", is_flag=True,
               help="Run the estimator, identifier, predictor and warning live on the decoded "
-                   "samples; its estimates and warning frames are recorded under /est/ and the "
-                   "latest warning shows in the status line.")
+                   "samples (configured as vdps replay does, from the first 3 s of data); its "
+                   "estimates and warning frames are recorded under /est/, the latest warning "
+                   "shows in the status line, and the input order is recorded so `vdps replay "
+                   "FILE --input-order recorded` reproduces the run (not with --rotate-mb/-s).")
 @click.option("--vehicle", default="sedan-model", show_default=True, metavar="FILE",
               help="Model vehicle file for --pipeline.")
 @click.option("--params", default=None, metavar="FILE",
@@ -209,11 +211,18 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
         stop.set()
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    if pipeline:
-        tap = PipelineTap(model, writer, start)
+    if pipeline:  # a rotated recording gets no input order (PipelineTap)
+        tap = PipelineTap(model, writer, start, record_order=not (rotate_mb or rotate_s),
+                          params_file=None if params is None else os.path.basename(params))
     session = LogSession(adapters, writer, flush_s=flush_s, status=_Status(quiet), tap=tap)
     try:
         summary = session.run(stop, duration)
+        if tap is not None and session.tap is tap:  # a tap that failed wrote no order
+            try:
+                tap.finish()
+            except Exception as e:  # noqa: BLE001 - the recording is closed properly whatever it does
+                session.errors.append(f"tap: {type(e).__name__}: {e}")
+                summary["reader_errors"] = list(session.errors)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
@@ -231,48 +240,132 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
 
 
 class PipelineTap:
-    """``vdps log --pipeline``: feeds every decoded sample, in arrival order, to the paper's
-    Figure 2 node (:class:`vdps_hil.system.VdpsSystem`, the same node ``vdps replay`` runs),
-    records its estimates under ``/est/state`` and its VDPS_Warning frames under
-    ``/est/can/<bus>``, and reports the latest warning for the status line. It never sends on
-    the bus (the bench does); the recording lets ``vdps replay`` reproduce the run."""
+    """``vdps log --pipeline``: feeds every decoded sample the recording took, in arrival order,
+    to the paper's Figure 2 node (:class:`vdps_hil.system.VdpsSystem`, the same node ``vdps
+    replay`` runs), records its estimates on ``/est/state`` (10 Hz) and its VDPS_Warning frames
+    on ``/est/can/<bus>`` in the layout of ``vdps replay``, and reports the latest warning for
+    the status line. It never sends on the bus (the bench does).
 
-    def __init__(self, model_vehicle, writer, start_params=None):
+    Configuration as ``vdps replay`` derives it (``system._replay_config``): the samples of the
+    first ``probe_s`` (``PROBE_SECONDS``, 3 s) of data are held, the sensor set is inferred from
+    their fields and the suspension averaging sized from their rate (suspension sigma
+    ``DEFAULT_SUSP_SIGMA_M``), then they go to the system at once -- so the first estimates and
+    warnings come out after those seconds. ``record_order``: every sample fed is noted
+    (``record.input_order``) and :meth:`finish` writes the input order with the settings the
+    system was sized from, so ``vdps replay FILE --input-order recorded`` (same ``--vehicle``
+    and ``--params``) reproduces the run's ``/est/`` messages. ``vdps log`` records no order when
+    it rotates (``--rotate-mb/-s``): a replay of one file starts a fresh system where the live one
+    had run through the files before it, so only the first file could be reproduced."""
+
+    def __init__(self, model_vehicle, writer, start_params=None, *, record_order: bool = True,
+                 params_file: str | None = None, probe_s: float | None = None):
         from vdps_hil.bus.samples import Sample
         from vdps_hil.codecs.can_codec import VdpsCanDecoder
-        from vdps_hil.system import CanFrame, SystemConfig, VdpsSystem
         from vdps_hil.estimation.pipeline import Estimate
+        from vdps_hil.record.input_order import InputOrder
+        from vdps_hil.system import PROBE_SECONDS, CanFrame
 
         self._sample_type, self._frame_type, self._est_type = Sample, CanFrame, Estimate
-        self.system = VdpsSystem(model_vehicle, SystemConfig(start_params=start_params))
+        self.model, self.start, self.params_file = model_vehicle, start_params, params_file
         self.writer = writer
+        self.probe_s = PROBE_SECONDS if probe_s is None else probe_s
+        self.system = None
+        self.settings: dict | None = None  # what the system was sized from (recorded with the order)
+        self.kind_map: dict[str, str] = {}
+        self.error: str | None = None  # the system could not be configured (no IMU): not running
+        self.order = InputOrder() if record_order else None
+        self._pending: list = []
+        self._t0: int | None = None
+        self._fed_since_clear = 0
         self._decoder = VdpsCanDecoder(source="pipeline")
         self.samples = self.estimates = self.frames = 0
         self.last_warning: dict | None = None
 
     def __call__(self, events) -> None:
         for ev in events:
-            if not isinstance(ev, self._sample_type) or not ev.valid:
+            if not isinstance(ev, self._sample_type):
                 continue
-            self.samples += 1
-            for out in self.system.handle(ev):
-                if isinstance(out, self._est_type):
-                    self.estimates += 1
-                    if self.estimates % 10 == 0:  # 10 Hz into the recording
-                        self.writer.write_estimate("state", out.t_ns, dict(zip(
-                            ("x_g_m", "y_g_m", "z_g_m", "vx_g_mps", "vy_g_mps", "vz_g_mps", "phi_g_rad",
-                             "theta_g_rad", "psi_g_rad", "phi_r_rad", "theta_r_rad", "psi_v_rad"), out.x)))
-                elif isinstance(out, self._frame_type):
-                    self.frames += 1
-                    self.writer.write_json(f"/est/can/{out.bus}", "vdps.RawCan.v1", out.t_ns, {
-                        "t_ns": out.t_ns, "arbitration_id": out.arbitration_id, "is_extended_id": False,
-                        "is_fd": False, "is_remote_frame": False, "is_error_frame": False,
-                        "dlc": len(out.data), "data_hex": out.data.hex(), "direction": "tx"})
-                    for s in self._decoder.decode(out.t_ns, out.arbitration_id, out.data):
-                        if s.kind == "warning":
-                            self.last_warning = dict(s.fields, t_s=out.t_ns / 1e9)
+            if self.system is not None:
+                self._feed(ev)
+            elif self.error is None:
+                self._pending.append(ev)
+                if self._t0 is None:
+                    self._t0 = ev.t_ns
+                if ev.t_ns - self._t0 > self.probe_s * 1e9:  # sample_stats' end of the window
+                    self._configure()
+
+    def _configure(self) -> None:
+        """Size the system from the held samples as ``replay_file`` does, then feed them."""
+        from dataclasses import replace
+
+        from vdps_hil.system import DEFAULT_SUSP_SIGMA_M, ReplayError, VdpsSystem, _replay_config, sample_stats
+
+        pending, self._pending = self._pending, []
+        _, rates, fields = sample_stats(iter(pending), self.probe_s)
+        try:
+            cfg, self.kind_map, _, _ = _replay_config(rates, fields, self.model, DEFAULT_SUSP_SIGMA_M, None,
+                                                      identify=True, predict=True)
+        except ReplayError as e:
+            self.error = str(e)
+            return
+        if self.start is not None:
+            cfg = replace(cfg, start_params=self.start)
+        self.system = VdpsSystem(self.model, cfg)
+        self.system.clear_input_log()
+        self.settings = {"vehicle": self.model.name, "vehicle_sha256": self.model.source_sha256,
+                         "start_params": None if self.start is None else self.start.as_dict(),
+                         "params_file": self.params_file, "susp_sigma_m": DEFAULT_SUSP_SIGMA_M,
+                         "probe_rates_hz": rates, "probe_fields": {k: sorted(v) for k, v in fields.items()}}
+        for s in pending:
+            self._feed(s)
+
+    def _feed(self, s) -> None:
+        if self.order is not None:
+            self.order.note(s)
+        self.samples += 1
+        if s.kind in self.kind_map:  # as replay_file
+            s = self._sample_type(s.t_ns, s.source, self.kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
+        self._outputs(self.system.handle(s))
+        self._fed_since_clear += 1
+        if self._fed_since_clear >= 4096:  # a live run keeps the file, not a copy in memory
+            self.system.clear_input_log()
+            self._fed_since_clear = 0
+
+    def _outputs(self, outs) -> None:
+        from vdps_hil.system import write_output
+
+        for out in outs:
+            if isinstance(out, self._est_type):
+                self.estimates += 1
+                if self.estimates % 10 == 0:  # 10 Hz into the recording
+                    write_output(out, self.writer)
+            elif isinstance(out, self._frame_type):
+                self.frames += 1
+                write_output(out, self.writer)
+                for s in self._decoder.decode(out.t_ns, out.arbitration_id, out.data):
+                    if s.kind == "warning":
+                        self.last_warning = dict(s.fields, t_s=out.t_ns / 1e9)
+
+    def finish(self) -> None:
+        """End of the run (before the writer closes): a system still waiting for its probe
+        window is sized from what came, its last outputs are written (as a replay's end) and,
+        with ``record_order``, the input order with the settings (metadata
+        ``hil.input_order``)."""
+        if self.system is None and self._pending and self.error is None:
+            self._configure()
+        if self.system is None:
+            return
+        self._outputs(self.system.finish())
+        if self.order is not None:
+            from vdps_hil.record.input_order import INPUT_ORDER_METADATA
+
+            self.writer.add_metadata(INPUT_ORDER_METADATA, self.order.metadata(system=self.settings))
 
     def status_line(self) -> str:
+        if self.system is None:
+            if self.error is not None:
+                return f"pipeline: not running ({self.error})"
+            return f"pipeline: sizing from the first {self.probe_s:g} s of data ({len(self._pending)} samples held)"
         w = self.last_warning
         if w is None:
             return f"pipeline: {self.samples} samples, {self.estimates} estimates, no warning frame yet"
@@ -285,4 +378,5 @@ class PipelineTap:
 
     def summary(self) -> dict:
         return {"samples": self.samples, "estimates": self.estimates, "warning_frames": self.frames,
-                "last_warning": self.last_warning}
+                "last_warning": self.last_warning, "error": self.error,
+                "input_order_recorded": self.order is not None and self.system is not None}

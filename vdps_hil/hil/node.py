@@ -29,8 +29,8 @@ arrival order.
 
 The order in which samples reached ``system.handle`` is the system's own ``input_log``; the
 node also writes it to the recording as the metadata record ``hil.input_order`` (topic index
-per sample, in order), so a replay can feed the recorded ``/decoded/`` samples in exactly the
-live order (``input_order_samples``).
+per sample written, in order; ``record.input_order``), so a replay can feed the recorded
+``/decoded/`` samples in exactly the live order (``input_order_samples``).
 
 Output cycles (``hil.latency``): every ``handle`` adds a row to ``cycles`` with the index of
 the raw record that carried the sample in its stream (the CAN frames received up to it, or the
@@ -41,12 +41,9 @@ The node never opens truth: it has the model vehicle, the wires and the bench cl
 
 from __future__ import annotations
 
-import base64
 import heapq
-import json
 import threading
 import time
-import zlib
 from typing import Any, Callable
 
 from vdps_hil.adapters.base import RawCan, RawSerial, Subscription
@@ -58,6 +55,7 @@ from vdps_hil.adapters.session import Recorder
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.can_codec import VdpsCanDecoder
 from vdps_hil.record import schemas as S
+from vdps_hil.record.input_order import INPUT_ORDER_METADATA, InputOrder, input_order_samples
 from vdps_hil.system import _est_docs  # the /est/ layout of ``vdps replay``
 
 from .latency import CycleLog
@@ -67,7 +65,6 @@ __all__ = ["PipelineNode", "InputSequencer", "InterfaceTimeCanAdapter", "DeviceT
 
 IMU_BAUD = 921600
 GNSS_BAUD = 115200
-INPUT_ORDER_METADATA = "hil.input_order"
 LIVE_CLOCK_JUMP_S = 0.25
 """Device clock alignment on the bench: a change of host-minus-device time below this is a host
 delay (a reader held up by the GIL or the machine's load), not a device clock step (``vdps
@@ -256,8 +253,7 @@ class PipelineNode:
         self.received = {"can_frames": 0, "imu_bytes": 0, "gnss_bytes": 0, "samples": 0}
         self._src_of = {self.can.name: "can", "imu": "imu", "gnss": "gnss"}
         self._last_idx = {"can": -1, "imu": -1, "gnss": -1}
-        self._order_topics: dict[str, int] = {}
-        self._order: bytearray = bytearray()
+        self.input_order = InputOrder()
         self._stop_adapters = threading.Event()
         self._threads: list[threading.Thread] = []
         self.errors: list[str] = []
@@ -376,13 +372,6 @@ class PipelineNode:
             self.counter_breaks += 1
         self._counters_seen[msg.arbitration_id] = value
 
-    def _note_order(self, s: Sample) -> None:
-        topic = f"/decoded/{s.source}/{s.kind}"
-        k = self._order_topics.get(topic)
-        if k is None:
-            k = self._order_topics[topic] = len(self._order_topics)
-        self._order.append(k)
-
     def release_held(self) -> None:
         """Hand the system every sample the sequencer still holds (end of the input)."""
         self._expire(everything=True)
@@ -397,9 +386,8 @@ class PipelineNode:
         """Hand one sample to the system (recording it and its place in the input order), send or
         record the outputs, log the cycle against the raw record that carried the sample."""
         s, src, idx = item
-        if self.recorder is not None:
-            self.recorder.write(s)
-            self._note_order(s)
+        if self.recorder is not None and self.recorder.write(s):
+            self.input_order.note(s)
         outs = self.system.handle(s)
         n_frames = 0
         first = len(self.frames_sent)
@@ -457,10 +445,7 @@ class PipelineNode:
             return
         rec.write_health(self.adapters)
         rec.write_final_health(self.adapters, extra)
-        topics = sorted(self._order_topics, key=self._order_topics.get)
-        self.writer.add_metadata(INPUT_ORDER_METADATA, {
-            "topics": json.dumps(topics), "count": str(len(self._order)),
-            "order_zlib_b64": base64.b64encode(zlib.compress(bytes(self._order), 9)).decode("ascii")})
+        self.writer.add_metadata(INPUT_ORDER_METADATA, self.input_order.metadata())
 
     def status(self) -> dict:
         return {a.name: a.status() for a in self.adapters}
@@ -480,22 +465,3 @@ class PipelineNode:
                          "rejected": gnss_c.get("rejected", 0), "queue_overflow": gnss_c.get("queue_overflow", 0)},
                 "subscription_overflows": self.sub.overflows, "reader_errors": list(self.errors)}
 
-
-def input_order_samples(reader) -> list[Sample]:
-    """The ``/decoded/`` samples of a bench recording in the order the live system received them
-    (metadata ``hil.input_order``): what ``VdpsSystem.replay`` needs to reproduce the live run."""
-    md = reader.metadata().get(INPUT_ORDER_METADATA)
-    if md is None:
-        raise ValueError(f"no {INPUT_ORDER_METADATA} metadata in this recording (not a bench recording)")
-    topics = json.loads(md["topics"])
-    order = zlib.decompress(base64.b64decode(md["order_zlib_b64"]))
-    per_topic: dict[str, list] = {t: [] for t in topics}
-    for rec in reader.iter_records(topics=topics):
-        per_topic[rec.topic].append(rec.data)
-    pos = [0] * len(topics)
-    out = []
-    for k in order:
-        data = per_topic[topics[k]][pos[k]]
-        pos[k] += 1
-        out.append(Sample.from_json(json.loads(data)))
-    return out
