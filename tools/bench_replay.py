@@ -10,10 +10,16 @@ Table 1 rates, suspension 1 Hz; ``table1-susp1k``: suspension 1 kHz) and replaye
 * ``+identify``: with the identifier (100 Hz);
 * ``+predict``: with the 5 s predictor at 10 Hz and the warning node;
 * ``replay_file``: the whole ``vdps replay`` (decode + system + writing OUT.mcap), estimator
-  only and complete.
+  only and complete, in this process;
+* ``command``: the ``vdps replay FILE -o OUT --no-identify --no-predict`` command in a fresh
+  interpreter, ``--jobs 1`` (one process) and ``--jobs 2`` (decoding and the output in a second
+  process, ``record/replay_io.py``; the CLI's default on two or more cores): wall time, with the
+  interpreter's start-up and without it (the ``--json`` ``realtime_factor``).
 
 RTF = simulated seconds / CPU seconds of this process (``time.process_time``, best of
-``--repeat``): on a shared machine the wall clock also counts other processes' load. EKF cycle time: wall time of
+``--repeat``) for the in-process stages: on a shared machine the wall clock also counts other
+processes' load. The ``command`` figures are wall time (two processes need two free cores; on a
+loaded machine ``--jobs 2`` can be slower than one process). EKF cycle time: wall time of
 ``pipeline.handle`` over the run divided by the number of predict cycles (10 ms), and the
 per-kind cost from ``tools/bench_ekf.py``'s micro-benchmark when it is present.
 
@@ -21,40 +27,41 @@ Usage::
 
     .venv/bin/python tools/bench_replay.py [--duration 30] [--repeat 2] [--json FILE]
 
-Measured (``--duration 30 --repeat 3``, 2-core shared VM, load average 3.2-4.8 during the run,
-i.e. other processes on both cores: CPU-time figures are inflated by the contention)::
+Measured (``--duration 30 --repeat 3``, the 2-core VM with nothing else running, load average
+~1.0 from the benchmark itself; session 3)::
 
-    RTF [x]                 decode  estimator  +identify  +predict | vdps replay -o: est.  +ident.  full
-    table1         before     19       44          -          -     |                  8.2      -      2.4
-                   now        37.8     47.7       13.9        4.1   |                 12.6     7.2     3.1
-    table1-susp1k  before     17       11          -          -     |                  3.6      -      1.9
-                   now        28.1     11.3        7.1        3.1   |                  5.5     4.1     2.4
-    EKF cycle inside the chain: 145 us (table1) / 209 us (table1-susp1k) per 10 ms
+    RTF [x]                 decode  estimator  +identify  +predict | replay -o in-process: est.  +ident.  full
+    table1         s2         37.8     47.7       13.9        4.1   |                        12.6     7.2     3.1
+                   s3         45.3     58.5       15.7        5.7   |                        15.9     8.5     4.4
+    table1-susp1k  s2         28.1     11.3        7.1        3.1   |                         5.5     4.1     2.4
+                   s3         31.8     13.3        7.9        4.3   |                         6.9     4.8     3.2
 
-("before": the figures of the previous session, also on a loaded machine.) Load-independent
-comparison, user-space instructions per replay of a 20 s drive (``perf stat -e instructions:u``,
-two replays minus one, imports excluded): ``vdps replay -o`` estimator only, table1 17.9 G ->
-14.4 G (-20 %), table1-susp1k 41.5 G -> 36.1 G (-13 %); complete (identification +
-prediction), table1 72.5 G -> 69.1 G (-5 %). Outputs unchanged: every ``/raw/`` and ``/est/``
-message of the output MCAP and the ``--json`` document are identical to before except
-``rejected.wheel_speed`` (no longer counts each half of the four wheel speeds).
+    command vdps replay -o, estimator only, 30 s drive, wall (best of 3):
+                     --jobs 1: s / x with start-up / x replay    --jobs 2: s / x with start-up / x replay
+    table1           1.95 s   15.4x   16.9x                       1.19 s   25.2x   29.7x
+    table1-susp1k    4.00 s    7.5x    7.9x                       2.90 s   10.3x   11.0x
+    EKF cycle inside the chain: 118 us (table1) / 170 us (table1-susp1k) per 10 ms
 
-Where the time goes (table1, 20 s, estimator only, ``-o``; instructions): decoding 40 % (IMU
-stream and clock alignment 14 %, CAN frames 13 %, MCAP reading 6 %, reorder buffer the rest),
-the system 33 % (the EKF itself about a third of it; per-sample handling of the 1 kHz IMU and
-the 2 x 1 kHz wheel-speed half-frames the rest), copying the raw topics 9 %, encoding the
-``/est/`` topics 11 % (mostly ``float.__repr__``, the bytes must stay those of ``json.dumps``),
-the probe of the first 3 s (suspension rate, sensor set) 6 %. With a 1 kHz suspension the EKF's
-delayed y1_sus updates (window means stamped at their mean time, re-propagating the history)
-dominate. With identification and prediction (table1, from the figures above): the 5 s predictor
-(a new prediction at 10 Hz, about 17 ms CPU each) takes about 55 % of the complete replay's CPU
-time and the identifier with its feeder about 16 %; rebuilding the predictor for every new
-parameter set (``with_params``, 100 Hz) about 2 % (cProfile). The first bar (20x) is not
-reached for the whole ``vdps replay -o`` path: decode and estimator are each well above it, but
-the chain of Python objects per sample (64 000 samples from 48 000 raw records per 20 s at
-Table-1 rates) and the byte-identical JSON output leave ~13x on this machine; the EKF's
-small-matrix numpy calls cannot be fused or reordered without changing the estimates in their
-last bits (BLAS sums differ from Python's: 110 864 of 120 000 3x3 products differed in a test).
+("s2": the previous session's figures, measured under load 3-5; "s3": this session.) On a
+120 s table1 drive (``replay_file(..., jobs=J)``, wall, best of 3): one process 7.15 s (16.8x),
+two processes 3.66 s (32.8x); then the decoding process is the longer side (3.7 s CPU against
+the system's 3.1 s). What made the difference this session: the recording is decoded once (the
+3 s sensor-set probe reads the replay's own decoder), the raw topics are copied in runs per
+channel, per-sample work in the estimator (bit-identical), the EKF's chi-square gate without
+importing scipy.stats (0.4 s of start-up), DBCs from a JSON cache without importing cantools and
+python-can (0.2 s of start-up), and ``--jobs 2``. Outputs: every ``/raw/`` and ``/est/`` message
+identical to before on four reference replays (table1, table1-susp1k, the complete chain, the
+real RAV4 drive with its own DBC and signal map), with one and two processes, except the
+innovation messages' ``gate`` value, which moved by 1-2 ulp with the gate's own quantile.
+
+Where the time goes now (table1, one process): per-object Python work on ~64,000 samples from
+~48,000 raw records per 20 s, spread in items of 5-40 ms each (decoding ~0.42 s per 20 s: CAN
+3.2 us per frame, IMU 8 us per packet; the system ~0.35 s: alpha-beta and handler bodies, EKF
+predict 32 us, estimate 24 us; the raw copy ~0.08 s; /est/ JSON ~0.08 s, mostly
+``float.__repr__``). The goal (100x) would need compiled code for the per-sample work (the EKF's
+small numpy products cannot be fused or reordered without changing the estimates in their last
+bits); with a 1 kHz suspension the EKF's delayed y1_sus updates (window means stamped at their
+mean time, re-propagating the history) dominate.
 """
 
 from __future__ import annotations

@@ -310,7 +310,8 @@ class RecordingProcess:
         msg = _receive(self._proc.stdout)
         if msg is None:
             code = self._proc.wait()
-            raise ReplayIOError(f"the replay's decoding process ended without a result (exit status {code})")
+            raise ReplayIOError(f"the replay's decoding process ended without a result (exit status {code}); "
+                                "--jobs 1 decodes in this process")
         tag, payload = msg
         if tag == "error":
             raise ReplayIOError(str(payload))
