@@ -12,16 +12,23 @@ from live_devices import Rig, vdps
 from vdps_hil.record.reader import RecordingReader
 
 
-def test_nothing_lost_at_table1_rates_and_sigterm_closes_cleanly(tmp_path):
-    rig = Rig(tmp_path, seconds=2.0)
+def _stop_with_sigterm(rig, wait_s: float):
+    """The devices' whole stream sent, 0.8 s for what is in flight to reach the file, then
+    SIGTERM to the logger: (what was sent, exit code, stderr)."""
     try:
         sent = rig.sent()
-        time.sleep(0.8)  # what is in flight reaches the file
+        time.sleep(0.8)
         rig.logger.send_signal(signal.SIGTERM)
-        rc = rig.logger.wait(30)
+        rc = rig.logger.wait(wait_s)
         err = rig.logger.stderr.read()
     finally:
         rig.close()
+    return sent, rc, err
+
+
+def test_nothing_lost_at_table1_rates_and_sigterm_closes_cleanly(tmp_path):
+    rig = Rig(tmp_path, seconds=2.0)
+    sent, rc, err = _stop_with_sigterm(rig, 30)
     assert rc == 0, err[-800:]
     assert sum(sent["dropped_at_device"].values()) == 0  # the logger kept up with the links
     s = sent["sent"]
@@ -139,15 +146,7 @@ def _est(path):
 def _live_pipeline_run(tmp_path, *logger_args):
     """A 5 s `vdps log --pipeline` on the emulated devices (slcan, IMU, GNSS on ptys), stopped by
     SIGTERM: the log's JSON summary."""
-    rig = Rig(tmp_path, seconds=5.0, logger_args=("--pipeline", *logger_args))
-    try:
-        rig.sent()
-        time.sleep(0.8)
-        rig.logger.send_signal(signal.SIGTERM)
-        rc = rig.logger.wait(60)
-        err = rig.logger.stderr.read()
-    finally:
-        rig.close()
+    _, rc, err = _stop_with_sigterm(Rig(tmp_path, seconds=5.0, logger_args=("--pipeline", *logger_args)), 60)
     assert rc == 0, err[-800:]
     return json.loads((tmp_path / "log.json").read_text())
 
