@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
 import sys
 
 import pytest
@@ -68,7 +69,7 @@ def test_replay_without_truth_equals_replay_with_truth(drive, tmp_path):
     assert len(a) > 300 and a == b
     ja = json.loads((tmp_path / "a.json").read_text())
     jb = json.loads((tmp_path / "b.json").read_text())
-    for k in ("input", "output", "wall_time_s", "realtime_factor"):
+    for k in ("input", "output", "wall_time_s", "realtime_factor", "jobs"):
         ja.pop(k), jb.pop(k)
     assert ja == jb
 
@@ -149,6 +150,24 @@ def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_p
 def test_bad_options_are_one_line_errors(drive, args, needle):
     code, text = run("replay", str(drive), "--no-predict", *args)
     assert code == 2 and needle in text and len(text.strip().splitlines()) == 1
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity on this system")
+def test_jobs_default_follows_the_cpus_this_process_may_use(drive, tmp_path):
+    """Without --jobs the replay uses two processes when it may run on two or more CPUs, one when
+    its affinity gives it a single CPU (a container or `taskset -c 0`); the JSON says which."""
+    import subprocess
+
+    def jobs_used(cpus):
+        out = tmp_path / f"j{len(cpus)}.json"
+        subprocess.run([sys.executable, "-c", "from vdps_hil.cli.main import entry; entry()", "replay", str(drive),
+                        "--no-identify", "--no-predict", "--json", str(out)], check=True, capture_output=True,
+                       preexec_fn=lambda: os.sched_setaffinity(0, cpus))
+        return json.loads(out.read_text())["jobs"]
+
+    mine = os.sched_getaffinity(0)
+    assert jobs_used({min(mine)}) == 1
+    assert jobs_used(mine) == (2 if len(mine) >= 2 else 1)
 
 
 def test_jobs_out_of_range_is_one_line(drive, capsys):

@@ -15,7 +15,7 @@ from vdps_hil.record.replay_io import LocalRecordingSide, RecordingProcess, Repl
 from vdps_hil.sim.drive import Drive
 from vdps_hil.system import ReplayError, replay_file
 
-WALL_KEYS = {"wall_time_s", "realtime_factor", "output"}
+WALL_KEYS = {"wall_time_s", "realtime_factor", "output", "jobs"}
 
 
 @pytest.fixture(scope="module")
@@ -61,6 +61,7 @@ def test_without_output_the_summaries_agree(drive):
     a = replay_file(drive, identify=False, predict=False, jobs=1)
     b = replay_file(drive, identify=False, predict=False, jobs=2)
     assert _doc(a) == _doc(b) and a["estimates_summary"]["count"] > 250
+    assert (a["jobs"], b["jobs"]) == (1, 2)
 
 
 def test_a_refused_configuration_writes_nothing_and_leaves_no_process(drive, tmp_path):

@@ -927,7 +927,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     doc = summary.document(system, dec, veh)
     doc.update({"input": os.fspath(path), "output": None if output is None else os.fspath(output),
                 "vehicle": veh.name, "sensor_set": sensors_desc, "wall_time_s": wall,
-                "realtime_factor": (doc["duration_s"] / wall) if wall > 0 and doc["duration_s"] else None})
+                "realtime_factor": (doc["duration_s"] / wall) if wall > 0 and doc["duration_s"] else None,
+                "jobs": 2 if isinstance(side, RecordingProcess) else 1})
     if model_doc is not None:
         doc["model"] = model_doc
     if save_params is not None:

@@ -27,6 +27,14 @@ Output topics: the /raw/ topics copied, /est/state (12 states of eq 7 + road-rel
 /est/ident (identified parameters, sigmas), /est/prediction (rollover assessment),
 /est/can/vdps (the VDPS_Warning frames the system sent)."""
 
+def _usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask where the system has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
 PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_accel_as_acceleration", "all")
 
 
@@ -63,8 +71,8 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
                    "order the live system received them (a vdps bench -o recording), reproducing its estimates.")
 @click.option("--jobs", type=click.IntRange(1, 2), default=None, metavar="N",
               help="2: decode the recording and write the output in a second process while this one runs "
-                   "the system (same output, less wall time) [default: 2 on a machine with two or more "
-                   "cores, else 1].")
+                   "the system (same output, less wall time) [default: 2 when this process may use two or "
+                   "more cores, else 1].")
 def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, output, json_out, params,
            save_params, no_identify, no_predict, susp_sigma_m, paper_faithful, input_order, jobs):
     """Replay FILE.mcap through the estimator, identifier, predictor and warning (the paper's
@@ -93,7 +101,7 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
                           signalmap=signalmap, bus_map=buses or None, params=params, save_params=save_params,
                           identify=not no_identify, predict=not no_predict, susp_sigma_m=susp_sigma_m,
                           paper_faithful=paper_faithful or None, sensorset=sensorset, input_order=input_order,
-                          jobs=jobs if jobs is not None else (2 if (os.cpu_count() or 1) >= 2 else 1))
+                          jobs=jobs if jobs is not None else (2 if _usable_cpus() >= 2 else 1))
     except ReplayError as e:
         raise UserError(str(e)) from None
     es = doc["estimates_summary"]
