@@ -93,14 +93,29 @@ def test_errors_in_the_second_process_are_one_line(drive, tmp_path):
     with pytest.raises(ReplayError) as e:
         replay_file(drive, identify=False, predict=False, output=tmp_path / "no" / "such" / "dir.mcap", jobs=2)
     assert "cannot write" in str(e.value) and len(str(e.value).splitlines()) == 1
-    side = RecordingProcess(drive)
+    side = RecordingProcess(drive)  # dies before it has sent anything
+    os.kill(side._proc.pid, signal.SIGKILL)
+    with pytest.raises(ReplayIOError, match="ended without a result"):
+        next(iter(side))
+    side.abort()
+
+
+def test_a_child_that_dies_half_way_is_one_line(tmp_path):
+    """Killed in the middle of a 10 s drive (its ~2.5 MB of sample frames cannot all wait in
+    the 1 MiB pipe, so after the first frame the child is still decoding): the samples already
+    sent arrive, then one line, never a hang."""
+    long_drive = tmp_path / "long.mcap"
+    Drive("paper", seed=6, duration_s=10.0).run(long_drive)
+    side = RecordingProcess(long_drive)
     it = iter(side)
     next(it)
     os.kill(side._proc.pid, signal.SIGKILL)
+    got = 1
     with pytest.raises(ReplayIOError, match="ended without a result"):
         for _ in it:
-            pass
+            got += 1
     side.abort()
+    assert 0 < got < 30_000  # of the ~42,000 samples the 10 s drive decodes to
 
 
 def test_local_side_holds_raw_records_until_the_output_starts(drive, tmp_path):
