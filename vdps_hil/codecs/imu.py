@@ -89,6 +89,8 @@ SENSOR_TO_BODY: tuple[tuple[int, int, int], ...] = ((1, 0, 0), (0, 1, 0), (0, 0,
 F_FIELDS = axis_fields("specific_force_mps2")
 W_FIELDS = axis_fields("angular_rate_radps")
 check_fields((*F_FIELDS, *W_FIELDS, "seq_counter"))
+_FX, _FY, _FZ = F_FIELDS
+_WX, _WY, _WZ = W_FIELDS
 
 IMU_REJECT_REASONS: tuple[str, ...] = ("bad_checksum", "bad_length", "malformed_payload",
                                        "unsupported_format", "no_imu_data", "overlapped")
@@ -427,7 +429,7 @@ class ImuDecoder:
                 i += 1
                 continue
             try:
-                pkt = _decode_mtdata2(bytes(buf[i + head:end - 1]), r)
+                pkt = _decode_mtdata2(buf[i + head:end - 1], r)  # a copy: the buffer moves on
             except _Bad as e:
                 self._reject(e.reason)
                 i += 1  # same reasoning: never consume a span that does not parse
@@ -487,7 +489,7 @@ class ImuDecoder:
                 return -1
             if status == "ok":
                 try:
-                    _decode_mtdata2(bytes(buf[j + head:end_j - 1]), self.sensor_to_body)
+                    _decode_mtdata2(buf[j + head:end_j - 1], self.sensor_to_body)
                     return j
                 except _Bad:
                     pass
@@ -511,8 +513,9 @@ class ImuDecoder:
             self._reject("no_imu_data")
             return None
         self.last_packet = pkt
-        fields = dict(zip(F_FIELDS, pkt.specific_force_mps2))
-        fields.update(zip(W_FIELDS, pkt.angular_rate_radps))
+        fx, fy, fz = pkt.specific_force_mps2
+        wx, wy, wz = pkt.angular_rate_radps
+        fields = {_FX: fx, _FY: fy, _FZ: fz, _WX: wx, _WY: wy, _WZ: wz}  # F_FIELDS, W_FIELDS
         if pkt.packet_counter is not None:
             fields["seq_counter"] = float(pkt.packet_counter)
             if self._last_counter is not None:
