@@ -84,8 +84,9 @@ def test_scaled_values_equal_cantools_conversion_on_every_raw_value():
     for spec in dbc.messages.values():
         plan = cc._DecodePlan(spec)
         cantools_sig = {s.name: s for s in dbc.db.get_message_by_name(spec.name).signals}
-        for (name, _, lo, hi, scale, offset, ttr), sig in zip(plan.values, spec.values):
+        for (name, _, scale, offset, ttr), sig in zip(plan.values, spec.values):
             assert name == sig.name
+            lo, hi = sig.raw_min, sig.raw_max
             conv = cantools_sig[name].conversion
             for r in range(lo, hi + 1):
                 x = float(conv.raw_to_scaled(r, decode_choices=False))

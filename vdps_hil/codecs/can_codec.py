@@ -548,11 +548,15 @@ class _SeqState:
 class _DecodePlan:
     """A message's decoding precomputed (``codecs.dbc_compile``; cantools when the layout is not
     compilable): signal indexes of the CRC, counter and ``warning_status``, and per value signal
-    (field, index, raw_min, raw_max, scale, offset, is the TTR sentinel field). The scaled value
-    is ``float(raw * scale + offset)`` with the conversion's own scale and offset, which is what
-    cantools' ``raw_to_scaled`` computes (:func:`_from_raw`; tested on every raw value)."""
+    (field, index, scale, offset, is the TTR sentinel field); ``checks``: (index, raw_min,
+    raw_max) of the value signals whose DBC range is narrower than their bits can hold (the
+    compiled raw values lie inside the bits: a full-width range needs no check). The scaled
+    value is ``float(raw * scale + offset)`` with the conversion's own scale and offset, which
+    is what cantools' ``raw_to_scaled`` computes (:func:`_from_raw`; tested on every raw
+    value). ``modulus``: of the rolling counter."""
 
-    __slots__ = ("spec", "compiled", "names", "crc", "counter", "counter_name", "status", "values")
+    __slots__ = ("spec", "compiled", "names", "crc", "counter", "counter_name", "status", "values",
+                 "checks", "modulus")
 
     def __init__(self, spec: MessageSpec):
         from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
@@ -569,12 +573,18 @@ class _DecodePlan:
         self.counter = idx[spec.counter.name]
         self.counter_name = spec.counter.name
         self.status = idx.get("warning_status", -1) if spec.crc is not None else -1
-        vals = []
+        self.modulus = 1 << spec.counter.length_bits
+        vals, checks = [], []
         for sig in spec.values:
             conv = sig.signal.conversion
             conv = getattr(conv, "_conversion", conv)  # named values: the numeric conversion
-            vals.append((sig.name, idx[sig.name], sig.raw_min, sig.raw_max, conv.scale, conv.offset, _is_ttr(sig)))
+            vals.append((sig.name, idx[sig.name], conv.scale, conv.offset, _is_ttr(sig)))
+            half = 1 << (sig.length_bits - 1)
+            full = (-half, half - 1) if sig.is_signed else (0, 2 * half - 1)
+            if self.compiled is None or (sig.raw_min, sig.raw_max) != full:
+                checks.append((idx[sig.name], sig.raw_min, sig.raw_max))
         self.values = tuple(vals)
+        self.checks = tuple(checks)
 
 
 class VdpsCanDecoder:
@@ -667,25 +677,27 @@ class VdpsCanDecoder:
             counts["crc_mismatch"] += 1
             return []
         c = raw[plan.counter]
-        reason = self._check_counter(spec, c, t_ns, counts)
+        reason = self._check_counter(plan, c, t_ns, counts)
         if reason is not None:
             counts[reason] += 1
             return []
-        fields: dict[str, float] = {}
-        for name, i, lo, hi, scale, offset, ttr in plan.values:
-            r = raw[i]
-            if not lo <= r <= hi:
+        for i, lo, hi in plan.checks:
+            if not lo <= raw[i] <= hi:
                 counts["out_of_range"] += 1
                 return []
+        fields: dict[str, float] = {}
+        for name, i, scale, offset, ttr in plan.values:
+            r = raw[i]
             fields[name] = math.inf if ttr and r == TTR_NONE_RAW else float(r * scale + offset)
         fields[plan.counter_name] = float(c)
         counts["accepted"] += 1
         valid = plan.status < 0 or raw[plan.status] == 0
         return [Sample(t_ns, self._source, spec.kind, fields, 0, valid)]  # positional: the hot path
 
-    def _check_counter(self, spec: MessageSpec, c: int, t_ns: int, counts: dict) -> str | None:
+    def _check_counter(self, plan: _DecodePlan, c: int, t_ns: int, counts: dict) -> str | None:
+        spec = plan.spec
         st = self._seq[spec.name]
-        modulus = 1 << spec.counter.length_bits
+        modulus = plan.modulus
         if st.last is None:
             st.last, st.t_ns = c, t_ns
             return None

@@ -89,6 +89,8 @@ SENSOR_TO_BODY: tuple[tuple[int, int, int], ...] = ((1, 0, 0), (0, 1, 0), (0, 0,
 F_FIELDS = axis_fields("specific_force_mps2")
 W_FIELDS = axis_fields("angular_rate_radps")
 check_fields((*F_FIELDS, *W_FIELDS, "seq_counter"))
+_FX, _FY, _FZ = F_FIELDS
+_WX, _WY, _WZ = W_FIELDS
 
 IMU_REJECT_REASONS: tuple[str, ...] = ("bad_checksum", "bad_length", "malformed_payload",
                                        "unsupported_format", "no_imu_data", "overlapped")
@@ -250,7 +252,11 @@ general loop below gives the same packet; this reads it with one struct call."""
 def decode_mtdata2(data: bytes, sensor_to_body=SENSOR_TO_BODY) -> ImuPacket:
     """Decode the DATA of one MTData2 message (raises ``ValueError`` subclasses on malformed
     payloads; ``ImuDecoder`` turns them into counted rejects). Unknown XDIs are skipped."""
-    r = _check_rotation(sensor_to_body)
+    return _decode_mtdata2(data, _check_rotation(sensor_to_body))
+
+
+def _decode_mtdata2(data: bytes, r) -> ImuPacket:
+    """``decode_mtdata2`` with ``r`` already validated by ``_check_rotation``."""
     if len(data) == _STANDARD.size:  # the layout encode_imu_packet writes: one unpack
         (x1, s1, counter, x2, s2, stf, x3, s3, ax, ay, az, x4, s4, gx, gy, gz) = _STANDARD.unpack(data)
         if (x1, s1, x2, s2, x3, s3, x4, s4) == _STANDARD_HEAD:
@@ -342,6 +348,17 @@ class ImuDecoder:
         self._counters[f"reject_{reason}"] += 1
 
     def feed(self, t_ns: int, chunk: bytes) -> list[Sample]:
+        return self.samples(self.feed_messages(t_ns, chunk))
+
+    def flush(self) -> list[Sample]:
+        """End of stream: decode what is left, treating headers whose bytes never arrived as
+        garbage (so messages held behind a false header are released)."""
+        return self.samples(self.flush_messages())
+
+    def feed_messages(self, t_ns: int, chunk: bytes) -> list[tuple[int, dict[str, float], ImuPacket]]:
+        """``feed`` before the samples are made: per accepted message ``(receive time [ns], bus
+        fields, packet)``, for a caller that stamps the samples by another clock
+        (``record.decode``: the device time); :meth:`samples` makes the samples."""
         c = self._counters
         c["bytes"] += len(chunk)
         if self._last_t_ns is not None and t_ns < self._last_t_ns:
@@ -351,17 +368,25 @@ class ImuDecoder:
         self._chunk_ends.append((self._base + len(self._buf), int(t_ns)))
         return self._run(final=False)
 
-    def flush(self) -> list[Sample]:
-        """End of stream: decode what is left, treating headers whose bytes never arrived as
-        garbage (so messages held behind a false header are released)."""
+    def flush_messages(self) -> list[tuple[int, dict[str, float], ImuPacket]]:
+        """``flush`` as ``feed_messages`` gives its messages."""
         if not self._chunk_ends:
             return []
         return self._run(final=True)
 
-    def _run(self, final: bool) -> list[Sample]:
+    def samples(self, messages, times=None) -> list[Sample]:
+        """The bus samples of ``feed_messages`` output, stamped by the receive-time rule or by
+        ``times`` (one per message; None keeps the receive time)."""
+        src = self.source
+        if times is None:
+            return [Sample(t, src, "imu", f) for t, f, _ in messages]  # (t_ns, source, kind, fields)
+        return [Sample(t if tt is None else tt, src, "imu", f) for (t, f, _), tt in zip(messages, times)]
+
+    def _run(self, final: bool) -> list[tuple[int, dict[str, float], ImuPacket]]:
         c = self._counters
         buf = self._buf
-        out: list[Sample] = []
+        r = self.sensor_to_body
+        out: list[tuple[int, dict[str, float], ImuPacket]] = []
         i = 0
         n = len(buf)
         while True:
@@ -404,7 +429,7 @@ class ImuDecoder:
                 i += 1
                 continue
             try:
-                pkt = decode_mtdata2(bytes(buf[i + head:end - 1]), self.sensor_to_body)
+                pkt = _decode_mtdata2(buf[i + head:end - 1], r)  # a copy: the buffer moves on
             except _Bad as e:
                 self._reject(e.reason)
                 i += 1  # same reasoning: never consume a span that does not parse
@@ -422,9 +447,9 @@ class ImuDecoder:
             c["messages"] += 1
             t_msg = self._time_of_byte(self._base + end - 1)
             i = end
-            sample = self._sample(t_msg, pkt)
-            if sample is not None:
-                out.append(sample)
+            fields = self._fields(pkt)
+            if fields is not None:
+                out.append((t_msg, fields, pkt))
         del buf[:i]
         self._base += i
         while len(self._chunk_ends) > 1 and self._chunk_ends[0][0] <= self._base:
@@ -464,7 +489,7 @@ class ImuDecoder:
                 return -1
             if status == "ok":
                 try:
-                    decode_mtdata2(bytes(buf[j + head:end_j - 1]), self.sensor_to_body)
+                    _decode_mtdata2(buf[j + head:end_j - 1], self.sensor_to_body)
                     return j
                 except _Bad:
                     pass
@@ -481,14 +506,16 @@ class ImuDecoder:
         end, t_chunk = self._chunk_ends[-1]
         return message_time_ns(t_chunk, 0, self.baud, self.bits_per_byte)
 
-    def _sample(self, t_msg: int, pkt: ImuPacket) -> Sample | None:
+    def _fields(self, pkt: ImuPacket) -> dict[str, float] | None:
+        """The bus fields of a packet (None: rejected, no IMU data); counts gaps and samples."""
         c = self._counters
         if pkt.specific_force_mps2 is None or pkt.angular_rate_radps is None:
             self._reject("no_imu_data")
             return None
         self.last_packet = pkt
-        fields = dict(zip(F_FIELDS, pkt.specific_force_mps2))
-        fields.update(zip(W_FIELDS, pkt.angular_rate_radps))
+        fx, fy, fz = pkt.specific_force_mps2
+        wx, wy, wz = pkt.angular_rate_radps
+        fields = {_FX: fx, _FY: fy, _FZ: fz, _WX: wx, _WY: wy, _WZ: wz}  # F_FIELDS, W_FIELDS
         if pkt.packet_counter is not None:
             fields["seq_counter"] = float(pkt.packet_counter)
             if self._last_counter is not None:
@@ -497,4 +524,4 @@ class ImuDecoder:
                     c["seq_gaps"] += gap
             self._last_counter = pkt.packet_counter
         c["samples"] += 1
-        return Sample(int(t_msg), self.source, "imu", fields)  # (t_ns, source, kind, fields)
+        return fields

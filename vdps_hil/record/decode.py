@@ -197,67 +197,71 @@ class DeviceStamper:
     observes a batch (one read chunk) first and then stamps it, so the batch's least-delayed
     message sets the offset for all of it. Messages seen while a clock step is pending are held;
     a confirmed step stamps them with the new offset, an unconfirmed one releases them with
-    their receive-time stamps (``outliers``)."""
+    their receive-time stamps (``outliers``). ``times``/``release`` do the same for messages of
+    any kind (the caller makes the samples)."""
 
     __slots__ = ("clock", "held", "outliers")
 
     def __init__(self, clock: ClockAligner):
         self.clock = clock
-        self.held: list[tuple[Sample, int]] = []
+        self.held: list[tuple[object, int]] = []
         self.outliers = 0
 
     def stamp(self, batch) -> list[Sample]:
+        items, times = self.times(batch)
+        return [s if t is None else _restamp(s, t) for s, t in zip(items, times)]
+
+    def times(self, batch) -> tuple[list, list[int | None]]:
+        """``batch``: ``[(message, host_ns, dev_ns), ...]`` -> (messages in output order, their
+        stamps [ns]; None: an outlier, it keeps its receive-time stamp)."""
         clock = self.clock
-        out: list[Sample] = []
-        todo: list[tuple[int, Sample, int]] = []  # (index in out, sample, device time)
-        for s, host, dev in batch:
+        items: list = []
+        times: list[int | None] = []  # device time until the offset is added (indices in todo)
+        todo: list[int] = []
+        for m, host, dev in batch:
             before = clock.offset_ns
             st = clock.observe(host, dev)
             if st == "pending":
-                self.held.append((s, dev))
+                self.held.append((m, dev))
                 continue
             if st == "jump":
-                for i, s0, d0 in todo:  # stamped with the offset before the step
-                    out[i] = _restamp(s0, d0 + (before or 0))
+                off = before or 0  # stamped with the offset before the step
+                for i in todo:
+                    times[i] += off
                 todo = []
-                for s0, d0 in self.held:
-                    todo.append((len(out), s0, d0))
-                    out.append(s0)
+                for m0, d0 in self.held:
+                    todo.append(len(items))
+                    items.append(m0)
+                    times.append(d0)
             elif self.held:  # the step did not last: those were outliers
                 self.outliers += len(self.held)
-                out.extend(s0 for s0, _ in self.held)
+                for m0, _ in self.held:
+                    items.append(m0)
+                    times.append(None)
             self.held = []
-            todo.append((len(out), s, dev))
-            out.append(s)
+            todo.append(len(items))
+            items.append(m)
+            times.append(dev)
         off = clock.offset_ns or 0
-        for i, s0, d0 in todo:
-            out[i] = _restamp(s0, d0 + off)
-        return out
+        for i in todo:
+            times[i] += off
+        return items, times
 
-    def flush(self) -> list[Sample]:
-        """End of stream: held messages (an unconfirmed step) keep their receive-time stamps."""
+    def release(self) -> list:
+        """End of stream: the held messages (an unconfirmed step: outliers, they keep their
+        receive-time stamps)."""
         held, self.held = self.held, []
         self.outliers += len(held)
-        return [s for s, _ in held]
+        return [m for m, _ in held]
+
+    def flush(self) -> list[Sample]:
+        """``release`` of samples."""
+        return self.release()
 
     def status(self) -> dict:
         d = self.clock.status()
         d["outliers"] = self.outliers
         return d
-
-
-class _TimedImuDecoder(ImuDecoder):
-    """ImuDecoder that also keeps, per emitted sample, the packet's device time fields."""
-
-    def __init__(self, *a, **kw):
-        super().__init__(*a, **kw)
-        self.meta: list[tuple[int | None, int | None]] = []
-
-    def _sample(self, t_msg, pkt):
-        s = super()._sample(t_msg, pkt)
-        if s is not None:
-            self.meta.append((pkt.sample_time_fine, pkt.packet_counter))
-        return s
 
 
 _IMU_PACKET_BYTES = 47  # PacketCounter + SampleTimeFine + float32 acc + gyro (codecs.imu)
@@ -269,7 +273,7 @@ class _ImuStream:
     def __init__(self, device: str, baud: int, device_time: bool, rate_hz: float):
         self.device = device
         self.baud = baud
-        self.dec = _TimedImuDecoder(device, baud=baud)
+        self.dec = ImuDecoder(device, baud=baud)
         self.device_time = device_time
         self.stamper = DeviceStamper(ClockAligner(jump_s=0.02, confirm_s=0.2))
         self.counter_stamper = DeviceStamper(ClockAligner(jump_s=0.02, confirm_s=0.2))
@@ -280,25 +284,28 @@ class _ImuStream:
         self.no_device_time = 0
 
     def feed(self, t_ns: int, data: bytes | None) -> list[Sample]:
-        out = self.dec.feed(t_ns, data) if data is not None else self.dec.flush()
-        meta, self.dec.meta = self.dec.meta, []
+        dec = self.dec
+        msgs = dec.feed_messages(t_ns, data) if data is not None else dec.flush_messages()
         if not self.device_time:
-            return out
-        by_stf, by_cnt, res = [], [], []
-        for s, (stf, cnt) in zip(out, meta):
-            if stf is not None:
-                by_stf.append((s, s.t_ns - self.wire_ns, self._stf(stf) * NS_PER_FINE_TICK))
-            elif cnt is not None:
-                by_cnt.append((s, s.t_ns - self.wire_ns, self._cnt(cnt) * self.period_ns))
+            return dec.samples(msgs)
+        by_stf, by_cnt, plain = [], [], []
+        wire = self.wire_ns
+        for m in msgs:
+            pkt = m[2]
+            if pkt.sample_time_fine is not None:
+                by_stf.append((m, m[0] - wire, self._stf(pkt.sample_time_fine) * NS_PER_FINE_TICK))
+            elif pkt.packet_counter is not None:
+                by_cnt.append((m, m[0] - wire, self._cnt(pkt.packet_counter) * self.period_ns))
             else:
-                self.no_device_time += 1
-                res.append(s)
+                plain.append(m)
+        self.no_device_time += len(plain)
+        res = dec.samples(plain)
         if by_stf:
-            res += self.stamper.stamp(by_stf)
+            res += dec.samples(*self.stamper.times(by_stf))
         if by_cnt:
-            res += self.counter_stamper.stamp(by_cnt)
+            res += dec.samples(*self.counter_stamper.times(by_cnt))
         if data is None:
-            res += self.stamper.flush() + self.counter_stamper.flush()
+            res += dec.samples(self.stamper.release() + self.counter_stamper.release())
         return res
 
     def counters(self) -> dict:
