@@ -32,31 +32,32 @@ Measured (``--duration 30 --repeat 3``, the 2-core VM with nothing else running,
 
     RTF [x]                 decode  estimator  +identify  +predict | replay -o in-process: est.  +ident.  full
     table1         s2         37.8     47.7       13.9        4.1   |                        12.6     7.2     3.1
-                   s3         45.3     58.5       15.7        5.7   |                        15.9     8.5     4.4
+                   s3         48.6     58.6       15.8        5.7   |                        16.5     8.6     4.4
     table1-susp1k  s2         28.1     11.3        7.1        3.1   |                         5.5     4.1     2.4
-                   s3         31.8     13.3        7.9        4.3   |                         6.9     4.8     3.2
+                   s3         33.8     13.1        7.8        4.3   |                         7.0     4.8     3.1
 
     command vdps replay -o, estimator only, 30 s drive, wall (best of 3):
                      --jobs 1: s / x with start-up / x replay    --jobs 2: s / x with start-up / x replay
-    table1           1.95 s   15.4x   16.9x                       1.19 s   25.2x   29.7x
-    table1-susp1k    4.00 s    7.5x    7.9x                       2.90 s   10.3x   11.0x
-    EKF cycle inside the chain: 118 us (table1) / 170 us (table1-susp1k) per 10 ms
+    table1           1.91 s   15.7x   17.3x                       1.17 s   25.6x   30.4x
+    table1-susp1k    3.96 s    7.6x    8.0x                       2.94 s   10.2x   10.9x
+    EKF cycle inside the chain: 119 us (table1) / 172 us (table1-susp1k) per 10 ms
 
 ("s2": the previous session's figures, measured under load 3-5; "s3": this session.) On a
-120 s table1 drive (``replay_file(..., jobs=J)``, wall, best of 3): one process 7.15 s (16.8x),
-two processes 3.66 s (32.8x); then the decoding process is the longer side (3.7 s CPU against
-the system's 3.1 s). What made the difference this session: the recording is decoded once (the
+120 s table1 drive (``replay_file(..., jobs=J)``, wall, best of 3): one process 7.01 s (17.1x),
+two processes 3.55 s (33.8x); then the decoding process is the longer side (3.55 s CPU against
+the system's 3.15 s). What made the difference this session: the recording is decoded once (the
 3 s sensor-set probe reads the replay's own decoder), the raw topics are copied in runs per
 channel, per-sample work in the estimator (bit-identical), the EKF's chi-square gate without
 importing scipy.stats (0.4 s of start-up), DBCs from a JSON cache without importing cantools and
-python-can (0.2 s of start-up), and ``--jobs 2``. Outputs: every ``/raw/`` and ``/est/`` message
+python-can (0.2 s of start-up), one Sample per IMU packet made with its device time and range
+checks only where the DBC range is narrower than the bits, and ``--jobs 2``. Outputs: every ``/raw/`` and ``/est/`` message
 identical to before on four reference replays (table1, table1-susp1k, the complete chain, the
 real RAV4 drive with its own DBC and signal map), with one and two processes, except the
 innovation messages' ``gate`` value, which moved by 1-2 ulp with the gate's own quantile.
 
 Where the time goes now (table1, one process): per-object Python work on ~64,000 samples from
-~48,000 raw records per 20 s, spread in items of 5-40 ms each (decoding ~0.42 s per 20 s: CAN
-3.2 us per frame, IMU 8 us per packet; the system ~0.35 s: alpha-beta and handler bodies, EKF
+~48,000 raw records per 20 s, spread in items of 5-40 ms each (decoding ~0.38 s per 20 s: CAN
+~3 us per frame, IMU ~6 us per packet, 0.5 us of each for the Sample object; the system ~0.35 s: alpha-beta and handler bodies, EKF
 predict 32 us, estimate 24 us; the raw copy ~0.08 s; /est/ JSON ~0.08 s, mostly
 ``float.__repr__``). The goal (100x) would need compiled code for the per-sample work (the EKF's
 small numpy products cannot be fused or reordered without changing the estimates in their last
