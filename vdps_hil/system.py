@@ -119,8 +119,8 @@ from vdps_hil.identification.problems import IdentConfig, Identifier
 from vdps_hil.model.params import IdentifiedParams, Vehicle
 
 __all__ = ["CanFrame", "IdentReport", "PredictionReport", "ReplayError", "SuspensionConditioner", "SystemConfig",
-           "VdpsSystem", "default_pipeline_config", "measure_rates", "output_to_json", "outputs_digest",
-           "probe_recording", "recorded_config", "replay_file", "sample_stats", "write_output"]
+           "VdpsSystem", "default_pipeline_config", "output_to_json", "outputs_digest", "recorded_config",
+           "replay_file", "sample_stats", "write_output"]
 
 _SUSP = wheel_fields("susp_deflection_m")
 _NEVER = 1 << 62
@@ -677,23 +677,6 @@ DEFAULT_SUSP_SIGMA_M = 0.001
 """Suspension deflection sigma of a replay (``--susp-sigma``; Table 1: 1 mm)."""
 
 
-def probe_recording(path, seconds: float = PROBE_SECONDS, **decode_kw) -> tuple[dict[str, float], dict[str, set]]:
-    """(sample rate [Hz] per kind, catalogue fields per kind) over the first ``seconds`` of the
-    decoded ``/raw/`` data (``sample_stats``): lets a replay size the suspension averaging and
-    infer the sensor set from the data instead of a profile name. (Receive-time stamps and a
-    short reorder window by default: only counts and fields matter here.)"""
-    from vdps_hil.record.decode import decode_recording
-
-    decode_kw.setdefault("device_time", False)
-    decode_kw.setdefault("reorder_window_s", 0.02)
-    dec = decode_recording(path, **decode_kw)
-    try:
-        _, rates, fields = sample_stats(dec, seconds)
-    finally:
-        dec.close()
-    return rates, fields
-
-
 def sample_stats(samples: Iterator[Sample], seconds: float = PROBE_SECONDS
                  ) -> tuple[list[Sample], dict[str, float], dict[str, set]]:
     """Take the samples of the first ``seconds`` from the iterator ``samples`` (plus the first
@@ -722,11 +705,6 @@ def sample_stats(samples: Iterator[Sample], seconds: float = PROBE_SECONDS
         count[k] = count.get(k, 0) + 1
     rates = {k: (count[k] - 1) * 1e9 / (last[k] - first[k]) for k in count if count[k] > 1 and last[k] > first[k]}
     return taken, rates, fields
-
-
-def measure_rates(path, seconds: float = 1.0, **decode_kw) -> dict[str, float]:
-    """Sample rate [Hz] per kind over the first ``seconds`` (``probe_recording``)."""
-    return probe_recording(path, seconds, **decode_kw)[0]
 
 
 _STATE_KEYS = (*STATE_NAMES, "phi_v_rad", "theta_v_rad", "psi_v_rad")
@@ -819,7 +797,7 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     import time
 
     from vdps_hil.record.reader import RecordingError, RecordingReader
-    from vdps_hil.record.replay_io import LocalRecordingSide, RecordingProcess, ReplayIOError
+    from vdps_hil.record.replay_io import LocalRecordingSide, RecordingProcess, ReplayIOError, SampleCounter
 
     wall0 = time.perf_counter()
     veh = _load_model_vehicle(vehicle)
@@ -892,11 +870,13 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
             handle = system.handle
             n = 0
             source = itertools.chain(head, side)
-            count = None  # the decoded samples are counted by the recording side
+            counter = None  # the decoded samples are counted by the recording side
+            count = None
             if recorded is not None:
                 for _ in side:  # the decoders' counters, and the raw copy
                     pass
-                source, count = recorded, summary.sample
+                counter = SampleCounter()
+                source, count = recorded, counter.count
             for s in source:
                 if count is not None:
                     count(s)
@@ -913,8 +893,7 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                     summary.outputs(outs, side.writer)
             summary.outputs(system.finish(), side.writer)
             side.finish()
-            if count is None:
-                summary.take_counts(side.sample_counts)
+            summary.take_counts(side.sample_counts if counter is None else counter.document())
         except ReplayIOError as e:
             raise ReplayError(str(e)) from None
         finally:
@@ -922,9 +901,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                 side.abort()
     finally:
         reader.close()
-    dec = side
     wall = time.perf_counter() - wall0
-    doc = summary.document(system, dec, veh)
+    doc = summary.document(system, side, veh)
     doc.update({"input": os.fspath(path), "output": None if output is None else os.fspath(output),
                 "vehicle": veh.name, "sensor_set": sensors_desc, "wall_time_s": wall,
                 "realtime_factor": (doc["duration_s"] / wall) if wall > 0 and doc["duration_s"] else None,
@@ -1082,23 +1060,9 @@ class _Summary:
         self.innov: dict[str, list] = {}
         self.pred = {"predictions": 0, "rollover_predicted": 0, "min_time_to_point_of_no_return_s": None}
         self.frames = {"sent": 0, "max_level": 0}
-        self.writer_errors = 0
-        self._keys: dict[str, dict[str, str]] = {}  # source -> kind -> "source/kind"
-
-    def sample(self, s: Sample) -> None:
-        src = self._keys.get(s.source)
-        if src is None:
-            src = self._keys[s.source] = {}
-        k = src.get(s.kind)
-        if k is None:
-            k = src[s.kind] = f"{s.source}/{s.kind}"
-        self.samples[k] = self.samples.get(k, 0) + 1
-        if self.t_first is None:
-            self.t_first = s.t_ns
-        self.t_last = s.t_ns
 
     def take_counts(self, counts: Mapping) -> None:
-        """The samples counted elsewhere (``record.replay_io``'s ``sample_counts``)."""
+        """The samples the replay fed (``record.replay_io.SampleCounter``)."""
         self.samples = dict(counts["per_source_kind"])
         self.t_first, self.t_last = counts["t_first_ns"], counts["t_last_ns"]
 
@@ -1133,7 +1097,8 @@ class _Summary:
             if writer is not None:
                 write_output(o, writer)
 
-    def document(self, system: "VdpsSystem", dec, veh: Vehicle) -> dict:
+    def document(self, system: "VdpsSystem", side, veh: Vehicle) -> dict:
+        """The ``--json`` document; ``side``: the replay's recording side (``record.replay_io``)."""
         from vdps_hil.estimation.states import STATE_NAMES
 
         dur = (self.t_last - self.t_first) / 1e9 if self.t_first is not None else 0.0
@@ -1145,12 +1110,12 @@ class _Summary:
             es["final"] = {"state": dict(zip(STATE_NAMES, est.x)), "sigma": dict(zip(STATE_NAMES, est.sigma)),
                            "vehicle_angles_rad": dict(zip(("phi_v", "theta_v", "psi_v"), est.vehicle_angles_rad))}
             es["rms_sigma"] = {n: math.sqrt(v / self.n_est) for n, v in zip(STATE_NAMES, self.sig_sum)}
-        rejected = dict(dec.rejected())
+        rejected = dict(side.rejected())
         rejected.update(system.pipeline.rejected())
         obs = [{"t_start_s": a / 1e9, "t_end_s": b / 1e9, "rank": r.rank, "n_states": r.n_states,
                 "unobservable": list(r.unobservable)} for a, b, r in system.pipeline.observability_reports]
         now = system.pipeline.observability_now()
-        reader_c = dec.counters["reader"]
+        reader_c = side.counters["reader"]
         doc = {
             "duration_s": dur,
             "messages_read": {"raw_records": reader_c["raw_records"], "samples": sum(self.samples.values()),
@@ -1162,8 +1127,8 @@ class _Summary:
             "rejected": rejected,
             "observability": {"windows": obs, "in_progress": None if now is None else
                               {"rank": now.rank, "n_states": now.n_states, "unobservable": list(now.unobservable)}},
-            "decode": {k: v for k, v in dec.counters.items()},
-            "decoding": dict(dec.decoding),
+            "decode": {k: v for k, v in side.counters.items()},
+            "decoding": dict(side.decoding),
             "system": system.status()["counters"],
         }
         # computed observability (issue 11): structural rank of the sensor set, each window's null

@@ -277,15 +277,19 @@ def _check_document(doc, sha256: str, strict: bool) -> None:
 # ---------------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=1)
 def _parser_tag() -> str:
-    """12 hex digits naming the installed cantools (version from its dist-info directory, size
-    and mtime of its DBC parser) without importing it."""
+    """12 hex digits naming the installed cantools (its distribution version, size and mtime of
+    its DBC parser) without importing it."""
+    import importlib.metadata
     import importlib.util
 
     spec = importlib.util.find_spec("cantools")
     if spec is None or not spec.origin:
         return "none"
     pkg = Path(spec.origin).parent
-    parts = [p.name for p in pkg.parent.glob("cantools-*.dist-info")]
+    try:
+        parts = [importlib.metadata.version("cantools")]
+    except importlib.metadata.PackageNotFoundError:
+        parts = ["unknown version"]
     try:
         st = (pkg / "database" / "can" / "formats" / "dbc.py").stat()
         parts.append(f"{st.st_size}:{st.st_mtime_ns}")

@@ -635,8 +635,7 @@ class Predictor:
         fzs: list[tuple] = []
         ts: list[float] = []
         stop = "horizon"
-        atan2, asin = math.atan2, math.asin
-        ng0, ng1, ng2 = env.normal_g
+        atan2 = math.atan2
         n = 0
         u = held
         while True:
@@ -648,26 +647,13 @@ class Predictor:
             n_eval += 1
             rec = out["_rec"]
             record = n % out_every == 0 or n == n_steps
-            # road-relative roll and its rate for the rollover monitor (n_b = C_r^v e_z)
+            # road-relative roll for the rollover monitor (n_b = C_r^v e_z)
             nx, ny, nz = out["_normal_b"]
-            phi_v = atan2(ny, nz)
-            theta_v = asin(max(-1.0, min(1.0, nx)))
-            wx, wy, wz = x[9], x[10], x[11]
-            tt = math.tan(theta_v)
-            roll_rate_v = wx - tt * math.sin(phi_v) * wy - tt * math.cos(phi_v) * wz
             fz = (rec[0][2], rec[1][2], rec[2][2], rec[3][2])
-            if record:
-                xs.append(x)
-                fzs.append(fz)
-                ts.append(t_rel)
-                monitor.update(t_rel, fz, phi_v, roll_rate_v)
-                if cfg.stop_at_point_of_no_return and monitor.point_of_no_return is not None:
-                    stop = "point_of_no_return"
-                    break
-            if abs(phi_v) > ROLL_LIMIT_RAD:
-                stop = "roll_limit"
-                if not record:
-                    xs.append(x), fzs.append(fz), ts.append(t_rel)
+            ended = _keep_step(xs, fzs, ts, monitor, cfg.stop_at_point_of_no_return, record, t_rel, x, fz,
+                               atan2(ny, nz), nx)
+            if ended is not None:
+                stop = ended
                 break
             if n >= n_steps:
                 break
@@ -735,13 +721,12 @@ class Predictor:
         gh, h15, h05 = ROS2_GAMMA * h, 1.5 * h, 0.5 * h
         monitor = RolloverMonitor(self.model.static_load_n, self._track_half_m,
                                   self.vehicle.geometry.h_cg_m)
-        update = monitor.update
         radii, corner_xy = self.model.rolling_radius_m, self.model.corner_xy
         vfloor = self.model.slip_speed_floor_mps
         w0 = w1 = w2 = w3 = 1.0
         cx0 = cx1 = cx2 = cx3 = cy0 = cy1 = cy2 = cy3 = cz0 = cz1 = cz2 = cz3 = 0.0
         uc_c = kc = None
-        atan2, asin, tan, sin, cos, isfinite = math.atan2, math.asin, math.tan, math.sin, math.cos, math.isfinite
+        atan2, isfinite = math.atan2, math.isfinite
         uc = inputs_of(held) if held is not None else None
         xs: list[list[float]] = []
         fzs: list = []
@@ -754,21 +739,10 @@ class Predictor:
                 uc = inputs_of(src(t_rel))
             f0, fz, (nx, ny, nz), kap, den = F(x, uc, env)
             n_eval += 1
-            phi_v = atan2(ny, nz)  # road-relative roll, n_b = C_r^v e_z
             record = n % out_every == 0 or n == n_steps
-            if record:
-                tt = tan(asin(max(-1.0, min(1.0, nx))))
-                xs.append(x)
-                fzs.append(fz)
-                ts.append(t_rel)
-                update(t_rel, fz, phi_v, x[9] - tt * sin(phi_v) * x[10] - tt * cos(phi_v) * x[11])
-                if stop_ponr and monitor.point_of_no_return is not None:
-                    stop = "point_of_no_return"
-                    break
-            if abs(phi_v) > ROLL_LIMIT_RAD:
-                stop = "roll_limit"
-                if not record:
-                    xs.append(x), fzs.append(fz), ts.append(t_rel)
+            ended = _keep_step(xs, fzs, ts, monitor, stop_ponr, record, t_rel, x, fz, atan2(ny, nz), nx)
+            if ended is not None:
+                stop = ended
                 break
             if n >= n_steps:
                 break
@@ -844,6 +818,29 @@ class Predictor:
             tip_up_t_s=tu.t_s if tu else None, tip_up_side=tu.side if tu else None,
             point_of_no_return_t_s=pn.t_s if pn else None, point_of_no_return_side=pn.side if pn else None,
             stop_reason=stop, input_mode=mode, n_steps=n_steps, n_f_evals=n_eval)
+
+
+def _keep_step(xs: list, fzs: list, ts: list, monitor: "RolloverMonitor", stop_ponr: bool, record: bool,
+               t_rel: float, x: list, fz, phi_v: float, nx: float) -> str | None:
+    """One integration step's bookkeeping, the same in both loops of :class:`Predictor`: a
+    recorded step keeps (state, wheel loads, time) and feeds the rollover monitor the
+    road-relative roll ``phi_v`` and its rate (Euler-rate relation with theta_v = asin(n_x)).
+    Returns why the prediction stops here -- ``"point_of_no_return"`` (the monitor found it and
+    ``stop_ponr``), ``"roll_limit"`` (|phi_v| past ``ROLL_LIMIT_RAD``; that step is kept even
+    when not a recorded one) -- or None."""
+    if record:
+        xs.append(x)
+        fzs.append(fz)
+        ts.append(t_rel)
+        tt = math.tan(math.asin(max(-1.0, min(1.0, nx))))
+        monitor.update(t_rel, fz, phi_v, x[9] - tt * math.sin(phi_v) * x[10] - tt * math.cos(phi_v) * x[11])
+        if stop_ponr and monitor.point_of_no_return is not None:
+            return "point_of_no_return"
+    if abs(phi_v) > ROLL_LIMIT_RAD:
+        if not record:
+            xs.append(x), fzs.append(fz), ts.append(t_rel)
+        return "roll_limit"
+    return None
 
 
 def vehicle_angles(euler_g_rad: np.ndarray, bank_rad: float, grade_rad: float) -> np.ndarray:

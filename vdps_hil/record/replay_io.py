@@ -68,9 +68,10 @@ def _one_line(e: BaseException) -> str:
     return text.splitlines()[0] if text else type(e).__name__
 
 
-class _SampleCounter:
+class SampleCounter:
     """Samples per source and kind, first and last sample time (the replay summary's
-    ``messages_read`` and duration), counted as the samples are handed out."""
+    ``messages_read`` and duration), counted as the samples are handed out (here, or by the
+    replay itself for the samples of a recorded input order)."""
 
     __slots__ = ("counts", "t_first", "t_last")
 
@@ -106,8 +107,8 @@ class LocalRecordingSide:
         self._pending: list | None = []  # raw records read before start_output
         self._metadata: dict | None = None
         self._copy = None
-        self._reader = None
-        self._counter = _SampleCounter() if count_samples else None  # the child leaves it to the parent
+        self._counter = SampleCounter() if count_samples else None  # the child leaves it to the parent
+        self._decode_error = DecodeError
         try:
             self.dec = decode_recording(reader, dbc=dbc, signalmap=signalmap, bus_map=bus_map,
                                         raw_sink=self._sink if output is not None else None)
@@ -122,12 +123,8 @@ class LocalRecordingSide:
     def __next__(self) -> Sample:
         try:
             s = next(self._it)
-        except ValueError as e:
-            from vdps_hil.record.decode import DecodeError
-
-            if isinstance(e, DecodeError):
-                raise ReplayIOError(_one_line(e)) from None
-            raise
+        except self._decode_error as e:
+            raise ReplayIOError(_one_line(e)) from None
         if self._counter is not None:
             self._counter.count(s)
         return s
@@ -261,7 +258,7 @@ class RecordingProcess:
         self._sender = threading.Thread(target=self._send_frames, name="replay-io-send", daemon=True)
         self._sender.start()
         self.writer = None if output is None else _EncodingForwarder(self)
-        self._counter = _SampleCounter()
+        self._counter = SampleCounter()
         self._calls: list = []
         self._state: dict | None = None
         self._it = self._run()
