@@ -18,7 +18,8 @@ def imported_vdps_modules(module: str) -> set[str]:
 @pytest.mark.parametrize("module", ["vdps_hil.estimation", "vdps_hil.estimation.pipeline",
                                     "vdps_hil.identification", "vdps_hil.identification.problems",
                                     "vdps_hil.prediction", "vdps_hil.prediction.predictor",
-                                    "vdps_hil.prediction.warning", "vdps_hil.system",
+                                    "vdps_hil.prediction.warning", "vdps_hil.pipeline.node",
+                                    "vdps_hil.app.replay",
                                     "vdps_hil.workbench.diagnosis", "vdps_hil.cli.replay_cmd",
                                     "vdps_hil.cli.diagnose_cmd"])
 def test_pipeline_never_imports_sim(module):

@@ -19,12 +19,12 @@ import math
 
 import pytest
 
+from vdps_hil.app.est_topics import est_docs
 from vdps_hil.hil.bench import Bench, BenchConfig, BenchError, make_system, model_for
 from vdps_hil.hil.node import INPUT_ORDER_METADATA, input_order_samples
 from vdps_hil.hil.transports import listening_sockets
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.profiles import load_profile
-from vdps_hil.system import _est_docs
 
 CI_SPEED = 1.0
 
@@ -122,7 +122,7 @@ def test_live_estimates_are_bit_identical_to_a_replay_in_the_recorded_input_orde
     replayed: dict = {k: [] for k in live}
     for s in samples:
         for o in system.handle(s):
-            for topic, t, vals, sig in _est_docs(o):
+            for topic, t, vals, sig in est_docs(o):
                 if topic in replayed:
                     replayed[topic].append((t, vals, sig))
     for topic in live:
@@ -228,11 +228,11 @@ def test_the_pipeline_process_never_imports_the_simulator():
     import subprocess
     import sys
 
-    code = ("import sys, vdps_hil.hil.child, vdps_hil.hil.node, vdps_hil.system; "
+    code = ("import sys, vdps_hil.hil.child, vdps_hil.hil.node, vdps_hil.pipeline.node; "
             "print('\\n'.join(m for m in sys.modules if m.startswith('vdps_hil')))")
     mods = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
                           check=True).stdout.split()
-    assert "vdps_hil.hil.child" in mods and "vdps_hil.system" in mods
+    assert "vdps_hil.hil.child" in mods and "vdps_hil.pipeline.node" in mods
     assert not [m for m in mods if m == "vdps_hil.sim" or m.startswith("vdps_hil.sim.")]
 
 
@@ -251,8 +251,8 @@ def test_bench_model_may_be_a_saved_workbench_model(tmp_path):
     system = make_system(str(m), p.suspension.rate_hz, p.suspension.sigma_m)
     assert system.vehicle.name == "suv-model"
     assert system.config.start_params.mass_kg == pytest.approx(veh.params.mass_kg + 300.0)
-    names = sorted(e.name for e in system._chain.predictor.effects)
+    names = sorted(e.name for e in system.predictor.effects)
     assert names == ["aero_drag", "linear_tire"]
-    assert system._chain.predictor.effects["aero_drag"].cda_m2 == pytest.approx(1.1)
+    assert system.predictor.effects["aero_drag"].cda_m2 == pytest.approx(1.1)
     plain = make_system("suv-model", p.suspension.rate_hz, p.suspension.sigma_m)
-    assert plain.config.start_params is None and "aero_drag" not in plain._chain.predictor.effects
+    assert plain.config.start_params is None and "aero_drag" not in plain.predictor.effects

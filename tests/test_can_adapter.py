@@ -8,9 +8,11 @@ import can
 import numpy as np
 import pytest
 
-from vdps_hil.adapters.base import AdapterError, EndOfInput, RawCan, Subscription
+from vdps_hil.adapters.base import AdapterError, EndOfInput
 from vdps_hil.adapters.can_adapter import CanAdapter, CanFileAdapter, parse_can_spec
+from vdps_hil.bus.raw import RawCan
 from vdps_hil.bus.samples import Sample
+from vdps_hil.bus.subscription import Subscription
 from vdps_hil.codecs import can_codec as cc
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from vdps_hil import realcars as rc
-from vdps_hil.adapters.base import ERROR_COUNTERS
+from vdps_hil.adapters.health import ERROR_COUNTERS
 from vdps_hil.record.importer import CanSource, SerialSource, import_logs
 
 from conftest import REAL_DATA, REPO

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from vdps_hil import realcars as rc
-from vdps_hil.adapters.base import ERROR_COUNTERS
+from vdps_hil.adapters.health import ERROR_COUNTERS
 from vdps_hil.record.importer import SerialSource
 from vdps_hil.units import GRAVITY_MPS2
 

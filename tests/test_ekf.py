@@ -409,6 +409,7 @@ def test_the_estimator_chain_does_not_import_scipy_stats():
     import subprocess
     import sys
 
-    code = "import sys, vdps_hil.system, vdps_hil.cli.replay_cmd; print('scipy.stats' in sys.modules)"
+    code = ("import sys, vdps_hil.pipeline.node, vdps_hil.app.replay, vdps_hil.cli.replay_cmd; "
+            "print('scipy.stats' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"

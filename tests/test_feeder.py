@@ -18,11 +18,11 @@ from vdps_hil.model.frames import (compose_absolute, dcm_global_to_vehicle, deco
                                    skew)
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.paper import truth_at
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.profiles import load_profile
-from vdps_hil.system import SystemConfig, VdpsSystem
 from vdps_hil.units import GRAVITY_MPS2
 
 G = GRAVITY_MPS2

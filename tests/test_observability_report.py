@@ -21,11 +21,11 @@ from vdps_hil.estimation.observability_report import (IdentificationMonitor, exp
 from vdps_hil.estimation.pipeline import PipelineConfig
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.scenarios import parse_scenario
-from vdps_hil.system import SystemConfig, VdpsSystem
 
 VEH = load_vehicle("sedan-model")
 NAMES = ("a", "b", "c", "d")

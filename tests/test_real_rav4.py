@@ -23,8 +23,8 @@ import pytest
 from vdps_hil import realcars as rc
 from vdps_hil.estimation.observability_report import IdentificationMonitor, observability_report
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 from vdps_hil.record.importer import CanSource, SerialSource
-from vdps_hil.system import SystemConfig, VdpsSystem
 
 from conftest import REAL_DATA
 

@@ -1,4 +1,4 @@
-"""Tests of ``vdps replay`` (vdps_hil.cli.replay_cmd over vdps_hil.system.replay_file)."""
+"""Tests of ``vdps replay`` (vdps_hil.cli.replay_cmd over vdps_hil.app.replay.replay_file)."""
 
 from __future__ import annotations
 
@@ -239,7 +239,7 @@ def test_replay_json_carries_the_computed_observability_report(tmp_path):
     """Issue 11: `vdps replay --json` carries the structural rank of the sensor set, the windows
     with their null spaces explained and each identification problem's information."""
     from vdps_hil.sim.drive import Drive
-    from vdps_hil.system import replay_file
+    from vdps_hil.app.replay import replay_file
     rec = tmp_path / "d.mcap"
     Drive("paper", profile="table1-susp1k", seed=3, duration_s=4.0).run(str(rec))
     doc = replay_file(str(rec), predict=False)

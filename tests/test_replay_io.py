@@ -1,4 +1,4 @@
-"""Tests of vdps_hil.record.replay_io: the recording side of a replay, here or in a second
+"""Tests of vdps_hil.app.replay_io: the recording side of a replay, here or in a second
 process (``vdps replay --jobs 2``). Real child processes, real pipes, real MCAP files."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import signal
 import pytest
 from mcap.reader import make_reader
 
+from vdps_hil.app.replay import ReplayError, replay_file
+from vdps_hil.app.replay_io import LocalRecordingSide, RecordingProcess, ReplayIOError
 from vdps_hil.record.reader import RecordingReader
-from vdps_hil.record.replay_io import LocalRecordingSide, RecordingProcess, ReplayIOError
 from vdps_hil.sim.drive import Drive
-from vdps_hil.system import ReplayError, replay_file
 
 WALL_KEYS = {"wall_time_s", "realtime_factor", "output", "jobs"}
 
@@ -94,7 +94,7 @@ def test_errors_in_the_second_process_are_one_line(drive, tmp_path):
         replay_file(drive, identify=False, predict=False, output=tmp_path / "no" / "such" / "dir.mcap", jobs=2)
     assert "cannot write" in str(e.value) and len(str(e.value).splitlines()) == 1
     side = RecordingProcess(drive)  # dies before it has sent anything
-    os.kill(side._proc.pid, signal.SIGKILL)
+    os.kill(side.pid, signal.SIGKILL)
     with pytest.raises(ReplayIOError, match="ended without a result"):
         next(iter(side))
     side.abort()
@@ -109,7 +109,7 @@ def test_a_child_that_dies_half_way_is_one_line(tmp_path):
     side = RecordingProcess(long_drive)
     it = iter(side)
     next(it)
-    os.kill(side._proc.pid, signal.SIGKILL)
+    os.kill(side.pid, signal.SIGKILL)
     got = 1
     with pytest.raises(ReplayIOError, match="ended without a result"):
         for _ in it:

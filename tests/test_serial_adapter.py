@@ -8,8 +8,9 @@ import tty
 
 import pytest
 
-from vdps_hil.adapters.base import AdapterError, EndOfInput, RawSerial
+from vdps_hil.adapters.base import AdapterError, EndOfInput
 from vdps_hil.adapters.serial_adapter import SerialAdapter, SerialFileAdapter, parse_port_spec
+from vdps_hil.bus.raw import RawSerial
 
 
 class Pty:

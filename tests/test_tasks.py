@@ -15,7 +15,7 @@ from vdps_hil.batch.tasks import (diagnose_drive, diagnose_tasks, drive_ids, rep
                                   replay_tasks, worker_info)
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
-from vdps_hil.system import replay_file
+from vdps_hil.app.replay import replay_file
 
 
 @pytest.fixture(scope="module")

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 import serial
 
-from vdps_hil.adapters.base import AdapterError, Subscription
+from vdps_hil.adapters.base import AdapterError
 from vdps_hil.adapters.can_adapter import CanAdapter
+from vdps_hil.bus.subscription import Subscription
 from vdps_hil.hil.transports import (ExternalCanDevice, PtySerialDevice, SendLog, SlcanPtyDevice,
                                      SocketcandServer, VirtualCanDevice, listening_sockets,
                                      parse_transport)

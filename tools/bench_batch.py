@@ -43,7 +43,7 @@ Peak RSS per worker 231-238 MiB.
 One-hour drive (``make_long_drive.py -o /tmp/h10/long-drive.mcap``: 'paper', table1-susp1k, seed
 0, 997 MiB, 12.7 M messages), one worker, library as it is now (the estimator pipeline's log
 cleared, the warning chain keeping counts and its last 100 frames/assessments,
-``system.WARNING_HISTORY``): ``bench_batch.py --memory /tmp/h10/long-drive.mcap --poll 5``:
+``pipeline.node.WARNING_HISTORY``): ``bench_batch.py --memory /tmp/h10/long-drive.mcap --poll 5``:
 3600 s of drive in 1507 s of worker CPU (2.39 s of drive per CPU s; 3083 s wall, load average
 4-7 from other jobs), **peak RSS 328 MiB** (getrusage); RSS at 0/103/290/405/663/1025/1505 CPU s:
 63 (idle worker)/266/308/327/327/327/327 MiB: it rises over the first ~16 min of drive, then
@@ -163,9 +163,9 @@ def speedup(args) -> None:
 
 def _patch_pipeline_log() -> str:
     """Run on the worker with ``--fix-pipeline-log``: make ``VdpsSystem.clear_input_log`` also
-    clear the estimator pipeline's own replay log (``EstimatorPipeline._log``), which a file
+    clear the estimator pipeline's own replay log (``EstimatorPipeline.input_log``), which a file
     replay otherwise keeps for the whole drive (an experiment of this tool, not the library)."""
-    from vdps_hil.system import VdpsSystem
+    from vdps_hil.pipeline.node import VdpsSystem
 
     orig = VdpsSystem.clear_input_log
     if getattr(orig, "_bench_patched", False):
@@ -173,7 +173,7 @@ def _patch_pipeline_log() -> str:
 
     def clear_input_log(self):
         orig(self)
-        self.pipeline._log.clear()
+        self.pipeline.clear_input_log()
     clear_input_log._bench_patched = True
     VdpsSystem.clear_input_log = clear_input_log
     return "patched"

@@ -13,7 +13,7 @@ Table 1 rates, suspension 1 Hz; ``table1-susp1k``: suspension 1 kHz) and replaye
   only and complete, in this process;
 * ``command``: the ``vdps replay FILE -o OUT --no-identify --no-predict`` command in a fresh
   interpreter, ``--jobs 1`` (one process) and ``--jobs 2`` (decoding and the output in a second
-  process, ``record/replay_io.py``; the CLI's default on two or more cores): wall time, with the
+  process, ``app/replay_io.py``; the CLI's default on two or more cores): wall time, with the
   interpreter's start-up and without it (the ``--json`` ``realtime_factor``).
 
 RTF = simulated seconds / CPU seconds of this process (``time.process_time``, best of
@@ -74,11 +74,12 @@ import sys
 import tempfile
 import time
 
+from vdps_hil.app.replay import replay_file
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.profiles import load_profile
-from vdps_hil.system import SystemConfig, VdpsSystem, replay_file
 
 
 def _best(fn, repeat: int) -> float:

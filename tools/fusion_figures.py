@@ -30,8 +30,8 @@ import nees_study  # noqa: E402  (the study harness next to this file)
 
 from vdps_hil.estimation.ekf import PaperFaithful  # noqa: E402
 from vdps_hil.estimation.states import STATE_NAMES  # noqa: E402
+from vdps_hil.pipeline.node import default_pipeline_config  # noqa: E402
 from vdps_hil.sim.profiles import load_profile  # noqa: E402
-from vdps_hil.system import default_pipeline_config  # noqa: E402
 
 SETTINGS = {
     "corrected": PaperFaithful(),

@@ -42,10 +42,10 @@ from scipy.stats import chi2
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.paper import truth_at
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem, default_pipeline_config
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
-from vdps_hil.system import SystemConfig, VdpsSystem, default_pipeline_config
 
 TRUTH_KEYS = ("pos_e_m", "pos_n_m", "pos_u_m", "vel_g_mps_e", "vel_g_mps_n", "vel_g_mps_u", "roll_g_rad",
               "pitch_g_rad", "yaw_g_rad", "road_bank_rad", "road_grade_rad", "yaw_v_rad")

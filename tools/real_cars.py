@@ -36,8 +36,8 @@ import numpy as np
 from vdps_hil import realcars as rc
 from vdps_hil.estimation.observability_report import IdentificationMonitor, observability_report
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 from vdps_hil.record.importer import CanSource, SerialSource
-from vdps_hil.system import SystemConfig, VdpsSystem
 
 REPO = Path(__file__).resolve().parents[1]
 PLAIN = dict(gyro_bias=False, accel_bias=False, wheel_speed=False, wheel_scale_state=False, nonholonomic=False)

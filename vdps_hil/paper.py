@@ -5,7 +5,7 @@ The chain and the harness
 -------------------------
 Every experiment simulates a drive (``sim.drive.Drive``: truth simulator + sensor models on the
 real wire formats, into an in-memory MCAP recording), decodes only its ``/raw/`` topics
-(``record.decode``) and feeds the samples to :class:`~vdps_hil.system.VdpsSystem` (EKF,
+(``record.decode``) and feeds the samples to :class:`~vdps_hil.pipeline.node.VdpsSystem` (EKF,
 alpha-beta, identification feeder, the four RLS problems, predictor, warning node) built on a
 *model* vehicle file. The harness here reads ``/truth/state``, ``/truth/events`` and the truth
 vehicle file's parameters only to SCORE what the chain produced; nothing from the truth reaches
@@ -187,7 +187,7 @@ def system_config(profile, *, identify: bool = True, predict: bool = True, ident
     """The chain as ``vdps replay`` sizes it from a sensor data sheet: the suspension window
     averaging from the profile's suspension rate and sigma (1 mm when the profile is noise-free:
     the EKF keeps the data sheet's figure, it is not told the sensors are perfect)."""
-    from vdps_hil.system import SystemConfig
+    from vdps_hil.pipeline.node import SystemConfig
 
     sigma = profile.suspension.sigma_m if profile.suspension.sigma_m > 0 else 0.001
     return SystemConfig.for_profile(profile.suspension.rate_hz, sigma, identify=identify, predict=predict,
@@ -220,7 +220,8 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
     from vdps_hil.record.decode import decode_recording
     from vdps_hil.record.reader import RecordingReader
     from vdps_hil.sim.drive import Drive
-    from vdps_hil.system import CanFrame, IdentReport, PredictionReport, VdpsSystem
+    from vdps_hil.pipeline.node import VdpsSystem
+    from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport
 
     wall0 = time.perf_counter()
     prof = _profile(profile)

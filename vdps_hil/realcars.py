@@ -390,7 +390,8 @@ def load_samples(can=(), serial=(), *, signalmap=None, dbc: Mapping[str, str] | 
     adapters and decoders) but keep the samples in memory. ``can``/``serial`` are
     ``importer.CanSource`` / ``SerialSource``. Returns (samples in time order, per-source
     status)."""
-    from vdps_hil.adapters.base import EndOfInput, Subscription
+    from vdps_hil.adapters.base import EndOfInput
+    from vdps_hil.bus.subscription import Subscription
     from vdps_hil.record.importer import build_adapters
 
     adapters, _ = build_adapters(list(can), list(serial), signalmap=signalmap, dbc=dict(dbc or {}))

@@ -1,2 +1,2 @@
 """Adapters: one reader per device (CAN through python-can, serial through pyserial,
-recorded logs), signal maps for foreign DBCs, and recording sessions. See ``base``."""
+recorded logs) and signal maps for foreign DBCs. See ``base``; per-source health: ``health``."""

@@ -28,8 +28,9 @@ import logging
 import os
 from typing import Any, Iterable, Mapping, Sequence
 
-from vdps_hil.adapters.base import (Adapter, AdapterError, DeviceLost, EndOfInput, RawCan,
-                                    ReplayClock)
+from vdps_hil.adapters.base import Adapter, AdapterError, DeviceLost, EndOfInput
+from vdps_hil.bus.clocks import ReplayClock
+from vdps_hil.bus.raw import RawCan
 
 __all__ = ["CanAdapter", "CanFileAdapter", "parse_can_spec", "CAN_LOG_SUFFIXES"]
 

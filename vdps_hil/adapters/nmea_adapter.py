@@ -37,9 +37,10 @@ import os
 import re
 from typing import Any, Sequence
 
-from vdps_hil.adapters.base import (Adapter, AdapterError, EndOfInput, RawSerial,
-                                    ReplayClock)
+from vdps_hil.adapters.base import Adapter, AdapterError, EndOfInput
 from vdps_hil.adapters.serial_adapter import DEFAULT_BAUD, SerialAdapter
+from vdps_hil.bus.clocks import ReplayClock
+from vdps_hil.bus.raw import RawSerial
 from vdps_hil.codecs.framing import LineFramer
 from vdps_hil.codecs.nmea import NmeaDecoder
 

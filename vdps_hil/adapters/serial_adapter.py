@@ -26,8 +26,9 @@ import dataclasses
 import os
 from typing import Any, Sequence
 
-from vdps_hil.adapters.base import (Adapter, AdapterError, DeviceLost, EndOfInput, RawSerial,
-                                    ReplayClock)
+from vdps_hil.adapters.base import Adapter, AdapterError, DeviceLost, EndOfInput
+from vdps_hil.bus.clocks import ReplayClock
+from vdps_hil.bus.raw import RawSerial
 from vdps_hil.codecs.framing import transmission_time_ns
 
 __all__ = ["SerialAdapter", "SerialFileAdapter", "parse_port_spec", "DEFAULT_BAUD"]

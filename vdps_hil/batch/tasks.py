@@ -12,7 +12,7 @@ drive's time series. A task that raises becomes a failed outcome with its one-li
 Task functions
 --------------
 ``replay_drive(path, vehicle, options)``
-    ``vdps_hil.system.replay_file`` (what ``vdps replay`` does) on one recording: estimates,
+    ``vdps_hil.app.replay.replay_file`` (what ``vdps replay`` does) on one recording: estimates,
     innovations, identified parameters with sigmas, prediction summary, decoder counters.
 ``diagnose_drive(path, vehicle, options)``
     The workbench diagnosis of one recording (``vdps diagnose``: ``workbench.diagnosis``). The
@@ -74,7 +74,7 @@ class NoRawData(ValueError):
 
 REPLAY_OPTIONS = ("model", "dbc", "signalmap", "bus_map", "params", "identify", "predict",
                   "susp_sigma_m", "paper_faithful", "output")
-"""Keyword arguments of ``vdps_hil.system.replay_file`` a batch may set (``config`` objects and
+"""Keyword arguments of ``vdps_hil.app.replay.replay_file`` a batch may set (``config`` objects and
 ``save_params`` are per-run choices a batch does not make)."""
 REPLAY_FILE_OPTIONS = ("model", "dbc", "signalmap", "params")
 """Options naming files: their contents are part of the resume key."""
@@ -83,14 +83,14 @@ TIMING_KEYS = ("wall_time_s", "realtime_factor")
 
 def replay_drive(path: str, *, vehicle: str = DEFAULT_MODEL,
                  options: Mapping[str, Any] | None = None) -> dict:
-    """Replay one recording with ``vdps_hil.system.replay_file`` (what ``vdps replay`` does):
+    """Replay one recording with ``vdps_hil.app.replay.replay_file`` (what ``vdps replay`` does):
     estimates, innovations, identified parameters with sigmas, prediction summary, counters.
     ``options``: keyword arguments of ``replay_file`` from :data:`REPLAY_OPTIONS`. The replay
     streams the file (decoder reorder window, no input log). Its timing fields (wall time,
     real-time factor) are moved under ``"run"`` (``engine`` docstring). A recording of which
     not one raw record could be read (garbage after the MCAP magic, no /raw/ topics) raises
     :class:`NoRawData`: a replay of nothing is a failed drive, not an empty success."""
-    from vdps_hil.system import replay_file
+    from vdps_hil.app.replay import replay_file
 
     opts = dict(options or {})
     unknown = sorted(set(opts) - set(REPLAY_OPTIONS))

@@ -38,7 +38,7 @@ def source_lines(sources: dict) -> list[str]:
     lines = []
     for name, st in sources.items():
         c = st["counters"]
-        from vdps_hil.adapters.base import ERROR_COUNTERS
+        from vdps_hil.adapters.health import ERROR_COUNTERS
 
         errs = {k: v for k, v in c.items() if k in ERROR_COUNTERS and v}
         kinds = ", ".join(f"{k} {v['count']} @ {v['rate_hz']:.1f} Hz"

@@ -39,7 +39,7 @@ def _topic_stats(ts: list[int], count_gaps: bool = True) -> dict:
 
 def summarize(path: str | os.PathLike) -> dict:
     """Everything ``vdps info`` prints, as a dict (raises RecordingError for a non-MCAP)."""
-    from vdps_hil.adapters.session import HEALTH_METADATA, HEALTH_PREFIX
+    from vdps_hil.record.recorder import HEALTH_METADATA, HEALTH_PREFIX
     from vdps_hil.bus.samples import FIELDS
     from vdps_hil.record import schemas as S
     from vdps_hil.record.reader import RecordingReader
@@ -106,7 +106,7 @@ def summarize(path: str | os.PathLike) -> dict:
 
 
 def _health_line(src: str, h: dict) -> str:
-    from vdps_hil.adapters.base import DROP_COUNTERS, ERROR_COUNTERS
+    from vdps_hil.adapters.health import DROP_COUNTERS, ERROR_COUNTERS
 
     c = h.get("counters", {})
     errs = {k: v for k, v in c.items() if k in ERROR_COUNTERS and v}

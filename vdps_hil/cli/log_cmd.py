@@ -145,7 +145,7 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
     --duration; a killed logger's file is rescued by `vdps recover`.
     """
     from vdps_hil.adapters.base import AdapterError
-    from vdps_hil.adapters.session import LogSession
+    from vdps_hil.app.session import LogSession
     from vdps_hil.record.writer import RecordingWriter
 
     if not can_specs and not serial_specs:
@@ -241,12 +241,12 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
 
 class PipelineTap:
     """``vdps log --pipeline``: feeds every decoded sample the recording took, in arrival order,
-    to the paper's Figure 2 node (:class:`vdps_hil.system.VdpsSystem`, the same node ``vdps
+    to the paper's Figure 2 node (:class:`vdps_hil.pipeline.node.VdpsSystem`, the same node ``vdps
     replay`` runs), records its estimates on ``/est/state`` (10 Hz) and its VDPS_Warning frames
     on ``/est/can/<bus>`` in the layout of ``vdps replay``, and reports the latest warning for
     the status line. It never sends on the bus (the bench does).
 
-    Configuration as ``vdps replay`` derives it (``system._replay_config``): the samples of the
+    Configuration as ``vdps replay`` derives it (``app.replay.replay_config``): the samples of the
     first ``probe_s`` (``PROBE_SECONDS``, 3 s) of data are held, the sensor set is inferred from
     their fields and the suspension averaging sized from their rate (suspension sigma
     ``DEFAULT_SUSP_SIGMA_M``), then they go to the system at once -- so the first estimates and
@@ -263,7 +263,8 @@ class PipelineTap:
         from vdps_hil.codecs.can_codec import VdpsCanDecoder
         from vdps_hil.estimation.pipeline import Estimate
         from vdps_hil.record.input_order import InputOrder
-        from vdps_hil.system import PROBE_SECONDS, CanFrame
+        from vdps_hil.app.replay import PROBE_SECONDS
+        from vdps_hil.pipeline.outputs import CanFrame
 
         self._sample_type, self._frame_type, self._est_type = Sample, CanFrame, Estimate
         self.model, self.start, self.params_file = model_vehicle, start_params, params_file
@@ -298,13 +299,14 @@ class PipelineTap:
         """Size the system from the held samples as ``replay_file`` does, then feed them."""
         from dataclasses import replace
 
-        from vdps_hil.system import DEFAULT_SUSP_SIGMA_M, ReplayError, VdpsSystem, _replay_config, sample_stats
+        from vdps_hil.app.replay import DEFAULT_SUSP_SIGMA_M, ReplayError, replay_config, sample_stats
+        from vdps_hil.pipeline.node import VdpsSystem
 
         pending, self._pending = self._pending, []
         _, rates, fields = sample_stats(iter(pending), self.probe_s)
         try:
-            cfg, self.kind_map, _, _ = _replay_config(rates, fields, self.model, DEFAULT_SUSP_SIGMA_M, None,
-                                                      identify=True, predict=True)
+            cfg, self.kind_map, _, _ = replay_config(rates, fields, self.model, DEFAULT_SUSP_SIGMA_M, None,
+                                                     identify=True, predict=True)
         except ReplayError as e:
             self.error = str(e)
             return
@@ -332,7 +334,7 @@ class PipelineTap:
             self._fed_since_clear = 0
 
     def _outputs(self, outs) -> None:
-        from vdps_hil.system import write_output
+        from vdps_hil.app.est_topics import write_output
 
         for out in outs:
             if isinstance(out, self._est_type):

@@ -1,5 +1,5 @@
 """``vdps replay``: run the vehicle dynamic prediction system on a recording's ``/raw/`` topics
-(``vdps_hil.system.replay_file``) and write the estimates, innovations, identified parameters,
+(``vdps_hil.app.replay.replay_file``) and write the estimates, innovations, identified parameters,
 predictions and warning frames."""
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
            save_params, no_identify, no_predict, susp_sigma_m, paper_faithful, input_order, jobs):
     """Replay FILE.mcap through the estimator, identifier, predictor and warning (the paper's
     Figure 2) using only its /raw/ topics; print a one-line summary."""
-    from vdps_hil.system import ReplayError, replay_file
+    from vdps_hil.app.replay import ReplayError, replay_file
 
     src = Path(recording)
     if not src.is_file():

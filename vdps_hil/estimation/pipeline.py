@@ -448,6 +448,10 @@ class EstimatorPipeline:
         """Every sample handed to ``handle``, in order (feed it to ``replay``)."""
         return tuple(self._log)
 
+    def clear_input_log(self) -> None:
+        """Forget the recorded inputs (a long replay that does not need them)."""
+        self._log.clear()
+
     @property
     def origin(self) -> EnuOrigin | None:
         return self._origin

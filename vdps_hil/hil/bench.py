@@ -56,7 +56,7 @@ Results (``BenchResult.to_json``): the ``--json`` keys of ``vdps bench`` (``hil`
 seconds per wall second achieved), ``late_sends``; plus details (IMU packets, pipeline keeps
 up, ECU actions, first warning, truth events, transport).
 
-Warning validity: the pipeline is the system's (:class:`vdps_hil.system.VdpsSystem`) with its
+Warning validity: the pipeline is the system's (:class:`vdps_hil.pipeline.node.VdpsSystem`) with its
 default rule: started from the model file's priors its frames say "not converged" until the
 cornering problem has converged (a few seconds of driving; never within a 3.7 s fishhook), so
 lead times count no frame; ``params`` (``--params FILE``, a file saved by ``vdps replay
@@ -161,7 +161,7 @@ def calibrate(scenario: str, truth_vehicle: str, model: str, directory: str | os
     saved in ``directory``. Returns {scenario, seed, params (file), converged (per problem),
     cpu_s}. The chain of the replay reads only the recording's /raw/ topics and the model file."""
     from vdps_hil.sim.drive import CONFIG_ERRORS, DEFAULT_PROFILE, Drive
-    from vdps_hil.system import ReplayError, replay_file
+    from vdps_hil.app.replay import ReplayError, replay_file
 
     d = Path(directory)
     rec, out = d / f"calibration-{scenario}.mcap", d / f"calibration-{scenario}-params.json"
@@ -185,7 +185,7 @@ def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: st
     identifier's start and its effects in the chain, as ``vdps replay --model`` (with a
     parameter file as well: refused)."""
     from vdps_hil.model.params import load_vehicle
-    from vdps_hil.system import SystemConfig, VdpsSystem
+    from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 
     saved = _saved_workbench_model(model)
     if saved is None:

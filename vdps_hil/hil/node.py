@@ -46,17 +46,18 @@ import threading
 import time
 from typing import Any, Callable
 
-from vdps_hil.adapters.base import RawCan, RawSerial, Subscription
 from vdps_hil.adapters.can_adapter import CanAdapter
 from vdps_hil.adapters.imu_adapter import ImuAdapter, ImuProtocol
 from vdps_hil.adapters.nmea_adapter import NmeaAdapter, NmeaProtocol
 from vdps_hil.adapters.serial_adapter import SerialAdapter
-from vdps_hil.adapters.session import Recorder
+from vdps_hil.app.est_topics import est_docs  # the /est/ layout of ``vdps replay``
+from vdps_hil.bus.raw import RawCan, RawSerial
 from vdps_hil.bus.samples import Sample
+from vdps_hil.bus.subscription import Subscription
 from vdps_hil.codecs.can_codec import VdpsCanDecoder
 from vdps_hil.record import schemas as S
 from vdps_hil.record.input_order import INPUT_ORDER_METADATA, InputOrder, input_order_samples
-from vdps_hil.system import _est_docs  # the /est/ layout of ``vdps replay``
+from vdps_hil.record.recorder import Recorder
 
 from .latency import CycleLog
 
@@ -204,7 +205,7 @@ class InputSequencer:
 class PipelineNode:
     """The pipeline side (module docstring).
 
-    ``system``: an object with ``handle(sample) -> list`` (``vdps_hil.system.VdpsSystem``);
+    ``system``: an object with ``handle(sample) -> list`` (``vdps_hil.pipeline.node.VdpsSystem``);
     ``can_spec``: the interface string of the bench's CAN; ``imu_port``/``gnss_port``: pty
     paths; ``clock``: the bench clock; ``writer``: a RecordingWriter for ``-o`` (or None).
     ``run(stop)`` processes until ``stop`` is set and everything queued is handled."""
@@ -263,7 +264,7 @@ class PipelineNode:
 
     # --- lifecycle ------------------------------------------------------------------------------
     def open(self) -> None:
-        from vdps_hil.adapters.session import open_all
+        from vdps_hil.app.session import open_all
 
         open_all(self.adapters, errors=(Exception,))
 
@@ -427,7 +428,7 @@ class PipelineNode:
         else:
             self.outputs["other"] += 1
         if w is not None:
-            for topic, t, vals, sig in _est_docs(o):
+            for topic, t, vals, sig in est_docs(o):
                 self._write(lambda: w.write_estimate(topic, t, vals, sig))
         return False
 

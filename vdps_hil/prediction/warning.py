@@ -44,7 +44,7 @@ Validity (``require_converged``)
 --------------------------------
 The predictor runs with the parameters identified so far. When the identifier started from the
 model file's priors (a first drive: no ``--params`` / ``SystemConfig.start_params``), the system
-(:class:`vdps_hil.system.VdpsSystem`) sends status 1 "not converged" until every identification
+(:class:`vdps_hil.pipeline.node.VdpsSystem`) sends status 1 "not converged" until every identification
 problem named in ``require_converged`` (default ``["cornering"]``: the cornering stiffnesses, the
 predictor's most sensitive parameters) has converged (``Identifier.converged``: every sigma/|x|
 below ``converged_rel_sigma``); started from identified parameters, frames are valid at once.

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from vdps_hil.adapters.base import Adapter, AdapterError, EndOfInput
-from vdps_hil.adapters.session import Recorder
+from vdps_hil.record.recorder import Recorder
 
 __all__ = ["CanSource", "SerialSource", "ImportError_", "import_logs", "parse_can_source",
            "parse_serial_source", "SERIAL_FORMATS"]
@@ -214,7 +214,7 @@ def import_logs(output: str | os.PathLike, can: Sequence[CanSource] = (),
             a.close()
         raise ImportError_(f"cannot write {output}: {e.strerror or e}") from None
     rec = Recorder(writer)
-    from vdps_hil.adapters.base import Subscription
+    from vdps_hil.bus.subscription import Subscription
 
     try:
         for a in adapters:

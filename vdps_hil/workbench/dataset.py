@@ -158,7 +158,7 @@ def run_estimator(samples: Sequence[Sample], vehicle: Vehicle, config: PipelineC
     for i, s in enumerate(samples):
         out = p.handle(s)
         if i % 4096 == 4095:
-            p._log.clear()  # its replay log (input_log) would hold the whole drive (as system.replay_file)
+            p.clear_input_log()  # its replay log (input_log) would hold the whole drive (as app.replay.replay_file)
         for o in out:
             if isinstance(o, Innovation):
                 innov.add(o)

@@ -1,4 +1,4 @@
-"""Recorder and LogSession in one process: python-can's virtual bus as the device, the
+"""LogSession (vdps_hil.app.session) in one process: python-can's virtual bus as the device, the
 recording read back, health in the file, overflow of a too-small queue counted."""
 
 import json
@@ -8,9 +8,10 @@ import time
 import can
 
 from vdps_hil.adapters.can_adapter import CanAdapter
-from vdps_hil.adapters.session import HEALTH_METADATA, LogSession, Recorder
+from vdps_hil.app.session import LogSession
 from vdps_hil.codecs import can_codec as cc
 from vdps_hil.record.reader import RecordingReader
+from vdps_hil.record.recorder import HEALTH_METADATA
 from vdps_hil.record.writer import RecordingWriter
 
 
@@ -68,15 +69,3 @@ def test_small_queue_overflow_is_counted_not_silent(tmp_path, rng):
     # every event either reached the file or was counted as a drop
     assert written + res["queue_overflow"] == 2 * 6000
     assert h["counters"].get("queue_overflow", 0) == res["queue_overflow"]
-
-
-def test_recorder_counts_refused_writes(tmp_path):
-    from vdps_hil.adapters.base import RawCan
-
-    w = RecordingWriter(tmp_path / "r.mcap")
-    rec = Recorder(w)
-    bad = can.Message(arbitration_id=0x800, data=b"", is_extended_id=False, check=False)
-    rec.write(RawCan(1, 1, "can.x", bad))  # an 11-bit ID out of range
-    rec.write("not an event")
-    w.close()
-    assert rec.write_errors == 2 and rec.written == 0 and len(rec.problems) == 2

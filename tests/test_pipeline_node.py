@@ -1,5 +1,6 @@
-"""Tests of vdps_hil.system: the Figure 2 node, its determinism, suspension conditioning, the
-warning path, and the estimator acceptance through the real chain (issue 5)."""
+"""Tests of vdps_hil.pipeline.node: the Figure 2 node, its determinism, the warning path, the
+estimator acceptance through the real chain (issue 5), a saved workbench model's effects in the
+predictor."""
 
 from __future__ import annotations
 
@@ -14,16 +15,14 @@ import pytest
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.can_codec import VdpsCanDecoder
 from vdps_hil.estimation.pipeline import Estimate, FilteredSignals, Innovation
-from vdps_hil.identification.problems import suspension_forces_n
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
+from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport, outputs_digest
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.profiles import load_profile
-from vdps_hil.system import (CanFrame, IdentReport, PredictionReport, SuspensionConditioner, SystemConfig,
-                             VdpsSystem, outputs_digest, sample_stats)
 
 MODEL = load_vehicle("sedan-model")
-SUSP = [f"susp_deflection_m_{i}" for i in range(1, 5)]
 
 
 def _nees_tool():
@@ -154,68 +153,6 @@ def test_refuses_truth_and_ignores_truth_samples():
     assert s.pipeline.counters["truth_ignored"] == 1
 
 
-# ----------------------------------------------------------------------- suspension conditioning
-def _susp(t_ns, h):
-    return Sample(t_ns, "can.vdps", "suspension", dict(zip(SUSP, h)))
-
-
-def test_window_means_are_stamped_at_the_window_end_and_never_in_the_past():
-    c = SuspensionConditioner(MODEL, 100.0, tire_compliance=False, raw_bandwidth_hz=20.0,
-                              rate_bandwidth_hz=10.0, max_gap_s=2.0)
-    out = []
-    for k in range(35):  # 1 kHz, constant deflections
-        t = k * 1_000_000 + 200_000
-        out += c.due(t)
-        assert c.add(_susp(t, (0.01, 0.02, 0.03, 0.04))) == []
-    assert [s.t_ns for s in out] == [10_000_000, 20_000_000, 30_000_000]
-    assert all(s.fields[SUSP[i]] == pytest.approx(0.01 * (i + 1), abs=1e-15) for s in out for i in range(4))
-    assert c.windows == 3 and c.merged == 30
-    assert c.add(Sample(1, "can.vdps", "suspension", {SUSP[0]: 0.0})) is None  # incomplete: passed on
-
-
-def test_mean_stamping_puts_a_ramp_window_at_its_mean_time():
-    """The system's default (``suspension_stamp = "mean"``): the mean of a window of a ramp is the
-    ramp at the mean sample time, exactly."""
-    c = SuspensionConditioner(MODEL, 100.0, tire_compliance=False, raw_bandwidth_hz=20.0,
-                              rate_bandwidth_hz=10.0, max_gap_s=2.0, stamp="mean")
-    out = []
-    for k in range(45):
-        t = k * 1_000_000 + 300_000
-        out += c.due(t)
-        c.add(_susp(t, (0.05 * t * 1e-9,) * 4))
-    assert [s.t_ns for s in out] == [4_800_000, 14_800_000, 24_800_000, 34_800_000]
-    assert all(s.fields[SUSP[0]] == pytest.approx(0.05 * s.t_ns * 1e-9, abs=1e-15) for s in out)
-    assert SystemConfig().suspension_stamp == "mean"
-    with pytest.raises(ValueError, match="suspension_stamp"):
-        SystemConfig(suspension_stamp="middle")
-
-
-def test_a_ramp_is_extrapolated_to_the_window_end():
-    c = SuspensionConditioner(MODEL, 100.0, tire_compliance=False, raw_bandwidth_hz=20.0,
-                              rate_bandwidth_hz=10.0, max_gap_s=2.0)
-    rate = 0.05  # m/s, all corners
-    out = []
-    for k in range(2000):
-        t = k * 1_000_000
-        out += c.due(t)
-        c.add(_susp(t, (rate * t * 1e-9,) * 4))
-    last = out[-1]
-    assert last.fields[SUSP[0]] == pytest.approx(rate * last.t_ns * 1e-9, abs=1e-6)  # the alpha-beta ramp is exact
-
-
-def test_tire_compliance_adds_the_load_change_over_the_tire_stiffness():
-    c = SuspensionConditioner(MODEL, None, tire_compliance=True, raw_bandwidth_hz=20.0, rate_bandwidth_hz=10.0,
-                              max_gap_s=2.0)
-    h = (0.01, -0.01, 0.005, 0.0)
-    (s,) = c.add(_susp(0, h))  # first sample: rate 0
-    f = suspension_forces_n(MODEL, h, (0.0,) * 4) - suspension_forces_n(MODEL, (0.0,) * 4, (0.0,) * 4)
-    kt = MODEL.tire.vertical_stiffness_npm
-    assert [s.fields[n] for n in SUSP] == pytest.approx([h[i] + f[i] / kt for i in range(4)], abs=1e-15)
-    assert c.raw_filtered()[0] == pytest.approx(h)  # the identifier keeps the measured H
-    (s0,) = c.add(_susp(1_000_000, (0.0,) * 4))
-    assert abs(s0.fields[SUSP[3]]) < 1e-3  # ~0 at design ride height (a damper term from the rate)
-
-
 # ------------------------------------------------------------------ acceptance through the chain
 def test_nees_of_five_seeded_runs_through_the_real_chain():
     """Issue 5's NEES check on the real chain (wire formats -> decode -> system), 5 runs of the
@@ -263,55 +200,13 @@ def test_identification_through_the_chain_finds_the_mass():
     assert math.isfinite(system.identifier.sigmas["mass_kg"])
 
 
-@pytest.mark.parametrize("stamp", ["end", "mean"])
-def test_identifier_deflection_and_rate_are_carried_to_the_estimate_time(stamp):
-    """The identifier's (H, H_dot) at an estimate instant: a 1 Hz sine of 2 cm sampled at 1 kHz,
-    100 Hz windows, 20 Hz alpha-beta. Held at the filter's last update, H lags ~5 ms and H_dot
-    ~18 ms (13 ms derivative lag + the update's age); carried forward and led
-    (``raw_filtered(t)``) the errors drop to a fifth (H) and a seventh (H_dot) of the held ones
-    (measured, both stampings: H 0.11 vs 0.93 mm, H_dot 1.1 vs 13.1 mm/s RMS). A 1 Hz sensor
-    (table1) is never extrapolated."""
-    amp, w = 0.02, 2 * math.pi
-
-    def run(lead):
-        c = SuspensionConditioner(MODEL, 100.0, tire_compliance=False, raw_bandwidth_hz=20.0,
-                                  rate_bandwidth_hz=10.0, max_gap_s=2.0, rate_lead=lead, stamp=stamp)
-        eh, ehd, eh0, ehd0 = [], [], [], []
-        for k in range(3000):
-            t = k * 1_000_000 + 300_000
-            c.due(t)
-            c.add(_susp(t, (amp * math.sin(w * t * 1e-9),) * 4))
-            if k > 1000 and k % 10 == 5:  # an estimate instant
-                h, hd = c.raw_filtered(t)
-                h0, hd0 = c.raw_filtered()
-                eh.append(h[0] - amp * math.sin(w * t * 1e-9))
-                ehd.append(hd[0] - amp * w * math.cos(w * t * 1e-9))
-                eh0.append(h0[0] - amp * math.sin(w * t * 1e-9))
-                ehd0.append(hd0[0] - amp * w * math.cos(w * t * 1e-9))
-        rms = lambda e: float(np.sqrt(np.mean(np.square(e))))  # noqa: E731
-        return rms(eh), rms(ehd), rms(eh0), rms(ehd0)
-
-    h, hd, h0, hd0 = run(True)
-    assert h < 0.2 * h0 and hd < 0.15 * hd0
-    _, hd_nolead, _, _ = run(False)
-    assert hd_nolead > 5 * hd  # the lead is what fixes the rate
-    slow = SuspensionConditioner(MODEL, 1.0, tire_compliance=False, raw_bandwidth_hz=20.0,
-                                 rate_bandwidth_hz=10.0, max_gap_s=2.0, stamp=stamp)
-    for k in range(3):
-        slow.due(k * 1_000_000_000)
-        slow.add(_susp(k * 1_000_000_000, (0.01 * k,) * 4))
-    t = 2_500_000_000
-    slow.due(t)
-    assert slow.raw_filtered(t) == slow.raw_filtered()
-
-
 # ---------------------------------------------------------------- saved workbench models (--model)
 
 def test_predictor_effects_join_a_workbench_model():
     """The workbench model's dynamics join the configured effects; its tire replaces the
     configured tire; its measurement effects stay out of the predictor."""
     from vdps_hil.model.effects import REGISTRY, EffectSet
-    from vdps_hil.system import predictor_effects
+    from vdps_hil.pipeline.node import predictor_effects
 
     base = EffectSet([REGISTRY["linear_tire"]()])
     wb = EffectSet([REGISTRY["aero_drag"](cda_m2=0.9), REGISTRY["magic_formula_tire"](), REGISTRY["imu_bias"]()])
@@ -336,83 +231,6 @@ def test_system_predictor_uses_the_saved_model_drag():
     end = {}
     for label, eff in (("plain", None), ("drag", EffectSet([REGISTRY["aero_drag"](cda_m2=2.0)]))):
         system = VdpsSystem(veh, SystemConfig(identify=False, model_effects=eff))
-        res = system._chain.predictor.predict(init)
+        res = system.predictor.predict(init)
         end[label] = float(res.vel_b_mps[-1][0])
     assert 1.5 <= end["plain"] - end["drag"] <= 3.0, end
-
-
-def test_replay_with_a_saved_model(tmp_path):
-    """``replay_file(model=...)`` reads a ``vdps diagnose --save-model`` file: its parameters
-    start the identifier, its effects join the predictor, the JSON says so; --params with
-    --model and a broken model file are one-line errors."""
-    from vdps_hil.model.effects import REGISTRY, EffectSet
-    from vdps_hil.system import ReplayError, replay_file
-    from vdps_hil.workbench.model_file import save_model
-
-    drive = tmp_path / "paper.mcap"
-    Drive("paper", seed=5, duration_s=2.0).run(drive)
-    veh = load_vehicle("sedan-model", "model")
-    m = save_model(tmp_path / "m.toml", veh.with_params(inertia_x_kgm2=1400.0),
-                   EffectSet([REGISTRY["aero_drag"](cda_m2=0.7), REGISTRY["imu_bias"]()]))
-    doc = replay_file(drive, model=m, predict=False)
-    assert doc["model"]["predictor_effects"] == ["aero_drag"]
-    assert doc["model"]["imu_corrected"] == ["imu_bias"]
-    # the file's parameters are the identifier's start (the vehicle file's prior Ix is 715)
-    from vdps_hil.system import _load_workbench_model
-
-    start, effects, _ = _load_workbench_model(m, veh)
-    assert start.inertia_x_kgm2 == 1400.0 and veh.params.inertia_x_kgm2 == 715.0
-    assert [e.name for e in effects] == ["aero_drag", "imu_bias"]
-    with pytest.raises(ReplayError, match="not both"):
-        replay_file(drive, model=m, params=m)
-    bad = tmp_path / "bad.toml"
-    bad.write_text(Path(m).read_text().replace('"aero_drag"', '"no_such_effect"'))
-    with pytest.raises(ReplayError) as e:
-        replay_file(drive, model=bad)
-    assert len(str(e.value).splitlines()) == 1 and "no_such_effect" in str(e.value)
-
-
-def test_saved_imu_bias_is_taken_out_of_the_readings(tmp_path):
-    """A drive whose IMU has a large hidden bias (0.3 m/s^2 on x and y, 0.01 rad/s on z: a
-    badly calibrated unit; lane change, seed 3, 12 s): without the model the EKF's gated GNSS
-    updates mostly fail (measured: 32/60 positions, 7/60 velocities accepted); with a saved
-    model naming that bias, ``VdpsSystem`` removes it from every IMU reading and >= 95 % of
-    the GNSS position and attitude updates pass the chi-square gate."""
-    from vdps_hil.model.effects import REGISTRY, EffectSet
-    from vdps_hil.system import replay_file
-    from vdps_hil.workbench.model_file import save_model
-
-    drive = tmp_path / "biased.mcap"
-    Drive("lane-change-iso3888", seed=3, duration_s=12.0,
-          effects=["imu_bias:accel_bias_x_mps2=0.3,accel_bias_y_mps2=0.3,gyro_bias_z_radps=0.01"]).run(drive)
-    bias = REGISTRY["imu_bias"](accel_bias_x_mps2=0.3, accel_bias_y_mps2=0.3, accel_bias_z_mps2=0.0,
-                                gyro_bias_x_radps=0.0, gyro_bias_y_radps=0.0, gyro_bias_z_radps=0.01)
-    m = save_model(tmp_path / "m.toml", load_vehicle("sedan-model", "model"), EffectSet([bias]))
-    plain = replay_file(drive, identify=False, predict=False)["innovations"]
-    fixed = replay_file(drive, model=m, identify=False, predict=False)["innovations"]
-    for kind in ("gnss_pos", "gnss_att"):
-        assert fixed[kind]["accepted"] >= 0.95 * fixed[kind]["updates"], fixed[kind]
-        assert plain[kind]["accepted"] < 0.8 * plain[kind]["updates"], plain[kind]
-
-
-def test_sample_stats_takes_the_first_seconds_and_leaves_the_rest():
-    """``sample_stats`` (the replay's sensor-set probe, run on the decoder the replay then goes on
-    reading): the samples it takes plus those left in the iterator are the whole stream, in order;
-    rates count one instant of one kind once (two wheel half-frames at 1 kHz -> 1000 Hz, not
-    2000); fields are those with a finite value."""
-    stream = []
-    for i in range(5000):  # 5 s: IMU at 1 kHz, wheel half-frames at 1 kHz, suspension at 10 Hz
-        t = i * 1_000_000
-        stream.append(Sample(t, "imu", "imu", {"angular_rate_radps_z": 0.1, "specific_force_mps2_x": math.nan}))
-        stream.append(Sample(t, "can", "wheel_speed", {"wheel_speed_radps_1": 1.0, "wheel_speed_radps_2": 1.0}))
-        stream.append(Sample(t, "can", "wheel_speed", {"wheel_speed_radps_3": 1.0, "wheel_speed_radps_4": 1.0}))
-        if i % 100 == 0:
-            stream.append(Sample(t, "can", "suspension", {"susp_deflection_m_1": 0.0}))
-    it = iter(stream)
-    taken, rates, fields = sample_stats(it, 3.0)
-    assert taken + list(it) == stream
-    assert taken[-1].t_ns > 3_000_000_000 >= taken[-2].t_ns  # the window ends with the first sample after it
-    assert rates["imu"] == pytest.approx(1000.0, rel=1e-9) and rates["wheel_speed"] == pytest.approx(1000.0, rel=1e-9)
-    assert rates["suspension"] == pytest.approx(10.0, rel=1e-9)
-    assert fields["imu"] == {"angular_rate_radps_z"}
-    assert fields["wheel_speed"] == {f"wheel_speed_radps_{i}" for i in range(1, 5)}

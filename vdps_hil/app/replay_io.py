@@ -5,7 +5,7 @@ A replay's costs split in two: the recording side (MCAP chunks, CAN frames, IMU 
 sentences, device clocks, the reorder buffer; copying the raw topics and writing the ``/est/``
 topics) and the system on the decoded samples. :class:`LocalRecordingSide` does the former in
 this process. :class:`RecordingProcess` runs a ``LocalRecordingSide`` in a child interpreter
-(``python -m vdps_hil.record.replay_io``) with the same interface: the child decodes and writes
+(``python -m vdps_hil.app.replay_io``) with the same interface: the child decodes and writes
 while the parent runs the system, so on two free cores the wall time is set by the slower side
 instead of the sum. The output holds the same messages either way (tested).
 
@@ -265,6 +265,11 @@ class RecordingProcess:
 
     def __iter__(self) -> Iterator[Sample]:
         return self._it
+
+    @property
+    def pid(self) -> int:
+        """The child's process id."""
+        return self._proc.pid
 
     def __next__(self) -> Sample:
         return next(self._it)
