@@ -157,7 +157,7 @@ def test_no_warning_on_paper_left_turn():
     assert math.isnan(d["first_warning_t_s"]) and d["false_alarms"] == 0  # ... never at level >= 2
     assert d["ecu"]["first_warning_t_s"] is None and d["ecu"]["max_level"] < 2
     # from the priors: "not converged" until the cornering problem converges (the switch to
-    # valid is tested deterministically on a replay in test_system/test_replay_cmd; in this
+    # valid is tested deterministically on a replay in test_pipeline_node/test_replay_cmd; in this
     # real-time run under heavy load it came after the end once: 594 of 594 frames not valid)
     assert 0 < d["warning_frames_not_valid"] <= d["warning_frames_accepted"]
 
