@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from vdps_hil import realcars as rc
-from vdps_hil.estimation.ekf import EkfConfig, SensorSet
+from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
 from vdps_hil.estimation.observability import observability_rank
 from vdps_hil.estimation.observability_report import (IdentificationMonitor, explain_null_space, input_dependencies,
                                                       observability_report, structural_report)

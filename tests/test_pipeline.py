@@ -11,7 +11,7 @@ import pytest
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation import synthetic as syn
-from vdps_hil.estimation.ekf import EkfConfig, SensorSet
+from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
 from vdps_hil.estimation.pipeline import (Estimate, EstimatorPipeline, Innovation, Latencies, PipelineConfig)
 from vdps_hil.estimation.kinematics import dcm_gv
 from vdps_hil.estimation.states import STATE_NAMES, States

@@ -30,7 +30,8 @@ import numpy as np
 from scipy.stats import chi2
 
 from vdps_hil.estimation import synthetic as syn
-from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, PaperFaithful
+from vdps_hil.estimation.ekf import MultiRateEKF
+from vdps_hil.estimation.ekf_config import EkfConfig, PaperFaithful
 from vdps_hil.estimation.observations import ObsKind, make_models, suspension_measurement
 from vdps_hil.estimation.observations import y2_gps_measurement
 from vdps_hil.estimation.pipeline import EstimatorPipeline, PipelineConfig

@@ -61,7 +61,7 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from vdps_hil.bus.samples import Sample
-from vdps_hil.estimation.ekf import EkfConfig, SensorSet
+from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
 from vdps_hil.estimation.kinematics import dcm_gv
 from vdps_hil.estimation.pipeline import Estimate, EstimatorPipeline, Innovation, Latencies, PipelineConfig
 from vdps_hil.geodesy import EnuOrigin, ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef

@@ -9,7 +9,8 @@ Data flow: ``Sample`` -> ``pipeline.EstimatorPipeline`` -> ``ekf.MultiRateEKF`` 
 """
 
 from vdps_hil.estimation.alpha_beta import AlphaBetaFilter, TimedAlphaBeta, critically_damped_gains, kalata_gains
-from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, PaperFaithful, SensorSet, UpdateResult
+from vdps_hil.estimation.ekf import MultiRateEKF, UpdateResult
+from vdps_hil.estimation.ekf_config import EkfConfig, PaperFaithful, SensorSet
 from vdps_hil.estimation.observability import ObservabilityReport, ObservabilityWindow, observability_rank
 from vdps_hil.estimation.observations import ObsKind
 from vdps_hil.estimation.pipeline import (Bandwidths, Estimate, EstimatorPipeline, FilteredSignals, Innovation,

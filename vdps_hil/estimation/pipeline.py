@@ -98,7 +98,8 @@ import numpy as np
 
 from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
 from vdps_hil.estimation.alpha_beta import TimedAlphaBetaBank
-from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, UpdateResult
+from vdps_hil.estimation.ekf import MultiRateEKF, UpdateResult
+from vdps_hil.estimation.ekf_config import EkfConfig
 from vdps_hil.estimation.kinematics import dcm_gv, vehicle_angles_eq4
 from vdps_hil.estimation.observability import ObservabilityReport, ObservabilityWindow
 from vdps_hil.estimation.observations import (ObsKind, ZrRateBuilder, suspension_measurement,
