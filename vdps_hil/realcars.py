@@ -1177,7 +1177,7 @@ def steer_response_fit(t_s, speed_mps, steer_wheel_rad, yaw_rate_radps, course_r
     ``observability_report``: gains = eig(S I S), S = diag(prior sigmas); a direction with gain
     < 1 is not identified by the drive (it does not halve the prior variance). s_R = p1 / L,
     x = p1 K_0 / (L p2), delta_0 = p3 (sigmas by first-order propagation)."""
-    from vdps_hil.estimation.observability_report import explain_null_space
+    from vdps_hil.estimation.observability_explain import explain_null_space
 
     t = np.asarray(t_s, dtype=float)
     u, sw, r_m, cr = (np.asarray(v, dtype=float) for v in (speed_mps, steer_wheel_rad, yaw_rate_radps,

@@ -1133,7 +1133,7 @@ class _Summary:
         }
         # computed observability (issue 11): structural rank of the sensor set, each window's null
         # space explained, and each identification problem's information with its cause
-        from vdps_hil.estimation.observability_report import observability_report
+        from vdps_hil.identification.observability_report import observability_report
         try:
             doc["observability"].update(observability_report(system.pipeline, system.identifier).to_json())
         except (ValueError, np.linalg.LinAlgError) as e:  # a degenerate window must not lose the run

@@ -13,7 +13,7 @@ default 1e-6). The right singular vectors of the remaining s_i span the unobserv
 directions; a state is reported *unobservable* when its squared component in that null space
 (its "participation", 0..1) exceeds ``participation_threshold`` (default 0.5). The null-space
 basis itself (rows, scaled coordinates) is kept in ``ObservabilityReport.null_space`` so the
-reasons can be derived from it (``observability_report.explain_null_space``).
+reasons can be derived from it (``observability_explain.explain_null_space``).
 """
 
 from __future__ import annotations

@@ -102,8 +102,8 @@ from vdps_hil.estimation.ekf import MultiRateEKF, UpdateResult
 from vdps_hil.estimation.ekf_config import EkfConfig
 from vdps_hil.estimation.kinematics import dcm_gv, vehicle_angles_eq4
 from vdps_hil.estimation.observability import ObservabilityReport, ObservabilityWindow
-from vdps_hil.estimation.observations import (ObsKind, ZrRateBuilder, suspension_measurement,
-                                              y2_gps_measurement)
+from vdps_hil.estimation.measurements import ZrRateBuilder, suspension_measurement, y2_gps_measurement
+from vdps_hil.estimation.observations import ObsKind
 from vdps_hil.estimation.states import STATE_NAMES, States
 from vdps_hil.geodesy import EnuOrigin
 from vdps_hil.units import deg2rad
@@ -160,7 +160,7 @@ class PipelineConfig:
     gnss_speed_sigma_mps: float = 0.1
     gnss_course_min_speed_mps: float = 3.0
     susp_sigma_m: float = 0.001
-    heave_rate_sigma_mps: float = 0.05  # y2_sus rate form (observations.ZrRateBuilder)
+    heave_rate_sigma_mps: float = 0.05  # y2_sus rate form (measurements.ZrRateBuilder)
     y2_gps_floor_rad: float | None = None  # faithful (b) only: isotropic R floor (None: the angle sigma)
     bandwidths: Bandwidths = field(default_factory=Bandwidths)
     latencies: Latencies = field(default_factory=Latencies)
