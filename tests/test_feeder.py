@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.estimation.pipeline import Estimate, FilteredSignals
+from vdps_hil.estimation.estimates import Estimate, FilteredSignals
 from vdps_hil.bus.samples import Sample
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.identification.feeder import IdentFeeder

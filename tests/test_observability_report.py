@@ -14,7 +14,7 @@ import pytest
 from vdps_hil import realcars as rc
 from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
 from vdps_hil.estimation.observability_explain import structural_report
-from vdps_hil.estimation.pipeline import PipelineConfig
+from vdps_hil.estimation.pipeline_config import PipelineConfig
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.identification.observability_report import IdentificationMonitor, input_dependencies, observability_report
 from vdps_hil.model.params import load_vehicle

@@ -34,7 +34,8 @@ from vdps_hil.estimation.ekf import MultiRateEKF
 from vdps_hil.estimation.ekf_config import EkfConfig, PaperFaithful
 from vdps_hil.estimation.measurements import suspension_measurement, y2_gps_measurement
 from vdps_hil.estimation.observations import ObsKind, make_models
-from vdps_hil.estimation.pipeline import EstimatorPipeline, PipelineConfig
+from vdps_hil.estimation.pipeline import EstimatorPipeline
+from vdps_hil.estimation.pipeline_config import PipelineConfig
 from vdps_hil.estimation.states import STATE_NAMES
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.params import load_vehicle

@@ -213,7 +213,7 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
     ``SystemConfig`` fields (``require_converged``, ``start_params``)."""
     import can
 
-    from vdps_hil.estimation.pipeline import Estimate
+    from vdps_hil.estimation.estimates import Estimate
     from vdps_hil.geodesy import DEFAULT_ORIGIN
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.prediction.predictor import PredictorInitialState

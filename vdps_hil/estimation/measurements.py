@@ -1,15 +1,27 @@
 """Measurement builders: sensor quantities -> (z, R) for the observation models (``observations``).
 
-===========================  ==============================================================
-builder                      measurement
-===========================  ==============================================================
-``suspension_measurement``   eq 5 on the four deflections: y1_sus (z, R, exactly linear in
-                             H) and eq 5's z_r with its variance (y2_sus)
-``y2_gps_measurement``       y2_gps from the GNSS attitude (pitch, yaw) with an isotropic
-                             R floor (paper-faithful (b) only)
-``ZrRateBuilder``            the locally referenced y2_sus (correction (c)): the rate of eq 5's
-                             z_r over a baseline
-===========================  ==============================================================
+=============================  ============================================================
+builder                        measurement
+=============================  ============================================================
+``suspension_measurement``     eq 5 on the four deflections: y1_sus (z, R, exactly linear in
+                               H) and eq 5's z_r with its variance (y2_sus)
+``y2_gps_measurement``         y2_gps from the GNSS attitude (pitch, yaw) with an isotropic
+                               R floor (paper-faithful (b) only)
+``ZrRateBuilder``              the locally referenced y2_sus (correction (c)): the rate of
+                               eq 5's z_r over a baseline
+``gnss_velocity_measurement``  gnss_vel from the single-antenna speed and course over ground
+``nhc_measurement``            the non-holonomic constraint (real cars, below)
+=============================  ============================================================
+
+Non-holonomic constraint (the pipeline adds one every ``nhc_period_s`` after a predict):
+z = [0, 0] with::
+
+    sigma_lat^2 = sigma_0^2 + (k_beta |a_y| |v|)^2 + (sigma_x w_z)^2
+
+sigma_0 ``nhc_sigma_lat_mps``; the rear-axle slip angle grows with the lateral acceleration a_y
+of the mean IMU input (k_beta ``nhc_slip_rad_per_mps2`` [rad/(m/s^2)]); sigma_x
+``nhc_point_sigma_m`` is the uncertainty of the rear axle's position along x in the model file
+(a point l off it moves sideways by w_z l); sigma_vert ``nhc_sigma_vert_mps``.
 
 Pure functions (and one small buffer, ``ZrRateBuilder``); the pipeline hands their (z, R) to
 ``MultiRateEKF.update``.
@@ -115,3 +127,27 @@ class ZrRateBuilder:
                 break
         buf.append((int(t_ns), float(z_r_m), float(var_m2)))
         return out
+
+
+def gnss_velocity_measurement(speed_mps: float, course_rad: float, sigma_mps: float,
+                              course_min_speed_mps: float) -> tuple[np.ndarray, np.ndarray]:
+    """z = [speed, course] and R = diag(sigma^2, (sigma / speed)^2) of the ``gnss_vel`` model; below
+    ``course_min_speed_mps`` (or without a course) the course row is NaN (dropped by the EKF)."""
+    ss = sigma_mps
+    if speed_mps >= course_min_speed_mps and math.isfinite(course_rad):
+        z = np.array([speed_mps, course_rad])
+        R = np.diag([ss * ss, (ss / speed_mps) ** 2])
+    else:
+        z = np.array([speed_mps, math.nan])
+        R = np.diag([ss * ss, 1.0])
+    return z, R
+
+
+def nhc_measurement(speed_mps: float, lateral_accel_mps2: float, yaw_rate_radps: float, sigma_lat_mps: float,
+                    slip_rad_per_mps2: float, point_sigma_m: float, sigma_vert_mps: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """z = [0, 0] and R = diag(sigma_lat^2, sigma_vert^2) of the non-holonomic constraint (module
+    docstring): |v| ``speed_mps``, a_y ``lateral_accel_mps2``, w_z ``yaw_rate_radps``."""
+    s_lat = math.sqrt(sigma_lat_mps ** 2 + (slip_rad_per_mps2 * abs(lateral_accel_mps2) * speed_mps) ** 2
+                      + (point_sigma_m * yaw_rate_radps) ** 2)
+    return np.zeros(2), np.diag([s_lat * s_lat, sigma_vert_mps ** 2])
