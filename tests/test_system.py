@@ -14,7 +14,7 @@ import pytest
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.can_codec import VdpsCanDecoder
 from vdps_hil.estimation.estimates import Estimate, FilteredSignals, Innovation
-from vdps_hil.identification.problems import suspension_forces_n
+from vdps_hil.identification.forces import suspension_forces_n
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.sim.drive import Drive

@@ -117,7 +117,8 @@ from vdps_hil.estimation.pipeline import EstimatorPipeline
 from vdps_hil.estimation.pipeline_config import PipelineConfig
 from vdps_hil.estimation.states import STATE_NAMES
 from vdps_hil.identification.feeder import FeederConfig, IdentFeeder
-from vdps_hil.identification.problems import IdentConfig, Identifier
+from vdps_hil.identification.config import IdentConfig
+from vdps_hil.identification.identifier import Identifier
 from vdps_hil.model.params import IdentifiedParams, Vehicle
 
 __all__ = ["CanFrame", "IdentReport", "PredictionReport", "ReplayError", "SuspensionConditioner", "SystemConfig",
@@ -296,7 +297,7 @@ class SuspensionConditioner:
     def __init__(self, vehicle: Vehicle, rate_hz: float | None, tire_compliance: bool, raw_bandwidth_hz: float,
                  rate_bandwidth_hz: float, max_gap_s: float, rate_lead: bool = True, stamp: str = "end"):
         from vdps_hil.estimation.alpha_beta import TimedAlphaBetaBank
-        from vdps_hil.identification.problems import suspension_forces_n
+        from vdps_hil.identification.forces import suspension_forces_n
 
         self.vehicle = vehicle
         self.period_ns = int(round(1e9 / rate_hz)) if rate_hz else 0

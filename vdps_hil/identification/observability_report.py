@@ -34,8 +34,9 @@ import numpy as np
 from vdps_hil.estimation.observability_explain import (Explanation, StructuralReport, WindowExplanation,
                                                         explain_null_space, explain_window, short_state_name,
                                                         structural_report)
-from vdps_hil.identification.problems import (PROBLEM_NAMES, PROBLEM_PARAMS, REGRESSORS, IdentInputs,
-                                              load_ident_config)
+from vdps_hil.identification.config import PROBLEM_NAMES, PROBLEM_PARAMS, load_ident_config
+from vdps_hil.identification.inputs import IdentInputs
+from vdps_hil.identification.problems import REGRESSORS
 
 __all__ = ["ProblemReport", "IdentificationMonitor", "ObservabilityReportDoc", "identification_report",
            "input_dependencies", "observability_report"]
