@@ -48,6 +48,7 @@ def fresh(item, t: int, max_age_ns: int) -> bool:
 def _attitude(t: int, aid: LatestAiding, level_f, gravity_mps2: float, cfg):
     """(roll, pitch, yaw, their prior sigmas, GNSS attitude used) at the fix of time t; yaw NaN
     when no heading is known (module docstring)."""
+    # lf: mean specific force f_b [m/s^2] (levelling: pitch = asin(f_x / |f|), roll = atan2(f_y, f_z))
     max_age = int(cfg.init_max_age_s * 1e9)
     att_ok = fresh(aid.att, t, max_age)
     roll = pitch = yaw = _NAN
@@ -81,6 +82,8 @@ def initial_state(t: int, aid: LatestAiding, level_f, gravity_mps2: float, lever
     """(x0, P0) in the filter ``layout`` at the fix of time t (``aid.fix``), or None while no
     heading is known (module docstring). ``level_f``: recent mean specific force (None: level),
     ``lever``: GNSS antenna lever arm [m] (body axes), ``cfg``: ``PipelineConfig``."""
+    # sh, sv: horizontal / vertical fix sigma [m]; s_att: prior sigmas of roll, pitch, yaw [rad];
+    # c: C_g^v of eq 1; x, sig: the 12 states of eq 7 and their prior sigmas
     _, enu, sh, sv = aid.fix
     roll, pitch, yaw, s_att, att_ok = _attitude(t, aid, level_f, gravity_mps2, cfg)
     if not math.isfinite(yaw):
@@ -128,6 +131,8 @@ def reacquisition_states(t: int, t_now: int, enu, sh: float, sv: float, x_full, 
     """{full state index: (value, sigma)} to reset at the filter time ``t_now`` from the fix
     ``enu`` (sigmas ``sh``, ``sv``) of time t (module docstring); ``x_full``: the filter's full
     state, ``cfg``: ``PipelineConfig``."""
+    # xf: full state of eq 7; sh, sv: fix sigmas [m]; s_vel, s_yaw: sigmas of the reset velocity
+    # [m/s] and yaw [rad] (s_yaw None: yaw kept); lead: age of the fix behind the filter [s]
     xf = x_full
     yaw, s_yaw = float(xf[States.PSI_G]), None
     vel, s_vel = None, cfg.init_velocity_sigma_mps

@@ -48,6 +48,8 @@ def wheel_speed_row(recent, r0_m: float, wheel_accel_radps2, torque_nm, cfg, cou
     alpha-beta wheel accelerations and the latest wheel torques (module docstring); None when
     skipped, the reason counted in ``counts`` (``wheel_too_few``, ``wheel_accel_skipped``; the
     dropped outliers in ``wheel_outliers``). ``cfg``: ``PipelineConfig``."""
+    # v: per-wheel mean speed omega_i r_0 [m/s]; med, tol: median and outlier tolerance; a_w: mean wheel
+    # acceleration [m/s^2]; s_t: slip sigma |z| |T| / (r_0 C_kappa) [m/s] (module docstring)
     t_m = int(round(sum(tt for tt, _ in recent) / len(recent)))
     v = []
     for i in range(4):
