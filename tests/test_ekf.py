@@ -16,8 +16,8 @@ import pytest
 from scipy.stats import chi2
 
 from vdps_hil.estimation import synthetic as syn
-from vdps_hil.estimation.ekf import (EkfConfig, MultiRateEKF, PaperFaithful, SensorSet, chi2_cdf, chi2_quantile,
-                                     filter_jacobians)
+from vdps_hil.estimation.ekf import MultiRateEKF, filter_jacobians
+from vdps_hil.estimation.ekf_config import EkfConfig, PaperFaithful, SensorSet
 from vdps_hil.estimation.kinematics import process_f, linearize
 from vdps_hil.estimation.observations import ObsKind, make_models
 from vdps_hil.estimation.states import States, StateLayout
@@ -179,34 +179,6 @@ def test_shapes_rejected_loudly_and_missing_kinds_never_crash():
     assert not ekf.predict_to(-1) and ekf.counters["predict_backwards"] == 1
 
 
-@pytest.mark.parametrize("sensors,kinds,n", [
-    (SensorSet(), {"gnss_pos", "gnss_vel", "gnss_att", "y1_sus", "y2_sus_rate"}, 11),
-    (SensorSet(gnss="single_antenna"), {"gnss_pos", "gnss_vel", "y1_sus", "y2_sus_rate"}, 11),
-    (SensorSet(imu="esc3", gnss="single_antenna", suspension=False), {"gnss_pos", "gnss_vel"}, 9),
-    (SensorSet(gnss="none", suspension=False), set(), 9),
-])
-def test_sensor_sets_decide_kinds_and_layout(sensors, kinds, n):
-    cfg = EkfConfig(sensors=sensors)
-    assert {k.value for k in cfg.kinds()} == kinds
-    assert cfg.layout().n == n
-    q = cfg.input_psd()
-    if sensors.imu == "esc3":  # substituted axes get the substitution noise
-        assert q[2] == pytest.approx(2 * 0.5 ** 2 * 0.2) and q[3] == q[4] == pytest.approx(2 * 0.05 ** 2 * 0.2)
-    else:
-        assert q[0] == pytest.approx(0.02 ** 2 / 1000)
-
-
-def test_config_rejects_bad_values():
-    with pytest.raises(ValueError):
-        EkfConfig(accel_noise_mps2=-1.0)
-    with pytest.raises(ValueError):
-        EkfConfig(gate_probability=1.5)
-    with pytest.raises(ValueError):
-        SensorSet(gnss="three_antenna")
-    with pytest.raises(ValueError):
-        PaperFaithful.only("e_something")
-
-
 @pytest.mark.parametrize("layout", [StateLayout.paper(), StateLayout(), StateLayout(road_estimated=False)])
 def test_jacobians_in_filter_layout(layout, rng):
     """H_filter = H_full E and F_filter = F_full[idx, idx] against central differences of the
@@ -325,24 +297,6 @@ def test_filter_jacobians_with_bias_states(rng):
             assert G.shape == (lay.n, 6) and not G[lay.n_kinematic:].any()
 
 
-def test_real_car_switches_decide_kinds_and_layout():
-    esc = SensorSet(imu="esc3", gnss="single_antenna", suspension=False)
-    cfg = EkfConfig(sensors=esc, gyro_bias=True, accel_bias=True, wheel_speed=True, wheel_scale_state=True,
-                    nonholonomic=True)
-    assert {k.value for k in cfg.kinds()} == {"gnss_pos", "gnss_vel", "wheel_speed", "nhc"}
-    assert cfg.gyro_bias_axes == (2,) and cfg.accel_bias_axes == (0, 1) and cfg.layout().n == 13
-    six = EkfConfig(sensors=SensorSet(gnss="single_antenna", suspension=False, wheel_speeds=False),
-                    gyro_bias=True, accel_bias=True, wheel_speed=True, wheel_scale_state=True)
-    assert ObsKind.WHEEL_SPEED not in six.kinds()  # no wheel speeds fitted: no row, no scale state
-    assert six.layout().n == 15 and not six.layout().wheel_scale
-    assert EkfConfig(sensors=esc).with_real_car_rows() == cfg
-    assert not EkfConfig(sensors=SensorSet(wheel_speeds=False)).with_real_car_rows().wheel_scale_state
-    with pytest.raises(ValueError, match="nonholonomic"):
-        EkfConfig(nonholonomic=1)
-    with pytest.raises(ValueError, match="gyro_bias_sigma_radps"):
-        EkfConfig(gyro_bias_sigma_radps=0.0)
-
-
 def test_gyro_bias_state_estimated_on_the_paper_manoeuvre():
     """Table-1 data with a 0.3 deg/s z-gyro bias and 0.1 m/s^2 x-accelerometer bias added: the
     filter with bias states (6-axis: all six) recovers them within 0.03 deg/s and 0.03 m/s^2 and
@@ -384,32 +338,3 @@ def test_reacquire_resets_only_the_given_states():
     np.testing.assert_array_equal(ekf.P[1:, 1:], p_before[1:, 1:])
     assert ekf.counters["reacquisitions"] == 1
     assert not MultiRateEKF(EkfConfig()).reacquire(0, {States.X_G: (0.0, 1.0)})
-
-
-@pytest.mark.parametrize("dof", range(1, 7))
-def test_chi2_gate_quantile_agrees_with_scipy(dof):
-    """The gate's chi-square quantile (computed without importing scipy.stats): within 1e-13
-    relative of scipy's chi2.ppf over p in [1e-3, 1 - 1e-5], within 4 ulp at the default gate
-    probability 0.9999 (upper tail solved against the exact 1 - p); the CDF within 1e-15; bad
-    arguments refused."""
-    for p in (1e-3, 0.01, 0.05, 0.2, 0.5, 0.6, 0.9, 0.95, 0.99, 0.999, 0.9999, 0.99999):
-        assert chi2_quantile(p, dof) == pytest.approx(chi2.ppf(p, dof), rel=1e-13, abs=0)
-    g = chi2_quantile(0.9999, dof)
-    assert abs(g - chi2.ppf(0.9999, dof)) <= 4 * math.ulp(g)
-    for x in (0.0, 0.1, 1.0, 3.0, 7.5, 15.0, 40.0):
-        assert chi2_cdf(x, dof) == pytest.approx(chi2.cdf(x, dof), rel=0, abs=1e-15)
-    for bad in ((0.0, dof), (1.0, dof), (0.5, 0), (0.5, 1.5)):
-        with pytest.raises(ValueError):
-            chi2_quantile(*bad)
-
-
-def test_the_estimator_chain_does_not_import_scipy_stats():
-    """Importing the system (estimator, identifier, predictor) leaves scipy.stats out: it would
-    cost every replay, bench and logger process ~0.4 s of start-up (fresh interpreter)."""
-    import subprocess
-    import sys
-
-    code = ("import sys, vdps_hil.pipeline.node, vdps_hil.app.replay, vdps_hil.cli.replay_cmd; "
-            "print('scipy.stats' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "False"

@@ -9,11 +9,12 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.estimation.pipeline import Estimate, FilteredSignals
+from vdps_hil.estimation.estimates import Estimate, FilteredSignals
 from vdps_hil.bus.samples import Sample
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.identification.feeder import IdentFeeder
-from vdps_hil.identification.problems import mass_regressor, load_ident_config
+from vdps_hil.identification.config import load_ident_config
+from vdps_hil.identification.problems import mass_regressor
 from vdps_hil.model.frames import (compose_absolute, dcm_global_to_vehicle, decompose_vehicle, gravity_in_aux,
                                    skew)
 from vdps_hil.model.params import load_vehicle

@@ -7,7 +7,8 @@ import dataclasses
 import numpy as np
 
 from vdps_hil.estimation import synthetic as syn
-from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, SensorSet
+from vdps_hil.estimation.ekf import MultiRateEKF
+from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
 from vdps_hil.estimation.observability import ObservabilityWindow, observability_rank
 from vdps_hil.estimation.observations import ObsKind
 from vdps_hil.model.params import load_vehicle

@@ -1,6 +1,5 @@
-"""The observability report is computed: null spaces explained (and the explanation does not
-depend on which basis of the null space the SVD returns), the generic rank of a sensor set, and
-on a simulated Table-1 drive (vdps_hil.sim.drive.Drive, decoded from /raw/ only) dropping sensors
+"""The observability report is computed (null spaces and the generic rank of a sensor set:
+``test_observability_explain``): on a simulated Table-1 drive (vdps_hil.sim.drive.Drive, decoded from /raw/ only) dropping sensors
 by configuration changes the filter's windows exactly as the generic rank analysis predicts,
 never crashes the pipeline, and the identification report says why a problem learns nothing
 (inputs missing, not excited); a straight-line drive reports cornering stiffness as not excited."""
@@ -10,16 +9,14 @@ from __future__ import annotations
 import dataclasses
 import io
 
-import numpy as np
 import pytest
 
 from vdps_hil import realcars as rc
-from vdps_hil.estimation.ekf import EkfConfig, SensorSet
-from vdps_hil.estimation.observability import observability_rank
-from vdps_hil.estimation.observability_report import (IdentificationMonitor, explain_null_space, input_dependencies,
-                                                      observability_report, structural_report)
-from vdps_hil.estimation.pipeline import PipelineConfig
+from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
+from vdps_hil.estimation.observability_explain import structural_report
+from vdps_hil.estimation.pipeline_config import PipelineConfig
 from vdps_hil.geodesy import DEFAULT_ORIGIN
+from vdps_hil.identification.observability_report import IdentificationMonitor, input_dependencies, observability_report
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 from vdps_hil.record.decode import decode_recording
@@ -28,52 +25,6 @@ from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.scenarios import parse_scenario
 
 VEH = load_vehicle("sedan-model")
-NAMES = ("a", "b", "c", "d")
-
-
-def _null(o):
-    return observability_rank([o], NAMES[: o.shape[1]]).null_space
-
-
-def test_explanations_of_known_null_spaces():
-    e = explain_null_space(_null(np.array([[1.0, -1.0, 0.0], [0.0, 0.0, 1.0]])), NAMES[:3])
-    assert [(x.kind, x.names) for x in e] == [("only_difference", ("a", "b"))]
-    assert e[0].text == "a, b: only their difference is observable"
-    e = explain_null_space(_null(np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0]])), NAMES[:3])
-    assert [(x.kind, x.names) for x in e] == [("only_sum", ("a", "b"))]
-    e = explain_null_space(_null(np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])), NAMES[:3])
-    assert [(x.kind, x.names) for x in e] == [("not_observable", ("c",))]
-    e = explain_null_space(_null(np.array([[1.0, 2.0, 0.0], [0.0, 0.0, 1.0]])), NAMES[:3])
-    assert e[0].kind == "combination" and e[0].names == ("a", "b")
-    assert np.allclose(e[0].coefficients, (1.0, -0.5))  # moving a by 1 and b by -1/2 changes nothing
-    assert explain_null_space(np.zeros((0, 3)), NAMES[:3]) == []
-
-
-def test_explanation_does_not_depend_on_the_null_space_basis(rng):
-    """Null space = span{e_d, (e_a - e_b)/sqrt 2}: any orthonormal basis of it (rotated at random)
-    gives 'd not observable' and 'a, b only their sum'... of the same two statements."""
-    base = np.array([[0.0, 0.0, 0.0, 1.0], [1.0, -1.0, 0.0, 0.0]])
-    base[1] /= np.sqrt(2.0)
-    for _ in range(20):
-        q, _ = np.linalg.qr(rng.normal(size=(2, 2)))
-        e = explain_null_space(q @ base, NAMES)
-        assert sorted((x.kind, x.names) for x in e) == [("not_observable", ("d",)), ("only_sum", ("a", "b"))]
-
-
-def test_generic_rank_of_sensor_sets():
-    full = structural_report(EkfConfig(), VEH.mounting.gnss_lever_arm_m)
-    assert (full.rank, full.n_states, full.unobservable) == (11, 11, ())
-    ns = structural_report(EkfConfig(sensors=SensorSet(suspension=False)), VEH.mounting.gnss_lever_arm_m)
-    assert ns.rank == 9 and set(ns.unobservable) == {"phi_r_rad", "theta_r_rad"}
-    texts = " | ".join(e.text for e in (*ns.not_estimated, *ns.explanations))
-    print("\nno suspension travel:", texts)
-    assert "phi_r, theta_r: not estimated" in texts and "no measurement kind of this sensor set" in texts
-    assert {e.names[0] for e in ns.not_estimated if e.kind == "derived"} == {"phi_v", "theta_v"}
-    ng = structural_report(EkfConfig(sensors=SensorSet(gnss="none")), VEH.mounting.gnss_lever_arm_m)
-    assert {"x_g_m", "y_g_m", "z_g_m"} <= set(ng.unobservable) and ng.rank < 11
-    # the same seed gives the same analysis
-    assert structural_report(EkfConfig(), seed=3).report.singular_values == \
-        structural_report(EkfConfig(), seed=3).report.singular_values
 
 
 @pytest.fixture(scope="module")

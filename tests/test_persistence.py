@@ -9,7 +9,7 @@ from hypothesis import given, settings, strategies as st
 
 from vdps_hil.identification.persistence import (SCHEMA, SCHEMA_VERSION, ParamsFileError, load_params,
                                                  parse_params, reset_params, save_params)
-from vdps_hil.identification.problems import Identifier
+from vdps_hil.identification.identifier import Identifier
 from vdps_hil.model.params import PARAM_NAMES, load_vehicle
 
 MODEL = load_vehicle("sedan-model", "model")

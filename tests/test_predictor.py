@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.estimation.pipeline import Estimate, FilteredSignals
+from vdps_hil.estimation.estimates import Estimate, FilteredSignals
 from vdps_hil.model.core import Inputs
 from vdps_hil.model.frames import decompose_vehicle
 from vdps_hil.model.params import load_vehicle

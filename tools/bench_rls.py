@@ -17,8 +17,10 @@ import time
 
 import numpy as np
 
-from vdps_hil.identification.problems import (PROBLEM_NAMES, REGRESSORS, IdentInputs, Identifier,
-                                              gravity_aux_mps2, load_ident_config)
+from vdps_hil.identification.config import PROBLEM_NAMES, load_ident_config
+from vdps_hil.identification.identifier import Identifier
+from vdps_hil.identification.inputs import IdentInputs, gravity_aux_mps2
+from vdps_hil.identification.problems import REGRESSORS
 from vdps_hil.model.params import load_vehicle
 
 

@@ -28,7 +28,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import nees_study  # noqa: E402  (the study harness next to this file)
 
-from vdps_hil.estimation.ekf import PaperFaithful  # noqa: E402
+from vdps_hil.estimation.ekf_config import PaperFaithful  # noqa: E402
 from vdps_hil.estimation.states import STATE_NAMES  # noqa: E402
 from vdps_hil.pipeline.node import default_pipeline_config  # noqa: E402
 from vdps_hil.sim.profiles import load_profile  # noqa: E402

@@ -78,7 +78,7 @@ def run_chain(scenario: str, seed: int, *, profile="table1-susp1k", duration_s: 
     system = VdpsSystem(load_vehicle(vehicle, "model"), cfg, origin=DEFAULT_ORIGIN)
     ekf = system.pipeline.ekf
     rows_t, rows_e, rows_nees, rows_sig, rows_ev = [], [], [], [], []
-    from vdps_hil.estimation.pipeline import Estimate
+    from vdps_hil.estimation.estimates import Estimate
 
     idx = None
     for s in decode_recording(reader):

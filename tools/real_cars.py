@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from vdps_hil import realcars as rc
-from vdps_hil.estimation.observability_report import IdentificationMonitor, observability_report
+from vdps_hil.identification.observability_report import IdentificationMonitor, observability_report
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 from vdps_hil.record.importer import CanSource, SerialSource

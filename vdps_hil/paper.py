@@ -213,7 +213,7 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
     ``SystemConfig`` fields (``require_converged``, ``start_params``)."""
     import can
 
-    from vdps_hil.estimation.pipeline import Estimate
+    from vdps_hil.estimation.estimates import Estimate
     from vdps_hil.geodesy import DEFAULT_ORIGIN
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.prediction.predictor import PredictorInitialState
@@ -540,7 +540,8 @@ def false_alarm_task(scenario: str, profile: str, seed: int, max_s: float | None
 def snr_task(profile: str, k: float, seed: int) -> dict:
     """Inertia identification at 10.25 s with every sensor sigma times k, and the SNR series
     (omega_dot, eq 23 moments at the estimate instants of 5-10.25 s; module docstring)."""
-    from vdps_hil.identification.problems import load_ident_config, moments_from_inputs
+    from vdps_hil.identification.config import load_ident_config
+    from vdps_hil.identification.forces import moments_from_inputs
 
     sheet = _profile(profile)
     r = chain_run("paper", scale_noise(sheet, k), seed, predict=False, sheet_profile=sheet,
@@ -632,7 +633,8 @@ def table3_task(profile: str, duration_s: float, seed: int = 1, qs: Iterable[flo
                 ) -> dict:
     """Table 3: the inertia problem with Q4 = diag(q,q,q), W4 = I, P(0) = I on the chain's
     recorded identifier inputs of one noise-free drive (module docstring)."""
-    from vdps_hil.identification.problems import Identifier, load_ident_config
+    from vdps_hil.identification.config import load_ident_config
+    from vdps_hil.identification.identifier import Identifier
 
     sheet = _profile(profile)
     r = chain_run("paper", sheet.zero_noise(), seed, predict=False, sheet_profile=sheet, duration_s=duration_s,

@@ -61,9 +61,11 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from vdps_hil.bus.samples import Sample
-from vdps_hil.estimation.ekf import EkfConfig, SensorSet
+from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
 from vdps_hil.estimation.kinematics import dcm_gv
-from vdps_hil.estimation.pipeline import Estimate, EstimatorPipeline, Innovation, Latencies, PipelineConfig
+from vdps_hil.estimation.estimates import Estimate, Innovation
+from vdps_hil.estimation.pipeline import EstimatorPipeline
+from vdps_hil.estimation.pipeline_config import Latencies, PipelineConfig
 from vdps_hil.geodesy import EnuOrigin, ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from vdps_hil.model.params import CONFIG_DIR
 from vdps_hil.units import GRAVITY_MPS2, wrap_pi
@@ -1178,7 +1180,7 @@ def steer_response_fit(t_s, speed_mps, steer_wheel_rad, yaw_rate_radps, course_r
     ``observability_report``: gains = eig(S I S), S = diag(prior sigmas); a direction with gain
     < 1 is not identified by the drive (it does not halve the prior variance). s_R = p1 / L,
     x = p1 K_0 / (L p2), delta_0 = p3 (sigmas by first-order propagation)."""
-    from vdps_hil.estimation.observability_report import explain_null_space
+    from vdps_hil.estimation.observability_explain import explain_null_space
 
     t = np.asarray(t_s, dtype=float)
     u, sw, r_m, cr = (np.asarray(v, dtype=float) for v in (speed_mps, steer_wheel_rad, yaw_rate_radps,

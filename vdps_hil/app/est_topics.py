@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 
-from vdps_hil.estimation.pipeline import Estimate, FilteredSignals, Innovation
+from vdps_hil.estimation.estimates import Estimate, FilteredSignals, Innovation
 from vdps_hil.estimation.states import STATE_NAMES
 from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport
 

@@ -12,7 +12,7 @@ from typing import Mapping
 import numpy as np
 
 from vdps_hil.app.est_topics import write_output
-from vdps_hil.estimation.pipeline import Estimate, Innovation
+from vdps_hil.estimation.estimates import Estimate, Innovation
 from vdps_hil.model.params import Vehicle
 from vdps_hil.pipeline.node import VdpsSystem
 from vdps_hil.pipeline.outputs import CanFrame, PredictionReport
@@ -107,7 +107,7 @@ class ReplaySummary:
         }
         # computed observability (issue 11): structural rank of the sensor set, each window's null
         # space explained, and each identification problem's information with its cause
-        from vdps_hil.estimation.observability_report import observability_report
+        from vdps_hil.identification.observability_report import observability_report
         try:
             doc["observability"].update(observability_report(system.pipeline, system.identifier).to_json())
         except (ValueError, np.linalg.LinAlgError) as e:  # a degenerate window must not lose the run

@@ -255,7 +255,8 @@ def weighting_trial(profile: str, seed: int, duration_s: float, noise_scale: flo
 
     import numpy as np
 
-    from vdps_hil.identification.problems import Identifier, load_ident_config
+    from vdps_hil.identification.config import load_ident_config
+    from vdps_hil.identification.identifier import Identifier
     from vdps_hil.paper import INERTIA, _profile, chain_run, scale_noise, truth_params
 
     sheet = _profile(profile)

@@ -261,7 +261,7 @@ class PipelineTap:
                  params_file: str | None = None, probe_s: float | None = None):
         from vdps_hil.bus.samples import Sample
         from vdps_hil.codecs.can_codec import VdpsCanDecoder
-        from vdps_hil.estimation.pipeline import Estimate
+        from vdps_hil.estimation.estimates import Estimate
         from vdps_hil.record.input_order import InputOrder
         from vdps_hil.app.replay import PROBE_SECONDS
         from vdps_hil.pipeline.outputs import CanFrame

@@ -17,23 +17,12 @@ that is absent (outage, sensor not fitted) simply never updates, so the filter r
 through outages. Kinds not enabled by the configuration are counted as ``disabled``, never a
 crash.
 
-Corrections of the paper (``PaperFaithful``: True = as printed, the default False = corrected):
-
-(a) ``a_psi_v_zero_rate``: eq 6 gives psi_v a zero rate, so between GPS epochs it lags the
-    heading (by yaw rate x 0.2 s at 5 Hz). With psi_r = 0 only five of the six angles are
-    independent; corrected, psi_v is *derived* from eq 4 (``StateLayout(psi_v_state=False)``)
-    and the filter carries 11 states.
-(b) ``b_y2_gps``: y2^gps is computed from the same GNSS attitude as y1^gps, so using both
-    counts that attitude twice with independent noise. Corrected: y2^gps is dropped (with (a)
-    corrected psi_v needs no observation of its own). Faithful: y2^gps is used with
-    R = J R_att J^T + floor^2 I (``observations.y2_gps_measurement``; the isotropic floor, by
-    default the angle sigma, keeps the lagging zero-rate psi_v from being gated on the radial
-    direction of the unit-circle measurement, and also weakens the double counting).
-(c) ``c_y2_sus_single_plane``: y2^sus = n . p assumes one road plane through the ENU origin.
-    Corrected: that form is used only when ``road_plane_through_origin`` is configured true;
-    otherwise the locally referenced form n . v = dz_r/dt (``observations.Y2SusRate``).
-(d) ``d_accel_as_acceleration``: eq 7 integrates the accelerometer as if it measured the
-    kinematic acceleration; it measures specific force. Corrected: gravity [0, 0, -g] is added.
+Corrections of the paper (``PaperFaithful``: True = as printed, the default False = corrected;
+(a) psi_v derived from eq 4, (b) y2^gps dropped, (c) locally referenced y2^sus, (d) gravity
+added to the specific force), the process noise q_u, q_rw and the real-car extensions (IMU bias
+states, wheel speed, non-holonomic constraint, re-acquisition) are switches of the configuration,
+stated in full in the ``ekf_config`` module docstring; they decide the state layout and the
+measurement kinds this filter runs.
 
 Latency (measurement time-stamped in the past, t_m < filter time): the filter keeps a history
 of (x, P) snapshots before every predict and update of the last ``history_s`` seconds. A late
@@ -44,297 +33,25 @@ the update, and re-propagates with the stored inputs, re-applying the stored lat
 Reset on NaN: a non-finite x or P after any step resets the filter to uninitialised (counted
 ``nan_resets``); the caller (pipeline) re-initialises from the next fixes. A measurement that
 is entirely NaN is counted ``nan`` (partial NaN: those rows are dropped).
-
-Process noise: white IMU noise sigma per sample at f_imu gives q = sigma^2 / f_imu for the mean
-input (``kinematics``); axes an ESC cluster does not provide (w_x, w_y, f_z) are substituted by
-0, 0, g with PSD 2 sigma_sub^2 tau_sub (first-order Markov at low frequency). Road angles (and
-psi_v in the faithful (a) variant) are random walks.
-
-Real-car extensions (not in the paper; every one OFF by default, so the paper's Table-1 set
-runs eq 7-11 as before; the sensor sets of real cars in ``configs/sensorsets`` switch them on):
-
-* IMU bias states (``gyro_bias``, ``accel_bias``; ``states.AugStates``): the inputs become
-  w_b = w_meas - b_g, f_b = f_meas - b_a, with b random walks (``gyro_bias_rw`` [rad/s/sqrt(s)],
-  ``accel_bias_rw`` [m/s^2/sqrt(s)]) and prior sigmas ``gyro_bias_sigma_radps``,
-  ``accel_bias_sigma_mps2``; d x_dot / d b_g = -G_w, d x_dot / d b_a = -G_f (G = d f/d [f, w]).
-  Only the axes the IMU has (ESC cluster: b_g,z, b_a,x, b_a,y).
-* Wheel speed (``wheel_speed``): the ``wheel_speed`` observation (``observations.WheelSpeed``),
-  optionally with the scale state k_w (``wheel_scale_state``, random walk ``wheel_scale_rw``).
-* Non-holonomic constraint (``nonholonomic``): the ``nhc`` observation
-  (``observations.NonHolonomic``).
-* Re-acquisition (``reacquire``): after persistent gating of the position the caller resets
-  position, velocity and yaw to the fixes (their cross-covariances dropped) and keeps the rest
-  (attitude, biases); counted ``reacquisitions``.
 """
 
 from __future__ import annotations
 
-import bisect
 import math
 import types
-from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
+from vdps_hil.estimation.chi2 import chi2_quantile
+from vdps_hil.estimation.ekf_config import EkfConfig
+from vdps_hil.estimation.ekf_history import Event, EventHistory
 from vdps_hil.estimation.kinematics import linearize, step, transition
 from vdps_hil.estimation.observations import (ObsKind, make_models, rear_axle_ground_point,
                                               wheel_positions)
 from vdps_hil.estimation.states import N_EXT, N_FULL, AugStates, States, StateLayout
-from vdps_hil.units import GRAVITY_MPS2, deg2rad
-
-
-def _chi2_tails(x: float, dof: int) -> tuple[float, float]:
-    """(lower, upper) tail of the chi-square distribution with integer ``dof`` >= 1 at ``x``,
-    each in closed form without cancellation: with h = x/2 and the series
-    s = e^-h sum_{i<dof/2} h^i / i! (even dof) or e^-h sum_{i<(dof-1)/2} h^(i+1/2) / Gamma(i+3/2)
-    (odd dof), upper = s (even) or erfc(sqrt h) + s (odd); lower = 1 - s (even) or
-    erf(sqrt h) - s (odd) (the regularised incomplete gamma functions of dof/2, h)."""
-    if not x > 0.0:
-        return 0.0, 1.0
-    h = 0.5 * x
-    if dof % 2 == 0:
-        term = total = 1.0
-        for i in range(1, dof // 2):
-            term *= h / i
-            total += term
-        s = math.exp(-h) * total
-        return 1.0 - s, s
-    r = math.sqrt(h)
-    s = 0.0
-    if dof > 1:
-        term = total = r / math.gamma(1.5)
-        for i in range(1, dof // 2):
-            term *= h / (i + 0.5)
-            total += term
-        s = math.exp(-h) * total
-    return math.erf(r) - s, math.erfc(r) + s
-
-
-def chi2_cdf(x: float, dof: int) -> float:
-    """Chi-square CDF for an integer ``dof`` >= 1 (:func:`_chi2_tails`)."""
-    return _chi2_tails(x, dof)[0]
-
-
-def chi2_quantile(p: float, dof: int) -> float:
-    """The ``p`` quantile of the chi-square distribution with integer ``dof`` (the innovation
-    gate), by bisection to adjacent doubles on the lower tail (p <= 0.5) or on the upper tail
-    against 1 - p (exact in floating point for p > 0.5), so a gate probability near 1 keeps its
-    precision. Tested against scipy's ``chi2.ppf``; computed here because importing
-    ``scipy.stats`` costs every replay, bench and logger process ~0.4 s."""
-    if not 0.0 < p < 1.0 or int(dof) != dof or dof < 1:
-        raise ValueError(f"chi2_quantile needs 0 < p < 1 and an integer dof >= 1, got p={p!r}, dof={dof!r}")
-    upper = p > 0.5
-    q = 1.0 - p if upper else p
-
-    def below(x: float) -> bool:  # is x below the quantile?
-        lo_tail, up_tail = _chi2_tails(x, dof)
-        return up_tail > q if upper else lo_tail < q
-
-    lo, hi = 0.0, float(dof) + 10.0
-    while below(hi):
-        lo, hi = hi, 2.0 * hi
-    while True:
-        mid = 0.5 * (lo + hi)
-        if mid <= lo or mid >= hi:  # adjacent doubles
-            return hi
-        if below(mid):
-            lo = mid
-        else:
-            hi = mid
-
 
 _TWO_PI = 2.0 * math.pi
-_IMU_KINDS = ("6axis", "esc3")
-_GNSS_KINDS = ("multi_antenna", "single_antenna", "none")
-
-
-@dataclass(frozen=True)
-class PaperFaithful:
-    """One switch per documented correction; True implements the paper as printed."""
-
-    a_psi_v_zero_rate: bool = False
-    b_y2_gps: bool = False
-    c_y2_sus_single_plane: bool = False
-    d_accel_as_acceleration: bool = False
-
-    @classmethod
-    def all(cls) -> "PaperFaithful":
-        return cls(True, True, True, True)
-
-    @classmethod
-    def only(cls, name: str) -> "PaperFaithful":
-        """Only the named switch faithful (``"a_psi_v_zero_rate"`` ...)."""
-        if name not in cls.__dataclass_fields__:
-            raise ValueError(f"unknown paper_faithful switch {name!r}")
-        return cls(**{name: True})
-
-    def any(self) -> bool:
-        return any((self.a_psi_v_zero_rate, self.b_y2_gps, self.c_y2_sus_single_plane,
-                    self.d_accel_as_acceleration))
-
-
-@dataclass(frozen=True)
-class SensorSet:
-    """Which sources exist. ``imu``: "6axis" (serial IMU) or "esc3" (ESC cluster on CAN: yaw
-    rate, a_x, a_y only). ``gnss``: "multi_antenna" (position + attitude), "single_antenna"
-    (position + speed/course) or "none". ``suspension``/``wheel_speeds``: fitted or not."""
-
-    imu: str = "6axis"
-    gnss: str = "multi_antenna"
-    suspension: bool = True
-    wheel_speeds: bool = True
-
-    def __post_init__(self):
-        if self.imu not in _IMU_KINDS:
-            raise ValueError(f"SensorSet.imu must be one of {_IMU_KINDS}, got {self.imu!r}")
-        if self.gnss not in _GNSS_KINDS:
-            raise ValueError(f"SensorSet.gnss must be one of {_GNSS_KINDS}, got {self.gnss!r}")
-
-    @classmethod
-    def paper(cls) -> "SensorSet":
-        """Table 1: 3-antenna GNSS, 6-axis IMU, four suspension sensors, tachometers."""
-        return cls()
-
-
-@dataclass(frozen=True)
-class EkfConfig:
-    """Filter configuration; the state layout and the enabled measurement kinds follow from it.
-
-    Noise figures default to Table 1 (accelerometer 0.02 m/s^2 and gyro 0.08 deg/s at 1 kHz)."""
-
-    sensors: SensorSet = field(default_factory=SensorSet)
-    paper_faithful: PaperFaithful = field(default_factory=PaperFaithful)
-    estimate_road: bool | None = None  # None: estimate road angles iff suspension is fitted
-    road_plane_through_origin: bool = False  # (c): y2^sus = n.p valid (one plane through origin)
-    use_gnss_velocity: bool = True  # speed/course updates when such samples arrive
-    gravity_mps2: float = GRAVITY_MPS2
-    imu_rate_hz: float = 1000.0
-    accel_noise_mps2: float = 0.02  # per-sample sigma at imu_rate_hz (Table 1)
-    gyro_noise_radps: float = float(deg2rad(0.08))  # per-sample sigma (Table 1)
-    accel_model_psd: float = 0.0  # extra white acceleration PSD [(m/s^2)^2 s] (bias, vibration)
-    gyro_model_psd: float = 0.0  # extra white rate PSD [(rad/s)^2 s]
-    substitute_accel_sigma_mps2: float = 0.5  # esc3: f_z := g, error sigma
-    substitute_gyro_sigma_radps: float = 0.05  # esc3: w_x = w_y := 0, error sigma
-    substitute_corr_time_s: float = 0.2  # esc3: correlation time of the substitution error
-    road_angle_rw: float = 3e-4  # road angle random walk [rad/sqrt(s)]
-    psi_v_rw: float = 0.3  # faithful (a) only: psi_v random walk [rad/sqrt(s)]
-    gate_probability: float | None = 0.9999  # chi-square gate; None disables gating
-    history_s: float = 1.0  # latency buffer length [s]; 0 disables late measurements
-    max_step_s: float = 0.05  # longest single predict step [s] (longer spans are split)
-    update_iterations: int = 3  # iterated-EKF relinearisations for the nonlinear kinds (1 = EKF)
-    # real-car extensions (module docstring); all off for the paper's Table-1 set
-    gyro_bias: bool = False  # gyro bias states b_g (the axes the IMU has)
-    accel_bias: bool = False  # accelerometer bias states b_a
-    gyro_bias_sigma_radps: float = float(deg2rad(0.5))  # prior sigma of b_g
-    accel_bias_sigma_mps2: float = 0.1  # prior sigma of b_a
-    gyro_bias_rw: float = 1e-4  # b_g random walk [rad/s/sqrt(s)]
-    accel_bias_rw: float = 1e-3  # b_a random walk [m/s^2/sqrt(s)]
-    wheel_speed: bool = False  # wheel_speed rows (needs sensors.wheel_speeds)
-    wheel_scale_state: bool = False  # wheel-speed scale state k_w (with wheel_speed)
-    wheel_scale_sigma: float = 0.02  # prior sigma of k_w [-]
-    wheel_scale_rw: float = 1e-4  # k_w random walk [1/sqrt(s)]
-    nonholonomic: bool = False  # nhc rows (no lateral/vertical velocity at the rear axle)
-
-    def __post_init__(self):
-        for name in ("imu_rate_hz", "accel_noise_mps2", "gyro_noise_radps", "substitute_accel_sigma_mps2",
-                     "substitute_gyro_sigma_radps", "substitute_corr_time_s", "max_step_s",
-                     "gyro_bias_sigma_radps", "accel_bias_sigma_mps2", "wheel_scale_sigma"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"EkfConfig.{name} must be a positive finite number, got {v!r}")
-        for name in ("gyro_bias", "accel_bias", "wheel_speed", "wheel_scale_state", "nonholonomic"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"EkfConfig.{name} must be true or false, got {getattr(self, name)!r}")
-        for name in ("accel_model_psd", "gyro_model_psd", "road_angle_rw", "psi_v_rw", "history_s", "gravity_mps2",
-                     "gyro_bias_rw", "accel_bias_rw", "wheel_scale_rw"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ValueError(f"EkfConfig.{name} must be a non-negative finite number, got {v!r}")
-        if not (isinstance(self.update_iterations, int) and 1 <= self.update_iterations <= 20):
-            raise ValueError(f"EkfConfig.update_iterations must be an integer in 1..20, got {self.update_iterations!r}")
-        if self.gate_probability is not None and not (0.0 < self.gate_probability < 1.0):
-            raise ValueError(f"EkfConfig.gate_probability must be in (0, 1) or None, got {self.gate_probability!r}")
-
-    @property
-    def road_estimated(self) -> bool:
-        return self.sensors.suspension if self.estimate_road is None else bool(self.estimate_road)
-
-    def with_real_car_rows(self) -> "EkfConfig":
-        """This configuration with the real-car extensions on (module docstring): IMU bias states,
-        the non-holonomic constraint and, when wheel speeds are fitted, the wheel-speed row and
-        its scale state (what ``configs/sensorsets`` of real cars switch on; e.g. for a sensor set
-        inferred from a recording without multi-antenna attitude)."""
-        import dataclasses
-
-        ws = self.sensors.wheel_speeds
-        return dataclasses.replace(self, gyro_bias=True, accel_bias=True, nonholonomic=True, wheel_speed=ws,
-                                   wheel_scale_state=ws)
-
-    @property
-    def gyro_bias_axes(self) -> tuple[int, ...]:
-        """Body axes with a gyro bias state (ESC cluster: z only)."""
-        if not self.gyro_bias:
-            return ()
-        return (2,) if self.sensors.imu == "esc3" else (0, 1, 2)
-
-    @property
-    def accel_bias_axes(self) -> tuple[int, ...]:
-        """Body axes with an accelerometer bias state (ESC cluster: x, y)."""
-        if not self.accel_bias:
-            return ()
-        return (0, 1) if self.sensors.imu == "esc3" else (0, 1, 2)
-
-    @property
-    def uses_wheel_speed(self) -> bool:
-        return self.wheel_speed and self.sensors.wheel_speeds
-
-    def layout(self) -> StateLayout:
-        road = self.road_estimated
-        return StateLayout(road_estimated=road, psi_v_state=road and self.paper_faithful.a_psi_v_zero_rate,
-                           gyro_bias_axes=self.gyro_bias_axes, accel_bias_axes=self.accel_bias_axes,
-                           wheel_scale=self.uses_wheel_speed and self.wheel_scale_state)
-
-    def kinds(self) -> frozenset[ObsKind]:
-        """Measurement kinds this configuration uses (eq 9 rows that exist for the sensors)."""
-        s, pf, road = self.sensors, self.paper_faithful, self.road_estimated
-        k: set[ObsKind] = set()
-        if s.gnss != "none":
-            k.add(ObsKind.GNSS_POS)
-            if self.use_gnss_velocity:
-                k.add(ObsKind.GNSS_VEL)
-        if s.gnss == "multi_antenna":
-            k.add(ObsKind.GNSS_ATT)
-            if road and pf.b_y2_gps:
-                k.add(ObsKind.Y2_GPS)
-        if s.suspension and road:
-            k.add(ObsKind.Y1_SUS)
-            if pf.c_y2_sus_single_plane or self.road_plane_through_origin:
-                k.add(ObsKind.Y2_SUS_PLANE)
-            else:
-                k.add(ObsKind.Y2_SUS_RATE)
-        if self.uses_wheel_speed:
-            k.add(ObsKind.WHEEL_SPEED)
-        if self.nonholonomic:
-            k.add(ObsKind.NHC)
-        return frozenset(k)
-
-    def input_psd(self) -> np.ndarray:
-        """q_u = [q_ax, q_ay, q_az, q_wx, q_wy, q_wz] of the mean IMU input (module docstring)."""
-        qa = self.accel_noise_mps2 ** 2 / self.imu_rate_hz + self.accel_model_psd
-        qg = self.gyro_noise_radps ** 2 / self.imu_rate_hz + self.gyro_model_psd
-        q = np.array([qa, qa, qa, qg, qg, qg])
-        if self.sensors.imu == "esc3":
-            tau = self.substitute_corr_time_s
-            q[2] = 2.0 * self.substitute_accel_sigma_mps2 ** 2 * tau
-            q[3] = q[4] = 2.0 * self.substitute_gyro_sigma_radps ** 2 * tau
-        return q
-
-    @property
-    def gravity_in_model_mps2(self) -> float:
-        """g added to the velocity equation: 0 when faithful (d)."""
-        return 0.0 if self.paper_faithful.d_accel_as_acceleration else self.gravity_mps2
-
 
 NONLINEAR_KINDS = (ObsKind.GNSS_VEL, ObsKind.Y2_GPS, ObsKind.Y1_SUS, ObsKind.Y2_SUS_PLANE, ObsKind.Y2_SUS_RATE)
 """Kinds updated with the iterated EKF (``EkfConfig.update_iterations``): their h couples angle
@@ -368,8 +85,8 @@ _STATUSES = ("accepted", "gated", "nan", "too_old", "disabled", "not_initialized
 def filter_jacobians(layout: StateLayout, x_ext, f_b, w_b) -> tuple[np.ndarray, np.ndarray]:
     """(F, G) of the continuous model in the filter layout at the extended state ``x_ext``
     (N_EXT) with the bias-corrected inputs ``f_b``, ``w_b``: F = d x_dot / d x (n x n),
-    G = d x_dot / d [f, w] (n x 6). The bias columns are -G of their input axes (module
-    docstring); augmented states have zero rows (random walks)."""
+    G = d x_dot / d [f, w] (n x 6). The bias columns are -G of their input axes (``ekf_config``
+    module docstring, IMU bias states); augmented states have zero rows (random walks)."""
     idx = layout.full_index
     nk = layout.n_kinematic
     kin = idx[:nk]
@@ -389,20 +106,6 @@ def filter_jacobians(layout: StateLayout, x_ext, f_b, w_b) -> tuple[np.ndarray, 
     G = np.zeros((n, 6))
     G[:nk] = Gk
     return F, G
-
-
-def _event_end(ev: "_Event") -> int:
-    return ev.t1
-
-
-@dataclass
-class _Event:
-    is_predict: bool
-    t0: int  # filter time before the event
-    x0: np.ndarray
-    p0: np.ndarray
-    t1: int  # predict: end time; update: measurement time
-    payload: tuple
 
 
 class MultiRateEKF:
@@ -443,7 +146,7 @@ class MultiRateEKF:
         self._x: np.ndarray | None = None
         self._P: np.ndarray | None = None
         self._t: int | None = None
-        self._hist: deque[_Event] = deque()
+        self._hist = EventHistory(self._hist_ns)
         self._replaying = False
         self._last: UpdateResult | None = None
         self._last_innov = np.zeros(0)
@@ -544,7 +247,7 @@ class MultiRateEKF:
         self._counts["initializations"] += 1
 
     def reacquire(self, t_ns: int, assignments) -> bool:
-        """Re-acquisition after persistent gating (module docstring): at the filter time
+        """Re-acquisition after persistent gating (``ekf_config`` module docstring): at the filter time
         ``t_ns`` (predicted to first), set the full-vector states of ``assignments``
         ({full index: (value, sigma)}; states the layout does not carry are ignored), drop their
         cross-covariances and the latency history. False if not initialised."""
@@ -732,25 +435,15 @@ class MultiRateEKF:
 
     # ---------------------------------------------------------------- latency
     def _record(self, is_predict: bool, t1: int, payload: tuple) -> None:
-        self._hist.append(_Event(is_predict, self._t, self._x.copy(), self._P.copy(), t1, payload))
-        horizon = self._t - self._hist_ns
-        while self._hist and self._hist[0].t1 < horizon:
-            self._hist.popleft()
+        self._hist.record(Event(is_predict, self._t, self._x.copy(), self._P.copy(), t1, payload))
 
     def _delayed(self, kind: ObsKind, z, R, t_m: int, aux) -> UpdateResult:
-        hist = self._hist
-        if not hist or hist[0].t0 > t_m:
+        later = self._hist.take_from(t_m) if self._hist.reaches(t_m) else None  # the events to re-run
+        if later is None:  # the history does not reach back to t_m
             return self._finish(UpdateResult(kind, t_m, "too_old", delayed=True), True)
-        # the first event ending after t_m (the history is in processing order, so its end
-        # times t1 never decrease: each event ends at or after the filter time it starts from)
-        i = bisect.bisect_right(hist, t_m, key=_event_end)
-        if i == len(hist):  # nothing after t_m: cannot happen since t_m < self._t, but be safe
+        if not later:  # nothing after t_m: cannot happen since t_m < self._t, but be safe
             return self._apply(kind, z, R, self._t, aux, count=True, delayed=True)
-        first = hist[i]
-        if first.t0 > t_m:  # history does not reach back to t_m
-            return self._finish(UpdateResult(kind, t_m, "too_old", delayed=True), True)
-        later = [hist.pop() for _ in range(len(hist) - i)]
-        later.reverse()
+        first = later[0]
         f_now, w_now = self._f, self._w
         self._x, self._P, self._t = first.x0.copy(), first.p0.copy(), first.t0
         self._counts["delayed_updates"] += 1

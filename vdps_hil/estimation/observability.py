@@ -13,7 +13,10 @@ default 1e-6). The right singular vectors of the remaining s_i span the unobserv
 directions; a state is reported *unobservable* when its squared component in that null space
 (its "participation", 0..1) exceeds ``participation_threshold`` (default 0.5). The null-space
 basis itself (rows, scaled coordinates) is kept in ``ObservabilityReport.null_space`` so the
-reasons can be derived from it (``observability_report.explain_null_space``).
+reasons can be derived from it (``observability_explain.explain_null_space``).
+
+``ObservabilityWindow`` collects the blocks from an EKF's hooks; ``ObservabilityWindows`` cuts a
+drive into consecutive windows of the pipeline's ``observability_window_s`` with one report each.
 """
 
 from __future__ import annotations
@@ -133,3 +136,42 @@ class ObservabilityWindow:
 
     def report(self) -> ObservabilityReport:
         return observability_rank(self._blocks, self.names, self.scales, self.rtol, self.threshold)
+
+
+class ObservabilityWindows:
+    """Consecutive windows of ``window_ns`` over an EKF's predicts and updates (the pipeline's
+    ``observability_window_s``): ``tick(t)`` after each predict starts the first window or, once
+    ``window_ns`` have passed, closes the window with its report and starts the next;
+    ``restart()`` drops the window in progress (after a filter reset), ``forget_start()``
+    makes the next tick start a new one (after an initialisation)."""
+
+    def __init__(self, layout: StateLayout, window_ns: int, ekf):
+        self._window = ObservabilityWindow.for_layout(layout).attach(ekf)
+        self._window_ns = window_ns
+        self._t0: int | None = None
+        self._reports: list[tuple[int, int, ObservabilityReport]] = []
+
+    @property
+    def reports(self) -> tuple[tuple[int, int, ObservabilityReport], ...]:
+        """(t_start_ns, t_end_ns, report) per completed window."""
+        return tuple(self._reports)
+
+    def now(self) -> ObservabilityReport:
+        """Report of the window in progress."""
+        return self._window.report()
+
+    def tick(self, t: int) -> None:
+        if self._t0 is None:
+            self._t0 = t
+            self._window.restart()
+        elif t - self._t0 >= self._window_ns:
+            self._reports.append((self._t0, t, self._window.report()))
+            self._t0 = t
+            self._window.restart()
+
+    def restart(self) -> None:
+        self._window.restart()
+        self._t0 = None
+
+    def forget_start(self) -> None:
+        self._t0 = None

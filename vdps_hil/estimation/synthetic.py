@@ -335,7 +335,8 @@ def drive_ekf(ekf, data: SensorData, vehicle, decimation: int = 10, heave_rate_s
     (one predict per block), GNSS and suspension updates at their own times (the pipeline's
     policy, without the bus). ``on_epoch(kind, k)`` may return False to skip epoch k of
     ``"gnss"``/``"susp"``. Returns the per-predict trace."""
-    from vdps_hil.estimation.observations import ObsKind, ZrRateBuilder, suspension_measurement
+    from vdps_hil.estimation.measurements import ZrRateBuilder, suspension_measurement
+    from vdps_hil.estimation.observations import ObsKind
 
     nz = data.noise
     kinds = ekf.kinds
@@ -355,7 +356,7 @@ def drive_ekf(ekf, data: SensorData, vehicle, decimation: int = 10, heave_rate_s
     rec_t, rec_x, rec_p, rec_xf, rec_sf = [], [], [], [], []
     i_used = int(np.searchsorted(t_imu, ekf.t_ns, side="right"))
     layout = ekf.layout
-    from vdps_hil.estimation.observations import y2_gps_measurement
+    from vdps_hil.estimation.measurements import y2_gps_measurement
 
     for t, _, kind, k in events:
         if not ekf.initialized or t < ekf.t_ns:

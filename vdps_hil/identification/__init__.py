@@ -1,18 +1,22 @@
 """Online identification of the ten vehicle parameters (paper section 5, eq 18-23).
 
-``rls``: weighted and scaled RLS of eq 19 (forgetting, bounds, gating, sigmas, identifiability).
-``problems``: the four problems (mass, tracking stiffness, cornering stiffness, inertia), their
-regressors from estimated quantities (``IdentInputs``), the config and the ``Identifier``.
-``persistence``: identified parameters saved/loaded between drives (JSON, sanity bounds).
-The misprints of the paper found here are listed in the ``problems`` and ``rls`` docstrings.
+Data flow: the estimator's outputs (``Estimate``, ``FilteredSignals``) -> ``feeder.IdentFeeder``
+-> ``inputs.IdentInputs`` (estimated quantities in the aux frame, never simulator truth) ->
+``identifier.Identifier``, which builds each problem's regressor (``problems``, eq 20-23, with
+the spring, tire and moment models of ``forces``) and updates its weighted RLS (``rls``, eq 19)
+in the order mass, tracking, cornering, inertia (settings and the problem table: ``config``) ->
+identified parameters with sigmas (a new frozen ``IdentifiedParams``), saved between drives by
+``persistence``; ``observability_report`` says what a drive identified and why not. The
+misprints of the paper found here are listed in the ``problems`` and ``rls`` docstrings.
 """
 
+from vdps_hil.identification.config import (PROBLEM_NAMES, PROBLEM_PARAMS, IdentConfig, IdentConfigError,
+                                            load_ident_config, parse_ident_config)
+from vdps_hil.identification.identifier import Identifier
+from vdps_hil.identification.inputs import IdentInputs, gravity_aux_mps2
 from vdps_hil.identification.persistence import (ParamsFileError, PersistedParams, load_params,
                                                  reset_params, save_params)
-from vdps_hil.identification.problems import (PROBLEM_NAMES, PROBLEM_PARAMS, REGRESSORS, IdentConfig,
-                                              IdentConfigError, IdentInputs, Identifier, Regressor,
-                                              balanced_weighting, gravity_aux_mps2, load_ident_config,
-                                              parse_ident_config)
+from vdps_hil.identification.problems import REGRESSORS, Regressor, balanced_weighting
 from vdps_hil.identification.rls import RLSCounters, WeightedRLS
 
 __all__ = [

@@ -90,7 +90,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
-from vdps_hil.identification.problems import IdentInputs, gravity_aux_mps2
+from vdps_hil.identification.inputs import IdentInputs, gravity_aux_mps2
 from vdps_hil.model.core import SLIP_SPEED_FLOOR_MPS, Env, Inputs, Model
 from vdps_hil.model.frames import (c_omega_inv, dcm_global_to_road, dcm_global_to_vehicle,
                                    dcm_road_to_aux)
@@ -133,7 +133,7 @@ class FeederConfig:
 
 
 class IdentFeeder:
-    """Estimates -> :class:`~vdps_hil.identification.problems.IdentInputs` (module docstring).
+    """Estimates -> :class:`~vdps_hil.identification.inputs.IdentInputs` (module docstring).
 
     ``model_vehicle`` must be a *model* file (mounting, geometry, tire radius). ``inputs``
     returns None before the estimator is initialised; quantities it cannot form (no wheel

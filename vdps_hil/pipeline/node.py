@@ -64,10 +64,13 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Iterable
 
 from vdps_hil.bus.samples import Sample
-from vdps_hil.estimation.pipeline import Estimate, EstimatorPipeline, PipelineConfig
+from vdps_hil.estimation.estimates import Estimate
+from vdps_hil.estimation.pipeline import EstimatorPipeline
+from vdps_hil.estimation.pipeline_config import PipelineConfig
 from vdps_hil.estimation.suspension import CONDITIONING_SIGMA_FACTOR, SUSPENSION_STAMPS, SuspensionConditioner
 from vdps_hil.identification.feeder import FeederConfig, IdentFeeder
-from vdps_hil.identification.problems import IdentConfig, Identifier
+from vdps_hil.identification.config import IdentConfig
+from vdps_hil.identification.identifier import Identifier
 from vdps_hil.model.params import IdentifiedParams, Vehicle
 from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport
 
@@ -80,7 +83,7 @@ def default_pipeline_config(**kw) -> PipelineConfig:
     alpha-beta bandwidths (module docstring) and a GNSS speed sigma of 0.05 m/s (Doppler
     velocity, about 1/20 of the code position sigma; Table 1 gives none; the pipeline's default
     0.1 m/s made the velocity NIS 0.26 on simulated drives); ``kw`` overrides PipelineConfig."""
-    from vdps_hil.estimation.pipeline import Bandwidths
+    from vdps_hil.estimation.pipeline_config import Bandwidths
 
     d = {"emit_estimates": False, "bandwidths": Bandwidths(20.0, 20.0, 20.0), "gnss_speed_sigma_mps": 0.05}
     d.update(kw)

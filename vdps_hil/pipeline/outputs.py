@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 from typing import Iterable, Mapping
 
-from vdps_hil.estimation.pipeline import FilteredSignals
+from vdps_hil.estimation.estimates import FilteredSignals
 
 __all__ = ["CanFrame", "IdentReport", "PredictionReport", "finite_or_none", "output_to_json", "outputs_digest"]
 

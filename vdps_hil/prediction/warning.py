@@ -177,7 +177,7 @@ class WarningPolicy:
             v = getattr(self, n)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise PredictionConfigError(f"warning.{n} must be a finite number >= 0, got {v!r}")
-        from vdps_hil.identification.problems import PROBLEM_NAMES
+        from vdps_hil.identification.config import PROBLEM_NAMES
 
         rc = self.require_converged
         if isinstance(rc, str) or not all(isinstance(n, str) for n in rc):

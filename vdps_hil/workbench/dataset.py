@@ -61,7 +61,9 @@ import numpy as np
 from scipy.signal import butter, filtfilt
 
 from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
-from vdps_hil.estimation.pipeline import EstimatorPipeline, Innovation, PipelineConfig
+from vdps_hil.estimation.estimates import Innovation
+from vdps_hil.estimation.pipeline import EstimatorPipeline
+from vdps_hil.estimation.pipeline_config import PipelineConfig
 from vdps_hil.model.effects.base import ImuKinematics, MeasurementEffect
 from vdps_hil.model.params import Vehicle
 

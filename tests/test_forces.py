@@ -1,0 +1,118 @@
+"""Forces and moments of the identification model (eq 14-17, eq 23's b_4): static balance, signs,
+the cross product, eq 14's floor, and the "measured" roll/pitch moments against the physics core
+with the body tilted over the road."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ident_forward import MODEL, TRUE, G
+from vdps_hil.identification.forces import body_moments_nm, suspension_forces_n
+from vdps_hil.identification.inputs import IdentInputs, gravity_aux_mps2
+from vdps_hil.model.frames import c_omega_inv
+
+
+def test_static_suspension_forces_balance_and_leave_no_moment():
+    zeros = np.zeros(4)
+    total = suspension_forces_n(MODEL, zeros, zeros)
+    body = suspension_forces_n(MODEL, zeros, zeros, include_unsprung_weight=False)
+    assert np.allclose(total - body, [MODEL.axle(i).unsprung_mass_kg * G for i in range(4)])
+    # the springs were sized to carry a 1440 kg sprung mass at design ride height (model file)
+    m_sprung = body.sum() / G
+    assert m_sprung == pytest.approx(1440.0, rel=2e-3)
+    m = body_moments_nm(MODEL.geometry, body, zeros, zeros)
+    assert abs(m[0]) < 1e-9 and abs(m[1]) < 0.01 * body.sum() * 0.01  # < 1 % of F x 1 cm
+    assert m[2] == 0.0
+
+
+def test_moment_signs_brake_dive_and_outward_roll():
+    zeros = np.zeros(4)
+    # braking (F_x < 0 at the ground): nose-down moment -> pitch (nose-up positive) rate < 0
+    m = body_moments_nm(MODEL.geometry, zeros, np.full(4, -2000.0), zeros)
+    assert m[1] > 0
+    theta_dot = (c_omega_inv(0.0, 0.0) @ np.array([0.0, m[1] / 2400.0, 0.0]))[1]
+    assert theta_dot < 0
+    # left turn (F_y > 0 at the ground): the body rolls right side down (phi positive)
+    m = body_moments_nm(MODEL.geometry, zeros, zeros, np.full(4, 2000.0))
+    assert m[0] > 0
+    # more lateral force at the front: yaw to the left (M_z > 0)
+    assert body_moments_nm(MODEL.geometry, zeros, zeros, [1000.0, 1000.0, 0.0, 0.0])[2] > 0
+
+
+def test_body_moments_equal_the_cross_product(rng):
+    fs, fx, fy = rng.normal(0, 3000, 4), rng.normal(0, 3000, 4), rng.normal(0, 3000, 4)
+    want = sum(np.cross([x, y, -MODEL.geometry.h_cg_m], [a, b, c])
+               for (x, y), a, b, c in zip(MODEL.geometry.corner_xy_m(), fx, fy, fs))
+    assert np.allclose(body_moments_nm(MODEL.geometry, fs, fx, fy), want, rtol=1e-12, atol=1e-9)
+
+
+def test_eq14_floor_on_extension():
+    # wheel hanging: the spring extended past its free length; K H + m_u g is floored at zero
+    f = suspension_forces_n(MODEL, np.full(4, -0.5), np.zeros(4))
+    assert np.allclose(f, 0.0, atol=1e-9)
+
+
+def _tilted_core_inputs(rng, k, roll_v, pitch_v, tire_scale=1.0):
+    """A core state (truth variant, level road, linear tire) with the body rolled/pitched over
+    the road by (roll_v, pitch_v) and suspension deflections consistent with that tilt, and the
+    IdentInputs a perfect estimator gives, with the specific force and road-relative angles."""
+    from vdps_hil.model.core import Env, Inputs, Model
+    from vdps_hil.model.frames import dcm_global_to_vehicle
+    veh = MODEL.with_params(**TRUE.as_dict())
+    model = Model(veh, unsprung_dof=True)
+    x = model.design_state(speed_mps=rng.uniform(15.0, 30.0))
+    _, d0 = model.evaluate(x, Inputs(), Env())  # untilted wheel-centre heights
+    x[3], x[4] = roll_v, pitch_v
+    x[7] = rng.normal(0.0, 0.3)
+    x[9:12] = rng.normal(0.0, 0.2, 3)
+    x[12:16] = [x[6] / r * (1.0 + rng.normal(0.0, 0.01)) for r in model.rolling_radius_m]
+    u = Inputs(steer_wheel_angle_rad=rng.normal(0.0, 0.5), wheel_torque_nm=tuple(rng.normal(0.0, 300.0, 4)))
+    # deflections that keep each wheel centre at its untilted height over the road (+ noise)
+    n = dcm_global_to_vehicle(roll_v, pitch_v, 0.0) @ np.array([0.0, 0.0, 1.0])
+    xy = np.array(veh.geometry.corner_xy_m())
+    zw0 = -(veh.geometry.h_cg_m - veh.tire.rolling_radius_m)
+    hw0 = np.array([d0[f"wheel_centre_height_m_{i}"] for i in range(1, 5)])
+    h_cg = d0["height_cg_above_road_m"]
+    x[16:20] = (hw0 - h_cg - n[0] * xy[:, 0] - n[1] * xy[:, 1]) / n[2] - zw0 + rng.normal(0.0, 0.002, 4)
+    x[20:24] = rng.normal(0.0, 0.05, 4)
+    _, d = model.evaluate(x, u, Env())
+    assert all(d[f"normal_load_n_{i}"] > 0 for i in range(1, 5))
+    vx, vy, wz = x[6], x[7], x[11]
+    acc = np.array([d[f"accel_b_mps2_{a}"] for a in "xyz"])
+    f_b = acc - dcm_global_to_vehicle(x[3], x[4], x[5]) @ np.array([0.0, 0.0, -G])
+    w4 = lambda stem: tuple(d[f"{stem}_{i}"] for i in range(1, 5))  # noqa: E731
+    inp = IdentInputs(
+        t_ns=k + 1, xdd_a_mps2=acc[0] + vy * wz, ydd_a_mps2=acc[1] - vx * wz, zdd_a_mps2=acc[2],
+        xd_a_mps=vx, yd_a_mps=vy, psi_v_dot_radps=wz, gravity_aux_mps2=gravity_aux_mps2(0.0, 0.0, x[5]),
+        omega_radps=tuple(x[9:12]), omega_dot_radps2=tuple(d[f"angular_accel_b_radps2_{a}"] for a in "xyz"),
+        susp_deflection_m=w4("susp_deflection_m"), susp_rate_mps=w4("susp_deflection_rate_mps"),
+        wheel_speed_radps=tuple(x[12:16]), wheel_accel_radps2=w4("wheel_accel_radps2"),
+        wheel_torque_nm=w4("wheel_torque_nm"), slip_ratio=w4("slip_ratio"),
+        slip_angle_rad=tuple(tire_scale * a for a in w4("slip_angle_rad")), wheel_angle_rad=w4("road_wheel_angle_rad"),
+        specific_force_b_mps2=tuple(f_b), vehicle_angles_rad=(roll_v, pitch_v))
+    return inp, veh, np.array([d[f"moment_b_nm_{a}"] for a in "xyz"])
+
+
+def test_measured_moment_form_matches_the_core_with_the_body_tilted_over_the_road(rng):
+    """Body rolled 2 deg and pitched 1 deg over the road (deflections up to 5 cm): the measured
+    M_x, M_y (first order in the angles and deflections; one lever arm for the summed tire
+    forces) are within 4 % of the core's moment magnitude (measured: up to 3.2 % in these
+    strongly tilted random states; on the paper's drive with the simulator's deflections I_x came
+    out -0.4 %), and they do not depend on the tire stiffnesses: 10 % larger
+    slip angles (as a 10 % stiffness error) leave them unchanged while the stiffness form moves."""
+    from vdps_hil.identification.forces import moments_from_inputs
+    for k in range(6):
+        inp, veh, m_core = _tilted_core_inputs(rng, k, math.radians(2.0), math.radians(1.0))
+        meas = moments_from_inputs(veh, TRUE, inp, "measured")
+        stiff = moments_from_inputs(veh, TRUE, inp, "stiffness")
+        scale = float(np.max(np.abs(m_core[:2])))
+        assert np.all(np.abs(meas[:2] - m_core[:2]) <= 0.04 * scale), (meas, m_core)
+        assert meas[2] == stiff[2]  # yaw: the stiffness form in both
+        seed = 100 + k
+        inp1, _, _ = _tilted_core_inputs(np.random.default_rng(seed), k, math.radians(2.0), math.radians(1.0), 1.0)
+        inp2, _, _ = _tilted_core_inputs(np.random.default_rng(seed), k, math.radians(2.0), math.radians(1.0), 1.1)
+        assert np.allclose(moments_from_inputs(veh, TRUE, inp2, "measured")[:2],
+                           moments_from_inputs(veh, TRUE, inp1, "measured")[:2], rtol=0, atol=1e-9)
+        assert not np.allclose(moments_from_inputs(veh, TRUE, inp2, "stiffness")[:2],
+                               moments_from_inputs(veh, TRUE, inp1, "stiffness")[:2], rtol=0, atol=1.0)

@@ -1,0 +1,156 @@
+"""The online Identifier (section 5.2): exact recovery of all ten parameters from consistent
+data, the Gauss-Seidel order and its waiting for upstream problems, gating, NaN and out-of-order
+inputs, reset, status and the sigmas including the upstream uncertainty (synthetic inputs:
+``ident_forward``)."""
+
+import dataclasses
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from ident_forward import MODEL, forward, rel_err, weak_prior_config
+from vdps_hil.identification.config import PROBLEM_NAMES, PROBLEM_PARAMS, load_ident_config
+from vdps_hil.identification.identifier import Identifier
+from vdps_hil.model.params import PARAM_NAMES
+
+
+@pytest.mark.parametrize("form", ["covariance", "sqrt_information"])
+def test_exact_consistent_data_recover_all_ten_parameters_to_1e9(rng, form):
+    # no noise, no forgetting, nontrivial Q (default config) and W (priors); weak prior
+    ident = Identifier(MODEL, weak_prior_config(form=form))
+    for k in range(300):
+        ident.update(forward(rng, k))
+    err = rel_err(ident.params)
+    assert max(abs(e) for e in err.values()) < 1e-9, err
+    assert all(c.updates > 200 for c in ident.counters.values())
+    assert ident.vehicle.params == ident.params and ident.vehicle.geometry == MODEL.geometry
+
+
+def test_default_config_moves_every_parameter_from_prior_toward_truth(rng):
+    # default prior (50 %) and weights: noise-free data, 500 samples (5 s at 100 Hz)
+    ident = Identifier(MODEL)
+    for k in range(500):
+        ident.update(forward(rng, k))
+    prior_err = rel_err(MODEL.params)
+    err = rel_err(ident.params)
+    for n in PARAM_NAMES:
+        assert abs(err[n]) < abs(prior_err[n]) / 5.0, (n, err[n], prior_err[n])
+
+
+def _warmed_up(rng, n=100):
+    ident = Identifier(MODEL)
+    for k in range(n):
+        ident.update(forward(rng, k))
+    return ident
+
+
+def test_zero_slip_and_zero_steer_never_update_and_never_divide_by_zero(rng):
+    ident = _warmed_up(rng)
+    before, c0 = ident.params, ident.counters
+    zeros4 = np.zeros(4)
+    with np.errstate(all="raise"), warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for k in range(100, 150):
+            inp = forward(rng, k, slip=zeros4, alpha=zeros4, delta=zeros4, omega=np.zeros(3))
+            inp = dataclasses.replace(inp, omega_dot_radps2=(0.0, 0.0, 0.0))
+            ident.update(inp)
+            assert ident.excited == {"mass": True, "tracking": False, "cornering": False, "inertia": False}
+        _ = ident.sigmas, ident.identifiability, ident.converged
+    for name in ("tracking", "cornering", "inertia"):
+        assert ident.counters[name].updates == c0[name].updates
+        assert ident.counters[name].not_excited == c0[name].not_excited + 50
+        for n in PROBLEM_PARAMS[name]:
+            assert getattr(ident.params, n) == getattr(before, n)
+
+
+def test_dependent_problems_wait_for_their_upstream_problems(rng):
+    ident = Identifier(MODEL)  # upstream_min_updates = 50 in the default config
+    for k in range(49):
+        ident.update(forward(rng, k))
+    assert ident.counters["cornering"].updates == 0 and ident.waiting_upstream["cornering"] == 49
+    for k in range(49, 120):
+        ident.update(forward(rng, k))
+    assert ident.counters["cornering"].updates > 0 and ident.counters["inertia"].updates > 0
+    assert ident.waiting_upstream["inertia"] > ident.waiting_upstream["cornering"]
+
+
+def test_a_never_excited_upstream_problem_delays_its_dependants_at_most_max_wait(rng):
+    cfg = dataclasses.replace(load_ident_config(), upstream_max_wait=30)
+    ident = Identifier(MODEL, cfg)
+    for k in range(60):  # no wheel ever slips: tracking is never excited
+        ident.update(forward(rng, k, slip=np.zeros(4)))
+    assert ident.counters["tracking"].updates == 0
+    assert ident.waiting_upstream["cornering"] == 30 and ident.counters["cornering"].updates > 0
+
+
+def test_low_speed_gates_the_slip_problems(rng):
+    ident = _warmed_up(rng)
+    c0 = ident.counters
+    for k in range(100, 120):
+        ident.update(forward(rng, k, speed=1.0))
+    assert ident.counters["mass"].updates == c0["mass"].updates + 20
+    for name in ("tracking", "cornering", "inertia"):
+        assert ident.counters[name].updates == c0[name].updates
+
+
+def test_nan_inputs_are_skipped_and_counted(rng):
+    ident = _warmed_up(rng)
+    c0 = ident.counters
+    inp = forward(rng, 100)
+    bad = dataclasses.replace(inp, slip_ratio=(math.nan,) + inp.slip_ratio[1:])
+    ident.update(bad)
+    c = ident.counters
+    assert c["tracking"].nan_rows == 1 and c["tracking"].rows_used == c0["tracking"].rows_used + 3
+    assert c["cornering"].nan_rows == 2 and c["inertia"].nan_rows >= 1  # b_3, b_4 use F_a,1
+    assert c["mass"].updates == c0["mass"].updates + 1
+    assert all(math.isfinite(v) for v in ident.params.as_dict().values())
+    assert all(math.isfinite(v) for v in ident.sigmas.values())
+
+
+def test_duplicate_or_out_of_order_inputs_are_refused(rng):
+    ident = Identifier(MODEL)
+    ident.update(forward(rng, 5))
+    ident.update(forward(rng, 5))
+    ident.update(forward(rng, 4))
+    assert ident.inputs_rejected == 2 and ident.counters["mass"].updates == 1
+
+
+def test_identifier_refuses_a_truth_vehicle_file():
+    with pytest.raises(ValueError, match="model vehicle"):
+        Identifier(dataclasses.replace(MODEL, kind="truth"))
+
+
+def test_reset_and_start_values(rng):
+    ident = _warmed_up(rng)
+    ident.reset("mass")
+    assert ident.params.mass_kg == MODEL.params.mass_kg
+    assert ident.params.inertia_x_kgm2 != MODEL.params.inertia_x_kgm2
+    start = dataclasses.replace(MODEL.params, mass_kg=1500.0)
+    ident.reset(start=start)
+    assert ident.params == start and ident.counters["inertia"].updates == 0
+    assert Identifier(MODEL, start=start).params == start
+
+
+def test_status_is_json_and_converged_flags(rng):
+    ident = Identifier(MODEL)
+    assert not any(ident.converged.values())
+    for k in range(300):
+        ident.update(forward(rng, k))
+    doc = json.loads(json.dumps(ident.status()))
+    assert set(doc["params"]) == set(PARAM_NAMES) == set(doc["sigmas"])
+    assert doc["converged"]["mass"] is True  # noise-free data: sigma -> 0
+    assert all(doc["identifiability"][p] > 0 for p in PROBLEM_NAMES)
+
+
+def test_sigmas_include_the_uncertainty_of_upstream_estimates(rng):
+    ident = Identifier(MODEL)
+    for k in range(200):
+        ident.update(forward(rng, k))
+    own = ident.problem("inertia").parameter_covariance
+    total = ident.covariances["inertia"]
+    assert np.all(np.diag(total) >= np.diag(own))
+    assert np.any(np.diag(total) > np.diag(own))
+    assert ident.sigmas["inertia_z_kgm2"] == pytest.approx(math.sqrt(total[2, 2]))

@@ -1,0 +1,188 @@
+"""The identification problems by name and their configuration (``configs/identification/*.toml``).
+
+``PROBLEM_NAMES`` (the update order), ``PROBLEM_PARAMS`` (the parameters of each problem, fields
+of ``model.params.IdentifiedParams``), ``PROBLEM_ROWS`` (rows of its regressor) and ``UPSTREAM``
+(problems whose estimates enter its b) define the four problems of eq 20-23 (``problems``);
+``IdentConfig`` (general settings) and one ``ProblemConfig`` per problem (Q, W, forgetting,
+prior sigma, excitation gate) are parsed from TOML with one-line errors (``IdentConfigError``).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from vdps_hil.identification.rls import BOUNDS_MODES, FORMS
+from vdps_hil.model.params import CONFIG_DIR
+
+IDENT_CONFIG_DIR = CONFIG_DIR / "identification"
+DEFAULT_CONFIG_PATH = IDENT_CONFIG_DIR / "default.toml"
+CONFIG_SCHEMA_VERSION = 1
+STEER_FORMS = ("per_wheel", "paper_mean")
+MASS_FORMS = ("paper", "sprung")
+MOMENT_FORMS = ("stiffness", "measured")
+
+PROBLEM_NAMES: tuple[str, ...] = ("mass", "tracking", "cornering", "inertia")
+"""Update order (Gauss-Seidel: each problem uses the newest estimates of the previous ones)."""
+
+PROBLEM_PARAMS: dict[str, tuple[str, ...]] = {
+    "mass": ("mass_kg",),
+    "tracking": ("tracking_stiffness_1_n", "tracking_stiffness_2_n", "tracking_stiffness_3_n",
+                 "tracking_stiffness_4_n"),
+    "cornering": ("cornering_stiffness_front_nprad", "cornering_stiffness_rear_nprad"),
+    "inertia": ("inertia_x_kgm2", "inertia_y_kgm2", "inertia_z_kgm2"),
+}
+PROBLEM_ROWS = {"mass": 1, "tracking": 4, "cornering": 2, "inertia": 3}
+UPSTREAM: dict[str, tuple[str, ...]] = {"mass": (), "tracking": (), "cornering": ("mass", "tracking"),
+                                        "inertia": ("tracking", "cornering")}
+"""Problems whose estimates enter a problem's b (eq 22: m, C_lambda; eq 23's moments: C_lambda,
+C_alpha). A problem waits until each of these has ``upstream_min_updates`` updates (at most
+``upstream_max_wait`` calls): rows built from the priors would otherwise stay in its memory
+(weight 1/N without forgetting)."""
+
+
+class IdentConfigError(ValueError):
+    """An identification config that cannot be used (one-line message)."""
+
+
+@dataclass(frozen=True)
+class ProblemConfig:
+    q: tuple[float, ...]  # diagonal of Q, 1/(unit of b_i), one per row
+    w: tuple[float, ...] | None  # diagonal of W, one per parameter; None = the priors
+    forgetting: float  # lambda in (0, 1]
+    prior_rel_sigma: float  # prior sd as a fraction of the prior value
+    excitation_min: tuple[float, ...]  # per row, in the regressor row's unit
+    p0_scaled: float | None = None  # if set: P_Q(0) = p0_scaled I (the paper's P(0)), overrides prior_rel_sigma
+
+
+@dataclass(frozen=True)
+class IdentConfig:
+    form: str
+    bounds_mode: str
+    bounds_factor: tuple[float, float]  # physical bounds = factor x model-file prior
+    min_speed_mps: float
+    sigma_autocorr: bool
+    min_dof: int
+    converged_rel_sigma: float
+    min_updates_converged: int
+    steer_form: str
+    mass_form: str
+    upstream_min_updates: int
+    upstream_max_wait: int
+    mass: ProblemConfig
+    tracking: ProblemConfig
+    cornering: ProblemConfig
+    inertia: ProblemConfig
+    moment_form: str = "stiffness"  # eq 23's b: "stiffness" (eq 15 forces) or "measured" (docstring)
+
+    def problem(self, name: str) -> ProblemConfig:
+        return getattr(self, name)
+
+
+_GENERAL_KEYS = {"form", "bounds_mode", "bounds_factor", "min_speed_mps", "sigma_autocorr", "min_dof",
+                 "converged_rel_sigma", "min_updates_converged", "steer_form", "mass_form", "upstream_min_updates",
+                 "upstream_max_wait"}
+_PROBLEM_KEYS = {"q", "w", "forgetting", "prior_rel_sigma", "excitation_min"}
+
+
+def _num(v, where: str, positive: bool = False, nonneg: bool = False) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise IdentConfigError(f"{where}: expected a finite number, got {v!r}")
+    if positive and v <= 0:
+        raise IdentConfigError(f"{where}: must be positive, got {v!r}")
+    if nonneg and v < 0:
+        raise IdentConfigError(f"{where}: must not be negative, got {v!r}")
+    return float(v)
+
+
+def _nums(v, n: int, where: str, positive: bool = False, nonneg: bool = False) -> tuple[float, ...]:
+    if not isinstance(v, list) or len(v) != n:
+        raise IdentConfigError(f"{where}: expected a list of {n} numbers")
+    return tuple(_num(e, f"{where}[{i}]", positive, nonneg) for i, e in enumerate(v))
+
+
+def _check_keys(table, allowed: set, where: str) -> None:
+    if not isinstance(table, dict):
+        raise IdentConfigError(f"{where}: expected a table")
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise IdentConfigError(f"{where}: unknown key {unknown[0]!r}")
+    missing = sorted(allowed - set(table))
+    if missing:
+        raise IdentConfigError(f"{where}: missing key {missing[0]!r}")
+
+
+def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
+    """Parse an identification config (TOML text); one-line :class:`IdentConfigError`."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise IdentConfigError(f"{origin}: malformed TOML: {e}") from None
+    _check_keys(doc, {"schema_version", "general", *PROBLEM_NAMES}, origin)
+    if doc["schema_version"] != CONFIG_SCHEMA_VERSION:
+        raise IdentConfigError(f"{origin}: schema_version {doc['schema_version']!r} is not "
+                               f"{CONFIG_SCHEMA_VERSION}")
+    g = doc["general"]
+    moment_form = g.get("moment_form", "stiffness") if isinstance(g, dict) else "stiffness"
+    if isinstance(g, dict):
+        g = {k: v for k, v in g.items() if k != "moment_form"}  # optional key
+    _check_keys(g, _GENERAL_KEYS, f"{origin}[general]")
+    if moment_form not in MOMENT_FORMS:
+        raise IdentConfigError(f"{origin}[general].moment_form: one of {MOMENT_FORMS}, got {moment_form!r}")
+    if g["form"] not in FORMS:
+        raise IdentConfigError(f"{origin}[general].form: one of {FORMS}, got {g['form']!r}")
+    if g["bounds_mode"] not in BOUNDS_MODES:
+        raise IdentConfigError(f"{origin}[general].bounds_mode: one of {BOUNDS_MODES}, got {g['bounds_mode']!r}")
+    if g["steer_form"] not in STEER_FORMS:
+        raise IdentConfigError(f"{origin}[general].steer_form: one of {STEER_FORMS}, got {g['steer_form']!r}")
+    if g["mass_form"] not in MASS_FORMS:
+        raise IdentConfigError(f"{origin}[general].mass_form: one of {MASS_FORMS}, got {g['mass_form']!r}")
+    if not isinstance(g["sigma_autocorr"], bool):
+        raise IdentConfigError(f"{origin}[general].sigma_autocorr: expected true or false")
+    lo, hi = _nums(g["bounds_factor"], 2, f"{origin}[general].bounds_factor", positive=True)
+    if not lo < 1.0 < hi:
+        raise IdentConfigError(f"{origin}[general].bounds_factor: need lo < 1 < hi, got [{lo}, {hi}]")
+    for k in ("min_dof", "min_updates_converged", "upstream_min_updates", "upstream_max_wait"):
+        if isinstance(g[k], bool) or not isinstance(g[k], int) or g[k] < 0:
+            raise IdentConfigError(f"{origin}[general].{k}: expected a non-negative integer")
+    problems = {}
+    for name in PROBLEM_NAMES:
+        where = f"{origin}[{name}]"
+        t = doc[name]
+        _check_keys({k: v for k, v in t.items() if k != "p0_scaled"} if isinstance(t, dict) else t,
+                    _PROBLEM_KEYS, where)
+        m, n = PROBLEM_ROWS[name], len(PROBLEM_PARAMS[name])
+        w = t["w"]
+        if w == "prior":
+            w_t = None
+        else:
+            w_t = _nums(w, n, f"{where}.w", positive=True)
+        lam = _num(t["forgetting"], f"{where}.forgetting", positive=True)
+        if lam > 1.0:
+            raise IdentConfigError(f"{where}.forgetting: must be in (0, 1], got {lam}")
+        problems[name] = ProblemConfig(
+            q=_nums(t["q"], m, f"{where}.q", positive=True), w=w_t, forgetting=lam,
+            prior_rel_sigma=_num(t["prior_rel_sigma"], f"{where}.prior_rel_sigma", positive=True),
+            excitation_min=_nums(t["excitation_min"], m, f"{where}.excitation_min", nonneg=True),
+            p0_scaled=(_num(t["p0_scaled"], f"{where}.p0_scaled", positive=True) if "p0_scaled" in t else None))
+    return IdentConfig(
+        form=g["form"], bounds_mode=g["bounds_mode"], bounds_factor=(lo, hi),
+        min_speed_mps=_num(g["min_speed_mps"], f"{origin}[general].min_speed_mps", nonneg=True),
+        sigma_autocorr=g["sigma_autocorr"], min_dof=g["min_dof"],
+        converged_rel_sigma=_num(g["converged_rel_sigma"], f"{origin}[general].converged_rel_sigma",
+                                 positive=True),
+        min_updates_converged=g["min_updates_converged"], steer_form=g["steer_form"], mass_form=g["mass_form"],
+        upstream_min_updates=g["upstream_min_updates"], upstream_max_wait=g["upstream_max_wait"],
+        moment_form=moment_form, **problems)
+
+
+def load_ident_config(path: str | Path | None = None) -> IdentConfig:
+    """Load ``configs/identification/default.toml`` (or ``path``)."""
+    p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise IdentConfigError(f"cannot read identification config {p}: {e.__class__.__name__}: {e}") from None
+    return parse_ident_config(text, str(p))

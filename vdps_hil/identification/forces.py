@@ -1,0 +1,177 @@
+"""Forces and moments of the identification model: the spring law of eq 14 per corner, the tire
+forces of eq 15-17 and the body moments of eq 23's b_4 (``moments_from_inputs``), from estimated
+quantities (``inputs.IdentInputs``) and a model vehicle.
+
+Moments M_x, M_y, M_z of eq 23's b_4 (the paper gives them only as "functions of the forces,
+attitude and geometry [25]"). We use the physics core's definition (``vdps_hil/model/core.py``,
+truth variant ``unsprung_dof=True``), checked against it in ``tests/test_problems.py`` and
+``tests/test_forces.py``: forces on the sprung body about its CG, vehicle frame, corner i at
+(x_i, y_i) from ``Geometry.corner_xy_m()``:
+
+* strut force F_s,i = K_s,i H_i + D_s,i Hd_i (eq 14 without m_u g: the unsprung weight acts on
+  the wheel, not on the body; with it the static forces would leave a spurious pitch moment
+  2 m_u g (l_r - l_f)) acting at (x_i, y_i);
+* tire forces in the vehicle frame F_x,i = F_a,i cos d_i - F_b,i sin d_i,
+  F_y,i = F_a,i sin d_i + F_b,i cos d_i (eq 16 per wheel, F_a,i = C_lambda,i lambda_i,
+  F_b,i = C_alpha,axle/2 alpha_i with the current estimates) acting at the contact point
+  (x_i, y_i, -h_cg) (no roll centre in the paper's model);
+* the unsprung masses' horizontal weight and inertia u_i = -m_u,i (a - g) at the wheel centre
+  (x_i, y_i, z_w,i), z_w,i = -(h_cg - r) + H_i, with (a - g) = (xdd_a - yd_a psid_v - G_x,
+  ydd_a + xd_a psid_v - G_y) (the unsprung masses translate with the body)::
+
+      M_x = sum_i ( y_i F_s,i + h_cg F_y,i - z_w,i u_y,i)
+      M_y = sum_i (-x_i F_s,i - h_cg F_x,i + z_w,i u_x,i)
+      M_z = sum_i ( x_i F_y,i - y_i F_x,i + x_i u_y,i - y_i u_x,i)
+
+  Small-angle: the attitude relative to the road is not used (as eq 13, which writes the
+  vehicle-frame forces in the aux frame). ``IdentInputs.moments_nm`` overrides them. This is
+  ``moment_form = "stiffness"``.
+
+  ``moment_form = "measured"`` (default in ``configs/identification/default.toml``): the tire
+  forces enter M_x and M_y only through their sums, which the accelerometer measures: in body
+  axes sum_i F_tire,i = m f_b (f_b the specific force at the CG, body axes; F_tire includes the
+  normal loads' components F_z,i n_b, n_b the road normal in body axes, from the estimated
+  road-relative roll and pitch)::
+
+      M_x = sum_i y_i F_s,i + (h_cg - H_bar) m f_b,y - r n_b,y sum_i F_z,i + sum_i z_w,i m_u,i f_b,y
+      M_y = -sum_i x_i F_s,i - (h_cg - H_bar) m f_b,x + r n_b,x sum_i F_z,i - sum_i z_w,i m_u,i f_b,x
+      M_z = as "stiffness" (the yaw moment needs the split between the axles)
+
+  (F_z,i = eq 14's normal load, H_bar the mean deflection, z_w,i = -(h_cg - r) + H_i; the
+  physics core's moments to first order in the road-relative angles and the deflections). Why:
+  the roll moment is the small difference of two large ones (the struts' y_i F_s,i and the
+  tires' h_cg sum F_y): with F_y from C_alpha alpha (eq 15) a 5 % stiffness error or the Magic
+  Formula's saturation, and the omitted F_z n_b,y term (body roll over the road tilts the normal
+  loads), moved I_x by +16..+40 % on the paper's scenario; with the measured sums and the
+  simulator's deflections I_x came to -0.4 % (linear-tire truth). It needs
+  ``IdentInputs.specific_force_b_mps2`` and ``vehicle_angles_rad``; without them the stiffness
+  form is used.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vdps_hil.identification.inputs import IdentInputs
+from vdps_hil.model.core import spring_force_n
+from vdps_hil.model.params import Geometry, IdentifiedParams, Vehicle
+from vdps_hil.units import GRAVITY_MPS2
+
+
+def spring_compression_m(vehicle: Vehicle, susp_deflection_m) -> np.ndarray:
+    """H of eq 14 (compression from the spring's free length) = static + deflection [m]."""
+    static = np.array([vehicle.axle(i).static_compression_m for i in range(4)])
+    return static + np.asarray(susp_deflection_m, dtype=float)
+
+
+def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
+                        include_unsprung_weight: bool = True) -> np.ndarray:
+    """Per corner [N], the spring law of eq 14 (``model.core.spring_force_n``):
+
+    * with the unsprung weight: F_z,spring,i = K_s H + D_s Hd + m_u g, the normal load of the
+      paper's reduced model, with eq 14's clamp as the physics core applies it (lift-off when
+      K_s H + m_u g <= 0, and never negative);
+    * without: the strut force K_s H + D_s Hd acting on the sprung body (no clamp: tension past
+      the free length stands in for the rebound stop, as in the core)."""
+    h = spring_compression_m(vehicle, susp_deflection_m)
+    hd = np.asarray(susp_rate_mps, dtype=float)
+    out = np.empty(4)
+    for i in range(4):
+        ax = vehicle.axle(i)
+        hs = float(h[i])
+        if not (math.isfinite(hs) and math.isfinite(hd[i])):
+            out[i] = math.nan
+            continue
+        fsp = spring_force_n(min(hs, 10.0), ax.spring_c1_npm, ax.spring_c2_per_m, ax.spring_c3_m)
+        if not include_unsprung_weight:
+            out[i] = fsp + ax.damper_nspm * hd[i]
+            continue
+        mug = ax.unsprung_mass_kg * GRAVITY_MPS2
+        out[i] = 0.0 if fsp + mug <= 0.0 else max(fsp + ax.damper_nspm * hd[i] + mug, 0.0)
+    return out
+
+
+def tire_forces_wheel_n(slip_ratio, slip_angle_rad, params: IdentifiedParams) -> tuple[np.ndarray, np.ndarray]:
+    """Eq 15 with eq 17's equal sides: F_a,i = C_lambda,i lambda_i, F_b,i = C_alpha,axle/2
+    alpha_i [N], wheel frame (a forward along the wheel, b to its left)."""
+    c_l = np.array(params.tracking_stiffness_n)
+    c_a = np.array([params.cornering_stiffness_front_nprad, params.cornering_stiffness_front_nprad,
+                    params.cornering_stiffness_rear_nprad, params.cornering_stiffness_rear_nprad]) / 2.0
+    return c_l * np.asarray(slip_ratio, dtype=float), c_a * np.asarray(slip_angle_rad, dtype=float)
+
+
+def tire_forces_body_n(f_a_n, f_b_n, wheel_angle_rad) -> tuple[np.ndarray, np.ndarray]:
+    """Eq 16 per wheel: wheel-frame forces rotated by the wheel angle into the vehicle frame."""
+    d = np.asarray(wheel_angle_rad, dtype=float)
+    fa, fb = np.asarray(f_a_n, dtype=float), np.asarray(f_b_n, dtype=float)
+    c, s = np.cos(d), np.sin(d)
+    return fa * c - fb * s, fa * s + fb * c
+
+
+def body_moments_nm(geometry: Geometry, f_susp_body_n, f_x_n, f_y_n) -> np.ndarray:
+    """(M_x, M_y, M_z) about the CG, vehicle frame, of the strut and tire forces:
+    sum_i r_i x F_i with r_i = (x_i, y_i, -h_cg) and F_i = (F_x,i, F_y,i, F_s,i)."""
+    xy = np.array(geometry.corner_xy_m())
+    x, y, h = xy[:, 0], xy[:, 1], geometry.h_cg_m
+    fs, fx, fy = (np.asarray(v, dtype=float) for v in (f_susp_body_n, f_x_n, f_y_n))
+    return np.array([np.sum(y * fs + h * fy), np.sum(-x * fs - h * fx), np.sum(x * fy - y * fx)])
+
+
+def unsprung_inertia_moments_nm(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
+    """(M_x, M_y, M_z) of the unsprung masses' horizontal weight and inertia (d'Alembert force
+    m_u,i (g - a) at the wheel centre r_w,i = (x_i, y_i, -(h_cg - r) + H_i)), as the physics
+    core applies them to the sprung body. a - g in the aux frame is (xdd_a - yd_a psid_v - G_x,
+    ydd_a + xd_a psid_v - G_y) (eq 13's left-hand sides over m)."""
+    geo = vehicle.geometry
+    xy = np.array(geo.corner_xy_m())
+    mu = np.array([vehicle.axle(i).unsprung_mass_kg for i in range(4)])
+    zw = -(geo.h_cg_m - vehicle.tire.rolling_radius_m) + np.asarray(inp.susp_deflection_m, dtype=float)
+    psid = inp.psi_v_dot_radps
+    ux = -mu * (inp.xdd_a_mps2 - inp.yd_a_mps * psid - inp.gravity_aux_mps2[0])
+    uy = -mu * (inp.ydd_a_mps2 + inp.xd_a_mps * psid - inp.gravity_aux_mps2[1])
+    return np.array([np.sum(-zw * uy), np.sum(zw * ux), np.sum(xy[:, 0] * uy - xy[:, 1] * ux)])
+
+
+def moments_from_inputs(vehicle: Vehicle, params: IdentifiedParams, inp: IdentInputs,
+                        form: str = "stiffness") -> np.ndarray:
+    """b_4 of eq 23: strut forces (eq 14), tire forces (eq 15-17 with ``params``) and the
+    unsprung masses' horizontal weight and inertia; ``form = "measured"`` takes M_x, M_y from
+    the measured specific force (module docstring) when the inputs carry it."""
+    if inp.moments_nm is not None:
+        return np.array(inp.moments_nm)
+    fs = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
+    fa, fb = tire_forces_wheel_n(inp.slip_ratio, inp.slip_angle_rad, params)
+    fx, fy = tire_forces_body_n(fa, fb, inp.wheel_angle_rad)
+    m = body_moments_nm(vehicle.geometry, fs, fx, fy) + unsprung_inertia_moments_nm(vehicle, inp)
+    if form == "measured" and inp.specific_force_b_mps2 is not None and inp.vehicle_angles_rad is not None:
+        m[0], m[1] = measured_roll_pitch_moments_nm(vehicle, params.mass_kg, inp, fs)
+    return m
+
+
+def road_normal_body(phi_v_rad: float, theta_v_rad: float) -> np.ndarray:
+    """n_b = C_r^v e_z: the road normal in body axes from the road-relative roll and pitch
+    (eq 3-4 with psi_v = 0; body parallel to the road: (0, 0, 1))."""
+    sp, cp, st, ct = math.sin(phi_v_rad), math.cos(phi_v_rad), math.sin(theta_v_rad), math.cos(theta_v_rad)
+    return np.array([st, sp * ct, cp * ct])
+
+
+def measured_roll_pitch_moments_nm(vehicle: Vehicle, mass_kg: float, inp: IdentInputs, strut_n=None
+                                   ) -> tuple[float, float]:
+    """(M_x, M_y) of the ``"measured"`` moment form (module docstring) [N m]."""
+    geo = vehicle.geometry
+    xy = np.array(geo.corner_xy_m())
+    h, r = geo.h_cg_m, vehicle.tire.rolling_radius_m
+    fs = (suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
+          if strut_n is None else np.asarray(strut_n, dtype=float))
+    fz = float(np.sum(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps)))
+    hh = np.asarray(inp.susp_deflection_m, dtype=float)
+    mu = np.array([vehicle.axle(i).unsprung_mass_kg for i in range(4)])
+    zw = -(h - r) + hh
+    n = road_normal_body(*inp.vehicle_angles_rad)
+    f = inp.specific_force_b_mps2
+    lever = h - float(np.mean(hh))
+    mx = float(np.sum(xy[:, 1] * fs) + lever * mass_kg * f[1] - r * n[1] * fz + np.sum(zw * mu) * f[1])
+    my = float(-np.sum(xy[:, 0] * fs) - lever * mass_kg * f[0] + r * n[0] * fz - np.sum(zw * mu) * f[0])
+    return mx, my

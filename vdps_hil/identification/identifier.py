@@ -1,0 +1,215 @@
+"""The online identifier of section 5.2: one weighted RLS (``rls.WeightedRLS``, eq 19) per problem
+(``problems``, eq 20-23), updated in the order mass, tracking, cornering, inertia (Gauss-Seidel:
+each with the newest estimates of the others; a problem waits for its ``config.UPSTREAM`` problems),
+with the parameters' covariances including what the upstream estimates contribute (consider
+covariance), identifiability and convergence.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import fields, replace
+
+import numpy as np
+
+from vdps_hil.identification.config import (PROBLEM_NAMES, PROBLEM_PARAMS, UPSTREAM, IdentConfig,
+                                            load_ident_config)
+from vdps_hil.identification.inputs import IdentInputs
+from vdps_hil.identification.problems import REGRESSORS
+from vdps_hil.identification.rls import RLSCounters, WeightedRLS
+from vdps_hil.model.params import IdentifiedParams, Vehicle
+
+
+class Identifier:
+    """Online identification of the ten parameters (section 5.2), one RLS per problem.
+
+    ``vehicle`` must be a *model* vehicle file (its params are the priors; the truth file is
+    refused). ``start`` (e.g. from :func:`~.persistence.load_params`) replaces the starting
+    values, not the priors used for W, the bounds and sigma0's scale.
+    """
+
+    def __init__(self, vehicle: Vehicle, config: IdentConfig | None = None,
+                 start: IdentifiedParams | None = None):
+        if vehicle.kind != "model":
+            raise ValueError(f"the identifier needs a model vehicle file, got a {vehicle.kind!r} file")
+        self._vehicle = vehicle
+        self._prior = vehicle.params
+        self._start = start if start is not None else vehicle.params
+        self.config = config if config is not None else load_ident_config()
+        self._rls = {name: self._make(name) for name in PROBLEM_NAMES}
+        self._excited = {name: False for name in PROBLEM_NAMES}
+        self._waiting = {name: 0 for name in PROBLEM_NAMES}
+        self._ready = {name: False for name in PROBLEM_NAMES}
+        self._inputs_rejected = 0
+        self._last_t_ns: int | None = None
+        self._params = self._collect()
+
+    def _make(self, name: str) -> WeightedRLS:
+        pc = self.config.problem(name)
+        names = PROBLEM_PARAMS[name]
+        prior = np.array([getattr(self._prior, n) for n in names])
+        x0 = np.array([getattr(self._start, n) for n in names])
+        lo, hi = self.config.bounds_factor
+        w = np.abs(prior) if pc.w is None else np.array(pc.w)
+        sigma0 = pc.prior_rel_sigma * np.abs(prior) if pc.p0_scaled is None else math.sqrt(pc.p0_scaled) * w
+        return WeightedRLS(
+            x0, sigma0, pc.q, w,
+            forgetting=pc.forgetting, lower=lo * prior, upper=hi * prior,
+            bounds_mode=self.config.bounds_mode, form=self.config.form,
+            sigma_autocorr=self.config.sigma_autocorr, min_dof=self.config.min_dof, names=names)
+
+    def _collect(self) -> IdentifiedParams:
+        vals = {}
+        for name, rls in self._rls.items():
+            vals.update(zip(PROBLEM_PARAMS[name], (float(v) for v in rls.x)))
+        return replace(self._prior, **vals)
+
+    def update(self, inputs: IdentInputs) -> None:
+        """Feed one set of estimates; each problem updates if excited (mass, tracking,
+        cornering, inertia, in that order, each with the newest estimates of the others)."""
+        if not isinstance(inputs, IdentInputs):
+            raise TypeError(f"Identifier.update needs IdentInputs, got {type(inputs).__name__}")
+        if self._last_t_ns is not None and inputs.t_ns <= self._last_t_ns:
+            self._inputs_rejected += 1  # duplicate or out of order: would count data twice
+            return
+        self._last_t_ns = inputs.t_ns
+        for name in PROBLEM_NAMES:
+            if not self._upstream_ready(name):
+                self._waiting[name] += 1
+                self._excited[name] = False
+                continue
+            reg = REGRESSORS[name](inputs, self._vehicle, self._params, self.config)
+            self._excited[name] = self._rls[name].update(reg.a, reg.b, reg.rows, db_dtheta=reg.db_dup)
+            if self._excited[name]:
+                self._params = self._collect()
+
+    def _upstream_ready(self, name: str) -> bool:
+        """Ready when every upstream problem has ``upstream_min_updates`` updates, or after
+        ``upstream_max_wait`` calls (an upstream problem that is never excited, e.g. the
+        tracking stiffness of a wheel that never slips, contributes ~ C lambda ~ 0 to b anyway).
+        Once ready a problem stays ready until a reset."""
+        if self._ready[name]:
+            return True
+        if (all(self._rls[up].counters.updates >= self.config.upstream_min_updates for up in UPSTREAM[name])
+                or self._waiting[name] >= self.config.upstream_max_wait):
+            self._ready[name] = True
+        return self._ready[name]
+
+    def reset(self, problem: str | None = None, start: IdentifiedParams | None = None) -> None:
+        """Back to the starting values (or ``start``) for one problem or all."""
+        if start is not None:
+            self._start = start
+        for name in PROBLEM_NAMES if problem is None else (problem,):
+            if name not in self._rls:
+                raise KeyError(f"unknown problem {name!r}; one of {PROBLEM_NAMES}")
+            self._rls[name].reset(np.array([getattr(self._start, n) for n in PROBLEM_PARAMS[name]]))
+            self._excited[name] = False
+        self._ready = {name: False for name in PROBLEM_NAMES}  # dependants re-check their upstream
+        self._waiting = {name: 0 for name in PROBLEM_NAMES}
+        self._params = self._collect()
+        if problem is None:
+            self._last_t_ns = None
+
+    # ------------------------------------------------------------------ read-only
+    @property
+    def params(self) -> IdentifiedParams:
+        """The current estimates: a new frozen object (the model file's other figures unchanged)."""
+        return self._params
+
+    @property
+    def vehicle(self) -> Vehicle:
+        """The model vehicle with the identified parameters (``Vehicle.with_params``)."""
+        return self._vehicle.with_params(**self._params.as_dict())
+
+    @property
+    def prior(self) -> IdentifiedParams:
+        return self._prior
+
+    @property
+    def covariances(self) -> dict[str, np.ndarray]:
+        """Problem -> covariance of its parameters (physical units): the RLS's own
+        (``parameter_covariance``) plus the consider covariance of the upstream estimates it
+        used (block-diagonal over the upstream problems, cascaded in update order)."""
+        out: dict[str, np.ndarray] = {}
+        for name in PROBLEM_NAMES:
+            rls = self._rls[name]
+            c = rls.parameter_covariance
+            ups = UPSTREAM[name]
+            if ups:
+                blocks = [out[u] for u in ups]
+                size = sum(b.shape[0] for b in blocks)
+                cu, i = np.zeros((size, size)), 0
+                for blk in blocks:
+                    k = blk.shape[0]
+                    cu[i:i + k, i:i + k] = blk
+                    i += k
+                c = c + rls.consider_covariance(cu)
+            out[name] = c
+        return out
+
+    @property
+    def sigmas(self) -> dict[str, float]:
+        """Parameter field name -> standard deviation (same unit as the parameter), including
+        the uncertainty inherited from the upstream problems (``covariances``)."""
+        out = {}
+        for name, c in self.covariances.items():
+            out.update(zip(PROBLEM_PARAMS[name], (math.sqrt(max(float(v), 0.0)) for v in np.diag(c))))
+        return out
+
+    @property
+    def identifiability(self) -> dict[str, float]:
+        """Problem -> minimum eigenvalue of the accumulated A^T Q^T Q A (Table 3)."""
+        return {name: rls.identifiability for name, rls in self._rls.items()}
+
+    @property
+    def excited(self) -> dict[str, bool]:
+        """Problem -> whether the last ``update`` changed it."""
+        return dict(self._excited)
+
+    @property
+    def counters(self) -> dict[str, RLSCounters]:
+        return {name: rls.counters for name, rls in self._rls.items()}
+
+    @property
+    def waiting_upstream(self) -> dict[str, int]:
+        """Problem -> updates skipped because an upstream problem was not ready yet."""
+        return dict(self._waiting)
+
+    @property
+    def inputs_rejected(self) -> int:
+        """Inputs refused before any problem saw them (duplicate or out-of-order t_ns)."""
+        return self._inputs_rejected
+
+    @property
+    def converged(self) -> dict[str, bool]:
+        """Problem -> every sigma/|x| (``sigmas``, upstream included) below
+        ``converged_rel_sigma`` after enough updates."""
+        out = {}
+        sig = self.sigmas
+        for name, rls in self._rls.items():
+            rel = np.array([sig[n] for n in PROBLEM_PARAMS[name]]) / np.maximum(np.abs(rls.x), 1e-300)
+            out[name] = bool(rls.counters.updates >= self.config.min_updates_converged
+                             and np.all(rel < self.config.converged_rel_sigma))
+        return out
+
+    @staticmethod
+    def upstream_param_names(name: str) -> tuple[str, ...]:
+        """The parameters (in order) of the columns of a problem's ``Regressor.db_dup``."""
+        return tuple(p for u in UPSTREAM[name] for p in PROBLEM_PARAMS[u])
+
+    def problem(self, name: str) -> WeightedRLS:
+        """The RLS of one problem (read its diagnostics; do not update it directly)."""
+        return self._rls[name]
+
+    def status(self) -> dict:
+        """A JSON-ready summary (params, sigmas, identifiability, excited, converged, counters)."""
+        return {
+            "params": self._params.as_dict(),
+            "sigmas": self.sigmas,
+            "identifiability": self.identifiability,
+            "excited": self.excited,
+            "converged": self.converged,
+            "counters": {n: {f.name: getattr(c, f.name) for f in fields(c)} for n, c in self.counters.items()},
+            "waiting_upstream": self.waiting_upstream,
+            "inputs_rejected": self._inputs_rejected,
+        }
