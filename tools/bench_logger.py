@@ -105,7 +105,8 @@ def emulate(args) -> int:
     from vdps_hil.adapters.can_adapter import slcan_line
     from vdps_hil.codecs import can_codec as cc
     from vdps_hil.codecs.imu import encode_imu_packet
-    from vdps_hil.codecs.nmea import format_attitude, format_gga
+    from vdps_hil.codecs.nmea.attitude import format_attitude
+    from vdps_hil.codecs.nmea.position import format_gga
 
     d = Path(args.dir)
     d.mkdir(parents=True, exist_ok=True)

@@ -842,7 +842,7 @@ def nmea_fix_lines(fixes: GnssFixes, t0_s: float = 0.0, talker: str = "GP") -> l
     pipeline uses h = altitude + separation), the satellites if known; RMC prints speed [kn] and
     course [deg from true north] with 3 decimals (course empty when NaN) and the mode letter of
     the fix quality (R RTK fixed, F float, D differential, A autonomous)."""
-    from vdps_hil.codecs.nmea import KNOT_MPS, wrap_sentence
+    from vdps_hil.codecs.nmea.sentence import KNOT_MPS, wrap_sentence
     from vdps_hil.conventions import yaw_to_heading
     import datetime as dt
 

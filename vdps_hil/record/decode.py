@@ -83,7 +83,7 @@ from typing import Callable, Iterator, Mapping
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.framing import BITS_PER_BYTE_8N1, LineFramer, transmission_time_ns
 from vdps_hil.codecs.imu import IMU_RATE_HZ, NS_PER_FINE_TICK, ImuDecoder
-from vdps_hil.codecs.nmea import NmeaDecoder
+from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.record import schemas as S
 from vdps_hil.record.reader import RawRecord, RecordingReader
 
