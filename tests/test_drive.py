@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from pynmeagps import NMEAReader, VALCKSUM
 
-from vdps_hil.codecs.can_codec import VdpsCanDecoder, load_dbc
+from vdps_hil.codecs.can_dbc import load_dbc
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.codecs.framing import LineFramer, transmission_time_ns
 from vdps_hil.codecs.imu import ImuDecoder
 from vdps_hil.codecs.nmea.decoder import NmeaDecoder

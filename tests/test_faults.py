@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.codecs.can_codec import VdpsCanDecoder, load_dbc
+from vdps_hil.codecs.can_dbc import load_dbc
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.codecs.framing import LineFramer
 from vdps_hil.codecs.imu import ImuDecoder
 from vdps_hil.codecs.nmea.decoder import NmeaDecoder

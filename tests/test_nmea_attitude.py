@@ -101,8 +101,6 @@ def test_dual_antenna_baseline_selects_the_measured_slot():
 # ---------------------------------------------------------------------------------------------
 # Golden: the real OxTS file
 # ---------------------------------------------------------------------------------------------
-
-
 def test_oxts_every_pashr_decodes_to_the_printed_numbers(real_data):
     lines = oxts_lines(real_data)
     pashr = [ln for ln in lines if ln.startswith(b"$PASHR")]

@@ -53,8 +53,6 @@ def test_garbage_before_dollar_is_skipped_and_counted():
 # ---------------------------------------------------------------------------------------------
 # Golden: the real OxTS file
 # ---------------------------------------------------------------------------------------------
-
-
 def test_oxts_through_framer_and_decoder(real_data, rng):
     raw = (real_data / OXTS).read_bytes()
     cuts = np.sort(rng.choice(len(raw), size=60, replace=False))
@@ -90,8 +88,6 @@ def test_oxts_through_framer_and_decoder(real_data, rng):
 # ---------------------------------------------------------------------------------------------
 # Fuzz: garbage and mutated sentences interleaved with valid ones
 # ---------------------------------------------------------------------------------------------
-
-
 def test_fuzz_line_level(rng):
     valid = valid_sentences(rng, 300)
     items = [("valid", s) for s in valid]

@@ -23,8 +23,6 @@ from nmea_checks import (
 # ---------------------------------------------------------------------------------------------
 # Round trips, with pynmeagps as the independent parser
 # ---------------------------------------------------------------------------------------------
-
-
 @settings(max_examples=150, deadline=None, derandomize=True)
 @given(t=times, lat=lats, lon=lons, alt=st.floats(-400.0, 9000.0), q=st.integers(1, 6),
        sats=st.integers(0, 40), hdop=st.floats(0.0, 50.0),
@@ -87,8 +85,6 @@ def test_vtg_round_trip(v, course):
 # ---------------------------------------------------------------------------------------------
 # Golden: the real OxTS file
 # ---------------------------------------------------------------------------------------------
-
-
 def test_oxts_gga_rmc_hdt_match_pynmeagps(real_data):
     n = {"GGA": 0, "RMC": 0, "HDT": 0}
     for ln in oxts_lines(real_data):

@@ -184,24 +184,24 @@ def test_canedge_mf4_decodes_gnss_and_imu(real_data):
 
 
 def _vdps_frames(rng, n):
-    from vdps_hil.codecs import can_codec as cc
+    from vdps_hil.codecs.can_encode import encode_steer, encode_suspension, encode_wheel_speeds
 
     out = []
     for i in range(n):
         k = i % 3
         if k == 0:
-            out.append(cc.encode_wheel_speeds(rng.uniform(-300, 300, 4), i % 256))
+            out.append(encode_wheel_speeds(rng.uniform(-300, 300, 4), i % 256))
         elif k == 1:
-            out.append([cc.encode_steer(float(rng.uniform(-12, 12)), i % 256)])
+            out.append([encode_steer(float(rng.uniform(-12, 12)), i % 256)])
         else:
-            out.append([cc.encode_suspension(rng.uniform(-0.15, 0.15, 4), i % 256)])
+            out.append([encode_suspension(rng.uniform(-0.15, 0.15, 4), i % 256)])
     return [m for group in out for m in group]
 
 
 def test_vdps_map_generic_decoder_equals_vdps_codec(rng):
     """The message list of configs/signalmaps/vdps.toml is the same mapping VdpsCanDecoder
     applies: same fields, same values."""
-    from vdps_hil.codecs.can_codec import VdpsCanDecoder
+    from vdps_hil.codecs.can_decode import VdpsCanDecoder
 
     sm = load_signalmap("vdps")
     bm = sm.buses["vdps"]
@@ -223,7 +223,7 @@ def test_vdps_map_generic_decoder_equals_vdps_codec(rng):
 def test_fuzz_random_frames_between_valid_ones(noise, seed):
     """Random frames (any ID, any length) interleaved with valid ones: no exception, every
     valid frame decoded to the value it encodes."""
-    from vdps_hil.codecs import can_codec as cc
+    from vdps_hil.codecs.can_encode import encode_steer
 
     sm = load_signalmap("vdps")
     bm = sm.buses["vdps"]
@@ -232,7 +232,7 @@ def test_fuzz_random_frames_between_valid_ones(noise, seed):
     for k, (aid, data) in enumerate(noise):
         dec.decode(k, aid, data, bool(r.integers(2)))
         x = float(r.uniform(-12, 12))
-        [m] = [cc.encode_steer(x, k % 256)]
+        [m] = [encode_steer(x, k % 256)]
         out = dec.decode(k, m.arbitration_id, bytes(m.data), False)
         assert len(out) == 1
         assert out[0].fields["steer_wheel_angle_rad"] == pytest.approx(x, abs=0.0005 + 1e-12)

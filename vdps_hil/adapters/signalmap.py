@@ -168,7 +168,7 @@ def _toyota_checksum(frame_id: int, data: bytes) -> bool:
 
 def _vdps_crc8(frame_id: int, data: bytes) -> bool:
     """dbc/vdps.dbc VDPS_Warning: byte 0 = CRC-8/SAE-J1850 of bytes 1..7."""
-    from vdps_hil.codecs.can_codec import crc8_j1850
+    from vdps_hil.codecs.can_e2e import crc8_j1850
 
     return len(data) >= 2 and crc8_j1850(data[1:]) == data[0]
 
@@ -591,7 +591,8 @@ def build_decoder(sigmap: SignalMap, bus: str, dbc_path: str | os.PathLike | Non
             "channel": bm.channel, "signalmap": sigmap.name, "signalmap_sha256": sigmap.sha256,
             "codec": bm.codec or "signalmap"}
     if bm.codec == "vdps":
-        from vdps_hil.codecs.can_codec import DbcError, VdpsCanDecoder
+        from vdps_hil.codecs.can_dbc import DbcError
+        from vdps_hil.codecs.can_decode import VdpsCanDecoder
 
         try:
             return VdpsCanDecoder(path, source=source or f"can.{bm.name}"), info

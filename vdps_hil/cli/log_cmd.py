@@ -260,7 +260,7 @@ class PipelineTap:
     def __init__(self, model_vehicle, writer, start_params=None, *, record_order: bool = True,
                  params_file: str | None = None, probe_s: float | None = None):
         from vdps_hil.bus.samples import Sample
-        from vdps_hil.codecs.can_codec import VdpsCanDecoder
+        from vdps_hil.codecs.can_decode import VdpsCanDecoder
         from vdps_hil.estimation.pipeline import Estimate
         from vdps_hil.record.input_order import InputOrder
         from vdps_hil.system import PROBE_SECONDS, CanFrame

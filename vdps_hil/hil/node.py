@@ -53,7 +53,7 @@ from vdps_hil.adapters.nmea_adapter import NmeaAdapter, NmeaProtocol
 from vdps_hil.adapters.serial_adapter import SerialAdapter
 from vdps_hil.adapters.session import Recorder
 from vdps_hil.bus.samples import Sample
-from vdps_hil.codecs.can_codec import VdpsCanDecoder
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.record import schemas as S
 from vdps_hil.record.input_order import INPUT_ORDER_METADATA, InputOrder, input_order_samples
 from vdps_hil.system import _est_docs  # the /est/ layout of ``vdps replay``

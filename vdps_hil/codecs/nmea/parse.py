@@ -116,4 +116,3 @@ def parse_sentence(line: bytes | str, *, lenient_checksum: bool = False,
         return Reject(e.reason, e.detail)
     except Exception as e:  # a bug: never let it out of the codec, but make it visible
         return Reject("internal_error", f"{type(e).__name__}: {e}")
-
