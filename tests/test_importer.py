@@ -106,7 +106,7 @@ def test_errors_before_anything_is_written(tmp_path, real_data):
 
 def test_vdps_bus_decodes_by_default_and_imu_capture(tmp_path, rng):
     from vdps_hil.codecs.can_encode import encode_wheel_speeds
-    from vdps_hil.codecs.imu import encode_imu_packet
+    from vdps_hil.codecs.imu_mtdata2 import encode_imu_packet
 
     log = tmp_path / "v.asc"
     with can.Logger(log) as w:

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from vdps_hil import realcars as rc
 from vdps_hil.adapters.signalmap import load_signalmap
 from vdps_hil.bus.samples import Sample
-from vdps_hil.codecs.imu import ImuDecoder
+from vdps_hil.codecs.imu_decoder import ImuDecoder
 from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.estimation.ekf import SensorSet
 from vdps_hil.estimation.kinematics import dcm_gv

@@ -106,7 +106,7 @@ def emulate(args) -> int:
     from vdps_hil.codecs.can_encode import (
         encode_steer, encode_suspension, encode_wheel_speeds, encode_wheel_torques,
     )
-    from vdps_hil.codecs.imu import encode_imu_packet
+    from vdps_hil.codecs.imu_mtdata2 import encode_imu_packet
     from vdps_hil.codecs.nmea.attitude import format_attitude
     from vdps_hil.codecs.nmea.position import format_gga
 

@@ -26,7 +26,7 @@ def build_live_adapters(can_specs, serial_specs, formats, signalmap, dbcs):
     from vdps_hil.adapters.nmea_adapter import NmeaAdapter
     from vdps_hil.adapters.serial_adapter import parse_port_spec
     from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
-    from vdps_hil.codecs.imu import DEFAULT_BAUD as IMU_BAUD
+    from vdps_hil.codecs.imu_mtdata2 import DEFAULT_BAUD as IMU_BAUD
     from vdps_hil.record.importer import ImportError_, _can_decoder, serial_format
     from vdps_hil.record.schemas import check_name
 

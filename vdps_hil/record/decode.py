@@ -82,7 +82,8 @@ from typing import Callable, Iterator, Mapping
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.framing import BITS_PER_BYTE_8N1, LineFramer, transmission_time_ns
-from vdps_hil.codecs.imu import IMU_RATE_HZ, NS_PER_FINE_TICK, ImuDecoder
+from vdps_hil.codecs.imu_decoder import ImuDecoder
+from vdps_hil.codecs.imu_mtdata2 import IMU_RATE_HZ, NS_PER_FINE_TICK
 from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.record import schemas as S
 from vdps_hil.record.reader import RawRecord, RecordingReader
@@ -264,7 +265,7 @@ class DeviceStamper:
         return d
 
 
-_IMU_PACKET_BYTES = 47  # PacketCounter + SampleTimeFine + float32 acc + gyro (codecs.imu)
+_IMU_PACKET_BYTES = 47  # PacketCounter + SampleTimeFine + float32 acc + gyro (codecs.imu_mtdata2)
 
 
 class _ImuStream:
@@ -524,7 +525,7 @@ class DecodedRecording:
             f = "imu" if device.lower().startswith("imu") else "nmea"
         st = None
         if f in IMU_FORMATS:
-            from vdps_hil.codecs.imu import DEFAULT_BAUD as IMU_BAUD
+            from vdps_hil.codecs.imu_mtdata2 import DEFAULT_BAUD as IMU_BAUD
 
             st = _ImuStream(device, baud or IMU_BAUD, self.device_time, self._imu_rate)
         elif f in NMEA_FORMATS:

@@ -158,7 +158,7 @@ def build_adapters(can: Sequence[CanSource] = (), serial: Sequence[SerialSource]
             raise ImportError_(f"--serial {src.name}: no such file {src.path}")
         fmt = serial_format(src.name, src.fmt)
         if fmt == "imu":
-            from vdps_hil.codecs.imu import DEFAULT_BAUD as IMU_BAUD
+            from vdps_hil.codecs.imu_mtdata2 import DEFAULT_BAUD as IMU_BAUD
 
             adapters.append(ImuFileAdapter(src.name, src.path, src.baud or IMU_BAUD))
         else:

@@ -2,7 +2,7 @@
 CAN frame timing on the bus and the serial line (UART queue + read chunks).
 
 Everything here produces exactly the bytes the foundation codecs produce (``codecs.can_encode``
-``encode_fields``, ``codecs.imu.encode_imu_packet``; checked byte for byte in
+``encode_fields``, ``codecs.imu_mtdata2.encode_imu_packet``; checked byte for byte in
 ``tests/test_wire.py``), only for whole arrays of samples at once: per-frame cantools encoding
 costs about 9 us, which at 3-4 frames per millisecond would dominate a simulated drive.
 
@@ -59,7 +59,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from vdps_hil.codecs import imu as imu_codec
+from vdps_hil.codecs import imu_mtdata2 as imu_codec
 from vdps_hil.codecs.can_busload import frame_bits
 from vdps_hil.codecs.can_dbc import MessageSpec, SignalSpec, VdpsDbc, load_dbc
 from vdps_hil.codecs.framing import BITS_PER_BYTE_8N1, NS_PER_S
@@ -175,7 +175,7 @@ assert _MTDATA2_DTYPE.itemsize == imu_codec.PACKET_BYTES == 47
 def pack_imu_packets(t_device_ns: np.ndarray, counters: np.ndarray, specific_force_mps2: np.ndarray,
                      angular_rate_radps: np.ndarray) -> np.ndarray:
     """(N, 47) uint8: one MTData2 message per row, byte-identical to
-    ``codecs.imu.encode_imu_packet(t, f, w, seq)`` with the identity ``sensor_to_body`` (the
+    ``codecs.imu_mtdata2.encode_imu_packet(t, f, w, seq)`` with the identity ``sensor_to_body`` (the
     values given are already in sensor axes). SampleTimeFine = nearest 100 us tick of the device
     time, modulo 2^32; PacketCounter = counter mod 65536."""
     n = len(counters)

@@ -96,8 +96,8 @@ def format_attitude(layout: str, *, utc_time_s: float, yaw_rad: float,
     elif layout == "HPR":
         body = ",".join([
             f"{talker}HPR", fmt_time(utc_time_s, 2), fmt_heading(heading, 2, 6),
-            fmt_num(pitch_pr, 2, 6), fmt_num(roll_pr, 2, 6), str(int(quality)), f"{int(num_sats):02d}",
-            "1.00", "0004",
+            fmt_num(pitch_pr, 2, 6), fmt_num(roll_pr, 2, 6), str(int(quality)),
+            f"{int(num_sats):02d}", "1.00", "0004",
         ])
     else:  # PTNL,AVR
         yaw_pr = heading if heading <= 180.0 else heading - 360.0

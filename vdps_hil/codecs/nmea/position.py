@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import datetime as _dt
 
-from vdps_hil.codecs.nmea.fields import Fields, fmt_heading, fmt_latlon, fmt_num, fmt_time, put_field
+from vdps_hil.codecs.nmea.fields import (
+    Fields, fmt_heading, fmt_latlon, fmt_num, fmt_time, put_field,
+)
 from vdps_hil.codecs.nmea.sentence import (
     KMH_MPS, KNOT_MPS, ParsedSentence, SentenceError, wrap_sentence,
 )
@@ -38,8 +40,8 @@ def format_gga(utc_time_s: float, lat_deg: float, lon_deg: float, alt_m: float, 
     geoid = fmt_num(geoid_sep_m, 3)
     body = ",".join([
         f"{talker}GGA", fmt_time(utc_time_s, 2), lat, ns, lon, ew, str(int(fix_quality)),
-        f"{int(num_sats):02d}", fmt_num(hdop, 1), fmt_num(alt_m, 3), "M", geoid, "M" if geoid else "",
-        fmt_num(diff_age_s, 1), "" if diff_station is None else f"{int(diff_station):04d}",
+        f"{int(num_sats):02d}", fmt_num(hdop, 1), fmt_num(alt_m, 3), "M", geoid,
+        "M" if geoid else "", fmt_num(diff_age_s, 1), "" if diff_station is None else f"{int(diff_station):04d}",
     ])
     return wrap_sentence(body)
 
