@@ -148,7 +148,8 @@ def _compiles(m):
 def test_signal_map_decoder_from_the_cache_equals_the_one_from_cantools(cache, real_data, rng):
     """The RAV4 signal map decoder built on a cache hit and one built on cantools' database give
     the same samples and counters for frames of every DBC message, of right and wrong length."""
-    from vdps_hil.adapters.signalmap import SignalMapDecoder, load_dbc, load_signalmap
+    from vdps_hil.adapters.signalmap import load_signalmap
+    from vdps_hil.adapters.signalmap_decoder import SignalMapDecoder, load_dbc
 
     bm = load_signalmap("toyota_rav4_2017").buses["pt"]
     path = real_data / RAV4_DBC

@@ -494,7 +494,8 @@ class DecodedRecording:
     def _can_stream(self, bus: str) -> _CanStream | None:
         if bus in self._can:
             return self._can[bus]
-        from vdps_hil.adapters.signalmap import SignalMapError, build_decoder, load_signalmap
+        from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
+        from vdps_hil.adapters.signalmap_decoder import build_decoder
 
         sigmap = self._sigmap
         map_bus = self._bus_map.get(bus, bus)

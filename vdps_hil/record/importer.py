@@ -105,7 +105,8 @@ def serial_format(name: str, fmt: str | None) -> str:
 
 def _can_decoder(bus: str, sigmap, dbc: dict[str, str], info: dict):
     """(decoder or None, decode channel) of one bus; fills ``info`` for the metadata."""
-    from vdps_hil.adapters.signalmap import SignalMapError, build_decoder, load_signalmap
+    from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
+    from vdps_hil.adapters.signalmap_decoder import build_decoder
 
     dbc_path = dbc.get(bus, dbc.get("*"))
     try:
