@@ -13,7 +13,8 @@ from vdps_hil.adapters.can_adapter import CanAdapter, CanFileAdapter, parse_can_
 from vdps_hil.bus.raw import RawCan
 from vdps_hil.bus.samples import Sample
 from vdps_hil.bus.subscription import Subscription
-from vdps_hil.codecs import can_codec as cc
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
+from vdps_hil.codecs.can_encode import encode_steer, encode_wheel_speeds
 
 
 def test_parse_can_spec():
@@ -54,16 +55,16 @@ def _pump(adapter, n_expected, timeout=5.0):
 
 def test_virtual_bus_live_decoding_and_counted_rejects(rng):
     chan = f"t_{rng.integers(1 << 30)}"
-    a = CanAdapter("vdps", f"virtual:{chan}", decoder=cc.VdpsCanDecoder())
+    a = CanAdapter("vdps", f"virtual:{chan}", decoder=VdpsCanDecoder())
     sub = a.subscribe(Subscription())
     a.open()
     tx = can.Bus(interface="virtual", channel=chan)
     try:
-        good = list(cc.encode_wheel_speeds([10.0, 11.0, 12.0, 13.0], 0))
+        good = list(encode_wheel_speeds([10.0, 11.0, 12.0, 13.0], 0))
         frames = good + [
             can.Message(arbitration_id=0x555, data=b"\x01\x02", is_extended_id=False),
             can.Message(arbitration_id=0x100, data=b"\x00\x01\x02", is_extended_id=False),
-        ] + list(cc.encode_wheel_speeds([20.0, 21.0, 22.0, 23.0], 1))
+        ] + list(encode_wheel_speeds([20.0, 21.0, 22.0, 23.0], 1))
         for m in frames:
             tx.send(m)
         _pump(a, len(frames))
@@ -88,7 +89,7 @@ def test_fuzz_random_frames_interleaved_every_valid_decoded(rng):
     """Random IDs, lengths and bytes between valid frames through the live path: no crash,
     every valid frame decoded."""
     chan = f"f_{rng.integers(1 << 30)}"
-    a = CanAdapter("vdps", f"virtual:{chan}", decoder=cc.VdpsCanDecoder())
+    a = CanAdapter("vdps", f"virtual:{chan}", decoder=VdpsCanDecoder())
     sub = a.subscribe(Subscription(raw=False))
     a.open()
     tx = can.Bus(interface="virtual", channel=chan)
@@ -105,7 +106,7 @@ def test_fuzz_random_frames_interleaved_every_valid_decoded(rng):
                 tx.send(can.Message(arbitration_id=aid, data=data, is_extended_id=False))
                 n += 1
             x = float(rng.uniform(-12, 12))
-            tx.send(cc.encode_steer(x, k % 256))
+            tx.send(encode_steer(x, k % 256))
             sent.append(x)
             n += 1
         _pump(a, n)
@@ -170,7 +171,7 @@ def test_every_python_can_format_reads_back(tmp_path, rng, suffix):
 def test_channel_filter_and_other_channels_recorded_apart(real_data):
     path = real_data / "comma2k19_rav4_2018-08-02_seg40" / "rav4_seg40.candump.log"
     only = CanFileAdapter("pt", path, channels=["can0"])
-    split = CanFileAdapter("pt", path, decode_channels=["can0"], decoder=cc.VdpsCanDecoder())
+    split = CanFileAdapter("pt", path, decode_channels=["can0"], decoder=VdpsCanDecoder())
     res = {}
     for a in (only, split):
         sub = a.subscribe(samples=False)
@@ -248,7 +249,7 @@ def test_truncated_binary_log_keeps_the_frames_before(tmp_path, rng):
 
 def test_run_in_thread_until_stopped(rng):
     chan = f"r_{rng.integers(1 << 30)}"
-    a = CanAdapter("vdps", f"virtual:{chan}", decoder=cc.VdpsCanDecoder())
+    a = CanAdapter("vdps", f"virtual:{chan}", decoder=VdpsCanDecoder())
     sub = a.subscribe(raw=False)
     stop = threading.Event()
     a.open()
@@ -257,7 +258,7 @@ def test_run_in_thread_until_stopped(rng):
     tx = can.Bus(interface="virtual", channel=chan)
     try:
         for k in range(100):
-            tx.send(cc.encode_steer(0.01 * k, k))
+            tx.send(encode_steer(0.01 * k, k))
         t_end = time.monotonic() + 5
         while a.health.samples < 100 and time.monotonic() < t_end:
             time.sleep(0.01)
@@ -289,13 +290,13 @@ def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
         return m, s
 
     m, s = plug()
-    a = CanAdapter("vdps", f"slcan:{link},sleep_after_open=0", decoder=cc.VdpsCanDecoder(),
+    a = CanAdapter("vdps", f"slcan:{link},sleep_after_open=0", decoder=VdpsCanDecoder(),
                    reconnect_s=0.05)
     sub = a.subscribe(raw=False)
     a.open()
     try:
         os.write(m, b"".join(slcan_line(f.arbitration_id, bytes(f.data))
-                             for k in range(50) for f in cc.encode_wheel_speeds([5.0] * 4, k)))
+                             for k in range(50) for f in encode_wheel_speeds([5.0] * 4, k)))
         os.write(m, b"tZZZ8GARBAGE!!\r\xff\xfe\r")  # malformed lines: counted, not fatal
         _pump(a, 100)
         os.close(m)
@@ -310,7 +311,7 @@ def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
         while a.health.state != "open" and time.monotonic() < t_end:
             a.poll(0.02)
         os.write(m, b"".join(slcan_line(f.arbitration_id, bytes(f.data))
-                             for f in cc.encode_wheel_speeds([6.0] * 4, 50)))
+                             for f in encode_wheel_speeds([6.0] * 4, 50)))
         _pump(a, 102)
     finally:
         a.close()

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from vdps_hil.codecs import dbc_cache
-from vdps_hil.codecs.can_codec import DEFAULT_DBC_PATH
+from vdps_hil.codecs.can_dbc import DEFAULT_DBC_PATH
 from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
 
 RAV4_DBC = Path("comma2k19_rav4_2018-08-02_seg40") / "toyota_new_mc_pt_generated.dbc"
@@ -148,7 +148,8 @@ def _compiles(m):
 def test_signal_map_decoder_from_the_cache_equals_the_one_from_cantools(cache, real_data, rng):
     """The RAV4 signal map decoder built on a cache hit and one built on cantools' database give
     the same samples and counters for frames of every DBC message, of right and wrong length."""
-    from vdps_hil.adapters.signalmap import SignalMapDecoder, load_dbc, load_signalmap
+    from vdps_hil.adapters.signalmap import load_signalmap
+    from vdps_hil.adapters.signalmap_decoder import SignalMapDecoder, load_dbc
 
     bm = load_signalmap("toyota_rav4_2017").buses["pt"]
     path = real_data / RAV4_DBC
@@ -293,13 +294,13 @@ def _recording(path, frames) -> Path:
 def test_fresh_interpreter_with_warm_cache_imports_neither_cantools_nor_can(cache, tmp_path, rng):
     """Decoding a vdps recording in a new process: the first run parses the DBC (cantools),
     the second reads the cache and leaves cantools and python-can unimported."""
-    from vdps_hil.codecs import can_codec as cc
+    from vdps_hil.codecs.can_encode import encode_steer, encode_warning, encode_wheel_speeds
 
     frames = []
     for k in range(50):
-        for m in (*cc.encode_wheel_speeds(rng.uniform(-50, 50, 4), k),
-                  cc.encode_steer(float(rng.uniform(-1, 1)), k),
-                  cc.encode_warning(1, 2.0, 0.1, 0.4, 0, k)):
+        for m in (*encode_wheel_speeds(rng.uniform(-50, 50, 4), k),
+                  encode_steer(float(rng.uniform(-1, 1)), k),
+                  encode_warning(1, 2.0, 0.1, 0.4, 0, k)):
             frames.append((m.arbitration_id, bytes(m.data)))
     rec = _recording(tmp_path / "vdps.mcap", frames)
     shutil.rmtree(cache, ignore_errors=True)  # encoding here may have filled it

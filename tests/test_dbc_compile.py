@@ -12,10 +12,12 @@ from cantools.database.can import Message, Signal
 from cantools.database.conversion import BaseConversion
 from hypothesis import given, settings, strategies as st
 
-from vdps_hil.codecs import can_codec as cc
+from vdps_hil.codecs.can_dbc import TTR_NONE_RAW, load_dbc
+from vdps_hil.codecs.can_decode import VdpsCanDecoder, _DecodePlan
+from vdps_hil.codecs.can_encode import _from_raw, encode_warning
 from vdps_hil.codecs.dbc_compile import CompiledMessage, NotCompilable, compile_message
 
-DB = cc.load_dbc().db
+DB = load_dbc().db
 
 
 @pytest.mark.parametrize("message", DB.messages, ids=lambda m: m.name)
@@ -80,9 +82,9 @@ def test_float_and_out_of_payload_signals_are_not_compiled():
 def test_scaled_values_equal_cantools_conversion_on_every_raw_value():
     """_DecodePlan's float(raw * scale + offset) == _from_raw == cantools' own raw_to_scaled
     for every raw value each value signal of the DBC can carry (TTR sentinel: inf)."""
-    dbc = cc.load_dbc()
+    dbc = load_dbc()
     for spec in dbc.messages.values():
-        plan = cc._DecodePlan(spec)
+        plan = _DecodePlan(spec)
         cantools_sig = {s.name: s for s in dbc.db.get_message_by_name(spec.name).signals}
         for (name, _, scale, offset, ttr), sig in zip(plan.values, spec.values):
             assert name == sig.name
@@ -90,16 +92,16 @@ def test_scaled_values_equal_cantools_conversion_on_every_raw_value():
             conv = cantools_sig[name].conversion
             for r in range(lo, hi + 1):
                 x = float(conv.raw_to_scaled(r, decode_choices=False))
-                if ttr and r == cc.TTR_NONE_RAW:
-                    assert cc._from_raw(sig, r) == math.inf
+                if ttr and r == TTR_NONE_RAW:
+                    assert _from_raw(sig, r) == math.inf
                     continue
-                assert float(r * scale + offset) == x == cc._from_raw(sig, r)
+                assert float(r * scale + offset) == x == _from_raw(sig, r)
 
 
 def _frames(seed: int, n: int) -> list[tuple[int, int, bytes]]:
     """Valid-looking and corrupted frames of every message, counters mostly in sequence."""
     rng = random.Random(seed)
-    dbc = cc.load_dbc()
+    dbc = load_dbc()
     ids = sorted(dbc.by_id)
     ctr = dict.fromkeys(ids, 0)
     out = []
@@ -107,8 +109,8 @@ def _frames(seed: int, n: int) -> list[tuple[int, int, bytes]]:
         aid = rng.choice(ids)
         spec = dbc.by_id[aid]
         if aid == 0x080:
-            data = bytes(cc.encode_warning(rng.randrange(4), rng.choice([None, 1.5]), 0.1, 0.5,
-                                           rng.randrange(2), ctr[aid]).data)
+            data = bytes(encode_warning(rng.randrange(4), rng.choice([None, 1.5]), 0.1, 0.5,
+                                        rng.randrange(2), ctr[aid]).data)
         else:
             data = bytearray(rng.randbytes(spec.dlc))
             data[-1] = ctr[aid] & 0xFF
@@ -126,7 +128,7 @@ def _frames(seed: int, n: int) -> list[tuple[int, int, bytes]]:
 def test_decoder_compiled_path_equals_cantools_path():
     """The chassis decoder with the compiled layouts and with cantools' decode (plans with no
     compiled message) gives the same samples and the same counters on 5000 mixed frames."""
-    fast, slow = cc.VdpsCanDecoder(), cc.VdpsCanDecoder()
+    fast, slow = VdpsCanDecoder(), VdpsCanDecoder()
     for p in slow._plan.values():
         p.compiled = None
     for t, aid, data in _frames(3, 5000):

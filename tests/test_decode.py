@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vdps_hil.codecs.nmea import format_gga
+from vdps_hil.codecs.nmea.position import format_gga
 from vdps_hil.record import schemas as S
 from vdps_hil.record.decode import (ClockAligner, DecodeError, DeviceStamper, Unwrapper, copy_raw_topics,
                                     decode_recording, raw_copier)

@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 from pynmeagps import NMEAReader, VALCKSUM
 
-from vdps_hil.codecs.can_codec import VdpsCanDecoder, load_dbc
+from vdps_hil.codecs.can_dbc import load_dbc
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.codecs.framing import LineFramer, transmission_time_ns
-from vdps_hil.codecs.imu import ImuDecoder
-from vdps_hil.codecs.nmea import NmeaDecoder
+from vdps_hil.codecs.imu_decoder import ImuDecoder
+from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.effects import REGISTRY as EFFECTS
 from vdps_hil.model.frames import dcm_global_to_vehicle

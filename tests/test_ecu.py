@@ -10,7 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vdps_hil.codecs.can_codec import VdpsCanEncoder, crc8_j1850
+from vdps_hil.codecs.can_e2e import crc8_j1850
+from vdps_hil.codecs.can_encode import VdpsCanEncoder
 from vdps_hil.hil.ecu import ActuatorConfig, Ecu, WarningMonitor
 from vdps_hil.model.core import Inputs
 from vdps_hil.sim.scenarios import load_scenario

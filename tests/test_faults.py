@@ -9,10 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.codecs.can_codec import VdpsCanDecoder, load_dbc
+from vdps_hil.codecs.can_dbc import load_dbc
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.codecs.framing import LineFramer
-from vdps_hil.codecs.imu import ImuDecoder
-from vdps_hil.codecs.nmea import NmeaDecoder
+from vdps_hil.codecs.imu_decoder import ImuDecoder
+from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.faults import (REGISTRY, FaultError, FaultSet, GnssOutage, parse_fault)

@@ -105,13 +105,13 @@ def test_errors_before_anything_is_written(tmp_path, real_data):
 
 
 def test_vdps_bus_decodes_by_default_and_imu_capture(tmp_path, rng):
-    from vdps_hil.codecs import can_codec as cc
-    from vdps_hil.codecs.imu import encode_imu_packet
+    from vdps_hil.codecs.can_encode import encode_wheel_speeds
+    from vdps_hil.codecs.imu_mtdata2 import encode_imu_packet
 
     log = tmp_path / "v.asc"
     with can.Logger(log) as w:
         for k in range(100):
-            for m in cc.encode_wheel_speeds([10.0, 10.0, 10.0, 10.0], k % 256):
+            for m in encode_wheel_speeds([10.0, 10.0, 10.0, 10.0], k % 256):
                 m.timestamp = 1_700_000_000 + k * 0.001
                 w.on_message_received(m)
     cap = tmp_path / "imu.bin"

@@ -11,7 +11,7 @@ import pytest
 
 from vdps_hil.adapters.base import EndOfInput
 from vdps_hil.adapters.imu_adapter import ImuAdapter, ImuFileAdapter, ImuProtocol
-from vdps_hil.codecs.imu import encode_imu_packet
+from vdps_hil.codecs.imu_mtdata2 import encode_imu_packet
 
 
 def packets(rng, n, skip=()):

@@ -14,14 +14,14 @@ from vdps_hil.record.writer import RecordingWriter
 
 
 def make(tmp_path, real_data):
-    from vdps_hil.codecs import can_codec as cc
+    from vdps_hil.codecs.can_encode import encode_steer
 
     log = tmp_path / "v.log"
     with can.Logger(log) as w:
         for k in range(300):  # 100 Hz steering, a 1 s hole after 1 s, an unknown ID
             if 100 <= k < 200:
                 continue
-            m = cc.encode_steer(0.1, k % 256)
+            m = encode_steer(0.1, k % 256)
             m.timestamp = 1000.0 + k * 0.01
             m.channel = "can0"
             w.on_message_received(m)

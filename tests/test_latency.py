@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.codecs.can_codec import VdpsCanEncoder
+from vdps_hil.codecs.can_encode import VdpsCanEncoder
 from vdps_hil.hil.latency import CycleLog, cycle_latencies, latency_summary, lead_times, reference_events
 from vdps_hil.hil.transports import SendLog
 from vdps_hil.sim.drive import Drive

@@ -12,7 +12,8 @@ import pytest
 from vdps_hil.adapters.base import EndOfInput
 from vdps_hil.adapters.nmea_adapter import (NmeaAdapter, NmeaProtocol, NmeaTextFileAdapter,
                                             parse_time_prefix)
-from vdps_hil.codecs.nmea import format_attitude, format_gga
+from vdps_hil.codecs.nmea.attitude import format_attitude
+from vdps_hil.codecs.nmea.position import format_gga
 
 NS = 1_000_000_000
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from vdps_hil.bus.samples import Sample
-from vdps_hil.codecs.can_codec import VdpsCanDecoder
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.estimation.estimates import Estimate, FilteredSignals, Innovation
 from vdps_hil.identification.forces import suspension_forces_n
 from vdps_hil.model.params import load_vehicle

@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 from vdps_hil import realcars as rc
 from vdps_hil.adapters.signalmap import load_signalmap
 from vdps_hil.bus.samples import Sample
-from vdps_hil.codecs.imu import ImuDecoder
-from vdps_hil.codecs.nmea import NmeaDecoder
+from vdps_hil.codecs.imu_decoder import ImuDecoder
+from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.estimation.ekf_config import SensorSet
 from vdps_hil.estimation.kinematics import dcm_gv
 from vdps_hil.model.params import load_vehicle

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vdps_hil.codecs.nmea import NmeaDecoder
+from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.core import BRAKE_HOLD_SPEED_RADPS
 from vdps_hil.model.effects import ImuKinematics, MeasurementEffect, make_effect

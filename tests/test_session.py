@@ -9,7 +9,8 @@ import can
 
 from vdps_hil.adapters.can_adapter import CanAdapter
 from vdps_hil.app.session import LogSession
-from vdps_hil.codecs import can_codec as cc
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
+from vdps_hil.codecs.can_encode import encode_wheel_speeds
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.record.recorder import HEALTH_METADATA
 from vdps_hil.record.writer import RecordingWriter
@@ -17,7 +18,7 @@ from vdps_hil.record.writer import RecordingWriter
 
 def run_session(tmp_path, rng, n, queue_size=1_000_000):
     chan = f"sess_{rng.integers(1 << 30)}"
-    a = CanAdapter("vdps", f"virtual:{chan}", decoder=cc.VdpsCanDecoder())
+    a = CanAdapter("vdps", f"virtual:{chan}", decoder=VdpsCanDecoder())
     out = tmp_path / "s.mcap"
     w = RecordingWriter(out, metadata={"mode": "test"})
     lines = []
@@ -31,7 +32,7 @@ def run_session(tmp_path, rng, n, queue_size=1_000_000):
     tx = can.Bus(interface="virtual", channel=chan)
     try:
         for k in range(n):
-            for m in cc.encode_wheel_speeds([1.0, 2.0, 3.0, 4.0], k % 256):
+            for m in encode_wheel_speeds([1.0, 2.0, 3.0, 4.0], k % 256):
                 tx.send(m)
         t_end = time.monotonic() + 10
         while a.health.records < 2 * n and time.monotonic() < t_end and \

@@ -13,7 +13,7 @@ import can
 import numpy as np
 import pytest
 
-from vdps_hil.codecs.can_codec import VdpsCanEncoder
+from vdps_hil.codecs.can_encode import VdpsCanEncoder
 from vdps_hil.hil.ecu import Ecu
 from vdps_hil.hil.pacing import BenchClock
 from vdps_hil.hil.simside import LiveSink, SimulatorSide

@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.codecs.can_codec import VdpsCanDecoder, crc8_j1850
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
+from vdps_hil.codecs.can_e2e import crc8_j1850
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.prediction.predictor import (PredictionConfigError, Predictor, PredictorInitialState,
                                            load_predictor_config)
@@ -259,7 +260,7 @@ def test_a_bounded_chain_sends_the_same_frames_and_keeps_only_a_recent_window():
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-from vdps_hil.codecs.can_codec import quantize  # noqa: E402
+from vdps_hil.codecs.can_encode import quantize  # noqa: E402
 
 
 @settings(max_examples=200, deadline=None)

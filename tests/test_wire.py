@@ -8,9 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vdps_hil.codecs.can_codec import encode_fields, frame_bits, load_dbc, quantize
+from vdps_hil.codecs.can_busload import frame_bits
+from vdps_hil.codecs.can_dbc import load_dbc
+from vdps_hil.codecs.can_encode import encode_fields, quantize
 from vdps_hil.codecs.framing import LineFramer, transmission_time_ns
-from vdps_hil.codecs.imu import ImuDecoder, encode_imu_packet
+from vdps_hil.codecs.imu_decoder import ImuDecoder
+from vdps_hil.codecs.imu_mtdata2 import encode_imu_packet
 from vdps_hil.sim.wire import (CanPacker, SerialLink, bus_offsets_ns, can_packers, frame_time_ns,
                                pack_imu_packets)
 

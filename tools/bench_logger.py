@@ -103,9 +103,12 @@ def emulate(args) -> int:
     import numpy as np
 
     from vdps_hil.adapters.can_adapter import slcan_line
-    from vdps_hil.codecs import can_codec as cc
-    from vdps_hil.codecs.imu import encode_imu_packet
-    from vdps_hil.codecs.nmea import format_attitude, format_gga
+    from vdps_hil.codecs.can_encode import (
+        encode_steer, encode_suspension, encode_wheel_speeds, encode_wheel_torques,
+    )
+    from vdps_hil.codecs.imu_mtdata2 import encode_imu_packet
+    from vdps_hil.codecs.nmea.attitude import format_attitude
+    from vdps_hil.codecs.nmea.position import format_gga
 
     d = Path(args.dir)
     d.mkdir(parents=True, exist_ok=True)
@@ -133,13 +136,13 @@ def emulate(args) -> int:
 
     def make(name, k):
         if name == "wheel_speed":
-            return can_send(name, cc.encode_wheel_speeds(rng.uniform(20, 30, 4), k % 256))
+            return can_send(name, encode_wheel_speeds(rng.uniform(20, 30, 4), k % 256))
         if name == "wheel_torque":
-            return can_send(name, [cc.encode_wheel_torques(rng.uniform(-100, 300, 4), k % 256)])
+            return can_send(name, [encode_wheel_torques(rng.uniform(-100, 300, 4), k % 256)])
         if name == "steer":
-            return can_send(name, [cc.encode_steer(float(rng.uniform(-1, 1)), k % 256)])
+            return can_send(name, [encode_steer(float(rng.uniform(-1, 1)), k % 256)])
         if name == "suspension":
-            return can_send(name, [cc.encode_suspension(rng.uniform(-0.02, 0.02, 4), k % 256)])
+            return can_send(name, [encode_suspension(rng.uniform(-0.02, 0.02, 4), k % 256)])
         if name == "extra":
             if not can_dev.send(slcan_line(EXTRA_ID, k.to_bytes(4, "little") + b"\0\0\0\0")):
                 dropped[name] += 1

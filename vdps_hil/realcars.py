@@ -845,7 +845,7 @@ def nmea_fix_lines(fixes: GnssFixes, t0_s: float = 0.0, talker: str = "GP") -> l
     pipeline uses h = altitude + separation), the satellites if known; RMC prints speed [kn] and
     course [deg from true north] with 3 decimals (course empty when NaN) and the mode letter of
     the fix quality (R RTK fixed, F float, D differential, A autonomous)."""
-    from vdps_hil.codecs.nmea import KNOT_MPS, wrap_sentence
+    from vdps_hil.codecs.nmea.sentence import KNOT_MPS, wrap_sentence
     from vdps_hil.conventions import yaw_to_heading
     import datetime as dt
 
@@ -885,7 +885,7 @@ class CaptureStats:
 
 def mti_capture(imu: ImuSeries, t0_s: float = 0.0, baud: int = 115200, max_lead_s: float = 120.0
                 ) -> tuple[bytes, CaptureStats]:
-    """An Xsens MTData2 byte stream (``codecs.imu.encode_imu_packet``) of ``imu`` for
+    """An Xsens MTData2 byte stream (``codecs.imu_mtdata2.encode_imu_packet``) of ``imu`` for
     ``vdps import --serial imu=FILE@BAUD``.
 
     The importer stamps a binary capture with its wire time (``SerialFileAdapter``: byte k
@@ -899,7 +899,7 @@ def mti_capture(imu: ImuSeries, t0_s: float = 0.0, baud: int = 115200, max_lead_
 
     Refuses (ValueError) a first sample more than ``max_lead_s`` after t0 (the padding would be
     that many seconds of idle bytes)."""
-    from vdps_hil.codecs.imu import PACKET_BYTES, encode_imu_packet
+    from vdps_hil.codecs.imu_mtdata2 import PACKET_BYTES, encode_imu_packet
 
     t = np.asarray(imu.t_s, dtype=float) - t0_s
     if t.size and (t[0] < 0 or t[0] > max_lead_s):

@@ -16,7 +16,7 @@ is checked for going backwards (``device_time_backwards``) -- the recording layo
 
 Decoding is delegated to a *CAN decoder*: any object with
 ``decode(t_ns, arbitration_id, data, is_extended_id) -> list[Sample]`` and a ``counters``
-mapping (``VdpsCanDecoder`` for ``dbc/vdps.dbc``, :class:`vdps_hil.signalmap.SignalMapDecoder`
+mapping (``VdpsCanDecoder`` for ``dbc/vdps.dbc``, :class:`vdps_hil.adapters.signalmap_decoder.SignalMapDecoder`
 for a car's own DBC). ``decode_channels``: when a log holds several channels, only frames of
 these channels are decoded; the others are counted ``other_channel`` and recorded raw under
 their own bus name ``<bus>.<channel>`` (``/raw/can/pt.can1``), never mixed into ``<bus>``.

@@ -1,9 +1,9 @@
-"""The serial IMU (Xsens MTi ``MTData2`` binary, :mod:`vdps_hil.codecs.imu`): live port and
-recorded byte stream.
+"""The serial IMU (Xsens MTi ``MTData2`` binary, :mod:`vdps_hil.codecs.imu_mtdata2`): live port
+and recorded byte stream.
 
-:class:`ImuProtocol` wraps :class:`~vdps_hil.codecs.imu.ImuDecoder` (message hunting, checksum,
-receive-time rule at the port's baud, packet-counter gaps counted as ``seq_gaps``) as a serial
-protocol; :class:`ImuAdapter` is a :class:`~vdps_hil.adapters.serial_adapter.SerialAdapter`
+:class:`ImuProtocol` wraps :class:`~vdps_hil.codecs.imu_decoder.ImuDecoder` (message hunting,
+checksum, receive-time rule at the port's baud, packet-counter gaps counted as ``seq_gaps``) as a
+serial protocol; :class:`ImuAdapter` is a :class:`~vdps_hil.adapters.serial_adapter.SerialAdapter`
 with it (default 921600 baud, 1 kHz ``imu`` samples of specific force [m/s^2] and angular rate
 [rad/s] in the body frame). ``sensor_to_body`` is the mounting's signed permutation.
 """
@@ -13,7 +13,8 @@ from __future__ import annotations
 import os
 
 from vdps_hil.adapters.serial_adapter import SerialAdapter, SerialFileAdapter
-from vdps_hil.codecs.imu import DEFAULT_BAUD, SENSOR_TO_BODY, ImuDecoder
+from vdps_hil.codecs.imu_decoder import ImuDecoder
+from vdps_hil.codecs.imu_mtdata2 import DEFAULT_BAUD, SENSOR_TO_BODY
 
 __all__ = ["ImuProtocol", "ImuAdapter", "ImuFileAdapter", "DEFAULT_BAUD"]
 

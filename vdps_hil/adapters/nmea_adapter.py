@@ -2,10 +2,11 @@
 time stamps.
 
 Live: :class:`NmeaAdapter` = :class:`~vdps_hil.adapters.serial_adapter.SerialAdapter` with
-:class:`NmeaProtocol` (``codecs.framing.LineFramer`` then ``codecs.nmea.NmeaDecoder``): every
-line gets the receive-time rule's ``t_ns``; GGA, RMC, VTG, HDT/THS and the attitude layouts
-(bare ``$PASHR``, ``$PASHR,HPR``, ``$GNHPR``/``$GPHPR``, ``$PTNL,AVR``) become samples of kinds
-``gnss_pos``, ``gnss_vel``, ``gnss_att`` in SI and paper angles.
+:class:`NmeaProtocol` (``codecs.framing.LineFramer`` then
+``codecs.nmea.decoder.NmeaDecoder``): every line gets the receive-time rule's ``t_ns``; GGA,
+RMC, VTG, HDT/THS and the attitude layouts (bare ``$PASHR``, ``$PASHR,HPR``,
+``$GNHPR``/``$GPHPR``, ``$PTNL,AVR``) become samples of kinds ``gnss_pos``, ``gnss_vel``,
+``gnss_att`` in SI and paper angles.
 
 Files: :class:`NmeaTextFileAdapter` reads a text file line by line. Accepted time stamps at
 the start of a line (then spaces, a tab, ``,`` or ``;`` before the ``$``/``!`` sentence):
@@ -42,7 +43,7 @@ from vdps_hil.adapters.serial_adapter import DEFAULT_BAUD, SerialAdapter
 from vdps_hil.bus.clocks import ReplayClock
 from vdps_hil.bus.raw import RawSerial
 from vdps_hil.codecs.framing import LineFramer
-from vdps_hil.codecs.nmea import NmeaDecoder
+from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 
 __all__ = ["NmeaProtocol", "NmeaAdapter", "NmeaTextFileAdapter", "parse_time_prefix"]
 
@@ -175,7 +176,7 @@ class NmeaTextFileAdapter(Adapter):
     """An NMEA text file replayed line by line (time stamps: module docstring).
 
     Raw records are the sentences as read plus CR LF, on ``/raw/serial/<name>`` with the
-    given ``baud``; samples come from an :class:`~vdps_hil.codecs.nmea.NmeaDecoder`.
+    given ``baud``; samples come from an :class:`~vdps_hil.codecs.nmea.decoder.NmeaDecoder`.
     """
 
     transport = "serial"

@@ -26,7 +26,7 @@ def build_live_adapters(can_specs, serial_specs, formats, signalmap, dbcs):
     from vdps_hil.adapters.nmea_adapter import NmeaAdapter
     from vdps_hil.adapters.serial_adapter import parse_port_spec
     from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
-    from vdps_hil.codecs.imu import DEFAULT_BAUD as IMU_BAUD
+    from vdps_hil.codecs.imu_mtdata2 import DEFAULT_BAUD as IMU_BAUD
     from vdps_hil.record.importer import ImportError_, _can_decoder, serial_format
     from vdps_hil.record.schemas import check_name
 
@@ -260,7 +260,7 @@ class PipelineTap:
     def __init__(self, model_vehicle, writer, start_params=None, *, record_order: bool = True,
                  params_file: str | None = None, probe_s: float | None = None):
         from vdps_hil.bus.samples import Sample
-        from vdps_hil.codecs.can_codec import VdpsCanDecoder
+        from vdps_hil.codecs.can_decode import VdpsCanDecoder
         from vdps_hil.estimation.estimates import Estimate
         from vdps_hil.record.input_order import InputOrder
         from vdps_hil.app.replay import PROBE_SECONDS

@@ -2,8 +2,8 @@
 when its CRC, counter and status say so, watches for the warning to stop arriving, and (with
 ``react``) cuts the drive torque and brakes through the simulator's input port.
 
-Reception (``dbc/vdps.dbc``, checks of :class:`~vdps_hil.codecs.can_codec.VdpsCanDecoder`)
-------------------------------------------------------------------------------------------
+Reception (``dbc/vdps.dbc``, checks of :class:`~vdps_hil.codecs.can_decode.VdpsCanDecoder`)
+-------------------------------------------------------------------------------------------
 * CRC-8/SAE-J1850 over bytes 1..7 must equal byte 0, else the frame is rejected
   (``crc_mismatch``);
 * the 4-bit counter must advance by 1..3 (``counter_repeat`` for 0, ``counter_jump`` beyond);
@@ -47,7 +47,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from vdps_hil.codecs.can_codec import WARNING, VdpsCanDecoder
+from vdps_hil.codecs.can_dbc import WARNING
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.model.core import Inputs
 from vdps_hil.units import NS_PER_S
 

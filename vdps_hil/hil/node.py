@@ -54,7 +54,7 @@ from vdps_hil.app.est_topics import est_docs  # the /est/ layout of ``vdps repla
 from vdps_hil.bus.raw import RawCan, RawSerial
 from vdps_hil.bus.samples import Sample
 from vdps_hil.bus.subscription import Subscription
-from vdps_hil.codecs.can_codec import VdpsCanDecoder
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.record import schemas as S
 from vdps_hil.record.input_order import INPUT_ORDER_METADATA, InputOrder, input_order_samples
 from vdps_hil.record.recorder import Recorder

@@ -1,6 +1,6 @@
 """Rollover warning: rollover measures of a prediction, the warning policy, and the pure node that
 sends ``VDPS_Warning`` on CAN (paper section 7.3 "the dynamic prediction system can predict the
-rollover event"; the message layout is ``dbc/vdps.dbc`` / :mod:`vdps_hil.codecs.can_codec`).
+rollover event"; the message layout is ``dbc/vdps.dbc`` / :mod:`vdps_hil.codecs.can_dbc`).
 
 Rollover measures of one prediction (definitions of :mod:`vdps_hil.model.rollover`, applied to the
 predicted trajectory; never redefined here)
@@ -76,7 +76,9 @@ from typing import Any, Iterable, Mapping, MutableSequence, Sequence
 import can
 import numpy as np
 
-from vdps_hil.codecs.can_codec import WARNING, VdpsCanDecoder, VdpsCanEncoder
+from vdps_hil.codecs.can_dbc import WARNING
+from vdps_hil.codecs.can_decode import VdpsCanDecoder
+from vdps_hil.codecs.can_encode import VdpsCanEncoder
 from vdps_hil.units import NS_PER_S
 
 from .predictor import (DEFAULT_CONFIG_PATH, Cadence, PredictionConfigError, PredictionResult, Predictor,

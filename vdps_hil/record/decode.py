@@ -82,8 +82,9 @@ from typing import Callable, Iterator, Mapping
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.framing import BITS_PER_BYTE_8N1, LineFramer, transmission_time_ns
-from vdps_hil.codecs.imu import IMU_RATE_HZ, NS_PER_FINE_TICK, ImuDecoder
-from vdps_hil.codecs.nmea import NmeaDecoder
+from vdps_hil.codecs.imu_decoder import ImuDecoder
+from vdps_hil.codecs.imu_mtdata2 import IMU_RATE_HZ, NS_PER_FINE_TICK
+from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.record import schemas as S
 from vdps_hil.record.reader import RawRecord, RecordingReader
 
@@ -264,7 +265,7 @@ class DeviceStamper:
         return d
 
 
-_IMU_PACKET_BYTES = 47  # PacketCounter + SampleTimeFine + float32 acc + gyro (codecs.imu)
+_IMU_PACKET_BYTES = 47  # PacketCounter + SampleTimeFine + float32 acc + gyro (codecs.imu_mtdata2)
 
 
 class _ImuStream:
@@ -493,7 +494,8 @@ class DecodedRecording:
     def _can_stream(self, bus: str) -> _CanStream | None:
         if bus in self._can:
             return self._can[bus]
-        from vdps_hil.adapters.signalmap import SignalMapError, build_decoder, load_signalmap
+        from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
+        from vdps_hil.adapters.signalmap_decoder import build_decoder
 
         sigmap = self._sigmap
         map_bus = self._bus_map.get(bus, bus)
@@ -524,7 +526,7 @@ class DecodedRecording:
             f = "imu" if device.lower().startswith("imu") else "nmea"
         st = None
         if f in IMU_FORMATS:
-            from vdps_hil.codecs.imu import DEFAULT_BAUD as IMU_BAUD
+            from vdps_hil.codecs.imu_mtdata2 import DEFAULT_BAUD as IMU_BAUD
 
             st = _ImuStream(device, baud or IMU_BAUD, self.device_time, self._imu_rate)
         elif f in NMEA_FORMATS:

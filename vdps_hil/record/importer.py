@@ -105,7 +105,8 @@ def serial_format(name: str, fmt: str | None) -> str:
 
 def _can_decoder(bus: str, sigmap, dbc: dict[str, str], info: dict):
     """(decoder or None, decode channel) of one bus; fills ``info`` for the metadata."""
-    from vdps_hil.adapters.signalmap import SignalMapError, build_decoder, load_signalmap
+    from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
+    from vdps_hil.adapters.signalmap_decoder import build_decoder
 
     dbc_path = dbc.get(bus, dbc.get("*"))
     try:
@@ -158,7 +159,7 @@ def build_adapters(can: Sequence[CanSource] = (), serial: Sequence[SerialSource]
             raise ImportError_(f"--serial {src.name}: no such file {src.path}")
         fmt = serial_format(src.name, src.fmt)
         if fmt == "imu":
-            from vdps_hil.codecs.imu import DEFAULT_BAUD as IMU_BAUD
+            from vdps_hil.codecs.imu_mtdata2 import DEFAULT_BAUD as IMU_BAUD
 
             adapters.append(ImuFileAdapter(src.name, src.path, src.baud or IMU_BAUD))
         else:

@@ -48,7 +48,7 @@ from typing import IO, Any, Iterable, Mapping
 
 import numpy as np
 
-from vdps_hil.codecs.can_codec import DEFAULT_DBC_PATH, VdpsDbc, load_dbc
+from vdps_hil.codecs.can_dbc import DEFAULT_DBC_PATH, VdpsDbc, load_dbc
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.effects import EffectConfigError, EffectSet, effects_from_names
 from vdps_hil.model.params import Vehicle, VehicleFileError, load_vehicle

@@ -93,7 +93,9 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from vdps_hil.codecs import nmea
+from vdps_hil.codecs.nmea.attitude import format_attitude
+from vdps_hil.codecs.nmea.position import format_gga, format_rmc
+from vdps_hil.codecs.nmea.sentence import wrap_sentence
 from vdps_hil.geodesy import DEFAULT_ORIGIN, EnuOrigin
 from vdps_hil.model.core import BRAKE_HOLD_SPEED_RADPS
 from vdps_hil.model.effects import ImuBias, ImuKinematics, ImuLeverArm, MeasurementEffect
@@ -473,17 +475,17 @@ class GnssModel:
         utc_s, date = self.utc(ep.t_ns, faults)
         if ep.state == "lost":
             time = _hhmmss(utc_s)
-            return [nmea.wrap_sentence(f"GPGGA,{time},,,,,0,00,99.9,,,,,,"),
-                    nmea.wrap_sentence(f"GPRMC,{time},V,,,,,,,{date.strftime('%d%m%y')},,,N")]
+            return [wrap_sentence(f"GPGGA,{time},,,,,0,00,99.9,,,,,,"),
+                    wrap_sentence(f"GPRMC,{time},V,,,,,,,{date.strftime('%d%m%y')},,,N")]
         quality = REACQUIRED_QUALITY if ep.state == "reacquiring" else p.fix_quality
-        gga = nmea.format_gga(utc_s, ep.lat_deg, ep.lon_deg, ep.alt_msl_m, fix_quality=quality,
-                              num_sats=GNSS_NUM_SATS, hdop=GNSS_HDOP, geoid_sep_m=GEOID_SEPARATION_M)
-        rmc = nmea.format_rmc(utc_s, ep.lat_deg, ep.lon_deg, ep.speed_mps, ep.course_rad, date=date)
+        gga = format_gga(utc_s, ep.lat_deg, ep.lon_deg, ep.alt_msl_m, fix_quality=quality,
+                         num_sats=GNSS_NUM_SATS, hdop=GNSS_HDOP, geoid_sep_m=GEOID_SEPARATION_M)
+        rmc = format_rmc(utc_s, ep.lat_deg, ep.lon_deg, ep.speed_mps, ep.course_rad, date=date)
         sig = p.attitude_sigma_rad
-        att = nmea.format_attitude(self.layout, utc_time_s=utc_s, yaw_rad=ep.yaw_rad,
-                                   pitch_rad=ep.pitch_rad, roll_rad=ep.roll_rad, yaw_sigma_rad=sig,
-                                   pitch_sigma_rad=sig, roll_sigma_rad=sig, quality=quality,
-                                   ins_status=0, num_sats=GNSS_NUM_SATS)
+        att = format_attitude(self.layout, utc_time_s=utc_s, yaw_rad=ep.yaw_rad,
+                              pitch_rad=ep.pitch_rad, roll_rad=ep.roll_rad, yaw_sigma_rad=sig,
+                              pitch_sigma_rad=sig, roll_sigma_rad=sig, quality=quality,
+                              ins_status=0, num_sats=GNSS_NUM_SATS)
         return [gga, rmc, att]
 
 

@@ -1,8 +1,8 @@
 """Wire side of the simulated sensors: vectorised DBC packing, vectorised Xsens MTData2 packets,
 CAN frame timing on the bus and the serial line (UART queue + read chunks).
 
-Everything here produces exactly the bytes the foundation codecs produce (``codecs.can_codec``
-``encode_fields``, ``codecs.imu.encode_imu_packet``; checked byte for byte in
+Everything here produces exactly the bytes the foundation codecs produce (``codecs.can_encode``
+``encode_fields``, ``codecs.imu_mtdata2.encode_imu_packet``; checked byte for byte in
 ``tests/test_wire.py``), only for whole arrays of samples at once: per-frame cantools encoding
 costs about 9 us, which at 3-4 frames per millisecond would dominate a simulated drive.
 
@@ -15,7 +15,7 @@ CAN packing (DBC linear conversion, Intel byte order)
     data    = payload bytes 0 .. DLC-1
 
 ``lo/hi`` = the raw range widened by one step (keeps the division finite, changes no clamped
-result), the same arithmetic as ``can_codec.quantize``. The rolling counter enters as
+result), the same arithmetic as ``can_encode.quantize``. The rolling counter enters as
 ``(counter mod 2^len) << start``. Messages with a CRC (VDPS_Warning) are not simulated sensors and
 are refused here.
 
@@ -59,8 +59,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from vdps_hil.codecs import imu as imu_codec
-from vdps_hil.codecs.can_codec import MessageSpec, SignalSpec, VdpsDbc, frame_bits, load_dbc
+from vdps_hil.codecs import imu_mtdata2 as imu_codec
+from vdps_hil.codecs.can_busload import frame_bits
+from vdps_hil.codecs.can_dbc import MessageSpec, SignalSpec, VdpsDbc, load_dbc
 from vdps_hil.codecs.framing import BITS_PER_BYTE_8N1, NS_PER_S
 
 __all__ = ["CanPacker", "can_packers", "pack_imu_packets", "frame_time_ns", "bus_offsets_ns",
@@ -71,7 +72,7 @@ __all__ = ["CanPacker", "can_packers", "pack_imu_packets", "frame_time_ns", "bus
 # CAN
 # ---------------------------------------------------------------------------------------------
 def raw_values(sig: SignalSpec, values: np.ndarray) -> np.ndarray:
-    """Physical values -> clamped raw integers (int64), the arithmetic of ``can_codec``'s
+    """Physical values -> clamped raw integers (int64), the arithmetic of ``can_encode``'s
     encoder (NaN raises ValueError, as the encoder does)."""
     v = np.asarray(values, dtype=float)
     if np.isnan(v).any():
@@ -88,7 +89,7 @@ class CanPacker:
     """Vectorised encoder of one DBC sensor message (Intel byte order, no CRC).
 
     ``pack(values, counters)``: values (N, k) in the order of ``field_names``, counters (N,)
-    -> (N, DLC) uint8 payloads, byte-identical to ``can_codec.encode_fields``.
+    -> (N, DLC) uint8 payloads, byte-identical to ``can_encode.encode_fields``.
     ``quantize(values)`` -> what a decoder reads back (same shape)."""
 
     def __init__(self, spec: MessageSpec):
@@ -174,7 +175,7 @@ assert _MTDATA2_DTYPE.itemsize == imu_codec.PACKET_BYTES == 47
 def pack_imu_packets(t_device_ns: np.ndarray, counters: np.ndarray, specific_force_mps2: np.ndarray,
                      angular_rate_radps: np.ndarray) -> np.ndarray:
     """(N, 47) uint8: one MTData2 message per row, byte-identical to
-    ``codecs.imu.encode_imu_packet(t, f, w, seq)`` with the identity ``sensor_to_body`` (the
+    ``codecs.imu_mtdata2.encode_imu_packet(t, f, w, seq)`` with the identity ``sensor_to_body`` (the
     values given are already in sensor axes). SampleTimeFine = nearest 100 us tick of the device
     time, modulo 2^32; PacketCounter = counter mod 65536."""
     n = len(counters)

@@ -1,0 +1,186 @@
+"""The counting decoder of the vdps chassis bus: a frame -> ``[Sample]`` (catalogue fields in
+SI plus the frame's counter) or ``[]`` with the reject counted, never raising on frame content.
+
+Per message the decoding is planned once (``_DecodePlan``: the compiled layout of
+``codecs.dbc_compile``, or cantools when it does not compile; signal indexes; scale and offset;
+which ranges need a check); per frame the checks run in this order: DLC, CRC (VDPS_Warning),
+rolling counter (``codecs.can_e2e``), raw range; then ``x = raw * scale + offset``
+(``codecs.can_encode`` module docstring; the TTR sentinel raw 65535 decodes to +inf).
+
+Rejects, each counted per message (``REJECT_REASONS``): ``dlc_mismatch`` (payload length != DBC
+DLC), ``undecodable`` (cantools could not decode), ``crc_mismatch``, ``counter_repeat``,
+``counter_jump`` (``codecs.can_e2e``), ``out_of_range`` (raw outside the DBC range). Frames
+with an unknown ID are counted under ``bus/unknown_id`` (11-bit) or ``bus/unknown_id_extended``
+(29-bit, none are defined); arguments that are not an ID/bytes count as ``bus/malformed``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Mapping
+
+from vdps_hil.bus.samples import Sample
+from vdps_hil.codecs.can_dbc import TTR_NONE_RAW, MessageSpec, VdpsDbc, is_ttr, load_dbc
+from vdps_hil.codecs.can_e2e import WARNING_MAX_DELTA_COUNTER, SequenceState, crc8_j1850
+
+if TYPE_CHECKING:
+    import can
+
+DEFAULT_SOURCE = "can.vdps"
+
+REJECT_REASONS = ("dlc_mismatch", "undecodable", "out_of_range", "crc_mismatch",
+                  "counter_repeat", "counter_jump")
+"""Per-message reject counters (each rejected frame increments exactly one)."""
+
+
+class _DecodePlan:
+    """A message's decoding precomputed (``codecs.dbc_compile``; cantools when the layout is not
+    compilable): signal indexes of the CRC, counter and ``warning_status``, and per value signal
+    (field, index, scale, offset, is the TTR sentinel field); ``checks``: (index, raw_min,
+    raw_max) of the value signals whose DBC range is narrower than their bits can hold (the
+    compiled raw values lie inside the bits: a full-width range needs no check). The scaled
+    value is ``float(raw * scale + offset)`` with the conversion's own scale and offset, which
+    is what cantools' ``raw_to_scaled`` computes (``codecs.can_encode._from_raw``; tested on
+    every raw value). ``modulus``: of the rolling counter."""
+
+    __slots__ = ("spec", "compiled", "names", "crc", "counter", "counter_name", "status", "values",
+                 "checks", "modulus")
+
+    def __init__(self, spec: MessageSpec):
+        from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
+
+        self.spec = spec
+
+        try:
+            self.compiled = compile_message(spec.message)
+        except NotCompilable:
+            self.compiled = None
+        self.names = tuple(s.name for s in spec.message.signals)
+        idx = {n: i for i, n in enumerate(self.names)}
+        self.crc = idx[spec.crc.name] if spec.crc is not None else -1
+        self.counter = idx[spec.counter.name]
+        self.counter_name = spec.counter.name
+        self.status = idx.get("warning_status", -1) if spec.crc is not None else -1
+        self.modulus = 1 << spec.counter.length_bits
+        vals, checks = [], []
+        for sig in spec.values:
+            conv = sig.signal.conversion
+            conv = getattr(conv, "_conversion", conv)  # named values: the numeric conversion
+            vals.append((sig.name, idx[sig.name], conv.scale, conv.offset, is_ttr(sig)))
+            half = 1 << (sig.length_bits - 1)
+            full = (-half, half - 1) if sig.is_signed else (0, 2 * half - 1)
+            if self.compiled is None or (sig.raw_min, sig.raw_max) != full:
+                checks.append((idx[sig.name], sig.raw_min, sig.raw_max))
+        self.values = tuple(vals)
+        self.checks = tuple(checks)
+
+
+class VdpsCanDecoder:
+    """Decode chassis frames into :class:`Sample` objects, counting every reject.
+
+    ``decode(t_ns, arbitration_id, data, is_extended_id=False)`` returns ``[Sample]`` for an
+    accepted frame and ``[]`` for a rejected one; it never raises on frame content. Samples
+    carry catalogue fields (SI) plus ``seq_counter`` (sensor frames) or ``warning_counter``;
+    kinds come from the DBC attribute ``VdpsKind`` (``wheel_speed``, ``wheel_torque``,
+    ``steer``, ``suspension``, ``warning``). A warning with ``warning_status != 0`` is returned
+    with ``valid=False``. Rules and counters: module docstring.
+    """
+
+    def __init__(self, dbc_path: str | Path | None = None, *, source: str = DEFAULT_SOURCE,
+                 max_delta_counter: int = WARNING_MAX_DELTA_COUNTER):
+        self._dbc = load_dbc(dbc_path)
+        self._source = source
+        self._max_delta = int(max_delta_counter)
+        self._by_id = dict(self._dbc.by_id)
+        self._bus = {"unknown_id": 0, "unknown_id_extended": 0, "malformed": 0}
+        self._counts = {name: dict.fromkeys(("accepted", "lost_frames") + REJECT_REASONS, 0)
+                        for name in self._dbc.messages}
+        self._seq = {name: SequenceState() for name in self._dbc.messages}
+        self._plan = {aid: _DecodePlan(spec) for aid, spec in self._by_id.items()}
+
+    @property
+    def dbc(self) -> VdpsDbc:
+        return self._dbc
+
+    @property
+    def counters(self) -> Mapping[str, Mapping[str, int]]:
+        """Read-only snapshot: ``{"bus": {unknown_id, unknown_id_extended, malformed},
+        <message name>: {accepted, lost_frames, dlc_mismatch, undecodable, out_of_range,
+        crc_mismatch, counter_repeat, counter_jump}}``."""
+        snap = {"bus": MappingProxyType(dict(self._bus))}
+        snap.update({k: MappingProxyType(dict(v)) for k, v in self._counts.items()})
+        return MappingProxyType(snap)
+
+    @property
+    def total_rejected(self) -> int:
+        """All rejected frames (unknown IDs, malformed and per-message rejects)."""
+        return sum(self._bus.values()) + sum(c[r] for c in self._counts.values()
+                                             for r in REJECT_REASONS)
+
+    def reset_sequence(self) -> None:
+        """Forget the counter history (e.g. after a bus restart); counts are kept."""
+        self._seq = {name: SequenceState() for name in self._dbc.messages}
+
+    def decode_message(self, msg: can.Message, t_ns: int | None = None) -> list[Sample]:
+        """Decode a python-can message (``t_ns`` defaults to its timestamp)."""
+        if msg.is_error_frame or msg.is_remote_frame:
+            self._bus["malformed"] += 1
+            return []
+        t = t_ns if t_ns is not None else int(round(msg.timestamp * 1e9))
+        return self.decode(t, msg.arbitration_id, bytes(msg.data[:msg.dlc]), msg.is_extended_id)
+
+    def decode(self, t_ns: int, arbitration_id: int, data: bytes,
+               is_extended_id: bool = False) -> list[Sample]:
+        try:
+            t_ns = int(t_ns)
+            aid = int(arbitration_id)
+            payload = bytes(data)
+        except (TypeError, ValueError, OverflowError):
+            self._bus["malformed"] += 1
+            return []
+        return self.decode_frame(t_ns, aid, payload, bool(is_extended_id))
+
+    def decode_frame(self, t_ns: int, aid: int, payload: bytes, is_extended_id: bool) -> list[Sample]:
+        """``decode`` of a frame whose fields already have their types (int, int, bytes, bool),
+        e.g. parsed from a recording: no conversions."""
+        plan = None if is_extended_id else self._plan.get(aid)
+        if plan is None:
+            self._bus["unknown_id_extended" if is_extended_id else "unknown_id"] += 1
+            return []
+        spec = plan.spec
+        counts = self._counts[spec.name]
+        if len(payload) != spec.dlc:
+            counts["dlc_mismatch"] += 1
+            return []
+        if plan.compiled is not None:
+            raw = plan.compiled.raw(payload)
+        else:
+            try:
+                d = spec.message.decode(payload, decode_choices=False, scaling=False)
+                raw = [d[n] for n in plan.names]
+            except Exception:  # cantools' DecodeError and friends: count, never raise
+                counts["undecodable"] += 1
+                return []
+        if plan.crc >= 0 and crc8_j1850(payload[1:]) != raw[plan.crc]:
+            counts["crc_mismatch"] += 1
+            return []
+        c = raw[plan.counter]
+        reason = self._seq[spec.name].check(c, t_ns, plan.modulus, plan.crc >= 0, self._max_delta,
+                                            counts)
+        if reason is not None:
+            counts[reason] += 1
+            return []
+        for i, lo, hi in plan.checks:
+            if not lo <= raw[i] <= hi:
+                counts["out_of_range"] += 1
+                return []
+        fields: dict[str, float] = {}
+        for name, i, scale, offset, ttr in plan.values:
+            r = raw[i]
+            fields[name] = math.inf if ttr and r == TTR_NONE_RAW else float(r * scale + offset)
+        fields[plan.counter_name] = float(c)
+        counts["accepted"] += 1
+        valid = plan.status < 0 or raw[plan.status] == 0
+        return [Sample(t_ns, self._source, spec.kind, fields, 0, valid)]  # positional: the hot path
