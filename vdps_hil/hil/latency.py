@@ -49,7 +49,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .pacing import percentiles_ms
-from .transports import SendLog
+from .serial_device import SendLog
 
 __all__ = ["SOURCES", "CycleLog", "cycle_latencies", "latency_summary", "lead_times",
            "reference_events"]
