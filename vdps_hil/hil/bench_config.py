@@ -45,7 +45,7 @@ class BenchConfig:
     max_lag_s: float = 0.25
     switch_interval_s: float | None = 0.001
     start_delay_s: float = 0.3
-    params: str | None = None  # saved identified parameters the pipeline starts from (module docstring)
+    params: str | None = None  # saved identified parameters the pipeline starts from (``hil.bench`` docstring)
 
 
 def model_for(truth_name: str) -> str:

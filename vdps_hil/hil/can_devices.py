@@ -148,7 +148,7 @@ class VirtualCanDevice(_PythonCanDevice):
 
 class ExternalCanDevice(_PythonCanDevice):
     """Any python-can interface string for the simulator (``sim_spec``) while the pipeline opens
-    ``spec`` (module docstring)."""
+    ``spec`` (``hil.transports`` docstring)."""
 
     kind = "external"
 

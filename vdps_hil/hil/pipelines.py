@@ -88,7 +88,7 @@ class LocalPipeline:
 
 
 class ChildPipeline:
-    """The pipeline in ``python -m vdps_hil.hil.child`` (module docstring)."""
+    """The pipeline in ``python -m vdps_hil.hil.child`` (``hil.bench`` docstring: processes)."""
 
     def __init__(self, bench: "Bench", can_dev, serial, work: Path):
         self.bench = bench
