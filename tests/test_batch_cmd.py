@@ -10,7 +10,7 @@ import shutil
 
 import pytest
 
-from vdps_hil.batch.engine import strip_run
+from vdps_hil.batch.runner import strip_run
 from vdps_hil.cli.batch_cmd import expand_inputs
 from vdps_hil.cli.main import main
 from vdps_hil.sim.drive import Drive

@@ -10,7 +10,9 @@ import re
 
 import pytest
 
-from vdps_hil.batch.engine import EngineConfig, Task, run_batch
+from vdps_hil.batch.engine import EngineConfig
+from vdps_hil.batch.runner import run_batch
+from vdps_hil.batch.worker import Task
 from vdps_hil.batch.report import (aggregate_from_dir, identified_params, parameter_flags,
                                    prior_params, recommended_effects, render_html, write_report)
 

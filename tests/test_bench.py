@@ -20,7 +20,8 @@ import math
 import pytest
 
 from vdps_hil.app.est_topics import est_docs
-from vdps_hil.hil.bench import Bench, BenchConfig, BenchError, make_system, model_for
+from vdps_hil.hil.bench import Bench
+from vdps_hil.hil.bench_config import BenchConfig, BenchError, make_system
 from vdps_hil.hil.node import INPUT_ORDER_METADATA, input_order_samples
 from vdps_hil.hil.transports import listening_sockets
 from vdps_hil.record.reader import RecordingReader
@@ -208,12 +209,6 @@ def test_bad_configurations_are_one_line_errors(kw, words):
     assert words in str(e.value) and "\n" not in str(e.value)
 
 
-def test_the_model_file_is_the_truth_files_pair():
-    assert model_for("configs/vehicles/suv-truth.toml") == "suv-model" and model_for("sedan-truth") == "sedan-model"
-    with pytest.raises(BenchError, match="give --model"):
-        model_for("my-car")
-
-
 def test_an_injected_fault_shows_in_the_sequence_counters_not_as_a_bench_loss():
     d = Bench(BenchConfig(scenario="paper", duration_s=1.0, speed=CI_SPEED,
                           faults=("dropped_frames:fraction=0.05",))).run().to_json()
@@ -234,25 +229,3 @@ def test_the_pipeline_process_never_imports_the_simulator():
                           check=True).stdout.split()
     assert "vdps_hil.hil.child" in mods and "vdps_hil.pipeline.node" in mods
     assert not [m for m in mods if m == "vdps_hil.sim" or m.startswith("vdps_hil.sim.")]
-
-
-def test_bench_model_may_be_a_saved_workbench_model(tmp_path):
-    """``vdps bench --model`` also takes a ``vdps diagnose --save-model`` file (as ``vdps replay
-    --model``): the vehicle file it names, its parameters as the identifier's start, its
-    dynamics effects in the predictor (linear tire kept); a vehicle name still works."""
-    from vdps_hil.model.effects import REGISTRY, EffectSet
-    from vdps_hil.model.params import load_vehicle
-    from vdps_hil.workbench.model_file import save_model
-
-    p = load_profile("table1-susp1k")
-    veh = load_vehicle("suv-model", "model")
-    m = save_model(tmp_path / "suv-drag.toml", veh.with_params(mass_kg=veh.params.mass_kg + 300.0),
-                   EffectSet([REGISTRY["aero_drag"](cda_m2=1.1)]))
-    system = make_system(str(m), p.suspension.rate_hz, p.suspension.sigma_m)
-    assert system.vehicle.name == "suv-model"
-    assert system.config.start_params.mass_kg == pytest.approx(veh.params.mass_kg + 300.0)
-    names = sorted(e.name for e in system.predictor.effects)
-    assert names == ["aero_drag", "linear_tire"]
-    assert system.predictor.effects["aero_drag"].cda_m2 == pytest.approx(1.1)
-    plain = make_system("suv-model", p.suspension.rate_hz, p.suspension.sigma_m)
-    assert plain.config.start_params is None and "aero_drag" not in plain.predictor.effects

@@ -1,7 +1,7 @@
 """Tests of vdps_hil.batch.engine: parallel results equal the serial ones exactly, tasks run in
 distinct worker processes, a real LocalCluster and a separately started Dask cluster run
 batches, killed workers are retried, failing tasks are reported without stopping the batch,
-resume skips unchanged results, and every socket of the cluster listens on 127.0.0.1 only.
+and every socket of the cluster listens on 127.0.0.1 only (resume: test_runner).
 
 Drives are short simulated ones (1 s, seeds 0-7); clusters are module-scoped (start-up is the
 expensive part)."""
@@ -19,13 +19,14 @@ from pathlib import Path
 
 import pytest
 
-from vdps_hil.batch.engine import (AGGREGATE, Engine, EngineConfig, Outcome, Task, execute,
-                                   result_path, run_batch, strip_run, to_jsonable)
+from vdps_hil.batch.engine import Engine, EngineConfig
 from vdps_hil.batch.keys import tool_version
+from vdps_hil.batch.runner import AGGREGATE, result_path, run_batch, strip_run
 from vdps_hil.batch.tasks import replay_tasks
 from vdps_hil.batch.report import identified_params, parameter_flags, render_html
-from vdps_hil.model.params import load_vehicle
-from vdps_hil.sim.drive import Drive
+from vdps_hil.batch.worker import Outcome, Task
+
+from batch_drives import HEAVY, N_DRIVES, corrupt, drives  # noqa: F401 - fixtures
 
 try:
     import distributed
@@ -35,34 +36,7 @@ except ImportError:  # the optional extra 'dask'; CI must have it (these are acc
         raise
     pytest.skip("distributed (pip install 'vdps-hil[dask]') not installed", allow_module_level=True)
 
-N_DRIVES = 8
-DRIVE_S = 1.0
 VENV_BIN = Path(sys.executable).parent
-
-
-HEAVY = 5
-"""The drive with 300 kg more on board (passengers, luggage): the fleet report must flag it."""
-
-
-@pytest.fixture(scope="module")
-def drives(tmp_path_factory) -> list[str]:
-    d = tmp_path_factory.mktemp("drives")
-    truth = load_vehicle("sedan-truth")
-    paths = []
-    for seed in range(N_DRIVES):
-        p = d / f"drive{seed}.mcap"
-        veh = truth.with_params(mass_kg=truth.params.mass_kg + 300.0) if seed == HEAVY else truth
-        Drive("paper", seed=seed, duration_s=DRIVE_S, vehicle=veh).run(p)
-        paths.append(os.fspath(p))
-    return paths
-
-
-@pytest.fixture(scope="module")
-def corrupt(tmp_path_factory) -> str:
-    """An MCAP magic followed by garbage: not a recording anyone can replay."""
-    p = tmp_path_factory.mktemp("bad") / "corrupt.mcap"
-    p.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 4)
-    return os.fspath(p)
 
 
 @pytest.fixture(scope="module")
@@ -288,78 +262,3 @@ def test_process_pool_gives_the_serial_results_and_survives_a_killed_worker(driv
 
 
 # ------------------------------------------------------------------- errors and resume
-def test_execute_turns_an_exception_into_a_one_line_failure(tmp_path):
-    doc = execute("vdps_hil.batch.tasks:replay_drive", {"path": os.fspath(tmp_path / "none.mcap")})
-    assert doc["status"] == "failed" and doc["result"] is None
-    assert doc["error"]["type"] == "ReplayError" and "none.mcap" in doc["error"]["message"]
-    assert "\n" not in doc["error"]["message"]
-    assert doc["run"]["pid"] == os.getpid() and doc["run"]["wall_s"] >= 0
-    bad = execute("vdps_hil.batch.tasks:no_such_function", {})
-    assert bad["status"] == "failed" and bad["error"]["type"] == "AttributeError"
-
-
-def test_resume_skips_unchanged_results_and_recomputes_changed_and_failed(drives, corrupt, tmp_path):
-    inputs = [tmp_path / f"d{i}.mcap" for i in range(3)] + [tmp_path / "corrupt.mcap"]
-    for src, dst in zip(drives[:3] + [corrupt], inputs):
-        dst.write_bytes(Path(src).read_bytes())
-
-    class Stop(Exception):
-        pass
-
-    class InterruptAfter:
-        """Progress that interrupts the batch after n outcomes (a Ctrl-C)."""
-
-        def __init__(self, n):
-            self.n, self.seen = n, []
-
-        def start(self, total, reused):
-            self.reused = reused
-
-        def engine(self, info):
-            pass
-
-        def update(self, o):
-            self.seen.append(o.id)
-            if len(self.seen) == self.n:
-                raise Stop
-
-        def close(self):
-            pass
-
-    cfg = EngineConfig(backend="inline")
-    out = tmp_path / "out"
-    with pytest.raises(Stop):
-        run_batch(replay_tasks(inputs), cfg, out_dir=out, progress=InterruptAfter(2))
-    assert len(list((out / "drives").glob("*.json"))) == 2  # written as they finished
-    prog = InterruptAfter(-1)
-    res = run_batch(replay_tasks(inputs), cfg, out_dir=out, progress=prog)
-    assert prog.reused == 2 and len(prog.seen) == 2  # resumed: only the rest ran
-    assert res.aggregate["run"]["reused"] == 2 and res.counts["failed"] == 1
-    # a rerun: everything reused except the failed corrupt file, which is tried again
-    prog = InterruptAfter(-1)
-    res2 = run_batch(replay_tasks(inputs), cfg, out_dir=out, progress=prog)
-    assert prog.seen == ["corrupt"] and strip_run(res2.aggregate) == strip_run(res.aggregate)
-    # a changed recording gets a new key and is recomputed; a changed option recomputes all
-    inputs[0].write_bytes(Path(drives[5]).read_bytes())
-    prog = InterruptAfter(-1)
-    run_batch(replay_tasks(inputs), cfg, out_dir=out, progress=prog)
-    assert sorted(prog.seen) == ["corrupt", "d0"]
-    prog = InterruptAfter(-1)
-    run_batch(replay_tasks(inputs, options={"predict": False}), cfg, out_dir=out, progress=prog)
-    assert len(prog.seen) == 4
-    prog = InterruptAfter(-1)
-    run_batch(replay_tasks(inputs), cfg, out_dir=out, progress=prog, force=True)
-    assert len(prog.seen) == 4
-
-
-def test_duplicate_ids_are_refused():
-    with pytest.raises(ValueError, match="unique"):
-        run_batch([Task("a", "x:y"), Task("a", "x:y")], EngineConfig(backend="inline"))
-
-
-def test_to_jsonable_makes_plain_json():
-    import numpy as np
-    doc = to_jsonable({"a": np.float64(1.5), "b": (1, float("nan")), 3: np.arange(2),
-                       "p": Path("/x")})
-    assert doc == {"a": 1.5, "b": [1, None], "3": [0, 1], "p": "/x"}
-    json.dumps(doc, allow_nan=False)

@@ -12,7 +12,7 @@ import pytest
 
 from vdps_hil.codecs.can_encode import VdpsCanEncoder
 from vdps_hil.hil.latency import CycleLog, cycle_latencies, latency_summary, lead_times, reference_events
-from vdps_hil.hil.transports import SendLog
+from vdps_hil.hil.serial_device import SendLog
 from vdps_hil.sim.drive import Drive
 
 MS = 1_000_000

@@ -9,7 +9,7 @@ import io
 import can
 import pytest
 
-from vdps_hil.hil.bench import make_system
+from vdps_hil.hil.bench_config import make_system
 from vdps_hil.hil.latency import SOURCES
 from vdps_hil.hil.node import INPUT_ORDER_METADATA, InputSequencer, PipelineNode, input_order_samples
 from vdps_hil.hil.pacing import BenchClock

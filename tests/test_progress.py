@@ -8,7 +8,7 @@ import io
 
 import pytest
 
-from vdps_hil.batch.engine import Outcome
+from vdps_hil.batch.worker import Outcome
 from vdps_hil.batch.progress import Progress, format_duration
 
 

@@ -258,7 +258,7 @@ def bench_recording(drive, tmp_path_factory):
     topics and its input order written by the node."""
     import can  # noqa: F401  (python-can's virtual bus)
 
-    from vdps_hil.hil.bench import make_system
+    from vdps_hil.hil.bench_config import make_system
     from vdps_hil.hil.node import PipelineNode
     from vdps_hil.hil.pacing import BenchClock
     from vdps_hil.record.schemas import DEFAULT_SIM_EPOCH_NS

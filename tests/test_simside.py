@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 
 from vdps_hil.codecs.can_encode import VdpsCanEncoder
+from vdps_hil.hil.can_devices import VirtualCanDevice
 from vdps_hil.hil.ecu import Ecu
 from vdps_hil.hil.pacing import BenchClock
+from vdps_hil.hil.serial_device import PtySerialDevice
 from vdps_hil.hil.simside import LiveSink, SimulatorSide
-from vdps_hil.hil.transports import PtySerialDevice, VirtualCanDevice
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
 

@@ -86,7 +86,7 @@ def test_weighting_study_runs_resumes_and_reports(tmp_path):
 def test_effects_table_counts_hits_found_confusions_and_false_alarms(monkeypatch):
     # the aggregation on trial outcomes of known content (the trials themselves: next test)
     from vdps_hil.batch import studies
-    from vdps_hil.batch.engine import Outcome
+    from vdps_hil.batch.worker import Outcome
 
     recs = {("aero_drag", 1): ["aero_drag"], ("aero_drag", 2): ["rolling_resistance", "aero_drag"],
             ("aero_drag", 3): [], ("crosswind", 1): ["crosswind"], ("crosswind", 2): ["crosswind"],

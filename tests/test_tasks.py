@@ -9,7 +9,8 @@ import os
 
 import pytest
 
-from vdps_hil.batch.engine import execute, strip_run
+from vdps_hil.batch.runner import strip_run
+from vdps_hil.batch.worker import execute
 from vdps_hil.batch.keys import tool_version
 from vdps_hil.batch.tasks import (diagnose_drive, diagnose_tasks, drive_ids, replay_drive,
                                   replay_tasks, worker_info)

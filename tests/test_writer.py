@@ -16,8 +16,11 @@ from mcap.stream_reader import StreamReader
 from vdps_hil import __version__
 from vdps_hil.bus.samples import Sample
 from vdps_hil.record import schemas as S
+from vdps_hil.record.payloads import estimate_payload, json_payload
 from vdps_hil.record.reader import RecordingReader
-from vdps_hil.record.writer import RecordingWriter, estimate_payload, json_payload
+from vdps_hil.record.writer import RecordingWriter
+
+from copy_messages import copy_messages
 
 EPOCH = S.DEFAULT_SIM_EPOCH_NS
 
@@ -239,56 +242,11 @@ def test_close_is_idempotent_and_exceptions_still_close(tmp_path):
         assert make_reader(f).get_summary().statistics.message_count == 1
 
 
-def test_fast_message_path_writes_the_same_file_as_the_mcap_library(tmp_path):
-    """The writer's own add_message (``_fast_add_message``) and mcap's Writer.add_message give
-    byte-identical files: same records, statistics, message indexes and chunk boundaries (small
-    chunks so that many close; log times not monotonic across topics)."""
-    import random
-
-    rng = random.Random(7)
-    msgs = []
-    for k in range(3000):
-        t = 1_000_000 * k + rng.randrange(-3_000_000, 3_000_000) + 10_000_000
-        msgs.append((rng.choice(("a", "b", "c")), t, rng.randbytes(rng.randrange(0, 40))))
-    files = []
-    for fast in (True, False):
-        p = tmp_path / f"{fast}.mcap"
-        w = RecordingWriter(p, chunk_size=4096, sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
-        if not fast:
-            w._add_message = w._mcap.add_message
-        else:
-            assert w._add_message != w._mcap.add_message  # the fast path is in use
-        for dev, t, data in msgs:
-            w.write_serial(dev, t, data)
-        w.write_estimate("x", 5, {"v": 1.0})
-        w.close()
-        files.append(p.read_bytes())
-    assert files[0] == files[1]
-    with open(tmp_path / "True.mcap", "rb") as f:
-        n = sum(1 for _ in make_reader(f).iter_messages())
-    assert n == len(msgs) + 1
-
-
-def _copy_messages(seed: int, n: int):
-    """(topic, t_ns, log_time, payload) on three serial topics, per-topic t_ns increasing,
-    log times not monotonic across topics."""
-    import random
-
-    rng = random.Random(seed)
-    last = {}
-    out = []
-    for k in range(n):
-        topic = rng.choice(("/raw/serial/a", "/raw/serial/b", "/raw/serial/c"))
-        t = last[topic] = last.get(topic, 0) + rng.randrange(1, 2_000_000)
-        out.append((topic, t, EPOCH + t + rng.randrange(0, 5_000_000), rng.randbytes(rng.randrange(0, 60))))
-    return out
-
-
 def test_copied_messages_read_back_equal_with_valid_indexes_and_statistics(tmp_path):
     """Copies (queued, written in runs) next to direct writes: the mcap library reads the
     same messages through the summary's chunk and message indexes as _write gives, with the same
     statistics and per-topic sequence numbers; our reader agrees (small chunks so many close)."""
-    msgs = _copy_messages(3, 3000)
+    msgs = copy_messages(3, 3000)
     paths = {}
     for how in ("copy", "write"):
         p = paths[how] = tmp_path / f"{how}.mcap"
@@ -318,25 +276,6 @@ def test_copied_messages_read_back_equal_with_valid_indexes_and_statistics(tmp_p
     assert not r.problems and sorted(mine) == sorted(msgs)
 
 
-def test_copy_runs_write_the_same_file_as_one_library_call_per_message(tmp_path):
-    """_MessageAppender.add_run (one pack and write per run, cut at chunk boundaries) gives the
-    bytes of the mcap library's add_message once per message: same records, statistics,
-    message indexes and chunk boundaries."""
-    msgs = _copy_messages(5, 3000)
-    files = []
-    for runs in (True, False):
-        p = tmp_path / f"{runs}.mcap"
-        w = RecordingWriter(p, chunk_size=1500, sim_epoch_ns=EPOCH)
-        if not runs:
-            w._appender, w._add_message = None, w._mcap.add_message
-        copy = w.copier(lambda topic: (S.RAW_SERIAL, {}))
-        for topic, t, log, data in msgs:
-            copy((topic, t, log, 7, data))
-        w.close()
-        files.append(p.read_bytes())
-    assert files[0] == files[1]
-
-
 def test_copy_keeps_per_topic_order_sequence_wrap_and_time_rules(tmp_path):
     """A direct write on a copied topic comes after the copies queued before it; sequence
     numbers wrap modulo 2^32 inside a run; log time 0 takes the writer's rule; backwards t_ns
@@ -364,44 +303,6 @@ def test_copy_keeps_per_topic_order_sequence_wrap_and_time_rules(tmp_path):
                make_reader(f).iter_messages(log_time_order=False) if ch.topic == a]
     assert got == [(b"1", 0, EPOCH + 1, 1), (b"2", 2**32 - 2, EPOCH + 7, 2), (b"3", 2**32 - 1, EPOCH + 8, 3),
                    (b"4", 0, EPOCH + 9, 2), (b"5", 1, EPOCH + 5, 5)]
-
-
-def test_write_estimate_payload_equals_the_generic_json_path(tmp_path):
-    """write_estimate's single cleaning pass writes the bytes write_json(estimate_doc) writes,
-    for floats, NaN/inf, numpy scalars, ints and bools."""
-    import numpy as np
-
-    vals = {"a": 0.1, "b": math.nan, "c": -math.inf, "d": np.float64(2.5), "e": 3, "f": True, "g": -0.0}
-    sig = {"a": 1e-300, "b": np.float32(0.5), "c": math.inf}
-    payloads = []
-    for fast in (True, False):
-        buf = io.BytesIO()
-        with RecordingWriter(buf, sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS) as w:
-            if fast:
-                w.write_estimate("/est/x", 9, vals, sig)
-            else:
-                w.write_json("/est/x", S.ESTIMATE, 9, S.estimate_doc(9, vals, sig))
-        buf.seek(0)
-        payloads.append([m.data for _, _, m in make_reader(buf).iter_messages()])
-    assert payloads[0] == payloads[1] and len(payloads[0]) == 1
-
-
-@settings(max_examples=300, deadline=None)
-@given(vals=st.dictionaries(st.text(max_size=8), st.floats(allow_nan=True, allow_infinity=True), max_size=8),
-       sig=st.none() | st.dictionaries(st.sampled_from(["a", 'b"', "é", "x_g_m"]), st.floats(), max_size=4),
-       t_ns=st.integers(0, 2**62))
-def test_direct_estimate_encoding_equals_json_dumps(vals, sig, t_ns):
-    """The direct encoding of float-only estimates is byte-identical to json.dumps of the
-    cleaned document (any keys, NaN/inf, -0.0, subnormals)."""
-    from vdps_hil.record.writer import _clean_flat, _float_object
-
-    doc = {"t_ns": t_ns, "values": _clean_flat(vals)}
-    if sig is not None:
-        doc["sigmas"] = _clean_flat(sig)
-    ref = json.dumps(doc, separators=(",", ":"), allow_nan=False)
-    v, s = _float_object(vals), "" if sig is None else _float_object(sig)
-    got = f'{{"t_ns":{t_ns},"values":{v}' + (f',"sigmas":{s}}}' if sig is not None else "}")
-    assert got == ref
 
 
 def test_messages_encoded_elsewhere_are_written_as_write_json_and_write_estimate_write_them(tmp_path):

@@ -76,7 +76,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from vdps_hil.batch.engine import Engine, EngineConfig, strip_run  # noqa: E402
+from vdps_hil.batch.engine import Engine, EngineConfig  # noqa: E402
+from vdps_hil.batch.runner import strip_run  # noqa: E402
 from vdps_hil.batch.tasks import replay_tasks  # noqa: E402
 
 
@@ -182,7 +183,7 @@ def _patch_pipeline_log() -> str:
 def memory(args) -> None:
     import psutil
 
-    from vdps_hil.batch.engine import execute
+    from vdps_hil.batch.worker import execute
 
     path = args.memory
     size = os.path.getsize(path)

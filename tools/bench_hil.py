@@ -38,7 +38,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from vdps_hil.hil.bench import Bench, BenchConfig  # noqa: E402
+from vdps_hil.hil.bench import Bench  # noqa: E402
+from vdps_hil.hil.bench_config import BenchConfig  # noqa: E402
 
 
 def one(transport: str, speed: float, scenario: str) -> dict:

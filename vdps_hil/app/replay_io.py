@@ -222,7 +222,7 @@ class _EncodingForwarder:
 
     def __init__(self, proc: "RecordingProcess"):
         from vdps_hil.record import schemas as S
-        from vdps_hil.record.writer import estimate_payload, estimate_topic, json_payload
+        from vdps_hil.record.payloads import estimate_payload, estimate_topic, json_payload
 
         self._proc = proc
         self._estimate = S.ESTIMATE

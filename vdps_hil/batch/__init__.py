@@ -2,9 +2,10 @@
 cluster (default), an existing Dask cluster, a process pool or inline, with resume keys, a
 progress bar and a fleet report.
 
-``engine``   Task, Engine, run_batch (backends, failure model, result files)
-``keys``     resume keys (input, config, vehicle/model files, effects, tool version)
-``tasks``    task functions (replay, diagnose, study trials) and task builders
-``report``   the fleet report (HTML with plots)
-``progress`` counts, bar and ETA
+Data flow. ``tasks`` turns files (or study trials, ``studies``) into :class:`~.worker.Task` s
+with resume keys (``keys``); ``runner.run_batch`` skips those whose result file holds the same
+key, hands the rest to an ``engine.Engine`` backend, whose workers run each with
+``worker.execute`` (a failure is data, never a stopped batch); every outcome is written to
+``<out>/drives/<id>.json`` as it finishes and counted by ``progress``; the aggregate
+``<out>/batch.json`` at the end feeds the fleet report (``report``, HTML with plots).
 """

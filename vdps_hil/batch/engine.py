@@ -1,14 +1,7 @@
-"""Batch engine: one task per recording (or per Monte Carlo trial), run on a local
-``dask.distributed`` cluster, on an existing Dask cluster, on a process pool or inline, through
-one code path, with resume, per-task error capture and worker-death retries.
-
-Data flow::
-
-    tasks (Task: id, "module:function", kwargs, resume key)
-      -> run_batch: skip the tasks whose result file holds the same key (resume)
-      -> Engine (backend) -> worker: execute(fn, kwargs) -> {status, result | error, run}
-      -> as each finishes: <out>/drives/<id>.json (atomic), progress
-      -> at the end: <out>/batch.json (aggregate, task order)
+"""Batch engine: tasks run on a local ``dask.distributed`` cluster, on an existing Dask cluster,
+on a process pool or inline, through one code path, with per-task error capture and
+worker-death retries (what a task is and how a worker runs it: :mod:`vdps_hil.batch.worker`;
+resume, result files and the aggregate: :mod:`vdps_hil.batch.runner`).
 
 Backends (``EngineConfig.backend``)
 -----------------------------------
@@ -40,53 +33,27 @@ Failure model
   the engine reads it back and records it. Process pool: a dying worker breaks the pool; it is
   rebuilt and the unfinished tasks resubmitted, each task that was in flight being charged one
   failure (the pool cannot tell which of them died), with the same limit.
-* **Interrupt** (Ctrl-C, a killed client): every finished task has already been written;
-  the rerun computes only what is missing or whose key changed.
-
-Timing fields
--------------
-Everything that depends on the machine or the run (worker pid and host, wall and CPU time,
-peak memory, attempts, whether the result was reused) is under a ``"run"`` key (per task and in the
-aggregate), so two runs of the same batch give documents that are identical once ``"run"`` is
-removed (``strip_run``), whatever backend or number of workers computed them.
-
-Memory per worker: ``run.peak_rss_mib`` is the worker process's peak resident set
-(``getrusage(RUSAGE_SELF).ru_maxrss``, the process's high-water mark since it started, so it
-covers every task that worker ran); with ``EngineConfig.trace_memory`` also
-``run.py_heap_peak_mib`` (``tracemalloc`` peak of this task alone; slows Python down ~2x, for
-benchmarks).
+* **Interrupt** (Ctrl-C, a killed client): see :mod:`vdps_hil.batch.runner`.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
-import importlib
-import json
-import math
 import multiprocessing
 import os
-import resource
-import socket
-import sys
-import time
 import uuid
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Iterator, Sequence
 
 from vdps_hil.batch.keys import tool_version
+from vdps_hil.batch.worker import Outcome, Task, execute, failure, one_line, outcome
 
-__all__ = ["Task", "Outcome", "EngineConfig", "Engine", "BatchResult", "run_batch", "execute",
-           "strip_run", "result_path", "BACKENDS", "DEFAULT_ALLOWED_FAILURES", "EngineError",
-           "dask_available", "to_jsonable"]
+__all__ = ["EngineConfig", "Engine", "BACKENDS", "DEFAULT_ALLOWED_FAILURES", "EngineError", "dask_available"]
 
 BACKENDS = ("dask", "processes", "inline")
 DEFAULT_ALLOWED_FAILURES = 2
 """Times a task may be on a worker that dies before it is reported as failed (Dask's
 ``distributed.scheduler.allowed-failures``; the same limit for the process pool)."""
-
-RESULT_DIR = "drives"
-AGGREGATE = "batch.json"
 
 
 class EngineError(RuntimeError):
@@ -101,114 +68,6 @@ def dask_available() -> bool:
     return True
 
 
-# ---------------------------------------------------------------------------------- tasks
-@dataclass(frozen=True)
-class Task:
-    """One unit of work. ``fn`` is ``"module:function"`` (imported in the worker, so nothing but
-    names and JSON-able arguments travel); ``kwargs`` its keyword arguments; ``key`` the resume
-    key (``keys.task_key``; None: never reused); ``meta`` is copied into the result document
-    (e.g. the input path); ``args`` positional arguments; ``cost`` orders submission (largest
-    first: the long drives do not end up alone at the end of the batch)."""
-
-    id: str
-    fn: str
-    kwargs: Mapping[str, Any] = field(default_factory=dict)
-    key: str | None = None
-    args: tuple = ()
-    meta: Mapping[str, Any] = field(default_factory=dict)
-    cost: float = 0.0
-
-
-@dataclass
-class Outcome:
-    """What became of one task: ``status`` "ok" or "failed"; ``result`` (the task function's
-    dict) or ``error`` ({"type", "message"}); ``run`` (timing fields, module docstring)."""
-
-    id: str
-    status: str
-    result: dict | None
-    error: dict | None
-    run: dict
-    key: str | None = None
-    meta: dict = field(default_factory=dict)
-
-    @property
-    def ok(self) -> bool:
-        return self.status == "ok"
-
-    def to_json(self) -> dict:
-        return {"id": self.id, **self.meta, "key": self.key, "status": self.status,
-                "result": self.result, "error": self.error, "run": self.run}
-
-
-def _one_line(e: BaseException) -> str:
-    text = str(e).strip().splitlines()
-    return text[0] if text else ""
-
-
-def _resolve(fn: str) -> Callable:
-    module, _, attr = fn.partition(":")
-    if not module or not attr:
-        raise ValueError(f"task function {fn!r}: expected 'module:function'")
-    obj = importlib.import_module(module)
-    for part in attr.split("."):
-        obj = getattr(obj, part)
-    return obj
-
-
-def _peak_rss_mib() -> float:
-    # ru_maxrss: kilobytes on Linux, bytes on macOS
-    r = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return r / (1024.0 * 1024.0) if sys.platform == "darwin" else r / 1024.0
-
-
-def execute(fn: str, kwargs: Mapping[str, Any], trace_memory: bool = False, args: tuple = ()) -> dict:
-    """Run one task in a worker: ``{"status", "result", "error", "run"}``. Never raises for an
-    ``Exception`` of the task (it becomes ``status = "failed"`` with a one-line error)."""
-    t0 = time.perf_counter()
-    c0 = time.process_time()
-    rss0 = _peak_rss_mib()
-    if trace_memory:
-        import tracemalloc
-        tracemalloc.start()
-    status, result, error = "ok", None, None
-    try:
-        result = _resolve(fn)(*args, **dict(kwargs))
-        if not isinstance(result, dict):
-            raise TypeError(f"task function {fn} returned {type(result).__name__}, not a dict")
-        result = to_jsonable(result)
-    except Exception as e:  # noqa: BLE001 - a task's failure is data, the batch goes on
-        status, result = "failed", None
-        error = {"type": type(e).__name__, "message": _one_line(e)}
-    run = {"pid": os.getpid(), "host": socket.gethostname(),
-           "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
-           "peak_rss_mib": _peak_rss_mib(), "peak_rss_mib_before": rss0}
-    if trace_memory:
-        import tracemalloc
-        run["py_heap_peak_mib"] = tracemalloc.get_traced_memory()[1] / (1024.0 * 1024.0)
-        tracemalloc.stop()
-    return {"status": status, "result": result, "error": error, "run": run}
-
-
-def to_jsonable(o: Any) -> Any:
-    """Plain JSON types: numpy scalars/arrays to Python, tuples to lists, non-finite floats to
-    None (JSON has no NaN), keys to str."""
-    if isinstance(o, float):
-        return o if math.isfinite(o) else None
-    if isinstance(o, Mapping):
-        return {str(k): to_jsonable(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [to_jsonable(v) for v in o]
-    if hasattr(o, "tolist") and callable(o.tolist):  # numpy arrays and scalars
-        return to_jsonable(o.tolist())
-    if o is None or isinstance(o, (str, int, bool)):
-        return o
-    if isinstance(o, os.PathLike):
-        return os.fspath(o)
-    return str(o)
-
-
-# --------------------------------------------------------------------------------- engine
 @dataclass(frozen=True)
 class EngineConfig:
     """``backend`` (``BACKENDS``; None = dask when installed, else processes), ``workers``
@@ -291,7 +150,7 @@ class Engine:
                 self._client = Client(cfg.scheduler, timeout="10s")
             except (OSError, TimeoutError) as e:
                 raise EngineError(f"cannot reach the Dask scheduler at {cfg.scheduler}: "
-                                  f"{_one_line(e)}") from None
+                                  f"{one_line(e)}") from None
             self.info["scheduler"] = cfg.scheduler
             self.info["allowed_failures"] = self._client.run_on_scheduler(_scheduler_allowed_failures)
             self.info["workers"] = len(self._client.scheduler_info()["workers"])
@@ -322,7 +181,7 @@ class Engine:
             seen = self._client.run(tool_version)
         except Exception as e:  # noqa: BLE001 - e.g. a worker without this package
             self.info.setdefault("warnings", []).append(
-                f"could not ask the workers for their vdps-hil version: {_one_line(e)}")
+                f"could not ask the workers for their vdps-hil version: {one_line(e)}")
             return
         mine = tool_version()
         self.info["worker_tools"] = sorted(set(seen.values()))
@@ -372,7 +231,7 @@ class Engine:
             yield from self._run_pool(order)
         else:
             for t in order:
-                yield _outcome(t, execute(t.fn, t.kwargs, self.config.trace_memory, tuple(t.args)),
+                yield outcome(t, execute(t.fn, t.kwargs, self.config.trace_memory, tuple(t.args)),
                                attempts=1)
 
     def _run_dask(self, tasks: Sequence[Task]) -> Iterator[Outcome]:
@@ -393,13 +252,13 @@ class Engine:
                     doc = f.result()
                 except KilledWorker as e:
                     n = self.info.get("allowed_failures")
-                    doc = _failed("WorkerDied", f"a worker died while running this task "
+                    doc = failure("WorkerDied", f"a worker died while running this task "
                                   f"{'more than ' + str(n) + ' times' if n is not None else 'too often'}"
-                                  f" (allowed-failures = {n}): {_one_line(e)}")
+                                  f" (allowed-failures = {n}): {one_line(e)}")
                 except Exception as e:  # noqa: BLE001 - cancelled, lost scheduler, ...
-                    doc = _failed(type(e).__name__, _one_line(e))
+                    doc = failure(type(e).__name__, one_line(e))
                 f.release()
-                yield _outcome(t, doc, attempts=None)
+                yield outcome(t, doc, attempts=None)
         finally:
             for f in futures:
                 f.cancel()
@@ -431,7 +290,7 @@ class Engine:
                             if t.id in in_flight or not in_flight:
                                 deaths[t.id] = deaths.get(t.id, 0) + 1
                             if deaths.get(t.id, 0) > limit:
-                                yield _outcome(t, _failed(
+                                yield outcome(t, failure(
                                     "WorkerDied", f"a worker process died while running this task "
                                     f"{deaths[t.id]} times (allowed-failures = {limit})"),
                                     attempts=deaths[t.id])
@@ -439,8 +298,8 @@ class Engine:
                                 queue.append(t)
                             continue
                         except Exception as e:  # noqa: BLE001 - e.g. unpicklable result
-                            doc = _failed(type(e).__name__, _one_line(e))
-                        yield _outcome(t, doc, attempts=deaths.get(t.id, 0) + 1)
+                            doc = failure(type(e).__name__, one_line(e))
+                        yield outcome(t, doc, attempts=deaths.get(t.id, 0) + 1)
             finally:
                 if not broken and pending:  # the consumer stopped early (interrupt)
                     for f in pending:
@@ -453,140 +312,3 @@ class Engine:
 
 def _scheduler_allowed_failures(dask_scheduler=None) -> int | None:
     return getattr(dask_scheduler, "allowed_failures", None)
-
-
-def _failed(kind: str, message: str) -> dict:
-    return {"status": "failed", "result": None, "error": {"type": kind, "message": message},
-            "run": {}}
-
-
-def _outcome(t: Task, doc: dict, attempts: int | None) -> Outcome:
-    run = dict(doc.get("run") or {})
-    if attempts is not None:
-        run["attempts"] = attempts
-    return Outcome(id=t.id, status=doc["status"], result=doc.get("result"), error=doc.get("error"),
-                   run=run, key=t.key, meta=dict(t.meta))
-
-
-# ------------------------------------------------------------------------------ run_batch
-@dataclass
-class BatchResult:
-    """Outcomes in task order, the engine's description and the aggregate document."""
-
-    outcomes: list[Outcome]
-    info: dict
-    aggregate: dict
-
-    @property
-    def failed(self) -> list[Outcome]:
-        return [o for o in self.outcomes if not o.ok]
-
-    @property
-    def counts(self) -> dict[str, int]:
-        return self.aggregate["counts"]
-
-
-def result_path(out_dir: str | os.PathLike, task_id: str, subdir: str = RESULT_DIR) -> Path:
-    return Path(out_dir) / subdir / f"{task_id}.json"
-
-
-def _write_json_atomic(path: Path, doc: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(json.dumps(to_jsonable(doc), indent=1, sort_keys=True) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
-
-
-def _reusable(out_dir: Path | None, t: Task, subdir: str) -> Outcome | None:
-    if out_dir is None or t.key is None:
-        return None
-    p = result_path(out_dir, t.id, subdir)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    if not isinstance(doc, dict) or doc.get("key") != t.key or doc.get("status") != "ok":
-        return None
-    run = dict(doc.get("run") or {})
-    run["reused"] = True
-    return Outcome(id=t.id, status="ok", result=doc.get("result"), error=None, run=run,
-                   key=t.key, meta=dict(t.meta))
-
-
-def strip_run(doc: Any) -> Any:
-    """``doc`` without any ``"run"`` entry at any depth (the timing fields)."""
-    if isinstance(doc, dict):
-        return {k: strip_run(v) for k, v in doc.items() if k != "run"}
-    if isinstance(doc, list):
-        return [strip_run(v) for v in doc]
-    return doc
-
-
-def run_batch(tasks: Sequence[Task], config: EngineConfig | None = None, *,
-              out_dir: str | os.PathLike | None = None, kind: str = "batch",
-              force: bool = False, progress=None, options: Mapping[str, Any] | None = None,
-              engine: Engine | None = None, results_subdir: str = RESULT_DIR,
-              aggregate_name: str | None = AGGREGATE) -> BatchResult:
-    """Run ``tasks`` (ids must be unique) and write ``<out_dir>/drives/<id>.json`` per task as it
-    finishes plus ``<out_dir>/batch.json`` at the end (module docstring).
-
-    A task whose result file exists with status ok and the same key is reused (not run) unless
-    ``force``. ``progress`` (``progress.Progress`` or None) is told about every outcome.
-    ``options`` (JSON-able) is recorded in the aggregate. ``engine``: an already started
-    engine (the caller closes it); otherwise one is made from ``config`` and closed here.
-    ``results_subdir`` / ``aggregate_name``: where the per-task files and the aggregate go
-    (``aggregate_name=None``: not written, e.g. one stage of a study).
-    """
-    ids = [t.id for t in tasks]
-    dup = sorted({i for i in ids if ids.count(i) > 1})
-    if dup:
-        raise ValueError(f"task ids must be unique, repeated: {', '.join(dup[:5])}")
-    out = None if out_dir is None else Path(out_dir)
-    wall0 = time.perf_counter()
-    started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-    outcomes: dict[str, Outcome] = {}
-    todo: list[Task] = []
-    for t in tasks:
-        prev = None if force else _reusable(out, t, results_subdir)
-        if prev is not None:
-            outcomes[t.id] = prev
-        else:
-            todo.append(t)
-    if progress is not None:
-        progress.start(total=len(tasks), reused=len(tasks) - len(todo))
-    info: dict[str, Any] = {}
-    own = engine is None
-    try:
-        if todo:
-            eng = engine or Engine(config)
-            try:
-                if own:
-                    eng.start()
-                info = dict(eng.info)
-                if progress is not None:
-                    progress.engine(info)
-                for o in eng.run(todo):
-                    outcomes[o.id] = o
-                    if out is not None:
-                        _write_json_atomic(result_path(out, o.id, results_subdir), o.to_json())
-                    if progress is not None:
-                        progress.update(o)
-            finally:
-                if own:
-                    eng.close()
-    finally:
-        if progress is not None:
-            progress.close()
-    ordered = [outcomes[t.id] for t in tasks if t.id in outcomes]
-    n_ok = sum(o.ok for o in ordered)
-    aggregate = {
-        "kind": kind, "tool": tool_version(), "options": to_jsonable(dict(options or {})),
-        "counts": {"total": len(tasks), "ok": n_ok, "failed": len(ordered) - n_ok},
-        "tasks": [o.to_json() for o in ordered],
-        "failed": [{"id": o.id, **o.meta, "error": o.error} for o in ordered if not o.ok],
-        "run": {"engine": info, "started_utc": started, "wall_s": time.perf_counter() - wall0,
-                "computed": len(todo), "reused": len(tasks) - len(todo)},
-    }
-    if out is not None and aggregate_name:
-        _write_json_atomic(out / aggregate_name, aggregate)
-    return BatchResult(ordered, info, aggregate)

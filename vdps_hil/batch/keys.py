@@ -15,7 +15,7 @@ The *tool version* is ``vdps_hil.__version__`` plus a digest of every ``*.py`` f
 package and of the shipped configs (``configs/**/*.toml``) and DBCs (``dbc/*.dbc``): a code
 change invalidates old results even when nobody bumped the version (what a developer running a
 batch twice expects). Paths are not part of the key: a drive moved or renamed keeps its result
-only if it keeps its result file name (``engine``); the key itself depends on content only.
+only if it keeps its result file name (``runner``); the key itself depends on content only.
 
 Hashing a fleet's recordings is I/O bound (hundreds of MB per hour of driving). A
 :class:`DigestCache` (``<out>/.digests.json``) remembers ``(path, size, mtime_ns, inode) ->

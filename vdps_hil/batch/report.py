@@ -189,7 +189,7 @@ def _median(xs: list[float]) -> float:
 def aggregate_from_dir(out_dir: str | os.PathLike) -> dict:
     """The aggregate of a batch directory: ``batch.json`` when present, else assembled from
     ``drives/*.json`` (an interrupted batch)."""
-    from vdps_hil.batch.engine import AGGREGATE, RESULT_DIR
+    from vdps_hil.batch.runner import AGGREGATE, RESULT_DIR
 
     out = Path(out_dir)
     agg = out / AGGREGATE
@@ -320,10 +320,20 @@ def _td(v: Any, num: bool = False, cls: str = "") -> str:
 
 
 def render_html(aggregate: Mapping[str, Any], *, z_flag: float = Z_FLAG) -> str:
-    """The report page of an aggregate document (``engine.run_batch``)."""
+    """The report page of an aggregate document (``runner.run_batch``)."""
     tasks = [t for t in aggregate.get("tasks", []) if isinstance(t, Mapping)]
-    ids = [str(t.get("id")) for t in tasks]
     ok_tasks = [t for t in tasks if t.get("status") == "ok"]
+    parts = _batch_section(aggregate, tasks, ok_tasks)
+    parts += _params_section([str(t.get("id")) for t in tasks], ok_tasks, z_flag)
+    parts += _effects_section(aggregate, ok_tasks)
+    parts += _failures_section(tasks)
+    parts += _summary_section(tasks)
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+def _batch_section(aggregate: Mapping[str, Any], tasks: list, ok_tasks: list) -> list[str]:
+    """Page head and section 1: counts, tool, engine, wall time, options."""
     counts = aggregate.get("counts", {})
     run = aggregate.get("run", {}) or {}
     eng = run.get("engine") or {}
@@ -340,8 +350,11 @@ def render_html(aggregate: Mapping[str, Any], *, z_flag: float = Z_FLAG) -> str:
                 f"{_e(run.get('reused'))} reused" if "wall_s" in run else "") + "</p>"]
     if aggregate.get("options"):
         parts.append(f"<p>options: <code>{_e(json.dumps(aggregate['options'], sort_keys=True))}</code></p>")
+    return parts
 
-    # identified parameters
+
+def _params_section(ids: list[str], ok_tasks: list, z_flag: float) -> list[str]:
+    """Section 2: identified parameters per drive against the fleet (module docstring)."""
     table: dict[str, dict[str, tuple[float, float | None]]] = {}
     priors: dict[str, float] = {}
     for t in ok_tasks:
@@ -349,40 +362,50 @@ def render_html(aggregate: Mapping[str, Any], *, z_flag: float = Z_FLAG) -> str:
             table.setdefault(name, {})[str(t["id"])] = vs
         for name, v in prior_params(t.get("result")).items():
             priors.setdefault(name, v)  # the first drive's model file (one vehicle per batch)
-    if table:
-        img, flags = _param_figure(ids, table, z_flag, priors)
-        parts.append("<h2>Identified parameters per drive</h2>")
-        parts.append(f"<p>Each drive against the fleet: z = (x - median) / sqrt(sigma&sup2; + "
-                     f"s_ref&sup2;), s_ref = 1.4826 MAD; flagged when |z| &gt; {z_flag:g}.</p>")
-        parts.append(f"<img alt=\"identified parameters\" src=\"{img}\">")
-        if flags:
-            parts.append("<h3 class=bad>Drives that differ from the fleet</h3>")
-            parts.append(_table(["drive", "parameter", "value", "sigma", "fleet median", "z"],
-                                [[_td(i), _td(n), _td(_fmt(v), True), _td(_fmt(s), True),
-                                  _td(_fmt(r), True), _td(_fmt(z, 3), True, "bad")]
-                                 for i, n, v, s, r, z in flags]))
-        else:
-            parts.append("<p class=ok>No drive differs from the fleet by more than the flag.</p>")
+    if not table:
+        return []
+    parts = []
+    img, flags = _param_figure(ids, table, z_flag, priors)
+    parts.append("<h2>Identified parameters per drive</h2>")
+    parts.append(f"<p>Each drive against the fleet: z = (x - median) / sqrt(sigma&sup2; + "
+                 f"s_ref&sup2;), s_ref = 1.4826 MAD; flagged when |z| &gt; {z_flag:g}.</p>")
+    parts.append(f"<img alt=\"identified parameters\" src=\"{img}\">")
+    if flags:
+        parts.append("<h3 class=bad>Drives that differ from the fleet</h3>")
+        parts.append(_table(["drive", "parameter", "value", "sigma", "fleet median", "z"],
+                            [[_td(i), _td(n), _td(_fmt(v), True), _td(_fmt(s), True),
+                              _td(_fmt(r), True), _td(_fmt(z, 3), True, "bad")]
+                             for i, n, v, s, r, z in flags]))
+    else:
+        parts.append("<p class=ok>No drive differs from the fleet by more than the flag.</p>")
+    return parts
 
-    # effects
+
+def _effects_section(aggregate: Mapping[str, Any], ok_tasks: list) -> list[str]:
+    """Section 3: effects recommended per drive (diagnose batches)."""
     eff = {str(t["id"]): recommended_effects(t.get("result")) for t in ok_tasks}
-    if any(eff.values()) or aggregate.get("kind") == "diagnose":
-        cnt: dict[str, int] = {}
-        for names in eff.values():
-            for n in set(names):
-                cnt[n] = cnt.get(n, 0) + 1
-        parts.append("<h2>Effects recommended per drive</h2>")
-        img = _effects_figure(cnt, len(ok_tasks))
-        if img:
-            parts.append(f"<img alt=\"effects across the fleet\" src=\"{img}\">")
-        cols = sorted(cnt, key=lambda k: (-cnt[k], k))
-        parts.append(_table(["drive", *cols, "recommended"],
-                            [[_td(i), *[_td("x" if c in eff[i] else "") for c in cols],
-                              _td(", ".join(eff[i]) or "none")] for i in eff]))
+    if not (any(eff.values()) or aggregate.get("kind") == "diagnose"):
+        return []
+    parts = []
+    cnt: dict[str, int] = {}
+    for names in eff.values():
+        for n in set(names):
+            cnt[n] = cnt.get(n, 0) + 1
+    parts.append("<h2>Effects recommended per drive</h2>")
+    img = _effects_figure(cnt, len(ok_tasks))
+    if img:
+        parts.append(f"<img alt=\"effects across the fleet\" src=\"{img}\">")
+    cols = sorted(cnt, key=lambda k: (-cnt[k], k))
+    parts.append(_table(["drive", *cols, "recommended"],
+                        [[_td(i), *[_td("x" if c in eff[i] else "") for c in cols],
+                          _td(", ".join(eff[i]) or "none")] for i in eff]))
+    return parts
 
-    # failures
+
+def _failures_section(tasks: list) -> list[str]:
+    """Section 4: failed drives and why."""
     failed = [t for t in tasks if t.get("status") != "ok"]
-    parts.append(f"<h2>Failed drives ({len(failed)})</h2>")
+    parts = [f"<h2>Failed drives ({len(failed)})</h2>"]
     if failed:
         parts.append(_table(["drive", "input", "error", "message"],
                             [[_td(t.get("id")), _td(t.get("input")),
@@ -390,8 +413,11 @@ def render_html(aggregate: Mapping[str, Any], *, z_flag: float = Z_FLAG) -> str:
                               _td((t.get("error") or {}).get("message"))] for t in failed]))
     else:
         parts.append("<p class=ok>None.</p>")
+    return parts
 
-    # per-drive summary
+
+def _summary_section(tasks: list) -> list[str]:
+    """Section 5: the per-drive summary."""
     rows = []
     for t in tasks:
         r = t.get("result") if isinstance(t.get("result"), Mapping) else {}
@@ -404,12 +430,10 @@ def render_html(aggregate: Mapping[str, Any], *, z_flag: float = Z_FLAG) -> str:
                      _td("; ".join(s["problems"]) or "", cls="bad" if s["problems"] else ""),
                      _td(_fmt(_num(trun.get("wall_s")), 3), True),
                      _td(_fmt(_num(trun.get("peak_rss_mib")), 4), True)])
-    parts.append("<h2>Per-drive summary</h2>")
-    parts.append(_table(["drive", "status", "duration [s]", "raw records", "rejected",
-                         "mean NIS/dof per update kind", "recording problems", "task wall [s]",
-                         "worker peak RSS [MiB]"], rows))
-    parts.append("</body></html>")
-    return "\n".join(parts)
+    return ["<h2>Per-drive summary</h2>",
+            _table(["drive", "status", "duration [s]", "raw records", "rejected",
+                    "mean NIS/dof per update kind", "recording problems", "task wall [s]",
+                    "worker peak RSS [MiB]"], rows)]
 
 
 def write_report(aggregate: Mapping[str, Any], report_dir: str | os.PathLike, *,

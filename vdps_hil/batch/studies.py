@@ -2,7 +2,7 @@
 Table 3 (weighting vs convergence) over many seeds, and the workbench's hidden-effect hit
 rates, each reported as mean and spread over the seeds next to the paper's figures.
 
-Every trial is one :class:`~.engine.Task` (``tasks.snr_trial``, ``tasks.weighting_trial``,
+Every trial is one :class:`~.worker.Task` (``tasks.snr_trial``, ``tasks.weighting_trial``,
 ``tasks.effect_trial``) with a resume key (the trial's arguments and the tool version), so a
 study is resumable and runs on the same engines as ``vdps batch replay``. Per-trial results go
 to ``<out>/trials/<id>.json``, the study document to ``<out>/study.json``.
@@ -48,8 +48,10 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from vdps_hil.batch.engine import Engine, EngineConfig, Task, _write_json_atomic, run_batch, to_jsonable
+from vdps_hil.batch.engine import Engine, EngineConfig
 from vdps_hil.batch.keys import task_key, tool_version
+from vdps_hil.batch.runner import run_batch, write_json_atomic
+from vdps_hil.batch.worker import Task, to_jsonable
 
 __all__ = ["STUDIES", "StudyOptions", "run_study", "summary", "wilson", "format_study",
            "SNR_TARGETS_DB", "SNR_TOLERANCE_DB", "TRIALS_DIR", "STUDY_FILE"]
@@ -178,7 +180,7 @@ def run_study(study: str, options: StudyOptions, config: EngineConfig | None = N
            "stages": stages, "run": {"engine": dict(eng.info)}}
     doc = to_jsonable(doc)
     out.mkdir(parents=True, exist_ok=True)
-    _write_json_atomic(out / STUDY_FILE, doc)
+    write_json_atomic(out / STUDY_FILE, doc)
     return doc
 
 

@@ -1,5 +1,5 @@
 """Batch tasks: what one worker does for one recording (replay, diagnose) or one Monte Carlo
-trial (studies), and the builders that turn a list of files into :class:`~.engine.Task` s with
+trial (studies), and the builders that turn a list of files into :class:`~.worker.Task` s with
 their resume keys.
 
 Task functions run in worker processes: they take JSON-able keyword arguments (paths as
@@ -7,7 +7,7 @@ strings, option dicts), open their recording themselves and stream it (the reade
 message at a time, chunk by chunk; the decoder's reorder buffer holds about a second; the
 system keeps no input log in a file replay), and return a JSON-able summary dict, never a
 drive's time series. A task that raises becomes a failed outcome with its one-line error
-(``engine.execute``); the batch goes on.
+(``worker.execute``); the batch goes on.
 
 Task functions
 --------------
@@ -43,7 +43,7 @@ import re
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
-from vdps_hil.batch.engine import Task
+from vdps_hil.batch.worker import Task
 from vdps_hil.batch.keys import DigestCache, task_key
 
 __all__ = ["drive_ids", "replay_drive", "diagnose_drive", "replay_tasks", "diagnose_tasks",
@@ -87,7 +87,7 @@ def replay_drive(path: str, *, vehicle: str = DEFAULT_MODEL,
     estimates, innovations, identified parameters with sigmas, prediction summary, counters.
     ``options``: keyword arguments of ``replay_file`` from :data:`REPLAY_OPTIONS`. The replay
     streams the file (decoder reorder window, no input log). Its timing fields (wall time,
-    real-time factor) are moved under ``"run"`` (``engine`` docstring). A recording of which
+    real-time factor) are moved under ``"run"`` (``worker`` docstring). A recording of which
     not one raw record could be read (garbage after the MCAP magic, no /raw/ topics) raises
     :class:`NoRawData`: a replay of nothing is a failed drive, not an empty success."""
     from vdps_hil.app.replay import replay_file

@@ -112,7 +112,8 @@ def _engine_config(workers, scheduler, backend, allowed_failures, no_dashboard):
 
 def _run(kind: str, tasks, cfg, out_dir: Path, *, force: bool, quiet: bool, options: dict,
          json_out: str | None, report_dir: str | None, digests=None) -> None:
-    from vdps_hil.batch.engine import EngineError, run_batch
+    from vdps_hil.batch.engine import EngineError
+    from vdps_hil.batch.runner import run_batch
     from vdps_hil.batch.progress import Progress
 
     if digests is not None:

@@ -76,7 +76,8 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
     from dataclasses import replace
     from pathlib import Path
 
-    from vdps_hil.hil.bench import Bench, BenchConfig, BenchError, calibrate
+    from vdps_hil.hil.bench import Bench
+    from vdps_hil.hil.bench_config import BenchConfig, BenchError, calibrate
 
     if output is not None:
         out = Path(output)

@@ -144,73 +144,23 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
     to /gnss/fix (Foxglove map), health to /health/... . Stops cleanly on Ctrl-C, SIGTERM or
     --duration; a killed logger's file is rescued by `vdps recover`.
     """
-    from vdps_hil.adapters.base import AdapterError
     from vdps_hil.app.session import LogSession
-    from vdps_hil.record.writer import RecordingWriter
 
-    if not can_specs and not serial_specs:
-        raise UserError("nothing to log: give --can BUS=INTERFACE:CHANNEL and/or "
-                        "--serial NAME=PORT[@BAUD]")
-    if duration is not None and duration <= 0:
-        raise UserError("--duration must be positive")
-    if flush_s <= 0:
-        raise UserError("--flush-s must be positive")
-    tap = None
-    if pipeline:
-        from vdps_hil.model.params import VehicleFileError, load_vehicle
-
-        try:
-            model = load_vehicle(vehicle, expect_kind="model")
-        except VehicleFileError as e:
-            raise UserError(str(e)) from None
-        start = None
-        if params is not None:
-            from vdps_hil.identification.persistence import ParamsFileError, load_params
-
-            try:
-                start = load_params(params, model).params
-            except ParamsFileError as e:
-                raise UserError(str(e).splitlines()[0]) from None
-    elif params is not None:
-        raise UserError("--params applies to --pipeline")
+    _check_options(can_specs, serial_specs, duration, flush_s)
+    model, start = _pipeline_start(pipeline, vehicle, params)
     adapters, info, sigmap = build_live_adapters(can_specs, serial_specs, formats, signalmap,
                                                  dbcs)
-    for a in adapters:  # devices first: a bad port fails before a file is created
-        try:
-            a.open()
-        except AdapterError as e:
-            for b in adapters:
-                b.close()
-            raise UserError(str(e)) from None
-    hashes = {f"dbc.{b}": i["dbc"] for b, i in info.items() if i.get("dbc")}
-    if sigmap:
-        hashes["signalmap"] = sigmap["path"]
-    md = {"mode": "log", "command": "vdps log " + " ".join(
-        [*(f"--can {s}" for s in can_specs), *(f"--serial {s}" for s in serial_specs)]),
-        "sources": {a.name: a.device for a in adapters}, "decoding": info,
-        "host": os.uname().nodename if hasattr(os, "uname") else ""}
-    if sigmap:
-        md["signalmap"] = sigmap
-    try:
-        if rotate_mb or rotate_s:
-            from vdps_hil.record.rotation import RotatingRecordingWriter
-
-            writer = RotatingRecordingWriter(
-                output, max_bytes=None if not rotate_mb else int(rotate_mb * 1e6),
-                max_s=rotate_s, metadata=md, content_hashes=hashes)
-        else:
-            writer = RecordingWriter(output, metadata=md, content_hashes=hashes)
-    except (OSError, ValueError) as e:
-        for a in adapters:
-            a.close()
-        raise UserError(f"cannot write {output}: {getattr(e, 'strerror', None) or e}") from None
-
+    _open_adapters(adapters)  # devices first: a bad port fails before a file is created
+    writer = _open_writer(output, rotate_mb, rotate_s, adapters,
+                          _recording_metadata(can_specs, serial_specs, adapters, info, sigmap),
+                          _content_hashes(info, sigmap))
     stop = threading.Event()
 
     def on_signal(signum, frame):
         stop.set()
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    tap = None
     if pipeline:  # a rotated recording gets no input order (PipelineTap)
         tap = PipelineTap(model, writer, start, record_order=not (rotate_mb or rotate_s),
                           params_file=None if params is None else os.path.basename(params))
@@ -218,16 +168,111 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
     try:
         summary = session.run(stop, duration)
         if tap is not None and session.tap is tap:  # a tap that failed wrote no order
-            try:
-                tap.finish()
-            except Exception as e:  # noqa: BLE001 - the recording is closed properly whatever it does
-                session.errors.append(f"tap: {type(e).__name__}: {e}")
-                summary["reader_errors"] = list(session.errors)
+            _finish_tap(tap, session, summary)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
         writer.close()
-    files = getattr(writer, "files", [output])
+    _report(summary, getattr(writer, "files", [output]), session, tap, quiet, json_out)
+
+
+def _check_options(can_specs, serial_specs, duration, flush_s) -> None:
+    if not can_specs and not serial_specs:
+        raise UserError("nothing to log: give --can BUS=INTERFACE:CHANNEL and/or "
+                        "--serial NAME=PORT[@BAUD]")
+    if duration is not None and duration <= 0:
+        raise UserError("--duration must be positive")
+    if flush_s <= 0:
+        raise UserError("--flush-s must be positive")
+
+
+def _pipeline_start(pipeline: bool, vehicle: str, params: str | None):
+    """(model vehicle, start parameters or None) for ``--pipeline`` ((None, None) without it);
+    UserError for an unusable vehicle or parameter file, or ``--params`` without ``--pipeline``."""
+    if not pipeline:
+        if params is not None:
+            raise UserError("--params applies to --pipeline")
+        return None, None
+    from vdps_hil.model.params import VehicleFileError, load_vehicle
+
+    try:
+        model = load_vehicle(vehicle, expect_kind="model")
+    except VehicleFileError as e:
+        raise UserError(str(e)) from None
+    start = None
+    if params is not None:
+        from vdps_hil.identification.persistence import ParamsFileError, load_params
+
+        try:
+            start = load_params(params, model).params
+        except ParamsFileError as e:
+            raise UserError(str(e).splitlines()[0]) from None
+    return model, start
+
+
+def _open_adapters(adapters) -> None:
+    """Open every device; on the first that fails close them all (UserError)."""
+    from vdps_hil.adapters.base import AdapterError
+
+    for a in adapters:
+        try:
+            a.open()
+        except AdapterError as e:
+            for b in adapters:
+                b.close()
+            raise UserError(str(e)) from None
+
+
+def _content_hashes(info: dict, sigmap: dict | None) -> dict:
+    """The files whose hashes the recording's metadata carries (DBCs, the signal map)."""
+    hashes = {f"dbc.{b}": i["dbc"] for b, i in info.items() if i.get("dbc")}
+    if sigmap:
+        hashes["signalmap"] = sigmap["path"]
+    return hashes
+
+
+def _recording_metadata(can_specs, serial_specs, adapters, info: dict, sigmap: dict | None) -> dict:
+    """The ``vdps.recording`` metadata of a live recording: command, sources, decoding, host."""
+    md = {"mode": "log", "command": "vdps log " + " ".join(
+        [*(f"--can {s}" for s in can_specs), *(f"--serial {s}" for s in serial_specs)]),
+        "sources": {a.name: a.device for a in adapters}, "decoding": info,
+        "host": os.uname().nodename if hasattr(os, "uname") else ""}
+    if sigmap:
+        md["signalmap"] = sigmap
+    return md
+
+
+def _open_writer(output, rotate_mb, rotate_s, adapters, md: dict, hashes: dict):
+    """The recording writer (rotating with ``--rotate-mb/-s``); on failure the devices are
+    closed (UserError)."""
+    from vdps_hil.record.writer import RecordingWriter
+
+    try:
+        if rotate_mb or rotate_s:
+            from vdps_hil.record.rotation import RotatingRecordingWriter
+
+            return RotatingRecordingWriter(
+                output, max_bytes=None if not rotate_mb else int(rotate_mb * 1e6),
+                max_s=rotate_s, metadata=md, content_hashes=hashes)
+        return RecordingWriter(output, metadata=md, content_hashes=hashes)
+    except (OSError, ValueError) as e:
+        for a in adapters:
+            a.close()
+        raise UserError(f"cannot write {output}: {getattr(e, 'strerror', None) or e}") from None
+
+
+def _finish_tap(tap: "PipelineTap", session, summary: dict) -> None:
+    """The pipeline's last outputs and input order (before the writer closes); a failure is one
+    more reader error, the recording is closed properly whatever it does."""
+    try:
+        tap.finish()
+    except Exception as e:  # noqa: BLE001 - the recording is closed properly whatever it does
+        session.errors.append(f"tap: {type(e).__name__}: {e}")
+        summary["reader_errors"] = list(session.errors)
+
+
+def _report(summary: dict, files: list, session, tap, quiet: bool, json_out) -> None:
+    """The closing lines on stderr and the ``--json`` summary."""
     if not quiet:
         eprint(f"vdps log: {summary['written']} messages in {summary['duration_s']:.1f} s to "
                f"{', '.join(files)}; queue overflows {summary['queue_overflow']}")

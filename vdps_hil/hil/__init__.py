@@ -1,15 +1,15 @@
 """Hardware-in-the-loop bench: the simulated vehicle on live CAN and serial wires paced to the
 wall clock, the live VDPS pipeline answering with VDPS_Warning on CAN, a simulated ECU reacting.
 
-* :mod:`.transports` -- the wires: python-can virtual bus, slcan on a pty, socketcand on
-  127.0.0.1, any python-can interface string; serial through pseudo-terminals.
-* :mod:`.pacing` -- the bench clock (simulated time tied to CLOCK_MONOTONIC by ``--speed``),
-  absolute deadlines, late sends.
-* :mod:`.simside` -- the vehicle's side: a ``sim.drive`` session feeding the wires, the ECU.
-* :mod:`.node` -- the pipeline's side: the real adapters, ``VdpsSystem``, warnings back on CAN.
-* :mod:`.ecu` -- the simulated ECU: CRC/counter/timeout checks, torque cut and braking.
-* :mod:`.latency` -- warning latency and lead time, defined once.
-* :mod:`.bench` -- ``Bench(BenchConfig(...)).run()``; :mod:`.child` the pipeline process.
+Data flow. :class:`~vdps_hil.hil.bench.Bench` (``bench``, configured by ``bench_config``) runs a
+drive on the simulator side (``simside``), which sends its CAN frames and serial read chunks at
+their own times, paced by the bench clock (``pacing``), through the wires (``transports``
+chooses them: the CAN device sides of ``can_devices``, the pseudo-terminals and device FIFOs of
+``serial_device``); the pipeline side (``pipelines``: a ``node.PipelineNode`` in this process or
+in the child process ``child``) reads them with the real adapters, feeds ``VdpsSystem`` and
+sends its warning frames back on CAN to the simulated ECU (``ecu``), whose braking acts on the
+simulator; ``latency`` times warnings against the send logs and the truth events, and the bench
+reports what was sent, received, lost and late.
 
 Only ``hil`` and ``cli`` open devices or start threads.
 """

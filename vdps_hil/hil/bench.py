@@ -71,11 +71,9 @@ latency and, once the wires' buffers are full, as lost data.
 from __future__ import annotations
 
 import gc
-import json
 import math
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import threading
@@ -84,139 +82,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
-
 from vdps_hil.adapters.base import AdapterError
 from vdps_hil.record import schemas as S
 from vdps_hil.units import NS_PER_S
 
-from .ecu import ActuatorConfig, Ecu
-from .latency import CycleLog, cycle_latencies, latency_summary, lead_times, reference_events
-from .pacing import DEFAULT_LATE_TOLERANCE_S, BenchClock
-from .transports import PtySerialDevice, parse_transport
+from .bench_config import BenchConfig, BenchError, model_for, start_params
+from .ecu import Ecu
+from .latency import cycle_latencies, latency_summary, lead_times, reference_events
+from .pacing import BenchClock
+from .pipelines import ChildPipeline, LocalPipeline
+from .serial_device import PtySerialDevice
+from .transports import parse_transport
 
-__all__ = ["BenchConfig", "Bench", "BenchResult", "BenchError", "calibrate", "make_system", "model_for", "start_params",
-           "IMU_PACKET_BYTES"]
+__all__ = ["Bench", "BenchResult", "IMU_PACKET_BYTES"]
 
 IMU_PACKET_BYTES = 47
 """Bytes of one simulated Xsens MTData2 packet (``sim.wire``)."""
-
-
-class BenchError(RuntimeError):
-    """The bench could not run (one-line message)."""
-
-
-@dataclass
-class BenchConfig:
-    """What to run (``vdps bench`` options). Times [s]."""
-
-    scenario: str = "fishhook-suv"
-    vehicle: str | None = None
-    model: str | None = None
-    effects: tuple[str, ...] = ()
-    faults: tuple[str, ...] = ()
-    duration_s: float | None = None
-    speed: float = 1.0
-    can: str = "virtual"
-    sim_can: str | None = None
-    react: bool = False
-    output: str | None = None
-    seed: int = 0
-    profile: str | None = None
-    actuator: ActuatorConfig = field(default_factory=ActuatorConfig)
-    block_s: float = 0.01
-    lookahead_s: float = 0.02
-    late_tolerance_s: float = DEFAULT_LATE_TOLERANCE_S
-    drain_timeout_s: float = 3.0
-    max_lag_s: float = 0.25
-    switch_interval_s: float | None = 0.001
-    start_delay_s: float = 0.3
-    params: str | None = None  # saved identified parameters the pipeline starts from (module docstring)
-
-
-def model_for(truth_name: str) -> str:
-    """The model vehicle file paired with a truth file (``suv-truth`` -> ``suv-model``)."""
-    stem = Path(truth_name).name
-    if stem.endswith(".toml"):
-        stem = stem[:-5]
-    if stem.endswith("-truth"):
-        return stem[:-6] + "-model"
-    raise BenchError(f"no model file paired with vehicle {truth_name!r}: give --model FILE")
-
-
-def start_params(model: str, params: str):
-    """The identified parameters saved in ``params`` for the model vehicle file ``model``
-    (``ParamsFileError``, a ValueError, when the file is unusable)."""
-    from vdps_hil.identification.persistence import load_params
-    from vdps_hil.model.params import load_vehicle
-
-    return load_params(params, load_vehicle(model, "model")).params
-
-
-def calibrate(scenario: str, truth_vehicle: str, model: str, directory: str | os.PathLike, *,
-              profile: str | None = None, seed: int = 1000) -> dict:
-    """A calibration drive before the bench, as a car's first drive: the simulator drives
-    ``scenario`` with the bench's truth vehicle, the drive is recorded and replayed through the
-    chain with the identifier (``vdps replay --save-params``), and the identified parameters are
-    saved in ``directory``. Returns {scenario, seed, params (file), converged (per problem),
-    cpu_s}. The chain of the replay reads only the recording's /raw/ topics and the model file."""
-    from vdps_hil.sim.drive import CONFIG_ERRORS, DEFAULT_PROFILE, Drive
-    from vdps_hil.app.replay import ReplayError, replay_file
-
-    d = Path(directory)
-    rec, out = d / f"calibration-{scenario}.mcap", d / f"calibration-{scenario}-params.json"
-    t0 = time.process_time()
-    try:
-        Drive(scenario, profile=profile or DEFAULT_PROFILE, seed=seed, vehicle=truth_vehicle).run(rec)
-        doc = replay_file(rec, vehicle=model, predict=False, save_params=out)
-    except CONFIG_ERRORS + (ReplayError,) as e:
-        raise BenchError(f"--calibrate {scenario}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
-    return {"scenario": scenario, "seed": seed, "params": str(out),
-            "converged": dict(doc["identification"]["converged"]), "cpu_s": time.process_time() - t0}
-
-
-def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: str | None = None):
-    """The VDPS pipeline for the bench: ``VdpsSystem`` with the model vehicle file and the
-    suspension sensor's rate and noise (its data sheet, from the sensor profile; not truth),
-    started from the priors or from a saved parameter file ``params``.
-
-    ``model`` may also be a saved workbench model (``vdps diagnose --save-model``, schema
-    ``vdps-model``): then the vehicle file it names, its identified parameters as the
-    identifier's start and its effects in the chain, as ``vdps replay --model`` (with a
-    parameter file as well: refused)."""
-    from vdps_hil.model.params import load_vehicle
-    from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
-
-    saved = _saved_workbench_model(model)
-    if saved is None:
-        vehicle = load_vehicle(model, "model")
-        start = start_params(model, params) if params is not None else None
-        return VdpsSystem(vehicle, SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=start))
-    if params is not None:
-        raise BenchError("give --params or a saved workbench model as --model (it carries its parameters), not both")
-    from vdps_hil.workbench.model_file import ModelFileError, load_model
-
-    try:
-        vehicle = load_vehicle(saved.vehicle, "model")
-        refined, effects, _ = load_model(model, vehicle)
-    except (ModelFileError, ValueError) as e:
-        raise BenchError(f"--model {model}: {str(e).splitlines()[0]}") from None
-    cfg = SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=refined.params, model_effects=effects)
-    return VdpsSystem(vehicle, cfg)
-
-
-def _saved_workbench_model(path: str):
-    """The parsed workbench model file at ``path``, or None when ``path`` is not one (a vehicle
-    file or name)."""
-    from vdps_hil.workbench.model_file import ModelFileError, read_model
-
-    p = Path(path)
-    if p.suffix.lower() not in (".toml", ".json") or not p.is_file():
-        return None
-    try:
-        return read_model(p)
-    except ModelFileError:
-        return None
 
 
 @dataclass
@@ -287,11 +168,8 @@ class Bench:
             raise BenchError(f"cannot write {c.output}: {e.strerror or e}") from None
 
     def _run(self, status) -> BenchResult:
-        from .simside import SimulatorSide
-
         c = self.config
-        drive = self.drive
-        reference = reference_events(drive) if c.react else None
+        reference = reference_events(self.drive) if c.react else None
         can_dev = self.transport.make()
         serial = {"imu": PtySerialDevice("imu"), "gnss": PtySerialDevice("gnss")}
         writer = None
@@ -305,62 +183,23 @@ class Bench:
                 raise BenchError(str(e)) from None
             clock = BenchClock(c.speed)
             ecu = Ecu(c.actuator, c.react)
-            cross = self.transport.cross_process
-            if cross:
+            if self.transport.cross_process:
                 work = Path(tempfile.mkdtemp(prefix="vdps-bench-"))
-                truth_path = work / "truth.mcap" if c.output else None
-                from vdps_hil.record.writer import RecordingWriter
-
-                writer = (RecordingWriter(truth_path, metadata={"source": "vdps bench"},
-                                          sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS) if truth_path else None)
-            else:
-                writer = self._make_writer()
-            lock = threading.Lock()
-
-            def on_truth(topic, t_ns, doc):
-                if writer is not None:
-                    with lock:
-                        writer.write_truth(topic, t_ns, doc)
-
-            def on_metadata(name, data):
-                if writer is not None:
-                    writer.add_metadata(name, data)
-
-            side = SimulatorSide(drive, can_dev, serial, clock, ecu, lookahead_s=c.lookahead_s,
-                                 late_tolerance_s=c.late_tolerance_s, on_truth=on_truth, on_metadata=on_metadata)
+            writer = self._open_writer(work)
+            side = self._simulator_side(can_dev, serial, clock, ecu, writer)
             side.prepare()
             side.start_receiver()
-            if cross:
-                pipe = _ChildPipeline(self, can_dev, serial, work)
+            if work is not None:
+                pipe = ChildPipeline(self, can_dev, serial, work)
             else:
-                pipe = _LocalPipeline(self, can_dev, serial, clock, writer)
+                pipe = LocalPipeline(self, can_dev, serial, clock, writer)
             pipe.open()
             gc.collect()
             gc.freeze()  # what exists now is never scanned again: no long collections mid-run
             mono0 = time.monotonic_ns() + int(c.start_delay_s * NS_PER_S)
             clock.start(mono0)
             pipe.start(mono0)
-            sim_stop = threading.Event()
-            sim_thread = threading.Thread(target=self._sim_thread, args=(side, sim_stop), name="bench-sim",
-                                          daemon=True)
-            sim_thread.start()
-            t_status = 0.0
-            self.interrupted = False
-            try:
-                while not side.done.wait(0.05):
-                    if status is not None and time.monotonic() - t_status >= 0.25:
-                        t_status = time.monotonic()
-                        status(self._status(side, pipe, clock))
-                    if pipe.failed():
-                        sim_stop.set()
-                        sim_thread.join(timeout=10.0)
-                        raise BenchError(f"pipeline failed: {pipe.error()}")
-            except KeyboardInterrupt:  # Ctrl-C: end the drive here and report what happened so far
-                self.interrupted = True
-                sim_stop.set()
-            sim_thread.join(timeout=10.0)
-            if side.error:
-                raise BenchError(f"simulator side failed: {side.error}")
+            self._drive_until_done(side, pipe, clock, status)
             side.flush()
             self._drain(side, pipe)
             pipe.stop()
@@ -385,6 +224,63 @@ class Bench:
             if work is not None:
                 shutil.rmtree(work, ignore_errors=True)
 
+    def _open_writer(self, work: Path | None):
+        """The recording of ``--output``: the file itself (pipeline in this process), or the
+        truth part in the work directory of a cross-process bench (merged with the child's part
+        at the end, ``ChildPipeline.finish_recording``); None without ``--output``."""
+        if work is None:
+            return self._make_writer()
+        truth_path = work / "truth.mcap" if self.config.output else None
+        from vdps_hil.record.writer import RecordingWriter
+
+        return (RecordingWriter(truth_path, metadata={"source": "vdps bench"},
+                                sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS) if truth_path else None)
+
+    def _simulator_side(self, can_dev, serial, clock, ecu, writer):
+        """The vehicle's side of the wires, its truth and metadata going to ``writer``."""
+        from .simside import SimulatorSide
+
+        c = self.config
+        lock = threading.Lock()
+
+        def on_truth(topic, t_ns, doc):
+            if writer is not None:
+                with lock:
+                    writer.write_truth(topic, t_ns, doc)
+
+        def on_metadata(name, data):
+            if writer is not None:
+                writer.add_metadata(name, data)
+
+        return SimulatorSide(self.drive, can_dev, serial, clock, ecu, lookahead_s=c.lookahead_s,
+                             late_tolerance_s=c.late_tolerance_s, on_truth=on_truth, on_metadata=on_metadata)
+
+    def _drive_until_done(self, side, pipe, clock, status) -> None:
+        """Run the simulator side in its thread until the drive has ended (or Ctrl-C: then
+        ``interrupted``), reporting ``status`` about four times a second; a failed pipeline or
+        simulator side raises BenchError."""
+        sim_stop = threading.Event()
+        sim_thread = threading.Thread(target=self._sim_thread, args=(side, sim_stop), name="bench-sim",
+                                      daemon=True)
+        sim_thread.start()
+        t_status = 0.0
+        self.interrupted = False
+        try:
+            while not side.done.wait(0.05):
+                if status is not None and time.monotonic() - t_status >= 0.25:
+                    t_status = time.monotonic()
+                    status(self._status(side, pipe, clock))
+                if pipe.failed():
+                    sim_stop.set()
+                    sim_thread.join(timeout=10.0)
+                    raise BenchError(f"pipeline failed: {pipe.error()}")
+        except KeyboardInterrupt:  # Ctrl-C: end the drive here and report what happened so far
+            self.interrupted = True
+            sim_stop.set()
+        sim_thread.join(timeout=10.0)
+        if side.error:
+            raise BenchError(f"simulator side failed: {side.error}")
+
     def _sim_thread(self, side, stop) -> None:
         try:
             side.run(stop)
@@ -404,7 +300,7 @@ class Bench:
             if pipe.failed():
                 break
             time.sleep(0.01)
-            side._serve_ecu()
+            side.serve_ecu()
 
     # ------------------------------------------------------------------------------------------
     def _status(self, side, pipe, clock, final: bool = False) -> dict:
@@ -497,218 +393,4 @@ class Bench:
             "output": c.output,
         }
         return BenchResult(doc, frames_on_bus, events)
-
-
-# ---------------------------------------------------------------------------------------------
-# the pipeline in this process or in a child
-# ---------------------------------------------------------------------------------------------
-class _LocalPipeline:
-    def __init__(self, bench: Bench, can_dev, serial, clock, writer):
-        from .node import PipelineNode
-
-        try:
-            sp = bench.drive.profile.suspension
-            system = make_system(bench.model, sp.rate_hz, sp.sigma_m, bench.config.params)
-        except (ValueError, OSError) as e:
-            raise BenchError(str(e).splitlines()[0]) from None
-        self.node = PipelineNode(system, can_dev.pipeline_spec, serial["imu"].port, serial["gnss"].port, clock,
-                                 writer=writer)
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._error = ""
-
-    pid = os.getpid()
-
-    def open(self) -> None:
-        try:
-            self.node.open()
-        except AdapterError as e:
-            raise BenchError(str(e)) from None
-
-    def start(self, mono0: int) -> None:
-        self._thread = threading.Thread(target=self._run, name="bench-pipeline", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        try:
-            self.node.run(self._stop)
-        except Exception as e:  # noqa: BLE001 - reported by the bench
-            self._error = f"{type(e).__name__}: {e}"
-
-    def failed(self) -> bool:
-        return bool(self._error)
-
-    def kill(self) -> None:
-        """Stop the pipeline thread if the bench ends early (an error)."""
-        self._stop.set()
-
-    def error(self) -> str:
-        return self._error
-
-    def received(self) -> dict:
-        return self.node.received_counts()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=30.0)
-        if self._error:
-            raise BenchError(f"pipeline failed: {self._error}")
-
-    def results(self) -> dict:
-        n = self.node
-        return {"cycles": n.cycles, "frames_sent": len(n.frames_sent), "counters": n.counters(),
-                "outputs": dict(n.outputs), "errors": list(n.errors)}
-
-    def finish_recording(self, doc: dict, writer) -> None:
-        self.node.finish_recording({"bench": doc})
-        writer.add_metadata("hil.bench", {"result": json.dumps(S.clean_json(doc), sort_keys=True)})
-
-
-class _ChildPipeline:
-    """The pipeline in ``python -m vdps_hil.hil.child`` (module docstring)."""
-
-    def __init__(self, bench: Bench, can_dev, serial, work: Path):
-        self.bench = bench
-        self.work = work
-        c = bench.config
-        self.part = work / "pipeline.mcap" if c.output else None
-        cmd = [sys.executable, "-m", "vdps_hil.hil.child", "--can-spec", can_dev.pipeline_spec,
-               "--imu-port", serial["imu"].port, "--gnss-port", serial["gnss"].port, "--model", bench.model,
-               "--susp-rate-hz", repr(bench.drive.profile.suspension.rate_hz),
-               "--susp-sigma-m", repr(bench.drive.profile.suspension.sigma_m),
-               "--speed", repr(c.speed), "--work", str(work)]
-        if self.part is not None:
-            cmd += ["--output", str(self.part)]
-        if c.params is not None:
-            cmd += ["--params", str(c.params)]
-        if c.switch_interval_s:
-            cmd += ["--switch-interval", repr(c.switch_interval_s)]
-        env = dict(os.environ)
-        repo = str(Path(__file__).resolve().parents[2])
-        env["PYTHONPATH"] = repo + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        self._err_path = work / "child.err"
-        self._err = open(self._err_path, "w")  # a file, never a pipe that could fill and block the child
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._err,
-                                     env=env, text=True, bufsize=1)
-        self._progress: dict = {}
-        self._lines: list[dict] = []
-        self._ready = threading.Event()
-        self._done = threading.Event()
-        self._reader = threading.Thread(target=self._read, name="bench-child-out", daemon=True)
-        self._reader.start()
-        self.can_dev = can_dev
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def _read(self) -> None:
-        for line in self.proc.stdout:
-            try:
-                doc = json.loads(line)
-            except ValueError:
-                continue
-            if doc.get("ready"):
-                self._ready.set()
-            if "received" in doc:
-                self._progress = doc["received"]
-            if doc.get("done"):
-                self._done.set()
-            self._lines.append(doc)
-        self._ready.set()
-        self._done.set()
-
-    def open(self) -> None:
-        if not self._ready.wait(60.0) or self.proc.poll() is not None:
-            err = self._stderr()
-            raise BenchError(f"pipeline process did not start: {err}")
-        if any(d.get("error") for d in self._lines):
-            raise BenchError(f"pipeline process: {next(d['error'] for d in self._lines if d.get('error'))}")
-
-    def _stderr(self) -> str:
-        try:
-            if self.proc.poll() is None:
-                self.proc.kill()
-                self.proc.wait(10.0)
-            err = self._err_path.read_text(errors="replace")
-        except (OSError, ValueError, subprocess.TimeoutExpired):
-            err = ""
-        lines = [ln for ln in (err or "").strip().splitlines() if ln.strip()]
-        return lines[-1] if lines else f"exit status {self.proc.poll()}"
-
-    def start(self, mono0: int) -> None:
-        self._send(f"go {mono0}")
-
-    def _send(self, text: str) -> None:
-        try:
-            self.proc.stdin.write(text + "\n")
-            self.proc.stdin.flush()
-        except (OSError, ValueError):
-            pass
-
-    def failed(self) -> bool:
-        return self.proc.poll() is not None and not self._done.is_set()
-
-    def error(self) -> str:
-        return self._stderr()
-
-    def kill(self) -> None:
-        """End the child if it is still running (the bench ended early); close its stderr file."""
-        if self.proc.poll() is None:
-            self.proc.kill()
-            try:
-                self.proc.wait(10.0)
-            except subprocess.TimeoutExpired:
-                pass
-        if not self._err.closed:
-            self._err.close()
-
-    def received(self) -> dict:
-        return dict(self._progress)
-
-    def stop(self) -> None:
-        self._send("stop")
-        if not self._done.wait(60.0):
-            self.proc.kill()
-            raise BenchError("pipeline process did not stop")
-        try:
-            self.proc.wait(30.0)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-        self._err.close()
-        if self.proc.returncode != 0:
-            raise BenchError(f"pipeline process failed: {self._stderr()}")
-
-    def results(self) -> dict:
-        d = np.load(self.work / "cycles.npz")
-        doc = json.loads((self.work / "result.json").read_text())
-        err = [ln for ln in self._err_path.read_text(errors="replace").splitlines() if ln.strip()]
-        return {"cycles": CycleLog.from_arrays(d), "frames_sent": doc["frames_sent"], "counters": doc["counters"],
-                "outputs": doc["outputs"], "errors": doc["errors"] + [f"stderr: {ln}" for ln in err[-5:]]}
-
-    def finish_recording(self, doc: dict, writer) -> None:
-        """Merge the child's recording (raw as received, /decoded, /est) with the truth."""
-        from vdps_hil.record.reader import RecordingReader
-        from vdps_hil.record.writer import RecordingWriter
-
-        c = self.bench.config
-        writer.close()
-        out = RecordingWriter(c.output, metadata={"source": "vdps bench"},
-                              content_hashes={"dbc.vdps": self.bench.drive.dbc_path},
-                              sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
-        try:
-            for path in (self.part, writer.path):
-                with RecordingReader(path) as r:
-                    topics = r.topics()
-                    for name, md in r.metadata().items():
-                        if name != S.METADATA_NAME:
-                            out.add_metadata(name, md)
-                    for rec in r.iter_records():
-                        doc_ = json.loads(rec.data)
-                        out.write_json(rec.topic, topics[rec.topic].schema, rec.t_ns, doc_,
-                                       wall_time_ns=rec.log_time_ns, channel_metadata=r.channel_metadata(rec.topic))
-            out.add_metadata("hil.bench", {"result": json.dumps(S.clean_json(doc), sort_keys=True)})
-        finally:
-            out.close()
 

@@ -56,7 +56,7 @@ def main(argv=None) -> int:
     from vdps_hil.record import schemas as S
     from vdps_hil.record.writer import RecordingWriter
 
-    from .bench import make_system
+    from .bench_config import make_system
     from .node import PipelineNode
     from .pacing import BenchClock
 

@@ -13,7 +13,7 @@ Then::
     L_k = t_bus,k - t_in,k                                       [wall ms]
 
     t_in,k   time the simulator put that sensor frame / the chunk's last byte onto its wire
-             (the device side's send log, ``transports.SendLog``; the frame index or byte
+             (the device side's send log, ``serial_device.SendLog``; the frame index or byte
              offset comes from the pipeline's count of what it received, exact when nothing is
              lost)
     t_bus,k  cycles that sent VDPS_Warning: the time the frame was on the bus, i.e. received
@@ -49,7 +49,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .pacing import percentiles_ms
-from .transports import SendLog
+from .serial_device import SendLog
 
 __all__ = ["SOURCES", "CycleLog", "cycle_latencies", "latency_summary", "lead_times",
            "reference_events"]

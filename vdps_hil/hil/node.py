@@ -224,11 +224,11 @@ class PipelineNode:
         self.can = InterfaceTimeCanAdapter(bus, can_spec, decoder=VdpsCanDecoder(source=f"can.{bus}"),
                                            clock=clock, batch=batch)
         if device_time:
-            from vdps_hil.record.decode import (ClockAligner, DeviceStamper, _ImuStream,  # the replay's
-                                                _NmeaStream)  # device clocks
+            from vdps_hil.record.device_clock import ClockAligner, DeviceStamper  # the replay's device clocks
+            from vdps_hil.record.streams import ImuStream, NmeaStream
 
-            imu_stream = _ImuStream("imu", IMU_BAUD, True, imu_rate_hz)
-            gnss_stream = _NmeaStream("gnss", GNSS_BAUD, True)
+            imu_stream = ImuStream("imu", IMU_BAUD, True, imu_rate_hz)
+            gnss_stream = NmeaStream("gnss", GNSS_BAUD, True)
             for st in (imu_stream, gnss_stream):  # live: a host stall is not a device clock step
                 st.stamper = DeviceStamper(ClockAligner(jump_s=LIVE_CLOCK_JUMP_S, confirm_s=0.2))
             self.imu = SerialAdapter("imu", imu_port, IMU_BAUD, DeviceTimeProtocol(imu_stream, ImuProtocol.fmt),

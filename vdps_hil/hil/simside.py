@@ -42,9 +42,10 @@ import numpy as np
 from vdps_hil.sim.drive import Drive, DriveSink
 from vdps_hil.units import NS_PER_S
 
+from .can_devices import CanDeviceSide
 from .ecu import Ecu
 from .pacing import BenchClock, Pacer
-from .transports import CanDeviceSide, PtySerialDevice
+from .serial_device import PtySerialDevice
 
 __all__ = ["LiveSink", "SimulatorSide"]
 
@@ -193,7 +194,7 @@ class SimulatorSide:
             while not session.done and session.t_ns < now + self.lookahead_ns:
                 session.advance((session.t_ns + block_ns) / NS_PER_S)
             self._send_due(clock.now_ns())
-            self._serve_ecu()
+            self.serve_ecu()
             if session.done and sink.empty:
                 break
             nxt = min(sink.next_due_ns(), session.t_ns - self.lookahead_ns if not session.done else math.inf)
@@ -245,7 +246,7 @@ class SimulatorSide:
         for d in self.serial.values():
             d.pump()
 
-    def _serve_ecu(self) -> None:
+    def serve_ecu(self) -> None:
         inbox = self._inbox
         clock, ecu = self.clock, self.ecu
         while inbox:
@@ -264,13 +265,13 @@ class SimulatorSide:
             if all(d.pending_bytes == 0 for d in self.serial.values()):
                 break
             time.sleep(0.001)
-        self._serve_ecu()
+        self.serve_ecu()
 
     def stop_receiver(self) -> None:
         self._rx_stop.set()
         if self._rx_thread is not None:
             self._rx_thread.join(timeout=2.0)
-        self._serve_ecu()
+        self.serve_ecu()
 
     def sent_counts(self) -> dict:
         """What the vehicle put on the wires (and what its device FIFOs dropped)."""

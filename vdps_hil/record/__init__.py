@@ -1,8 +1,15 @@
 """Recordings: one MCAP file per run, JSON channels, raw frames beside decoded values.
 
-The layout (topics, schemas, time stamps, metadata) is documented in
-:mod:`vdps_hil.record.schemas`; :class:`RecordingWriter` writes it and
-:class:`RecordingReader` reads it back in ``t_ns`` order (broken files as far as they go).
+Data flow. Writing: the logger, the importer, the replay and the bench hand messages to
+:class:`RecordingWriter` (``writer``), which encodes them (``payloads``) in the layout of
+``schemas`` (topics, schemas, time stamps, metadata) and appends them to ZSTD chunks
+(``mcap_append``); ``rotation`` starts a new file by size or time. Reading:
+:class:`RecordingReader` (``reader``) indexes the file from its summary or, for a broken file,
+by scanning it (``mcap_file``) and yields messages in ``t_ns`` order across channels;
+``decode`` turns the ``/raw/`` records into bus samples through one decoder per source
+(``streams``) stamped by the devices' own clocks (``device_clock``); ``input_order`` keeps the
+order a live system received its samples; ``recover`` rescues a file cut off by a crash;
+``can_io`` lets python-can read and write ``.mcap``.
 """
 
 from vdps_hil.record.reader import RawRecord, RecordingError, RecordingReader, TopicInfo

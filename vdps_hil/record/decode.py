@@ -21,37 +21,12 @@ Decoders (the project's codecs, the same the live adapters use)
 
 Sample sources: ``can.<bus>`` (CAN), the device name (serial: ``imu``, ``gnss``).
 
-Time stamps from the devices' own clocks (``device_time=True``)
----------------------------------------------------------------
-A serial recording holds read chunks (5 ms windows); the receive-time rule
-(``codecs.framing``) stamps a message by its last byte assuming back-to-back bytes, so the
-packets of one chunk are stamped too close together (an IMU packet takes 0.51 ms on the wire
-at 921600 Bd but is sent every 1 ms) and late by the wire time. Each device's own time -- the
-IMU's SampleTimeFine (10 kHz ticks; the packet counter times a nominal period when absent) and
-the UTC time of day of NMEA sentences -- is mapped onto the host clock::
-
-    d_k      = host time of the start of message k  -  device time of message k
-             = (t_rule,k - T_wire,k) - t_dev,k              T_wire,k = n_k * 10 / baud
-    o_k      = min(o_{k-1} + leak * (t_dev,k - t_dev,k-1),  d_k)       (leaky running minimum)
-    t_k      = t_dev,k + o_k                                  (the sample's t_ns)
-
-The message with the least queueing (the last one of a chunk, the first sentence of a GNSS
-epoch) has d_k = transport latency exactly, so the minimum is the device-to-host offset plus
-the latency and t_k is the device's measurement instant on the host clock, without the chunk
-quantisation. ``leak`` (default 100 ppm, twice a typical crystal tolerance) lets the offset
-follow a device clock that runs slower than the host. The observations of one IMU chunk are
-all taken before any of its packets is stamped. Device times are unwrapped (SampleTimeFine
-modulo 2^32 ticks, packet counter modulo 2^16, UTC modulo one day) by the signed shortest step.
-
-Clock steps: a step of the device clock ahead (d_k drops) by more than ``jump_s`` and a step
-back (d_k rises by more than ``jump_s``) are believed only when they persist for
-``confirm_s`` of device time (then the offset is re-anchored at the least d of that span and
-``clock_jumps`` counts it); a single corrupted time stamp cannot move the offset. Until then
-the old offset is used. A message without a device time (``$GPHDT`` has no UTC) keeps its
-receive-time stamp.
-
-Symbols: t_rule receive-time-rule stamp [ns]; T_wire wire time of the message [ns]; n_k its
-length [bytes]; t_dev device time [ns]; d_k, o_k offsets [ns]; leak [1].
+Time stamps from the devices' own clocks (``device_time=True``, default): each serial device's
+own time (the IMU's SampleTimeFine or packet counter, the UTC time of NMEA sentences) is mapped
+onto the host clock by a leaky running minimum of host minus device time, which removes the
+read-chunk quantisation and the wire time (:mod:`vdps_hil.record.device_clock`); a message
+without a device time keeps its receive-time stamp. The per-source decoders are in
+:mod:`vdps_hil.record.streams`.
 
 Ordering: decoded samples may be stamped earlier than the raw record that carried them (by the
 wire and chunk time, GNSS latency), so they pass a reorder buffer released ``reorder_window_s``
@@ -74,361 +49,25 @@ from __future__ import annotations
 import base64
 import heapq
 import json
-import math
 import os
-import re
-from binascii import unhexlify
 from typing import Callable, Iterator, Mapping
 
 from vdps_hil.bus.samples import Sample
-from vdps_hil.codecs.framing import BITS_PER_BYTE_8N1, LineFramer, transmission_time_ns
-from vdps_hil.codecs.imu_decoder import ImuDecoder
-from vdps_hil.codecs.imu_mtdata2 import IMU_RATE_HZ, NS_PER_FINE_TICK
-from vdps_hil.codecs.nmea.decoder import NmeaDecoder
+from vdps_hil.codecs.imu_mtdata2 import IMU_RATE_HZ
 from vdps_hil.record import schemas as S
 from vdps_hil.record.reader import RawRecord, RecordingReader
+from vdps_hil.record.streams import CanStream, ImuStream, NmeaStream
 
-__all__ = ["ClockAligner", "DeviceStamper", "Unwrapper", "DecodedRecording", "DecodeError", "decode_recording",
-           "raw_copier", "copy_raw_topics", "IMU_FORMATS", "NMEA_FORMATS"]
+__all__ = ["DecodedRecording", "DecodeError", "decode_recording", "raw_copier", "copy_raw_topics", "IMU_FORMATS",
+           "NMEA_FORMATS"]
 
 IMU_FORMATS = ("xsens-mtdata2", "imu")
 NMEA_FORMATS = ("nmea",)
 DEFAULT_NMEA_BAUD = 115_200
-DAY_NS = 86_400 * 1_000_000_000
-_COUNTER_MOD = 1 << 16
 
 
 class DecodeError(ValueError):
     """Decoding cannot start (a bad signal map or DBC, an unreadable file): one line."""
-
-
-class Unwrapper:
-    """Unwraps a counter or clock that wraps modulo ``modulus`` by the signed shortest step
-    (call once per reading, in order)."""
-
-    __slots__ = ("modulus", "_last", "_value")
-
-    def __init__(self, modulus: int):
-        self.modulus = int(modulus)
-        self._last: int | None = None
-        self._value = 0
-
-    def __call__(self, raw: int) -> int:
-        if self._last is None:
-            self._value = raw
-        else:
-            m = self.modulus
-            step = (raw - self._last) % m
-            if step >= m // 2:
-                step -= m
-            self._value += step
-        self._last = raw
-        return self._value
-
-
-class ClockAligner:
-    """Device time -> host time by a leaky running minimum of host - device (module docstring).
-
-    ``observe(host_ns, dev_ns)`` feeds one message (device time already unwrapped);
-    ``to_host(dev_ns)`` stamps one. ``jump_s``/``confirm_s``: a step of the offset larger than
-    ``jump_s`` is believed once it has lasted ``confirm_s`` of device time."""
-
-    __slots__ = ("leak", "jump_ns", "confirm_ns", "offset_ns", "observations", "jumps", "_last_dev",
-                 "_pending")
-
-    def __init__(self, *, leak_ppm: float = 100.0, jump_s: float = 0.02, confirm_s: float = 0.2):
-        if not (leak_ppm >= 0 and jump_s > 0 and confirm_s >= 0):
-            raise ValueError("leak_ppm >= 0, jump_s > 0 and confirm_s >= 0 are required")
-        self.leak = leak_ppm * 1e-6
-        self.jump_ns = int(round(jump_s * 1e9))
-        self.confirm_ns = int(round(confirm_s * 1e9))
-        self.offset_ns: int | None = None
-        self.observations = 0
-        self.jumps = 0
-        self._last_dev: int | None = None
-        self._pending: tuple[int, int, bool] | None = None  # (device time first seen, least d, step up)
-
-    def observe(self, host_ns: int, dev_ns: int) -> str:
-        """Feed one message; returns ``"ok"`` (consistent; a pending step, if any, was not
-        confirmed: those messages were outliers), ``"pending"`` (a step is being watched: hold
-        the message) or ``"jump"`` (a step confirmed: the offset is re-anchored)."""
-        self.observations += 1
-        d = host_ns - dev_ns
-        o = self.offset_ns
-        if o is None:
-            self.offset_ns, self._last_dev = d, dev_ns
-            return "ok"
-        if dev_ns > self._last_dev:
-            o += int(self.leak * (dev_ns - self._last_dev))
-        self._last_dev = dev_ns
-        delta = d - o
-        if -self.jump_ns <= delta <= self.jump_ns:
-            self._pending = None
-            self.offset_ns = o if o < d else d
-            return "ok"
-        # a clock step, a host stall or a corrupt time stamp: believed only if it lasts
-        up = delta > 0
-        p = self._pending
-        self.offset_ns = o
-        if p is None or p[2] != up:
-            self._pending = (dev_ns, d, up)
-            return "pending"
-        least = p[1] if p[1] < d else d
-        if dev_ns - p[0] >= self.confirm_ns:
-            self.offset_ns = least
-            self._pending = None
-            self.jumps += 1
-            return "jump"
-        self._pending = (p[0], least, up)
-        return "pending"
-
-    def to_host(self, dev_ns: int) -> int:
-        return dev_ns + (self.offset_ns or 0)
-
-    def status(self) -> dict:
-        return {"offset_ns": self.offset_ns, "observations": self.observations, "clock_jumps": self.jumps}
-
-
-def _restamp(s: Sample, t_ns: int) -> Sample:
-    return Sample(t_ns, s.source, s.kind, s.fields, s.wall_time_ns, s.valid)  # every field, in order
-
-
-class DeviceStamper:
-    """Stamps messages by a :class:`ClockAligner`: ``stamp([(sample, host_ns, dev_ns), ...])``
-    observes a batch (one read chunk) first and then stamps it, so the batch's least-delayed
-    message sets the offset for all of it. Messages seen while a clock step is pending are held;
-    a confirmed step stamps them with the new offset, an unconfirmed one releases them with
-    their receive-time stamps (``outliers``). ``times``/``release`` do the same for messages of
-    any kind (the caller makes the samples)."""
-
-    __slots__ = ("clock", "held", "outliers")
-
-    def __init__(self, clock: ClockAligner):
-        self.clock = clock
-        self.held: list[tuple[object, int]] = []
-        self.outliers = 0
-
-    def stamp(self, batch) -> list[Sample]:
-        items, times = self.times(batch)
-        return [s if t is None else _restamp(s, t) for s, t in zip(items, times)]
-
-    def times(self, batch) -> tuple[list, list[int | None]]:
-        """``batch``: ``[(message, host_ns, dev_ns), ...]`` -> (messages in output order, their
-        stamps [ns]; None: an outlier, it keeps its receive-time stamp)."""
-        clock = self.clock
-        items: list = []
-        times: list[int | None] = []  # device time until the offset is added (indices in todo)
-        todo: list[int] = []
-        for m, host, dev in batch:
-            before = clock.offset_ns
-            st = clock.observe(host, dev)
-            if st == "pending":
-                self.held.append((m, dev))
-                continue
-            if st == "jump":
-                off = before or 0  # stamped with the offset before the step
-                for i in todo:
-                    times[i] += off
-                todo = []
-                for m0, d0 in self.held:
-                    todo.append(len(items))
-                    items.append(m0)
-                    times.append(d0)
-            elif self.held:  # the step did not last: those were outliers
-                self.outliers += len(self.held)
-                for m0, _ in self.held:
-                    items.append(m0)
-                    times.append(None)
-            self.held = []
-            todo.append(len(items))
-            items.append(m)
-            times.append(dev)
-        off = clock.offset_ns or 0
-        for i in todo:
-            times[i] += off
-        return items, times
-
-    def release(self) -> list:
-        """End of stream: the held messages (an unconfirmed step: outliers, they keep their
-        receive-time stamps)."""
-        held, self.held = self.held, []
-        self.outliers += len(held)
-        return [m for m, _ in held]
-
-    def flush(self) -> list[Sample]:
-        """``release`` of samples."""
-        return self.release()
-
-    def status(self) -> dict:
-        d = self.clock.status()
-        d["outliers"] = self.outliers
-        return d
-
-
-_IMU_PACKET_BYTES = 47  # PacketCounter + SampleTimeFine + float32 acc + gyro (codecs.imu_mtdata2)
-
-
-class _ImuStream:
-    """One MTi device: decoder + clock alignment (module docstring)."""
-
-    def __init__(self, device: str, baud: int, device_time: bool, rate_hz: float):
-        self.device = device
-        self.baud = baud
-        self.dec = ImuDecoder(device, baud=baud)
-        self.device_time = device_time
-        self.stamper = DeviceStamper(ClockAligner(jump_s=0.02, confirm_s=0.2))
-        self.counter_stamper = DeviceStamper(ClockAligner(jump_s=0.02, confirm_s=0.2))
-        self._stf = Unwrapper(1 << 32)
-        self._cnt = Unwrapper(_COUNTER_MOD)
-        self.period_ns = int(round(1e9 / rate_hz))
-        self.wire_ns = transmission_time_ns(_IMU_PACKET_BYTES, baud)
-        self.no_device_time = 0
-
-    def feed(self, t_ns: int, data: bytes | None) -> list[Sample]:
-        dec = self.dec
-        msgs = dec.feed_messages(t_ns, data) if data is not None else dec.flush_messages()
-        if not self.device_time:
-            return dec.samples(msgs)
-        by_stf, by_cnt, plain = [], [], []
-        wire = self.wire_ns
-        for m in msgs:
-            pkt = m[2]
-            if pkt.sample_time_fine is not None:
-                by_stf.append((m, m[0] - wire, self._stf(pkt.sample_time_fine) * NS_PER_FINE_TICK))
-            elif pkt.packet_counter is not None:
-                by_cnt.append((m, m[0] - wire, self._cnt(pkt.packet_counter) * self.period_ns))
-            else:
-                plain.append(m)
-        self.no_device_time += len(plain)
-        res = dec.samples(plain)
-        if by_stf:
-            res += dec.samples(*self.stamper.times(by_stf))
-        if by_cnt:
-            res += dec.samples(*self.counter_stamper.times(by_cnt))
-        if data is None:
-            res += dec.samples(self.stamper.release() + self.counter_stamper.release())
-        return res
-
-    def counters(self) -> dict:
-        return dict(self.dec.counters)
-
-    def clock_status(self) -> dict:
-        d = self.stamper.status()
-        d["no_device_time"] = self.no_device_time
-        if self.counter_stamper.clock.observations:
-            d["counter_clock"] = self.counter_stamper.status()
-        return d
-
-    def rejected(self) -> int:
-        return int(self.dec.counters["rejected"])
-
-
-class _NmeaStream:
-    """One NMEA device: line framer + decoder + UTC alignment (module docstring)."""
-
-    def __init__(self, device: str, baud: int, device_time: bool):
-        self.device = device
-        self.baud = baud
-        self.framer = LineFramer(baud)
-        self.dec = NmeaDecoder(device)
-        self.device_time = device_time
-        self.stamper = DeviceStamper(ClockAligner(jump_s=0.1, confirm_s=0.4))
-        self._utc = Unwrapper(DAY_NS)
-        self.byte_ns = BITS_PER_BYTE_8N1 * 1e9 / baud
-        self.no_device_time = 0
-
-    def feed(self, t_ns: int, data: bytes | None) -> list[Sample]:
-        if data is None:
-            self.framer.flush()  # a partial line at the end is not a sentence
-            return self.stamper.flush()
-        out = []
-        for t_line, line in self.framer.feed(t_ns, data):
-            got = self.dec.feed_line(t_line, line)
-            if not got:
-                continue
-            s = got[0]
-            utc = self.dec.last.utc_time_s if self.dec.last is not None else None
-            if not self.device_time:
-                out.append(s)
-            elif utc is None or not math.isfinite(utc):
-                self.no_device_time += 1
-                out.append(s)
-            else:
-                n = len(line) + 2 - self.dec.last.skipped_prefix  # the sentence + CR LF on the wire
-                t_start = t_line - int(round(n * self.byte_ns))
-                out += self.stamper.stamp(((s, t_start, self._utc(int(round(utc * 1e9)))),))
-        return out
-
-    def counters(self) -> dict:
-        d = dict(self.dec.counters)
-        d.update({f"framer_{k}": v for k, v in self.framer.counters.items()})
-        return d
-
-    def clock_status(self) -> dict:
-        d = self.stamper.status()
-        d["no_device_time"] = self.no_device_time
-        return d
-
-    def rejected(self) -> int:
-        return int(self.dec.counters["rejected"]) + int(self.framer.counters["overflows"])
-
-
-_FAST_CAN = re.compile(rb'"arbitration_id":(\d+),"is_extended_id":(true|false),"is_fd":false,'
-                       rb'"is_remote_frame":false,"is_error_frame":false,"dlc":\d+,"data_hex":"([0-9a-f]*)"')
-"""The raw CAN document as ``RecordingWriter`` writes a classic data frame (fixed key order):
-read without building a dict; anything else goes through ``json.loads``."""
-
-
-class _CanStream:
-    def __init__(self, bus: str, decoder, info: dict):
-        self.bus = bus
-        self.dec = decoder
-        self._decode_frame = getattr(decoder, "decode_frame", decoder.decode)  # typed fields: no conversions
-        self.info = info
-        self.malformed = 0
-
-    def feed_raw(self, t_ns: int, data: bytes) -> list[Sample]:
-        m = _FAST_CAN.search(data)
-        if m is not None:
-            aid, ext, hx = m.groups()
-            try:
-                payload = unhexlify(hx)
-            except ValueError:  # binascii.Error: odd length
-                payload = None
-            if payload is not None:
-                return self._decode_frame(t_ns, int(aid), payload, ext == b"true")
-        try:
-            doc = json.loads(data)
-        except ValueError:
-            self.malformed += 1
-            return []
-        return self.feed(t_ns, doc)
-
-    def feed(self, t_ns: int, doc) -> list[Sample]:
-        try:
-            if doc["is_error_frame"] or doc["is_remote_frame"]:
-                self.malformed += 1
-                return []
-            data = bytes.fromhex(doc["data_hex"])
-            return self.dec.decode(t_ns, doc["arbitration_id"], data, bool(doc["is_extended_id"]))
-        except (KeyError, TypeError, ValueError):
-            self.malformed += 1
-            return []
-
-    def counters(self) -> dict:
-        c = self.dec.counters
-        out = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in c.items()}
-        out["raw_malformed"] = self.malformed
-        return out
-
-    def rejected(self) -> int:
-        n = self.malformed
-        tr = getattr(self.dec, "total_rejected", None)
-        if tr is not None:
-            return n + int(tr)
-        c = self.dec.counters
-        return n + sum(int(c.get(k, 0)) for k in ("undecodable", "checksum_mismatch", "counter_jump",
-                                                   "dlc_mismatch", "missing_signal"))
 
 
 class DecodedRecording:
@@ -469,7 +108,7 @@ class DecodedRecording:
         self._window_ns = int(round(reorder_window_s * 1e9))
         self._imu_rate = float(imu_rate_hz)
         self._raw_sink = raw_sink
-        self._can: dict[str, _CanStream | None] = {}
+        self._can: dict[str, CanStream | None] = {}
         self._serial: dict[str, object | None] = {}
         self._undecoded: dict[str, int] = {}
         self._late = 0
@@ -491,7 +130,7 @@ class DecodedRecording:
             self.reader.close()
 
     # ---------------------------------------------------------------- setup per source
-    def _can_stream(self, bus: str) -> _CanStream | None:
+    def _can_stream(self, bus: str) -> CanStream | None:
         if bus in self._can:
             return self._can[bus]
         from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
@@ -513,7 +152,7 @@ class DecodedRecording:
         if dec is not None:
             info["decoded"] = True
         self.decoding[f"can.{bus}"] = info
-        st = _CanStream(bus, dec, info) if dec is not None else None
+        st = CanStream(bus, dec, info) if dec is not None else None
         self._can[bus] = st
         return st
 
@@ -528,9 +167,9 @@ class DecodedRecording:
         if f in IMU_FORMATS:
             from vdps_hil.codecs.imu_mtdata2 import DEFAULT_BAUD as IMU_BAUD
 
-            st = _ImuStream(device, baud or IMU_BAUD, self.device_time, self._imu_rate)
+            st = ImuStream(device, baud or IMU_BAUD, self.device_time, self._imu_rate)
         elif f in NMEA_FORMATS:
-            st = _NmeaStream(device, baud or DEFAULT_NMEA_BAUD, self.device_time)
+            st = NmeaStream(device, baud or DEFAULT_NMEA_BAUD, self.device_time)
         self.decoding[f"serial.{device}"] = ({"decoded": True, "format": f, "baud": st.baud} if st else
                                              {"decoded": False, "reason": f"unknown serial format {fmt!r}"})
         self._serial[device] = st

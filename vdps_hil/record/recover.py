@@ -143,19 +143,9 @@ def _chunk_records(chunk: Chunk) -> list:
 def recover(src: str | os.PathLike | IO[bytes], dst: str | os.PathLike) -> dict:
     """Copy every complete record of ``src`` into a new closed MCAP ``dst``; returns a report.
     Raises RecoverError (one line) when ``src`` is not an MCAP file at all."""
-    if hasattr(src, "read"):
-        f, owns, name = src, False, getattr(src, "name", "<stream>")
-    else:
-        name = os.fspath(src)
-        try:
-            f, owns = open(name, "rb"), True
-        except OSError as e:
-            raise RecoverError(f"cannot open {name}: {e.strerror or e}") from None
+    f, owns, name = _open_source(src)
     try:
-        size = os.fstat(f.fileno()).st_size if hasattr(f, "fileno") else None
-    except (OSError, io.UnsupportedOperation):
-        size = None
-    try:
+        size = _size_of(f)
         if f.read(len(MAGIC)) != MAGIC:
             raise RecoverError(f"{name} is not an MCAP recording (bad magic)")
         if os.path.abspath(os.fspath(dst)) == os.path.abspath(name):
@@ -171,94 +161,129 @@ def recover(src: str | os.PathLike | IO[bytes], dst: str | os.PathLike) -> dict:
             w = Writer(out_f, compression=CompressionType.ZSTD, index_types=IndexType.ALL,
                        repeat_channels=True, repeat_schemas=True, use_chunking=True,
                        use_statistics=True, use_summary_offsets=True, enable_crcs=True)
-            started = False
             cp = _Copier(w)
-            offset = len(MAGIC)
-            while True:
-                head = f.read(_HEAD.size)
-                if len(head) < _HEAD.size:
-                    report["stop"] = ("end of file" if not head else
-                                      f"cut inside a record header at byte {offset}")
-                    break
-                op, length = _HEAD.unpack(head)
-                if length > _MAX_RECORD or (size is not None and
-                                            offset + _HEAD.size + length > size):
-                    report["stop"] = f"cut inside a record (opcode {op}) at byte {offset}"
-                    break
-                body = f.read(length)
-                if len(body) < length:
-                    report["stop"] = f"cut inside a record (opcode {op}) at byte {offset}"
-                    break
-                rec_offset = offset
-                offset += _HEAD.size + length
-                if op == Opcode.HEADER and not started:
-                    try:
-                        h = Header.read(ReadDataStream(io.BytesIO(body)))
-                        w.start(profile=h.profile, library=f"vdps-hil recover ({h.library})")
-                    except Exception:  # noqa: BLE001
-                        w.start(profile="", library="vdps-hil recover")
-                    started = True
-                    report["complete_bytes"] = offset
-                    continue
-                if not started:
-                    w.start(profile="", library="vdps-hil recover")
-                    started = True
-                if op == Opcode.DATA_END or op == Opcode.FOOTER:
-                    report["properly_closed"] = True
-                    report["stop"] = "end of data section"
-                    report["complete_bytes"] = offset
-                    break
-                try:
-                    stream = ReadDataStream(io.BytesIO(body))
-                    if op == Opcode.CHUNK:
-                        try:
-                            records = _chunk_records(Chunk.read(stream))
-                        except Exception as e:  # noqa: BLE001 - damaged chunk: skip it
-                            report["chunks_damaged"] += 1
-                            if len(report["damaged"]) < 20:
-                                report["damaged"].append(f"chunk at byte {rec_offset}: "
-                                                         f"{_one_line(e)}")
-                            report["complete_bytes"] = offset
-                            continue
-                        for r in records:
-                            if isinstance(r, Schema):
-                                cp.schema(r)
-                            elif isinstance(r, Channel):
-                                cp.channel(r)
-                            else:
-                                cp.message(r)
-                        report["chunks_ok"] += 1
-                    elif op == Opcode.SCHEMA:
-                        cp.schema(Schema.read(stream))
-                    elif op == Opcode.CHANNEL:
-                        cp.channel(Channel.read(stream))
-                    elif op == Opcode.MESSAGE:
-                        cp.message(Message.read(stream, length))
-                    elif op == Opcode.METADATA:
-                        md = Metadata.read(stream)
-                        w.add_metadata(md.name, dict(md.metadata))
-                        report["metadata_records"] += 1
-                    elif op == Opcode.ATTACHMENT:
-                        a = Attachment.read(stream)
-                        w.add_attachment(a.create_time, a.log_time, a.name, a.media_type,
-                                         bytes(a.data))
-                        report["attachments"] += 1
-                    # message indexes, chunk indexes and the like are rebuilt by the writer
-                except Exception as e:  # noqa: BLE001 - a damaged record: skip it
-                    if len(report["damaged"]) < 20:
-                        report["damaged"].append(f"record {op} at byte {rec_offset}: "
-                                                 f"{_one_line(e)}")
-                report["complete_bytes"] = offset
-            if not started:
+            if not _copy_records(f, size, w, cp, report):
                 w.start(profile="", library="vdps-hil recover")
-            report["messages"] = sum(cp.messages_by_topic.values())
-            report["topics"] = dict(sorted(cp.messages_by_topic.items()))
-            report["last_t_ns"] = dict(sorted(cp.last_t_ns.items()))
-            report["orphan_messages"] = cp.orphans
-            w.add_metadata(RECOVER_METADATA, {k: v if isinstance(v, str) else json.dumps(v)
-                                              for k, v in report.items()})
-            w.finish()
+            _finish(w, cp, report)
         return report
     finally:
         if owns:
             f.close()
+
+
+def _open_source(src: str | os.PathLike | IO[bytes]) -> tuple[IO[bytes], bool, str]:
+    """(file, whether we opened it, its name)."""
+    if hasattr(src, "read"):
+        return src, False, getattr(src, "name", "<stream>")
+    name = os.fspath(src)
+    try:
+        return open(name, "rb"), True, name
+    except OSError as e:
+        raise RecoverError(f"cannot open {name}: {e.strerror or e}") from None
+
+
+def _size_of(f: IO[bytes]) -> int | None:
+    try:
+        return os.fstat(f.fileno()).st_size if hasattr(f, "fileno") else None
+    except (OSError, io.UnsupportedOperation):
+        return None
+
+
+def _copy_records(f: IO[bytes], size: int | None, w: Writer, cp: _Copier, report: dict) -> bool:
+    """Walk the records after the magic until the cut or the end of the data section, copying
+    each complete one (``report`` updated); returns whether the output writer was started."""
+    started = False
+    offset = len(MAGIC)
+    while True:
+        head = f.read(_HEAD.size)
+        if len(head) < _HEAD.size:
+            report["stop"] = ("end of file" if not head else
+                              f"cut inside a record header at byte {offset}")
+            break
+        op, length = _HEAD.unpack(head)
+        if length > _MAX_RECORD or (size is not None and
+                                    offset + _HEAD.size + length > size):
+            report["stop"] = f"cut inside a record (opcode {op}) at byte {offset}"
+            break
+        body = f.read(length)
+        if len(body) < length:
+            report["stop"] = f"cut inside a record (opcode {op}) at byte {offset}"
+            break
+        rec_offset = offset
+        offset += _HEAD.size + length
+        if op == Opcode.HEADER and not started:
+            try:
+                h = Header.read(ReadDataStream(io.BytesIO(body)))
+                w.start(profile=h.profile, library=f"vdps-hil recover ({h.library})")
+            except Exception:  # noqa: BLE001
+                w.start(profile="", library="vdps-hil recover")
+            started = True
+            report["complete_bytes"] = offset
+            continue
+        if not started:
+            w.start(profile="", library="vdps-hil recover")
+            started = True
+        if op == Opcode.DATA_END or op == Opcode.FOOTER:
+            report["properly_closed"] = True
+            report["stop"] = "end of data section"
+            report["complete_bytes"] = offset
+            break
+        _copy_record(op, body, length, rec_offset, w, cp, report)
+        report["complete_bytes"] = offset
+    return started
+
+
+def _copy_record(op: int, body: bytes, length: int, rec_offset: int, w: Writer, cp: _Copier,
+                 report: dict) -> None:
+    """One complete record of the data section into the output; a damaged one is skipped and
+    noted in ``report``."""
+    try:
+        stream = ReadDataStream(io.BytesIO(body))
+        if op == Opcode.CHUNK:
+            try:
+                records = _chunk_records(Chunk.read(stream))
+            except Exception as e:  # noqa: BLE001 - damaged chunk: skip it
+                report["chunks_damaged"] += 1
+                if len(report["damaged"]) < 20:
+                    report["damaged"].append(f"chunk at byte {rec_offset}: "
+                                             f"{_one_line(e)}")
+                return
+            for r in records:
+                if isinstance(r, Schema):
+                    cp.schema(r)
+                elif isinstance(r, Channel):
+                    cp.channel(r)
+                else:
+                    cp.message(r)
+            report["chunks_ok"] += 1
+        elif op == Opcode.SCHEMA:
+            cp.schema(Schema.read(stream))
+        elif op == Opcode.CHANNEL:
+            cp.channel(Channel.read(stream))
+        elif op == Opcode.MESSAGE:
+            cp.message(Message.read(stream, length))
+        elif op == Opcode.METADATA:
+            md = Metadata.read(stream)
+            w.add_metadata(md.name, dict(md.metadata))
+            report["metadata_records"] += 1
+        elif op == Opcode.ATTACHMENT:
+            a = Attachment.read(stream)
+            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type,
+                             bytes(a.data))
+            report["attachments"] += 1
+        # message indexes, chunk indexes and the like are rebuilt by the writer
+    except Exception as e:  # noqa: BLE001 - a damaged record: skip it
+        if len(report["damaged"]) < 20:
+            report["damaged"].append(f"record {op} at byte {rec_offset}: "
+                                     f"{_one_line(e)}")
+
+
+def _finish(w: Writer, cp: _Copier, report: dict) -> None:
+    """The report's totals, the ``vdps.recover`` metadata record, the summary and footer."""
+    report["messages"] = sum(cp.messages_by_topic.values())
+    report["topics"] = dict(sorted(cp.messages_by_topic.items()))
+    report["last_t_ns"] = dict(sorted(cp.last_t_ns.items()))
+    report["orphan_messages"] = cp.orphans
+    w.add_metadata(RECOVER_METADATA, {k: v if isinstance(v, str) else json.dumps(v)
+                                      for k, v in report.items()})
+    w.finish()

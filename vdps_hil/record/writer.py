@@ -19,34 +19,31 @@ goes through :meth:`RecordingWriter.write_json` / ``_write``, except messages co
 another recording (:meth:`RecordingWriter.copier`: queued, then written in runs per
 channel); per-file state (channels, schemas, the mcap writer) lives in ``_open_file`` /
 ``_finish_file``, so a rotating writer closes one file and opens the next with the same
-metadata.
+metadata. The message bytes come from :mod:`vdps_hil.record.payloads` and are appended to the
+chunk in progress by :mod:`vdps_hil.record.mcap_append`.
 
 The writer is safe to share between threads (one lock around each message).
 """
 
 from __future__ import annotations
 
-import bisect
-import io
 import json
 import operator
 import os
-import struct
 import threading
 import time
 from dataclasses import dataclass, field
-from itertools import accumulate, chain, repeat
-from typing import IO, Any, Callable, Mapping, Sequence
+from typing import IO, Any, Callable, Mapping
 
-from mcap.opcode import Opcode
-from mcap.records import MessageIndex
 from mcap.writer import CompressionType, IndexType, Writer
 from mcap.writer import LIBRARY_IDENTIFIER as _MCAP_LIBRARY
 
 from vdps_hil import __version__ as _TOOL_VERSION
 from vdps_hil.record import schemas as S
+from vdps_hil.record.mcap_append import MessageAppender
+from vdps_hil.record.payloads import estimate_payload, estimate_topic, json_payload
 
-__all__ = ["RecordingWriter", "WriterStats", "estimate_payload", "estimate_topic", "json_payload"]
+__all__ = ["RecordingWriter", "WriterStats"]
 
 _RESERVED_KEYS = ("layout_version", "tool", "tool_version", "mcap_library", "log_time",
                   "publish_time", "sim_epoch_ns", "message_encoding")
@@ -88,178 +85,6 @@ class WriterStats:
     @property
     def total(self) -> int:
         return sum(self.messages.values())
-
-
-_MESSAGE_RECORD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log_time, publish_time
-_MESSAGE_RECORD_BYTES = _MESSAGE_RECORD.size  # 31: record header (9) + message header (22)
-
-
-class _MessageAppender:
-    """Appends message records to the chunk in progress of an mcap ``Writer`` without the
-    library's per-message objects (a Message dataclass, eight small writes and a seek back per
-    record: about 5 us, the largest share of copying a replay's raw topics). Same bytes,
-    statistics, message indexes and chunk boundaries as ``Writer.add_message`` called once per
-    message (``tests/test_writer.py`` compares the files).
-
-    ``add`` writes one message; ``add_run`` a run of messages of one channel with one pack and
-    one write per run piece: the run is cut where the library would close the chunk (after the
-    message that takes the chunk past ``chunk_size``)."""
-
-    def __init__(self, stats, chunk_builder, record_writer, maybe_finalize, chunk_size: int):
-        self._st, self._cb, self._rw = stats, chunk_builder, record_writer
-        self._finalize = maybe_finalize
-        self._chunk_size = chunk_size
-
-    @classmethod
-    def attach(cls, mcap_writer) -> "_MessageAppender | None":
-        """The appender of ``mcap_writer``, or None when the mcap library's internals are not
-        the ones this was written against (then the library's own add_message is used)."""
-        st = getattr(mcap_writer, "_Writer__statistics", None)
-        cb = getattr(mcap_writer, "_Writer__chunk_builder", None)
-        finalize = getattr(mcap_writer, "_Writer__maybe_finalize_chunk", None)
-        chunk_size = getattr(mcap_writer, "_Writer__chunk_size", None)
-        rw = getattr(cb, "record_writer", None)
-        if st is None or cb is None or finalize is None or type(chunk_size) is not int \
-                or not isinstance(getattr(rw, "_buffer", None), io.BytesIO) \
-                or not all(hasattr(cb, a) for a in ("num_messages", "message_start_time", "message_end_time",
-                                                     "message_indices")) \
-                or not all(hasattr(st, a) for a in ("message_count", "message_start_time", "message_end_time",
-                                                     "channel_message_counts")):
-            return None
-        return cls(st, cb, rw, finalize, chunk_size)
-
-    def _account(self, channel_id: int, n: int, t_min: int, t_max: int):
-        """Statistics and chunk times of ``n`` messages with log times in [t_min, t_max]; the
-        channel's message index of the chunk in progress."""
-        st, cb = self._st, self._cb
-        if st.message_count == 0 or t_min < st.message_start_time:
-            st.message_start_time = t_min
-        if t_max > st.message_end_time:
-            st.message_end_time = t_max
-        st.channel_message_counts[channel_id] += n
-        st.message_count += n
-        if cb.num_messages == 0 or t_min < cb.message_start_time:
-            cb.message_start_time = t_min
-        if t_max > cb.message_end_time:
-            cb.message_end_time = t_max
-        cb.num_messages += n
-        mi = cb.message_indices.get(channel_id)
-        if mi is None:
-            mi = cb.message_indices[channel_id] = _MessageIndex(channel_id=channel_id, records=[])
-        return mi.records
-
-    def add(self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0) -> None:
-        """``Writer.add_message`` (same signature)."""
-        index = self._account(channel_id, 1, log_time, log_time)
-        buf = self._rw._buffer
-        index.append((log_time, buf.tell()))
-        buf.write(_MESSAGE_RECORD.pack(0x05, 22 + len(data), channel_id, sequence, log_time, publish_time))
-        buf.write(data)
-        self._finalize()
-
-    def add_run(self, channel_id: int, sequence: int, log_times: Sequence[int], payloads: Sequence[bytes],
-                publish_times: Sequence[int]) -> None:
-        """Messages ``k = 0..n-1`` of one channel with sequence numbers ``sequence + k`` (the
-        caller keeps them below 2^32), as ``add`` once per message in that order."""
-        n = len(payloads)
-        ends = list(accumulate(map(_MESSAGE_RECORD_BYTES.__add__, map(len, payloads))))  # run offsets
-        headers = list(map(_MESSAGE_RECORD.pack, repeat(0x05), map((22).__add__, map(len, payloads)),
-                           repeat(channel_id), range(sequence, sequence + n), log_times, publish_times))
-        i = 0
-        while i < n:
-            base = ends[i - 1] if i else 0  # run offset of message i
-            start = self._rw._buffer.tell()  # its offset in the chunk
-            # the chunk closes after the first message ending past chunk_size
-            k = min(bisect.bisect_right(ends, self._chunk_size - start + base, i) + 1, n)
-            piece = log_times[i:k]
-            index = self._account(channel_id, k - i, min(piece), max(piece))
-            index.extend(zip(piece, map((start - base).__add__, chain((base,), ends[i:k - 1]))))
-            self._rw._buffer.writelines(chain.from_iterable(zip(headers[i:k], payloads[i:k])))
-            self._finalize()
-            i = k
-
-
-class _MessageIndex(MessageIndex):
-    """Written with one pack of all its (log_time, offset) pairs instead of two calls each."""
-
-    def write(self, stream) -> None:
-        recs = self.records
-        stream.start_record(Opcode.MESSAGE_INDEX)
-        stream.write2(self.channel_id)
-        stream.write4(len(recs) * 16)
-        stream.write(struct.pack(f"<{2 * len(recs)}Q", *chain.from_iterable(recs)))
-        stream.finish_record()
-
-
-_JSON_KEYS: dict[str, str] = {}
-
-
-def _float_object(d: Mapping[str, Any]) -> str | None:
-    """The compact JSON object ``json.dumps(clean_json(dict(d)), separators=(",", ":"))`` of a
-    flat mapping of str keys to plain floats (non-finite -> null; json writes a float with
-    ``float.__repr__``), or None when some key or value is of another type (the caller then
-    takes the general path)."""
-    parts = []
-    keys = _JSON_KEYS
-    rep = float.__repr__
-    for k, v in d.items():
-        if type(v) is not float or type(k) is not str:
-            return None
-        q = keys.get(k)
-        if q is None:
-            if len(keys) > 4096:
-                keys.clear()
-            q = keys[k] = json.dumps(k) + ":"
-        parts.append(q + (rep(v) if v - v == 0.0 else "null"))
-    return "{" + ",".join(parts) + "}"
-
-
-def _clean_flat(d: Mapping[str, Any]) -> dict:
-    """``schemas.clean_json(dict(d))`` for a flat mapping, without recursion for plain floats."""
-    out = {}
-    for k, v in d.items():
-        out[str(k)] = (v if v - v == 0.0 else None) if type(v) is float else S.clean_json(v)
-    return out
-
-
-def json_payload(topic: str, schema_name: str, t_ns: int, doc: Mapping[str, Any]) -> bytes:
-    """The bytes ``RecordingWriter.write_json`` writes for ``doc`` (topic, time and schema
-    checked; ``t_ns`` added when the schema has it; non-finite floats -> null)."""
-    S.check_topic(topic)
-    S.check_time_ns("t_ns", t_ns)
-    if schema_name not in S.SCHEMAS:
-        raise KeyError(f"unknown schema {schema_name!r}; register it with "
-                       "vdps_hil.record.schemas.register_schema()")
-    doc = S.clean_json(dict(doc))
-    if "t_ns" in S.SCHEMAS[schema_name].get("properties", {}):
-        if doc.setdefault("t_ns", t_ns) != t_ns:
-            raise ValueError(f"doc t_ns {doc['t_ns']} differs from t_ns {t_ns}")
-    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
-
-
-def estimate_topic(topic: str) -> str:
-    """The absolute, checked topic of an estimate (``"ekf"`` -> ``/est/ekf``)."""
-    if not topic.startswith("/"):
-        topic = S.EST_PREFIX + topic
-    if not S.check_topic(topic).startswith(S.EST_PREFIX):
-        raise ValueError(f"estimate topic must be under {S.EST_PREFIX}: {topic}")
-    return topic
-
-
-def estimate_payload(t_ns: int, values: Mapping[str, float], sigmas: Mapping[str, float] | None = None) -> bytes:
-    """The bytes of an estimate message (schema ``ESTIMATE``): = ``json_payload`` of
-    ``{"t_ns", "values", "sigmas"}``, written directly when every value is a plain float (a
-    replay writes thousands of these per second)."""
-    S.check_time_ns("t_ns", t_ns)
-    v = _float_object(values)
-    sg = "" if sigmas is None else _float_object(sigmas)
-    if v is not None and sg is not None:
-        return (f'{{"t_ns":{int(t_ns)},"values":{v}' + (f',"sigmas":{sg}}}' if sigmas is not None else "}")
-                ).encode()
-    doc = {"t_ns": t_ns, "values": _clean_flat(values)}
-    if sigmas is not None:
-        doc["sigmas"] = _clean_flat(sigmas)
-    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
 
 
 class RecordingWriter:
@@ -324,7 +149,7 @@ class RecordingWriter:
                             use_statistics=True, use_summary_offsets=True, enable_crcs=True)
         self._channels: dict[str, _Channel] = {}
         self._schema_ids: dict[str, int] = {}
-        self._appender = _MessageAppender.attach(self._mcap)
+        self._appender = MessageAppender.attach(self._mcap)
         self._add_message = self._mcap.add_message if self._appender is None else self._appender.add
         self._copies: dict[str, _CopyRun | None] = {}  # copies not written yet per topic (None: not copied)
         self._copies_queued = 0
@@ -398,7 +223,7 @@ class RecordingWriter:
 
         The same messages as ``_write`` gives (statistics, sequence numbers, time-order counts),
         written later: copies are queued and written in runs of one channel each (one pack and
-        one write per run, see ``_MessageAppender.add_run``) when ``_COPY_QUEUE`` messages are
+        one write per run, see ``MessageAppender.add_run``) when ``_COPY_QUEUE`` messages are
         queued over all topics, when a copied topic is written directly, and at ``flush`` /
         ``close`` (``stats`` counts them then). A file therefore holds a topic's copies up to
         ``_COPY_QUEUE`` messages after the messages written directly next to them (in ``t_ns``
@@ -474,9 +299,10 @@ class RecordingWriter:
 
     def write_encoded(self, topic: str, schema_name: str, t_ns: int, payload: bytes, *,
                       wall_time_ns: int | None = None, channel_metadata: Mapping[str, str] | None = None) -> None:
-        """Write a message already encoded by :func:`json_payload` or :func:`estimate_payload`
-        (elsewhere, e.g. in the other process of ``vdps replay --jobs 2``): the topic, schema
-        and time are checked as ``write_json`` checks them; the payload must be bytes."""
+        """Write a message already encoded by :func:`~vdps_hil.record.payloads.json_payload` or
+        :func:`~vdps_hil.record.payloads.estimate_payload` (elsewhere, e.g. in the other process
+        of ``vdps replay --jobs 2``): the topic, schema and time are checked as ``write_json``
+        checks them; the payload must be bytes."""
         S.check_topic(topic)
         S.check_time_ns("t_ns", t_ns)
         if schema_name not in S.SCHEMAS:

@@ -1,0 +1,134 @@
+"""What the bench runs and the pipeline it builds: :class:`BenchConfig` (the ``vdps bench``
+options), the model vehicle file paired with a truth file, saved start parameters, the bench's
+``VdpsSystem`` (:func:`make_system`, also in the pipeline process ``hil.child``) and the
+calibration drive before a bench run (:func:`calibrate`)."""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .ecu import ActuatorConfig
+from .pacing import DEFAULT_LATE_TOLERANCE_S
+
+__all__ = ["BenchConfig", "BenchError", "calibrate", "make_system", "model_for", "start_params"]
+
+
+class BenchError(RuntimeError):
+    """The bench could not run (one-line message)."""
+
+
+@dataclass
+class BenchConfig:
+    """What to run (``vdps bench`` options). Times [s]."""
+
+    scenario: str = "fishhook-suv"
+    vehicle: str | None = None
+    model: str | None = None
+    effects: tuple[str, ...] = ()
+    faults: tuple[str, ...] = ()
+    duration_s: float | None = None
+    speed: float = 1.0
+    can: str = "virtual"
+    sim_can: str | None = None
+    react: bool = False
+    output: str | None = None
+    seed: int = 0
+    profile: str | None = None
+    actuator: ActuatorConfig = field(default_factory=ActuatorConfig)
+    block_s: float = 0.01
+    lookahead_s: float = 0.02
+    late_tolerance_s: float = DEFAULT_LATE_TOLERANCE_S
+    drain_timeout_s: float = 3.0
+    max_lag_s: float = 0.25
+    switch_interval_s: float | None = 0.001
+    start_delay_s: float = 0.3
+    params: str | None = None  # saved identified parameters the pipeline starts from (``hil.bench`` docstring)
+
+
+def model_for(truth_name: str) -> str:
+    """The model vehicle file paired with a truth file (``suv-truth`` -> ``suv-model``)."""
+    stem = Path(truth_name).name
+    if stem.endswith(".toml"):
+        stem = stem[:-5]
+    if stem.endswith("-truth"):
+        return stem[:-6] + "-model"
+    raise BenchError(f"no model file paired with vehicle {truth_name!r}: give --model FILE")
+
+
+def start_params(model: str, params: str):
+    """The identified parameters saved in ``params`` for the model vehicle file ``model``
+    (``ParamsFileError``, a ValueError, when the file is unusable)."""
+    from vdps_hil.identification.persistence import load_params
+    from vdps_hil.model.params import load_vehicle
+
+    return load_params(params, load_vehicle(model, "model")).params
+
+
+def calibrate(scenario: str, truth_vehicle: str, model: str, directory: str | os.PathLike, *,
+              profile: str | None = None, seed: int = 1000) -> dict:
+    """A calibration drive before the bench, as a car's first drive: the simulator drives
+    ``scenario`` with the bench's truth vehicle, the drive is recorded and replayed through the
+    chain with the identifier (``vdps replay --save-params``), and the identified parameters are
+    saved in ``directory``. Returns {scenario, seed, params (file), converged (per problem),
+    cpu_s}. The chain of the replay reads only the recording's /raw/ topics and the model file."""
+    from vdps_hil.sim.drive import CONFIG_ERRORS, DEFAULT_PROFILE, Drive
+    from vdps_hil.app.replay import ReplayError, replay_file
+
+    d = Path(directory)
+    rec, out = d / f"calibration-{scenario}.mcap", d / f"calibration-{scenario}-params.json"
+    t0 = time.process_time()
+    try:
+        Drive(scenario, profile=profile or DEFAULT_PROFILE, seed=seed, vehicle=truth_vehicle).run(rec)
+        doc = replay_file(rec, vehicle=model, predict=False, save_params=out)
+    except CONFIG_ERRORS + (ReplayError,) as e:
+        raise BenchError(f"--calibrate {scenario}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
+    return {"scenario": scenario, "seed": seed, "params": str(out),
+            "converged": dict(doc["identification"]["converged"]), "cpu_s": time.process_time() - t0}
+
+
+def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: str | None = None):
+    """The VDPS pipeline for the bench: ``VdpsSystem`` with the model vehicle file and the
+    suspension sensor's rate and noise (its data sheet, from the sensor profile; not truth),
+    started from the priors or from a saved parameter file ``params``.
+
+    ``model`` may also be a saved workbench model (``vdps diagnose --save-model``, schema
+    ``vdps-model``): then the vehicle file it names, its identified parameters as the
+    identifier's start and its effects in the chain, as ``vdps replay --model`` (with a
+    parameter file as well: refused)."""
+    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
+
+    saved = _saved_workbench_model(model)
+    if saved is None:
+        vehicle = load_vehicle(model, "model")
+        start = start_params(model, params) if params is not None else None
+        return VdpsSystem(vehicle, SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=start))
+    if params is not None:
+        raise BenchError("give --params or a saved workbench model as --model (it carries its parameters), not both")
+    from vdps_hil.workbench.model_file import ModelFileError, load_model
+
+    try:
+        vehicle = load_vehicle(saved.vehicle, "model")
+        refined, effects, _ = load_model(model, vehicle)
+    except (ModelFileError, ValueError) as e:
+        raise BenchError(f"--model {model}: {str(e).splitlines()[0]}") from None
+    cfg = SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=refined.params, model_effects=effects)
+    return VdpsSystem(vehicle, cfg)
+
+
+def _saved_workbench_model(path: str):
+    """The parsed workbench model file at ``path``, or None when ``path`` is not one (a vehicle
+    file or name)."""
+    from vdps_hil.workbench.model_file import ModelFileError, read_model
+
+    p = Path(path)
+    if p.suffix.lower() not in (".toml", ".json") or not p.is_file():
+        return None
+    try:
+        return read_model(p)
+    except ModelFileError:
+        return None
+

@@ -1,0 +1,86 @@
+"""The JSON bytes of recording messages, encoded apart from the writer.
+
+``json_payload`` is what :meth:`~vdps_hil.record.writer.RecordingWriter.write_json` writes,
+``estimate_payload`` what ``write_estimate`` writes (directly when every value is a plain float);
+``vdps replay --jobs 2`` encodes with them in one process and writes the bytes in the other
+(``RecordingWriter.write_encoded``).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Mapping
+
+from vdps_hil.record import schemas as S
+
+__all__ = ["estimate_payload", "estimate_topic", "json_payload"]
+
+_JSON_KEYS: dict[str, str] = {}
+
+
+def _float_object(d: Mapping[str, Any]) -> str | None:
+    """The compact JSON object ``json.dumps(clean_json(dict(d)), separators=(",", ":"))`` of a
+    flat mapping of str keys to plain floats (non-finite -> null; json writes a float with
+    ``float.__repr__``), or None when some key or value is of another type (the caller then
+    takes the general path)."""
+    parts = []
+    keys = _JSON_KEYS
+    rep = float.__repr__
+    for k, v in d.items():
+        if type(v) is not float or type(k) is not str:
+            return None
+        q = keys.get(k)
+        if q is None:
+            if len(keys) > 4096:
+                keys.clear()
+            q = keys[k] = json.dumps(k) + ":"
+        parts.append(q + (rep(v) if v - v == 0.0 else "null"))
+    return "{" + ",".join(parts) + "}"
+
+
+def _clean_flat(d: Mapping[str, Any]) -> dict:
+    """``schemas.clean_json(dict(d))`` for a flat mapping, without recursion for plain floats."""
+    out = {}
+    for k, v in d.items():
+        out[str(k)] = (v if v - v == 0.0 else None) if type(v) is float else S.clean_json(v)
+    return out
+
+
+def json_payload(topic: str, schema_name: str, t_ns: int, doc: Mapping[str, Any]) -> bytes:
+    """The bytes ``RecordingWriter.write_json`` writes for ``doc`` (topic, time and schema
+    checked; ``t_ns`` added when the schema has it; non-finite floats -> null)."""
+    S.check_topic(topic)
+    S.check_time_ns("t_ns", t_ns)
+    if schema_name not in S.SCHEMAS:
+        raise KeyError(f"unknown schema {schema_name!r}; register it with "
+                       "vdps_hil.record.schemas.register_schema()")
+    doc = S.clean_json(dict(doc))
+    if "t_ns" in S.SCHEMAS[schema_name].get("properties", {}):
+        if doc.setdefault("t_ns", t_ns) != t_ns:
+            raise ValueError(f"doc t_ns {doc['t_ns']} differs from t_ns {t_ns}")
+    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
+
+
+def estimate_topic(topic: str) -> str:
+    """The absolute, checked topic of an estimate (``"ekf"`` -> ``/est/ekf``)."""
+    if not topic.startswith("/"):
+        topic = S.EST_PREFIX + topic
+    if not S.check_topic(topic).startswith(S.EST_PREFIX):
+        raise ValueError(f"estimate topic must be under {S.EST_PREFIX}: {topic}")
+    return topic
+
+
+def estimate_payload(t_ns: int, values: Mapping[str, float], sigmas: Mapping[str, float] | None = None) -> bytes:
+    """The bytes of an estimate message (schema ``ESTIMATE``): = ``json_payload`` of
+    ``{"t_ns", "values", "sigmas"}``, written directly when every value is a plain float (a
+    replay writes thousands of these per second)."""
+    S.check_time_ns("t_ns", t_ns)
+    v = _float_object(values)
+    sg = "" if sigmas is None else _float_object(sigmas)
+    if v is not None and sg is not None:
+        return (f'{{"t_ns":{int(t_ns)},"values":{v}' + (f',"sigmas":{sg}}}' if sigmas is not None else "}")
+                ).encode()
+    doc = {"t_ns": t_ns, "values": _clean_flat(values)}
+    if sigmas is not None:
+        doc["sigmas"] = _clean_flat(sigmas)
+    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
