@@ -62,9 +62,9 @@ import numpy as np
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation.ekf import EkfConfig, SensorSet
-from vdps_hil.estimation.kinematics import dcm_gv
 from vdps_hil.estimation.pipeline import Estimate, EstimatorPipeline, Innovation, Latencies, PipelineConfig
 from vdps_hil.geodesy import EnuOrigin, ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
+from vdps_hil.model.frames import dcm_gv
 from vdps_hil.model.params import CONFIG_DIR
 from vdps_hil.units import GRAVITY_MPS2, wrap_pi
 

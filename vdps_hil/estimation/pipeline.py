@@ -99,12 +99,13 @@ import numpy as np
 from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
 from vdps_hil.estimation.alpha_beta import TimedAlphaBetaBank
 from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, UpdateResult
-from vdps_hil.estimation.kinematics import dcm_gv, vehicle_angles_eq4
+from vdps_hil.estimation.kinematics import vehicle_angles_eq4
 from vdps_hil.estimation.observability import ObservabilityReport, ObservabilityWindow
 from vdps_hil.estimation.observations import (ObsKind, ZrRateBuilder, suspension_measurement,
                                               y2_gps_measurement)
 from vdps_hil.estimation.states import STATE_NAMES, States
 from vdps_hil.geodesy import EnuOrigin
+from vdps_hil.model.frames import dcm_gv
 from vdps_hil.units import deg2rad
 
 KINDS = ("imu", "gnss_pos", "gnss_att", "gnss_vel", "suspension", "wheel_speed", "wheel_torque", "steer")

@@ -10,9 +10,11 @@ prediction metrics used everywhere, and the rollover warning on CAN.
 
 from vdps_hil.prediction.metrics import (PAPER_INACCURACY_PCT, PoseTrajectory, compare_trajectories,
                                          format_metrics, prediction_metrics)
-from vdps_hil.prediction.predictor import (Cadence, InputTrajectory, PredictionConfigError, PredictionResult,
-                                           Predictor, PredictorConfig, PredictorInitialState,
-                                           load_prediction_document, load_predictor_config)
+from vdps_hil.prediction.config import (PredictionConfigError, PredictorConfig, load_prediction_document,
+                                        load_predictor_config)
+from vdps_hil.prediction.initial_state import InputTrajectory, PredictorInitialState
+from vdps_hil.prediction.predictor import Cadence, Predictor
+from vdps_hil.prediction.result import PredictionResult
 from vdps_hil.prediction.warning import (RolloverAssessment, WarningChain, WarningLevel, WarningNode,
                                          WarningNodeConfig, WarningOutcome, WarningPolicy, WarningStatus,
                                          evaluate_warning_frames, load_warning_config, replay_assessments)

@@ -79,8 +79,10 @@ import numpy as np
 from vdps_hil.codecs.can_codec import WARNING, VdpsCanDecoder, VdpsCanEncoder
 from vdps_hil.units import NS_PER_S
 
-from .predictor import (DEFAULT_CONFIG_PATH, Cadence, PredictionConfigError, PredictionResult, Predictor,
-                        PredictorInitialState, load_prediction_document)
+from .config import DEFAULT_CONFIG_PATH, PredictionConfigError, load_prediction_document
+from .initial_state import PredictorInitialState
+from .predictor import Cadence, Predictor
+from .result import PredictionResult
 
 
 class WarningLevel(enum.IntEnum):
