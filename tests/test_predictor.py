@@ -11,12 +11,12 @@ from vdps_hil.experiments.truth_init import initial_state_from_truth
 from vdps_hil.model.core import Inputs
 from vdps_hil.model.frames import decompose_vehicle
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.model.rollover import static_tip_angle_rad
 from vdps_hil.prediction.config import (PredictionConfigError, PredictorConfig, load_predictor_config,
                                         predictor_config_from_table)
 from vdps_hil.prediction.initial_state import InputTrajectory, PredictorInitialState
 from vdps_hil.prediction.metrics import PoseTrajectory, compare_trajectories
 from vdps_hil.prediction.predictor import Cadence, Predictor
-from vdps_hil.sim.rollover import static_tip_angle_rad
 from vdps_hil.sim.scenarios import load_scenario
 from vdps_hil.sim.simulator import Simulator
 

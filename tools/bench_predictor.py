@@ -51,10 +51,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from vdps_hil.model.params import load_vehicle  # noqa: E402
-from vdps_hil.prediction.metrics import PoseTrajectory  # noqa: E402
 from vdps_hil.experiments.truth_init import initial_state_from_truth  # noqa: E402
+from vdps_hil.model.params import load_vehicle  # noqa: E402
 from vdps_hil.prediction.config import PredictorConfig, load_predictor_config  # noqa: E402
+from vdps_hil.prediction.metrics import PoseTrajectory  # noqa: E402
 from vdps_hil.prediction.predictor import Predictor  # noqa: E402
 from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
 from vdps_hil.sim.simulator import Simulator  # noqa: E402
