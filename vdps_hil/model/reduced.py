@@ -122,6 +122,8 @@ class ReducedLinearCore:
         return out
 
     def _build(self):
+        """The evaluation ``f(x, uc, env)``: a hand-specialised numeric kernel of the reduced
+        model's stages written out in one loop (module docstring), tested equal to ``Model.f``."""
         m = self.model
         veh = m.vehicle
         p = veh.params
@@ -143,6 +145,7 @@ class ReducedLinearCore:
         sqrt, sin, cos, atan, exp = math.sqrt, math.sin, math.cos, math.atan, math.exp
 
         def f(x, uc, env):
+            """Hand-specialised kernel (see ``_build``): x_dot, F_z,i, n_b, kappa_i, den_i."""
             (pe, pn, pu, phi, theta, psi, vx, vy, vz, wx, wy, wz) = x[0:12]
             sph, cph, sth, cth, sps, cps = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
             c00, c01, c02, c10, c11, c12, c20, c21, c22 = dcm_gv_elements(sph, cph, sth, cth, sps, cps)  # eq 1

@@ -6,7 +6,7 @@ The order of one evaluation (symbols and the model's assumptions: :mod:`vdps_hil
 
     body_attitude        C_g^v (eq 1), road normal n_b, gravity g_b, CG height over the road
     ackermann_angles     front road-wheel angles from the bicycle angle
-    corner_loads_*       per corner: wheel-centre position and velocity, suspension deflection,
+    corner_loads         per corner: wheel-centre position and velocity, suspension deflection,
                          normal load (eq 14; with unsprung DOF: tire radial spring), C_alpha,i
     compliance_steer_angle   delta_c = -K_c (F_b,1 + F_b,2) (secant solve)
     tire_at_corner       road-plane tire axes, slips and tire forces (eq 15-16)
@@ -22,7 +22,7 @@ some 10^4-10^5 times per simulated drive. Tuples passed between the stages:
 * a **corner constant** (``CoreConstants.corners``, one per corner i = 0..3 FL FR RR RL):
   ``(i, x_i, y_i, m_u,i, C1, C2, C3, static compression, D_s, r_i, r_free,i, C_kappa,i,
   C_alpha,i, F_z0,i, m_u,i g)``;
-* a **corner state** (``corner_loads_*``): ``(i, x_i, y_i, z_i, h_w,i, F_z,i, F_s,i, H_i,
+* a **corner state** (``corner_loads``): ``(i, x_i, y_i, z_i, h_w,i, F_z,i, F_s,i, H_i,
   H_dot_i, v_w,i (3), r_i, C_kappa,i, C_alpha,i, F_z0,i)`` with z_i the wheel centre's body z,
   h_w,i its height over the road along n, F_s,i the suspension force;
 * a **wrench** ``(F_x, F_y, F_z, M_x, M_y, M_z)`` in body axes about the sprung CG [N, N m].
@@ -102,70 +102,63 @@ def body_attitude(pos, euler, normal_g, g: float):
     return (sph, cph, sth, cth), c, n_b, g_b, pe * ng0 + pn * ng1 + pu * ng2
 
 
-def corner_loads_unsprung(k: CoreConstants, susp, susp_rate, h_cg: float, n_b, vel, rate) -> list:
-    """Corner states with unsprung DOF (the truth simulator): the wheel centre slides along the
-    body z axis, z_i = z_w0 + H_i; the tire is a radial spring (lift-off: deflection <= 0 gives
-    F_z = 0); the suspension force is eq 14's spring law plus the damper::
+def corner_loads(k: CoreConstants, susp, susp_rate, h_cg: float, n_b, vel, rate) -> list:
+    """Corner states: wheel-centre position and velocity, suspension deflection and normal load
+    of each corner, then C_alpha,i *= each cornering_stiffness_factor(i, F_z,i, F_z0,i).
 
-        h_w,i = h_cg + n_b . (x_i, y_i, z_i)
+    With unsprung DOF (the truth simulator; ``susp``, ``susp_rate`` = H_i, H_dot_i): the wheel
+    centre slides along the body z axis, the tire is a radial spring (lift-off: deflection <= 0
+    gives F_z = 0), the suspension force is eq 14's spring law plus the damper::
+
+        z_i = z_w0 + H_i,   h_w,i = h_cg + n_b . (x_i, y_i, z_i)
         F_z,i = k_t (r_free,i - h_w,i)  if positive, else 0
         F_s,i = K_s H_s H_s + D_s H_dot_i,   H_s = static compression + H_i
         v_w,i = v_b + omega x r_w,i + H_dot_i e_z
-        C_alpha,i *= each cornering_stiffness_factor(i, F_z,i, F_z0,i)"""
-    nx, ny, nz = n_b
-    vx, vy, vz = vel
-    wx, wy, wz = rate
-    zw0, kt, stiff_fns = k.zw0, k.tire_radial_stiffness, k.stiffness_fns
-    ck = []
-    for (i, xi, yi, mu, c1, c2, c3, sc, ds, ri, rfree, ckap, calp, fz0, mug) in k.corners:
-        H = susp[i]
-        Hd = susp_rate[i]
-        zi = zw0 + H
-        hw = h_cg + nx * xi + ny * yi + nz * zi
-        defl = rfree - hw
-        fz = kt * defl if defl > 0.0 else 0.0
-        fs = spring_force_n(sc + H, c1, c2, c3) + ds * Hd
-        vwx = vx + wy * zi - wz * yi
-        vwy = vy + wz * xi - wx * zi
-        vwz = vz + wx * yi - wy * xi + Hd
-        for sf in stiff_fns:
-            calp = calp * sf(i, fz, fz0)
-        ck.append((i, xi, yi, zi, hw, fz, fs, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0))
-    return ck
 
-
-def corner_loads_rigid(k: CoreConstants, h_cg: float, n_b, vel, rate) -> list:
-    """Corner states of the paper's reduced model (rigid tires, unsprung masses moving with the
-    body): the deflection follows from the pose over the road plane and the normal load is
-    eq 14 with its lift-off clamp::
+    The paper's reduced model (``susp`` None; rigid tires, unsprung masses moving with the body):
+    the deflection follows from the pose over the road plane, the load is eq 14 with its clamp::
 
         h_w,i = h_cg + n_b . (x_i, y_i, z_w0),   v_w,i = v_b + omega x r_w,i
         H_i = r - h_w,i,   H_dot_i = -n_b . v_w,i
         F_z,i = 0                                       if K_s H_s H_s + m_u g <= 0 (lifted)
-              = max(0, K_s H_s H_s + D_s H_dot_i + m_u g)   otherwise
-        F_s,i = F_z,i;  C_alpha,i *= each cornering_stiffness_factor(i, F_z,i, F_z0,i)"""
+              = max(0, K_s H_s H_s + D_s H_dot_i + m_u g)   otherwise;   F_s,i = F_z,i"""
     nx, ny, nz = n_b
     vx, vy, vz = vel
     wx, wy, wz = rate
-    zi, r_load, stiff_fns = k.zw0, k.r_load, k.stiffness_fns
+    dof, zw0, stiff_fns = k.unsprung_dof, k.zw0, k.stiffness_fns
+    kt, r_load = k.tire_radial_stiffness, k.r_load
     ck = []
     for (i, xi, yi, mu, c1, c2, c3, sc, ds, ri, rfree, ckap, calp, fz0, mug) in k.corners:
-        hw = h_cg + nx * xi + ny * yi + nz * zi
-        vwx = vx + wy * zi - wz * yi
-        vwy = vy + wz * xi - wx * zi
-        vwz = vz + wx * yi - wy * xi
-        H = r_load - hw
-        Hd = -(nx * vwx + ny * vwy + nz * vwz)
-        fsp = spring_force_n(sc + H, c1, c2, c3)
-        if fsp + mug <= 0.0:  # eq 14 clamp: lift-off
-            fz = 0.0
+        if dof:
+            H = susp[i]
+            Hd = susp_rate[i]
+            zi = zw0 + H
+            hw = h_cg + nx * xi + ny * yi + nz * zi
+            defl = rfree - hw
+            fz = kt * defl if defl > 0.0 else 0.0
+            fs = spring_force_n(sc + H, c1, c2, c3) + ds * Hd
+            vwx = vx + wy * zi - wz * yi
+            vwy = vy + wz * xi - wx * zi
+            vwz = vz + wx * yi - wy * xi + Hd
         else:
-            fz = fsp + ds * Hd + mug
-            if fz < 0.0:
+            zi = zw0
+            hw = h_cg + nx * xi + ny * yi + nz * zi
+            vwx = vx + wy * zi - wz * yi
+            vwy = vy + wz * xi - wx * zi
+            vwz = vz + wx * yi - wy * xi
+            H = r_load - hw
+            Hd = -(nx * vwx + ny * vwy + nz * vwz)
+            fsp = spring_force_n(sc + H, c1, c2, c3)
+            if fsp + mug <= 0.0:  # eq 14 clamp: lift-off
                 fz = 0.0
+            else:
+                fz = fsp + ds * Hd + mug
+                if fz < 0.0:
+                    fz = 0.0
+            fs = fz
         for sf in stiff_fns:
             calp = calp * sf(i, fz, fz0)
-        ck.append((i, xi, yi, zi, hw, fz, fz, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0))
+        ck.append((i, xi, yi, zi, hw, fz, fs, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0))
     return ck
 
 
@@ -368,10 +361,8 @@ def derivative_function(k: CoreConstants) -> Callable:
         trig, c, n_b, g_b, h_cg = body_attitude((pe, pn, pu), (phi, theta, psi), env.normal_g, g)
         ratio, wheelbase, t_f = steer
         d1, d2 = ackermann_angles(u.steer_wheel_angle_rad / ratio, wheelbase, t_f)
-        if dof:
-            ck = corner_loads_unsprung(k, x[16:20], x[20:24], h_cg, n_b, vel, rate)
-        else:
-            ck = corner_loads_rigid(k, h_cg, n_b, vel, rate)
+        susp, susp_rate = (x[16:20], x[20:24]) if dof else (None, None)
+        ck = corner_loads(k, susp, susp_rate, h_cg, n_b, vel, rate)
         dcomp = compliance_steer_angle(k_c, ck[0:2], d1, d2, n_b, oms, v_floor, tire_fn) if k_c != 0.0 else 0.0
         deltas = (d1 + dcomp, d2 + dcomp, 0.0, 0.0)
         wrench, wdots, fzt, rec = corner_wrench(k, ck, deltas, n_b, oms, u, out is not None)
@@ -402,6 +393,6 @@ def derivative_function(k: CoreConstants) -> Callable:
 
 
 __all__ = ["CoreConstants", "ackermann_angles", "air_velocity_b", "body_accelerations", "body_attitude",
-           "compliance_steer_angle", "corner_loads_rigid", "corner_loads_unsprung", "corner_wrench",
+           "compliance_steer_angle", "corner_loads", "corner_wrench",
            "derivative_function", "effect_wrench", "pose_rates", "spring_force_n", "tire_at_corner",
            "unsprung_accelerations"]
