@@ -92,7 +92,9 @@ def body_attitude(pos, euler, normal_g, g: float):
     the origin)."""
     pe, pn, pu = pos
     phi, theta, psi = euler
-    sph, cph, sth, cth, sps, cps = math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta), math.sin(psi), math.cos(psi)
+    sph, cph = math.sin(phi), math.cos(phi)
+    sth, cth = math.sin(theta), math.cos(theta)
+    sps, cps = math.sin(psi), math.cos(psi)
     c = dcm_gv_elements(sph, cph, sth, cth, sps, cps)
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = c
     ng0, ng1, ng2 = normal_g
@@ -112,7 +114,7 @@ def corner_loads(k: CoreConstants, susp, susp_rate, h_cg: float, n_b, vel, rate)
 
         z_i = z_w0 + H_i,   h_w,i = h_cg + n_b . (x_i, y_i, z_i)
         F_z,i = k_t (r_free,i - h_w,i)  if positive, else 0
-        F_s,i = K_s H_s H_s + D_s H_dot_i,   H_s = static compression + H_i
+        F_s,i = K_s(H_s) H_s + D_s H_dot_i,   H_s = static compression + H_i
         v_w,i = v_b + omega x r_w,i + H_dot_i e_z
 
     The paper's reduced model (``susp`` None; rigid tires, unsprung masses moving with the body):
@@ -120,8 +122,8 @@ def corner_loads(k: CoreConstants, susp, susp_rate, h_cg: float, n_b, vel, rate)
 
         h_w,i = h_cg + n_b . (x_i, y_i, z_w0),   v_w,i = v_b + omega x r_w,i
         H_i = r - h_w,i,   H_dot_i = -n_b . v_w,i
-        F_z,i = 0                                       if K_s H_s H_s + m_u g <= 0 (lifted)
-              = max(0, K_s H_s H_s + D_s H_dot_i + m_u g)   otherwise;   F_s,i = F_z,i"""
+        F_z,i = 0                                          if K_s(H_s) H_s + m_u g <= 0 (lifted)
+              = max(0, K_s(H_s) H_s + D_s H_dot_i + m_u g)   otherwise;   F_s,i = F_z,i"""
     nx, ny, nz = n_b
     vx, vy, vz = vel
     wx, wy, wz = rate

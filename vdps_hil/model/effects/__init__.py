@@ -71,8 +71,8 @@ def effects_from_names(names: Iterable[str], vehicle_effects: Mapping | None = N
 
 
 __all__ = ["REGISTRY", "BUILTIN_EFFECTS", "EffectRegistry", "TIRE_MODEL_NAMES", "make_effect",
-           "effects_from_names", "Effect", "DynamicsEffect", "MeasurementEffect", "TireModel", "EffectSet", "EffectConfigError",
-           "ParamSpec", "ImuKinematics", "EQUATIONS", "DYNAMICS_HOOKS", "LinearTire",
+           "effects_from_names", "Effect", "DynamicsEffect", "MeasurementEffect", "TireModel", "EffectSet",
+           "EffectConfigError", "ParamSpec", "ImuKinematics", "EQUATIONS", "DYNAMICS_HOOKS", "LinearTire",
            "MagicFormulaTire", "AeroDrag", "Crosswind", "RollingResistance",
            "LoadDependentCorneringStiffness", "LowPressureTire", "SteeringCompliance", "ImuBias",
            "ImuLeverArm"]
