@@ -10,7 +10,9 @@ import pytest
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.prediction.metrics import PAPER_INACCURACY_PCT, PoseTrajectory, compare_trajectories
-from vdps_hil.prediction.predictor import InputTrajectory, Predictor, PredictorConfig
+from vdps_hil.prediction.config import PredictorConfig
+from vdps_hil.prediction.initial_state import InputTrajectory
+from vdps_hil.prediction.predictor import Predictor
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.scenarios import load_scenario

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from vdps_hil.model.core import (Env, Inputs, Model, StateLayout, ackermann_angles, spring_force_n)
+from vdps_hil.model.core import Env, Inputs, Model, StateLayout
 from vdps_hil.model.effects import EffectSet, LinearTire, make_effect
 from vdps_hil.model.frames import c_omega_inv, dcm_global_to_vehicle
 from vdps_hil.model.params import load_vehicle
@@ -23,15 +23,6 @@ def test_state_layout_named_slices():
     assert full.susp_defl == slice(16, 20) and full.susp_defl_rate == slice(20, 24)
     assert not hasattr(red, "susp_defl")
     assert len(full.names) == 24 and full.names[12] == "wheel_speed_radps_1"
-
-
-def test_ackermann_inner_wheel_steers_more_and_mean_is_bicycle_angle():
-    L, tf = SEDAN.geometry.wheelbase_m, SEDAN.geometry.track_half_front_m
-    d1, d2 = ackermann_angles(0.05, L, tf)
-    assert d1 > 0.05 > d2 > 0.0  # left turn: FL is the inner wheel
-    # both wheel axes meet on the rear-axle line: L / tan d1 + tf == L / tan d2 - tf
-    assert L / math.tan(d1) + tf == pytest.approx(L / math.tan(d2) - tf, rel=1e-12)
-    assert abs(0.5 * (d1 + d2) - 0.05) <= 1.1 * (tf / L) ** 2 * 0.05 ** 3  # third-order difference
 
 
 @pytest.mark.parametrize("dof", [True, False])
@@ -58,14 +49,6 @@ def test_design_state_is_exact_equilibrium_of_f():
         m = Model(SEDAN, unsprung_dof=dof)
         xd = m.f(m.design_state(0.0), Inputs(), Env())
         assert max(abs(v) for v in xd) < 1e-9
-
-
-def test_spring_law_eq14():
-    a = SEDAN.front
-    f = spring_force_n(a.static_compression_m, a.spring_c1_npm, a.spring_c2_per_m, a.spring_c3_m)
-    assert f == pytest.approx(a.spring_c1_npm * a.static_compression_m, rel=1e-12)
-    f2 = spring_force_n(0.12, a.spring_c1_npm, a.spring_c2_per_m, a.spring_c3_m)
-    assert f2 == pytest.approx(a.spring_c1_npm * math.exp(a.spring_c2_per_m * (0.12 - 0.07)) * 0.12)
 
 
 def test_kinematic_rows_match_frames_module():

@@ -76,14 +76,6 @@ def test_gnss_and_innovation_tables(drive):
     assert 0.2 < np.nanmean(nis) / 3.0 < 5.0  # consistent filter: mean NIS near the dof
 
 
-def test_dcm_batch_equals_eq1():
-    rng = np.random.default_rng(1)
-    a = rng.uniform(-1, 1, (5, 3))
-    c = D.dcm_gv_batch(a[:, 0], a[:, 1], a[:, 2])
-    for k in range(5):
-        assert np.allclose(c[k], dcm_global_to_vehicle(*a[k]), atol=1e-12)
-
-
 def test_imu_bias_is_taken_out_of_the_readings(drive):
     from vdps_hil.bus.samples import Sample
 

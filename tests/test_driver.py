@@ -7,8 +7,9 @@ import pytest
 
 from vdps_hil.model.core import Inputs
 from vdps_hil.model.params import load_vehicle
-from vdps_hil.sim.driver import Driver, Path, make_path, path_local_points
-from vdps_hil.sim.scenarios import ScenarioError, load_scenario, parse_scenario
+from vdps_hil.sim.driver import Driver, ReferencePath, make_path, path_local_points
+from vdps_hil.sim.scenarios import load_scenario, parse_scenario
+from vdps_hil.sim.signals import ScenarioError
 from vdps_hil.sim.simulator import Simulator
 
 SEDAN = load_vehicle("sedan-truth")
@@ -34,7 +35,7 @@ def test_circle_path_and_nearest_point():
 
 
 def test_path_straight_extension():
-    p = Path([(0.0, 0.0), (10.0, 0.0)])
+    p = ReferencePath([(0.0, 0.0), (10.0, 0.0)])
     assert p.point_at(15.0) == (15.0, 0.0) and p.point_at(-3.0) == (0.0, 0.0)
 
 

@@ -20,7 +20,7 @@ def test_compliance_equation_is_satisfied_exactly_with_linear_tires():
     x = m.design_state(20.0)
     x[7], x[11] = 0.3, 0.1  # some sideslip and yaw rate
     _, d = m.evaluate(x, Inputs(0.5), Env())
-    from vdps_hil.model.core import ackermann_angles
+    from vdps_hil.model.stages import ackermann_angles
     d1, d2 = ackermann_angles(0.5 / SEDAN.geometry.steer_ratio, SEDAN.geometry.wheelbase_m,
                               SEDAN.geometry.track_half_front_m)
     fy = d["tire_force_lat_n_1"] + d["tire_force_lat_n_2"]

@@ -53,6 +53,14 @@ def test_c_omega_matches_dcm_kinematics(phi, theta, psi, rates):
     np.testing.assert_allclose(fr.c_omega_inv(phi, theta) @ fr.c_omega(phi, theta), np.eye(3), atol=1e-9)
 
 
+def test_dcm_batch_equals_eq1():
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-1, 1, (5, 3))
+    c = fr.dcm_gv_batch(a[:, 0], a[:, 1], a[:, 2])
+    for k in range(5):
+        assert np.allclose(c[k], fr.dcm_global_to_vehicle(*a[k]), atol=1e-12)
+
+
 def test_sign_conventions_physical():
     # pitch nose up: the vehicle x axis (row 0 of C_g^v) points up for theta > 0
     assert fr.dcm_global_to_vehicle(0.0, 0.1, 0.0)[0, 2] > 0

@@ -98,7 +98,7 @@ def test_gravity_correction_d():
     printed (gravity 0) accelerates upwards at g."""
     x = np.zeros(12)
     x[6:9] = (0.1, -0.05, 1.0)
-    f_rest = K.dcm_gv(*x[6:9]) @ np.array([0.0, 0.0, GRAVITY_MPS2])
+    f_rest = fr.dcm_gv(*x[6:9]) @ np.array([0.0, 0.0, GRAVITY_MPS2])
     np.testing.assert_allclose(K.process_f(x, f_rest, np.zeros(3))[3:6], 0.0, atol=1e-12)
     np.testing.assert_allclose(K.process_f(x, f_rest, np.zeros(3), gravity_mps2=0.0)[3:6], [0, 0, GRAVITY_MPS2],
                                atol=1e-12)

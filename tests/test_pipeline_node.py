@@ -222,7 +222,7 @@ def test_system_predictor_uses_the_saved_model_drag():
     0.5 rho CdA v^2 / m * 5 s more speed with the model's CdA = 2 m^2 (766 N at 25 m/s, about
     0.45 m/s^2 on 1700 kg, falling with v): 1.5-3.0 m/s more, from the same state."""
     from vdps_hil.model.effects import REGISTRY, EffectSet
-    from vdps_hil.prediction.predictor import PredictorInitialState
+    from vdps_hil.prediction.initial_state import PredictorInitialState
 
     veh = load_vehicle("sedan-model", "model").with_params(mass_kg=1700.0)
     r = veh.tire.rolling_radius_m if hasattr(veh, "tire") and hasattr(veh.tire, "rolling_radius_m") else 0.3

@@ -1,5 +1,5 @@
 """Tests of vdps_hil.prediction.predictor: the truth simulator is the truth source (through the
-test-only constructor ``PredictorInitialState.from_truth_for_tests_only``)."""
+test-only constructor ``experiments.truth_init.initial_state_from_truth``)."""
 
 import math
 
@@ -7,14 +7,16 @@ import numpy as np
 import pytest
 
 from vdps_hil.estimation.estimates import Estimate, FilteredSignals
+from vdps_hil.experiments.truth_init import initial_state_from_truth
 from vdps_hil.model.core import Inputs
 from vdps_hil.model.frames import decompose_vehicle
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.model.rollover import static_tip_angle_rad
+from vdps_hil.prediction.config import (PredictionConfigError, PredictorConfig, load_predictor_config,
+                                        predictor_config_from_table)
+from vdps_hil.prediction.initial_state import InputTrajectory, PredictorInitialState
 from vdps_hil.prediction.metrics import PoseTrajectory, compare_trajectories
-from vdps_hil.prediction.predictor import (Cadence, InputTrajectory, PredictionConfigError, Predictor,
-                                           PredictorConfig, PredictorInitialState, load_predictor_config,
-                                           predictor_config_from_table)
-from vdps_hil.sim.rollover import static_tip_angle_rad
+from vdps_hil.prediction.predictor import Cadence, Predictor
 from vdps_hil.sim.scenarios import load_scenario
 from vdps_hil.sim.simulator import Simulator
 
@@ -43,14 +45,6 @@ def _truth_traj(sim, t0, t1):
     return PoseTrajectory.from_snapshots(sim.truth, t0, t1)
 
 
-def test_default_config_is_the_documented_one():
-    cfg = load_predictor_config()
-    assert cfg == PredictorConfig()
-    assert (cfg.horizon_s, cfg.step_s, cfg.integrator, cfg.cadence_hz) == (5.0, 0.01, "ros2", 10.0)
-    assert cfg.effects == ("linear_tire",) and cfg.unsprung_dof is False
-    assert cfg.n_steps == 500
-
-
 def test_truth_model_in_the_predictor_reproduces_the_simulator_exactly(left_turn):
     """Plumbing: with the truth's own model (Magic Formula, unsprung DOF), the truth's integrator
     (RK2 at 1 ms) and the truth state, the predictor IS the simulator: equal to 1e-9 m / 1e-6 N."""
@@ -58,7 +52,7 @@ def test_truth_model_in_the_predictor_reproduces_the_simulator_exactly(left_turn
     cfg = PredictorConfig(integrator="rk2", step_s=0.001, output_every=10, horizon_s=4.75,
                           unsprung_dof=True, pose_source="estimate_plane")
     r = Predictor(true_vehicle, cfg, effects=sc.effect_set()).predict(
-        PredictorInitialState.from_truth_for_tests_only(snap))
+        initial_state_from_truth(snap))
     tr = [s for s in sim.truth if s["t_s"] >= T0_LEFT_TURN - 1e-9]
     assert len(r.t_s) == len(tr) == 476
     pos = np.array([[s["pos_e_m"], s["pos_n_m"], s["pos_u_m"]] for s in tr])
@@ -76,7 +70,7 @@ def test_paper_model_with_true_parameters_on_the_left_turn(left_turn):
     roll RMS 0.27 deg, inaccuracy 6.3 %. Asserted with ~15 % margin."""
     sc, sim, snap, true_vehicle = left_turn
     r = Predictor(true_vehicle, PredictorConfig(horizon_s=4.75)).predict(
-        PredictorInitialState.from_truth_for_tests_only(snap))
+        initial_state_from_truth(snap))
     m = compare_trajectories(PoseTrajectory.from_prediction(r), _truth_traj(sim, T0_LEFT_TURN, 15.0))
     assert m["n_samples"] == 476 and m["span_s"] == pytest.approx(4.75)
     assert 4.5 < m["position_err_m"] < 7.0
@@ -93,7 +87,7 @@ def test_the_left_turn_error_is_the_tire_model(left_turn):
     0.13 m and 0.15 deg (measured); what is left is mostly roll (rigid tires roll less: 0.47 deg RMS)."""
     sc, sim, snap, true_vehicle = left_turn
     r = Predictor(true_vehicle, PredictorConfig(horizon_s=4.75), effects=sc.effect_set()).predict(
-        PredictorInitialState.from_truth_for_tests_only(snap))
+        initial_state_from_truth(snap))
     m = compare_trajectories(PoseTrajectory.from_prediction(r), _truth_traj(sim, T0_LEFT_TURN, 15.0))
     assert m["position_err_m"] < 0.25
     assert abs(m["yaw_err_deg"]) < 0.3
@@ -117,7 +111,7 @@ def test_the_left_turn_needs_the_secant_stiffness_of_its_own_slips(left_turn):
     inner front at 95 % of its friction) lie beyond the sine's (1.8 deg). Asserted: < 1 m and
     < 0.3 deg with the turn's secant; > 4.5 m and > 4.5 deg with the sine's."""
     sc, sim, snap, true_vehicle = left_turn
-    init = PredictorInitialState.from_truth_for_tests_only(snap)
+    init = initial_state_from_truth(snap)
     truth = _truth_traj(sim, T0_LEFT_TURN, 15.0)
     p = sc.vehicle.params.as_dict()
     out = {}
@@ -137,7 +131,7 @@ def test_ros2_at_10_ms_matches_rk2_at_1_ms(left_turn):
     """The accuracy cost of the 10 ms linearly implicit step against explicit RK2 at 1 ms:
     measured 2.7 mm and 0.0013 deg over 4.75 s (tools/bench_predictor.py)."""
     sc, sim, snap, true_vehicle = left_turn
-    init = PredictorInitialState.from_truth_for_tests_only(snap)
+    init = initial_state_from_truth(snap)
     ref = Predictor(true_vehicle, PredictorConfig(integrator="rk2", step_s=0.001, output_every=10,
                                                   horizon_s=4.75)).predict(init)
     r = Predictor(true_vehicle, PredictorConfig(horizon_s=4.75)).predict(init)
@@ -163,7 +157,7 @@ def test_fast_path_equals_the_generic_core_path(left_turn, paper_drive):
     every other effect set takes). Same trajectory to 1 um / 1e-6 deg (measured ~1e-13) for held
     inputs (ros2 default, ros2 without coupling, rk2), recorded inputs and a predicted rollover."""
     sc, sim, snap, true_vehicle = left_turn
-    init = PredictorInitialState.from_truth_for_tests_only(snap)
+    init = initial_state_from_truth(snap)
     for cfg in (PredictorConfig(), PredictorConfig(jacobian_coupling=False, output_every=3, horizon_s=2.0),
                 PredictorConfig(integrator="rk2", step_s=0.001, output_every=10, horizon_s=1.0)):
         fast = Predictor(true_vehicle, cfg)
@@ -176,7 +170,7 @@ def test_fast_path_equals_the_generic_core_path(left_turn, paper_drive):
                            np.array([s["steer_wheel_angle_rad"] for s in rec]),
                            np.array([[s[f"wheel_torque_nm_{i}"] for i in range(1, 5)] for s in rec]),
                            np.full((len(rec), 4), 150.0))
-    init2 = PredictorInitialState.from_truth_for_tests_only(rec[0])
+    init2 = initial_state_from_truth(rec[0])
     cfg = PredictorConfig(horizon_s=2.0)
     _assert_same_prediction(Predictor(true_vehicle, cfg).predict(init2, traj),
                             Predictor(true_vehicle, cfg, fast=False).predict(init2, traj))
@@ -184,7 +178,7 @@ def test_fast_path_equals_the_generic_core_path(left_turn, paper_drive):
     sim3 = Simulator(scenario=load_scenario("fishhook-suv"))
     sim3.step_to(1.9 + 1e-9)
     suv = load_vehicle("suv-model").with_params(**sim3.scenario.vehicle.params.as_dict())
-    init3 = PredictorInitialState.from_truth_for_tests_only(sim3.snapshot())
+    init3 = initial_state_from_truth(sim3.snapshot())
     a = Predictor(suv).predict(init3)
     assert a.stop_reason == "point_of_no_return"
     _assert_same_prediction(a, Predictor(suv, fast=False).predict(init3))
@@ -195,7 +189,7 @@ def test_fast_path_equals_the_generic_core_path(left_turn, paper_drive):
 
 def test_held_and_input_driven_agree_for_constant_inputs(left_turn):
     sc, sim, snap, true_vehicle = left_turn
-    init = PredictorInitialState.from_truth_for_tests_only(snap)
+    init = initial_state_from_truth(snap)
     p = Predictor(true_vehicle, PredictorConfig(horizon_s=2.0))
     held = p.predict(init)
     u = init.inputs
@@ -222,7 +216,7 @@ def test_input_driven_follows_recorded_inputs(paper_drive):
                            np.array([[s[f"wheel_torque_nm_{i}"] for i in range(1, 5)] for s in rec]))
     vehicle = load_vehicle("sedan-model").with_params(**sc.vehicle.params.as_dict())
     p = Predictor(vehicle, PredictorConfig(horizon_s=2.0))
-    init = PredictorInitialState.from_truth_for_tests_only(snap)
+    init = initial_state_from_truth(snap)
     true = _truth_traj(sim, t0, t1)
     md = compare_trajectories(PoseTrajectory.from_prediction(p.predict(init, traj)), true)
     mh = compare_trajectories(PoseTrajectory.from_prediction(p.predict(init)), true)
@@ -235,10 +229,10 @@ def test_pose_from_suspension_inverts_the_reduced_model(left_turn):
     model geometry) give back the state they came from (1e-9)."""
     sc, sim, snap, true_vehicle = left_turn
     p = Predictor(true_vehicle, PredictorConfig(pose_source="estimate_plane"))
-    x0, env, _ = p.core_state(PredictorInitialState.from_truth_for_tests_only(snap, with_suspension=False))
+    x0, env, _ = p.core_state(initial_state_from_truth(snap, with_suspension=False))
     u = Inputs()
     _, d = p.model.evaluate(x0, u, env)
-    init = PredictorInitialState.from_truth_for_tests_only(snap)
+    init = initial_state_from_truth(snap)
     init = PredictorInitialState(**{**init.__dict__,
                                     "susp_deflection_m": tuple(d[f"susp_deflection_m_{i}"] for i in range(1, 5)),
                                     "susp_deflection_rate_mps": tuple(d[f"susp_deflection_rate_mps_{i}"] for i in range(1, 5))})
@@ -261,7 +255,7 @@ def test_initial_state_from_the_estimator_outputs(left_turn):
                            (0.0,) * 3, w4("wheel_speed_radps"), (0.0,) * 4, w4("susp_deflection_m"),
                            w4("susp_deflection_rate_mps"), w4("wheel_torque_nm"), snap["steer_wheel_angle_rad"], {})
     a = PredictorInitialState.from_estimator(est, filt)
-    b = PredictorInitialState.from_truth_for_tests_only(snap)
+    b = initial_state_from_truth(snap)
     assert a == b
     # no suspension sensors (NaN): attitude from the estimate
     nan4 = (math.nan,) * 4
@@ -280,7 +274,7 @@ def test_predicted_point_of_no_return_uses_the_simulator_definition():
     sim.step_to(1.9 + 1e-9)
     vehicle = load_vehicle("suv-model").with_params(**sc.vehicle.params.as_dict())
     r = Predictor(vehicle, PredictorConfig(output_every=1)).predict(
-        PredictorInitialState.from_truth_for_tests_only(sim.snapshot()))
+        initial_state_from_truth(sim.snapshot()))
     assert r.stop_reason == "point_of_no_return" and r.rollover_predicted
     g = vehicle.geometry
     tip = static_tip_angle_rad(0.5 * (g.track_half_front_m + g.track_half_rear_m), g.h_cg_m)
@@ -343,7 +337,7 @@ def test_prediction_is_invariant_to_the_estimator_origin(left_turn, source):
     "suspension" and "estimate" pose sources a shifted position estimate shifts the prediction
     and changes nothing else."""
     sc, sim, snap, true_vehicle = left_turn
-    init = PredictorInitialState.from_truth_for_tests_only(snap)
+    init = initial_state_from_truth(snap)
     moved = PredictorInitialState(**{**init.__dict__, "pos_g_m": tuple(np.add(init.pos_g_m, (120.0, -45.0, 31.0)))})
     p = Predictor(true_vehicle, PredictorConfig(horizon_s=1.0, pose_source=source))
     a, b = p.predict(init), p.predict(moved)

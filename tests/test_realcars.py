@@ -19,7 +19,7 @@ from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.imu_decoder import ImuDecoder
 from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.estimation.ekf_config import SensorSet
-from vdps_hil.estimation.kinematics import dcm_gv
+from vdps_hil.model.frames import dcm_gv
 from vdps_hil.model.params import load_vehicle
 
 

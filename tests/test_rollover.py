@@ -6,8 +6,8 @@ import math
 import pytest
 
 from vdps_hil.model.params import load_vehicle
-from vdps_hil.sim.rollover import (RolloverMonitor, assess, classify_outcome, static_tip_angle_rad,
-                                   with_static_stability_factor)
+from vdps_hil.model.rollover import (RolloverMonitor, assess, classify_outcome, static_tip_angle_rad,
+                                     with_static_stability_factor)
 from vdps_hil.sim.scenarios import load_scenario
 from vdps_hil.sim.simulator import Simulator
 

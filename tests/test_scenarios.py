@@ -1,4 +1,4 @@
-"""Scenario files: loader (one-line errors), signals, and the paper scenarios as the issue
+"""Scenario files: loader (one-line errors) and the paper scenarios as the issue
 specifies them (A_sw for a 4 m/s^2 peak, T0 holding the speed, the 10.25 s holds)."""
 
 import math
@@ -6,8 +6,8 @@ import math
 import pytest
 
 from vdps_hil.model.core import Inputs
-from vdps_hil.sim.scenarios import (CHANNELS, ScenarioError, build_signal, load_scenario, parse_scenario,
-                                    scenario_names)
+from vdps_hil.sim.scenarios import load_scenario, parse_scenario, scenario_names
+from vdps_hil.sim.signals import ScenarioError
 from vdps_hil.sim.simulator import Simulator
 from vdps_hil.units import GRAVITY_MPS2 as G
 
@@ -50,21 +50,6 @@ def test_bad_scenarios_give_one_line_errors(text, msg):
 def test_unknown_scenario_name_is_one_line():
     with pytest.raises(ScenarioError, match="unknown scenario 'nope'"):
         load_scenario("nope")
-
-
-def test_signals():
-    sine = build_signal({"type": "sine", "offset": 1.0, "amplitude": 2.0, "frequency_hz": 0.5, "start_s": 1.0}, "s")
-    assert sine(0.5) == 1.0 and sine(1.5) == pytest.approx(1.0 + 2.0 * math.sin(math.pi * 0.5))
-    pts = build_signal({"type": "points", "points": [[0, 0], [1, 10], [1, 20], [2, 20]]}, "p")
-    assert pts(-1) == 0 and pts(0.5) == 5 and pts(1.0) == 20 and pts(3) == 20
-    held = build_signal({"type": "sine", "amplitude": 1.0, "frequency_hz": 1.0, "hold_from_s": 10.25}, "h")
-    assert held(12.0) == pytest.approx(1.0) and held(10.0) == pytest.approx(0.0, abs=1e-12)
-    sw = build_signal({"type": "sine", "amplitude": 1.0, "frequency_hz": 1.0, "then_s": 2.0,
-                       "then": {"type": "const", "value": 5.0}}, "w")
-    assert sw(1.25) == pytest.approx(1.0) and sw(2.0) == 5.0
-    sweep = build_signal({"type": "sweep", "amplitude": 1.0, "f0_hz": 0.5, "f1_hz": 2.0, "duration_s": 4.0}, "c")
-    assert sweep(5.0) == 0.0 and abs(sweep(1.0)) <= 1.0
-    assert len(CHANNELS) == 9
 
 
 def test_paper_scenarios_as_specified():
@@ -110,7 +95,8 @@ def test_paper_peak_lateral_acceleration_is_4_mps2():
 
 
 def test_scenario_faults_are_validated_at_load():
-    from vdps_hil.sim.scenarios import ScenarioError, parse_scenario
+    from vdps_hil.sim.scenarios import parse_scenario
+    from vdps_hil.sim.signals import ScenarioError
     base = 'name = "x"\nduration_s = 1.0\n'
     sc = parse_scenario(base + 'faults = ["gnss_outage:t_s=0.2,duration_s=0.3"]\n')
     assert sc.raw["faults"] == ["gnss_outage:t_s=0.2,duration_s=0.3"]

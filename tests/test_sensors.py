@@ -1,4 +1,4 @@
-"""Tests of sim.sensors on synthetic truth blocks: sampling, IMU kinematics (lever arm, mounting
+"""Tests of sim.sensors on synthetic truth blocks: IMU kinematics (lever arm, mounting
 rotation, effects, scale factor and misalignment), GNSS antenna geometry, Gauss-Markov error,
 sentences in every fix state, chassis sensors, noise statistics and the quantisation switch."""
 
@@ -9,8 +9,6 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.geodesy import DEFAULT_ORIGIN
@@ -20,9 +18,9 @@ from vdps_hil.model.frames import dcm_global_to_vehicle
 from vdps_hil.model.params import Mounting
 from vdps_hil.sim.faults import FaultSet
 from vdps_hil.sim.profiles import load_profile
-from vdps_hil.sim.sensors import (GEOID_SEPARATION_M, Block, GnssModel, ImuModel, Sampler,
-                                  VELOCITY_SIGMA_PER_POSITION_SIGMA, chassis_sensors,
-                                  noise_budget_sigma, rng_for)
+from vdps_hil.sim.sampling import Block
+from vdps_hil.sim.sensors import (GEOID_SEPARATION_M, VELOCITY_SIGMA_PER_POSITION_SIGMA, GnssModel, ImuModel,
+                                  chassis_sensors, noise_budget_sigma)
 
 MS = 1_000_000
 PROFILE = load_profile("table1-susp1k")
@@ -40,30 +38,6 @@ def random_block(rng, n, dt_ns=MS, start=0):
                        wheel_spin=rng.normal(60, 5, (n, 4)), susp=rng.normal(0, 0.01, (n, 4)),
                        steer=rng.normal(0, 0.5, n), drive_torque=rng.normal(0, 200, (n, 4)),
                        brake_torque=np.abs(rng.normal(0, 100, (n, 4))))
-
-
-def test_rng_streams_reproduce_and_are_independent():
-    a, b = rng_for(7, "imu.noise").standard_normal(5), rng_for(7, "imu.noise").standard_normal(5)
-    np.testing.assert_array_equal(a, b)
-    assert not np.allclose(a, rng_for(7, "gnss.position").standard_normal(5))
-    assert not np.allclose(a, rng_for(8, "imu.noise").standard_normal(5))
-
-
-@settings(max_examples=60, deadline=None, derandomize=True)
-@given(rate=st.sampled_from([1000.0, 100.0, 5.0, 1.0, 300.0]),
-       cuts=st.lists(st.integers(1, 700), min_size=1, max_size=8))
-def test_sampler_picks_every_sample_once_whatever_the_blocks(rate, cuts):
-    s = Sampler(rate, MS)
-    n0, picked = 0, []
-    for c in cuts:
-        rows, ks = s.pick(Block.build(np.arange(n0, n0 + c), MS))
-        picked += list(zip((rows + n0).tolist(), ks.tolist()))
-        n0 += c
-    ks = [k for _, k in picked]
-    assert ks == list(range(len(ks)))
-    period = round(1e9 / rate)
-    assert all(n == (2 * k * period + MS) // (2 * MS) for n, k in picked)
-    assert ks and (2 * (ks[-1] + 1) * period + MS) // (2 * MS) >= n0  # nothing left behind
 
 
 def test_noise_budget_sigma():

@@ -8,9 +8,11 @@ import pytest
 
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.codecs.can_e2e import crc8_j1850
+from vdps_hil.experiments.truth_init import initial_state_from_truth
 from vdps_hil.model.params import load_vehicle
-from vdps_hil.prediction.predictor import (PredictionConfigError, Predictor, PredictorInitialState,
-                                           load_predictor_config)
+from vdps_hil.prediction.config import PredictionConfigError, load_predictor_config
+from vdps_hil.prediction.initial_state import PredictorInitialState
+from vdps_hil.prediction.predictor import Predictor
 from vdps_hil.prediction.warning import (RolloverAssessment, WarningChain, WarningLevel, WarningNode,
                                          WarningNodeConfig, WarningPolicy, WarningStatus, evaluate_warning_frames,
                                          load_transfer_ratio, load_warning_config, replay_assessments,
@@ -186,7 +188,7 @@ def run_chain(name, model):
     pred = Predictor(load_vehicle(model).with_params(**sc.vehicle.params.as_dict()), load_predictor_config())
     chain = WarningChain(pred, *load_warning_config())
     for s in sim.truth:
-        chain.handle(s["t_ns"], PredictorInitialState.from_truth_for_tests_only(s))
+        chain.handle(s["t_ns"], initial_state_from_truth(s))
     return sim, chain, evaluate_warning_frames(chain.frames, sim.events)
 
 
@@ -244,7 +246,7 @@ def test_a_bounded_chain_sends_the_same_frames_and_keeps_only_a_recent_window():
     full = WarningChain(pred, *load_warning_config())
     small = WarningChain(pred, *load_warning_config(), keep=7)
     for s in sim.truth[:250]:  # 2.5 s at 100 Hz: 25 predictions, ~125 frames, level changes
-        init = PredictorInitialState.from_truth_for_tests_only(s)
+        init = initial_state_from_truth(s)
         assert [bytes(f.data) for f in small.handle(s["t_ns"], init)] == \
             [bytes(f.data) for f in full.handle(s["t_ns"], init)]
     assert len(full.assessments) >= 20 and len(full.frames) >= 100

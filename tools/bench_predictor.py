@@ -51,10 +51,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from vdps_hil.experiments.truth_init import initial_state_from_truth  # noqa: E402
 from vdps_hil.model.params import load_vehicle  # noqa: E402
+from vdps_hil.prediction.config import PredictorConfig, load_predictor_config  # noqa: E402
 from vdps_hil.prediction.metrics import PoseTrajectory  # noqa: E402
-from vdps_hil.prediction.predictor import (Predictor, PredictorConfig, PredictorInitialState,  # noqa: E402
-                                           load_predictor_config)
+from vdps_hil.prediction.predictor import Predictor  # noqa: E402
 from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
 from vdps_hil.sim.simulator import Simulator  # noqa: E402
 
@@ -115,7 +116,7 @@ def main(argv=None) -> int:
     for name, t0, model, label in CASES:
         snap, sc = truth_snapshot(name, t0)
         vehicle = load_vehicle(model).with_params(**sc.vehicle.params.as_dict())
-        init = PredictorInitialState.from_truth_for_tests_only(snap)
+        init = initial_state_from_truth(snap)
         print(f"\n== {name} from t0 = {t0} s: {label}; true parameters, truth initial state, held inputs, "
               f"horizon {default.horizon_s} s")
         print(f"{'case':34s} {'median ms':>9s} {'best ms':>7s} {'f-evals':>7s} {'stop':>18s} {'max dpos m':>10s} "

@@ -36,7 +36,7 @@ sys.path.insert(0, str(REPO))
 
 from vdps_hil.sim.drive import Drive  # noqa: E402
 from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
-from vdps_hil.sim.sensors import StepRecorder  # noqa: E402
+from vdps_hil.sim.sampling import StepRecorder  # noqa: E402
 from vdps_hil.sim.simulator import Simulator  # noqa: E402
 
 

@@ -172,12 +172,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from vdps_hil.experiments.truth_init import initial_state_from_truth  # noqa: E402
 from vdps_hil.model.core import Inputs  # noqa: E402
 from vdps_hil.model.params import load_vehicle  # noqa: E402
+from vdps_hil.prediction.config import PredictorConfig, load_predictor_config  # noqa: E402
+from vdps_hil.prediction.initial_state import InputTrajectory  # noqa: E402
 from vdps_hil.prediction.metrics import PoseTrajectory, compare_trajectories  # noqa: E402
-from vdps_hil.prediction.predictor import (InputTrajectory, Predictor, PredictorConfig,  # noqa: E402
-                                           PredictorInitialState, load_predictor_config)
-from vdps_hil.sim.scenarios import build_signal, load_scenario  # noqa: E402
+from vdps_hil.prediction.predictor import Predictor  # noqa: E402
+from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
+from vdps_hil.sim.signals import build_signal  # noqa: E402
 from vdps_hil.sim.simulator import Simulator  # noqa: E402
 
 T0 = 10.25
@@ -342,7 +345,7 @@ def stiffness_cases(truth, true_p, chain_c=None) -> dict:
 
 
 def truth_state_budget(sc, truth, veh, true_p, cases, *, t0=T0, t_end=T_END, grid=True) -> dict:
-    init = PredictorInitialState.from_truth_for_tests_only(snapshot_at(truth, t0))
+    init = initial_state_from_truth(snapshot_at(truth, t0))
     out = {}
     m = score(predict(veh, true_p, init, horizon_s=t_end - t0, effects=sc.effect_set()), truth, t0, t_end)
     out["magic formula"] = {"C": None, "m": m}
@@ -381,7 +384,7 @@ def chain_budget(seeds, truth, veh, true_p, profile="table1-susp1k") -> tuple[di
         t0 = t_ns / 1e9
         p_c = params.as_dict()
         chain_c[f"s{seed}"] = (p_c[CF], p_c[CR])
-        init_t = PredictorInitialState.from_truth_for_tests_only(_interp_snapshot(r["truth"], t0))
+        init_t = initial_state_from_truth(_interp_snapshot(r["truth"], t0))
         h = T_END - t0
         res = {}
         for sl, init in (("chain state", init_c), ("truth state", init_t)):
@@ -472,7 +475,7 @@ def rollover_budget(profile="table1-susp1k", seed=1) -> dict:
         init_c, params = r["captured"][first.t0_ns]
         t0 = first.t0_ns / 1e9
         p_c = params.as_dict()
-        init_t = PredictorInitialState.from_truth_for_tests_only(_interp_snapshot(truth, t0))
+        init_t = initial_state_from_truth(_interp_snapshot(truth, t0))
         t_from = InputTrajectory(rec.t_s - t0, rec.steer_wheel_angle_rad, rec.wheel_torque_nm, rec.brake_torque_nm)
         cfg_h = load_predictor_config().horizon_s
         runs = {"chain state + chain params (reported)": (init_c, p_c, None, None),
@@ -496,7 +499,7 @@ def rollover_budget(profile="table1-susp1k", seed=1) -> dict:
     tr9 = Simulator(scenario=sc9).run()
     veh = load_vehicle("sedan-model")
     tp9 = sc9.vehicle.params.as_dict()
-    init9 = PredictorInitialState.from_truth_for_tests_only(snapshot_at(tr9, T0))
+    init9 = initial_state_from_truth(snapshot_at(tr9, T0))
     fig9 = {}
     for label, eff in (("truth state + true params", None), ("truth state + true params, MF tire",
                                                              sc9.effect_set())):

@@ -18,7 +18,7 @@ import time
 
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.params import load_vehicle
-from vdps_hil.sim.rollover import assess, with_static_stability_factor
+from vdps_hil.model.rollover import assess, with_static_stability_factor
 from vdps_hil.sim.scenarios import load_scenario
 from vdps_hil.sim.simulator import Simulator
 

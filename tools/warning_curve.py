@@ -37,14 +37,15 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from vdps_hil.experiments.truth_init import initial_state_from_truth  # noqa: E402
 from vdps_hil.model.core import Inputs  # noqa: E402
 from vdps_hil.model.effects import effects_from_names  # noqa: E402
 from vdps_hil.model.params import load_vehicle  # noqa: E402
-from vdps_hil.prediction.predictor import (Predictor, PredictorInitialState,  # noqa: E402
-                                           load_predictor_config)
+from vdps_hil.model.rollover import assess  # noqa: E402
+from vdps_hil.prediction.config import load_predictor_config  # noqa: E402
+from vdps_hil.prediction.predictor import Predictor  # noqa: E402
 from vdps_hil.prediction.warning import (WarningChain, WarningPolicy, evaluate_warning_frames,  # noqa: E402
                                          load_warning_config, replay_assessments)
-from vdps_hil.sim.rollover import assess  # noqa: E402
 from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
 from vdps_hil.sim.simulator import Simulator  # noqa: E402
 
@@ -83,7 +84,7 @@ def run_one(label, sc, src, model, effects, policy, node_cfg):
     pred = Predictor(load_vehicle(model).with_params(**sc.vehicle.params.as_dict()), cfg, effects)
     chain = WarningChain(pred, policy, node_cfg)
     for s in sim.truth:
-        chain.handle(s["t_ns"], PredictorInitialState.from_truth_for_tests_only(s))
+        chain.handle(s["t_ns"], initial_state_from_truth(s))
     o = evaluate_warning_frames(chain.frames, sim.events)
     a = assess(sim)
     pn = [x.t0_ns / 1e9 + x.time_to_point_of_no_return_s for x in chain.assessments

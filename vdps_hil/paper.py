@@ -216,7 +216,7 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
     from vdps_hil.estimation.estimates import Estimate
     from vdps_hil.geodesy import DEFAULT_ORIGIN
     from vdps_hil.model.params import load_vehicle
-    from vdps_hil.prediction.predictor import PredictorInitialState
+    from vdps_hil.prediction.initial_state import PredictorInitialState
     from vdps_hil.record.decode import decode_recording
     from vdps_hil.record.reader import RecordingReader
     from vdps_hil.sim.drive import Drive
@@ -377,7 +377,8 @@ def identification_task(profile: str, seed: int, *, predict: bool = True, zero_n
     """Identification at 10.25 s and over 5-10.25 s, fusion errors over 5-10 s, the left-turn
     prediction from 10.25 s and the warning frames of the whole drive (false alarms)."""
     from vdps_hil.prediction.metrics import PoseTrajectory, compare_trajectories
-    from vdps_hil.prediction.predictor import Predictor, load_predictor_config
+    from vdps_hil.prediction.config import load_predictor_config
+    from vdps_hil.prediction.predictor import Predictor
     from vdps_hil.prediction.warning import evaluate_warning_frames
 
     prof = _profile(profile)
@@ -433,7 +434,8 @@ def rollover_task(profile: str, seed: int, scenario: str = "fishhook-suv", model
     (``vdps replay --save-params`` / ``--params``), and its warnings are valid from the start;
     without, it starts from the priors and waits for the cornering stiffnesses to converge."""
     from vdps_hil.prediction.metrics import PoseTrajectory, compare_trajectories
-    from vdps_hil.prediction.predictor import Predictor, load_predictor_config
+    from vdps_hil.prediction.config import load_predictor_config
+    from vdps_hil.prediction.predictor import Predictor
     from vdps_hil.prediction.warning import evaluate_warning_frames
 
     kw, cal_doc = _start_kw(profile, seed, model, truth_vehicle, calibration)

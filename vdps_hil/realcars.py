@@ -62,11 +62,12 @@ import numpy as np
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
-from vdps_hil.estimation.kinematics import dcm_gv
+from vdps_hil.model.frames import dcm_gv
 from vdps_hil.estimation.estimates import Estimate, Innovation
 from vdps_hil.estimation.pipeline import EstimatorPipeline
 from vdps_hil.estimation.pipeline_config import Latencies, PipelineConfig
 from vdps_hil.geodesy import EnuOrigin, ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
+from vdps_hil.model.frames import dcm_gv
 from vdps_hil.model.params import CONFIG_DIR
 from vdps_hil.units import GRAVITY_MPS2, wrap_pi
 

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from vdps_hil.bus.samples import axis_fields
-from vdps_hil.estimation.kinematics import dcm_gv
+from vdps_hil.model.frames import dcm_gv
 
 _SF = axis_fields("specific_force_mps2")
 _AR = axis_fields("angular_rate_radps")

@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vdps_hil.estimation.kinematics import dcm_gv, vehicle_angles_eq4
+from vdps_hil.estimation.kinematics import vehicle_angles_eq4
+from vdps_hil.model.frames import dcm_gv
 from vdps_hil.estimation.states import States
 
 _NAN = math.nan

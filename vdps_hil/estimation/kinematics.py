@@ -16,7 +16,7 @@ w_b         rad/s     gyro angular rate in body axes
 g_vec       m/s^2     [0, 0, -g] in {g} (ENU). Correction (d): eq 7 feeds A^acc as if it were
                       the kinematic acceleration; a real accelerometer measures specific
                       force, so gravity is added here. ``gravity_mps2=0`` gives eq 7 literally.
-C_g^v       -         eq 1, R(x, phi_g) R(y, theta_g) R(z, psi_g) (``frames``)
+C_g^v       -         eq 1, R(x, phi_g) R(y, theta_g) R(z, psi_g) (``frames.dcm_gv``)
 C_omega^-1  -         inverse of C_omega consistent with eq 1 (``frames.c_omega_inv``)
 ==========  ========  ============================================================
 
@@ -44,21 +44,10 @@ import math
 
 import numpy as np
 
+from vdps_hil.model.frames import dcm_gv, dcm_gv_elements
 from vdps_hil.units import GRAVITY_MPS2
 
 _I3 = np.eye(3)
-
-
-def dcm_gv(phi: float, theta: float, psi: float) -> np.ndarray:
-    """C_g^v of eq 1 (closed form, cheaper than three products)."""
-    sf, cf = math.sin(phi), math.cos(phi)
-    st, ct = math.sin(theta), math.cos(theta)
-    sp, cp = math.sin(psi), math.cos(psi)
-    return np.array([
-        [ct * cp, ct * sp, st],
-        [-cf * sp - sf * st * cp, cf * cp - sf * st * sp, sf * ct],
-        [sf * sp - cf * st * cp, -sf * cp - cf * st * sp, cf * ct],
-    ])
 
 
 def dcm_gv_partials(phi: float, theta: float, psi: float):
@@ -69,9 +58,9 @@ def dcm_gv_partials(phi: float, theta: float, psi: float):
     sf, cf = math.sin(phi), math.cos(phi)
     st, ct = math.sin(theta), math.cos(theta)
     sp, cp = math.sin(psi), math.cos(psi)
-    r1 = [-cf * sp - sf * st * cp, cf * cp - sf * st * sp, sf * ct]
-    r2 = [sf * sp - cf * st * cp, -sf * cp - cf * st * sp, cf * ct]
-    c = np.array([[ct * cp, ct * sp, st], r1, r2])
+    c00, c01, c02, *r12 = dcm_gv_elements(sf, cf, st, ct, sp, cp)
+    r1, r2 = r12[0:3], r12[3:6]
+    c = np.array([[c00, c01, c02], r1, r2])
     d_phi = np.array([[0.0, 0.0, 0.0], r2, [-r1[0], -r1[1], -r1[2]]])
     d_theta = np.array([
         [-st * cp, -st * sp, ct],

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vdps_hil.estimation.kinematics import dcm_gv
+from vdps_hil.model.frames import dcm_gv
 
 _NAN = math.nan
 

@@ -39,7 +39,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from vdps_hil.sim.drive import Drive, DriveSink
+from vdps_hil.sim.drive import Drive
+from vdps_hil.sim.sinks import DriveSink
 from vdps_hil.units import NS_PER_S
 
 from .can_devices import CanDeviceSide

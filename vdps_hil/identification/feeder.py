@@ -53,7 +53,7 @@ evaluated at the estimated state -- body velocity v_b = C_g^v v_g, body rates w 
 wheel spins (alpha-beta), the estimated road plane (phi_r, theta_r) and the measured steering
 wheel angle -- giving per wheel::
 
-    d_1,2 = Ackermann(delta_sw / steer_ratio),  d_3,4 = 0                (core.ackermann_angles)
+    d_1,2 = Ackermann(delta_sw / steer_ratio),  d_3,4 = 0                (stages.ackermann_angles)
     lambda_i = (r_i w_i - v_l,i) / max(|v_l,i|, v_floor)                  slip ratio
     alpha_i  = -atan(v_t,i / max(|v_l,i|, v_floor))                       slip angle
 

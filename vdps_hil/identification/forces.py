@@ -55,7 +55,7 @@ import math
 import numpy as np
 
 from vdps_hil.identification.inputs import IdentInputs
-from vdps_hil.model.core import spring_force_n
+from vdps_hil.model.stages import spring_force_n
 from vdps_hil.model.params import Geometry, IdentifiedParams, Vehicle
 from vdps_hil.units import GRAVITY_MPS2
 
@@ -68,7 +68,7 @@ def spring_compression_m(vehicle: Vehicle, susp_deflection_m) -> np.ndarray:
 
 def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
                         include_unsprung_weight: bool = True) -> np.ndarray:
-    """Per corner [N], the spring law of eq 14 (``model.core.spring_force_n``):
+    """Per corner [N], the spring law of eq 14 (``model.stages.spring_force_n``):
 
     * with the unsprung weight: F_z,spring,i = K_s H + D_s Hd + m_u g, the normal load of the
       paper's reduced model, with eq 14's clamp as the physics core applies it (lift-off when

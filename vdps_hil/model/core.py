@@ -39,7 +39,8 @@ slice              size  meaning
 =================  ====  ======================================================================
 
 Entry points: ``Model(vehicle, effects, unsprung_dof=...)`` builds the parameters once;
-``model.f(x, u, env)`` (or ``derivatives(x, u, model, env)``) is the pure derivative function;
+``model.f(x, u, env)`` (or ``derivatives(x, u, model, env)``) is the pure derivative function,
+composed of the stages in :mod:`vdps_hil.model.stages` (one function per stage below);
 ``model.evaluate(x, u, env)`` adds named diagnostics (tire forces, slips, loads, ...);
 ``model.design_state`` / ``model.trim_state`` / ``model.state_from`` build states.
 
@@ -100,6 +101,7 @@ from vdps_hil.units import GRAVITY_MPS2
 from .effects import EffectSet, LinearTire
 from .effects.base import Effect
 from .params import Vehicle
+from .stages import CoreConstants, derivative_function
 
 SLIP_SPEED_FLOOR_MPS = 5.0
 """Default v_floor of the slip denominators [m/s]."""
@@ -188,20 +190,6 @@ class Env:
         object.__setattr__(self, "wind_enu_mps", tuple(float(w) for w in self.wind_enu_mps))
 
 
-def spring_force_n(h_spring_m: float, c1: float, c2: float, c3: float) -> float:
-    """Eq 14 spring: K_s H with K_s = C1 exp(C2 (H - C3)); H compression from free length [m].
-    Negative H (extension past free length) gives tension, standing in for the rebound stop."""
-    return c1 * math.exp(c2 * (h_spring_m - c3)) * h_spring_m
-
-
-def ackermann_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front_m: float) -> tuple[float, float]:
-    """Front road-wheel angles (delta_1 FL, delta_2 FR) [rad] for a bicycle-model angle
-    delta_m: tan delta_1,2 = L tan delta_m / (L -+ t_f tan delta_m)."""
-    tm = math.tan(delta_mean_rad)
-    return (math.atan2(wheelbase_m * tm, wheelbase_m - track_half_front_m * tm),
-            math.atan2(wheelbase_m * tm, wheelbase_m + track_half_front_m * tm))
-
-
 def derivatives(x: Sequence[float], u: "Inputs", p: "Model", env: "Env") -> list[float]:
     """f(x, u, p, env) -> x_dot: the core as a pure function of state, inputs, parameters (a
     :class:`Model`: vehicle + effects + variant) and environment. Same as ``p.f(x, u, env)``."""
@@ -214,7 +202,8 @@ class Model:
     ``Model(vehicle, effects, unsprung_dof=True)`` is the truth simulator's model;
     ``Model(model_vehicle, EffectSet([LinearTire()]), unsprung_dof=False)`` is the paper's eq
     13-16. When ``effects`` has no tire model, ``linear_tire`` is used. Build once, call ``f``
-    many times: ``f`` is a closure over plain floats (no numpy inside).
+    many times: ``f`` composes the stages of :mod:`vdps_hil.model.stages` over the model's
+    constants (:class:`~vdps_hil.model.stages.CoreConstants`), on plain floats (no numpy inside).
 
     Attributes: ``layout`` (StateLayout), ``vehicle``, ``effects`` (EffectSet incl. the tire),
     ``static_load_n`` (F_z0 per corner on a level road [N]), ``rolling_radius_m`` (per corner),
@@ -272,23 +261,11 @@ class Model:
 
     # ------------------------------------------------------------------ the core
     def _build(self) -> Callable:
+        """f from the model's constants and the stages of :mod:`vdps_hil.model.stages`."""
         veh = self.vehicle
         geo, p = veh.geometry, veh.params
-        dof = self.unsprung_dof
         g = GRAVITY_MPS2
-        m_tot, m_s = self.m_tot, self.m_s
-        inv_m_tot, inv_m_s = 1.0 / m_tot, 1.0 / m_s
         Ix, Iy, Iz = p.inertia_x_kgm2, p.inertia_y_kgm2, p.inertia_z_kgm2
-        Iyz, Izx, Ixy = (Iy - Iz) / Ix, (Iz - Ix) / Iy, (Ix - Iy) / Iz
-        inv_Ix, inv_Iy, inv_Iz = 1.0 / Ix, 1.0 / Iy, 1.0 / Iz
-        Iw_inv = 1.0 / veh.tire.wheel_inertia_kgm2
-        kt = veh.tire.vertical_stiffness_npm
-        L, tf = geo.wheelbase_m, geo.track_half_front_m
-        ratio = geo.steer_ratio
-        zw0 = self.wheel_centre_z_m
-        r_load = veh.tire.rolling_radius_m
-        vfloor = self.slip_speed_floor_mps
-        wbrake = BRAKE_HOLD_SPEED_RADPS
         corners = []
         for i in range(4):
             ax = veh.axle(i)
@@ -297,231 +274,21 @@ class Model:
                             ax.static_compression_m, ax.damper_nspm, self.rolling_radius_m[i],
                             self.tire_free_radius_m[i], self.c_kappa[i], self.c_alpha[i],
                             self.static_load_n[i], self.m_u[i] * g))
-        corners = tuple(corners)
         dyn = self.effects.dynamics
-        tire = self.effects.tire
-        tire_fn = tire.tire_forces
-        stiff_fns = tuple(e.cornering_stiffness_factor for e in dyn if "cornering_stiffness_factor" in e.HOOKS)
-        wrench_fns = tuple(e.body_wrench for e in dyn if "body_wrench" in e.HOOKS)
-        wheel_fns = tuple(e.wheel_torque for e in dyn if "wheel_torque" in e.HOOKS)
-        k_c = sum(e.compliance_steer() for e in dyn if "compliance_steer" in e.HOOKS)
-        wex, wey, wez = self.effect_wind_enu_mps
-        sqrt, sin, cos, atan, exp, atan2, tan = math.sqrt, math.sin, math.cos, math.atan, math.exp, math.atan2, math.tan
-
-        def f(x, u, env, out=None):
-            """x_dot = f(x, u, env). ``out``: optional dict filled with named diagnostics."""
-            (pe, pn, pu, phi, theta, psi, vx, vy, vz, wx, wy, wz, om1, om2, om3, om4) = x[0:16]
-            oms = (om1, om2, om3, om4)
-            if dof:
-                Hs = x[16:20]
-                Hds = x[20:24]
-            sph, cph, sth, cth, sps, cps = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
-            # C = C_g^v = R(x,phi) R(y,theta) R(z,psi), eq 1
-            c00, c01, c02 = cth * cps, cth * sps, sth
-            c10 = -cph * sps - sph * sth * cps
-            c11 = cph * cps - sph * sth * sps
-            c12 = sph * cth
-            c20 = sph * sps - cph * sth * cps
-            c21 = -sph * cps - cph * sth * sps
-            c22 = cph * cth
-            ng0, ng1, ng2 = env.normal_g
-            nx = c00 * ng0 + c01 * ng1 + c02 * ng2
-            ny = c10 * ng0 + c11 * ng1 + c12 * ng2
-            nz = c20 * ng0 + c21 * ng1 + c22 * ng2
-            gx, gy, gz = -g * c02, -g * c12, -g * c22
-            h_cg = pe * ng0 + pn * ng1 + pu * ng2
-            # steering (Ackermann from the bicycle angle)
-            dm = u.steer_wheel_angle_rad / ratio
-            tm = tan(dm)
-            d1 = atan2(L * tm, L - tf * tm)
-            d2 = atan2(L * tm, L + tf * tm)
-            torques = u.wheel_torque_nm
-            brakes = u.brake_torque_nm
-
-            # ---- per-corner kinematics and normal loads
-            ck = []
-            for (i, xi, yi, mu, c1, c2, c3, sc, ds, ri, rfree, ckap, calp, fz0, mug) in corners:
-                if dof:
-                    H = Hs[i]
-                    Hd = Hds[i]
-                    zi = zw0 + H
-                    hw = h_cg + nx * xi + ny * yi + nz * zi
-                    defl = rfree - hw
-                    fz = kt * defl if defl > 0.0 else 0.0
-                    hsp = sc + H
-                    fs = c1 * exp(c2 * (hsp - c3)) * hsp + ds * Hd
-                    vwx = vx + wy * zi - wz * yi
-                    vwy = vy + wz * xi - wx * zi
-                    vwz = vz + wx * yi - wy * xi + Hd
-                else:
-                    zi = zw0
-                    hw = h_cg + nx * xi + ny * yi + nz * zi
-                    vwx = vx + wy * zi - wz * yi
-                    vwy = vy + wz * xi - wx * zi
-                    vwz = vz + wx * yi - wy * xi
-                    H = r_load - hw
-                    Hd = -(nx * vwx + ny * vwy + nz * vwz)
-                    hsp = sc + H
-                    fsp = c1 * exp(c2 * (hsp - c3)) * hsp
-                    if fsp + mug <= 0.0:  # eq 14 clamp: lift-off
-                        fz = 0.0
-                    else:
-                        fz = fsp + ds * Hd + mug
-                        if fz < 0.0:
-                            fz = 0.0
-                    fs = fz
-                if stiff_fns:
-                    for sf in stiff_fns:
-                        calp = calp * sf(i, fz, fz0)
-                ck.append((i, xi, yi, zi, hw, fz, fs, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0))
-
-            def tire_at(c, delta):
-                (i, xi, yi, zi, hw, fz, fs, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0) = c
-                cd, sd = cos(delta), sin(delta)
-                hn = cd * nx + sd * ny
-                lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
-                inv = 1.0 / sqrt(lx * lx + ly * ly + lz * lz)
-                lx, ly, lz = lx * inv, ly * inv, lz * inv
-                tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
-                vl = vwx * lx + vwy * ly + vwz * lz
-                vt = vwx * tx + vwy * ty + vwz * tz
-                den = vl if vl > 0.0 else -vl
-                if den < vfloor:
-                    den = vfloor
-                kap = (ri * oms[i] - vl) / den
-                alp = -atan(vt / den)
-                fa, fb = tire_fn(fz, fz0, kap, alp, ckap, calp)
-                return fa, fb, kap, alp, lx, ly, lz, tx, ty, tz
-
-            if k_c != 0.0:
-                # steering compliance: delta_c = -K_c (F_b1 + F_b2), solved by secant (exact if linear)
-                c0, c1_ = ck[0], ck[1]
-
-                def resid(dc):
-                    return dc + k_c * (tire_at(c0, d1 + dc)[1] + tire_at(c1_, d2 + dc)[1])
-
-                r0_ = resid(0.0)
-                dc1 = -r0_
-                r1_ = resid(dc1)
-                den_ = r1_ - r0_
-                dcomp = dc1 - r1_ * dc1 / den_ if den_ != 0.0 else dc1
-            else:
-                dcomp = 0.0
-            deltas = (d1 + dcomp, d2 + dcomp, 0.0, 0.0)
-
-            Fx = Fy = Fz = Mx = My = Mz = 0.0
-            wdots = [0.0, 0.0, 0.0, 0.0]
-            fzt = [0.0, 0.0, 0.0, 0.0]
-            rec = [] if out is not None else None
-            for c in ck:
-                (i, xi, yi, zi, hw, fz, fs, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0) = c
-                fa, fb, kap, alp, lx, ly, lz, tx, ty, tz = tire_at(c, deltas[i])
-                ftx = fa * lx + fb * tx + fz * nx
-                fty = fa * ly + fb * ty + fz * ny
-                ftz = fa * lz + fb * tz + fz * nz
-                # contact point r_c = r_w - hw n
-                rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zi - hw * nz
-                Mx += rcy * ftz - rcz * fty
-                My += rcz * ftx - rcx * ftz
-                Mz += rcx * fty - rcy * ftx
-                Fx += ftx
-                Fy += fty
-                if dof:
-                    Fz += fs
-                    # spring/damper at the strut; the tire's body-z force goes into the unsprung mass
-                    Mx += yi * (fs - ftz)
-                    My -= xi * (fs - ftz)
-                    fzt[i] = ftz
-                else:
-                    Fz += ftz
-                om = oms[i]
-                tq = torques[i]
-                b = brakes[i]
-                if b != 0.0:
-                    s = om / wbrake
-                    tq -= b * (1.0 if s > 1.0 else (-1.0 if s < -1.0 else s))
-                teff = 0.0
-                for wf in wheel_fns:
-                    teff += wf(i, om, fz, ri)
-                wdots[i] = (tq - ri * fa + teff) * Iw_inv
-                if rec is not None:
-                    rec.append((fa, fb, fz, kap, alp, H, Hd, tq, teff, deltas[i], ri, hw, fs, ftx, fty, ftz))
-            # effects' body wrench (air velocity relative to the wind)
-            if wrench_fns:
-                we0, we1, we2 = env.wind_enu_mps
-                we0 += wex
-                we1 += wey
-                we2 += wez
-                air = (vx - (c00 * we0 + c01 * we1 + c02 * we2),
-                       vy - (c10 * we0 + c11 * we1 + c12 * we2),
-                       vz - (c20 * we0 + c21 * we1 + c22 * we2))
-                vel = (vx, vy, vz)
-                omg = (wx, wy, wz)
-                for wf in wrench_fns:
-                    ex, ey, ez, emx, emy, emz = wf(vel, omg, air)
-                    Fx += ex
-                    Fy += ey
-                    Fz += ez
-                    Mx += emx
-                    My += emy
-                    Mz += emz
-            # translation: a = F/m + g_b
-            ax_ = Fx * inv_m_tot + gx
-            ay_ = Fy * inv_m_tot + gy
-            if dof:
-                az_ = Fz * inv_m_s + gz
-            else:
-                az_ = Fz * inv_m_tot + gz
-            # unsprung masses' weight and translational inertia at the wheel centres
-            for (i, xi, yi, mu, *_rest) in corners:
-                zi = ck[i][3]
-                ux, uy = mu * (gx - ax_), mu * (gy - ay_)
-                uz = 0.0 if dof else mu * (gz - az_)
-                Mx += yi * uz - zi * uy
-                My += zi * ux - xi * uz
-                Mz += xi * uy - yi * ux
-            dwx = Iyz * wy * wz + Mx * inv_Ix
-            dwy = Izx * wz * wx + My * inv_Iy
-            dwz = Ixy * wx * wy + Mz * inv_Iz
-            # kinematics
-            dpe = c00 * vx + c10 * vy + c20 * vz
-            dpn = c01 * vx + c11 * vy + c21 * vz
-            dpu = c02 * vx + c12 * vy + c22 * vz
-            tth = sth / cth
-            dphi = wx - tth * sph * wy - tth * cph * wz
-            dtheta = -cph * wy + sph * wz
-            dpsi = (sph * wy + cph * wz) / cth
-            xd = [dpe, dpn, dpu, dphi, dtheta, dpsi,
-                  ax_ - (wy * vz - wz * vy), ay_ - (wz * vx - wx * vz), az_ - (wx * vy - wy * vx),
-                  dwx, dwy, dwz, wdots[0], wdots[1], wdots[2], wdots[3]]
-            if dof:
-                ww = wx * wx + wy * wy + wz * wz
-                hdd = []
-                for (i, xi, yi, mu, *_rest) in corners:
-                    zi = ck[i][3]
-                    acc_z = az_ + (dwx * yi - dwy * xi) + (wz * (wx * xi + wy * yi + wz * zi) - zi * ww)
-                    hdd.append((fzt[i] - ck[i][6]) / mu + gz - acc_z)
-                xd.extend(Hds)
-                xd.extend(hdd)
-            if out is not None:
-                out["_rec"] = rec
-                out["_acc_b"] = (ax_, ay_, az_)
-                out["_g_b"] = (gx, gy, gz)
-                out["_force_b"] = (Fx, Fy, Fz)
-                out["_moment_b"] = (Mx, My, Mz)
-                out["_normal_b"] = (nx, ny, nz)
-                out["_height_cg"] = h_cg
-                if out.get("_want_air", True):
-                    we0, we1, we2 = env.wind_enu_mps
-                    we0 += wex
-                    we1 += wey
-                    we2 += wez
-                    out["_air_b"] = (vx - (c00 * we0 + c01 * we1 + c02 * we2),
-                                     vy - (c10 * we0 + c11 * we1 + c12 * we2),
-                                     vz - (c20 * we0 + c21 * we1 + c22 * we2))
-            return xd
-
-        return f
+        k = CoreConstants(
+            unsprung_dof=self.unsprung_dof, g=g, inv_m_tot=1.0 / self.m_tot, inv_m_s=1.0 / self.m_s,
+            inertia=((Iy - Iz) / Ix, (Iz - Ix) / Iy, (Ix - Iy) / Iz, 1.0 / Ix, 1.0 / Iy, 1.0 / Iz),
+            iw_inv=1.0 / veh.tire.wheel_inertia_kgm2, tire_radial_stiffness=veh.tire.vertical_stiffness_npm,
+            wheelbase_m=geo.wheelbase_m, track_half_front_m=geo.track_half_front_m, steer_ratio=geo.steer_ratio,
+            zw0=self.wheel_centre_z_m, r_load=veh.tire.rolling_radius_m, v_floor=self.slip_speed_floor_mps,
+            brake_hold_radps=BRAKE_HOLD_SPEED_RADPS, corners=tuple(corners),
+            corner_masses=tuple(c[0:4] for c in corners), tire_fn=self.effects.tire.tire_forces,
+            stiffness_fns=tuple(e.cornering_stiffness_factor for e in dyn if "cornering_stiffness_factor" in e.HOOKS),
+            wrench_fns=tuple(e.body_wrench for e in dyn if "body_wrench" in e.HOOKS),
+            wheel_fns=tuple(e.wheel_torque for e in dyn if "wheel_torque" in e.HOOKS),
+            k_c=sum(e.compliance_steer() for e in dyn if "compliance_steer" in e.HOOKS),
+            wind_effects=self.effect_wind_enu_mps)
+        return derivative_function(k)
 
     # ------------------------------------------------------------------ helpers
     def evaluate(self, x, u: Inputs, env: Env) -> tuple[list, dict]:

@@ -36,8 +36,46 @@ def rot_z(psi: float) -> np.ndarray:
 
 
 def dcm_global_to_vehicle(phi_g: float, theta_g: float, psi_g: float) -> np.ndarray:
-    """C_g^v = R(x, phi_g) R(y, theta_g) R(z, psi_g), eq 1."""
+    """C_g^v = R(x, phi_g) R(y, theta_g) R(z, psi_g), eq 1, as the product of the three rotations.
+
+    Equal to :func:`dcm_gv` to rounding only (the 3 x 3 products round differently from the
+    closed form, by an ulp in some elements); the callers of each keep theirs so that every
+    output stays bit-identical."""
     return rot_x(phi_g) @ rot_y(theta_g) @ rot_z(psi_g)
+
+
+def dcm_gv_elements(sf, cf, st, ct, sp, cp):
+    """The nine elements of C_g^v (eq 1, closed form), row by row, from the sines and cosines
+    of the Euler angles (sf, cf = sin, cos phi_g; st, ct of theta_g; sp, cp of psi_g)::
+
+        C_g^v = [[ ct cp,                 ct sp,                 st    ],
+                 [-cf sp - sf st cp,      cf cp - sf st sp,      sf ct ],
+                 [ sf sp - cf st cp,     -sf cp - cf st sp,      cf ct ]]
+
+    The one place this formula is written: on floats it is the scalar form (the physics core,
+    the EKF's kinematics), on numpy arrays the element-wise vectorised form
+    (:func:`dcm_gv_batch`); the same IEEE operations in both."""
+    return (ct * cp, ct * sp, st,
+            -cf * sp - sf * st * cp, cf * cp - sf * st * sp, sf * ct,
+            sf * sp - cf * st * cp, -sf * cp - cf * st * sp, cf * ct)
+
+
+def dcm_gv(phi: float, theta: float, psi: float) -> np.ndarray:
+    """C_g^v of eq 1 as a 3 x 3 array, closed form (:func:`dcm_gv_elements`; cheaper than the
+    three products of :func:`dcm_global_to_vehicle`)."""
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = dcm_gv_elements(
+        math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta), math.sin(psi), math.cos(psi))
+    return np.array([[c00, c01, c02], [c10, c11, c12], [c20, c21, c22]])
+
+
+def dcm_gv_batch(phi, theta, psi) -> np.ndarray:
+    """C_g^v = R(x, phi) R(y, theta) R(z, psi) (eq 1) for arrays of angles: (N, 3, 3), closed
+    form (:func:`dcm_gv_elements` on the arrays' sines and cosines)."""
+    e = dcm_gv_elements(np.sin(phi), np.cos(phi), np.sin(theta), np.cos(theta), np.sin(psi), np.cos(psi))
+    c = np.empty((np.size(phi), 3, 3))
+    for k in range(9):
+        c[:, k // 3, k % 3] = e[k]
+    return c
 
 
 def dcm_global_to_road(phi_r: float, theta_r: float, psi_r: float = 0.0) -> np.ndarray:
@@ -96,6 +134,17 @@ def decompose_road(phi_g: float, theta_g: float, psi_g: float,
     """Eq 4 solved for the road angles: C_g^r = (C_r^v)^T C_g^v -> (phi_r, theta_r, psi_r)."""
     c = dcm_road_to_vehicle(phi_v, theta_v, psi_v).T @ dcm_global_to_vehicle(phi_g, theta_g, psi_g)
     return road_angles_from_dcm(c)
+
+
+def decompose_vehicle_batch(euler_g_rad, bank_rad: float, grade_rad: float) -> np.ndarray:
+    """Eq 4 vectorised: absolute angles (N, 3) -> road-relative (phi_v, theta_v, psi_v) (N, 3),
+    C_r^v = C_g^v (C_g^r)^T with psi_r = 0 (:func:`dcm_gv_batch`)."""
+    e = np.atleast_2d(np.asarray(euler_g_rad, dtype=float))
+    c = dcm_gv_batch(e[:, 0], e[:, 1], e[:, 2])
+    cr = c @ dcm_global_to_road(bank_rad, grade_rad).T
+    return np.stack([np.arctan2(cr[:, 1, 2], cr[:, 2, 2]),
+                     np.arcsin(np.clip(cr[:, 0, 2], -1.0, 1.0)),
+                     np.arctan2(cr[:, 0, 1], cr[:, 0, 0])], axis=1)
 
 
 def c_omega(phi: float, theta: float) -> np.ndarray:

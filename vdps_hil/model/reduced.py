@@ -3,6 +3,13 @@ effect set: the same equations as :meth:`vdps_hil.model.core.Model.f` with
 ``unsprung_dof=False`` and ``linear_tire`` (plus static rolling-radius factors), specialised
 once per model and once per input value.
 
+This is a **hand-specialised numeric kernel**, kept beside its reference on purpose: it does not
+call the stages of :mod:`vdps_hil.model.stages` (which ``Model.f`` composes) but writes the
+reduced model's stages out in one loop, rearranged (below) and therefore equal to ``Model.f``
+to rounding, not bit for bit. Its evaluation (``ReducedLinearCore.f``, ~100 lines) is one
+function on purpose: splitting it into calls would cost the predictor's hot loop. It is tested
+equal to ``Model.f`` in ``tests/test_reduced.py``.
+
 Why: the predictor integrates this model 500 steps (1000 f-evaluations) per 5 s prediction in
 pure Python; the generic core resolves effect hooks, builds per-corner tuples, calls a tire
 function per corner and fills a diagnostics dict on every call. Here everything that depends
@@ -42,8 +49,10 @@ import math
 
 from vdps_hil.units import GRAVITY_MPS2
 
-from .core import BRAKE_HOLD_SPEED_RADPS, Inputs, Model, ackermann_angles
+from .core import BRAKE_HOLD_SPEED_RADPS, Inputs, Model
+from .stages import ackermann_angles
 from .effects import LinearTire
+from .frames import dcm_gv_elements
 
 STATIC_HOOKS = frozenset({"rolling_radius_factor"})
 """Effect hooks the core resolves at construction (nothing to do per call)."""
@@ -113,6 +122,8 @@ class ReducedLinearCore:
         return out
 
     def _build(self):
+        """The evaluation ``f(x, uc, env)``: a hand-specialised numeric kernel of the reduced
+        model's stages written out in one loop (module docstring), tested equal to ``Model.f``."""
         m = self.model
         veh = m.vehicle
         p = veh.params
@@ -134,16 +145,10 @@ class ReducedLinearCore:
         sqrt, sin, cos, atan, exp = math.sqrt, math.sin, math.cos, math.atan, math.exp
 
         def f(x, uc, env):
+            """Hand-specialised kernel (see ``_build``): x_dot, F_z,i, n_b, kappa_i, den_i."""
             (pe, pn, pu, phi, theta, psi, vx, vy, vz, wx, wy, wz) = x[0:12]
             sph, cph, sth, cth, sps, cps = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
-            # C_g^v, eq 1
-            c00, c01, c02 = cth * cps, cth * sps, sth
-            c10 = -cph * sps - sph * sth * cps
-            c11 = cph * cps - sph * sth * sps
-            c12 = sph * cth
-            c20 = sph * sps - cph * sth * cps
-            c21 = -sph * cps - cph * sth * sps
-            c22 = cph * cth
+            c00, c01, c02, c10, c11, c12, c20, c21, c22 = dcm_gv_elements(sph, cph, sth, cth, sps, cps)  # eq 1
             ng0, ng1, ng2 = env.normal_g
             nx = c00 * ng0 + c01 * ng1 + c02 * ng2
             ny = c10 * ng0 + c11 * ng1 + c12 * ng2

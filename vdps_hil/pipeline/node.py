@@ -196,7 +196,8 @@ class VdpsSystem:
         self.require_converged: tuple[str, ...] = ()
         """Problems whose convergence makes a warning valid (module docstring); () = no gate."""
         if cfg.predict:
-            from vdps_hil.prediction.predictor import Predictor, load_predictor_config
+            from vdps_hil.prediction.config import load_predictor_config
+            from vdps_hil.prediction.predictor import Predictor
             from vdps_hil.prediction.warning import WarningChain, load_warning_config
 
             pcfg = cfg.predictor if cfg.predictor is not None else load_predictor_config()
@@ -378,7 +379,7 @@ class VdpsSystem:
         chain = self._chain
         if chain is None:
             return
-        from vdps_hil.prediction.predictor import PredictorInitialState
+        from vdps_hil.prediction.initial_state import PredictorInitialState
         from vdps_hil.prediction.warning import WarningStatus
 
         init = None

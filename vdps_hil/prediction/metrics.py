@@ -76,7 +76,7 @@ class PoseTrajectory:
 
     @classmethod
     def from_prediction(cls, result) -> "PoseTrajectory":
-        """From a :class:`~vdps_hil.prediction.predictor.PredictionResult`, absolute times [s]."""
+        """From a :class:`~vdps_hil.prediction.result.PredictionResult`, absolute times [s]."""
         return cls(result.t0_ns * 1e-9 + result.t_s, result.pos_g_m, result.euler_v_rad,
                    result.road_bank_rad, result.road_grade_rad)
 

@@ -81,8 +81,10 @@ from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.codecs.can_encode import VdpsCanEncoder
 from vdps_hil.units import NS_PER_S
 
-from .predictor import (DEFAULT_CONFIG_PATH, Cadence, PredictionConfigError, PredictionResult, Predictor,
-                        PredictorInitialState, load_prediction_document)
+from .config import DEFAULT_CONFIG_PATH, PredictionConfigError, load_prediction_document
+from .initial_state import PredictorInitialState
+from .predictor import Cadence, Predictor
+from .result import PredictionResult
 
 
 class WarningLevel(enum.IntEnum):

@@ -30,7 +30,7 @@ the initial position; ``type``):
   transition, 15 m back on the original line, then straight. Transitions are half-cosines.
 * ``points``: ``points = [[x, y], ...]`` polyline.
 
-Spec keys (``[driver]``): path, speed (a signal, see ``scenarios``; omitted: no speed control,
+Spec keys (``[driver]``): path, speed (a signal, see ``sim.signals``; omitted: no speed control,
 zero torque), lookahead_time_s (0.8), lookahead_min_m (5.0), speed_kp_per_s (1.0),
 speed_ki_per_s2 (0.3), drive ("awd"), brake_front_share (0.6), max_steer_wheel_rad (8.0),
 max_steer_rate_radps (15.0, about 860 deg/s), understeer_gradient_radpmps2 (from the vehicle),
@@ -47,6 +47,8 @@ from typing import Any, Mapping, Sequence
 from vdps_hil.model.core import Env, Inputs
 from vdps_hil.units import GRAVITY_MPS2
 
+from .signals import ScenarioError, build_signal
+
 _SPEC_KEYS = {"path", "speed", "lookahead_time_s", "lookahead_min_m", "speed_kp_per_s", "speed_ki_per_s2",
               "drive", "brake_front_share", "max_steer_wheel_rad", "max_steer_rate_radps",
               "understeer_gradient_radpmps2", "update_period_s"}
@@ -54,8 +56,7 @@ _PATH_KEYS = {"straight": {"length_m"}, "circle": {"radius_m", "entry_m"},
               "iso3888": {"entry_m", "offset_m", "exit_m"}, "points": {"points"}}
 
 
-def _err(where: str, msg: str):
-    from .scenarios import ScenarioError
+def _err(where: str, msg: str) -> ScenarioError:
     return ScenarioError(f"{where}: {msg}")
 
 
@@ -85,11 +86,10 @@ def validate_driver_spec(spec: Mapping[str, Any], where: str) -> None:
             if not isinstance(pts, list) or len(pts) < 2 or not all(isinstance(q, list) and len(q) == 2 for q in pts):
                 raise _err(where, "path.points must be a list of >= 2 [x, y] pairs")
     if "speed" in spec:
-        from .scenarios import build_signal
         build_signal(spec["speed"], f"{where}.speed")
 
 
-class Path:
+class ReferencePath:
     """A polyline path in ENU with arc length; nearest-point search from a hint index."""
 
     def __init__(self, xy: Sequence[tuple[float, float]]):
@@ -181,16 +181,17 @@ def _frange(a: float, b: float, step: float):
     return [a + (b - a) * k / n for k in range(n)]
 
 
-def make_path(spec: Mapping[str, Any], east_m: float, north_m: float, heading_rad: float) -> Path:
+def make_path(spec: Mapping[str, Any], east_m: float, north_m: float, heading_rad: float) -> ReferencePath:
+    """The path of a ``[driver] path`` table placed at the initial position and heading (ENU)."""
     ch, sh = math.cos(heading_rad), math.sin(heading_rad)
-    return Path([(east_m + ch * x - sh * y, north_m + sh * x + ch * y) for x, y in path_local_points(spec)])
+    return ReferencePath([(east_m + ch * x - sh * y, north_m + sh * x + ch * y) for x, y in path_local_points(spec)])
 
 
 class Driver:
     """``driver(t, x) -> Inputs``: pure pursuit on ``path`` (None: steering 0) and PI speed
     control to ``speed(t)`` (None: zero torque). Call once per simulation step, in time order."""
 
-    def __init__(self, model, env: Env, path: Path | None, speed=None, *, lookahead_time_s: float = 0.8,
+    def __init__(self, model, env: Env, path: ReferencePath | None, speed=None, *, lookahead_time_s: float = 0.8,
                  lookahead_min_m: float = 5.0, speed_kp_per_s: float = 1.0, speed_ki_per_s2: float = 0.3,
                  drive: str = "awd", brake_front_share: float = 0.6, max_steer_wheel_rad: float = 8.0,
                  max_steer_rate_radps: float = 15.0, understeer_gradient_radpmps2: float | None = None,
@@ -277,7 +278,6 @@ class Driver:
 def make_driver(spec: Mapping[str, Any], model, env: Env, scenario, where: str = "[driver]") -> Driver:
     """A Driver from a scenario's [driver] table."""
     validate_driver_spec(spec, where)
-    from .scenarios import build_signal
     path = None
     if "path" in spec:
         path = make_path(spec["path"], scenario.initial_east_m, scenario.initial_north_m, scenario.initial_heading_rad)

@@ -22,18 +22,7 @@ File layout (all keys optional unless marked; unknown keys are one-line errors):
                                          #           brake_torque_nm_1..4
     [driver]  ...                        # see driver.DriverSpec
 
-Signals (tables; t is the simulation time [s])::
-
-    {type = "const", value = V}
-    {type = "sine", offset = O, amplitude = A, frequency_hz = F, phase_rad = 0, start_s = 0}
-        O + A sin(2 pi F (t - start) + phase) for t >= start, O + A sin(phase) before
-    {type = "sweep", offset = O, amplitude = A, f0_hz, f1_hz, start_s, duration_s}
-        linear chirp O + A sin(2 pi (f0 tau + (f1 - f0) tau^2 / (2 T))), tau = t - start in [0, T], O outside
-    {type = "points", points = [[t0, v0], [t1, v1], ...]}   piecewise linear, held beyond the ends
-    {type = "step", t_s = T, before = 0, after = V}
-  modifiers on any signal:
-    hold_from_s = T         the value at T is held from T on
-    then_s = T, then = {signal}    from T on the channel follows the other signal
+Signals: see :mod:`vdps_hil.sim.signals` (const, sine, sweep, points, step; hold_from_s, then).
 
 Loading uses :mod:`tomllib` only (no code execution); errors are one line
 (:class:`ScenarioError`).
@@ -51,113 +40,15 @@ from vdps_hil.model.core import Env, Inputs
 from vdps_hil.model.effects import EffectConfigError, EffectSet, effects_from_names
 from vdps_hil.model.params import CONFIG_DIR, Vehicle, VehicleFileError, load_vehicle
 
+from .driver import make_driver, validate_driver_spec
+from .faults import FaultError, parse_fault
+from .signals import ScenarioError, build_signal, read_number
+
 SCENARIO_DIR = CONFIG_DIR / "scenarios"
 
 CHANNELS: tuple[str, ...] = ("steer_wheel_angle_rad",
                              *(f"wheel_torque_nm_{i}" for i in range(1, 5)),
                              *(f"brake_torque_nm_{i}" for i in range(1, 5)))
-
-
-class ScenarioError(ValueError):
-    """A scenario that cannot be used; the message is one line."""
-
-
-# ---------------------------------------------------------------------- signals
-def _num(d: Mapping, key: str, where: str, default: float | None = None) -> float:
-    if key not in d:
-        if default is None:
-            raise ScenarioError(f"{where}: missing key {key!r}")
-        return default
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise ScenarioError(f"{where}.{key}: expected a finite number, got {v!r}")
-    return float(v)
-
-
-_SIGNAL_KEYS = {
-    "const": {"value"},
-    "sine": {"offset", "amplitude", "frequency_hz", "phase_rad", "start_s"},
-    "sweep": {"offset", "amplitude", "f0_hz", "f1_hz", "start_s", "duration_s"},
-    "points": {"points"},
-    "step": {"t_s", "before", "after"},
-}
-_MODIFIERS = {"type", "hold_from_s", "then_s", "then"}
-
-
-def build_signal(spec: Any, where: str) -> Callable[[float], float]:
-    """A function of time from a signal table (see the module docstring)."""
-    if isinstance(spec, (int, float)) and not isinstance(spec, bool):
-        spec = {"type": "const", "value": spec}
-    if not isinstance(spec, Mapping):
-        raise ScenarioError(f"{where}: a signal must be a table or a number")
-    kind = spec.get("type")
-    if kind not in _SIGNAL_KEYS:
-        raise ScenarioError(f"{where}: unknown signal type {kind!r} (known: {', '.join(_SIGNAL_KEYS)})")
-    unknown = sorted(set(spec) - _SIGNAL_KEYS[kind] - _MODIFIERS)
-    if unknown:
-        raise ScenarioError(f"{where}: unknown key {unknown[0]!r} for a {kind} signal")
-    if kind == "const":
-        v = _num(spec, "value", where)
-        fn = lambda t, v=v: v  # noqa: E731
-    elif kind == "sine":
-        o, a = _num(spec, "offset", where, 0.0), _num(spec, "amplitude", where)
-        w = 2.0 * math.pi * _num(spec, "frequency_hz", where)
-        ph, t0 = _num(spec, "phase_rad", where, 0.0), _num(spec, "start_s", where, 0.0)
-        sin = math.sin
-
-        def fn(t, o=o, a=a, w=w, ph=ph, t0=t0):
-            return o + a * sin(w * (t - t0) + ph) if t >= t0 else o + a * sin(ph)
-    elif kind == "sweep":
-        o, a = _num(spec, "offset", where, 0.0), _num(spec, "amplitude", where)
-        f0, f1 = _num(spec, "f0_hz", where), _num(spec, "f1_hz", where)
-        t0, T = _num(spec, "start_s", where, 0.0), _num(spec, "duration_s", where)
-        if T <= 0:
-            raise ScenarioError(f"{where}.duration_s: must be positive")
-
-        def fn(t, o=o, a=a, f0=f0, f1=f1, t0=t0, T=T):
-            tau = t - t0
-            if tau < 0.0 or tau > T:
-                return o
-            return o + a * math.sin(2.0 * math.pi * (f0 * tau + (f1 - f0) * tau * tau / (2.0 * T)))
-    elif kind == "points":
-        pts = spec.get("points")
-        if (not isinstance(pts, list) or not pts
-                or not all(isinstance(p, list) and len(p) == 2 for p in pts)):
-            raise ScenarioError(f"{where}.points: expected a list of [t, value] pairs")
-        ts = [_num({"t": p[0]}, "t", where) for p in pts]
-        vs = [_num({"v": p[1]}, "v", where) for p in pts]
-        if any(b < a for a, b in zip(ts, ts[1:])):
-            raise ScenarioError(f"{where}.points: times must not decrease")
-
-        def fn(t, ts=ts, vs=vs):
-            if t <= ts[0]:
-                return vs[0]
-            if t >= ts[-1]:
-                return vs[-1]
-            # linear search is fine for the few points a schedule has
-            for k in range(1, len(ts)):
-                if t < ts[k]:
-                    t_a, t_b = ts[k - 1], ts[k]
-                    if t_b == t_a:
-                        return vs[k]
-                    return vs[k - 1] + (vs[k] - vs[k - 1]) * (t - t_a) / (t_b - t_a)
-            return vs[-1]
-    else:  # step
-        ts_, b, a = _num(spec, "t_s", where), _num(spec, "before", where, 0.0), _num(spec, "after", where)
-        fn = lambda t, ts_=ts_, b=b, a=a: a if t >= ts_ else b  # noqa: E731
-    if "then_s" in spec or "then" in spec:
-        if "then_s" not in spec or "then" not in spec:
-            raise ScenarioError(f"{where}: then_s and then go together")
-        t_sw = _num(spec, "then_s", where)
-        other = build_signal(spec["then"], f"{where}.then")
-        first = fn
-        fn = lambda t, first=first, other=other, t_sw=t_sw: other(t) if t >= t_sw else first(t)  # noqa: E731
-    if "hold_from_s" in spec:
-        t_h = _num(spec, "hold_from_s", where)
-        inner = fn
-        held = inner(t_h)
-        fn = lambda t, inner=inner, t_h=t_h, held=held: held if t >= t_h else inner(t)  # noqa: E731
-    return fn
 
 
 # ---------------------------------------------------------------------- scenario
@@ -252,7 +143,6 @@ class Scenario:
         sched = self.schedule_function()
         if self.driver_spec is None:
             return lambda t, x: sched(t)
-        from .driver import make_driver
         driver = make_driver(self.driver_spec, model, env, self, where=f"scenario {self.name!r} [driver]")
         if not self.signals:
             return driver
@@ -292,7 +182,7 @@ def parse_scenario(text: str, origin: str = "<string>") -> Scenario:
     name = doc.get("name")
     if not isinstance(name, str) or not name:
         raise ScenarioError(f"{origin}: missing name")
-    dur = _num(doc, "duration_s", origin)
+    dur = read_number(doc, "duration_s", origin)
     if dur <= 0:
         raise ScenarioError(f"{origin}.duration_s: must be positive")
     effects = doc.get("effects", [])
@@ -308,7 +198,7 @@ def parse_scenario(text: str, origin: str = "<string>") -> Scenario:
     w = wind.get("enu_mps", [0.0, 0.0, 0.0])
     if not (isinstance(w, list) and len(w) == 3):
         raise ScenarioError(f"{origin}[wind].enu_mps: expected 3 numbers")
-    wv = tuple(_num({"w": e}, "w", f"{origin}[wind].enu_mps") for e in w)
+    wv = tuple(read_number({"w": e}, "w", f"{origin}[wind].enu_mps") for e in w)
     signals = {ch: build_signal(spec, f"{origin}[inputs].{ch}") for ch, spec in inputs.items()}
     driver = doc.get("driver")
     if driver is not None and not isinstance(driver, Mapping):
@@ -320,20 +210,19 @@ def parse_scenario(text: str, origin: str = "<string>") -> Scenario:
         name=name, description=str(doc.get("description", "")),
         vehicle_name=str(doc.get("vehicle", "sedan-truth")), duration_s=dur,
         effect_names=tuple(effects), effect_params={k: dict(v) for k, v in eparams.items()},
-        bank_rad=math.radians(_num(road, "bank_deg", f"{origin}[road]", 0.0)),
-        grade_rad=math.radians(_num(road, "grade_deg", f"{origin}[road]", 0.0)),
+        bank_rad=math.radians(read_number(road, "bank_deg", f"{origin}[road]", 0.0)),
+        grade_rad=math.radians(read_number(road, "grade_deg", f"{origin}[road]", 0.0)),
         wind_enu_mps=wv,
-        initial_speed_mps=_num(init, "speed_mps", f"{origin}[initial]", 0.0),
-        initial_heading_rad=math.radians(_num(init, "heading_deg", f"{origin}[initial]", 0.0)),
-        initial_east_m=_num(init, "east_m", f"{origin}[initial]", 0.0),
-        initial_north_m=_num(init, "north_m", f"{origin}[initial]", 0.0),
+        initial_speed_mps=read_number(init, "speed_mps", f"{origin}[initial]", 0.0),
+        initial_heading_rad=math.radians(read_number(init, "heading_deg", f"{origin}[initial]", 0.0)),
+        initial_east_m=read_number(init, "east_m", f"{origin}[initial]", 0.0),
+        initial_north_m=read_number(init, "north_m", f"{origin}[initial]", 0.0),
         signals=signals, driver_spec=dict(driver) if driver is not None else None,
         stop_at_point_of_no_return=stop, path=origin, raw=doc)
     # faults (sensor-level, applied by sim.drive): validate now, one-line errors at load time
     faults = doc.get("faults", [])
     if not isinstance(faults, list):
         raise ScenarioError(f"{origin}.faults: expected a list of fault specs")
-    from vdps_hil.sim.faults import FaultError, parse_fault
     for spec in faults:
         try:
             parse_fault(spec)
@@ -349,7 +238,6 @@ def parse_scenario(text: str, origin: str = "<string>") -> Scenario:
     except EffectConfigError as e:
         raise ScenarioError(f"{origin}: {e}") from None
     if driver is not None:
-        from .driver import validate_driver_spec
         validate_driver_spec(driver, f"{origin}[driver]")
     return sc
 

@@ -237,7 +237,7 @@ class CrosswindCandidate(Candidate):
         # |v| w_y,body and M_z = x_cp F_y, w_y,body = (C_g^v w)_y. The effect's side force from the
         # car's own sideslip (v_air,y = v_y at zero wind) is left out: second order, and it would
         # let a "wind" mimic a cornering stiffness.
-        from .dataset import dcm_gv_batch
+        from vdps_hil.model.frames import dcm_gv_batch
 
         c = ctx.table.columns
         idx = ctx.res.index

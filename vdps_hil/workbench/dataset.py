@@ -65,10 +65,11 @@ from vdps_hil.estimation.estimates import Innovation
 from vdps_hil.estimation.pipeline import EstimatorPipeline
 from vdps_hil.estimation.pipeline_config import PipelineConfig
 from vdps_hil.model.effects.base import ImuKinematics, MeasurementEffect
+from vdps_hil.model.frames import dcm_gv_batch
 from vdps_hil.model.params import Vehicle
 
 __all__ = ["DatasetConfig", "DatasetError", "DriveTable", "decode_raw", "iter_raw", "load_drive", "build_table",
-           "EstimatorRun", "run_estimator", "dcm_gv_batch", "remove_imu_effects"]
+           "EstimatorRun", "run_estimator", "remove_imu_effects"]
 
 _SF = axis_fields("specific_force_mps2")
 _AR = axis_fields("angular_rate_radps")
@@ -224,22 +225,6 @@ class InnovationLog:
 
 
 # ----------------------------------------------------------------------------------- helpers
-def dcm_gv_batch(phi, theta, psi) -> np.ndarray:
-    """C_g^v = R(x, phi) R(y, theta) R(z, psi) (eq 1) for arrays: (N, 3, 3)."""
-    sf, cf = np.sin(phi), np.cos(phi)
-    st, ct = np.sin(theta), np.cos(theta)
-    sp, cp = np.sin(psi), np.cos(psi)
-    c = np.empty((np.size(phi), 3, 3))
-    c[:, 0, 0], c[:, 0, 1], c[:, 0, 2] = ct * cp, ct * sp, st
-    c[:, 1, 0] = -cf * sp - sf * st * cp
-    c[:, 1, 1] = cf * cp - sf * st * sp
-    c[:, 1, 2] = sf * ct
-    c[:, 2, 0] = sf * sp - cf * st * cp
-    c[:, 2, 1] = -sf * cp - cf * st * sp
-    c[:, 2, 2] = cf * ct
-    return c
-
-
 class _Smoother:
     """Zero-phase Butterworth low-pass at one cutoff, designed per sampling rate."""
 

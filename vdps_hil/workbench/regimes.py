@@ -97,14 +97,14 @@ def regime_variables(table: DriveTable, res: EquationResiduals) -> dict[str, np.
         out["slip_angle_front_deg"] = np.degrees([0.5 * (r["slip_angle_rad_1"] + r["slip_angle_rad_2"]) for r in q])
         out["slip_angle_rear_deg"] = np.degrees([0.5 * (r["slip_angle_rad_3"] + r["slip_angle_rad_4"]) for r in q])
         out["slip_ratio_max"] = np.array([max(abs(r[f"slip_ratio_{i}"]) for i in range(1, 5)) for r in q])
-    from vdps_hil.prediction.predictor import vehicle_angles
+    from vdps_hil.model.frames import decompose_vehicle_batch
 
     eul = np.column_stack([c["roll_g_rad"], c["pitch_g_rad"], c["yaw_g_rad"]])[idx]
     bank = np.nan_to_num(c["road_bank_rad"][idx])
     grade = np.nan_to_num(c["road_grade_rad"][idx])
     if len(eul):
         # eq 4 row by row (the road angles vary slowly along the drive)
-        roll = np.array([vehicle_angles(e[None], b, g)[0, 0] for e, b, g in zip(eul, bank, grade)])
+        roll = np.array([decompose_vehicle_batch(e[None], b, g)[0, 0] for e, b, g in zip(eul, bank, grade)])
         out["roll_deg"] = np.degrees(roll)
     h = np.column_stack([c[f"susp_deflection_m_{i}"] for i in range(1, 5)])[idx]
     if np.isfinite(h).any():

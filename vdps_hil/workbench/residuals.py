@@ -63,11 +63,14 @@ from vdps_hil.model.core import Env, Inputs, Model
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import EQUATIONS as DYNAMIC_EQUATIONS
 from vdps_hil.model.effects.base import ImuKinematics, MeasurementEffect
+from vdps_hil.model.frames import dcm_gv_batch
 from vdps_hil.model.params import Vehicle
-from vdps_hil.prediction.predictor import InputTrajectory, Predictor, PredictorConfig, PredictorInitialState
+from vdps_hil.prediction.config import PredictorConfig
+from vdps_hil.prediction.initial_state import InputTrajectory, PredictorInitialState
+from vdps_hil.prediction.predictor import Predictor
 from vdps_hil.units import GRAVITY_MPS2
 
-from .dataset import DriveTable, dcm_gv_batch
+from .dataset import DriveTable
 
 __all__ = ["INNOVATION_CHANNELS", "EQUATIONS", "DYNAMIC_EQUATIONS", "KINEMATIC_EQUATIONS", "EQUATION_LABELS", "EQUATION_UNITS",
            "EquationResiduals", "compute_residuals", "RowStates", "row_states", "Innovations",

@@ -11,6 +11,9 @@ Loading user code is code execution, so it happens only from what the user names
   only the named entries are loaded, never the whole group.
 
 Recordings, model files and configs never load code (they can name an effect, not bring one).
+A loaded class is checked against the built-in registry (``model.effects.registry``: a taken
+name is refused); callers put the classes in a registry of their own with
+``REGISTRY.extended(classes)``, never in the shared ``REGISTRY``.
 
 A user effect needs a ``name``, ``PARAMS`` (``ParamSpec`` with unit, default and plausible
 range), its hook (``body_wrench``, ``wheel_torque``, ... see ``model.effects.base``) and, if it is
@@ -42,7 +45,7 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from vdps_hil.model.effects import REGISTRY
-from vdps_hil.model.effects.base import DynamicsEffect, Effect, MeasurementEffect, ParamSpec
+from vdps_hil.model.effects.base import DynamicsEffect, Effect, EffectConfigError, MeasurementEffect, ParamSpec
 
 __all__ = ["UserEffectError", "load_effect_file", "load_entry_point_effects", "check_effect_class",
            "ENTRY_POINT_GROUP"]
@@ -61,8 +64,10 @@ def check_effect_class(cls, origin: str) -> type[Effect]:
     name = getattr(cls, "name", "")
     if not isinstance(name, str) or not name.isidentifier():
         raise UserEffectError(f"{origin}: effect class {cls.__name__} needs a name (an identifier)")
-    if name in REGISTRY and REGISTRY[name] is not cls:
-        raise UserEffectError(f"{origin}: effect name {name!r} is a built-in effect; choose another name")
+    try:
+        REGISTRY.extended([cls])  # the door built-in effects go through: a taken name is refused
+    except EffectConfigError:
+        raise UserEffectError(f"{origin}: effect name {name!r} is a built-in effect; choose another name") from None
     if not all(isinstance(p, ParamSpec) for p in getattr(cls, "PARAMS", ())):
         raise UserEffectError(f"{origin}: {name}.PARAMS must be ParamSpec entries")
     try:

@@ -1,9 +1,11 @@
 """Effects: the registry of canonical effect names and helpers to build effect sets.
 
-``REGISTRY`` maps each canonical name (used by ``--effect``, scenarios, the workbench and reports)
-to its class. Build effects with :func:`make_effect` (parameters checked, one-line errors) and
-combine them in an :class:`EffectSet`. :func:`effects_from_names` takes magnitudes from a vehicle
-truth file's ``[effects]`` table, then from explicit overrides.
+``REGISTRY`` (an :class:`EffectRegistry`, :mod:`.registry`) maps each built-in canonical name
+(used by ``--effect``, scenarios, the workbench and reports) to its class; a user's effects join
+through the same API in a registry of their own (``REGISTRY.extended([MyEffect])``). Build
+effects with :func:`make_effect` (parameters checked, one-line errors) and combine them in an
+:class:`EffectSet`. :func:`effects_from_names` takes magnitudes from a vehicle truth file's
+``[effects]`` table, then from explicit overrides.
 
 ================================== =========== ==================================================
 name                               family      module
@@ -29,33 +31,27 @@ from .aero import AeroDrag, Crosswind
 from .base import (DYNAMICS_HOOKS, EQUATIONS, DynamicsEffect, Effect, EffectConfigError, EffectSet,
                    ImuKinematics, MeasurementEffect, ParamSpec, TireModel)
 from .imu import ImuBias, ImuLeverArm
+from .registry import BUILTIN_EFFECTS, REGISTRY, EffectRegistry
 from .rolling import RollingResistance
 from .steering import SteeringCompliance
 from .tires import LinearTire, LoadDependentCorneringStiffness, LowPressureTire, MagicFormulaTire
-
-REGISTRY: dict[str, type[Effect]] = {
-    cls.name: cls for cls in (
-        LinearTire, MagicFormulaTire, AeroDrag, RollingResistance, LoadDependentCorneringStiffness,
-        LowPressureTire, Crosswind, SteeringCompliance, ImuBias, ImuLeverArm)
-}
-"""Canonical name -> effect class. Add your own: ``REGISTRY[MyEffect.name] = MyEffect``."""
 
 TIRE_MODEL_NAMES = tuple(n for n, c in REGISTRY.items() if issubclass(c, TireModel))
 
 
 def make_effect(name: str, **params: float) -> Effect:
-    """One effect by canonical name; unknown names or parameters raise EffectConfigError."""
-    try:
-        cls = REGISTRY[name]
-    except KeyError:
-        raise EffectConfigError(f"unknown effect {name!r} (known: {', '.join(REGISTRY)})") from None
-    return cls(**params)
+    """One built-in effect by canonical name (``REGISTRY.make``); unknown names or parameters
+    raise EffectConfigError."""
+    return REGISTRY.make(name, **params)
 
 
 def effects_from_names(names: Iterable[str], vehicle_effects: Mapping | None = None,
-                       overrides: Mapping[str, Mapping[str, float]] | None = None) -> EffectSet:
-    """An EffectSet of the named effects. Magnitudes: the effect's defaults, then the vehicle
-    truth file's ``[effects]`` table (``vehicle_effects``), then ``overrides``."""
+                       overrides: Mapping[str, Mapping[str, float]] | None = None, *,
+                       registry: EffectRegistry | None = None) -> EffectSet:
+    """An EffectSet of the named effects (from ``registry``, default the built-in ``REGISTRY``).
+    Magnitudes: the effect's defaults, then the vehicle truth file's ``[effects]`` table
+    (``vehicle_effects``), then ``overrides``."""
+    registry = REGISTRY if registry is None else registry
     vehicle_effects = vehicle_effects or {}
     overrides = overrides or {}
     names = list(names)
@@ -70,13 +66,13 @@ def effects_from_names(names: Iterable[str], vehicle_effects: Mapping | None = N
             raise EffectConfigError(f"vehicle [effects].{n} must be a table")
         params.update(base)
         params.update(overrides.get(n, {}))
-        out.append(make_effect(n, **params))
+        out.append(registry.make(n, **params))
     return EffectSet(out)
 
 
-__all__ = ["REGISTRY", "TIRE_MODEL_NAMES", "make_effect", "effects_from_names", "Effect",
-           "DynamicsEffect", "MeasurementEffect", "TireModel", "EffectSet", "EffectConfigError",
-           "ParamSpec", "ImuKinematics", "EQUATIONS", "DYNAMICS_HOOKS", "LinearTire",
+__all__ = ["REGISTRY", "BUILTIN_EFFECTS", "EffectRegistry", "TIRE_MODEL_NAMES", "make_effect",
+           "effects_from_names", "Effect", "DynamicsEffect", "MeasurementEffect", "TireModel", "EffectSet",
+           "EffectConfigError", "ParamSpec", "ImuKinematics", "EQUATIONS", "DYNAMICS_HOOKS", "LinearTire",
            "MagicFormulaTire", "AeroDrag", "Crosswind", "RollingResistance",
            "LoadDependentCorneringStiffness", "LowPressureTire", "SteeringCompliance", "ImuBias",
            "ImuLeverArm"]

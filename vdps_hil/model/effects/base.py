@@ -30,8 +30,9 @@ default magnitudes, and a docstring giving its formula. Two families:
 
 Effects are immutable: parameters are fixed at construction (defaults from the class; truth
 magnitudes from a vehicle truth file's ``[effects]`` table or a scenario). A new value means a
-new object (``effect.replace(name=value)``). ``REGISTRY`` (in :mod:`vdps_hil.model.effects`) maps
-canonical names to classes; a user's own effect is a subclass registered the same way.
+new object (``effect.replace(name=value)``). ``REGISTRY`` (:mod:`vdps_hil.model.effects.registry`)
+maps the built-in canonical names to classes; a user's own effect is a subclass that joins through
+the same :class:`~vdps_hil.model.effects.registry.EffectRegistry` API (``REGISTRY.extended``).
 """
 
 from __future__ import annotations
