@@ -132,7 +132,7 @@ class MagicFormulaCandidate(Candidate):
     def __init__(self, effect_cls):
         super().__init__(effect_cls, ("saturation_scale",))
         self.mu0 = self.defaults["peak_friction"]
-        self.mu: float | None = None  # set by refine
+        self.mu: float | None = None  # a fixed peak friction (None: from the saturation scale)
 
     linear = False
 
@@ -182,36 +182,6 @@ class MagicFormulaCandidate(Candidate):
         mu = self._mu(theta)
         mu = min(max(mu if math.isfinite(mu) else 1e3, 0.05), 1e3)
         return self.effect_cls(**{**self.defaults, "peak_friction": mu})
-
-    def refine(self, ctx, theta, fit_fn):
-        """Golden-section search of mu on the held-in SSE (other shape factors at the prior)."""
-        s = float(theta[0])
-        if not (s > 0):
-            return theta, None
-        lo, hi = math.log(0.3), math.log(3.0)
-        start = self._mu([s])
-        if math.isfinite(start):
-            lo, hi = math.log(max(0.3, start / 2.0)), math.log(min(3.0, start * 2.0))
-
-        def sse(logmu):
-            e = self.effect_cls(**{**self.defaults, "peak_friction": math.exp(logmu)})
-            return fit_fn(ctx.dyn_contribution(e)[:, :, None])
-
-        gr = (math.sqrt(5.0) - 1.0) / 2.0
-        a, b = lo, hi
-        c1, c2 = b - gr * (b - a), a + gr * (b - a)
-        f1, f2 = sse(c1), sse(c2)
-        for _ in range(14):
-            if f1 < f2:
-                b, c2, f2 = c2, c1, f1
-                c1 = b - gr * (b - a)
-                f1 = sse(c1)
-            else:
-                a, c1, f1 = c1, c2, f2
-                c2 = a + gr * (b - a)
-                f2 = sse(c2)
-        self.mu = math.exp(0.5 * (a + b))
-        return theta, self.mu
 
     def report_params(self, theta, sigma):
         return _saturation_report(float(theta[0]), float(sigma[0]), self._mu(theta))

@@ -4,8 +4,8 @@ Steps (each in its own module): decode the ``/raw/`` topics and run the estimato
 (``dataset``), identify the ten parameters and rank the effect candidates (``ranking``), the
 residuals and the input-driven simulation error of the identified model (``residuals``,
 ``simulation_errors``), where it fails (``regimes``), optionally add effects and measure
-before/after (``add``), optionally save the model (``model_file``). Only ``/raw/`` topics and the model vehicle file are read
-(plus a ``--model`` file and user effect code the user names).
+before/after (``add``), optionally save the model (``model_file``). Only ``/raw/`` topics and
+the model vehicle file are read (plus a ``--model`` file and user effect code the user names).
 
 JSON (``Diagnosis.to_json``), the issue's keys::
 

@@ -30,13 +30,15 @@ WHEEL_SPEED_FIELDS = wheel_fields("wheel_speed_radps")
 WHEEL_TORQUE_FIELDS = wheel_fields("wheel_torque_nm")
 SUSPENSION_FIELDS = wheel_fields("susp_deflection_m")
 GNSS_POS_FIELDS = ("gnss_lat_deg", "gnss_lon_deg", "gnss_alt_m", "gnss_geoid_sep_m", "gnss_pos_sigma_h_m",
-             "gnss_pos_sigma_v_m", "gnss_fix_quality")
+                   "gnss_pos_sigma_v_m", "gnss_fix_quality")
 GNSS_ATT_FIELDS = ("gnss_roll_rad", "gnss_pitch_rad", "gnss_yaw_rad", "gnss_roll_sigma_rad", "gnss_pitch_sigma_rad",
-             "gnss_yaw_sigma_rad")
+                   "gnss_yaw_sigma_rad")
 GNSS_VEL_FIELDS = ("gnss_speed_mps", "gnss_course_rad")
-STREAM_FIELDS = {"imu": tuple(SPECIFIC_FORCE_FIELDS) + tuple(ANGULAR_RATE_FIELDS), "wheel_speed": tuple(WHEEL_SPEED_FIELDS), "suspension": tuple(SUSPENSION_FIELDS),
-                  "steer": ("steer_wheel_angle_rad",), "wheel_torque": tuple(WHEEL_TORQUE_FIELDS), "gnss_pos": GNSS_POS_FIELDS,
-                  "gnss_att": GNSS_ATT_FIELDS, "gnss_vel": GNSS_VEL_FIELDS}
+STREAM_FIELDS = {"imu": tuple(SPECIFIC_FORCE_FIELDS) + tuple(ANGULAR_RATE_FIELDS), "wheel_speed": tuple(WHEEL_SPEED_FIELDS),
+                 "suspension": tuple(SUSPENSION_FIELDS), "steer": ("steer_wheel_angle_rad",),
+                 "wheel_torque": tuple(WHEEL_TORQUE_FIELDS), "gnss_pos": GNSS_POS_FIELDS, "gnss_att": GNSS_ATT_FIELDS,
+                 "gnss_vel": GNSS_VEL_FIELDS}
+"""The sample kinds a drive table uses and their fields (:class:`Streams`' default)."""
 
 
 class DatasetError(ValueError):

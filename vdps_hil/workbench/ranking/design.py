@@ -162,7 +162,8 @@ class Design:
         self._stats = None
 
     def has_signal(self, name: str) -> bool:
-        return any(s > 0 and np.any(stored_values(self.cols[k]) != 0) for k in self.blocks[name] for s in [self.scale[k]])
+        return any(s > 0 and np.any(stored_values(self.cols[k]) != 0) for k in self.blocks[name]
+                   for s in [self.scale[k]])
 
     # --- sufficient statistics
     def invalidate_stats(self) -> None:

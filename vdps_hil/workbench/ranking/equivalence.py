@@ -189,5 +189,6 @@ def group_list(entries, params) -> list[dict]:
         if not any(g for g in e.group if g not in PARAM_ALIASES.values()):
             continue
         seen.add(key)
-        out.append({"members": list(e.group), "lead": e.effect, "explained_fraction": json_number(e.explained_fraction)})
+        out.append({"members": list(e.group), "lead": e.effect,
+                    "explained_fraction": json_number(e.explained_fraction)})
     return out

@@ -137,7 +137,8 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
 def _prior_contribution(G: np.ndarray, base: list, d, name: str, c) -> tuple[float, float]:
     """(v, v_base) of candidate ``name`` at its generic prior magnitude: v = th' G_cc th, its
     weighted sum of squares over the drive, and v_base = g' G_bb^+ g (g = G_bc th), the part of
-    it the ``base`` columns reproduce (0 without base columns)."""
+    it the ``base`` columns reproduce (0 without base columns). th: theta_0 in scaled columns,
+    vv: v, gbv: g."""
     cols = d.blocks[name]
     th = c.prior_theta() * np.array([d.scale[k] for k in cols])
     vv = float(th @ G[np.ix_(cols, cols)] @ th)
