@@ -19,7 +19,7 @@ from vdps_hil.sim.scenarios import load_scenario
 from vdps_hil.workbench.add import add_effects, before_after, fit_model
 from vdps_hil.workbench.candidates import candidate_for
 from vdps_hil.workbench.dataset import load_drive
-from vdps_hil.workbench.residuals import _initial_state
+from vdps_hil.workbench.simulation_errors import _initial_state
 from vdps_hil.workbench.study import HIDDEN, cached_drive, study_profile
 
 VEH = load_vehicle("sedan-model")

@@ -1,5 +1,5 @@
 """The workbench's drive table: built from /raw/ only, aligned with the truth within the sensors'
-noise, measurement effects taken out of the IMU readings, bad input as one-line errors."""
+noise, bad input as one-line errors."""
 
 from __future__ import annotations
 
@@ -8,7 +8,6 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.model.effects import make_effect
 from vdps_hil.model.frames import dcm_global_to_vehicle
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.record.reader import RecordingReader
@@ -76,20 +75,6 @@ def test_gnss_and_innovation_tables(drive):
     assert 0.2 < np.nanmean(nis) / 3.0 < 5.0  # consistent filter: mean NIS near the dof
 
 
-def test_imu_bias_is_taken_out_of_the_readings(drive):
-    from vdps_hil.bus.samples import Sample
-
-    bias = make_effect("imu_bias", accel_bias_x_mps2=0.2, gyro_bias_z_radps=0.01)
-    samples = [Sample(i * 1_000_000, "imu", "imu", {"specific_force_mps2_x": 1.0 + 0.2, "specific_force_mps2_y": 0.0,
-                                                    "specific_force_mps2_z": 9.8 + 0.05,
-                                                    "angular_rate_radps_x": 0.0, "angular_rate_radps_y": 0.0,
-                                                    "angular_rate_radps_z": 0.3 + 0.01})
-               for i in range(200)]
-    out = D.remove_imu_effects(samples, [bias])
-    f = out[100].fields
-    assert f["specific_force_mps2_x"] == pytest.approx(1.0)
-    assert f["angular_rate_radps_z"] == pytest.approx(0.3)
-    assert f["specific_force_mps2_z"] == pytest.approx(9.8)  # the default z bias 0.05 is in the effect
 
 
 def test_complementary_velocity_removes_update_steps():

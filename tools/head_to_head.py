@@ -69,8 +69,11 @@ def _one(job: dict) -> dict:
     from vdps_hil.model.effects import EffectSet
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.workbench.dataset import load_drive
-    from vdps_hil.workbench.ranking import RankingConfig, _build, _identify, rank
-    from vdps_hil.workbench.residuals import EQUATIONS, compute_innovations, row_states
+    from vdps_hil.workbench.innovations import compute_innovations
+    from vdps_hil.workbench.ranking.config import RankingConfig
+    from vdps_hil.workbench.ranking.identification import identify
+    from vdps_hil.workbench.ranking.selection import rank
+    from vdps_hil.workbench.residuals import EQUATIONS, row_states
     from vdps_hil.workbench.study import cached_drive
 
     veh = load_vehicle("sedan-model")
@@ -82,7 +85,7 @@ def _one(job: dict) -> dict:
     cfg = RankingConfig()
     states = row_states(tab, veh)
     inn = compute_innovations(tab)
-    point, d, cols, _ = _identify(tab, veh, EffectSet(), states, inn, cfg, reference=veh)
+    point, d, cols, _ = identify(tab, veh, EffectSet(), states, inn, cfg, reference=veh)
     th, _ = d.objective(cols)
     r = d.y - d.matrix(cols) @ th
     ctx = d.ctx

@@ -1,20 +1,23 @@
 """The model workbench (issue 9): compare the model with a drive, see where it fails, learn which
 physical effect is missing, add it and watch the error fall.
 
-Data flow (one module per step)::
-
-    recording (/raw/ only) + model vehicle file
-      -> dataset      time-aligned table: estimator outputs (EKF, eq 7-11) + zero-phase smoothed sensors
-      -> residuals    eq 13 residual per equation, estimator-error nuisance, GNSS/IMU strapdown
-                      innovations, input-driven simulation error (0.5, 1, 2 s)
-      -> ranking      identification of the ten parameters + effect candidates (candidates) ranked by
-                      held-out explained fraction, forward selection, groups, words (words)
-      -> regimes      worst windows, residuals over the operating regime
-      -> add          --add: joint re-identification from generic priors, before/after on held-out time
-      -> model_file   --save-model / --model (data only)
-      -> report       one self-contained HTML page
-    diagnosis ties them together (``vdps diagnose``); user_effects loads the user's own effect
-    classes from a named file or entry point; study holds the hidden-effect acceptance drives.
+Data flow: a recording (its ``/raw/`` topics only) and a model vehicle file become one
+time-aligned table in ``dataset`` (the samples decoded and collected per kind in ``streams``,
+the estimator run over them in ``estimator_run``, IMU measurement effects optionally taken out
+first in ``imu_effects``); ``residuals`` evaluates every equation of eq 13 against the paper's
+reduced model on that table (one row at a time in ``row_model``), ``innovations`` integrates the
+IMU open loop against every GNSS measurement and ``simulation_errors`` runs the predictor from
+the estimate over 0.5, 1 and 2 s; ``regimes`` finds the worst windows and bins the residuals over
+the operating regime; the effect candidates (``candidates`` picks the adapter per effect from
+``candidate_base`` and ``builtin_candidates``) offer their columns to the ranking stages in
+``ranking`` -- whitened rows without the estimator's errors (``context``), the design matrix
+(``gram``, ``design``), the identification of the ten parameters and of each candidate
+(``identification``), forward selection on held-out data (``selection``), equivalence groups
+(``equivalence``) and the result with its words (``results``, ``words``); ``add`` re-identifies
+with the chosen effects and measures before/after on held-out time; ``model_file`` saves and
+loads the model and ``report`` writes one self-contained HTML page. ``diagnosis`` ties the steps
+together (``vdps diagnose``); ``user_effects`` loads the user's own effect classes from a named
+file or entry point; ``study`` holds the hidden-effect acceptance drives.
 """
 
 from vdps_hil.workbench.diagnosis import Diagnosis, diagnose

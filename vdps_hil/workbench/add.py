@@ -31,10 +31,15 @@ from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import Effect, MeasurementEffect
 from vdps_hil.model.params import Vehicle
 
-from .candidates import Candidate, candidate_for
+from .candidate_base import Candidate
+from .candidates import candidate_for
 from .dataset import DriveTable
-from .ranking import RankingConfig, _apply_base, _build, _effects_with, _identify, _Point, _theta_of
-from .residuals import EQUATIONS, HORIZONS_S, SimErrors, compute_innovations, row_states, simulation_errors
+from .innovations import compute_innovations
+from .ranking.config import RankingConfig
+from .ranking.design import theta_of
+from .ranking.identification import Point, apply_base, build_design, effects_with, identify
+from .residuals import EQUATIONS, row_states
+from .simulation_errors import HORIZONS_S, SimErrors, simulation_errors
 
 __all__ = ["FittedModel", "fit_model", "AddResult", "add_effects", "before_after", "cleaned_rms"]
 
@@ -71,25 +76,25 @@ def fit_model(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequ
     for c in add:
         phi = np.asarray(start[c.name], dtype=float) if start and c.name in start else c.to_phi(c.prior_theta())
         phis[c.name] = phi
-        eff = _effects_with(eff, c.phi_effect(phi))
+        eff = effects_with(eff, c.phi_effect(phi))
     selected = {c.name: c for c in add}
-    point, d, cols, _ = _identify(tab, vehicle, eff, states, inn, cfg, reference=vehicle, phis=phis, selected=selected)
+    point, d, cols, _ = identify(tab, vehicle, eff, states, inn, cfg, reference=vehicle, phis=phis, selected=selected)
     sig: dict[str, dict[str, float]] = {}
     for _ in range(iterations if add else 0):
         th, obj = d.objective(cols)
         new_phis = dict(point.phis)
         new_eff = point.effects
         for c in add:
-            dphi = _theta_of(d, c.name, cols, th)
+            dphi = theta_of(d, c.name, cols, th)
             ph = c.clip_phi(point.phis[c.name] + dphi)
             try:
-                new_eff = _effects_with(new_eff, c.phi_effect(ph))
+                new_eff = effects_with(new_eff, c.phi_effect(ph))
                 new_phis[c.name] = ph
             except ValueError:
                 pass
-        base = _apply_base(point, d, cols, th, cfg, vehicle)
-        point = _Point(base, new_eff, new_phis)
-        _, d, cols = _build(tab, states, inn, vehicle, point, cfg, selected)
+        base = apply_base(point, d, cols, th, cfg, vehicle)
+        point = Point(base, new_eff, new_phis)
+        _, d, cols = build_design(tab, states, inn, vehicle, point, cfg, selected)
     th, obj = d.objective(cols)
     s2 = obj / max(len(d.y) - len(cols), 1)
     G = d.stats()[0].sum(axis=(0, 1))
@@ -130,7 +135,7 @@ def cleaned_rms(table: DriveTable, model: FittedModel, vehicle: Vehicle, config:
     cfg = config or RankingConfig()
     states = row_states(table, model.vehicle)
     inn = compute_innovations(table)
-    _, d, cols = _build(table, states, inn, vehicle, _Point(model.vehicle, model.effects, {}), cfg, {})
+    _, d, cols = build_design(table, states, inn, vehicle, Point(model.vehicle, model.effects, {}), cfg, {})
     th, _ = d.objective(cols)
     r = d.y - d.predict(cols, th)
     ctx = d.ctx

@@ -2,10 +2,10 @@
 
 Steps (each in its own module): decode the ``/raw/`` topics and run the estimator
 (``dataset``), identify the ten parameters and rank the effect candidates (``ranking``), the
-residuals and the input-driven simulation error of the identified model (``residuals``), where
-it fails (``regimes``), optionally add effects and measure before/after (``add``), optionally
-save the model (``model_file``). Only ``/raw/`` topics and the model vehicle file are read
-(plus a ``--model`` file and user effect code the user names).
+residuals and the input-driven simulation error of the identified model (``residuals``,
+``simulation_errors``), where it fails (``regimes``), optionally add effects and measure
+before/after (``add``), optionally save the model (``model_file``). Only ``/raw/`` topics and
+the model vehicle file are read (plus a ``--model`` file and user effect code the user names).
 
 JSON (``Diagnosis.to_json``), the issue's keys::
 
@@ -35,9 +35,12 @@ from vdps_hil.model.params import Vehicle
 
 from .add import AddResult, FittedModel, add_effects, cleaned_rms
 from .dataset import DatasetConfig, DriveTable, load_drive
-from .ranking import Ranking, RankingConfig, rank
+from .ranking.config import RankingConfig
+from .ranking.results import Ranking
+from .ranking.selection import rank
 from .regimes import RegimeBins, Window, regime_bins, worst_windows
-from .residuals import EquationResiduals, SimErrors, compute_residuals, simulation_errors
+from .residuals import EquationResiduals, compute_residuals
+from .simulation_errors import SimErrors, simulation_errors
 
 __all__ = ["Diagnosis", "diagnose"]
 

@@ -232,7 +232,7 @@ def run_job(job: dict) -> dict:
 
     from .add import add_effects
     from .dataset import load_drive
-    from .ranking import rank
+    from .ranking.selection import rank
 
     veh = load_vehicle("sedan-model")
     t0 = time.perf_counter()

@@ -12,7 +12,7 @@ import math
 
 from vdps_hil.units import GRAVITY_MPS2
 
-from .candidates import PARAM_ALIASES, PARAM_LABELS
+from .candidate_base import PARAM_ALIASES, PARAM_LABELS
 from .residuals import EQUATION_LABELS
 
 __all__ = ["describe_entry", "describe_ranking", "separating_maneuver", "group_maneuver", "EFFECT_LABELS",

@@ -1,0 +1,23 @@
+"""Measurement effects taken out of the IMU readings before the estimator runs."""
+
+from __future__ import annotations
+
+import pytest
+
+from vdps_hil.bus.samples import Sample
+from vdps_hil.model.effects import make_effect
+from vdps_hil.workbench import imu_effects as IE
+
+
+def test_imu_bias_is_taken_out_of_the_readings():
+    bias = make_effect("imu_bias", accel_bias_x_mps2=0.2, gyro_bias_z_radps=0.01)
+    samples = [Sample(i * 1_000_000, "imu", "imu", {"specific_force_mps2_x": 1.0 + 0.2, "specific_force_mps2_y": 0.0,
+                                                    "specific_force_mps2_z": 9.8 + 0.05,
+                                                    "angular_rate_radps_x": 0.0, "angular_rate_radps_y": 0.0,
+                                                    "angular_rate_radps_z": 0.3 + 0.01})
+               for i in range(200)]
+    out = IE.remove_imu_effects(samples, [bias])
+    f = out[100].fields
+    assert f["specific_force_mps2_x"] == pytest.approx(1.0)
+    assert f["angular_rate_radps_z"] == pytest.approx(0.3)
+    assert f["specific_force_mps2_z"] == pytest.approx(9.8)  # the default z bias 0.05 is in the effect

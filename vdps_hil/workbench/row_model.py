@@ -1,0 +1,181 @@
+"""The residual of eq 13 at one row for one model (vehicle + dynamics effects), the kernel of
+:func:`~vdps_hil.workbench.residuals.compute_residuals` (:class:`RowModel`).
+
+Per row (``meas``: the 22 measured values of ``RowStates.meas``; core: ``model.core.Model.f``
+at the row's state, the reduced model, ``unsprung_dof=False``)::
+
+    r_long,lat,vert = m (f_meas - (a_b - g_b))                   [N]     f = a - g at the CG
+    r_roll,pitch,yaw = I (omega_dot_meas - omega_dot_model)      [N m]
+    r_wheel_i = I_w (omega_dot_i,meas - omega_dot_i,model)       [N m]
+    r_wheel_speed_i = v_l,i (1 + kappa_q,i) - r_i omega_i,meas   [m/s]
+
+v_l,i: the wheel centre's velocity along the wheel's heading in the road plane, e_l = (d - (d.n)
+n) / |...| with d = (cos delta, sin delta, 0), n the road normal; kappa_q,i = (T_i + T_eff,i -
+I_w omega_dot_i,meas) / (r_i C_kappa,i), the slip the measured spin balance asks for (eq 15;
+with a saturating tire law the slip at which that law gives the same force). When the
+suspension is measured the normal loads come from the deflections (eq 14): the difference to
+the rigid-tire pose dF_z,i acts along n at the contact point r_c,i = r_w,i - h_w n.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vdps_hil.model.core import Model
+from vdps_hil.model.effects import EffectSet
+from vdps_hil.model.params import Vehicle
+from vdps_hil.units import GRAVITY_MPS2
+
+__all__ = ["RowModel"]
+
+
+class RowModel:
+    """Residual vector of one row for one model (vehicle + dynamics effects)."""
+
+    def __init__(self, vehicle: Vehicle, effects: EffectSet):
+        self.model = Model(vehicle, EffectSet(effects.dynamics), unsprung_dof=False)
+        p = vehicle.params
+        self.m = p.mass_kg
+        self.inertia = (p.inertia_x_kgm2, p.inertia_y_kgm2, p.inertia_z_kgm2)
+        self.iw = vehicle.tire.wheel_inertia_kgm2
+        self.c_kappa = p.tracking_stiffness_n
+        self.corners = vehicle.geometry.corner_xy_m()
+        self.axles = [vehicle.axle(i) for i in range(4)]
+        self._spring = [(a.spring_c1_npm, a.spring_c2_per_m, a.spring_c3_m, a.static_compression_m, a.damper_nspm,
+                         a.unsprung_mass_kg * GRAVITY_MPS2) for a in self.axles]
+        self.last_ws = [0.0] * 8
+        self.last_slip_cols = None
+        self._zw = self.model.wheel_centre_z_m
+        tire = self.model.effects.tire
+        self._tire = None if tire is None or tire.name == "linear_tire" else tire
+        self._fz0 = self.model.static_load_n
+        self._calpha = self.model.c_alpha
+
+    def residual(self, x, u, env, meas, want_named: bool = False, want_slip: bool = False):
+        """(r (14,) list, named quantities or None) at one row; ``meas`` a sequence of 22
+        measured values (``RowStates.meas``)."""
+        m = self.model
+        raw: dict = {"_want_air": want_named}
+        xd = m.f(x, u, env, raw)
+        ax, ay, az = raw["_acc_b"]
+        gx, gy, gz = raw["_g_b"]
+        mass = self.m
+        ix, iy, iz = self.inertia
+        r = [mass * (meas[0] - (ax - gx)), mass * (meas[1] - (ay - gy)), mass * (meas[2] - (az - gz)),
+             ix * (meas[3] - xd[9]), iy * (meas[4] - xd[10]), iz * (meas[5] - xd[11]),
+             0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        vx, vy = x[6], x[7]
+        wz = x[11]
+        rec = raw["_rec"]
+        if len(meas) > 14 and meas[14] == meas[14] and meas[18] == meas[18]:
+            self._measured_loads(r, rec, raw["_normal_b"], meas)
+        iw = self.iw
+        ws = self.last_ws
+        cos, sin, sqrt = math.cos, math.sin, math.sqrt
+        nx, ny, nz = raw["_normal_b"]
+        wx, wy = x[9], x[10]
+        vz = x[8]
+        zw = self._zw
+        for i in range(4):
+            rc = rec[i]
+            tq, teff, delta, ri = rc[7], rc[8], rc[9], rc[10]
+            r[6 + i] = iw * (meas[6 + i] - xd[12 + i])
+            xi, yi = self.corners[i]
+            # wheel-centre velocity along the wheel's heading in the road plane (as the core)
+            cd, sd = cos(delta), sin(delta)
+            hn = cd * nx + sd * ny
+            lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
+            inv = 1.0 / sqrt(lx * lx + ly * ly + lz * lz)
+            vwx = vx + wy * zw - wz * yi
+            vwy = vy + wz * xi - wx * zw
+            vwz = vz + wx * yi - wy * xi
+            vl = (vwx * lx + vwy * ly + vwz * lz) * inv
+            kq = (tq + teff - iw * meas[6 + i]) / (ri * self.c_kappa[i])
+            if self._tire is not None:
+                kq = self._slip_for_force(i, rc, kq * self.c_kappa[i], kq)
+            r[10 + i] = vl * (1.0 + kq) - ri * meas[10 + i]
+            ws[i] = vl
+            ws[4 + i] = kq
+        named = m._named(x, xd, raw, env) if want_named else None
+        if want_slip:
+            self.last_slip_cols = self._slip_columns(rec, raw["_normal_b"])
+        return r, named
+
+    def _measured_loads(self, r, rec, n_b, meas) -> None:
+        """Normal loads from the measured deflections and rates (eq 14, as eq 20 and 23 use them)
+        instead of the rigid-tire pose: the difference dF_z,i acts along the road normal n at the
+        contact point r_c,i = r_w,i - h_w n, so r -= (n dF, r_c x n dF)."""
+        nx, ny, nz = n_b
+        zw = self.model.wheel_centre_z_m
+        exp = math.exp
+        for i in range(4):
+            c1, c2, c3, sc, ds, mug = self._spring[i]
+            hs = sc + meas[14 + i]
+            fsp = c1 * exp(c2 * ((hs if hs < 10.0 else 10.0) - c3)) * hs
+            if fsp + mug <= 0.0:
+                fz = 0.0
+            else:
+                fz = fsp + ds * meas[18 + i] + mug
+                if fz < 0.0:
+                    fz = 0.0
+            rc = rec[i]
+            d = fz - rc[2]
+            hw = rc[11]
+            xi, yi = self.corners[i]
+            rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
+            fx, fy, fz_ = nx * d, ny * d, nz * d
+            r[0] -= fx
+            r[1] -= fy
+            r[2] -= fz_
+            r[3] -= rcy * fz_ - rcz * fy
+            r[4] -= rcz * fx - rcx * fz_
+            r[5] -= rcx * fy - rcy * fx
+
+    def _slip_for_force(self, i: int, rc, fa_target: float, k0: float) -> float:
+        """The slip ratio at which the model's tire law gives the longitudinal force the spin
+        balance measured (Newton from the linear tire's value, at the corner's slip angle and
+        load; combined slip lowers the longitudinal stiffness of a saturating tire)."""
+        tf = self._tire.tire_forces
+        fz, alp = rc[2], rc[4]
+        ck, ca, fz0 = self.c_kappa[i], self._calpha[i], self._fz0[i]
+        k = k0
+        for _ in range(3):
+            f0 = tf(fz, fz0, k, alp, ck, ca)[0]
+            h = 1e-5
+            df = (tf(fz, fz0, k + h, alp, ck, ca)[0] - f0) / h
+            if not df > 0.05 * ck:
+                break
+            k = k + (fa_target - f0) / df
+        return k
+
+    def _slip_columns(self, rec, n_b) -> np.ndarray:
+        """(14, 8): d(residual)/d(F_a,i) (columns 0-3) -- a longitudinal tire force along the
+        wheel's heading in the road plane e_l at the contact point (force e_l, moment r_c x e_l,
+        wheel spin -r_i) -- and d(residual)/d(F_b,i) (columns 4-7, along e_t = n x e_l, times the
+        slip angle: the cornering-stiffness columns of the linear tire)."""
+        nx, ny, nz = n_b
+        zw = self.model.wheel_centre_z_m
+        out = np.zeros((14, 8))
+        for i in range(4):
+            delta, ri, hw, alp = rec[i][9], rec[i][10], rec[i][11], rec[i][4]
+            cd, sd = math.cos(delta), math.sin(delta)
+            hn = cd * nx + sd * ny
+            lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
+            inv = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
+            lx, ly, lz = lx * inv, ly * inv, lz * inv
+            tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
+            xi, yi = self.corners[i]
+            rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
+            out[0, i], out[1, i], out[2, i] = -lx, -ly, -lz
+            out[3, i] = -(rcy * lz - rcz * ly)
+            out[4, i] = -(rcz * lx - rcx * lz)
+            out[5, i] = -(rcx * ly - rcy * lx)
+            out[6 + i, i] = ri
+            k = 4 + i
+            out[0, k], out[1, k], out[2, k] = -tx * alp, -ty * alp, -tz * alp
+            out[3, k] = -(rcy * tz - rcz * ty) * alp
+            out[4, k] = -(rcz * tx - rcx * tz) * alp
+            out[5, k] = -(rcx * ty - rcy * tx) * alp
+        return out

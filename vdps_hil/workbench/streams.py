@@ -1,0 +1,173 @@
+"""A drive's samples: decoded from the recording's ``/raw/`` topics, collected per kind as packed
+arrays, resampled onto uniform grids and smoothed there.
+
+Smoothing (offline, zero phase): a Butterworth low-pass (:class:`Smoother`, order 4) run forward
+and backward (``scipy.signal.filtfilt``) on the stream's own uniform grid (median step,
+:func:`uniform`); derivatives are central differences of the smoothed signal (:func:`smoothed`),
+none for a stream slower than the caller's minimum rate. The values are then interpolated
+linearly onto the table's grid (:func:`on_grid`, NaN outside the stream's span).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from array import array
+from typing import Iterable, Iterator, Mapping, Sequence
+
+import numpy as np
+from scipy.signal import butter, filtfilt
+
+from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
+
+__all__ = ["DatasetError", "iter_raw", "decode_raw", "Streams", "stream", "Smoother", "uniform", "on_grid", "smoothed",
+           "STREAM_FIELDS", "SPECIFIC_FORCE_FIELDS", "ANGULAR_RATE_FIELDS", "WHEEL_SPEED_FIELDS", "WHEEL_TORQUE_FIELDS",
+           "SUSPENSION_FIELDS", "GNSS_POS_FIELDS", "GNSS_ATT_FIELDS", "GNSS_VEL_FIELDS"]
+
+SPECIFIC_FORCE_FIELDS = axis_fields("specific_force_mps2")
+ANGULAR_RATE_FIELDS = axis_fields("angular_rate_radps")
+WHEEL_SPEED_FIELDS = wheel_fields("wheel_speed_radps")
+WHEEL_TORQUE_FIELDS = wheel_fields("wheel_torque_nm")
+SUSPENSION_FIELDS = wheel_fields("susp_deflection_m")
+GNSS_POS_FIELDS = ("gnss_lat_deg", "gnss_lon_deg", "gnss_alt_m", "gnss_geoid_sep_m", "gnss_pos_sigma_h_m",
+                   "gnss_pos_sigma_v_m", "gnss_fix_quality")
+GNSS_ATT_FIELDS = ("gnss_roll_rad", "gnss_pitch_rad", "gnss_yaw_rad", "gnss_roll_sigma_rad", "gnss_pitch_sigma_rad",
+                   "gnss_yaw_sigma_rad")
+GNSS_VEL_FIELDS = ("gnss_speed_mps", "gnss_course_rad")
+STREAM_FIELDS = {"imu": tuple(SPECIFIC_FORCE_FIELDS) + tuple(ANGULAR_RATE_FIELDS), "wheel_speed": tuple(WHEEL_SPEED_FIELDS),
+                 "suspension": tuple(SUSPENSION_FIELDS), "steer": ("steer_wheel_angle_rad",),
+                 "wheel_torque": tuple(WHEEL_TORQUE_FIELDS), "gnss_pos": GNSS_POS_FIELDS, "gnss_att": GNSS_ATT_FIELDS,
+                 "gnss_vel": GNSS_VEL_FIELDS}
+"""The sample kinds a drive table uses and their fields (:class:`Streams`' default)."""
+
+
+class DatasetError(ValueError):
+    """A recording the workbench cannot use (one-line message)."""
+
+
+# ----------------------------------------------------------------------------------- decoding
+def iter_raw(path: str | os.PathLike, *, dbc=None, signalmap=None) -> Iterator[Sample]:
+    """The decoded ``/raw/`` samples of a recording in t_ns order, one at a time (nothing else
+    is read, nothing is held: memory does not grow with the drive's length)."""
+    from vdps_hil.record.decode import DecodeError, decode_recording
+
+    try:
+        yield from decode_recording(path, dbc=dbc, signalmap=signalmap)
+    except DecodeError as e:
+        raise DatasetError(str(e)) from None
+
+
+def decode_raw(path: str | os.PathLike, *, dbc=None, signalmap=None) -> list[Sample]:
+    """The decoded ``/raw/`` samples of a recording in t_ns order, as a list (about 2 MiB per
+    second of drive: the workbench itself streams with :func:`iter_raw`)."""
+    return list(iter_raw(path, dbc=dbc, signalmap=signalmap))
+
+
+# ----------------------------------------------------------------------------------- streams
+class Streams:
+    """The valid samples of each kind the table uses, collected in one pass as packed arrays
+    (t_ns, and the kind's fields with NaN where a sample lacks one): 8 bytes a value, so a
+    drive is never held as Sample objects. ``count``: every sample seen."""
+
+    def __init__(self, kinds: Mapping[str, Sequence[str]] | None = None):
+        self.names = {k: tuple(v) for k, v in (kinds or STREAM_FIELDS).items()}
+        self._t = {k: array("q") for k in self.names}
+        self._v = {k: array("d") for k in self.names}
+        self.count = 0
+
+    def add(self, s: Sample) -> None:
+        self.count += 1
+        names = self.names.get(s.kind)
+        if names is None or not s.valid:
+            return
+        f = s.fields
+        self._t[s.kind].append(s.t_ns)
+        self._v[s.kind].extend([f.get(n, math.nan) for n in names])
+
+    def tap(self, samples: Iterable[Sample]) -> Iterator[Sample]:
+        """Pass the samples through, collecting them on the way."""
+        for s in samples:
+            self.add(s)
+            yield s
+
+    def get(self, kind: str, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+        """(t_ns (n,), values (n, k)) of ``names`` of one kind."""
+        have = self.names[kind]
+        t = np.frombuffer(self._t[kind], dtype=np.int64).copy() if len(self._t[kind]) else np.zeros(0, np.int64)
+        v = np.frombuffer(self._v[kind], dtype=float).reshape(len(t), len(have)) if len(t) else np.zeros((0, len(have)))
+        return t, v[:, [have.index(n) for n in names]].copy()
+
+
+def stream(samples, kind: str, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(t_ns (n,), values (n, k)) of one sample kind (from :class:`Streams` or a sample
+    sequence); a field missing in a sample -> NaN."""
+    if not isinstance(samples, Streams):
+        st = Streams({kind: names})
+        for s in samples:
+            st.add(s)
+        samples = st
+    return samples.get(kind, names)
+
+
+def uniform(t_ns: np.ndarray, v: np.ndarray, t0_ns: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+    """Resample a stream (NaN-free rows) onto its own uniform grid (median step); times in s
+    relative to ``t0_ns``."""
+    ok = np.all(np.isfinite(v), axis=1)
+    t_ns, v = t_ns[ok], v[ok]
+    if len(t_ns) < 3:
+        return (t_ns - t0_ns).astype(float) * 1e-9, v, 0.0
+    dt = float(np.median(np.diff(t_ns))) * 1e-9
+    if dt <= 0:
+        dt = 1e-3
+    t = (t_ns - t0_ns).astype(float) * 1e-9
+    tg = np.arange(t[0], t[-1] + 0.5 * dt, dt)
+    vg = np.column_stack([np.interp(tg, t, v[:, k]) for k in range(v.shape[1])])
+    return tg, vg, 1.0 / dt
+
+
+def on_grid(grid_s: np.ndarray, t_s: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Linear interpolation onto the grid; NaN outside the stream's span."""
+    out = np.full((len(grid_s), v.shape[1]), np.nan)
+    if len(t_s) < 2:
+        return out
+    inside = (grid_s >= t_s[0]) & (grid_s <= t_s[-1])
+    for k in range(v.shape[1]):
+        out[inside, k] = np.interp(grid_s[inside], t_s, v[:, k])
+    return out
+
+
+def smoothed(samples, kind, names, smoother, grid_s, t0_ns, min_rate_hz, want_rate: bool):
+    """(values on the grid, derivatives on the grid or NaN, native rate) of one stream."""
+    t_ns, v = stream(samples, kind, names)
+    tg, vg, rate = uniform(t_ns, v, t0_ns)
+    if rate <= 0:
+        nan = np.full((len(grid_s), len(names)), np.nan)
+        return nan, nan, 0.0
+    vs = smoother(vg, rate)
+    val = on_grid(grid_s, tg, vs)
+    if want_rate and rate >= min_rate_hz:
+        der = on_grid(grid_s, tg, np.gradient(vs, 1.0 / rate, axis=0))
+    else:
+        der = np.full_like(val, np.nan)
+    return val, der, rate
+
+
+class Smoother:
+    """Zero-phase Butterworth low-pass at one cutoff, designed per sampling rate."""
+
+    def __init__(self, cutoff_hz: float, order: int = 4):
+        self.cutoff_hz = cutoff_hz
+        self.order = order
+        self._cache: dict[float, tuple] = {}
+
+    def __call__(self, y: np.ndarray, rate_hz: float) -> np.ndarray:
+        if rate_hz <= 2.2 * self.cutoff_hz:
+            return y.copy()
+        key = round(rate_hz, 6)
+        if key not in self._cache:
+            self._cache[key] = butter(self.order, self.cutoff_hz / (0.5 * rate_hz))
+        b, a = self._cache[key]
+        padlen = 3 * max(len(a), len(b))
+        if y.shape[0] <= padlen:
+            return y.copy()
+        return filtfilt(b, a, y, axis=0)
