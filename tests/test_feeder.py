@@ -11,13 +11,13 @@ import pytest
 
 from vdps_hil.estimation.pipeline import Estimate, FilteredSignals
 from vdps_hil.bus.samples import Sample
+from vdps_hil.experiments.scoring import truth_at
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.identification.feeder import IdentFeeder
 from vdps_hil.identification.problems import mass_regressor, load_ident_config
 from vdps_hil.model.frames import (compose_absolute, dcm_global_to_vehicle, decompose_vehicle, gravity_in_aux,
                                    skew)
 from vdps_hil.model.params import load_vehicle
-from vdps_hil.paper import truth_at
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive

@@ -6,10 +6,10 @@ import dataclasses
 
 import numpy as np
 
-from vdps_hil.estimation import synthetic as syn
 from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, SensorSet
 from vdps_hil.estimation.observability import ObservabilityWindow, observability_rank
 from vdps_hil.estimation.observations import ObsKind
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.units import GRAVITY_MPS2
 

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.estimation import synthetic as syn
 from vdps_hil.estimation.observations import (ObsKind, ZrRateBuilder, make_models, rear_axle_ground_point,
                                               suspension_measurement, wheel_positions, y2_gps_measurement)
 from vdps_hil.estimation.states import N_EXT, AugStates
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.model import frames as fr
 from vdps_hil.model.params import load_vehicle
 

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from vdps_hil.bus.samples import Sample
-from vdps_hil.estimation import synthetic as syn
 from vdps_hil.estimation.ekf import EkfConfig, SensorSet
 from vdps_hil.estimation.pipeline import (Estimate, EstimatorPipeline, Innovation, Latencies, PipelineConfig)
 from vdps_hil.estimation.kinematics import dcm_gv
 from vdps_hil.estimation.states import STATE_NAMES, States
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.params import load_vehicle
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Benchmark and figures of the estimator (issue 5). Prints; ``--json FILE`` also writes them.
 
-Sections (all on the synthetic Table-1 manoeuvre of ``vdps_hil.estimation.synthetic``):
+Sections (all on the synthetic Table-1 manoeuvre of ``vdps_hil.experiments.synthetic``):
 
 * ``cycle``: EKF cycle time per predict (10 ms mean-input step) and per update kind [us].
 * ``replay``: real-time factor of the pipeline on a 60 s Table-1-rate stream (IMU and
@@ -29,12 +29,12 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
-from vdps_hil.estimation import synthetic as syn
 from vdps_hil.estimation.ekf import EkfConfig, MultiRateEKF, PaperFaithful
 from vdps_hil.estimation.observations import ObsKind, make_models, suspension_measurement
 from vdps_hil.estimation.observations import y2_gps_measurement
 from vdps_hil.estimation.pipeline import EstimatorPipeline, PipelineConfig
 from vdps_hil.estimation.states import STATE_NAMES
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.params import load_vehicle
 

@@ -5,7 +5,8 @@ node that feeds them from bus samples.
 Data flow: ``Sample`` -> ``pipeline.EstimatorPipeline`` -> ``ekf.MultiRateEKF`` (process model
 ``kinematics``, measurement models ``observations``, named states ``states``) and
 ``alpha_beta.TimedAlphaBeta`` -> ``Estimate`` / ``Innovation`` / ``FilteredSignals``.
-``synthetic`` holds analytic test trajectories (tests and benchmarks only).
+``sensorsets``: named sensor sets (``configs/sensorsets``) and the one a recording provides. The
+analytic test trajectories with their truth are ``vdps_hil.experiments.synthetic``.
 """
 
 from vdps_hil.estimation.alpha_beta import AlphaBetaFilter, TimedAlphaBeta, critically_damped_gains, kalata_gains

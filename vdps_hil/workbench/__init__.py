@@ -14,7 +14,8 @@ Data flow (one module per step)::
       -> model_file   --save-model / --model (data only)
       -> report       one self-contained HTML page
     diagnosis ties them together (``vdps diagnose``); user_effects loads the user's own effect
-    classes from a named file or entry point; study holds the hidden-effect acceptance drives.
+    classes from a named file or entry point. The hidden-effect acceptance drives (simulated, with
+    truth) are ``vdps_hil.experiments.workbench_study``.
 """
 
 from vdps_hil.workbench.diagnosis import Diagnosis, diagnose
