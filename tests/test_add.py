@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from vdps_hil.experiments.workbench_study import HIDDEN, cached_drive, study_profile
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.prediction.metrics import PAPER_INACCURACY_PCT, PoseTrajectory, compare_trajectories
@@ -20,7 +21,6 @@ from vdps_hil.workbench.add import add_effects, before_after, fit_model
 from vdps_hil.workbench.candidates import candidate_for
 from vdps_hil.workbench.dataset import load_drive
 from vdps_hil.workbench.simulation_errors import _initial_state
-from vdps_hil.workbench.study import HIDDEN, cached_drive, study_profile
 
 VEH = load_vehicle("sedan-model")
 

@@ -43,9 +43,10 @@ def assert_nothing_lost(d: dict) -> None:
 def calibrated_params(tmp_path_factory):
     """Parameters the chain identifies on the paper's drive of the SUV (the paper harness's
     rollover calibration, seed 1000), saved as ``vdps replay --save-params`` does."""
+    from vdps_hil.experiments.paper_chain import chain_run
+    from vdps_hil.experiments.paper_tasks import ROLLOVER_CALIBRATION
     from vdps_hil.identification.persistence import save_params
     from vdps_hil.model.params import load_vehicle
-    from vdps_hil.paper import ROLLOVER_CALIBRATION, chain_run
 
     cal = chain_run(ROLLOVER_CALIBRATION, load_profile("table1-susp1k"), 1000, model="suv-model",
                     truth_vehicle="suv-truth", predict=False, ident_report_period_s=1.0)

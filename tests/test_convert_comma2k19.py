@@ -12,13 +12,15 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil import realcars as rc
 from vdps_hil.adapters.health import ERROR_COUNTERS
+from vdps_hil.realdata.comma2k19 import COMMA_SEGMENT, read_comma_phone_imu, read_comma_ublox
+from vdps_hil.realdata.runs import load_samples
 from vdps_hil.record.importer import CanSource, SerialSource, import_logs
+from vdps_hil.units import wrap_pi
 
 from conftest import REAL_DATA, REPO
 
-SEG = REAL_DATA / rc.COMMA_SEGMENT
+SEG = REAL_DATA / COMMA_SEGMENT
 DBC = SEG / "toyota_new_mc_pt_generated.dbc"
 
 
@@ -35,17 +37,17 @@ def converted(tmp_path_factory):
         pytest.skip(f"real data not present: {SEG}")
     out = tmp_path_factory.mktemp("comma")
     doc = _tool().convert(SEG, out)
-    samples, status = rc.load_samples([CanSource("pt", str(out / "pt.candump.log"), "can0")],
-                                      [SerialSource("gnss", str(out / "gnss.nmea")),
-                                       SerialSource("imu", str(out / "imu.mti"), 115200)],
-                                      signalmap="toyota_rav4_2017", dbc={"*": str(DBC)})
+    samples, status = load_samples([CanSource("pt", str(out / "pt.candump.log"), "can0")],
+                                   [SerialSource("gnss", str(out / "gnss.nmea")),
+                                    SerialSource("imu", str(out / "imu.mti"), 115200)],
+                                   signalmap="toyota_rav4_2017", dbc={"*": str(DBC)})
     return out, doc, samples, status
 
 
 def test_clock_and_counts(converted):
     out, doc, samples, status = converted
-    fixes = rc.read_comma_ublox(SEG)
-    imu = rc.read_comma_phone_imu(SEG)
+    fixes = read_comma_ublox(SEG)
+    imu = read_comma_phone_imu(SEG)
     t0 = doc["t0_s"]
     assert t0 == math.floor(min(fixes.t_s[0], imu.t_s[0])) - 1.0
     assert json.loads((out / "convert.json").read_text())["t0_s"] == t0
@@ -63,7 +65,7 @@ def test_clock_and_counts(converted):
 
 def test_gnss_values_round_trip(converted):
     out, doc, samples, _ = converted
-    fixes = rc.read_comma_ublox(SEG)
+    fixes = read_comma_ublox(SEG)
     pos = [s for s in samples if s.kind == "gnss_pos"]
     vel = [s for s in samples if s.kind == "gnss_vel"]
     t = np.array([s.t_ns for s in pos]) / 1e9
@@ -77,13 +79,13 @@ def test_gnss_values_round_trip(converted):
     sp = np.array([s.fields["gnss_speed_mps"] for s in vel])
     crs = np.array([s.fields["gnss_course_rad"] for s in vel])
     assert np.max(np.abs(sp - fixes.speed_mps)) <= 0.0005 * 1852 / 3600 + 1e-9  # 0.001 kn printed
-    assert np.max(np.abs(rc.wrap_pi(crs - fixes.course_rad))) <= math.radians(0.0005) + 1e-9
+    assert np.max(np.abs(wrap_pi(crs - fixes.course_rad))) <= math.radians(0.0005) + 1e-9
     assert all(s.fields["gnss_fix_quality"] == 1.0 for s in pos)
 
 
 def test_phone_imu_axes_and_times(converted):
     out, doc, samples, _ = converted
-    imu = rc.read_comma_phone_imu(SEG)
+    imu = read_comma_phone_imu(SEG)
     got = [s for s in samples if s.kind == "imu"]
     t = np.array([s.t_ns for s in got]) / 1e9
     assert np.max(np.abs(t - (imu.t_s - doc["t0_s"]))) <= 10.0 / 115200 + 1e-9  # one byte time

@@ -12,14 +12,15 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil import realcars as rc
 from vdps_hil.adapters.health import ERROR_COUNTERS
+from vdps_hil.realdata.rtklib import RTKLIB_DRIVE, read_rtklib_imu, read_rtklib_pos, read_timetag
+from vdps_hil.realdata.runs import load_samples
 from vdps_hil.record.importer import SerialSource
-from vdps_hil.units import GRAVITY_MPS2
+from vdps_hil.units import GRAVITY_MPS2, wrap_pi
 
 from conftest import REAL_DATA, REPO
 
-DRIVE = REAL_DATA / rc.RTKLIB_DRIVE
+DRIVE = REAL_DATA / RTKLIB_DRIVE
 POS = DRIVE / "gnss_1934_sf.pos"
 CSV = DRIVE / "imu_1934.csv"
 TAG = DRIVE / "imu_1934.csv.tag"
@@ -38,15 +39,15 @@ def converted(tmp_path_factory):
         pytest.skip(f"real data not present: {DRIVE}")
     out = tmp_path_factory.mktemp("rtk")
     doc = _tool().convert(POS, CSV, out, tag_path=TAG)
-    samples, status = rc.load_samples([], [SerialSource("gnss", str(out / "gnss.nmea")),
-                                           SerialSource("imu", str(out / "imu.mti"), 115200)])
+    samples, status = load_samples([], [SerialSource("gnss", str(out / "gnss.nmea")),
+                                        SerialSource("imu", str(out / "imu.mti"), 115200)])
     return out, doc, samples, status
 
 
 def test_time_tag_file():
     if not DRIVE.is_dir():
         pytest.skip("real data not present")
-    tag = rc.read_timetag(TAG)
+    tag = read_timetag(TAG)
     assert tag.header == "TIMETAG RTKLIB demo5"
     import datetime as dt
     start = dt.datetime.fromtimestamp(tag.start_s, dt.timezone.utc)
@@ -70,7 +71,7 @@ def test_counts_and_errors(converted):
 
 def test_gnss_round_trip_and_quality(converted):
     out, doc, samples, _ = converted
-    sol = rc.read_rtklib_pos(POS)
+    sol = read_rtklib_pos(POS)
     pos = [s for s in samples if s.kind == "gnss_pos"]
     vel = [s for s in samples if s.kind == "gnss_vel"]
     t = np.array([s.t_ns for s in pos]) / 1e9 + doc["t0_gpst_s"]
@@ -87,7 +88,7 @@ def test_gnss_round_trip_and_quality(converted):
     moving = np.hypot(sol.vel_neu_mps[:, 0], sol.vel_neu_mps[:, 1]) > 0.05
     assert np.all(np.isnan(crs[~moving])) and np.all(np.isfinite(crs[moving]))
     ref = np.arctan2(sol.vel_neu_mps[moving, 0], sol.vel_neu_mps[moving, 1])
-    assert np.max(np.abs(rc.wrap_pi(crs[moving] - ref))) <= math.radians(0.0005) + 1e-9
+    assert np.max(np.abs(wrap_pi(crs[moving] - ref))) <= math.radians(0.0005) + 1e-9
 
 
 def test_imu_times_follow_the_publishers_rule_and_axes_stay_raw(converted):
@@ -95,7 +96,7 @@ def test_imu_times_follow_the_publishers_rule_and_axes_stay_raw(converted):
     imu = [s for s in samples if s.kind == "imu"]
     t = np.array([s.t_ns for s in imu]) / 1e9 + doc["t0_gpst_s"]
     raw = np.loadtxt(CSV, delimiter=",")
-    tag = rc.read_timetag(TAG)
+    tag = read_timetag(TAG)
     sec = (raw[:, 6] - raw[0, 6]) / 1000.0
     expect = tag.start_s + sec * (tag.end_s - tag.start_s) / sec[-1]
     assert np.max(np.abs(t - expect)) <= 10.0 / 115200 + 1e-6
@@ -113,11 +114,11 @@ def test_broken_lines_are_skipped(tmp_path):
     lines = POS.read_text().splitlines(keepends=True)
     bad = tmp_path / "bad.pos"
     bad.write_text("".join(lines[:5]) + "garbage line\n2025/07/08 19:34:19.749 40.1 x\n" + "".join(lines[5:40]))
-    sol = rc.read_rtklib_pos(bad)
+    sol = read_rtklib_pos(bad)
     assert sol.t_gpst_s.shape[0] == 39  # 4 + 35 solution lines; the header and the 2 broken lines skipped
     csv = tmp_path / "imu.csv"
     csv.write_text("0.1,0.2,1.0,0.0,0.0,0.0,100\nnot,a,row\n0.1,0.2,1.0,0.0,0.0,0.0,110\n")
-    imu = rc.read_rtklib_imu(csv)
+    imu = read_rtklib_imu(csv)
     assert imu.t_s.tolist() == [0.0, 0.01]
 
 

@@ -8,11 +8,12 @@ import math
 import numpy as np
 import pytest
 
+from vdps_hil.experiments.workbench_study import cached_drive
+from vdps_hil.model.effects import make_effect
 from vdps_hil.model.frames import dcm_global_to_vehicle
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.workbench import dataset as D
-from vdps_hil.workbench.study import cached_drive
 
 VEH = load_vehicle("sedan-model")
 

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from vdps_hil.cli.main import main
-from vdps_hil.workbench.study import HIDDEN, cached_drive
+from vdps_hil.experiments.workbench_study import HIDDEN, cached_drive
 
 
 @pytest.fixture(scope="module")

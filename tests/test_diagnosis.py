@@ -7,11 +7,11 @@ import shutil
 
 import pytest
 
+from vdps_hil.experiments.workbench_study import HIDDEN, cached_drive
 from vdps_hil.model import params as P
 from vdps_hil.record.decode import copy_raw_topics
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.workbench.diagnosis import diagnose
-from vdps_hil.workbench.study import HIDDEN, cached_drive
 from vdps_hil.workbench.user_effects import load_effect_file
 
 SIDE_FORCE = '''

@@ -15,12 +15,13 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from vdps_hil.estimation import synthetic as syn
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.estimation.ekf import MultiRateEKF, filter_jacobians
 from vdps_hil.estimation.ekf_config import EkfConfig, PaperFaithful, SensorSet
 from vdps_hil.estimation.kinematics import process_f, linearize
 from vdps_hil.estimation.observations import ObsKind, make_models
 from vdps_hil.estimation.states import States, StateLayout
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.units import GRAVITY_MPS2
 

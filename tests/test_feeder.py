@@ -11,6 +11,7 @@ import pytest
 
 from vdps_hil.estimation.estimates import Estimate, FilteredSignals
 from vdps_hil.bus.samples import Sample
+from vdps_hil.experiments.scoring import truth_at
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.identification.feeder import IdentFeeder
 from vdps_hil.identification.config import load_ident_config
@@ -18,7 +19,6 @@ from vdps_hil.identification.problems import mass_regressor
 from vdps_hil.model.frames import (compose_absolute, dcm_global_to_vehicle, decompose_vehicle, gravity_in_aux,
                                    skew)
 from vdps_hil.model.params import load_vehicle
-from vdps_hil.paper import truth_at
 from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.record.reader import RecordingReader

@@ -9,7 +9,7 @@ from vdps_hil.model.effects import make_effect
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.workbench import innovations as I
 from vdps_hil.workbench.dataset import load_drive
-from vdps_hil.workbench.study import cached_drive
+from vdps_hil.experiments.workbench_study import cached_drive
 
 VEH = load_vehicle("sedan-model")
 

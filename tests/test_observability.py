@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from vdps_hil.estimation import synthetic as syn
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.estimation.ekf import MultiRateEKF
 from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
 from vdps_hil.estimation.observability import ObservabilityWindow, observability_rank

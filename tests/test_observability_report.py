@@ -11,7 +11,6 @@ import io
 
 import pytest
 
-from vdps_hil import realcars as rc
 from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
 from vdps_hil.estimation.observability_explain import structural_report
 from vdps_hil.estimation.pipeline_config import PipelineConfig
@@ -19,6 +18,7 @@ from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.identification.observability_report import IdentificationMonitor, input_dependencies, observability_report
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
+from vdps_hil.realdata.runs import run_pipeline
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
@@ -57,7 +57,7 @@ def test_dropping_sensors_changes_the_windows_as_the_rank_analysis_predicts(tabl
     print("\nsimulated Table-1 drive (paper scenario, 8 s), analysis layout (road angles estimated), windows of 3 s:")
     for name, ss in SENSOR_DROPS.items():
         cfg = PipelineConfig(ekf=EkfConfig(sensors=ss, estimate_road=True), observability_window_s=3.0)
-        r = rc.run_pipeline(VEH, cfg, table1_drive, drop=_drop_for(ss), origin=DEFAULT_ORIGIN)
+        r = run_pipeline(VEH, cfg, table1_drive, drop=_drop_for(ss), origin=DEFAULT_ORIGIN)
         st = structural_report(cfg.ekf, VEH.mounting.gnss_lever_arm_m)
         wins = r.pipeline.observability_reports
         doc = observability_report(r.pipeline)
@@ -77,7 +77,7 @@ def test_dropping_sensors_changes_the_windows_as_the_rank_analysis_predicts(tabl
 def test_default_layout_report_explains_what_it_does_not_estimate(table1_drive):
     ss = SensorSet(suspension=False)
     cfg = PipelineConfig(ekf=EkfConfig(sensors=ss), observability_window_s=4.0)
-    r = rc.run_pipeline(VEH, cfg, table1_drive, drop=_drop_for(ss), origin=DEFAULT_ORIGIN)
+    r = run_pipeline(VEH, cfg, table1_drive, drop=_drop_for(ss), origin=DEFAULT_ORIGIN)
     doc = observability_report(r.pipeline).to_json()
     assert all(w["rank"] == w["n_states"] == 9 for w in doc["windows"])
     assert doc["structural"]["not_estimated"][0]["names"] == ["phi_r_rad", "theta_r_rad"]

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.estimation import synthetic as syn
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.estimation.measurements import suspension_measurement, y2_gps_measurement
 from vdps_hil.estimation.observations import ObsKind, make_models, rear_axle_ground_point, wheel_positions
 from vdps_hil.estimation.states import N_EXT, AugStates

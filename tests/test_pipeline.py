@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from vdps_hil.bus.samples import Sample
-from vdps_hil.estimation import synthetic as syn
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
 from vdps_hil.estimation.estimates import Estimate, Innovation
 from vdps_hil.model.frames import dcm_gv
@@ -18,7 +18,6 @@ from vdps_hil.estimation.pipeline import EstimatorPipeline
 from vdps_hil.estimation.pipeline_config import Latencies, PipelineConfig
 from vdps_hil.estimation.states import STATE_NAMES, States
 from vdps_hil.geodesy import DEFAULT_ORIGIN
-from vdps_hil.model.frames import dcm_gv
 from vdps_hil.model.params import load_vehicle
 
 VEH = load_vehicle("sedan-model")

@@ -1,8 +1,8 @@
 """Acceptance of the ranking on drives with a hidden effect (issue 9), two seeds per effect.
 
 Each drive is simulated with one effect hidden in the truth (maneuver and magnitude per effect:
-``vdps_hil.workbench.study``; refinements against the issue's wording are stated there: 12-20 s
-drives, a weaving crosswind drive, a 0.2-0.6 Hz sine sweep of 0.9 rad for the load-dependent
+``vdps_hil.experiments.workbench_study``; refinements against the issue's wording are stated there:
+12-20 s drives, a weaving crosswind drive, a 0.2-0.6 Hz sine sweep of 0.9 rad for the load-dependent
 stiffness, the IMU bias on one straight-then-circle drive; Table 1 sensors with the suspension
 at 100 Hz). The workbench reads only the recording's /raw/ topics and the model vehicle file.
 
@@ -21,7 +21,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import pytest
 
-from vdps_hil.workbench.study import HIDDEN, TWO_HIDDEN, run_job
+from vdps_hil.experiments.workbench_study import HIDDEN, TWO_HIDDEN, run_job
 
 SEEDS = (21, 22)
 NULL_MANEUVERS = ("accel-coast", "coast-down", "step-steer", "lane-change", "sine-sweep")

@@ -20,15 +20,22 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil import realcars as rc
 from vdps_hil.identification.observability_report import IdentificationMonitor, observability_report
+from vdps_hil.estimation.pipeline_config import Latencies
+from vdps_hil.estimation.sensorsets import load_sensorset
 from vdps_hil.model.params import load_vehicle
-from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
+from vdps_hil.realdata.capture_writers import nmea_fix_lines
+from vdps_hil.realdata.comma2k19 import COMMA_SEGMENT, read_comma_reference, read_comma_ublox
+from vdps_hil.realdata.reference import dead_reckoning, estimate_lag, speed_course_errors
+from vdps_hil.realdata.runs import gnss_denied, load_samples, run_pipeline, series
+from vdps_hil.realdata.steering import OPENPILOT_RAV4, steer_response_fit, steer_signals, understeer_gradient
 from vdps_hil.record.importer import CanSource, SerialSource
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
+from vdps_hil.units import wrap_pi
 
 from conftest import REAL_DATA
 
-SEG = REAL_DATA / rc.COMMA_SEGMENT
+SEG = REAL_DATA / COMMA_SEGMENT
 R_WHEEL = 0.35
 
 
@@ -37,28 +44,28 @@ def drive(tmp_path_factory):
     if not SEG.is_dir():
         pytest.skip(f"real data not present: {SEG}")
     out = tmp_path_factory.mktemp("rav4")
-    fixes = rc.read_comma_ublox(SEG)
-    (out / "gnss.nmea").write_bytes(b"".join(rc.nmea_fix_lines(fixes, 0.0)))  # device boot clock, as the CAN log
-    samples, _ = rc.load_samples([CanSource("pt", str(SEG / "rav4_seg40.candump.log"), "can0")],
-                                 [SerialSource("gnss", str(out / "gnss.nmea"))], signalmap="toyota_rav4_2017",
-                                 dbc={"*": str(SEG / "toyota_new_mc_pt_generated.dbc")})
-    ref = rc.read_comma_reference(SEG)
+    fixes = read_comma_ublox(SEG)
+    (out / "gnss.nmea").write_bytes(b"".join(nmea_fix_lines(fixes, 0.0)))  # device boot clock, as the CAN log
+    samples, _ = load_samples([CanSource("pt", str(SEG / "rav4_seg40.candump.log"), "can0")],
+                              [SerialSource("gnss", str(out / "gnss.nmea"))], signalmap="toyota_rav4_2017",
+                              dbc={"*": str(SEG / "toyota_new_mc_pt_generated.dbc")})
+    ref = read_comma_reference(SEG)
     veh = load_vehicle("rav4-model", "model")
-    ss = rc.load_sensorset("rav4-can-ublox")
+    ss = load_sensorset("rav4-can-ublox")
     return samples, ref, fixes, veh, ss
 
 
 def _run(drive, windows=(), **cfg_kw):
     samples, ref, _, veh, ss = drive
     cfg = ss.pipeline_config(observability_window_s=None, output_period_s=0.05, **cfg_kw)
-    r = rc.run_pipeline(veh, cfg, samples, kind_map=ss.kind_map, origin=ref.origin,
-                        drop=rc.gnss_denied(windows, cfg.latencies.gnss_s) if windows else None)
+    r = run_pipeline(veh, cfg, samples, kind_map=ss.kind_map, origin=ref.origin,
+                     drop=gnss_denied(windows, cfg.latencies.gnss_s) if windows else None)
     pa, va = r.track.antenna(veh.mounting.gnss_lever_arm_m)
     return r, pa, va
 
 
 def _wheels(samples):
-    t, w = rc.series(samples, "wheel_speed", [f"wheel_speed_radps_{i}" for i in range(1, 5)])
+    t, w = series(samples, "wheel_speed", [f"wheel_speed_radps_{i}" for i in range(1, 5)])
     return t, w.mean(axis=1) * R_WHEEL
 
 
@@ -66,14 +73,14 @@ def test_filter_beats_mean_wheel_speed_and_raw_ublox(drive):
     samples, ref, fixes, veh, ss = drive
     r, pa, va = _run(drive)
     assert r.pipeline.counters["ekf"]["nan_resets"] == 0
-    filt = rc.speed_course_errors(r.track.t_s, np.hypot(va[:, 0], va[:, 1]), np.arctan2(va[:, 1], va[:, 0]), ref)
-    ublox = rc.speed_course_errors(fixes.t_s, fixes.speed_mps, fixes.course_rad, ref)
+    filt = speed_course_errors(r.track.t_s, np.hypot(va[:, 0], va[:, 1]), np.arctan2(va[:, 1], va[:, 0]), ref)
+    ublox = speed_course_errors(fixes.t_s, fixes.speed_mps, fixes.course_rad, ref)
     tw, vw = _wheels(samples)
-    wheels = rc.speed_course_errors(tw, vw, np.full_like(vw, np.nan), ref)
-    r0, pa0, va0 = _run(drive, latencies=rc.Latencies())  # without the configured u-blox latency
-    no_lat = rc.speed_course_errors(r0.track.t_s, np.hypot(va0[:, 0], va0[:, 1]),
-                                    np.arctan2(va0[:, 1], va0[:, 0]), ref)
-    lag = rc.estimate_lag(fixes.t_s, fixes.speed_mps, tw, vw, np.arange(0.0, 0.3, 0.01))
+    wheels = speed_course_errors(tw, vw, np.full_like(vw, np.nan), ref)
+    r0, pa0, va0 = _run(drive, latencies=Latencies())  # without the configured u-blox latency
+    no_lat = speed_course_errors(r0.track.t_s, np.hypot(va0[:, 0], va0[:, 1]),
+                                 np.arctan2(va0[:, 1], va0[:, 0]), ref)
+    lag = estimate_lag(fixes.t_s, fixes.speed_mps, tw, vw, np.arange(0.0, 0.3, 0.01))
     print("\nRAV4 (comma2k19 seg 40) vs global_pose, RMS over the drive:")
     print(f"  {'':32s} {'speed RMS m/s':>14s} {'(mean)':>8s} {'course RMS deg':>15s}")
     for name, e in (("EKF (CAN ESC + u-blox)", filt), ("  same, no u-blox latency", no_lat),
@@ -104,7 +111,7 @@ def test_gnss_denied_windows_against_wheel_dead_reckoning(drive):
     assert r.withheld["gnss_pos"] > 350 and r.pipeline.counters["ekf"]["nan_resets"] == 0
     tr = r.track
     tw, vw = _wheels(samples)
-    ty, wz = rc.series(samples, "esc_imu", ["angular_rate_radps_z"])
+    ty, wz = series(samples, "esc_imu", ["angular_rate_radps_z"])
     wz_at_w = np.interp(tw, ty, wz[:, 0])
     sp, crs = np.hypot(va[:, 0], va[:, 1]), np.arctan2(va[:, 1], va[:, 0])
     sig_sp = np.hypot(va[:, 0] * tr.sigma[:, 3], va[:, 1] * tr.sigma[:, 4]) / np.maximum(sp, 1e-6)
@@ -119,12 +126,12 @@ def test_gnss_denied_windows_against_wheel_dead_reckoning(drive):
         pr, vr = ref.at([tr.t_s[i1]])
         f_pos = float(np.hypot(*(pa[i1, :2] - pr[0, :2])))
         f_sp = float(sp[i1] - np.hypot(*vr[0, :2]))
-        f_crs = float(np.degrees(rc.wrap_pi(crs[i1] - math.atan2(vr[0, 1], vr[0, 0]))))
-        tt, dsp, dcrs, dp = rc.dead_reckoning(tw, vw, wz_at_w, pa[i0, :2], float(crs[i0]), tr.t_s[i0], tr.t_s[i1])
+        f_crs = float(np.degrees(wrap_pi(crs[i1] - math.atan2(vr[0, 1], vr[0, 0]))))
+        tt, dsp, dcrs, dp = dead_reckoning(tw, vw, wz_at_w, pa[i0, :2], float(crs[i0]), tr.t_s[i0], tr.t_s[i1])
         pr2, vr2 = ref.at([tt[-1]])
         d_pos = float(np.hypot(*(dp[-1] - pr2[0, :2])))
         d_sp = float(dsp[-1] - np.hypot(*vr2[0, :2]))
-        d_crs = float(np.degrees(rc.wrap_pi(dcrs[-1] - math.atan2(vr2[0, 1], vr2[0, 0]))))
+        d_crs = float(np.degrees(wrap_pi(dcrs[-1] - math.atan2(vr2[0, 1], vr2[0, 0]))))
         before = (r_full.track.t_s >= a - 10.0) & (r_full.track.t_s < a)
         tb = r_full.track.t_s[before]
         bias = float(np.mean(np.interp(tb, ty, wz[:, 0])) - (c_full[before][-1] - c_full[before][0]) / (tb[-1] - tb[0]))
@@ -153,13 +160,13 @@ def test_gnss_denied_windows_against_wheel_dead_reckoning(drive):
 def test_head_to_head_with_openpilot_learned_parameters(drive):
     samples, ref, _, veh, ss = drive
     r, _, _ = _run(drive)
-    t, u, sw, wz, cr = rc.steer_signals([dataclasses.replace(s, kind="imu") if s.kind == "esc_imu" else s
-                                         for s in samples], r.track)
-    op = rc.OPENPILOT_RAV4
-    k0 = rc.understeer_gradient(op["mass_kg"], op["center_to_front_m"], op["wheelbase_m"] - op["center_to_front_m"],
-                                op["cornering_stiffness_front_nprad"], op["cornering_stiffness_rear_nprad"])
-    fit = rc.steer_response_fit(t, u, sw, wz, cr, wheelbase_m=op["wheelbase_m"], understeer0=k0,
-                                prior_steer_ratio=op["steer_ratio"])
+    t, u, sw, wz, cr = steer_signals([dataclasses.replace(s, kind="imu") if s.kind == "esc_imu" else s
+                                      for s in samples], r.track)
+    op = OPENPILOT_RAV4
+    k0 = understeer_gradient(op["mass_kg"], op["center_to_front_m"], op["wheelbase_m"] - op["center_to_front_m"],
+                             op["cornering_stiffness_front_nprad"], op["cornering_stiffness_rear_nprad"])
+    fit = steer_response_fit(t, u, sw, wz, cr, wheelbase_m=op["wheelbase_m"], understeer0=k0,
+                             prior_steer_ratio=op["steer_ratio"])
     obs = fit.observable()
     q_op = op["steer_ratio"] * (op["wheelbase_m"] + k0 * fit.combination[0] ** 2)
     # our RLS identification (eq 20-23) on the same drive, with the reasons it gives

@@ -22,13 +22,19 @@ import importlib.util
 import numpy as np
 import pytest
 
-from vdps_hil import realcars as rc
+from vdps_hil.estimation.pipeline_config import Latencies
+from vdps_hil.estimation.sensorsets import load_sensorset
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.realdata.outages import outage_errors, outage_windows, summarize_outages
+from vdps_hil.realdata.reference import interp_angle, velocity_lag
+from vdps_hil.realdata.rtklib import RTKLIB_DRIVE, publisher_mounting_rpy, read_rtklib_pos
+from vdps_hil.realdata.runs import gnss_denied, load_samples, run_pipeline
 from vdps_hil.record.importer import SerialSource
+from vdps_hil.units import wrap_pi
 
 from conftest import REAL_DATA, REPO
 
-DRIVE = REAL_DATA / rc.RTKLIB_DRIVE
+DRIVE = REAL_DATA / RTKLIB_DRIVE
 
 
 @pytest.fixture(scope="module")
@@ -40,13 +46,13 @@ def drive(tmp_path_factory):
     spec.loader.exec_module(tool)
     out = tmp_path_factory.mktemp("rtk")
     doc = tool.convert(DRIVE / "gnss_1934_sf.pos", DRIVE / "imu_1934.csv", out, tag_path=DRIVE / "imu_1934.csv.tag")
-    samples, _ = rc.load_samples([], [SerialSource("gnss", str(out / "gnss.nmea")),
-                                      SerialSource("imu", str(out / "imu.mti"), 115200)])
-    ref = rc.read_rtklib_pos(DRIVE / "gnss_1934_sf.pos").reference(t0_gpst_s=doc["t0_gpst_s"])
+    samples, _ = load_samples([], [SerialSource("gnss", str(out / "gnss.nmea")),
+                                   SerialSource("imu", str(out / "imu.mti"), 115200)])
+    ref = read_rtklib_pos(DRIVE / "gnss_1934_sf.pos").reference(t0_gpst_s=doc["t0_gpst_s"])
     veh = load_vehicle("rtklib-car-model", "model")
-    ss = rc.load_sensorset("rtklib-car")
+    ss = load_sensorset("rtklib-car")
     t_move = float(ref.t_s[np.argmax(ref.speed_mps > 3.0)])
-    windows = rc.outage_windows(t_move + 20.0, float(ref.t_s[-1]), 30.0, (5.0, 10.0), first_offset_s=0.0)
+    windows = outage_windows(t_move + 20.0, float(ref.t_s[-1]), 30.0, (5.0, 10.0), first_offset_s=0.0)
     return samples, ref, veh, ss, windows, t_move
 
 
@@ -63,18 +69,18 @@ def _run(drive, vehicle=None, latencies=None, windows=None, until_s=None, calibr
     cfg = ss.pipeline_config(observability_window_s=None, output_period_s=0.05, latencies=latencies)
     if ekf:
         cfg = dataclasses.replace(cfg, ekf=dataclasses.replace(cfg.ekf, **ekf))
-    r = rc.run_pipeline(v, cfg, samples, origin=ref.origin, drop=rc.gnss_denied(w) if w else None,
-                        preprocess=ss.calibration_nodes(v) if calibration else ())
-    return r, rc.outage_errors(r.track, v.mounting.gnss_lever_arm_m, ref, w)
+    r = run_pipeline(v, cfg, samples, origin=ref.origin, drop=gnss_denied(w) if w else None,
+                     preprocess=ss.calibration_nodes(v) if calibration else ())
+    return r, outage_errors(r.track, v.mounting.gnss_lever_arm_m, ref, w)
 
 
 def _attitude_offsets(track, ref, t0, t1):
     """Mean (yaw - course of the reference) and mean pitch [deg] while moving above 4 m/s."""
     m = (track.t_s >= t0) & (track.t_s <= t1)
     t = track.t_s[m]
-    c = rc.interp_angle(t, ref.t_s, ref.course_rad)
+    c = interp_angle(t, ref.t_s, ref.course_rad)
     moving = np.interp(t, ref.t_s, ref.speed_mps) > 4.0
-    yaw = np.degrees(np.mean(rc.wrap_pi(track.x[m, 8][moving] - c[moving])))
+    yaw = np.degrees(np.mean(wrap_pi(track.x[m, 8][moving] - c[moving])))
     return float(yaw), float(np.degrees(np.mean(track.x[m, 7][moving])))
 
 
@@ -96,11 +102,11 @@ def test_outages_at_least_halve_the_constant_velocity_error(drive, published):
     r, errs = published
     assert r.pipeline.counters["ekf"]["nan_resets"] == 0
     c = r.pipeline.counters["ekf"]["updates"]
-    s = rc.summarize_outages(errs)
+    s = summarize_outages(errs)
     bias = ss.calibration_nodes(veh)
     _print_table(f"\nRTKLIB drive 0708: {len(wins)} GNSS outages every 30 s from {t_move + 20 - ref.t_s[0]:.0f} s "
                  f"(horizontal error at the last RTK epoch of each outage)", s)
-    vlag = rc.velocity_lag(ref)
+    vlag = velocity_lag(ref)
     print(f"  gnss_pos updates accepted/gated {c['gnss_pos']['accepted']}/{c['gnss_pos']['gated']}, mean NIS/dof "
           + ", ".join(f"{k} {v['mean_nis_per_dof']:.2f}" for k, v in r.nis.items())
           + f"; the .pos velocities lag its positions by {vlag:.3f} s (not used: use_gnss_velocity = false)")
@@ -123,7 +129,7 @@ def test_outages_without_the_standstill_calibration(drive, published):
     samples, ref, veh, ss, wins, t_move = drive
     r, errs = _run(drive, calibration=False)
     r_plain, errs_plain = _run(drive, calibration=False, ekf=PLAIN)
-    s, sp = rc.summarize_outages(errs), rc.summarize_outages(errs_plain)
+    s, sp = summarize_outages(errs), summarize_outages(errs_plain)
     _print_table("\nRTKLIB drive 0708 without the standstill gyro calibration (bias states in the filter):", s)
     _print_table("  the plain eq 7-11 filter (no bias states, no constraint), also without it:", sp)
     bz, sbz = r.pipeline.augmented_state()["gyro_bias_z_radps"]
@@ -138,9 +144,9 @@ def test_outages_without_the_standstill_calibration(drive, published):
 def test_effect_of_the_stated_imu_lag_and_misalignment(drive, published):
     samples, ref, veh, ss, wins, t_move = drive
     r_pub, e_pub = published
-    r_lag, e_lag = _run(drive, latencies=rc.Latencies())
+    r_lag, e_lag = _run(drive, latencies=Latencies())
     no_mis = dataclasses.replace(veh, mounting=dataclasses.replace(
-        veh.mounting, imu_rotation_rpy_rad=rc.publisher_mounting_rpy((180.0, 0.0, 180.0))))
+        veh.mounting, imu_rotation_rpy_rad=publisher_mounting_rpy((180.0, 0.0, 180.0))))
     t_end = t_move + 150.0
     # what the mounting rotation does to the attitude: the plain filter (no bias states, no
     # constraint) then estimates the IMU's attitude
@@ -158,7 +164,7 @@ def test_effect_of_the_stated_imu_lag_and_misalignment(drive, published):
     bax = {k: r.pipeline.augmented_state()["accel_bias_x_mps2"][0] for k, r in (("pub", r_pub_full),
                                                                                 ("mis", r_mis_full))}
     nis = {k: r.nis["gnss_pos"]["mean_nis_per_dof"] for k, r in (("pub", r_pub_full), ("mis", r_mis_full))}
-    _print_table("\nRTKLIB drive 0708, the stated 0.125 s IMU lag switched off:", rc.summarize_outages(e_lag))
+    _print_table("\nRTKLIB drive 0708, the stated 0.125 s IMU lag switched off:", summarize_outages(e_lag))
     print(f"  mean end-of-outage error over all {len(e_pub)} outages: {pooled['published']:.2f} m with the lag, "
           f"{pooled['no lag']:.2f} m without; mean NIS/dof gnss_pos "
           f"{r_pub.nis['gnss_pos']['mean_nis_per_dof']:.2f} vs {r_lag.nis['gnss_pos']['mean_nis_per_dof']:.2f}")

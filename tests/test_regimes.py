@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from vdps_hil.experiments.workbench_study import cached_drive
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.workbench import regimes as G
 from vdps_hil.workbench.dataset import load_drive
 from vdps_hil.workbench.residuals import EQUATIONS, EquationResiduals, compute_residuals
-from vdps_hil.workbench.study import cached_drive
 
 VEH = load_vehicle("sedan-model")
 

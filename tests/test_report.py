@@ -18,10 +18,10 @@ import subprocess
 
 import pytest
 
+from vdps_hil.experiments.workbench_study import HIDDEN, cached_drive
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.workbench.diagnosis import diagnose
 from vdps_hil.workbench.report import render_report, write_report
-from vdps_hil.workbench.study import HIDDEN, cached_drive
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from vdps_hil.experiments.workbench_study import cached_drive
 from vdps_hil.model.effects import EffectSet, make_effect
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.workbench import residuals as R
 from vdps_hil.workbench.dataset import load_drive
-from vdps_hil.workbench.study import cached_drive
 
 VEH = load_vehicle("sedan-model")
 TRUE = VEH.with_params(**load_vehicle("sedan-truth").params.as_dict())  # tests only: a correct model

@@ -10,7 +10,7 @@ from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.workbench import simulation_errors as S
 from vdps_hil.workbench.dataset import load_drive
-from vdps_hil.workbench.study import cached_drive
+from vdps_hil.experiments.workbench_study import cached_drive
 
 VEH = load_vehicle("sedan-model")
 TRUE = VEH.with_params(**load_vehicle("sedan-truth").params.as_dict())  # tests only: a correct model

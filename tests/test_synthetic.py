@@ -8,7 +8,7 @@ import numpy as np
 
 from vdps_hil.bus.samples import check_fields
 from vdps_hil.estimation import kinematics as K
-from vdps_hil.estimation import synthetic as syn
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model import frames as fr
 from vdps_hil.model.params import load_vehicle

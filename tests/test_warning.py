@@ -9,12 +9,13 @@ import pytest
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.codecs.can_e2e import crc8_j1850
 from vdps_hil.experiments.truth_init import initial_state_from_truth
+from vdps_hil.experiments.scoring import evaluate_warning_frames
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.prediction.config import PredictionConfigError, load_predictor_config
 from vdps_hil.prediction.initial_state import PredictorInitialState
 from vdps_hil.prediction.predictor import Predictor
 from vdps_hil.prediction.warning import (RolloverAssessment, WarningChain, WarningLevel, WarningNode,
-                                         WarningNodeConfig, WarningPolicy, WarningStatus, evaluate_warning_frames,
+                                         WarningNodeConfig, WarningPolicy, WarningStatus,
                                          load_transfer_ratio, load_warning_config, replay_assessments,
                                          warning_config_from_table)
 from vdps_hil.sim.scenarios import load_scenario
@@ -146,36 +147,6 @@ def test_status_field():
     assert dec.total_rejected == 0
     assert [int(s.fields["warning_status"]) for s in samples] == [1, 1, 2, 0, 3]
     assert [s.valid for s in samples] == [False, False, False, True, False]
-
-
-def test_evaluate_counts_corrupted_frames_and_episodes():
-    node = WarningNode(WarningPolicy(hold_s=0.0), WarningNodeConfig(period_s=0.02))
-    frames = []
-    for t in range(0, 3000 * MS, 10 * MS):
-        a = None
-        if t == 0:
-            a = assessment(0)
-        elif t == 1000 * MS:
-            a = assessment(t, ttr=1.0, roll=-0.9)
-        elif t == 1500 * MS:
-            a = assessment(t)
-        frames += node.handle(t, a)
-    bad = frames[10]
-    data = bytearray(bad.data)
-    data[3] ^= 0x01
-    frames[10] = type(bad)(timestamp=bad.timestamp, arbitration_id=bad.arbitration_id, is_extended_id=False,
-                           dlc=8, data=bytes(data))
-    events = [{"kind": "tip_up", "t_s": 1.8}, {"kind": "point_of_no_return", "t_s": 2.5, "side": "right"}]
-    o = evaluate_warning_frames(frames, events)
-    assert o.frames_rejected == 1  # the CRC catches the flipped bit
-    assert o.warning_episodes == [(1.0, 1.48)]  # the last frame at level 2 (the all-clear is sent at 1.5 s)
-    assert o.first_warning_t_s == 1.0 and o.lead_time_s == pytest.approx(1.5)
-    assert o.lead_to_tip_up_s == pytest.approx(0.8) and o.lead_time_matched_side_s == pytest.approx(1.5)
-    assert o.false_alarms == 0
-    # the same frames in a run without a rollover: one false alarm
-    assert evaluate_warning_frames(frames, []).false_alarms == 1
-    # a rollover 10 s later: the episode ended more than 5 s before it, a false alarm too
-    assert evaluate_warning_frames(frames, [{"kind": "point_of_no_return", "t_s": 12.0}]).false_alarms == 1
 
 
 # ----------------------------------------------------------------------------- on the simulator

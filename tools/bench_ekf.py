@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Benchmark and figures of the estimator (issue 5). Prints; ``--json FILE`` also writes them.
 
-Sections (all on the synthetic Table-1 manoeuvre of ``vdps_hil.estimation.synthetic``):
+Sections (all on the synthetic Table-1 manoeuvre of ``vdps_hil.experiments.synthetic``):
 
 * ``cycle``: EKF cycle time per predict (10 ms mean-input step) and per update kind [us].
 * ``replay``: real-time factor of the pipeline on a 60 s Table-1-rate stream (IMU and
@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
-from vdps_hil.estimation import synthetic as syn
+from vdps_hil.experiments import synthetic as syn
 from vdps_hil.estimation.ekf import MultiRateEKF
 from vdps_hil.estimation.ekf_config import EkfConfig, PaperFaithful
 from vdps_hil.estimation.measurements import suspension_measurement, y2_gps_measurement

@@ -9,10 +9,11 @@ candump log. This tool writes, into OUT_DIR:
 ``gnss.nmea``       the u-blox fixes as time-stamped NMEA text (``<t> $GPGGA`` and ``<t> $GPRMC``
                     per fix; single antenna: no attitude sentence). Height: the arrays give the
                     ellipsoidal height; it is printed in the GGA altitude field with a geoid
-                    separation of 0 (see ``realcars.nmea_fix_lines``).
+                    separation of 0 (see ``realdata.capture_writers.nmea_fix_lines``).
 ``imu.mti``         the phone IMU as an Xsens MTData2 capture at ``--baud`` whose wire time puts
-                    every packet at its stamp (``realcars.mti_capture``); axes converted from
-                    comma's documented [forward, right, down] to x forward, y left, z up.
+                    every packet at its stamp (``realdata.capture_writers.mti_capture``); axes
+                    converted from comma's documented [forward, right, down] to x forward, y
+                    left, z up.
 ``pt.candump.log``  the segment's candump log with every stamp moved by -t0 (with ``--can``), so
                     CAN, GNSS and IMU share one clock.
 ``convert.json``    t0, baud, counts and the ``vdps import`` command line.
@@ -40,7 +41,8 @@ import re
 import sys
 from pathlib import Path
 
-from vdps_hil import realcars as rc
+from vdps_hil.realdata.capture_writers import mti_capture, nmea_fix_lines
+from vdps_hil.realdata.comma2k19 import read_comma_phone_imu, read_comma_ublox
 
 CANDUMP_NAME = "rav4_seg40.candump.log"
 DBC_NAME = "toyota_new_mc_pt_generated.dbc"
@@ -76,20 +78,20 @@ def convert(seg_dir, out_dir, *, t0: float | str = "auto", imu: bool = True, can
     seg = Path(seg_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    fixes = rc.read_comma_ublox(seg)
-    phone = rc.read_comma_phone_imu(seg) if imu else None
+    fixes = read_comma_ublox(seg)
+    phone = read_comma_phone_imu(seg) if imu else None
     if t0 == "auto":
         firsts = [float(fixes.t_s[0])] + ([float(phone.t_s[0])] if phone is not None else [])
         t0_s = float(math.floor(min(firsts)) - 1.0)
     else:
         t0_s = float(t0)
-    lines = rc.nmea_fix_lines(fixes, t0_s)
+    lines = nmea_fix_lines(fixes, t0_s)
     (out / "gnss.nmea").write_bytes(b"".join(lines))
     doc = {"source": str(seg), "clock": "device boot seconds - t0", "t0_s": t0_s,
            "gnss": {"file": "gnss.nmea", "fixes": len(fixes), "lines": len(lines)}}
     serial = [f"--serial gnss={out / 'gnss.nmea'}"]
     if phone is not None:
-        data, stats = rc.mti_capture(phone, t0_s, baud)
+        data, stats = mti_capture(phone, t0_s, baud)
         (out / "imu.mti").write_bytes(data)
         doc["imu"] = {"file": "imu.mti", "baud": baud, "packets": stats.packets, "delayed": stats.delayed,
                       "padding_bytes": stats.padding_bytes, "max_time_error_s": stats.max_error_s,

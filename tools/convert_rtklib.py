@@ -14,9 +14,10 @@ prints them, minus t0; ``--t0 auto``: floor of the earliest epoch - 1 s):
 ==================  ========================================================================
 ``gnss.nmea``       ``<t> $GPGGA`` + ``<t> $GPRMC`` per epoch (RTK fixed -> GGA quality 4 and RMC
                     mode R, float -> 5/F); UTC in the sentences = GPST - 18 s; single antenna.
-``imu.mti``         the IMU as an Xsens MTData2 capture at ``--baud`` (``realcars.mti_capture``),
-                    in the IMU's own axes and SI (g -> m/s^2, deg/s -> rad/s). Times follow the
-                    publisher's rule (``realcars.read_rtklib_imu``).
+``imu.mti``         the IMU as an Xsens MTData2 capture at ``--baud``
+                    (``realdata.capture_writers.mti_capture``), in the IMU's own axes and SI
+                    (g -> m/s^2, deg/s -> rad/s). Times follow the publisher's rule
+                    (``realdata.rtklib.read_rtklib_imu``).
 ``convert.json``    t0, counts and the ``vdps import`` command line.
 ==================  ========================================================================
 
@@ -39,7 +40,8 @@ import math
 import sys
 from pathlib import Path
 
-from vdps_hil import realcars as rc
+from vdps_hil.realdata.capture_writers import mti_capture, nmea_fix_lines
+from vdps_hil.realdata.rtklib import read_rtklib_imu, read_rtklib_pos
 
 
 def find_inputs(folder) -> tuple[Path, Path, Path | None]:
@@ -58,8 +60,8 @@ def convert(pos_path, imu_csv=None, out_dir=".", *, tag_path=None, t0: float | s
     """Write the files of the module docstring; returns the ``convert.json`` document."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    sol = rc.read_rtklib_pos(pos_path)
-    imu = rc.read_rtklib_imu(imu_csv, tag_path) if imu_csv is not None else None
+    sol = read_rtklib_pos(pos_path)
+    imu = read_rtklib_imu(imu_csv, tag_path) if imu_csv is not None else None
     if imu is not None and tag_path is None:
         raise ValueError("the IMU log needs its time-tag file (GPST of the log)")
     if t0 == "auto":
@@ -68,14 +70,14 @@ def convert(pos_path, imu_csv=None, out_dir=".", *, tag_path=None, t0: float | s
     else:
         t0_s = float(t0)
     fixes = sol.fixes(t0_s)
-    lines = rc.nmea_fix_lines(fixes, 0.0)
+    lines = nmea_fix_lines(fixes, 0.0)
     (out / "gnss.nmea").write_bytes(b"".join(lines))
     doc = {"source": str(pos_path), "clock": "GPST calendar seconds since 1970 - t0", "t0_gpst_s": t0_s,
            "gnss": {"file": "gnss.nmea", "epochs": len(fixes), "lines": len(lines),
                     "rtk_fixed_fraction": float((sol.q == 1).mean())}}
     cmd = ["vdps import", f"--serial gnss={out / 'gnss.nmea'}"]
     if imu is not None:
-        data, stats = rc.mti_capture(imu, t0_s, baud)
+        data, stats = mti_capture(imu, t0_s, baud)
         (out / "imu.mti").write_bytes(data)
         doc["imu"] = {"file": "imu.mti", "source": str(imu_csv), "tag": str(tag_path), "baud": baud,
                       "packets": stats.packets, "delayed": stats.delayed, "padding_bytes": stats.padding_bytes,

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Head to head: the workbench's ranking against PySINDy on the same residuals (issue 9).
 
-For each hidden-effect drive (``vdps_hil.workbench.study``) both methods see the same data: the
+For each hidden-effect drive (``vdps_hil.experiments.workbench_study``) both methods see the same data: the
 residual of eq 13 that the identified model leaves once the estimator's error directions are
 taken out (the workbench's own identification step), on the longitudinal, lateral, yaw and four
 wheel-speed equations. PySINDy (``STLSQ`` sparse regression on a ``PolynomialLibrary`` of degree 3
@@ -30,7 +30,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import numpy as np  # noqa: E402
 
-from vdps_hil.workbench.study import HIDDEN, is_hit  # noqa: E402
+from vdps_hil.experiments.workbench_study import HIDDEN, is_hit  # noqa: E402
 
 VARS = ("v_x", "v_y", "r", "r_dot", "a_y", "delta")
 
@@ -74,7 +74,7 @@ def _one(job: dict) -> dict:
     from vdps_hil.workbench.ranking.identification import identify
     from vdps_hil.workbench.ranking.selection import rank
     from vdps_hil.workbench.residuals import EQUATIONS, row_states
-    from vdps_hil.workbench.study import cached_drive
+    from vdps_hil.experiments.workbench_study import cached_drive
 
     veh = load_vehicle("sedan-model")
     path = cached_drive(job["cache"], job["maneuver"], job["specs"], job["seed"])

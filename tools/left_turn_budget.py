@@ -374,7 +374,7 @@ def print_budget(title, res, true_p):
 
 # ------------------------------------------------------------------------------ part 3
 def chain_budget(seeds, truth, veh, true_p, profile="table1-susp1k") -> tuple[dict, dict]:
-    from vdps_hil.paper import chain_run
+    from vdps_hil.experiments.paper_chain import chain_run
 
     rows, chain_c = {}, {}
     for seed in seeds:
@@ -446,7 +446,8 @@ def print_variants(var, true_p):
 
 # ------------------------------------------------------------------------------ part 5
 def rollover_budget(profile="table1-susp1k", seed=1) -> dict:
-    from vdps_hil.paper import ROLLOVER_CALIBRATION, _start_kw, chain_run
+    from vdps_hil.experiments.paper_chain import chain_run
+    from vdps_hil.experiments.paper_tasks import ROLLOVER_CALIBRATION, _start_kw
 
     sc = load_scenario("fishhook-suv")
     model = load_vehicle("suv-model")
@@ -511,9 +512,9 @@ def rollover_budget(profile="table1-susp1k", seed=1) -> dict:
 
 def _interp_snapshot(truth, t_s):
     """The truth snapshot at t_s (linear between 100 Hz neighbours; angles unwrapped)."""
-    from vdps_hil.paper import _truth_at
+    from vdps_hil.experiments.scoring import truth_at
 
-    s = _truth_at({int(x["t_ns"]): x for x in truth}, int(round(t_s * 1e9)))
+    s = truth_at({int(x["t_ns"]): x for x in truth}, int(round(t_s * 1e9)))
     s = dict(s)
     s["t_ns"] = int(round(t_s * 1e9))
     return s

@@ -39,9 +39,9 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import chi2
 
+from vdps_hil.experiments.scoring import truth_at
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.params import load_vehicle
-from vdps_hil.paper import truth_at
 from vdps_hil.pipeline.node import SystemConfig, VdpsSystem, default_pipeline_config
 from vdps_hil.record.decode import decode_recording
 from vdps_hil.record.reader import RecordingReader

@@ -2,7 +2,7 @@
 """The full ``vdps paper`` run: >= 20 seeds per profile (table1-susp1k and table1), every
 experiment at full length (the whole test-track scenarios, Table 3 over 40 s, 3 seeds per SNR
 row), in parallel over ``--workers`` processes; prints the side-by-side table (paper vs ours)
-and writes the JSON document (``vdps_hil.paper.run_paper``; keys as ``vdps paper --json``).
+and writes the JSON document (``vdps_hil.experiments.paper_run.run_paper``; keys as ``vdps paper --json``).
 
 Usage::
 
@@ -24,7 +24,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from vdps_hil.cli.common import _clean  # noqa: E402
-from vdps_hil.paper import PROFILES, PaperOptions, format_report, run_paper  # noqa: E402
+from vdps_hil.experiments.paper_report import format_report  # noqa: E402
+from vdps_hil.experiments.paper_run import PROFILES, PaperOptions, run_paper  # noqa: E402
 
 
 def main(argv=None) -> int:

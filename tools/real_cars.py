@@ -33,11 +33,20 @@ from pathlib import Path
 
 import numpy as np
 
-from vdps_hil import realcars as rc
 from vdps_hil.identification.observability_report import IdentificationMonitor, observability_report
+from vdps_hil.estimation.pipeline_config import Latencies
+from vdps_hil.estimation.sensorsets import load_sensorset
 from vdps_hil.model.params import load_vehicle
-from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
+from vdps_hil.realdata.capture_writers import nmea_fix_lines
+from vdps_hil.realdata.comma2k19 import COMMA_SEGMENT, read_comma_reference, read_comma_ublox
+from vdps_hil.realdata.outages import outage_errors, outage_windows, summarize_outages
+from vdps_hil.realdata.reference import dead_reckoning, speed_course_errors, velocity_lag
+from vdps_hil.realdata.rtklib import RTKLIB_DRIVE, publisher_mounting_rpy, read_rtklib_pos
+from vdps_hil.realdata.runs import gnss_denied, load_samples, run_pipeline, series
+from vdps_hil.realdata.steering import OPENPILOT_RAV4, steer_response_fit, steer_signals, understeer_gradient
 from vdps_hil.record.importer import CanSource, SerialSource
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
+from vdps_hil.units import wrap_pi
 
 REPO = Path(__file__).resolve().parents[1]
 PLAIN = dict(gyro_bias=False, accel_bias=False, wheel_speed=False, wheel_scale_state=False, nonholonomic=False)
@@ -54,39 +63,39 @@ def _tool(name):
 
 
 def rav4(data: Path, tmp: Path, quick: bool) -> dict:
-    seg = data / rc.COMMA_SEGMENT
-    fixes = rc.read_comma_ublox(seg)
-    (tmp / "gnss.nmea").write_bytes(b"".join(rc.nmea_fix_lines(fixes, 0.0)))
-    samples, _ = rc.load_samples([CanSource("pt", str(seg / "rav4_seg40.candump.log"), "can0")],
-                                 [SerialSource("gnss", str(tmp / "gnss.nmea"))], signalmap="toyota_rav4_2017",
-                                 dbc={"*": str(seg / "toyota_new_mc_pt_generated.dbc")})
-    ref = rc.read_comma_reference(seg)
+    seg = data / COMMA_SEGMENT
+    fixes = read_comma_ublox(seg)
+    (tmp / "gnss.nmea").write_bytes(b"".join(nmea_fix_lines(fixes, 0.0)))
+    samples, _ = load_samples([CanSource("pt", str(seg / "rav4_seg40.candump.log"), "can0")],
+                              [SerialSource("gnss", str(tmp / "gnss.nmea"))], signalmap="toyota_rav4_2017",
+                              dbc={"*": str(seg / "toyota_new_mc_pt_generated.dbc")})
+    ref = read_comma_reference(seg)
     veh = load_vehicle("rav4-model", "model")
-    ss = rc.load_sensorset("rav4-can-ublox")
+    ss = load_sensorset("rav4-can-ublox")
     out: dict = {}
 
     def run(windows=(), plain=False, **kw):
         cfg = ss.pipeline_config(observability_window_s=None, output_period_s=0.05, **kw)
         if plain:
             cfg = dataclasses.replace(cfg, ekf=dataclasses.replace(cfg.ekf, **PLAIN))
-        r = rc.run_pipeline(veh, cfg, samples, kind_map=ss.kind_map, origin=ref.origin,
-                            drop=rc.gnss_denied(windows, cfg.latencies.gnss_s) if windows else None)
+        r = run_pipeline(veh, cfg, samples, kind_map=ss.kind_map, origin=ref.origin,
+                         drop=gnss_denied(windows, cfg.latencies.gnss_s) if windows else None)
         pa, va = r.track.antenna(veh.mounting.gnss_lever_arm_m)
         return r, pa, va
 
     r, pa, va = run()
-    tw, w = rc.series(samples, "wheel_speed", [f"wheel_speed_radps_{i}" for i in range(1, 5)])
+    tw, w = series(samples, "wheel_speed", [f"wheel_speed_radps_{i}" for i in range(1, 5)])
     vw = w.mean(axis=1) * veh.tire.rolling_radius_m
-    rows = {"filter": rc.speed_course_errors(r.track.t_s, np.hypot(va[:, 0], va[:, 1]), np.arctan2(va[:, 1], va[:, 0]),
-                                             ref),
-            "u-blox": rc.speed_course_errors(fixes.t_s, fixes.speed_mps, fixes.course_rad, ref),
-            "wheels": rc.speed_course_errors(tw, vw, np.full_like(vw, np.nan), ref)}
+    rows = {"filter": speed_course_errors(r.track.t_s, np.hypot(va[:, 0], va[:, 1]), np.arctan2(va[:, 1], va[:, 0]),
+                                          ref),
+            "u-blox": speed_course_errors(fixes.t_s, fixes.speed_mps, fixes.course_rad, ref),
+            "wheels": speed_course_errors(tw, vw, np.full_like(vw, np.nan), ref)}
     rp, _, vap = run(plain=True)
-    rows["filter, plain eq 7-11"] = rc.speed_course_errors(rp.track.t_s, np.hypot(vap[:, 0], vap[:, 1]),
+    rows["filter, plain eq 7-11"] = speed_course_errors(rp.track.t_s, np.hypot(vap[:, 0], vap[:, 1]),
                                                           np.arctan2(vap[:, 1], vap[:, 0]), ref)
-    r0, _, va0 = run(latencies=rc.Latencies())
-    rows["filter, no u-blox latency"] = rc.speed_course_errors(r0.track.t_s, np.hypot(va0[:, 0], va0[:, 1]),
-                                                               np.arctan2(va0[:, 1], va0[:, 0]), ref)
+    r0, _, va0 = run(latencies=Latencies())
+    rows["filter, no u-blox latency"] = speed_course_errors(r0.track.t_s, np.hypot(va0[:, 0], va0[:, 1]),
+                                                            np.arctan2(va0[:, 1], va0[:, 0]), ref)
     print("RAV4: RMS errors against global_pose")
     for k, e in rows.items():
         print(f"  {k:28s} speed {e['speed_rms_mps']:.3f} m/s (mean {e['speed_mean_mps']:+.3f})  course "
@@ -95,7 +104,7 @@ def rav4(data: Path, tmp: Path, quick: bool) -> dict:
     out["augmented_state"] = {k: list(v) for k, v in r.pipeline.augmented_state().items()}
     print("RAV4 estimated states beyond eq 7: " + ", ".join(f"{k} {v:+.5f} +- {sg:.5f}"
                                                            for k, (v, sg) in r.pipeline.augmented_state().items()))
-    ty, wz = rc.series(samples, "esc_imu", ["angular_rate_radps_z"])
+    ty, wz = series(samples, "esc_imu", ["angular_rate_radps_z"])
     wz_w = np.interp(tw, ty, wz[:, 0])
     t0 = ref.t_s[0]
     starts = [5.0, 20.0, 35.0] if quick else list(np.arange(2.0, 38.1, 4.0))
@@ -110,13 +119,13 @@ def rav4(data: Path, tmp: Path, quick: bool) -> dict:
         i0, i1 = int(np.searchsorted(tr.t_s, a)) - 1, int(np.searchsorted(tr.t_s, b)) - 1
         pr, vr = ref.at([tr.t_s[i1]])
         sp2, crs2 = np.hypot(va2[:, 0], va2[:, 1]), np.arctan2(va2[:, 1], va2[:, 0])
-        tt, dsp, dcrs, dp = rc.dead_reckoning(tw, vw, wz_w, pa2[i0, :2], float(crs2[i0]), tr.t_s[i0], tr.t_s[i1])
+        tt, dsp, dcrs, dp = dead_reckoning(tw, vw, wz_w, pa2[i0, :2], float(crs2[i0]), tr.t_s[i0], tr.t_s[i1])
         c_ref = math.atan2(vr[0, 1], vr[0, 0])
         d = {"start_s": s0, "filter": {"speed_mps": float(sp2[i1] - np.hypot(*vr[0, :2])),
-                                       "course_deg": float(np.degrees(rc.wrap_pi(crs2[i1] - c_ref))),
+                                       "course_deg": float(np.degrees(wrap_pi(crs2[i1] - c_ref))),
                                        "position_m": float(np.hypot(*(pa2[i1, :2] - pr[0, :2])))},
              "dead_reckoning": {"speed_mps": float(dsp[-1] - np.hypot(*vr[0, :2])),
-                                "course_deg": float(np.degrees(rc.wrap_pi(dcrs[-1] - c_ref))),
+                                "course_deg": float(np.degrees(wrap_pi(dcrs[-1] - c_ref))),
                                 "position_m": float(np.hypot(*(dp[-1] - pr[0, :2])))}}
         iq = int(np.searchsorted(rq.track.t_s, b)) - 1
         prq, _ = ref.at([rq.track.t_s[iq]])
@@ -132,12 +141,12 @@ def rav4(data: Path, tmp: Path, quick: bool) -> dict:
           f"{np.mean([d['plain']['position_m'] for d in drift]):.1f} m")
     # head to head
     ren = [dataclasses.replace(s, kind="imu") if s.kind == "esc_imu" else s for s in samples]
-    t, u, sw, wzt, cr = rc.steer_signals(ren, r.track)
-    op = rc.OPENPILOT_RAV4
-    k0 = rc.understeer_gradient(op["mass_kg"], op["center_to_front_m"], op["wheelbase_m"] - op["center_to_front_m"],
-                                op["cornering_stiffness_front_nprad"], op["cornering_stiffness_rear_nprad"])
-    fit = rc.steer_response_fit(t, u, sw, wzt, cr, wheelbase_m=op["wheelbase_m"], understeer0=k0,
-                                prior_steer_ratio=op["steer_ratio"])
+    t, u, sw, wzt, cr = steer_signals(ren, r.track)
+    op = OPENPILOT_RAV4
+    k0 = understeer_gradient(op["mass_kg"], op["center_to_front_m"], op["wheelbase_m"] - op["center_to_front_m"],
+                             op["cornering_stiffness_front_nprad"], op["cornering_stiffness_rear_nprad"])
+    fit = steer_response_fit(t, u, sw, wzt, cr, wheelbase_m=op["wheelbase_m"], understeer0=k0,
+                             prior_steer_ratio=op["steer_ratio"])
     print(f"RAV4 head to head: steer ratio {fit.steer_ratio:.1f} +- {fit.steer_ratio_sigma:.1f} (openpilot 16.88), "
           f"stiffness factor {fit.stiffness_factor:.2f} +- {fit.stiffness_factor_sigma:.2f} (1.0), angle offset "
           f"{fit.angle_offset_deg:+.3f} +- {fit.angle_offset_sigma_deg:.3f} deg; gains {fit.gains}")
@@ -163,23 +172,23 @@ def rav4(data: Path, tmp: Path, quick: bool) -> dict:
 
 
 def rtklib(data: Path, tmp: Path, quick: bool) -> dict:
-    drive = data / rc.RTKLIB_DRIVE
+    drive = data / RTKLIB_DRIVE
     doc = _tool("convert_rtklib").convert(drive / "gnss_1934_sf.pos", drive / "imu_1934.csv", tmp,
                                           tag_path=drive / "imu_1934.csv.tag")
-    samples, _ = rc.load_samples([], [SerialSource("gnss", str(tmp / "gnss.nmea")),
-                                      SerialSource("imu", str(tmp / "imu.mti"), 115200)])
-    ref = rc.read_rtklib_pos(drive / "gnss_1934_sf.pos").reference(t0_gpst_s=doc["t0_gpst_s"])
+    samples, _ = load_samples([], [SerialSource("gnss", str(tmp / "gnss.nmea")),
+                                   SerialSource("imu", str(tmp / "imu.mti"), 115200)])
+    ref = read_rtklib_pos(drive / "gnss_1934_sf.pos").reference(t0_gpst_s=doc["t0_gpst_s"])
     veh = load_vehicle("rtklib-car-model", "model")
-    ss = rc.load_sensorset("rtklib-car")
+    ss = load_sensorset("rtklib-car")
     t_move = float(ref.t_s[np.argmax(ref.speed_mps > 3.0)])
     lengths = (5.0, 10.0) if quick else (5.0, 10.0, 15.0)
-    wins = rc.outage_windows(t_move + 20.0, float(ref.t_s[-1]), 30.0, lengths, first_offset_s=0.0)
+    wins = outage_windows(t_move + 20.0, float(ref.t_s[-1]), 30.0, lengths, first_offset_s=0.0)
     mount = veh.mounting
     variants = {
         "published": (veh, {}, True),
-        "no IMU lag": (veh, {"latencies": rc.Latencies()}, True),
+        "no IMU lag": (veh, {"latencies": Latencies()}, True),
         "no misalignment": (dataclasses.replace(veh, mounting=dataclasses.replace(
-            mount, imu_rotation_rpy_rad=rc.publisher_mounting_rpy((180.0, 0.0, 180.0)))), {}, True),
+            mount, imu_rotation_rpy_rad=publisher_mounting_rpy((180.0, 0.0, 180.0)))), {}, True),
         "no standstill gyro calibration": (veh, {}, False),
         "plain eq 7-11 filter": (veh, {"plain": True}, True),
         "plain, no standstill calibration": (veh, {"plain": True}, False),
@@ -188,7 +197,7 @@ def rtklib(data: Path, tmp: Path, quick: bool) -> dict:
         variants["no rotation at all"] = (dataclasses.replace(veh, mounting=dataclasses.replace(
             mount, imu_rotation_rpy_rad=(0.0, 0.0, 0.0))), {}, True)
         variants["with the .pos velocities"] = (veh, {"use_vel": True, "latencies": dataclasses.replace(
-            ss.latencies, gnss_vel_s=rc.velocity_lag(ref))}, True)
+            ss.latencies, gnss_vel_s=velocity_lag(ref))}, True)
         variants[".pos velocities, one GNSS latency"] = (veh, {"use_vel": True}, True)
     out = {}
     print(f"RTKLIB drive 0708: {len(wins)} outages every 30 s ({', '.join(f'{x:g}' for x in lengths)} s)")
@@ -199,9 +208,9 @@ def rtklib(data: Path, tmp: Path, quick: bool) -> dict:
             cfg = dataclasses.replace(cfg, ekf=dataclasses.replace(cfg.ekf, use_gnss_velocity=True))
         if kw.get("plain"):
             cfg = dataclasses.replace(cfg, ekf=dataclasses.replace(cfg.ekf, **PLAIN))
-        r = rc.run_pipeline(v, cfg, samples, origin=ref.origin, drop=rc.gnss_denied(wins),
-                            preprocess=ss.calibration_nodes(v) if cal else ())
-        s = rc.summarize_outages(rc.outage_errors(r.track, v.mounting.gnss_lever_arm_m, ref, wins))
+        r = run_pipeline(v, cfg, samples, origin=ref.origin, drop=gnss_denied(wins),
+                         preprocess=ss.calibration_nodes(v) if cal else ())
+        s = summarize_outages(outage_errors(r.track, v.mounting.gnss_lever_arm_m, ref, wins))
         gated = r.pipeline.counters["ekf"]["updates"]["gnss_pos"]["gated"]
         out[name] = {"outages": s, "gnss_pos_gated": gated, "reacquisitions": r.pipeline.counters["reacquisitions"],
                      "augmented_state": {k: list(v) for k, v in r.pipeline.augmented_state().items()},

@@ -37,6 +37,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from vdps_hil.experiments.scoring import evaluate_warning_frames  # noqa: E402
 from vdps_hil.experiments.truth_init import initial_state_from_truth  # noqa: E402
 from vdps_hil.model.core import Inputs  # noqa: E402
 from vdps_hil.model.effects import effects_from_names  # noqa: E402
@@ -44,8 +45,8 @@ from vdps_hil.model.params import load_vehicle  # noqa: E402
 from vdps_hil.model.rollover import assess  # noqa: E402
 from vdps_hil.prediction.config import load_predictor_config  # noqa: E402
 from vdps_hil.prediction.predictor import Predictor  # noqa: E402
-from vdps_hil.prediction.warning import (WarningChain, WarningPolicy, evaluate_warning_frames,  # noqa: E402
-                                         load_warning_config, replay_assessments)
+from vdps_hil.prediction.warning import (WarningChain, WarningPolicy, load_warning_config,  # noqa: E402
+                                         replay_assessments)
 from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
 from vdps_hil.sim.simulator import Simulator  # noqa: E402
 

@@ -3,7 +3,7 @@
 intervals, the null rate with nothing hidden, detection probability against magnitude, and the
 --add reductions of the attributable simulation error.
 
-Each drive is simulated (``vdps_hil.workbench.study``: maneuver and magnitude per effect),
+Each drive is simulated (``vdps_hil.experiments.workbench_study``: maneuver and magnitude per effect),
 written to a temporary MCAP, and diagnosed from its /raw/ topics and the model vehicle file
 only (the truth file is never passed to the workbench). A *hit* is the hidden effect recommended
 or inside the reported top equivalence group with an alternative named (``study.is_hit``).
@@ -35,7 +35,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from vdps_hil.workbench.study import HIDDEN, MANEUVERS, run_job, wilson_interval  # noqa: E402
+from vdps_hil.experiments.workbench_study import HIDDEN, MANEUVERS, run_job, wilson_interval  # noqa: E402
 
 
 def _one(job: dict) -> dict:

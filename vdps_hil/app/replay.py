@@ -339,9 +339,9 @@ def replay_config(rates: Mapping[str, float], fields: Mapping[str, set], veh, su
     sample ``rates`` and ``fields`` of the recording's first seconds (``sample_stats``): the
     sensor set from ``sensorset`` (``configs/sensorsets``: sensors, noise, latencies, kind map,
     calibration nodes) or inferred from the fields the recording carries
-    (``realcars.infer_sensor_set``); the suspension averaging from its measured rate."""
+    (``estimation.sensorsets.infer_sensor_set``); the suspension averaging from its measured rate."""
     from vdps_hil.estimation.ekf_config import PaperFaithful
-    from vdps_hil.realcars import SensorSetError, infer_sensor_set, load_sensorset
+    from vdps_hil.estimation.sensorsets import SensorSetError, infer_sensor_set, load_sensorset
 
     pc = default_pipeline_config()
     nodes: list = []

@@ -22,22 +22,23 @@ Studies
 -------
 ``snr``        Table 2. Stage 1: every seed at noise scale k = 1 (the profile's Table 1
                sigmas) and k = 0 (zero-noise sensors); each seed's pair gives the k at which
-               the measured SNR equals each target (``paper.snr_noise_scale``: the estimation
-               error is linear in k and the noise also sits in var(s_k), so each channel's
-               noise-to-signal ratio saturates; not 20 log10 1/k), the row's k is their
-               median; stage 2: every seed at each target's k. The SNR of a trial is measured
-               against the zero-noise trial of the same seed (``paper.snr_db``). Per row:
-               target and measured SNR (a note when their medians differ by more than
-               ``SNR_TOLERANCE_DB``) and |relative error| of I_x, I_y, I_z at 10.25 s.
+               the measured SNR equals each target (``experiments.paper_tasks.snr_noise_scale``:
+               the estimation error is linear in k and the noise also sits in var(s_k), so each
+               channel's noise-to-signal ratio saturates; not 20 log10 1/k), the row's k is
+               their median; stage 2: every seed at each target's k. The SNR of a trial is
+               measured against the zero-noise trial of the same seed
+               (``experiments.paper_tasks.snr_db``). Per row: target and measured SNR (a note
+               when their medians differ by more than ``SNR_TOLERANCE_DB``) and |relative
+               error| of I_x, I_y, I_z at 10.25 s.
 ``weighting``  Table 3. Every (noise scale, seed): the inertia problem re-run on the chain's
                identifier inputs with Q_4 = diag(q, q, q) for the paper's four q. Per (noise
                scale, q): convergence time per inertia (over the seeds that converged, with
                the count that did), minimum eigenvalue. Noise-free drives (k = 0, the paper's
                case) are deterministic: one trial stands for every seed.
-``effects``    Each hidden effect of ``workbench.study.HIDDEN`` x seed (plus null maneuvers
-               with nothing hidden, ``--null``): hit rate (first recommendation = the hidden
-               effect), found rate (among the recommendations), false-alarm rate of the null
-               drives.
+``effects``    Each hidden effect of ``experiments.workbench_study.HIDDEN`` x seed (plus null
+               maneuvers with nothing hidden, ``--null``): hit rate (first recommendation = the
+               hidden effect), found rate (among the recommendations), false-alarm rate of the
+               null drives.
 """
 
 from __future__ import annotations
@@ -191,7 +192,8 @@ def _ok_results(outs: Mapping[str, Any], ids: Sequence[str]) -> list[dict]:
 def _snr(opt: StudyOptions, stage) -> dict:
     import numpy as np
 
-    from vdps_hil.paper import INERTIA, PAPER, snr_db, snr_noise_scale
+    from vdps_hil.experiments.paper_report import PAPER
+    from vdps_hil.experiments.paper_tasks import INERTIA, snr_db, snr_noise_scale
 
     seeds = opt.seed_list
     ids: dict[str, list[str]] = {"k0": [], "k1": []}
@@ -261,7 +263,8 @@ def _snr(opt: StudyOptions, stage) -> dict:
 
 
 def _weighting(opt: StudyOptions, stage) -> dict:
-    from vdps_hil.paper import INERTIA, PAPER
+    from vdps_hil.experiments.paper_report import PAPER
+    from vdps_hil.experiments.paper_tasks import INERTIA
 
     tasks, ids = [], {}
     for k in opt.noise_scales:
@@ -293,7 +296,7 @@ def _weighting(opt: StudyOptions, stage) -> dict:
 
 
 def _effects(opt: StudyOptions, stage) -> dict:
-    from vdps_hil.workbench.study import HIDDEN
+    from vdps_hil.experiments.workbench_study import HIDDEN
 
     effects = list(opt.effects) if opt.effects else sorted(HIDDEN)
     unknown = [e for e in effects if e not in HIDDEN]

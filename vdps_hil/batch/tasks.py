@@ -45,6 +45,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from vdps_hil.batch.worker import Task
 from vdps_hil.batch.keys import DigestCache, task_key
+from vdps_hil.experiments.paper_tasks import TABLE3_QS
 
 __all__ = ["drive_ids", "replay_drive", "diagnose_drive", "replay_tasks", "diagnose_tasks",
            "worker_info", "snr_trial", "weighting_trial", "effect_trial", "DEFAULT_MODEL",
@@ -229,77 +230,44 @@ def _timing_to_run(doc: dict, keys: Iterable[str] = ("wall_s",)) -> dict:
 
 def snr_trial(profile: str, k: float, seed: int) -> dict:
     """One trial of the SNR study (paper Table 2): the paper-scenario drive with every Table 1
-    sigma times ``k`` through the real chain (``vdps_hil.paper.snr_task``): the relative error
-    of I_x, I_y, I_z at 10.25 s and the SNR series (``t_ns``, ``series``: the inertia problem's
-    omega_dot and moments at the estimate instants of 5-10.25 s). The SNR needs the zero-noise
-    trial of the same seed; the study computes it (``paper.snr_db``)."""
-    from vdps_hil.paper import snr_task
+    sigma times ``k`` through the real chain (``vdps_hil.experiments.paper_tasks.snr_task``): the
+    relative error of I_x, I_y, I_z at 10.25 s and the SNR series (``t_ns``, ``series``: the
+    inertia problem's omega_dot and moments at the estimate instants of 5-10.25 s). The SNR needs
+    the zero-noise trial of the same seed; the study computes it (``paper_tasks.snr_db``)."""
+    from vdps_hil.experiments.paper_tasks import snr_task
 
     return _timing_to_run(snr_task(profile, float(k), int(seed)))
 
 
-TABLE3_QS = (0.625, 0.125, 0.025, 0.005)
-
-
 def weighting_trial(profile: str, seed: int, duration_s: float, noise_scale: float = 0.0,
                     qs: Sequence[float] = TABLE3_QS) -> dict:
-    """One trial of the weighting study (paper Table 3): a paper-scenario drive of
+    """One trial of the weighting study (paper Table 3), the one Table 3 computation
+    ``experiments.paper_tasks.table3_task`` in the study's layout: a paper-scenario drive of
     ``duration_s`` with the sensor sigmas times ``noise_scale`` (0: noise-free, as the paper)
     through the real chain, its identifier inputs recorded; the inertia problem re-run on them
-    with Q_4 = diag(q, q, q), W_4 = I, P(0) = I for each q. Per q: minimum eigenvalue of
-    sum A^T Q^T Q A, convergence time per inertia (first time from which |I - I_true| <= 10 %
-    holds to the end; None: never, the paper's "Nan") and the final relative errors. The same
-    computation as ``vdps_hil.paper.table3_task`` with the noise scale added."""
-    import math
-    from dataclasses import replace
+    with Q_4 = diag(q, q, q), W_4 = I, P(0) = I for each q. Per q (key ``f"{q:g}"``): minimum
+    eigenvalue of sum A^T Q^T Q A, convergence time per inertia (first time from which
+    |I - I_true| <= 10 % holds to the end; NaN: never, the paper's "Nan"; null in the trial's
+    JSON, ``engine.to_jsonable``) and the final relative errors."""
+    from vdps_hil.experiments.paper_tasks import INERTIA, table3_task
 
-    import numpy as np
-
-    from vdps_hil.identification.config import load_ident_config
-    from vdps_hil.identification.identifier import Identifier
-    from vdps_hil.paper import INERTIA, _profile, chain_run, scale_noise, truth_params
-
-    sheet = _profile(profile)
-    r = chain_run("paper", scale_noise(sheet, float(noise_scale)), int(seed), predict=False,
-                  sheet_profile=sheet, duration_s=float(duration_s), record_inputs=True,
-                  ident_report_period_s=1.0)
-    tp = truth_params()
-    base = load_ident_config()
-    rows = {}
-    for q in qs:
-        q = float(q)
-        cfg = replace(base, inertia=replace(base.inertia, q=(q, q, q), w=(1.0, 1.0, 1.0), p0_scaled=1.0))
-        idf = Identifier(r["model"], cfg)
-        ts, xs = [], []
-        for inp in r["inputs"]:
-            idf.update(inp)
-            ts.append(inp.t_ns / 1e9)
-            p = idf.params
-            xs.append([getattr(p, n) for n in INERTIA])
-        ts_a, xs_a = np.array(ts), np.array(xs).reshape(-1, 3)
-        conv = []
-        for j, n in enumerate(INERTIA):
-            ok = np.abs(xs_a[:, j] - tp[n]) <= 0.1 * tp[n]
-            bad = np.nonzero(~ok)[0]
-            if len(ok) and ok[-1]:
-                conv.append(float(ts_a[bad[-1] + 1] - ts_a[0]) if len(bad) else 0.0)
-            else:
-                conv.append(None)
-        rows[f"{q:g}"] = {"q": q, "min_eigenvalue": float(idf.identifiability["inertia"]),
-                          "convergence_s": dict(zip(INERTIA, conv)),
-                          "final_rel_err": {n: (float((xs_a[-1, j] - tp[n]) / tp[n]) if len(xs_a) else math.nan)
-                                            for j, n in enumerate(INERTIA)}}
+    t3 = table3_task(profile, float(duration_s), int(seed), qs=[float(q) for q in qs],
+                     noise_scale=float(noise_scale))
+    rows = {f"{q:g}": {"q": q, "min_eigenvalue": v["min_eigenvalue"],
+                       "convergence_s": dict(zip(INERTIA, v["convergence_s"])),
+                       "final_rel_err": dict(zip(INERTIA, v["final_rel_err"]))}
+            for q, v in t3["rows"].items()}
     return {"profile": profile, "seed": int(seed), "noise_scale": float(noise_scale),
-            "duration_s": float(duration_s), "inputs": len(r["inputs"]), "rows": rows,
-            "run": {"wall_s": r["wall_s"]}}
+            "duration_s": float(duration_s), "inputs": t3["inputs"], "rows": rows,
+            "run": {"wall_s": t3["wall_s"]}}
 
 
 def effect_trial(effect: str | None, seed: int, maneuver: str | None = None,
                  vehicle: str = DEFAULT_MODEL, options: Mapping[str, Any] | None = None) -> dict:
     """One trial of the hidden-effect study: the workbench's maneuver for ``effect`` with the
-    effect hidden in the truth simulator (``vdps_hil.workbench.study``; ``effect`` None: a null
-    drive of ``maneuver`` with nothing hidden), simulated into a temporary file, diagnosed
-    from its ``/raw/`` topics with the model vehicle file (``diagnose_drive``). Returns the
+    effect hidden in the truth simulator (``vdps_hil.experiments.workbench_study``; ``effect``
+    None: a null drive of ``maneuver`` with nothing hidden), simulated into a temporary file,
+    diagnosed from its ``/raw/`` topics with the model vehicle file (``diagnose_drive``). Returns the
     recommended effects, ``hit`` (the hidden effect is the first recommendation) and
     ``found`` (it is among them); for a null drive ``false_alarm`` (anything recommended).
     ``options``: diagnosis options (default: no simulation-error runs, which the hit rate does
@@ -307,7 +275,7 @@ def effect_trial(effect: str | None, seed: int, maneuver: str | None = None,
     import tempfile
 
     from vdps_hil.batch.report import recommended_effects
-    from vdps_hil.workbench.study import HIDDEN, hidden_drive
+    from vdps_hil.experiments.workbench_study import HIDDEN, hidden_drive
 
     _diagnose_fn()  # fail before simulating when there is no workbench entry point
 

@@ -1,5 +1,5 @@
 """``vdps paper``: the paper's experiments on the simulator through the real chain, printed next
-to the paper's published values (``vdps_hil.paper``)."""
+to the paper's published values (``vdps_hil.experiments.paper_run``)."""
 
 from __future__ import annotations
 
@@ -34,7 +34,8 @@ def paper(quick, profiles, seeds, seed0, workers, json_out):
     """Run the paper's experiments (Hsu & Chen 2012, sections 7-8) and print ours next to the
     paper's figures: fusion errors, identification at 10.25 s, left-turn and rollover
     predictions, warning lead time and false alarms, Tables 2 and 3."""
-    from vdps_hil.paper import PROFILES, PaperOptions, format_report, run_paper
+    from vdps_hil.experiments.paper_report import format_report
+    from vdps_hil.experiments.paper_run import PROFILES, PaperOptions, run_paper
     from vdps_hil.sim.profiles import ProfileError, load_profile
 
     profs = tuple(profiles) or PROFILES

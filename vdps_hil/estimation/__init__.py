@@ -12,6 +12,9 @@ models ``observations``, named states ``states``, gate ``chi2``, latency history
 ``ekf_history``) and the alpha-beta filters ``alpha_beta``; out come ``estimates.Estimate`` /
 ``Innovation`` / ``FilteredSignals`` and, per window, ``observability`` reports whose null
 spaces ``observability_explain`` puts in words.
+``sensorsets``: named sensor sets (``configs/sensorsets``) and the one a recording provides;
+``suspension``: the suspension conditioning of the Figure-2 node. The analytic test trajectories
+with their truth are ``vdps_hil.experiments.synthetic``.
 """
 
 from vdps_hil.estimation.alpha_beta import AlphaBetaFilter, TimedAlphaBeta, critically_damped_gains, kalata_gains

@@ -28,11 +28,11 @@ reports p50, p99 and the maximum over all cycles (``warning_latency_ms``) and ov
 that sent a frame (``warning_frame_latency_ms``). All host times are CLOCK_MONOTONIC, the same
 in every process of the host. Latencies are wall time, whatever ``--speed``.
 
-Lead time (as ``prediction.warning``)
--------------------------------------
+Lead time (as ``experiments.scoring``)
+--------------------------------------
 ``warning_lead_time_s = t_PONR - t_w`` and ``warning_lead_to_tipup_s = t_tip - t_w`` on the
 bench's simulated time axis, with t_w the first accepted ``VDPS_Warning`` frame (CRC, counter,
-status 0) with level >= 2 on the bus (``prediction.warning.evaluate_warning_frames``) and
+status 0) with level >= 2 on the bus (``experiments.scoring.evaluate_warning_frames``) and
 t_PONR, t_tip the truth events (``sim.rollover``) of this run. With ``--react`` the ECU may
 prevent the point of no return; the lead time is then taken to the events of the *reference*
 run: the same scenario without any ECU action (``reference = "open_loop"``), which the bench
@@ -132,7 +132,7 @@ def lead_times(frames: Sequence, events: Sequence[Mapping], reference: Sequence[
     """Lead times of the warning frames on the bus (``can.Message`` with ``timestamp`` = bench
     time [s]) against this run's truth ``events``, or ``reference`` events when this run has no
     point of no return (module docstring)."""
-    from vdps_hil.prediction.warning import evaluate_warning_frames
+    from vdps_hil.experiments.scoring import evaluate_warning_frames
 
     own_ponr = not math.isnan(_event_t(events, "point_of_no_return"))
     use_ref = not own_ponr and reference is not None and not math.isnan(_event_t(reference, "point_of_no_return"))

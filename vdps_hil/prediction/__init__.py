@@ -8,7 +8,8 @@ prediction metrics used everywhere, and the rollover warning on CAN.
 returns.
 ``metrics``: errors in the road frame relative to the pose at t0 and the paper-style inaccuracy.
 ``warning``: rollover measures of a prediction, ``WarningPolicy``, the pure ``WarningNode``
-(VDPS_Warning at 50 Hz and on level change), ``WarningChain`` and lead-time evaluation.
+(VDPS_Warning at 50 Hz and on level change) and ``WarningChain`` (lead time and false alarms
+against the truth: ``vdps_hil.experiments.scoring``).
 """
 
 from vdps_hil.prediction.config import (PredictionConfigError, PredictorConfig, load_prediction_document,
@@ -19,14 +20,14 @@ from vdps_hil.prediction.metrics import (PAPER_INACCURACY_PCT, PoseTrajectory, c
 from vdps_hil.prediction.predictor import Cadence, Predictor
 from vdps_hil.prediction.result import PredictionResult
 from vdps_hil.prediction.warning import (RolloverAssessment, WarningChain, WarningLevel, WarningNode,
-                                         WarningNodeConfig, WarningOutcome, WarningPolicy, WarningStatus,
-                                         evaluate_warning_frames, load_warning_config, replay_assessments)
+                                         WarningNodeConfig, WarningPolicy, WarningStatus, load_warning_config,
+                                         replay_assessments)
 
 __all__ = [
     "Cadence", "InputTrajectory", "PAPER_INACCURACY_PCT", "PoseTrajectory", "PredictionConfigError",
     "PredictionResult", "Predictor", "PredictorConfig", "PredictorInitialState", "RolloverAssessment",
-    "WarningChain", "WarningLevel", "WarningNode", "WarningNodeConfig", "WarningOutcome", "WarningPolicy",
-    "WarningStatus", "compare_trajectories", "evaluate_warning_frames", "format_metrics",
+    "WarningChain", "WarningLevel", "WarningNode", "WarningNodeConfig", "WarningPolicy",
+    "WarningStatus", "compare_trajectories", "format_metrics",
     "load_prediction_document", "load_predictor_config", "load_warning_config", "prediction_metrics",
     "replay_assessments",
 ]

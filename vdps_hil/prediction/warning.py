@@ -51,15 +51,11 @@ below ``converged_rel_sigma``); started from identified parameters, frames are v
 From the sedan-model priors (C_alpha front x1.5, rear x0.6: an oversteering model) the predictor
 foresaw rollovers in the paper's sine steering before the cornering problem converged.
 
-Lead time (acceptance figures)
-------------------------------
-``lead_time_s = t_PONR,truth - t(first valid frame with level >= warning)``, and
-``lead_to_tip_up_s`` likewise to the truth tip-up; ``lead_time_matched_side_s`` counts only frames
-whose predicted peak roll has the sign of the truth rollover (a fishhook's first steer can make
-the model predict a rollover to the other side first); :func:`evaluate_warning_frames` decodes the
-sent frames with :class:`VdpsCanDecoder` (CRC and counter checked) and counts false alarms:
-warning episodes (maximal runs of valid frames with level >= warning) in a run without a truth
-PONR, or ending more than ``false_alarm_window_s`` before it.
+Lead time and false alarms
+--------------------------
+Scored against the simulator's truth events outside the pipeline:
+``vdps_hil.experiments.scoring.evaluate_warning_frames`` decodes the sent frames and gives the lead
+time to the truth point of no return and the false alarms (this module never reads truth).
 
 Symbols: t_half mean half track [m], h_cg CG height [m], F_z normal load [N], times [s].
 """
@@ -69,9 +65,9 @@ from __future__ import annotations
 import enum
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, MutableSequence, Sequence
+from typing import Iterable, Mapping, MutableSequence, Sequence
 
 import can
 import numpy as np
@@ -338,7 +334,8 @@ class WarningChain:
 
     Storage: ``frames`` (the sent frames) and ``assessments`` (one per prediction, t0 inside)
     keep the most recent ``keep`` of each (``keep`` None: all of them, for a study of one
-    drive that evaluates the frames afterwards, e.g. :func:`evaluate_warning_frames`); a
+    drive that evaluates the frames afterwards, e.g.
+    ``vdps_hil.experiments.scoring.evaluate_warning_frames``); a
     long-running system passes a bound so memory does not grow with the drive (50 frames per
     second otherwise). Counts over the whole run: ``frames_total``, ``assessments_total``; the
     latest assessment: ``last_assessment``."""
@@ -406,101 +403,7 @@ def replay_assessments(assessments: Sequence[RolloverAssessment], times_ns: Iter
     return frames
 
 
-# ---------------------------------------------------------------------------------------------
-# lead time and false alarms
-# ---------------------------------------------------------------------------------------------
-@dataclass
-class WarningOutcome:
-    """Result of :func:`evaluate_warning_frames` (times [s]; NaN when absent)."""
-
-    first_warning_t_s: float
-    first_imminent_t_s: float
-    truth_point_of_no_return_t_s: float
-    truth_tip_up_t_s: float
-    lead_time_s: float
-    lead_to_tip_up_s: float
-    lead_time_matched_side_s: float
-    warning_episodes: list[tuple[float, float]]
-    false_alarms: int
-    frames_accepted: int
-    frames_rejected: int
-    frames_invalid_status: int
-    max_gap_s: float
-    decoded: list[dict] = field(default_factory=list, repr=False)
-
-    def to_json(self) -> dict:
-        d = {k: v for k, v in self.__dict__.items() if k != "decoded"}
-        d["warning_episodes"] = [list(e) for e in self.warning_episodes]
-        return d
-
-
-def _event_time(events: Iterable[Mapping[str, Any]], kind: str) -> float:
-    for e in events:
-        if e.get("kind") == kind:
-            return float(e["t_s"])
-    return math.nan
-
-
-def evaluate_warning_frames(frames: Sequence[can.Message], truth_events: Iterable[Mapping[str, Any]] = (),
-                            level: int = WarningLevel.WARNING, false_alarm_window_s: float = 5.0
-                            ) -> WarningOutcome:
-    """Decode the sent VDPS_Warning frames (CRC and counter checked by the codec's decoder) and
-    compare with the truth events (``Simulator.events``: dicts with ``kind`` "tip_up" /
-    "point_of_no_return" and ``t_s``). Only frames with status 0 count as warnings."""
-    dec = VdpsCanDecoder()
-    rows = []
-    for m in frames:
-        for s in dec.decode_message(m):
-            if s.kind != "warning":
-                continue
-            rows.append({"t_s": s.t_ns / NS_PER_S, "level": int(s.fields["warning_level"]),
-                         "status": int(s.fields["warning_status"]), "valid": s.valid,
-                         "ttr_s": s.fields["warning_time_to_rollover_s"],
-                         "ltr": s.fields["warning_ltr"], "peak_roll_rad": s.fields["warning_peak_roll_rad"]})
-    counts = dec.counters[WARNING]
-    rejected = dec.total_rejected  # CRC, counter, range, DLC, unknown ID, malformed
-    events = list(truth_events)
-    t_pn = _event_time(events, "point_of_no_return")
-    t_tu = _event_time(events, "tip_up")
-    episodes: list[tuple[float, float]] = []
-    start = None
-    last_t = None
-    for r in rows:
-        on = r["valid"] and r["level"] >= level
-        if on and start is None:
-            start = r["t_s"]
-        if not on and start is not None:
-            episodes.append((start, last_t))
-            start = None
-        last_t = r["t_s"]
-    if start is not None:
-        episodes.append((start, last_t))
-    first = episodes[0][0] if episodes else math.nan
-    imm = next((r["t_s"] for r in rows if r["valid"] and r["level"] >= WarningLevel.IMMINENT), math.nan)
-    false = 0
-    for a, b in episodes:
-        if math.isnan(t_pn) or b < t_pn - false_alarm_window_s:
-            false += 1
-    relevant = [a for a, b in episodes if not math.isnan(t_pn) and b >= t_pn - false_alarm_window_s]
-    first_rel = relevant[0] if relevant else math.nan
-    # the first warning frame whose predicted roll direction is the truth's (PONR side "left":
-    # the left side lifts, roll > 0)
-    side = next((e.get("side") for e in events if e.get("kind") == "point_of_no_return"), None)
-    sign = 1.0 if side == "left" else -1.0
-    matched = next((r["t_s"] for r in rows if r["valid"] and r["level"] >= level
-                    and r["peak_roll_rad"] * sign > 0.0), math.nan)
-    ts = [r["t_s"] for r in rows]
-    gaps = np.diff(ts) if len(ts) > 1 else np.array([0.0])
-    return WarningOutcome(
-        first_warning_t_s=first, first_imminent_t_s=imm, truth_point_of_no_return_t_s=t_pn,
-        truth_tip_up_t_s=t_tu, lead_time_s=t_pn - first_rel, lead_to_tip_up_s=t_tu - first_rel,
-        lead_time_matched_side_s=t_pn - matched,
-        warning_episodes=episodes, false_alarms=false, frames_accepted=int(counts["accepted"]),
-        frames_rejected=int(rejected), frames_invalid_status=sum(1 for r in rows if not r["valid"]),
-        max_gap_s=float(np.max(gaps)), decoded=rows)
-
-
 __all__ = ["RolloverAssessment", "WarningChain", "WarningLevel", "WarningNode", "WarningNodeConfig",
-           "WarningOutcome", "WarningPolicy", "WarningStatus", "evaluate_warning_frames",
+           "WarningPolicy", "WarningStatus",
            "load_transfer_ratio", "load_warning_config", "predictive_ltr", "replay_assessments",
            "roll_relative_to_road", "warning_config_from_table"]

@@ -17,7 +17,7 @@ the operating regime; the effect candidates (``candidates`` picks the adapter pe
 with the chosen effects and measures before/after on held-out time; ``model_file`` saves and
 loads the model and ``report`` writes one self-contained HTML page. ``diagnosis`` ties the steps
 together (``vdps diagnose``); ``user_effects`` loads the user's own effect classes from a named
-file or entry point; ``study`` holds the hidden-effect acceptance drives.
+file or entry point. (The hidden-effect acceptance drives are ``experiments.workbench_study``.)
 """
 
 from vdps_hil.workbench.diagnosis import Diagnosis, diagnose

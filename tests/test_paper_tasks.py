@@ -1,4 +1,4 @@
-"""``vdps paper`` (vdps_hil.paper): a reduced, seeded version of the paper's experiments through
+"""The paper's experiments (vdps_hil.experiments.paper_tasks, ``vdps paper``): a reduced, seeded version of the paper's experiments through
 the real chain (simulated wire formats -> /raw/ decode -> VdpsSystem), asserting the issue-6
 acceptance thresholds that the chain reaches, and marking the one it does not reach with the
 paper's linear-tire predictor (the left turn within 3 m / 3 deg) as a strict expected failure
@@ -15,8 +15,8 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil import paper as P
-from vdps_hil.sim.profiles import load_profile
+from vdps_hil.experiments import paper_tasks as P
+from vdps_hil.experiments.scoring import FUSION_NAMES
 
 PROFILE = "table1-susp1k"
 
@@ -28,36 +28,6 @@ def ident_run():
 
 
 # ------------------------------------------------------------------------------ pure helpers
-def test_scale_noise_scales_every_sigma_and_zero_is_the_zero_noise_profile():
-    prof = load_profile(PROFILE)
-    assert P.scale_noise(prof, 0.0) == prof.zero_noise()
-    k = 3.0
-    s = P.scale_noise(prof, k)
-    assert s.gnss.pos_sigma_h_m == pytest.approx(k * prof.gnss.pos_sigma_h_m)
-    assert s.gnss.attitude_sigma_rad == pytest.approx(k * prof.gnss.attitude_sigma_rad)
-    assert s.imu.gyro_sigma_radps == pytest.approx(k * prof.imu.gyro_sigma_radps)
-    assert s.suspension.sigma_m == pytest.approx(k * prof.suspension.sigma_m)
-    assert s.tachometer.sigma_radps == pytest.approx(k * prof.tachometer.sigma_radps)
-    assert s.imu.rate_hz == prof.imu.rate_hz and s.suspension.rate_hz == prof.suspension.rate_hz
-
-
-def test_aggregate_identification_median_p90_and_two_sigma_fraction():
-    rng = np.random.default_rng(3)
-    docs = []
-    for seed in range(10):
-        e = rng.normal(0.0, 0.01)
-        docs.append({"rel_err": {"mass_kg": e}, "rel_err_mean_window": {"mass_kg": e / 2},
-                     "prior_rel_err": {"mass_kg": 0.15}, "sigma_ratio": {"mass_kg": abs(e) / 0.01}})
-    agg = P.aggregate_identification(docs)["mass_kg"]
-    errs = np.abs([d["rel_err"]["mass_kg"] for d in docs]) * 100
-    assert agg["median_rel_err_pct"] == pytest.approx(np.median(errs))
-    assert agg["p90_rel_err_pct"] == pytest.approx(np.percentile(errs, 90))
-    assert agg["within_2_sigma"] == pytest.approx(np.mean([d["sigma_ratio"]["mass_kg"] <= 2 for d in docs]))
-    assert agg["paper_rel_err_pct"] == P.PAPER["identification_rel_err_pct"]["mass_kg"]
-    text = P.format_report({"profile": PROFILE, "seeds": list(range(10)), "identification": {"mass_kg": agg}})
-    assert "mass_kg" in text and "paper" in text
-
-
 def test_snr_is_minus_ten_log_of_the_mean_noise_to_signal_variance_ratio():
     rng = np.random.default_rng(5)
     t = list(range(1000))
@@ -100,16 +70,6 @@ def test_snr_noise_scale_gives_the_target_snr_of_the_definition():
     # every ratio saturates at 1 as k grows: SNR >= 0 dB, a negative target is out of reach
     assert math.isnan(P.snr_noise_scale(run1, ref, -1.0))
     assert math.isnan(P.snr_noise_scale(run1, {"t_ns": [-1, -2], "series": clean[:2]}, 20.0))
-
-
-def test_truth_between_snapshots_is_interpolated_with_wrapped_angles():
-    a = {"t_s": 1.0, "yaw_v_rad": math.pi - 0.1, "pos_e_m": 10.0}
-    b = {"t_s": 1.01, "yaw_v_rad": -math.pi + 0.1, "pos_e_m": 10.25}
-    by_t = {1_000_000_000: a, 1_010_000_000: b}
-    m = P.truth_at(by_t, 1_002_500_000)
-    assert m["pos_e_m"] == pytest.approx(10.0625) and m["t_s"] == pytest.approx(1.0025)
-    assert m["yaw_v_rad"] == pytest.approx(math.pi - 0.05)  # through +-pi, not through 0
-    assert P.truth_at(by_t, 1_000_000_000) is a and P.truth_at(by_t, 1_012_000_000) is None
 
 
 # ----------------------------------------------------------------- through the real chain
@@ -157,7 +117,7 @@ def test_left_turn_prediction_is_bounded_and_no_false_alarm_on_the_left_turn(ide
 
 def test_fusion_errors_are_reported_for_every_state(ident_run):
     fs = ident_run["fusion_std"]
-    assert set(fs) == set(P.FUSION_NAMES)
+    assert set(fs) == set(FUSION_NAMES)
     assert all(math.isfinite(v) and v >= 0 for v in fs.values())
     assert fs["psi_g_deg"] < 0.4  # below the GNSS attitude sigma of Table 1 (0.4 deg)
 
@@ -202,11 +162,3 @@ def test_table3_minimum_eigenvalue_scales_with_q_squared_and_larger_q_converges_
     for j in range(3):
         times = [c[j] if math.isfinite(c[j]) else math.inf for c in conv]
         assert times == sorted(times)
-
-
-def test_cli_rejects_an_unknown_profile_in_one_line(capsys):
-    from vdps_hil.cli.main import main
-
-    assert main(["paper", "--quick", "--profile", "no-such-profile"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "no-such-profile" in err[0]

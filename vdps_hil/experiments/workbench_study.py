@@ -1,4 +1,5 @@
-"""Hidden-effect drives: the maneuvers and magnitudes of the workbench's acceptance study.
+"""Hidden-effect drives: the maneuvers and magnitudes of the model workbench's acceptance study
+(``vdps_hil.workbench``).
 
 Each entry of :data:`MANEUVERS` is a short scenario (TOML text, ``sim.scenarios`` format; the
 truth vehicle ``sedan-truth`` with the *linear* tire unless the effect is the tire law itself)
@@ -230,9 +231,9 @@ def run_job(job: dict) -> dict:
     from vdps_hil.model.effects import EffectSet
     from vdps_hil.model.params import load_vehicle
 
-    from .add import add_effects
-    from .dataset import load_drive
-    from .ranking.selection import rank
+    from vdps_hil.workbench.add import add_effects
+    from vdps_hil.workbench.dataset import load_drive
+    from vdps_hil.workbench.ranking.selection import rank
 
     veh = load_vehicle("sedan-model")
     t0 = time.perf_counter()

@@ -1,8 +1,9 @@
 """Synthetic kinematic trajectories and Table-1 sensor streams for tests and benchmarks of the
 estimator (no vehicle dynamics: an analytic motion on one road plane).
 
-Test and benchmark support only: the pipeline never imports this module, and nothing here reads
-the simulator or a truth vehicle file (sensor geometry comes from a *model* vehicle file).
+Test and benchmark support only: the pipeline never imports this module (it holds the drive's
+truth, ``Truth``, beside its sensor streams: ``vdps_hil.experiments``' truth rule); nothing here
+reads the simulator or a truth vehicle file (sensor geometry comes from a *model* vehicle file).
 
 Trajectory (road frame {r}: the road plane through the ENU origin, bank phi_r, grade theta_r)::
 

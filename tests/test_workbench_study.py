@@ -7,9 +7,9 @@ from types import SimpleNamespace
 import pytest
 from scipy.stats import binomtest
 
+from vdps_hil.experiments import workbench_study as S
 from vdps_hil.model.effects import REGISTRY
 from vdps_hil.sim.drive import parse_effect_spec
-from vdps_hil.workbench import study as S
 
 
 def test_every_maneuver_parses_and_every_effect_is_known():
