@@ -15,7 +15,7 @@ import pytest
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.estimation.estimates import Estimate, FilteredSignals, Innovation
-from vdps_hil.identification.forces import suspension_forces_n
+from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport, outputs_digest

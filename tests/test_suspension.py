@@ -11,7 +11,7 @@ import pytest
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation.suspension import SuspensionConditioner
-from vdps_hil.identification.forces import suspension_forces_n
+from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.pipeline.node import SystemConfig
 

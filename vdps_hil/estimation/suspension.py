@@ -75,7 +75,7 @@ class SuspensionConditioner:
     def __init__(self, vehicle: Vehicle, rate_hz: float | None, tire_compliance: bool, raw_bandwidth_hz: float,
                  rate_bandwidth_hz: float, max_gap_s: float, rate_lead: bool = True, stamp: str = "end"):
         from vdps_hil.estimation.alpha_beta import TimedAlphaBetaBank
-        from vdps_hil.identification.forces import suspension_forces_n
+        from vdps_hil.model.spring_law import suspension_forces_n
 
         self.vehicle = vehicle
         self.period_ns = int(round(1e9 / rate_hz)) if rate_hz else 0

@@ -1,4 +1,5 @@
-"""Forces and moments of the identification model: the spring law of eq 14 per corner, the tire
+"""Forces and moments of the identification model (the spring law of eq 14 per corner is
+``model.spring_law``): the tire
 forces of eq 15-17 and the body moments of eq 23's b_4 (``moments_from_inputs``), from estimated
 quantities (``inputs.IdentInputs``) and a model vehicle.
 
@@ -55,42 +56,8 @@ import math
 import numpy as np
 
 from vdps_hil.identification.inputs import IdentInputs
-from vdps_hil.model.stages import spring_force_n
+from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.model.params import Geometry, IdentifiedParams, Vehicle
-from vdps_hil.units import GRAVITY_MPS2
-
-
-def spring_compression_m(vehicle: Vehicle, susp_deflection_m) -> np.ndarray:
-    """H of eq 14 (compression from the spring's free length) = static + deflection [m]."""
-    static = np.array([vehicle.axle(i).static_compression_m for i in range(4)])
-    return static + np.asarray(susp_deflection_m, dtype=float)
-
-
-def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
-                        include_unsprung_weight: bool = True) -> np.ndarray:
-    """Per corner [N], the spring law of eq 14 (``model.stages.spring_force_n``):
-
-    * with the unsprung weight: F_z,spring,i = K_s H + D_s Hd + m_u g, the normal load of the
-      paper's reduced model, with eq 14's clamp as the physics core applies it (lift-off when
-      K_s H + m_u g <= 0, and never negative);
-    * without: the strut force K_s H + D_s Hd acting on the sprung body (no clamp: tension past
-      the free length stands in for the rebound stop, as in the core)."""
-    h = spring_compression_m(vehicle, susp_deflection_m)
-    hd = np.asarray(susp_rate_mps, dtype=float)
-    out = np.empty(4)
-    for i in range(4):
-        ax = vehicle.axle(i)
-        hs = float(h[i])
-        if not (math.isfinite(hs) and math.isfinite(hd[i])):
-            out[i] = math.nan
-            continue
-        fsp = spring_force_n(min(hs, 10.0), ax.spring_c1_npm, ax.spring_c2_per_m, ax.spring_c3_m)
-        if not include_unsprung_weight:
-            out[i] = fsp + ax.damper_nspm * hd[i]
-            continue
-        mug = ax.unsprung_mass_kg * GRAVITY_MPS2
-        out[i] = 0.0 if fsp + mug <= 0.0 else max(fsp + ax.damper_nspm * hd[i] + mug, 0.0)
-    return out
 
 
 def tire_forces_wheel_n(slip_ratio, slip_angle_rad, params: IdentifiedParams) -> tuple[np.ndarray, np.ndarray]:

@@ -116,7 +116,8 @@ from typing import Callable
 import numpy as np
 
 from vdps_hil.identification.config import IdentConfig
-from vdps_hil.identification.forces import moments_from_inputs, suspension_forces_n
+from vdps_hil.identification.forces import moments_from_inputs
+from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.identification.inputs import IdentInputs
 from vdps_hil.model.params import Geometry, IdentifiedParams, Vehicle
 
