@@ -61,6 +61,7 @@ from .profiles import ProfileError, SensorProfile, load_profile
 from .scenarios import Scenario, ScenarioError, load_scenario
 from .sensors import GnssModel, ImuModel, StepRecorder, chassis_sensors
 from .simulator import Simulator
+from .truth_backends import TruthBackendError, truth_backend
 from .wire import SerialLink, bus_offsets_ns, can_packers, frame_time_ns, pack_imu_packets
 
 __all__ = ["Drive", "DriveError", "DriveSummary", "DriveSink", "RecordingSink", "DriveSession",
@@ -79,7 +80,8 @@ class DriveError(ValueError):
     """A drive that cannot be set up (one-line message)."""
 
 
-CONFIG_ERRORS = (DriveError, ScenarioError, ProfileError, FaultError, EffectConfigError, VehicleFileError)
+CONFIG_ERRORS = (DriveError, ScenarioError, ProfileError, FaultError, EffectConfigError, VehicleFileError,
+                 TruthBackendError)
 """Exceptions that mean a bad configuration (one line for the user)."""
 
 
@@ -121,6 +123,7 @@ class DriveSummary:
     wall_time_s: float
     timing_s: dict[str, float] = field(default_factory=dict)
     time_backwards: dict[str, int] = field(default_factory=dict)
+    truth: dict = field(default_factory=dict)
 
     @property
     def real_time_factor(self) -> float:
@@ -139,7 +142,8 @@ class DriveSummary:
                 "rollover_events": list(self.rollover_events),
                 "effects": list(self.effects), "faults": list(self.faults),
                 "wall_time_s": self.wall_time_s, "real_time_factor": self.real_time_factor,
-                "timing_s": dict(self.timing_s), "time_backwards": dict(self.time_backwards)}
+                "timing_s": dict(self.timing_s), "time_backwards": dict(self.time_backwards),
+                "truth": dict(self.truth)}
 
 
 class _Frame:
@@ -169,7 +173,10 @@ class Drive:
     scenario's), ``faults`` (fault specs, see ``sim.faults``; the scenario's ``faults`` list, if
     the scenario file has one, comes first), ``duration_s`` (default the scenario's), ``bus``
     (CAN bus name), ``read_period_s`` (serial read window), ``block_s`` (processing block),
-    ``dbc`` (path; default ``dbc/vdps.dbc``).
+    ``dbc`` (path; default ``dbc/vdps.dbc``), ``truth`` (a truth backend spec,
+    ``sim.truth_backends``: default our simulator; ``commonroad-mb:1`` brings its own vehicle, so
+    ``vehicle`` is refused with it) and ``flat_road`` (that backend's option for a banked or
+    graded scenario).
 
     ``run(output)`` writes the recording (a path or a binary stream) and returns a
     :class:`DriveSummary`.
@@ -178,16 +185,25 @@ class Drive:
     def __init__(self, scenario: Scenario | str, *, profile: SensorProfile | str = DEFAULT_PROFILE,
                  seed: int = 0, vehicle: Vehicle | str | None = None, effects: Iterable[str] = (),
                  faults: Iterable[Any] = (), duration_s: float | None = None, bus: str = DEFAULT_BUS,
-                 read_period_s: float = 0.005, block_s: float = 0.5, dbc: str | os.PathLike | None = None):
+                 read_period_s: float = 0.005, block_s: float = 0.5, dbc: str | os.PathLike | None = None,
+                 truth: str | None = None, flat_road: bool = False):
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.profile = profile if isinstance(profile, SensorProfile) else load_profile(profile)
         self.seed = int(seed)
+        self.truth = truth_backend(truth, flat_road=flat_road)
+        if self.truth is None and flat_road:
+            raise DriveError("flat_road applies to a truth backend with a flat road only (--truth)")
+        if self.truth is not None and vehicle is not None:
+            raise DriveError(f"--vehicle does not apply with --truth {self.truth.spec}: the backend brings its vehicle")
         if vehicle is None:
-            vehicle = self.scenario.vehicle
+            vehicle = self.scenario.vehicle if self.truth is None else self.truth.vehicle
         elif not isinstance(vehicle, Vehicle):
             vehicle = load_vehicle(vehicle, "truth")
         self.vehicle = vehicle
         self.effect_set = self._effects(list(effects))
+        self.truth_notes: list[str] = []
+        if self.truth is not None:
+            self.effect_set, self.truth_notes = self.truth.prepare(self.scenario, self.effect_set)
         dur = self.scenario.duration_s if duration_s is None else float(duration_s)
         if not (dur > 0 and math.isfinite(dur)):
             raise DriveError(f"duration must be a positive number of seconds, got {duration_s!r}")
@@ -347,8 +363,12 @@ class DriveSession:
             [(f.start_ns, {"kind": "fault_start", "fault": f.name, **f.params}) for f in self.faults]
             + [(f.end_ns, {"kind": "fault_end", "fault": f.name, **f.params}) for f in self.faults
                if f.end_ns < (1 << 61)], key=lambda e: e[0])
-        sim = Simulator(drive.vehicle, scenario=drive.scenario, effects=drive.effect_set,
-                        record_truth=False, on_truth=self._on_truth, duration_s=drive.duration_s)
+        if drive.truth is None:
+            sim = Simulator(drive.vehicle, scenario=drive.scenario, effects=drive.effect_set,
+                            record_truth=False, on_truth=self._on_truth, duration_s=drive.duration_s)
+        else:
+            sim = drive.truth.simulator(drive.scenario, drive.effect_set, record_truth=False,
+                                        on_truth=self._on_truth, duration_s=drive.duration_s)
         self.sim = sim
         self._setup(sim)
         self._end_n = int(math.floor(drive.duration_s * NS_PER_S / sim.dt_ns + 1e-9))
@@ -382,7 +402,11 @@ class DriveSession:
                 "imu_unit": self._imu.describe(),
                 "enu_origin": {"lat_deg": DEFAULT_ORIGIN.lat_deg, "lon_deg": DEFAULT_ORIGIN.lon_deg,
                                "h_m": DEFAULT_ORIGIN.h_m},
-                "bus": d.bus, "read_period_s": d.read_period_ns / NS_PER_S}
+                "bus": d.bus, "read_period_s": d.read_period_ns / NS_PER_S, "truth": self._truth_backend()}
+
+    def _truth_backend(self) -> dict:
+        d = self.drive
+        return {"backend": "ours"} if d.truth is None else d.truth.describe(self.sim)
 
     def _setup(self, sim: Simulator) -> None:
         d = self.drive
@@ -550,4 +574,4 @@ class DriveSession:
             max_abs_roll_rel_road_rad=st["max_roll_v"], rollover_events=list(self._events),
             effects=list(d.effect_set.names), faults=[f.spec() for f in self.faults],
             wall_time_s=wall, timing_s=dict(self._timing),
-            time_backwards=self.sink.time_backwards)
+            time_backwards=self.sink.time_backwards, truth=self._truth_backend())
