@@ -81,7 +81,8 @@ Truth figures (:func:`truth_figures`): what a study compares identified paramete
 are truth: only ``sim`` and ``experiments`` may read them (the layer rule keeps the estimator
 out). Derivations, with the package's symbols:
 
-* total mass m = m_s + m_uf + m_ur (m_uf, m_ur are per axle).
+* total mass m: the package's MASS, the mass of its longitudinal equation; m_s + m_uf + m_ur
+  (m_uf, m_ur are per axle) agrees with it to 1e-3 kg.
 * static tire loads (level road, at rest): F_z0,front = (m_s g b / (a + b) + m_uf g) / 2,
   F_z0,rear = (m_s g a / (a + b) + m_ur g) / 2 (the package's own static load, ``init_mb``).
 * cornering stiffness per axle: the Magic Formula slope at alpha = 0 is B C D = K_y =
@@ -193,7 +194,12 @@ def parameter_sha256(set_id: int) -> str:
 # the package's right-hand side, re-bound
 # ---------------------------------------------------------------------------------------------
 def _rebind(fn: Callable, **replace: Any) -> Callable:
-    """``fn``'s code object over a copy of its module globals with some names replaced."""
+    """``fn``'s code object over a copy of its module globals with some names replaced (each
+    must be a global the function reads: a package version that renamed it is refused)."""
+    missing = [n for n in replace if n not in fn.__code__.co_names]
+    if missing:
+        raise CrParameterError(f"commonroad-vehicle-models {package_version()}: {fn.__name__} no longer "
+                               f"reads {', '.join(missing)}; this backend is written for 3.0.2")
     g = dict(fn.__globals__)
     g.update(replace)
     return types.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__)
@@ -299,7 +305,7 @@ def truth_figures(set_id: int) -> dict[str, float]:
     m_u = (p.m_uf / 2, p.m_uf / 2, p.m_ur / 2, p.m_ur / 2)
     iz_unsprung = sum(mu * (x * x + y * y) for mu, (x, y) in zip(m_u, corners))
     fig = {
-        "mass_kg": p.m_s + p.m_uf + p.m_ur,
+        "mass_kg": p.m,
         "inertia_x_kgm2": p.I_Phi_s,
         "inertia_y_kgm2": p.I_y_s,
         "inertia_z_kgm2": p.I_z - iz_unsprung,
@@ -311,6 +317,7 @@ def truth_figures(set_id: int) -> dict[str, float]:
         "inertia_z_unsprung_kgm2": iz_unsprung,
         "inertia_xz_kgm2": p.I_xz_s,
         "sprung_mass_kg": p.m_s,
+        "mass_sum_of_bodies_kg": p.m_s + p.m_uf + p.m_ur,
         "unsprung_mass_front_axle_kg": p.m_uf,
         "unsprung_mass_rear_axle_kg": p.m_ur,
         "cornering_stiffness_per_load_nprad_per_n": ky,
@@ -321,7 +328,7 @@ def truth_figures(set_id: int) -> dict[str, float]:
         "h_sprung_cg_static_m": p.h_s - ride.z_sprung_m,
         "static_pitch_rad": ride.pitch_rad,
         "roll_axis_height_front_m": p.h_raf, "roll_axis_height_rear_m": p.h_rar,
-        "aux_roll_stiffness_front_nmprad": -p.K_tsf, "aux_roll_stiffness_rear_nmprad": -p.K_tsr,
+        "aux_roll_stiffness_front_nmprad": 0.0 - p.K_tsf, "aux_roll_stiffness_rear_nmprad": 0.0 - p.K_tsr,
         "spring_rate_front_npm": p.K_sf, "spring_rate_rear_npm": p.K_sr,
         "damping_front_nspm": p.K_sdf, "damping_rear_nspm": p.K_sdr,
         "tire_vertical_stiffness_npm": p.K_zt, "wheel_radius_m": p.R_w, "wheel_inertia_kgm2": p.I_y_w,
