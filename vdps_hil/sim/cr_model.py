@@ -35,14 +35,16 @@ Changes made here (each switchable for tests; the defaults are what the truth ba
 -------------------------------------------------------------------------------------------
 1. **Smoothed camber sign** (``sign_width_rad``). ``formula_lateral`` writes the camber terms
    as S_Hy = sign(gamma)(p_hy1 + p_hy3 |gamma|), S_Vy = sign(gamma) F_z (p_vy1 + p_vy3 |gamma|):
-   with p_vy1 = 0.037 a lateral force of 3.7 % of the load flips side whenever the camber
-   crosses zero, so straight ahead (gamma = roll + camber gain x travel ~ 0) the tires chatter:
-   set 1 at 25 m/s with a 1e-6 rad roll disturbance, +-160 N per tire and +-0.36 m/s^2 of
-   lateral acceleration on a straight road (smoothed: below 1e-4 m/s^2). We use sign(gamma) ~ tanh(gamma / w) with w = ``CAMBER_SIGN_WIDTH_RAD``
-   = 0.01 rad: the camber-thrust slope at zero camber is then p_vy1 F_z / w = 3.7 F_z per rad,
-   0.17 of the cornering stiffness |p_ky1| F_z = 21.9 F_z per rad (a camber stiffness of a tenth
-   to a fifth of the cornering stiffness is the usual order for radial car tires); beyond
-   |gamma| = 3 w the package's values are kept to 0.5 %.
+   as the camber crosses zero the lateral force jumps by 2 F_z (p_ky1 p_hy1 + p_vy1) = -0.043 F_z
+   (158 N on a 3.7 kN front tire of set 1), so straight ahead (gamma = roll + camber gain x
+   travel ~ 0) the tires chatter: set 1 at 25 m/s with a 1e-6 rad roll disturbance, each tire's
+   force swings between -160 and +160 N and the lateral acceleration by +-0.36 m/s^2 on a
+   straight road (smoothed: below 1e-4 m/s^2). We use sign(gamma) ~ tanh(gamma / w) with
+   w = ``CAMBER_SIGN_WIDTH_RAD`` = 0.01 rad: the camber slope at zero camber is then
+   F_z (p_ky1 p_hy1 + p_vy1) / w = -2.1 F_z per rad, 0.10 of the cornering stiffness
+   |p_ky1| F_z = 21.9 F_z per rad (a camber stiffness of about a tenth of the cornering
+   stiffness is the usual order for radial car tires); beyond |gamma| = 3 w the package's values
+   are kept to 0.5 %.
 2. **Mirrored combined slip** (``mirror_combined``). The package's combined-slip functions are
    not mirror-symmetric: ``formula_lateral_comb`` has the slip-induced side force
    S_Vy,kappa = mu_y F_z (r_vy1 + r_vy3 gamma) cos(atan(r_vy4 alpha)) sin(r_vy5 atan(r_vy6 kappa))
