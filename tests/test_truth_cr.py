@@ -19,7 +19,7 @@ import pytest
 from vdps_hil.model.core import Inputs
 from vdps_hil.model.effects import effects_from_names
 from vdps_hil.model.frames import c_omega, dcm_global_to_vehicle
-from vdps_hil.sim.cr_model import CR_GRAVITY_MPS2, load_parameters, truth_figures
+from vdps_hil.sim.cr_model import CR_GRAVITY_MPS2, truth_figures
 from vdps_hil.sim.scenarios import load_scenario, parse_scenario
 from vdps_hil.sim.truth_cr import CommonRoadBackend, CommonRoadTruth, TruthRangeError, body_kinematics
 

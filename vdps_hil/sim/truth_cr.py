@@ -114,9 +114,9 @@ from typing import Callable, Sequence
 from vdps_hil.model.core import Env, Inputs, StateLayout
 from vdps_hil.model.effects import EffectSet, MeasurementEffect, TireModel
 from vdps_hil.model.effects.base import ImuKinematics
-from vdps_hil.units import NS_PER_S
 
 from .cr_inputs import CrInputs, InputMapping
+from .stepping import FixedStepTruth, InputSource, SimulationError, rk_step, snapshot_ltr
 from .truth_backends import TruthBackendError
 from .cr_model import (CR_GRAVITY_MPS2, CrParameterError, TireProbe, load_parameters, mb_rhs, static_ride,
                        truth_figures, truth_vehicle)
@@ -212,9 +212,6 @@ class _ModelView:
         self.rolling_radius_m = (vehicle.tire.rolling_radius_m,) * 4
 
 
-InputSource = Callable[[float, Sequence[float]], Inputs]
-
-
 def check_scenario(scenario, effects: EffectSet, flat_road: bool) -> tuple[EffectSet, list[str]]:
     """The effects the backend keeps (measurement effects) and its notes; TruthRangeError for a
     scenario outside its range (module docstring, "Range")."""
@@ -280,7 +277,7 @@ def trim_state(p, speed_mps: float, heading_rad: float = 0.0, east_m: float = 0.
 
 
 # ---------------------------------------------------------------------------------------------
-class CommonRoadTruth:
+class CommonRoadTruth(FixedStepTruth):
     """A steppable truth on CommonRoad's multibody model with :class:`Simulator`'s interface
     (module docstring).
 
@@ -308,18 +305,10 @@ class CommonRoadTruth:
         self.effects, self.notes = check_scenario(scenario, effects, flat_road)
         self.env = Env()
         self.model = _ModelView(self.vehicle, self.figures)
-        if integrator not in _STEP_FACTOR:
-            raise ValueError(f"unknown integrator {integrator!r} (rk4 or rk2)")
-        self.integrator = integrator
+        self._init_clock(dt_s, truth_rate_hz, integrator)
         if not (isinstance(refine, int) and refine >= 1):
-            raise ValueError(f"refine must be an integer >= 1, got {refine!r}")
+            raise SimulationError(f"refine must be an integer >= 1, got {refine!r}")
         self.refine = refine
-        dt_ns = int(round(dt_s * NS_PER_S))
-        truth_ns = int(round(NS_PER_S / truth_rate_hz))
-        if dt_ns <= 0 or dt_ns > 1_000_000 or truth_ns % dt_ns:
-            raise ValueError(f"dt_s must be <= 1 ms and divide the truth period {truth_ns} ns; got {dt_s}")
-        self.dt_ns, self.dt_s = dt_ns, dt_ns / NS_PER_S
-        self._truth_every = truth_ns // dt_ns
         kw = {"mirror_combined": mirror_combined}
         if sign_width_rad is not None:
             kw["sign_width_rad"] = sign_width_rad
@@ -332,13 +321,7 @@ class CommonRoadTruth:
         self._lam_w = p.R_w ** 2 * p.tire.p_kx1 * fz_max / p.I_y_w
         self._lam_lat = (2.0 * abs(p.tire.p_ky1) * fz_max, p.K_rad, min(p.m_uf, p.m_ur))
         self._step_factor = _STEP_FACTOR[integrator]
-        # inputs
-        if inputs is None and scenario is not None:
-            inputs = scenario.input_source(self.model, self.env)
-        if inputs is None:
-            inputs = Inputs()
-        self._source: InputSource = (lambda t, x, _u=inputs: _u) if isinstance(inputs, Inputs) else inputs
-        self._override = None
+        self._init_inputs(inputs, scenario, self.model, self.env)
         # initial state
         speed = initial_speed_mps
         heading = east = north = 0.0
@@ -362,15 +345,7 @@ class CommonRoadTruth:
         self._cmd = self._ci = self._applied = self._k1 = self._view = None
         self._emit_truth()
 
-    # ------------------------------------------------------------------ time and state
-    @property
-    def t_s(self) -> float:
-        return self.n * self.dt_ns / NS_PER_S
-
-    @property
-    def t_ns(self) -> int:
-        return self.n * self.dt_ns
-
+    # ------------------------------------------------------------------ state
     def _fresh(self) -> None:
         if self._cache_n != self.n:
             self._cache_n = self.n
@@ -399,9 +374,6 @@ class CommonRoadTruth:
         """As :meth:`Simulator.set_input_override`: acts on the commanded inputs from the next step."""
         self._override = override
         self._cache_n = -1
-
-    def add_step_hook(self, fn: Callable) -> None:
-        self._step_hooks.append(fn)
 
     def commanded_inputs(self) -> Inputs:
         """The schedule's or driver's inputs for the step starting now, after the override."""
@@ -473,22 +445,13 @@ class CommonRoadTruth:
         n_sub = self.substeps(x[3])
         self.max_substeps = max(self.max_substeps, n_sub)
         h = self.dt_s / n_sub
-        f = self.derivative
+        deriv = self.derivative
+
+        def f(xs):
+            return deriv(xs, u)
         k1 = self._deriv_now()
         for j in range(n_sub):
-            if j:
-                k1 = f(x, u)
-            if self.integrator == "rk4":
-                hh = 0.5 * h
-                k2 = f([a + hh * b for a, b in zip(x, k1)], u)
-                k3 = f([a + hh * b for a, b in zip(x, k2)], u)
-                k4 = f([a + h * b for a, b in zip(x, k3)], u)
-                h6 = h / 6.0
-                x = [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
-            else:
-                k2 = f([a + h * b for a, b in zip(x, k1)], u)
-                h2 = 0.5 * h
-                x = [a + h2 * (b + c) for a, b, c in zip(x, k1, k2)]
+            x = rk_step(f, x, k1 if j == 0 else f(x), h, self.integrator)
             for k in range(23, 27):
                 if x[k] < 0.0:
                     x[k] = 0.0
@@ -498,25 +461,8 @@ class CommonRoadTruth:
         if not all(math.isfinite(v) for v in x):
             self.stopped = True
             self.stop_reason = "non-finite state"
-            raise ValueError(f"CommonRoad truth: non-finite state at t = {self.t_s:.3f} s")
-        for hook in self._step_hooks:
-            hook(self)
-        if self.n % self._truth_every == 0:
-            self._emit_truth()
-        return not self.stopped
-
-    def step_to(self, t_s: float) -> float:
-        target = int(math.floor(t_s * NS_PER_S / self.dt_ns + 1e-9))
-        while self.n < target and not self.stopped:
-            self.step()
-        return self.t_s
-
-    def run(self, duration_s: float | None = None) -> list[dict]:
-        d = duration_s if duration_s is not None else self.duration_s
-        if d is None:
-            raise ValueError("no duration: give run(duration_s) or a scenario")
-        self.step_to(d)
-        return self.truth
+            raise SimulationError(f"CommonRoad truth: non-finite state at t = {self.t_s:.3f} s")
+        return self._after_step()
 
     # ------------------------------------------------------------------ truth
     def kinematics(self) -> ImuKinematics:
@@ -582,18 +528,13 @@ class CommonRoadTruth:
         s["steer_wheel_angle_rad"] = self.commanded_inputs().steer_wheel_angle_rad
         s["road_wheel_angle_cmd_rad"] = -ci.road_wheel_angle_cmd_rad
         s["road_bank_rad"] = s["road_grade_rad"] = 0.0
-        fl = s["normal_load_n_1"] + s["normal_load_n_4"]
-        fr = s["normal_load_n_2"] + s["normal_load_n_3"]
-        s["ltr"] = (fr - fl) / (fr + fl) if fr + fl > 0 else 0.0
+        s["ltr"] = snapshot_ltr(s)
         return s
 
     def _emit_truth(self) -> None:
         s = self.snapshot()
         s["events"] = []
-        if self.record_truth:
-            self.truth.append(s)
-        if self._on_truth is not None:
-            self._on_truth(s)
+        self._deliver_truth(s)
         if min(s[f"normal_load_n_{i}"] for i in range(1, 5)) <= 0.0 and not self.stopped:
             self.stopped = True
             self.stop_reason = "lift_off_outside_model"
