@@ -216,6 +216,19 @@ def test_road_rollover_and_effects_outside_the_range_are_refused_in_one_line():
     assert kept.names == ("imu_bias",)
 
 
+@pytest.mark.parametrize("set_id", [1, 3])
+def test_the_cr_scenarios_are_in_range(set_id):
+    """The four maneuvers of issue 17 run on the backend: accepted (level road, no rollover),
+    their tire effect replaced, and their first second inside the model's input limits."""
+    for name in ("cr-circle-ramp", "cr-lane-change", "cr-sine-accel", "cr-straight-pulses"):
+        sc = load_scenario(name)
+        kept, notes = CommonRoadBackend(str(set_id)).prepare(sc, sc.effect_set())
+        assert kept.names == () and any("replaced" in n for n in notes)
+        sim = CommonRoadTruth(set_id, sc, kept)
+        sim.run(1.0)
+        assert not sim.stopped and sim.accel_limited_steps == 0
+
+
 # ------------------------------------------------------------------ interface
 def test_the_step_recorder_and_driver_read_it_as_our_simulator():
     from vdps_hil.sim.sensors import StepRecorder

@@ -43,8 +43,8 @@ per wheel in phase, 6.7 m/s^2 peak lateral acceleration, 4 s, against RK4 with 4
 RK2 differs by 5.6e-5 m in position, 1.2e-4 deg in attitude, 4.5e-4 m/s^2 in specific force and
 2.5e-4 rad/s in wheel spin; halving its step changes these by 1.4e-5 m, 2.9e-5 deg, 1.0e-4 m/s^2
 (a ratio of 4: second order, converged). That is two orders below the sensor noise of Table 1
-(0.02 m/s^2, 0.08 deg/s, 1 m, 0.4 deg), and RK2 costs 0.45 of RK4 (physics alone 3.3x against
-1.5x real time on one core). ``tests/test_truth_cr.py`` repeats the halving on a lower-speed
+(0.02 m/s^2, 0.08 deg/s, 1 m, 0.4 deg), and RK2 costs about half of RK4 (physics alone 8.6x
+against 4.4x real time in CPU seconds, ``tools/bench_truth_cr.py``). ``tests/test_truth_cr.py`` repeats the halving on a lower-speed
 circle with stated tolerances.
 
 Conversions (each tested in ``tests/test_truth_cr.py``)
