@@ -275,7 +275,12 @@ def test_vdps_sim_on_the_commonroad_truth_replays_and_the_ekf_tracks_it(tmp_path
     after 2 s the EKF's horizontal position RMS is below that of the raw GNSS fix (1 m per axis:
     sqrt(2) m) and its roll, pitch and yaw RMS below 0.4 deg (the GNSS attitude sigma): the
     fused estimate is no worse than its noisiest sensor; bounds set by the profile's noise, not
-    by today's error."""
+    by today's error (seed 21: 0.98 m, 0.03 / 0.05 / 0.04 deg). Not every seed meets the
+    position bound today, on either truth: the EKF keeps a seed-dependent position offset
+    (seed 4: 3.3 m on ``paper`` with our own truth too), an estimator matter outside this
+    backend; and with the suspension sensors the eq-5 attitude (rigid tires, body level at
+    design ride height) disagrees with this vehicle's tire roll (up to 0.6 deg) and its static
+    pitch (-0.18 deg), which on set 1, seed 1 leaves a 4 deg yaw error (issue 17)."""
     from vdps_hil.cli.main import main
     from vdps_hil.record.reader import RecordingReader
     drive, est, js = tmp_path / "cr1.mcap", tmp_path / "est.mcap", tmp_path / "sim.json"
