@@ -214,6 +214,8 @@ def test_road_rollover_and_effects_outside_the_range_are_refused_in_one_line():
         CommonRoadBackend("3").prepare(sc, effects_from_names(["aero_drag"]))
     kept, _ = CommonRoadBackend("3").prepare(sc, effects_from_names(["imu_bias", "linear_tire"]))
     assert kept.names == ("imu_bias",)
+    windy = parse_scenario('name = "w"\nduration_s = 1.0\n[wind]\nenu_mps = [0.0, 5.0, 0.0]\n')
+    assert any("wind not simulated" in n for n in CommonRoadBackend("1").prepare(windy, windy.effect_set())[1])
 
 
 @pytest.mark.parametrize("set_id", [1, 3])

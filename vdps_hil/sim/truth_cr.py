@@ -15,7 +15,7 @@ Range (refused or stopped, never silent)
 * **Effects**: a tire law of ours (``linear_tire``, ``magic_formula_tire``) is replaced by the
   model's own Pacejka tire (noted); other dynamics effects act on our physics core only and are
   refused; measurement effects (``imu_bias``, ``imu_lever_arm``) act in the sensor models as
-  with our truth.
+  with our truth. A scenario's wind is noted as not simulated (no aerodynamics).
 * **Low speed**: below 0.1 m/s the package switches to a kinematic model with zero slip; there
   the wheels are made to roll with the body (omega = u / R_w, our low-speed fallback: the
   package would let them spin up on the tire's force offsets). Between 0.1 m/s and a few m/s
@@ -223,6 +223,8 @@ def check_scenario(scenario, effects: EffectSet, flat_road: bool) -> tuple[Effec
                 raise TruthRangeError(f"scenario {scenario.name!r} asks for a road with {road}; the CommonRoad "
                                       f"model has a flat road only (--flat-road drives it level)")
             notes.append(f"flat road: the scenario's {road} is not simulated (--flat-road)")
+        if any(w != 0.0 for w in scenario.wind_enu_mps):
+            notes.append("wind not simulated: the CommonRoad model has no aerodynamics")
         if scenario.stop_at_point_of_no_return:
             raise TruthRangeError(f"scenario {scenario.name!r} is a rollover scenario; the CommonRoad model has "
                                   f"no wheel lift-off, rollover is outside its range")
