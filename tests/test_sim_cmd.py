@@ -49,6 +49,14 @@ def test_default_output_and_json_on_stdout(tmp_path, monkeypatch, capsys):
     (["sim", "paper", "--duration", "0"], "duration must be"),
     (["sim", "paper", "--duration", "x"], "Invalid value"),
     (["sim", "paper", "-o", "/no/such/dir/x.mcap"], "does not exist"),
+    (["sim", "cr-sine-accel", "--truth", "commonroad-mb:2"], "reserved"),
+    (["sim", "cr-sine-accel", "--truth", "commonroad-mb:7"], "1 or 3"),
+    (["sim", "cr-sine-accel", "--truth", "bogus"], "unknown truth"),
+    (["sim", "paper", "--truth", "commonroad-mb:1"], "flat road only"),
+    (["sim", "fishhook-suv", "--truth", "commonroad-mb:3", "--flat-road"], "no wheel lift-off"),
+    (["sim", "cr-sine-accel", "--truth", "commonroad-mb:1", "--effect", "aero_drag"], "own physics"),
+    (["sim", "cr-sine-accel", "--truth", "commonroad-mb:1", "--vehicle", "sedan-truth"], "brings its vehicle"),
+    (["sim", "cr-sine-accel", "--flat-road"], "flat_road applies"),
 ])
 def test_errors_are_one_line_with_exit_status_2(args, words, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -56,3 +64,17 @@ def test_errors_are_one_line_with_exit_status_2(args, words, capsys, tmp_path, m
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("vdps: error:") and words in err
     assert not list(tmp_path.iterdir())  # nothing written
+
+
+def test_commonroad_truth_prints_its_backend_and_warnings(tmp_path, capsys):
+    out, js = tmp_path / "c.mcap", tmp_path / "c.json"
+    assert main(["sim", "paper", "--truth", "commonroad-mb:3", "--flat-road", "--duration", "0.3",
+                 "-o", str(out), "--json", str(js)]) == 0
+    text = capsys.readouterr().out
+    assert "truth: commonroad-mb:3 (commonroad-vehicle-models" in text
+    assert "warning: flat road" in text and "magic_formula_tire replaced" in text
+    doc = json.loads(js.read_text())
+    assert doc["truth"]["backend"] == "commonroad-mb:3" and doc["truth"]["flat_road"] is True
+    with RecordingReader(out) as r:
+        meta = r.metadata()["truth.drive"]
+    assert json.loads(meta["truth"])["parameter_set"] == 3 and meta["vehicle"] == "commonroad-mb-3"

@@ -15,6 +15,12 @@ Examples:
   vdps sim paper -o paper.mcap --json -
   vdps sim paper --seed 3 --profile table1 --effect imu_bias -o biased.mcap
   vdps sim paper --fault gnss_outage:t_s=4,duration_s=3 --fault dropped_frames:fraction=0.02
+  vdps sim cr-sine-accel --truth commonroad-mb:1 -o cr1-sine.mcap
+
+\b
+Truth (--truth): ours (default, this project's physics core) or commonroad-mb:1 / :3
+(CommonRoad's multibody model, parameter set 1 or 3; flat road only, no wheel lift-off:
+see vdps_hil/sim/truth_cr.py).
 
 \b
 Faults (NAME or NAME:key=value,...): gnss_outage, gyro_spike, frozen_can_signal,
@@ -37,17 +43,21 @@ Without -o the recording is written to ./<scenario>.mcap."""
               help="Switch on an effect (NAME or NAME:param=value,...); repeatable.")
 @click.option("--fault", "faults", multiple=True, metavar="NAME",
               help="Inject a fault (NAME or NAME:key=value,...); repeatable.")
+@click.option("--truth", default=None, metavar="SPEC",
+              help="Truth backend: ours (default) or commonroad-mb:1 / commonroad-mb:3.")
+@click.option("--flat-road", is_flag=True, default=False,
+              help="With a flat-road truth backend: drive a banked or graded scenario level (warned).")
 @click.option("-o", "--output", default=None, metavar="FILE.mcap",
               help="Recording to write [default: ./<scenario>.mcap].")
 @json_option
-def sim(scenario, duration_s, seed, profile, vehicle, effects, faults, output, json_out):
+def sim(scenario, duration_s, seed, profile, vehicle, effects, faults, truth, flat_road, output, json_out):
     """Simulate SCENARIO (a name in configs/scenarios/ or a .toml path) and write its recording:
     /raw/can/vdps, /raw/serial/imu, /raw/serial/gnss and /truth/state (100 Hz), /truth/events."""
     from vdps_hil.sim.drive import CONFIG_ERRORS, DEFAULT_PROFILE, Drive
 
     try:
         drive = Drive(scenario, profile=profile or DEFAULT_PROFILE, seed=seed, vehicle=vehicle,
-                      effects=effects, faults=faults, duration_s=duration_s)
+                      effects=effects, faults=faults, duration_s=duration_s, truth=truth, flat_road=flat_road)
     except CONFIG_ERRORS as e:
         raise UserError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
     if output is None:
@@ -75,6 +85,19 @@ def _print_summary(doc: dict) -> None:
         f"{doc['wall_time_s']:.2f} s ({doc['real_time_factor']:.1f}x real time), "
         f"profile {doc['profile']}, seed {doc['seed']}"
         + (f", stopped at the {doc['stop_reason'].replace('_', ' ')}" if doc["stop_reason"] != "duration" else ""))
+    truth = doc.get("truth", {})
+    if truth.get("backend", "ours") != "ours":
+        say(f"  truth: {truth['backend']} ({truth['package']} {truth['package_version']}, {truth['integrator']} "
+            f"{truth['dt_s'] * 1e3:g} ms, up to {truth['max_substeps']} sub-steps)")
+        for note in truth.get("notes", []):
+            say(f"  warning: {note}")
+        if truth.get("steer_rate_limited_steps"):
+            lag = math.degrees(truth["steer_lag_max_rad"]) * truth["steer_ratio"]
+            say(f"  note: the model's steering-rate limit held the road wheels back on "
+                f"{truth['steer_rate_limited_steps']} steps (largest lag {lag:.2f} deg at the steering wheel)")
+        if truth.get("accel_limited_steps"):
+            say(f"  warning: the model's acceleration limits cut the wheel torques on "
+                f"{truth['accel_limited_steps']} steps")
     if doc["effects"]:
         say(f"  effects: {', '.join(doc['effects'])}")
     if doc["faults"]:

@@ -11,6 +11,9 @@ writer.
 * :mod:`.faults` -- sensor faults; :mod:`.wire` -- the real wire formats and their timing.
 * :mod:`.drive` -- ``Drive(scenario).run(out.mcap)``; :mod:`.session` steps it block by block into
   a sink (:mod:`.sinks`: the recording, or the HIL bench's live wires).
+* :mod:`.truth_cr` -- ``CommonRoadTruth(set_id, scenario)``: CommonRoad's multibody model as a
+  second truth with the same interface (``vdps sim --truth commonroad-mb:1``; :mod:`.cr_model`,
+  :mod:`.cr_inputs`, registry :mod:`.truth_backends`, shared clock :mod:`.stepping`).
 
 Rollover (tip-up, point of no return) is defined once in :mod:`vdps_hil.model.rollover`.
 ``sim`` never imports ``estimation``; the pipeline never imports ``sim``.

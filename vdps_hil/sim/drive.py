@@ -59,6 +59,7 @@ from .scenarios import Scenario, load_scenario
 from .session import DriveSession, DriveSummary
 from .signals import ScenarioError
 from .sinks import DriveSink, RecordingSink
+from .truth_backends import TruthBackendError, truth_backend
 
 __all__ = ["Drive", "DriveError", "parse_effect_spec", "DEFAULT_PROFILE", "DEFAULT_BUS", "CONFIG_ERRORS"]
 
@@ -72,7 +73,8 @@ class DriveError(ValueError):
     """A drive that cannot be set up (one-line message)."""
 
 
-CONFIG_ERRORS = (DriveError, ScenarioError, ProfileError, FaultError, EffectConfigError, VehicleFileError)
+CONFIG_ERRORS = (DriveError, ScenarioError, ProfileError, FaultError, EffectConfigError, VehicleFileError,
+                 TruthBackendError)
 """Exceptions that mean a bad configuration (one line for the user)."""
 
 
@@ -103,7 +105,10 @@ class Drive:
     scenario's), ``faults`` (fault specs, see ``sim.faults``; the scenario's ``faults`` list, if
     the scenario file has one, comes first), ``duration_s`` (default the scenario's), ``bus``
     (CAN bus name), ``read_period_s`` (serial read window), ``block_s`` (processing block),
-    ``dbc`` (path; default ``dbc/vdps.dbc``).
+    ``dbc`` (path; default ``dbc/vdps.dbc``), ``truth`` (a truth backend spec,
+    ``sim.truth_backends``: default our simulator; ``commonroad-mb:1`` brings its own vehicle, so
+    ``vehicle`` is refused with it) and ``flat_road`` (that backend's option for a banked or
+    graded scenario).
 
     ``run(output)`` writes the recording (a path or a binary stream) and returns a
     :class:`DriveSummary`.
@@ -112,16 +117,25 @@ class Drive:
     def __init__(self, scenario: Scenario | str, *, profile: SensorProfile | str = DEFAULT_PROFILE,
                  seed: int = 0, vehicle: Vehicle | str | None = None, effects: Iterable[str] = (),
                  faults: Iterable[Any] = (), duration_s: float | None = None, bus: str = DEFAULT_BUS,
-                 read_period_s: float = 0.005, block_s: float = 0.5, dbc: str | os.PathLike | None = None):
+                 read_period_s: float = 0.005, block_s: float = 0.5, dbc: str | os.PathLike | None = None,
+                 truth: str | None = None, flat_road: bool = False):
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.profile = profile if isinstance(profile, SensorProfile) else load_profile(profile)
         self.seed = int(seed)
+        self.truth = truth_backend(truth, flat_road=flat_road)
+        if self.truth is None and flat_road:
+            raise DriveError("flat_road applies to a truth backend with a flat road only (--truth)")
+        if self.truth is not None and vehicle is not None:
+            raise DriveError(f"--vehicle does not apply with --truth {self.truth.spec}: the backend brings its vehicle")
         if vehicle is None:
-            vehicle = self.scenario.vehicle
+            vehicle = self.scenario.vehicle if self.truth is None else self.truth.vehicle
         elif not isinstance(vehicle, Vehicle):
             vehicle = load_vehicle(vehicle, "truth")
         self.vehicle = vehicle
         self.effect_set = self._effects(list(effects))
+        self.truth_notes: list[str] = []
+        if self.truth is not None:
+            self.effect_set, self.truth_notes = self.truth.prepare(self.scenario, self.effect_set)
         dur = self.scenario.duration_s if duration_s is None else float(duration_s)
         if not (dur > 0 and math.isfinite(dur)):
             raise DriveError(f"duration must be a positive number of seconds, got {duration_s!r}")

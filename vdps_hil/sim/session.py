@@ -50,6 +50,7 @@ class DriveSummary:
     wall_time_s: float
     timing_s: dict[str, float] = field(default_factory=dict)
     time_backwards: dict[str, int] = field(default_factory=dict)
+    truth: dict = field(default_factory=dict)
 
     @property
     def real_time_factor(self) -> float:
@@ -68,7 +69,8 @@ class DriveSummary:
                 "rollover_events": list(self.rollover_events),
                 "effects": list(self.effects), "faults": list(self.faults),
                 "wall_time_s": self.wall_time_s, "real_time_factor": self.real_time_factor,
-                "timing_s": dict(self.timing_s), "time_backwards": dict(self.time_backwards)}
+                "timing_s": dict(self.timing_s), "time_backwards": dict(self.time_backwards),
+                "truth": dict(self.truth)}
 
 
 class DriveSession:
@@ -97,8 +99,12 @@ class DriveSession:
             [(f.start_ns, {"kind": "fault_start", "fault": f.name, **f.params}) for f in self.faults]
             + [(f.end_ns, {"kind": "fault_end", "fault": f.name, **f.params}) for f in self.faults
                if f.end_ns < (1 << 61)], key=lambda e: e[0])
-        sim = Simulator(drive.vehicle, scenario=drive.scenario, effects=drive.effect_set,
-                        record_truth=False, on_truth=self._on_truth, duration_s=drive.duration_s)
+        if drive.truth is None:
+            sim = Simulator(drive.vehicle, scenario=drive.scenario, effects=drive.effect_set,
+                            record_truth=False, on_truth=self._on_truth, duration_s=drive.duration_s)
+        else:
+            sim = drive.truth.simulator(drive.scenario, drive.effect_set, record_truth=False,
+                                        on_truth=self._on_truth, duration_s=drive.duration_s)
         self.sim = sim
         self._setup(sim)
         self._end_n = int(math.floor(drive.duration_s * NS_PER_S / sim.dt_ns + 1e-9))
@@ -132,7 +138,11 @@ class DriveSession:
                 "imu_unit": self._imu.describe(),
                 "enu_origin": {"lat_deg": DEFAULT_ORIGIN.lat_deg, "lon_deg": DEFAULT_ORIGIN.lon_deg,
                                "h_m": DEFAULT_ORIGIN.h_m},
-                "bus": d.bus, "read_period_s": d.read_period_ns / NS_PER_S}
+                "bus": d.bus, "read_period_s": d.read_period_ns / NS_PER_S, "truth": self._truth_backend()}
+
+    def _truth_backend(self) -> dict:
+        d = self.drive
+        return {"backend": "ours"} if d.truth is None else d.truth.describe(self.sim)
 
     def _setup(self, sim: Simulator) -> None:
         d = self.drive
@@ -306,4 +316,4 @@ class DriveSession:
             max_abs_roll_rel_road_rad=st["max_roll_v"], rollover_events=list(self._events),
             effects=list(d.effect_set.names), faults=[f.spec() for f in self.faults],
             wall_time_s=wall, timing_s=dict(self._timing),
-            time_backwards=self.sink.time_backwards)
+            time_backwards=self.sink.time_backwards, truth=self._truth_backend())

@@ -54,12 +54,11 @@ from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import ImuKinematics
 from vdps_hil.model.frames import decompose_vehicle
 from vdps_hil.model.params import Vehicle, load_vehicle
-from vdps_hil.units import NS_PER_S
 
 from vdps_hil.model.rollover import RolloverMonitor
 
-InputSource = Callable[[float, Sequence[float]], Inputs]
-"""``source(t_s, x) -> Inputs``: an open-loop schedule or a closed-loop driver."""
+from .stepping import FixedStepTruth, InputSource, SimulationError, rk_step, snapshot_ltr
+
 
 
 def _fast_inputs(steer: float, torques: tuple, brakes: tuple) -> Inputs:
@@ -70,11 +69,10 @@ def _fast_inputs(steer: float, torques: tuple, brakes: tuple) -> Inputs:
     return u
 
 
-class SimulationError(RuntimeError):
-    """The simulation cannot go on (bad configuration, non-finite state)."""
+__all__ = ["Simulator", "SimulationError", "InputSource"]
 
 
-class Simulator:
+class Simulator(FixedStepTruth):
     """A steppable truth simulator.
 
     Parameters
@@ -112,27 +110,12 @@ class Simulator:
         self.model = Model(vehicle, effects.dynamics if isinstance(effects, EffectSet) else effects,
                            unsprung_dof=unsprung_dof, **kw)
         self.effects = effects if isinstance(effects, EffectSet) else EffectSet(effects)
-        if integrator not in ("rk4", "rk2"):
-            raise SimulationError(f"unknown integrator {integrator!r} (rk4 or rk2)")
-        self.integrator = integrator
-        dt_ns = int(round(dt_s * NS_PER_S))
-        truth_ns = int(round(NS_PER_S / truth_rate_hz))
-        if dt_ns <= 0 or dt_ns > 1_000_000 or truth_ns % dt_ns:
-            raise SimulationError(f"dt_s must be <= 1 ms and divide the truth period {truth_ns} ns; got {dt_s}")
+        self._init_clock(dt_s, truth_rate_hz, integrator)
         limit = self.model.max_stable_step_s if integrator == "rk4" else self.model.max_stable_step_s * 2.0 / 2.78
         if dt_s > limit:
             raise SimulationError(f"dt_s {dt_s} s exceeds the stability limit {limit:.2e} s of the wheel-spin mode")
-        self.dt_s = dt_ns / NS_PER_S
-        self.dt_ns = dt_ns
-        self._truth_every = truth_ns // dt_ns
         self.n = 0
-        # input source
-        if inputs is None and scenario is not None:
-            inputs = scenario.input_source(self.model, self.env)
-        if inputs is None:
-            inputs = Inputs()
-        self._source: InputSource = (lambda t, x, _u=inputs: _u) if isinstance(inputs, Inputs) else inputs
-        self._override = None
+        self._init_inputs(inputs, scenario, self.model, self.env)
         # initial state
         if initial_state is not None:
             x0 = [float(v) for v in initial_state]
@@ -165,15 +148,7 @@ class Simulator:
         self._u_n = -1
         self._emit_truth()
 
-    # ------------------------------------------------------------------ time
-    @property
-    def t_s(self) -> float:
-        return self.n * self.dt_ns / NS_PER_S
-
-    @property
-    def t_ns(self) -> int:
-        return self.n * self.dt_ns
-
+    # ------------------------------------------------------------------ state
     @property
     def state(self) -> list[float]:
         """A copy of the state vector (layout: ``self.model.layout``)."""
@@ -201,10 +176,6 @@ class Simulator:
             self._u_n = self.n
         return self._u
 
-    def add_step_hook(self, fn: Callable[["Simulator"], None]) -> None:
-        """Call ``fn(sim)`` after every integration step (e.g. a 1 kHz sensor model)."""
-        self._step_hooks.append(fn)
-
     # ------------------------------------------------------------------ stepping
     def _deriv_now(self, u: Inputs) -> list:
         k = self._k1
@@ -219,45 +190,15 @@ class Simulator:
         if self.stopped:
             return False
         u = self.current_inputs()
-        f, env, h, x = self.model.f, self.env, self.dt_s, self.x
-        k1 = self._deriv_now(u)
-        if self.integrator == "rk4":
-            hh = 0.5 * h
-            k2 = f([a + hh * b for a, b in zip(x, k1)], u, env)
-            k3 = f([a + hh * b for a, b in zip(x, k2)], u, env)
-            k4 = f([a + h * b for a, b in zip(x, k3)], u, env)
-            h6 = h / 6.0
-            xn = [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
-        else:
-            k2 = f([a + h * b for a, b in zip(x, k1)], u, env)
-            h2 = 0.5 * h
-            xn = [a + h2 * (b + c) for a, b, c in zip(x, k1, k2)]
+        f, env = self.model.f, self.env
+        xn = rk_step(lambda x: f(x, u, env), self.x, self._deriv_now(u), self.dt_s, self.integrator)
         self.x = xn
         self.n += 1
         if not math.isfinite(xn[6] + xn[9] + xn[12]):
             self.stopped = True
             self.stop_reason = "non-finite state"
             raise SimulationError(f"non-finite state at t = {self.t_s:.3f} s")
-        for hook in self._step_hooks:
-            hook(self)
-        if self.n % self._truth_every == 0:
-            self._emit_truth()
-        return not self.stopped
-
-    def step_to(self, t_s: float) -> float:
-        """Advance to the last step time <= t_s (or until stopped). Returns the time reached."""
-        target = int(math.floor(t_s * NS_PER_S / self.dt_ns + 1e-9))
-        while self.n < target and not self.stopped:
-            self.step()
-        return self.t_s
-
-    def run(self, duration_s: float | None = None) -> list[dict]:
-        """Step to ``duration_s`` (default: the scenario's) and return the truth snapshots."""
-        d = duration_s if duration_s is not None else self.duration_s
-        if d is None:
-            raise SimulationError("no duration: give run(duration_s) or a scenario")
-        self.step_to(d)
-        return self.truth
+        return self._after_step()
 
     # ------------------------------------------------------------------ truth
     def kinematics(self) -> ImuKinematics:
@@ -304,9 +245,7 @@ class Simulator:
             s[f"brake_torque_nm_{i + 1}"] = u.brake_torque_nm[i]
         s["steer_wheel_angle_rad"] = u.steer_wheel_angle_rad
         s["road_bank_rad"], s["road_grade_rad"] = env.bank_rad, env.grade_rad
-        fl = d["normal_load_n_1"] + d["normal_load_n_4"]
-        fr = d["normal_load_n_2"] + d["normal_load_n_3"]
-        s["ltr"] = (fr - fl) / (fr + fl) if fr + fl > 0 else 0.0
+        s["ltr"] = snapshot_ltr(s)
         return s
 
     def _emit_truth(self) -> None:
@@ -314,10 +253,7 @@ class Simulator:
         fz = [s[f"normal_load_n_{i}"] for i in range(1, 5)]
         evs = self.rollover.update(s["t_s"], fz, s["roll_v_rad"], s["roll_rate_v_radps"])
         s["events"] = [e.to_json() for e in evs]
-        if self.record_truth:
-            self.truth.append(s)
-        if self._on_truth is not None:
-            self._on_truth(s)
+        self._deliver_truth(s)
         if self.stop_at_point_of_no_return and self.rollover.point_of_no_return is not None and not self.stopped:
             self.stopped = True
             self.stop_reason = "point_of_no_return"
