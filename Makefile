@@ -13,6 +13,7 @@ $(STAMP): pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test,mdf,dask]'
+	$(PY) -m vdps_hil.jit --warm
 	touch $(STAMP)
 
 run: setup

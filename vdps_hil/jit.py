@@ -1,0 +1,83 @@
+"""Compiled kernels: one door to numba for every per-sample hot path.
+
+A kernel is a plain Python function decorated with :func:`kernel`; the Python function stays
+the reference (``f.py_func``), and the tests check the compiled one equal to it (tolerance
+stated per kernel: 1e-12 relative, or bit-exact where the operations are the same). Live,
+replay and the bench all call the same compiled code, so their outputs stay bit-identical to
+each other.
+
+Compilation and its cache
+-------------------------
+* numba compiles a kernel the first time it is called with a new signature (or, with explicit
+  signatures, at import) and writes the machine code to its cache; later processes load it in
+  milliseconds. The cache lives inside the virtual environment
+  (``<sys.prefix>/var/cache/vdps-hil/numba``), never in the working directory; set
+  ``NUMBA_CACHE_DIR`` to put it elsewhere.
+* ``make setup`` warms the cache (``python -m vdps_hil.jit --warm``: imports every module in
+  :data:`KERNEL_MODULES` and runs its ``warm()``), so no command a user runs pays the compile.
+* ``VDPS_JIT=0`` in the environment turns compilation off: every kernel runs as its Python
+  reference (for debugging, and for the equality tests' reference side).
+
+Layer 0 (imports nothing of ours), so every package may use it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+import time
+from typing import Callable
+
+__all__ = ["ENABLED", "KERNEL_MODULES", "kernel", "warm"]
+
+ENABLED = os.environ.get("VDPS_JIT", "1").strip().lower() not in ("0", "false", "no", "off")
+"""False when ``VDPS_JIT=0``: kernels run as plain Python."""
+
+os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(sys.prefix, "var", "cache", "vdps-hil", "numba"))
+
+KERNEL_MODULES: list[str] = []
+"""Modules that define kernels and a ``warm()`` that compiles them with representative
+arguments (``python -m vdps_hil.jit --warm``). A module adds itself here by name, in this
+file, when it gains kernels."""
+
+
+def kernel(*signatures, **options) -> Callable:
+    """Decorator: compile ``fn`` with numba in nopython mode (cached, GIL released, numpy error
+    model); ``fn.py_func`` is the Python reference. Without numba or with ``VDPS_JIT=0`` the
+    function is returned as it is (``py_func`` set to itself)."""
+
+    def wrap(fn: Callable) -> Callable:
+        if ENABLED:
+            import numba
+
+            opts = {"cache": True, "nogil": True, "error_model": "numpy"}
+            opts.update(options)
+            return numba.njit(*signatures, **opts)(fn)
+        fn.py_func = fn
+        return fn
+
+    return wrap
+
+
+def warm(verbose: bool = False) -> dict[str, float]:
+    """Import every kernel module and run its ``warm()``; returns seconds per module."""
+    out = {}
+    for name in KERNEL_MODULES:
+        t0 = time.perf_counter()
+        mod = importlib.import_module(name)
+        getattr(mod, "warm", lambda: None)()
+        out[name] = time.perf_counter() - t0
+        if verbose:
+            print(f"{name}: {out[name]:.2f} s", file=sys.stderr)
+    return out
+
+
+if __name__ == "__main__":  # python -m vdps_hil.jit --warm
+    if "--warm" in sys.argv[1:]:
+        took = warm(verbose=True)
+        print(f"compiled kernels of {len(took)} modules in {sum(took.values()):.1f} s"
+              f"{'' if ENABLED else ' (VDPS_JIT=0: nothing compiled)'}")
+    else:
+        print("usage: python -m vdps_hil.jit --warm", file=sys.stderr)
+        sys.exit(2)
