@@ -119,7 +119,7 @@ def steer_response_fit(t_s, speed_mps, steer_wheel_rad, yaw_rate_radps, course_r
     db = 1e-4
     j_b = (solve(bias + db)[2] - solve(bias - db)[2]) / (2 * db)  # d theta / d bias
     cov = np.linalg.pinv(A.T @ A / s2) + np.outer(j_b, j_b) * var_bias
-    info = np.linalg.pinv(cov)
+    info = _without_design_null_space(np.linalg.pinv(cov), A)
     p1, p2, p3 = theta
     sr = p1 / wheelbase_m
     x = p1 * understeer0 / (wheelbase_m * p2) if p2 != 0 else math.inf
@@ -149,6 +149,22 @@ def _window_means(t: np.ndarray, ok: np.ndarray, window_s: float, signals) -> np
         if m.sum() >= 3:
             win.append(tuple(x[m].mean() for x in signals))
     return np.array(win)
+
+
+def _without_design_null_space(info: np.ndarray, A: np.ndarray, rel_tol: float = 1e-9) -> np.ndarray:
+    """``info`` with the exact null space of the design ``A`` removed: P info P, P = I - V V^T,
+    V the parameter directions v with A v = 0 (singular values of the column-normalised A below
+    ``rel_tol`` times the largest). A noise-free drive (residual variance at rounding level)
+    otherwise turns rounding noise in those directions into information."""
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0.0] = 1.0
+    _, sv, vt = np.linalg.svd(A / scale, full_matrices=False)
+    null = vt[sv < rel_tol * sv[0]] / scale  # back to parameter coordinates: A (v_n / S) = 0
+    if not null.size:
+        return info
+    q, _ = np.linalg.qr(null.T)
+    p = np.eye(A.shape[1]) - q @ q.T
+    return p @ info @ p
 
 
 def _gains_and_explanations(A: np.ndarray, info: np.ndarray, prior: np.ndarray) -> tuple:
