@@ -23,8 +23,14 @@ run: setup
 browser:
 	@command -v chromium >/dev/null 2>&1 || { (apt-get update -qq && apt-get install -y -qq chromium >/dev/null) || echo "make: could not install chromium (report tests will say so)"; }
 
+# Two phases, both always run, either failing fails the target (pytest's exit 5, no test run, too):
+# everything but the real-time tests on both cores (pytest-xdist, one worker per module), then
+# the real-time tests (tests/conftest.py REALTIME_MODULES) on their own.
+PYTEST := $(PY) -m pytest -q -p no:cacheprovider --timeout 600
 test: setup browser
-	$(PY) -m pytest -q -p no:cacheprovider --timeout 600 tests
+	@$(PYTEST) -n 2 --dist loadfile --durations 15 -m "not realtime" tests; a=$$?; \
+	$(PYTEST) --durations 5 -m realtime tests; b=$$?; \
+	echo "make test: other tests exit $$a, real-time tests exit $$b"; [ $$a -eq 0 ] && [ $$b -eq 0 ]
 
 clean:
 	rm -rf $(VENV) .pytest_cache

@@ -34,6 +34,19 @@ def pytest_unconfigure(config):
         os.environ[_CACHE_ENV] = old
 
 
+REALTIME_MODULES = frozenset({"test_bench", "test_bench_cmd", "test_log_cmd", "test_recover_cmd"})
+"""Test modules whose behaviour depends on keeping up with the wall clock (the HIL bench, the
+logger at Table 1 rates, kill -9 while logging). They carry the ``realtime`` marker: ``make
+test`` runs them in a phase of their own, after the rest has run on both cores, so they meet
+the machine's own load, not the load of the test suite's other half."""
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.stem in REALTIME_MODULES:
+            item.add_marker(pytest.mark.realtime)
+
+
 @pytest.fixture
 def rng():
     """Every test's random numbers come from this seeded generator."""
