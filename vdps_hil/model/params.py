@@ -202,12 +202,13 @@ def _build(cls, table: Any, where: str):
                     or not all(isinstance(e, (int, float)) and not isinstance(e, bool) and math.isfinite(e) for e in v)):
                 raise VehicleFileError(f"{where}.{n}: expected a list of 3 finite numbers")
             kwargs[n] = tuple(float(e) for e in v)
-        _check_range(n, kwargs[n], where)
+        check_range(n, kwargs[n], where)
     return cls(**kwargs)
 
 
-def _check_range(name: str, value, where: str) -> None:
-    """``value`` (a number or each component of a vector) inside ``RANGES[name]``."""
+def check_range(name: str, value, where: str) -> None:
+    """``value`` (a number or each component of a vector) inside ``RANGES[name]``, else
+    :class:`VehicleFileError` (one line, naming ``where``)."""
     lo, hi = RANGES.get(name, (-math.inf, math.inf))
     for x in value if isinstance(value, tuple) else (value,):
         if not lo <= x <= hi:
