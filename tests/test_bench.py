@@ -183,10 +183,16 @@ def test_cross_process_bench_over_loopback_tcp(calibrated_params):
     assert sockets and all(addr == "127.0.0.1" for addr, _ in sockets), sockets
 
 
-def test_cross_process_bench_over_slcan_on_a_pty(tmp_path):
+def test_cross_process_bench_over_slcan_on_a_pty(tmp_path, monkeypatch):
+    """Run where modules named json, threading, numpy, ... lie in the working directory: the
+    pipeline process (python -P -m vdps_hil.hil.child) imports none of them."""
+    from planted_modules import markers, plant
+
+    monkeypatch.chdir(plant(tmp_path / "cwd"))
     out = tmp_path / "pty.mcap"
     d = Bench(BenchConfig(scenario="paper", duration_s=1.5, speed=CI_SPEED, can="pty", output=str(out))).run()
     d = d.to_json()
+    assert markers(tmp_path / "cwd") == []
     assert d["transport"] == "pty" and d["can"]["pipeline_spec"].startswith("slcan:/dev/pts/")
     assert_nothing_lost(d)
     with RecordingReader(out) as r:  # the child's part and the truth merged into one file

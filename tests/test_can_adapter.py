@@ -64,6 +64,9 @@ def test_virtual_bus_live_decoding_and_counted_rejects(rng):
         frames = good + [
             can.Message(arbitration_id=0x555, data=b"\x01\x02", is_extended_id=False),
             can.Message(arbitration_id=0x100, data=b"\x00\x01\x02", is_extended_id=False),
+            can.Message(arbitration_id=0x100, is_remote_frame=True, dlc=5, is_extended_id=False),
+            can.Message(arbitration_id=0x101, data=bytes(good[1].data[:4]) + b"\x01", is_fd=True,
+                        is_extended_id=False),  # right ID, length and counter, but CAN FD
         ] + list(encode_wheel_speeds([20.0, 21.0, 22.0, 23.0], 1))
         for m in frames:
             tx.send(m)
@@ -79,7 +82,8 @@ def test_virtual_bus_live_decoding_and_counted_rejects(rng):
             for s in samples] == pytest.approx([10.0, 12.0, 20.0, 22.0])
     c = a.health.all_counters()
     assert c["unknown_id"] == 1 and c["dlc_mismatch"] == 1
-    assert a.health.error_total() == 1  # the DLC mismatch; unknown IDs are not errors
+    assert c["remote_frame"] == 1 and c["fd_frame"] == 1
+    assert a.health.error_total() == 3  # DLC mismatch, remote, FD; unknown IDs are not errors
     # one host clock: raw t_ns increase, device time stamps kept
     assert all(r.device_time_ns for r in raws)
     assert [r.t_ns for r in raws] == sorted(r.t_ns for r in raws)

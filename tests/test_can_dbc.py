@@ -66,3 +66,17 @@ def test_bad_dbc_gives_one_line_error(tmp_path):
     p.write_text(text)
     with pytest.raises(DbcError, match="wheel_rpm_1: not a bus field"):
         VdpsDbc(p)
+
+
+@pytest.mark.parametrize("edit,msg", [
+    (("wheel_speed_radps_1 : 0|16@1- (0.01,0)", "wheel_speed_radps_1 : 0|16@1- (0,0)"), "scale 0 "),
+    (("BO_ 304 VDPS_SteerAngle: 3 SAS", "BO_ 304 VDPS_SteerAngle: 255 SAS"), "length 255"),
+    (("BO_ 304 VDPS_SteerAngle: 3 SAS", "BO_ 304 VDPS_SteerAngle: 12 SAS"), "1-8 data bytes"),
+], ids=["scale-0", "dlc-255", "dlc-12"])
+def test_absurd_numbers_in_the_dbc_give_one_line_error(tmp_path, edit, msg):
+    """Issue 20, finding 6: a scale of 0 was a ZeroDivisionError, DLC 255 was accepted."""
+    p = tmp_path / "bad.dbc"
+    p.write_text(DEFAULT_DBC_PATH.read_text().replace(*edit))
+    with pytest.raises(DbcError, match=msg) as e:
+        VdpsDbc(p)
+    assert "\n" not in str(e.value) and "bad.dbc" in str(e.value)

@@ -32,12 +32,16 @@ def test_rejects_counted_never_raised():
     assert dec.decode(0, 0x130, steer, is_extended_id=True) == []     # our ID, but 29-bit
     assert dec.decode(0, 0x130, None) == []                           # not bytes
     assert dec.decode(0, "x", steer) == []                            # not an ID
+    assert dec.decode(0, 0x130, steer, is_fd=True) == []              # our ID and DLC, but CAN FD
+    assert dec.decode(0, 0x130, b"", is_remote_frame=True) == []      # a remote frame
     c = dec.counters
     assert c["VDPS_SteerAngle"]["dlc_mismatch"] == 2
     assert c["VDPS_SteerAngle"]["out_of_range"] == 1
     assert c["VDPS_Warning"]["crc_mismatch"] == 1
-    assert dict(c["bus"]) == {"unknown_id": 1, "unknown_id_extended": 1, "malformed": 2}
-    assert dec.total_rejected == 8
+    assert dict(c["bus"]) == {"unknown_id": 1, "unknown_id_extended": 1, "malformed": 2,
+                              "fd_frame": 1, "remote_frame": 1}
+    assert dec.total_rejected == 10
+    assert dec.decode(0, 0x130, steer) != []  # the counter was not taken from the FD frame
     with pytest.raises(TypeError):
         c["bus"]["unknown_id"] = 0  # read-only view
 
@@ -60,6 +64,10 @@ def test_decode_message_and_encoder_class_route_samples():
     assert [s.fields["warning_counter"] for m in (a, b) for s in dec.decode_message(m)] == [0, 1]
     err = can.Message(arbitration_id=0x100, is_error_frame=True)
     assert dec.decode_message(err) == [] and dec.counters["bus"]["malformed"] == 1
+    rtr = can.Message(arbitration_id=0x130, is_remote_frame=True, dlc=3, is_extended_id=False)
+    fd = can.Message(arbitration_id=0x130, data=bytes(3), is_fd=True, is_extended_id=False)
+    assert dec.decode_message(rtr) == [] and dec.decode_message(fd) == []
+    assert dec.counters["bus"]["remote_frame"] == 1 and dec.counters["bus"]["fd_frame"] == 1
 
 
 # ---------------------------------------------------------------------------------------------

@@ -173,6 +173,18 @@ def _cache_file(cache) -> Path:
     return f
 
 
+def _retuned(doc, scale, rehash=False) -> str:
+    """``doc`` with the first wheel speed's scale set to ``scale`` (conversion too), every other
+    field intact; ``rehash``: its content_sha256 recomputed to match."""
+    doc = json.loads(json.dumps(doc))
+    m = next(m for m in doc["messages"] if m["name"] == "VDPS_WheelSpeedFront")
+    m["signals"][0]["scale"] = scale
+    m["signals"][0]["conversion"][1] = scale
+    if rehash:
+        doc["content_sha256"] = dbc_cache._content_sha256(doc["attributes"], doc["messages"])
+    return json.dumps(doc)
+
+
 @pytest.mark.parametrize("corrupt", [
     lambda doc, text: b"\x00not json",
     lambda doc, text: text[: len(text) // 2],
@@ -185,8 +197,12 @@ def _cache_file(cache) -> Path:
     lambda doc, text: json.dumps(dict(doc, messages=[dict(doc["messages"][0], signals=[
         dict(doc["messages"][0]["signals"][0], conversion=["exec", 1, 0, False, False])])])),
     lambda doc, text: json.dumps(dict(doc, messages=[dict(doc["messages"][0], extra=1)])),
+    lambda doc, text: _retuned(doc, 0.02),  # a number of the right type changed: content hash
+    lambda doc, text: _retuned(doc, 0, rehash=True),  # consistent, but a scale no decoder can use
+    lambda doc, text: json.dumps(dict(doc, content_sha256="0" * 64)),
 ], ids=["binary", "truncated", "list", "format", "parser", "strict", "length-type",
-        "bool-id", "conversion-kind", "extra-field"])
+        "bool-id", "conversion-kind", "extra-field", "tampered-scale", "zero-scale",
+        "content-hash"])
 def test_corrupt_or_stale_cache_file_is_ignored_and_replaced(cache, corrupt):
     dbc_cache.load_description(DEFAULT_DBC_PATH)
     f = _cache_file(cache)
@@ -250,7 +266,23 @@ def test_cache_location(monkeypatch, tmp_path):
     monkeypatch.setenv(dbc_cache.ENV_CACHE_DIR, str(tmp_path / "mine"))
     assert dbc_cache.cache_dir() == tmp_path / "mine" / "dbc"
     name = dbc_cache.cache_path("ab" * 32, False).name
-    assert name.startswith("ab" * 32 + ".lax.v1.") and name.endswith(".json")
+    assert name.startswith("ab" * 32 + f".lax.v{dbc_cache.FORMAT_VERSION}.") and name.endswith(".json")
+
+
+@pytest.mark.parametrize("edit,msg", [
+    (("wheel_speed_radps_1 : 0|16@1- (0.01,0)", "wheel_speed_radps_1 : 0|16@1- (0,0)"),
+     "VDPS_WheelSpeedFront.wheel_speed_radps_1: scale 0 "),
+    (("BO_ 304 VDPS_SteerAngle: 3 SAS", "BO_ 304 VDPS_SteerAngle: 255 SAS"),
+     "VDPS_SteerAngle: length 255 bytes"),
+], ids=["scale-0", "dlc-255"])
+def test_dbc_numbers_no_decoder_can_use_are_refused(cache, tmp_path, edit, msg):
+    bad = tmp_path / "bad.dbc"
+    bad.write_text(DEFAULT_DBC_PATH.read_text().replace(*edit))
+    assert bad.read_text() != DEFAULT_DBC_PATH.read_text()
+    with pytest.raises(dbc_cache.DbcValueError, match=msg) as e:
+        dbc_cache.load_description(bad)
+    assert "\n" not in str(e.value)
+    assert not list((cache / "dbc").glob("*.json"))
 
 
 def test_unparsable_dbc_raises_and_caches_nothing(cache, tmp_path):

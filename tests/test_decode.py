@@ -164,6 +164,22 @@ def test_garbage_is_counted_and_good_data_around_it_is_kept():
     assert rej["can.vdps"] == 2  # dlc mismatch + error frame
 
 
+def test_remote_and_fd_frames_with_a_valid_id_are_counted_rejects_not_samples():
+    """Issue 20, finding 7: a remote frame was recorded but counted by no decoder counter; a CAN
+    FD frame with a valid ID and length decoded as the classic message."""
+    good = S.raw_can_doc(0, 0x130, bytes(3))
+    remote = S.raw_can_doc(0, 0x130, b"", is_remote_frame=True, dlc=3)
+    fd = S.raw_can_doc(0, 0x130, bytes([0, 0, 1]), is_fd=True)
+    frames = [(1_000 * MS, good), (1_010 * MS, remote), (1_020 * MS, fd),
+              (1_030 * MS, dict(good, data_hex="000002"))]
+    d = decode_recording(_serial_recording([], can=[(t, dict(f, t_ns=t)) for t, f in frames]))
+    steer = [s for s in d if s.kind == "steer"]
+    assert [s.fields["seq_counter"] for s in steer] == [0.0, 2.0]  # the FD frame's counter 1 unused
+    bus = d.counters["can.vdps"]["bus"]
+    assert bus["remote_frame"] == 1 and bus["fd_frame"] == 1
+    assert d.rejected()["can.vdps"] == 2
+
+
 def test_unknown_serial_format_and_undecoded_bus_are_counted_not_fatal():
     buf = io.BytesIO()
     with RecordingWriter(buf) as w:

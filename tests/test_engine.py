@@ -262,3 +262,19 @@ def test_process_pool_gives_the_serial_results_and_survives_a_killed_worker(driv
 
 
 # ------------------------------------------------------------------- errors and resume
+
+
+# ------------------------------------------------------------- nothing from the working directory
+@pytest.mark.parametrize("backend", ["processes", "dask"])
+def test_spawned_workers_import_nothing_from_the_working_directory(backend, tmp_path, monkeypatch):
+    """Started where modules named json, threading, pickle, numpy, ... lie: the spawned workers
+    (``python -c ...`` bootstrap) import none of them."""
+    from planted_modules import markers, plant
+
+    cwd = plant(tmp_path / "cwd")
+    monkeypatch.setenv("PYTHONSAFEPATH", "")  # as in a user's shell; restored afterwards
+    monkeypatch.chdir(cwd)
+    with Engine(EngineConfig(backend=backend, workers=1)) as eng:
+        out = list(eng.run([Task("info", "vdps_hil.batch.tasks:worker_info")]))
+    assert [o.status for o in out] == ["ok"], [o.error for o in out]
+    assert markers(cwd) == []

@@ -72,6 +72,27 @@ def test_bad_interface_and_port_are_one_line_exit_2(tmp_path):
     assert not out.exists()  # devices are checked before the file is created
 
 
+def test_absurd_sizes_durations_and_dbc_numbers_are_one_line_exit_2(tmp_path):
+    """Issue 20, finding 6: ``--rotate-mb 0`` was silently "no rotation"; a DBC scale of 0 was
+    a ZeroDivisionError (exit 1); a DLC of 255 was accepted."""
+    from vdps_hil.codecs.can_dbc import DEFAULT_DBC_PATH
+
+    dbc = DEFAULT_DBC_PATH.read_text()
+    (tmp_path / "scale0.dbc").write_text(dbc.replace("(0.01,0) [-327.68|327.67]", "(0,0) [-327.68|327.67]"))
+    (tmp_path / "dlc255.dbc").write_text(dbc.replace("VDPS_SteerAngle: 3 SAS", "VDPS_SteerAngle: 255 SAS"))
+    out = tmp_path / "x.mcap"
+    for args, msg in ((["--rotate-mb", "0"], "--rotate-mb must be a finite positive"),
+                      (["--rotate-mb", "-1"], "--rotate-mb must be"), (["--rotate-s", "nan"], "--rotate-s must"),
+                      (["--flush-s", "inf"], "--flush-s must"),
+                      (["--dbc", f"vdps={tmp_path / 'scale0.dbc'}"], "scale 0 "),
+                      (["--dbc", f"vdps={tmp_path / 'dlc255.dbc'}"], "length 255")):
+        p = vdps("log", "--can", "vdps=virtual:absurd", *args, "-o", out, "--duration", "1")
+        assert p.returncode == 2, (args, p.stderr)
+        lines = p.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("vdps: error:") and msg in lines[0], p.stderr
+    assert not out.exists()
+
+
 def test_unreadable_signal_map_is_one_line(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[bus.vdps\n")

@@ -1,5 +1,7 @@
 """Recovery of cut and damaged recordings: every complete chunk rescued, nothing invented."""
 
+import struct
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -97,3 +99,82 @@ def test_not_mcap_is_one_line(tmp_path):
     with pytest.raises(RecoverError, match="new file"):
         write_file(tmp_path / "z.mcap", 10)
         recover(tmp_path / "z.mcap", tmp_path / "z.mcap")
+
+
+# ------------------------------------------------------------- a corrupted record length field
+def _records(data: bytes) -> list[tuple[int, int, int]]:
+    """(offset, opcode, length) of every top-level record of an intact file, up to DataEnd."""
+    out, p = [], 8
+    while p + 9 <= len(data):
+        op, n = struct.unpack_from("<BQ", data, p)
+        out.append((p, op, n))
+        if op == 0x0F:  # DataEnd
+            break
+        p += 9 + n
+    return out
+
+
+@pytest.fixture(scope="module")
+def many_chunks(tmp_path_factory):
+    """2000 samples in 40 chunks (each record: a chunk and its message index), closed."""
+    p = tmp_path_factory.mktemp("len") / "full.mcap"
+    data = write_file(p, 2000, 50)
+    recs = _records(data)
+    assert sum(op == 0x06 for _, op, _ in recs) == 40
+    return data, recs
+
+
+def _recover_bytes(tmp_path, data: bytes) -> tuple[dict, list[int]]:
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(data)
+    rep = recover(bad, tmp_path / "fixed.mcap")
+    return rep, seqs(tmp_path / "fixed.mcap")
+
+
+def _assert_kept(got: list[int], n: int = 2000, share: float = 0.99) -> None:
+    assert got == sorted(set(got)) and set(got) <= set(range(n))  # in order, nothing invented
+    assert len(got) >= share * n, f"kept {len(got)} of {n}"
+
+
+@pytest.mark.parametrize("summary", [True, False], ids=["with summary", "cut before the summary"])
+@pytest.mark.parametrize("value", [1 << 40, 17, 5000, 0], ids=["past the end", "tiny", "inside", "zero"])
+@pytest.mark.parametrize("which", ["chunk", "message index"])
+def test_one_corrupted_length_field_keeps_every_record(tmp_path, many_chunks, summary, value, which):
+    """The length field of one record in the middle is overwritten: the record is still read
+    (its fields imply its length; the chunk index has it) and everything after it is kept."""
+    data, recs = many_chunks
+    op_wanted = 0x06 if which == "chunk" else 0x07
+    off = [o for o, op, _ in recs if op == op_wanted][20]
+    b = bytearray(data)
+    struct.pack_into("<Q", b, off + 1, value)
+    if not summary:
+        b = b[:recs[-1][0]]  # no DataEnd, no summary, no footer: as after a crash
+    rep, got = _recover_bytes(tmp_path, bytes(b))
+    _assert_kept(got)
+    assert got == list(range(2000))  # a length field alone loses nothing
+    assert rep["summary_used"] is summary
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10**6), st.integers(0, 2**64 - 1), st.booleans())
+def test_any_corrupted_length_field_keeps_99_percent(tmp_path_factory, many_chunks, pick, value, summary):
+    data, recs = many_chunks
+    off, _, _ = recs[1:-1][pick % (len(recs) - 2)]  # any record between the header and DataEnd
+    b = bytearray(data)
+    struct.pack_into("<Q", b, off + 1, value)
+    if not summary:
+        b = b[:recs[-1][0]]
+    rep, got = _recover_bytes(tmp_path_factory.mktemp("any"), bytes(b))
+    _assert_kept(got)
+
+
+def test_a_damaged_spot_without_summary_resynchronises_on_the_next_chunk(tmp_path, many_chunks):
+    """Header and body start of one chunk overwritten, no summary: that chunk is lost (50
+    records), the scan resumes at the next valid record and keeps the rest."""
+    data, recs = many_chunks
+    off = [o for o, op, _ in recs if op == 0x06][10]
+    b = bytearray(data[:recs[-1][0]])
+    b[off:off + 40] = b"\xa5" * 40
+    rep, got = _recover_bytes(tmp_path, bytes(b))
+    assert got == [i for i in range(2000) if not 500 <= i < 550]
+    assert rep["resynchronised"] and rep["resynchronised"][0]["bad_record_at"] == off

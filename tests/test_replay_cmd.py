@@ -210,6 +210,9 @@ def test_broken_inputs_are_one_line_errors_or_read_as_far_as_they_go(drive, tmp_
     assert code == 0
     doc = json.loads((tmp_path / "c.json").read_text())
     assert doc["estimates_summary"]["count"] > 50 and doc["decode"]["reader"]["problems"]
+    # said on the terminal too, not only in --json (issue 20, finding 7): one warning line
+    warn = [ln for ln in text.splitlines() if "warning:" in ln]
+    assert len(warn) == 1 and f"parts of {cut} skipped: " in warn[0], text
 
 
 def test_sensor_set_inferred_or_named(drive, tmp_path):

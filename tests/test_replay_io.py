@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
+import sys
 
 import pytest
 from mcap.reader import make_reader
@@ -137,3 +139,17 @@ def test_local_side_holds_raw_records_until_the_output_starts(drive, tmp_path):
         meta = r.metadata()["vdps.recording"]
     assert meta["source"] == "test" and int(meta["sim_epoch_ns"]) > 0  # the input's clock kept
     assert sorted(raw_out) == sorted(raw_in) and n > 10_000
+
+
+def test_the_second_process_imports_nothing_from_the_working_directory(drive, tmp_path):
+    """``vdps replay --jobs 2`` run where modules named json, threading, numpy, ... lie in the
+    working directory: the child (python -P -m vdps_hil.app.replay_io) never imports them."""
+    from planted_modules import markers, plant
+
+    cwd = plant(tmp_path / "cwd")
+    vdps = os.path.join(os.path.dirname(sys.executable), "vdps")
+    r = subprocess.run([vdps, "replay", str(drive), "--jobs", "2", "--json", "s.json",
+                        "-o", "out.mcap"], cwd=cwd, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert markers(cwd) == []
+    assert json.loads((cwd / "s.json").read_text())["jobs"] == 2

@@ -163,6 +163,18 @@ def test_vdps_map_generic_decoder_equals_vdps_codec(rng):
             assert a[0].fields[k] == pytest.approx(v, abs=1e-12)
 
 
+def test_remote_and_fd_frames_of_classic_messages_are_counted_not_decoded(rng):
+    sm = load_signalmap("vdps")
+    bm = sm.buses["vdps"]
+    dec = SignalMapDecoder(bm, load_dbc(bm.dbc), source="can.vdps")
+    m = _vdps_frames(rng, 1)[0]
+    assert dec.decode(0, m.arbitration_id, bytes(m.data), False, is_fd=True) == []
+    assert dec.decode(0, m.arbitration_id, b"", False, is_remote_frame=True) == []
+    assert len(dec.decode(0, m.arbitration_id, bytes(m.data), False)) == 1
+    assert dec.counters["fd_mismatch"] == 1 and dec.counters["remote_frame"] == 1
+    assert dec.counters["decoded"] == 1
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.tuples(st.integers(0, 0x7FF), st.binary(max_size=12)), max_size=60),
        st.integers(0, 2**32 - 1))

@@ -20,8 +20,8 @@ class _Recorder:
         self.calls = []
         self.counters = {}
 
-    def decode(self, t_ns, arbitration_id, data, is_extended_id=False):
-        self.calls.append((t_ns, arbitration_id, bytes(data), bool(is_extended_id)))
+    def decode(self, t_ns, arbitration_id, data, is_extended_id=False, **flags):
+        self.calls.append((t_ns, arbitration_id, bytes(data), bool(is_extended_id), flags))
         return []
 
 
@@ -30,7 +30,8 @@ class _Recorder:
        remote=st.booleans(), error=st.booleans())
 def test_fast_raw_can_path_reads_what_json_reads(ext, ident, data, remote, error):
     """The regex fast path over the writer's raw CAN documents gives the decoder exactly what the
-    JSON path gives it, for any classic frame (and remote/error frames take the JSON path)."""
+    JSON path gives it, for any classic frame (remote/error frames take the JSON path; a remote
+    frame reaches the decoder flagged, which counts it; an error frame is malformed)."""
     from vdps_hil.record.streams import CanStream
 
     ident = ident if ext else ident & 0x7FF
@@ -44,4 +45,5 @@ def test_fast_raw_can_path_reads_what_json_reads(ext, ident, data, remote, error
     fast.feed_raw(rec.t_ns, rec.data)
     slow.feed(rec.t_ns, json.loads(rec.data))
     assert fast.dec.calls == slow.dec.calls and fast.malformed == slow.malformed
-    assert (fast.dec.calls == []) == (remote or error)
+    assert (fast.dec.calls == []) == error
+    assert all(c[4] == ({"is_remote_frame": True} if remote else {}) for c in fast.dec.calls)

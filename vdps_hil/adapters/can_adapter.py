@@ -154,15 +154,16 @@ class _CanDecodeMixin:
                       None if dev is None else int(round(dev * 1e9)))
 
     def _decode(self, t_ns, msg):
-        if self.decoder is None or msg.is_error_frame or msg.is_remote_frame:
+        if self.decoder is None or msg.is_error_frame:
             if msg.is_error_frame:
                 self.health.count("error_frames")
             return ()
         if self.decode_channels is not None and str(msg.channel) not in self.decode_channels:
             self.health.count("other_channel")
             return ()
+        flags = {k: True for k in ("is_fd", "is_remote_frame") if getattr(msg, k)}  # counted rejects
         return self.decoder.decode(t_ns, msg.arbitration_id, bytes(msg.data),
-                                   msg.is_extended_id)
+                                   msg.is_extended_id, **flags)
 
     def decoder_counters(self) -> Mapping[str, int]:
         c = getattr(self.decoder, "counters", None)

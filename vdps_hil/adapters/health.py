@@ -173,7 +173,8 @@ ERROR_COUNTERS = frozenset({
     "rejected",
     # CAN decoders (VdpsCanDecoder, SignalMapDecoder): per-frame rejects
     "dlc_mismatch", "undecodable", "out_of_range", "crc_mismatch", "checksum_mismatch",
-    "counter_repeat", "counter_jump", "malformed", "bad_frames",
+    "counter_repeat", "counter_jump", "malformed", "bad_frames", "remote_frame", "fd_frame",
+    "fd_mismatch",
     # file adapters: lines of a text log that could not be read
     "bad_lines", "non_utf8_lines",
     # this base class

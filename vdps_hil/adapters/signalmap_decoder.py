@@ -101,7 +101,8 @@ class SignalMapDecoder:
         self.source = source or f"can.{bus_map.name}"
         self._c = {k: 0 for k in ("frames", "decoded", "unmapped", "unknown_id",
                                   "dlc_mismatch", "undecodable", "checksum_mismatch",
-                                  "counter_jump", "missing_signal")}
+                                  "counter_jump", "missing_signal", "remote_frame",
+                                  "fd_mismatch")}
         self._by_key: dict[tuple[int, bool], _Compiled | None] = {}
         self._fast: dict[tuple[int, bool], tuple | None] = {}  # compiled layouts (None: cantools)
         self._dbc_msgs: dict[tuple[int, bool], Any] = {}
@@ -133,14 +134,23 @@ class SignalMapDecoder:
     def fields(self) -> set[str]:
         return self.bus_map.fields()
 
-    def decode(self, t_ns: int, arbitration_id: int, data: bytes,
-               is_extended_id: bool = False) -> list[Sample]:
+    def decode(self, t_ns: int, arbitration_id: int, data: bytes, is_extended_id: bool = False,
+               *, is_fd: bool = False, is_remote_frame: bool = False) -> list[Sample]:
+        """A frame -> ``[Sample]`` or ``[]`` (counted): a remote frame carries no signals
+        (``remote_frame``), a CAN FD frame of a classic message or a classic frame of an FD
+        message is not that message (``fd_mismatch``)."""
         c = self._c
         c["frames"] += 1
+        if is_remote_frame:
+            c["remote_frame"] += 1
+            return []
         key = (arbitration_id, bool(is_extended_id))
         comp = self._by_key.get(key)
+        m = self._dbc_msgs.get(key)
+        if m is not None and bool(is_fd) != bool(m.is_fd):
+            c["fd_mismatch"] += 1
+            return []
         if comp is None:
-            m = self._dbc_msgs.get(key)
             if m is None:
                 c["unknown_id"] += 1
                 return []

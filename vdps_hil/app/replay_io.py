@@ -5,7 +5,8 @@ A replay's costs split in two: the recording side (MCAP chunks, CAN frames, IMU 
 sentences, device clocks, the reorder buffer; copying the raw topics and writing the ``/est/``
 topics) and the system on the decoded samples. :class:`LocalRecordingSide` does the former in
 this process. :class:`RecordingProcess` runs a ``LocalRecordingSide`` in a child interpreter
-(``python -m vdps_hil.app.replay_io``) with the same interface: the child decodes and writes
+(``python -P -m vdps_hil.app.replay_io``: never importing from the working directory,
+``app.children``) with the same interface: the child decodes and writes
 while the parent runs the system, so on two free cores the wall time is set by the slower side
 instead of the sum. The output holds the same messages either way (tested).
 
@@ -43,6 +44,7 @@ import sys
 import threading
 from typing import Any, Iterator, Mapping
 
+from vdps_hil.app.children import child_environ, python_module_command
 from vdps_hil.bus.samples import Sample
 
 BATCH = 2048
@@ -251,8 +253,8 @@ class RecordingProcess:
                 "signalmap": None if signalmap is None else os.fspath(signalmap),
                 "bus_map": dict(bus_map or {}), "output": None if output is None else os.fspath(output),
                 "copy_raw": bool(copy_raw)}
-        self._proc = subprocess.Popen([sys.executable, "-m", __name__, json.dumps(args)],
-                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self._proc = subprocess.Popen(python_module_command(__name__, [json.dumps(args)]),
+                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=child_environ())
         _widen_pipes(self._proc.stdin, self._proc.stdout)
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
         self._sender = threading.Thread(target=self._send_frames, name="replay-io-send", daemon=True)

@@ -17,6 +17,10 @@ Backends (``EngineConfig.backend``)
 ``inline``     :func:`execute` in this process, one task after the other (the serial reference
                the parallel results are checked against, and the easiest to debug).
 
+The local worker processes (spawned: ``python -c ...``) start in safe-path mode
+(``PYTHONSAFEPATH=1``, :func:`vdps_hil.app.children.isolate_spawned_children`): a module in the
+working directory is never imported by them.
+
 Failure model
 -------------
 * A task that **raises** (corrupt file, unsupported format, bad config) does not stop the
@@ -45,6 +49,7 @@ import uuid
 from dataclasses import dataclass
 from typing import Any, Iterator, Sequence
 
+from vdps_hil.app.children import isolate_spawned_children
 from vdps_hil.batch.keys import tool_version
 from vdps_hil.batch.worker import Outcome, Task, execute, failure, one_line, outcome
 
@@ -128,6 +133,8 @@ class Engine:
 
     def start(self) -> None:
         cfg = self.config
+        if self.backend in ("dask", "processes"):
+            isolate_spawned_children()  # spawned workers import nothing from the working directory
         if self.backend == "dask":
             self._start_dask()
         elif self.backend == "processes":

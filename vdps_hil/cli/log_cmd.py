@@ -3,6 +3,7 @@ or ``--duration``, with a live one-line status per source."""
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import sys
@@ -146,7 +147,7 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
     """
     from vdps_hil.app.session import LogSession
 
-    _check_options(can_specs, serial_specs, duration, flush_s)
+    _check_options(can_specs, serial_specs, duration, flush_s, rotate_mb, rotate_s)
     model, start = _pipeline_start(pipeline, vehicle, params)
     adapters, info, sigmap = build_live_adapters(can_specs, serial_specs, formats, signalmap,
                                                  dbcs)
@@ -176,14 +177,18 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
     _report(summary, getattr(writer, "files", [output]), session, tap, quiet, json_out)
 
 
-def _check_options(can_specs, serial_specs, duration, flush_s) -> None:
+def _check_options(can_specs, serial_specs, duration, flush_s, rotate_mb, rotate_s) -> None:
+    """UserError unless there is something to log and every given duration or size is a finite
+    positive number (``--rotate-mb 0`` would otherwise silently mean "no rotation")."""
     if not can_specs and not serial_specs:
         raise UserError("nothing to log: give --can BUS=INTERFACE:CHANNEL and/or "
                         "--serial NAME=PORT[@BAUD]")
-    if duration is not None and duration <= 0:
-        raise UserError("--duration must be positive")
-    if flush_s <= 0:
-        raise UserError("--flush-s must be positive")
+    for name, v in (("--duration", duration), ("--flush-s", flush_s), ("--rotate-mb", rotate_mb),
+                    ("--rotate-s", rotate_s)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise UserError(f"{name} must be a finite positive number, got {v:g}")
+    if rotate_mb is not None and rotate_mb * 1e6 < 1000:
+        raise UserError(f"--rotate-mb must be at least 0.001 (1 kB), got {rotate_mb:g}")
 
 
 def _pipeline_start(pipeline: bool, vehicle: str, params: str | None):

@@ -1,4 +1,5 @@
-"""``vdps recover``: write a closed copy of a recording cut off by a crash or a full disk."""
+"""``vdps recover``: write a closed copy of a recording cut off by a crash or a full disk, or
+damaged in the middle."""
 
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ __all__ = ["recover_"]
 @json_option
 def recover_(broken, output, json_out):
     """Rescue every complete record of a recording cut off by a crash, a kill -9 or a full
-    disk into a new, properly closed file.
+    disk, or damaged in the middle (the scan resynchronises after a bad record), into a new,
+    properly closed file.
 
     Example: vdps recover track.mcap -o track-fixed.mcap
     """
@@ -35,4 +37,7 @@ def recover_(broken, output, json_out):
         click.echo(f"  {t}: {n}" + ("" if last is None else f" (last t_ns {last})"))
     for d in rep["damaged"]:
         click.echo(f"  damaged: {d}")
+    for r in rep["resynchronised"]:
+        click.echo(f"  bad record (opcode {r['opcode']}) at byte {r['bad_record_at']}: "
+                   f"{r['skipped_bytes']} bytes skipped, resumed at byte {r['resumed_at']}")
     write_json(rep, json_out)

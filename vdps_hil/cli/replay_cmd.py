@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from vdps_hil.cli.common import UserError, json_option, write_json
+from vdps_hil.cli.common import UserError, eprint, json_option, write_json
 
 _EXAMPLE = """\b
 Examples:
@@ -114,4 +114,8 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
     if output:
         line += f" -> {output}"
     click.echo(line, err=bool(json_out == "-"))
+    problems = doc.get("decode", {}).get("reader", {}).get("problems") or []
+    if problems:  # skipped parts of a damaged file are said without --json too
+        more = f" (and {len(problems) - 1} more: see --json decode.reader.problems)" if len(problems) > 1 else ""
+        eprint(f"vdps replay: warning: parts of {recording} skipped: {problems[0]}{more}")
     write_json(doc, json_out)

@@ -134,7 +134,8 @@ class VdpsDbc:
     ``VdpsDbc(path)`` raises :class:`DbcError` (one line) if the file is unreadable or breaks a
     rule the codec relies on: standard IDs, a ``VdpsKind`` attribute per message, exactly one
     counter signal (``seq_counter`` or ``warning_counter``), value signals named after catalogue
-    fields, a CRC signal (if any) filling byte 0, integer signals (no float signals).
+    fields, a CRC signal (if any) filling byte 0, integer signals (no float signals), 1-8 data
+    bytes, and (``codecs.dbc_cache``) finite non-zero scales.
     """
 
     def __init__(self, path: str | Path | None = None):
@@ -184,8 +185,9 @@ class VdpsDbc:
                           float(hi), raw_min, raw_max, s.unit or "", s)
 
     def _message_spec(self, m) -> MessageSpec:
-        if m.is_extended_frame or m.is_fd or m.is_container:
-            self._fail(f"{m.name}: only classic CAN frames with 11-bit IDs are supported")
+        if m.is_extended_frame or m.is_fd or m.is_container or not 1 <= m.length <= 8:
+            self._fail(f"{m.name}: only classic CAN frames (11-bit IDs, 1-8 data bytes) are "
+                       f"supported (DLC {m.length})")
         kind = m.attributes.get("VdpsKind", "")
         if not kind:
             self._fail(f"{m.name}: missing message attribute VdpsKind")

@@ -11,7 +11,9 @@ Rejects, each counted per message (``REJECT_REASONS``): ``dlc_mismatch`` (payloa
 DLC), ``undecodable`` (cantools could not decode), ``crc_mismatch``, ``counter_repeat``,
 ``counter_jump`` (``codecs.can_e2e``), ``out_of_range`` (raw outside the DBC range). Frames
 with an unknown ID are counted under ``bus/unknown_id`` (11-bit) or ``bus/unknown_id_extended``
-(29-bit, none are defined); arguments that are not an ID/bytes count as ``bus/malformed``.
+(29-bit, none are defined); the bus defines classic data frames only, so a remote frame counts
+as ``bus/remote_frame`` and a CAN FD frame (whatever its ID) as ``bus/fd_frame``; arguments that
+are not an ID/bytes, and error frames, count as ``bus/malformed``.
 """
 
 from __future__ import annotations
@@ -33,6 +35,9 @@ DEFAULT_SOURCE = "can.vdps"
 REJECT_REASONS = ("dlc_mismatch", "undecodable", "out_of_range", "crc_mismatch",
                   "counter_repeat", "counter_jump")
 """Per-message reject counters (each rejected frame increments exactly one)."""
+
+BUS_REJECTS = ("unknown_id", "unknown_id_extended", "malformed", "remote_frame", "fd_frame")
+"""Rejects of frames that are no message of the bus (module docstring)."""
 
 
 class _DecodePlan:
@@ -94,7 +99,7 @@ class VdpsCanDecoder:
         self._source = source
         self._max_delta = int(max_delta_counter)
         self._by_id = dict(self._dbc.by_id)
-        self._bus = {"unknown_id": 0, "unknown_id_extended": 0, "malformed": 0}
+        self._bus = dict.fromkeys(BUS_REJECTS, 0)
         self._counts = {name: dict.fromkeys(("accepted", "lost_frames") + REJECT_REASONS, 0)
                         for name in self._dbc.messages}
         self._seq = {name: SequenceState() for name in self._dbc.messages}
@@ -106,7 +111,8 @@ class VdpsCanDecoder:
 
     @property
     def counters(self) -> Mapping[str, Mapping[str, int]]:
-        """Read-only snapshot: ``{"bus": {unknown_id, unknown_id_extended, malformed},
+        """Read-only snapshot: ``{"bus": {unknown_id, unknown_id_extended, malformed,
+        remote_frame, fd_frame},
         <message name>: {accepted, lost_frames, dlc_mismatch, undecodable, out_of_range,
         crc_mismatch, counter_repeat, counter_jump}}``."""
         snap = {"bus": MappingProxyType(dict(self._bus))}
@@ -125,14 +131,19 @@ class VdpsCanDecoder:
 
     def decode_message(self, msg: can.Message, t_ns: int | None = None) -> list[Sample]:
         """Decode a python-can message (``t_ns`` defaults to its timestamp)."""
-        if msg.is_error_frame or msg.is_remote_frame:
+        if msg.is_error_frame:
             self._bus["malformed"] += 1
             return []
         t = t_ns if t_ns is not None else int(round(msg.timestamp * 1e9))
-        return self.decode(t, msg.arbitration_id, bytes(msg.data[:msg.dlc]), msg.is_extended_id)
+        return self.decode(t, msg.arbitration_id, bytes(msg.data[:msg.dlc]), msg.is_extended_id,
+                           is_fd=msg.is_fd, is_remote_frame=msg.is_remote_frame)
 
-    def decode(self, t_ns: int, arbitration_id: int, data: bytes,
-               is_extended_id: bool = False) -> list[Sample]:
+    def decode(self, t_ns: int, arbitration_id: int, data: bytes, is_extended_id: bool = False,
+               *, is_fd: bool = False, is_remote_frame: bool = False) -> list[Sample]:
+        """A frame -> ``[Sample]`` or ``[]`` (counted); remote and CAN FD frames are rejects."""
+        if is_remote_frame or is_fd:
+            self._bus["remote_frame" if is_remote_frame else "fd_frame"] += 1
+            return []
         try:
             t_ns = int(t_ns)
             aid = int(arbitration_id)

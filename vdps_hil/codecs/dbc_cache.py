@@ -14,10 +14,16 @@ Cache file::
 
 The parser tag (12 hex digits) hashes the installed cantools' version and its DBC parser file,
 so an upgraded cantools misses the old entries. The file repeats its key (format, DBC sha256,
-strict, parser) and is checked field by field on load (JSON only: nothing in it can execute);
-an unreadable, corrupt, foreign or stale file -- or an unwritable directory -- is ignored: the
-DBC is parsed by cantools again (counted in :data:`STATS`, logged at debug level), never an
-error.
+strict, parser), carries ``content_sha256`` -- the SHA-256 of its own attributes and messages
+in canonical JSON (sorted keys, no spaces), so a changed number of the right type is caught --
+and is checked field by field on load (JSON only: nothing in it can execute); an unreadable,
+corrupt, tampered, foreign or stale file -- or an unwritable directory -- is ignored: the DBC is
+parsed by cantools again (counted in :data:`STATS`, logged at debug level), never an error.
+
+Numbers no CAN decoder can use are refused in every DBC, parsed or cached (:class:`DbcValueError`,
+one line naming the message and signal): a message longer than 64 bytes (the largest CAN FD
+frame), a signal scale that is zero (every raw value would mean the same number; the encoders
+divide by it) or not finite, a non-finite offset.
 
 The description's classes carry the attribute names of cantools' ``Message``/``Signal`` for the
 same meanings (``frame_id``, ``length``, ``signals``, ``start``, ``byte_order``, ``conversion``
@@ -42,18 +48,19 @@ import hashlib
 import io
 import json
 import logging
+import math
 import os
 import tempfile
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping
 
-__all__ = ["FORMAT_VERSION", "ENV_CACHE_DIR", "STATS", "DbcDescription", "MessageDescription",
-           "SignalDescription", "Conversion", "cache_dir", "cache_path", "load_description"]
+__all__ = ["FORMAT_VERSION", "ENV_CACHE_DIR", "STATS", "DbcDescription", "DbcValueError",
+           "MessageDescription", "SignalDescription", "Conversion", "cache_dir", "cache_path", "load_description"]
 
 log = logging.getLogger(__name__)
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 """Bumped whenever the JSON layout or the meaning of a field changes (old files then miss)."""
 
 ENV_CACHE_DIR = "VDPS_CACHE_DIR"
@@ -69,6 +76,14 @@ stale, files written, writes that failed."""
 
 class _BadCache(ValueError):
     """A cache file that cannot be used (the reason is logged at debug level)."""
+
+
+class DbcValueError(ValueError):
+    """A DBC whose numbers no decoder can use (module docstring); the message is one line."""
+
+
+MAX_FRAME_BYTES = 64
+"""The longest CAN frame (CAN FD); a DBC message may not be longer."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -209,10 +224,30 @@ def _document(db, sha256: str, strict: bool) -> dict[str, Any]:
                      "cycle_time": m.cycle_time, "multiplexed": bool(m.is_multiplexed()),
                      "attributes": _scalar_attrs(m.dbc.attributes if m.dbc else None),
                      "signals": sigs})
+    attrs = _scalar_attrs(db.dbc.attributes if db.dbc else None)
     return {"format": FORMAT_VERSION, "dbc_sha256": sha256, "strict": strict,
-            "parser": _parser_tag(),
-            "attributes": _scalar_attrs(db.dbc.attributes if db.dbc else None),
-            "messages": msgs}
+            "parser": _parser_tag(), "content_sha256": _content_sha256(attrs, msgs),
+            "attributes": attrs, "messages": msgs}
+
+
+def _content_sha256(attributes, messages) -> str:
+    """SHA-256 of the description's content in canonical JSON (sorted keys, no spaces)."""
+    text = json.dumps([attributes, messages], sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _check_numbers(doc) -> None:
+    """:class:`DbcValueError` for a frame longer than :data:`MAX_FRAME_BYTES` or a zero or
+    non-finite scale, or a non-finite offset (module docstring)."""
+    for m in doc["messages"]:
+        if m["length"] > MAX_FRAME_BYTES:
+            raise DbcValueError(f"message {m['name']}: length {m['length']} bytes, a CAN frame "
+                                f"carries at most {MAX_FRAME_BYTES}")
+        for s in m["signals"]:
+            scale, offset = s["conversion"][1], s["conversion"][2]
+            if scale == 0 or not math.isfinite(scale) or not math.isfinite(offset):
+                raise DbcValueError(f"signal {m['name']}.{s['name']}: scale {scale!r} and offset "
+                                    f"{offset!r} must be finite, the scale non-zero")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -254,6 +289,8 @@ def _check_document(doc, sha256: str, strict: bool) -> None:
         raise _BadCache("made for another DBC, format or parser")
     if not isinstance(doc.get("attributes"), dict) or not isinstance(doc.get("messages"), list):
         raise _BadCache("no attributes or messages")
+    if doc.get("content_sha256") != _content_sha256(doc["attributes"], doc["messages"]):
+        raise _BadCache("content does not match its content_sha256")
     _check_attrs(doc["attributes"], "database")
     for i, m in enumerate(doc["messages"]):
         _check_fields(m, _MESSAGE_TYPES, f"message {i}")
@@ -325,6 +362,7 @@ def _read_cache(path: Path, sha256: str, strict: bool) -> dict | None:
     try:
         doc = json.loads(text)
         _check_document(doc, sha256, strict)
+        _check_numbers(doc)
     except (ValueError, RecursionError) as e:  # JSONDecodeError and _BadCache are ValueErrors
         STATS["rejected"] += 1
         log.debug("DBC cache %s ignored (%s): parsing the DBC", path, e)
@@ -357,8 +395,9 @@ def _write_cache(path: Path, doc: dict) -> None:
 def load_description(path: str | os.PathLike, *, strict: bool = True) -> DbcDescription:
     """The :class:`DbcDescription` of the DBC file ``path`` (cached; module docstring).
 
-    Raises ``OSError`` if the file cannot be read and whatever cantools raises if it cannot
-    parse it (the callers turn both into one-line errors); a cache problem is never raised.
+    Raises ``OSError`` if the file cannot be read, whatever cantools raises if it cannot
+    parse it, and :class:`DbcValueError` for numbers no decoder can use (the callers turn all
+    into one-line errors); a cache problem is never raised.
     """
     p = Path(path)
     data = p.read_bytes()
@@ -376,6 +415,7 @@ def load_description(path: str | os.PathLike, *, strict: bool = True) -> DbcDesc
     STATS["miss"] += 1
     db = _parse(data, strict)
     doc = _document(db, sha256, strict)
+    _check_numbers(doc)
     if where is not None:
         _write_cache(where, doc)
     # the description always comes from the JSON form, hit or miss: one behaviour

@@ -16,6 +16,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
+from vdps_hil.app.children import isolate_spawned_children
 from vdps_hil.experiments.paper_report import DEFINITIONS, finite_median, profile_doc
 from vdps_hil.experiments.paper_tasks import (FALSE_ALARM_SCENARIOS, SNR_TARGETS_DB, false_alarm_task,
                                               identification_task, rollover_task, snr_db, snr_noise_scale,
@@ -66,6 +67,8 @@ def _run_tasks(tasks: list[tuple[Callable, tuple, dict]], workers: int, progress
     import multiprocessing as mp
 
     ctx = mp.get_context("spawn" if os.name == "nt" else "fork")
+    if ctx.get_start_method() == "spawn":
+        isolate_spawned_children()  # no module of the working directory in the children
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
         futs = {ex.submit(fn, *a, **kw): i for i, (fn, a, kw) in enumerate(tasks)}
         done = 0

@@ -1,6 +1,6 @@
 """The bench's pipeline side, in this process (:class:`LocalPipeline`: a ``PipelineNode`` in a
 thread, python-can's virtual bus or an interface string) or in a child process
-(:class:`ChildPipeline`: ``python -m vdps_hil.hil.child`` over a pty or loopback TCP). Both have
+(:class:`ChildPipeline`: ``python -P -m vdps_hil.hil.child`` over a pty or loopback TCP). Both have
 the interface :class:`~vdps_hil.hil.bench.Bench` drives: ``open``, ``start(mono0)``, ``failed``,
 ``error``, ``received``, ``stop``, ``kill``, ``results``, ``finish_recording`` and ``pid``."""
 
@@ -9,13 +9,13 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 import threading
 from pathlib import Path
 
 import numpy as np
 
 from vdps_hil.adapters.base import AdapterError
+from vdps_hil.app.children import child_environ, python_module_command
 from vdps_hil.record import schemas as S
 
 from .bench_config import BenchError, make_system
@@ -95,20 +95,19 @@ class ChildPipeline:
         self.work = work
         c = bench.config
         self.part = work / "pipeline.mcap" if c.output else None
-        cmd = [sys.executable, "-m", "vdps_hil.hil.child", "--can-spec", can_dev.pipeline_spec,
-               "--imu-port", serial["imu"].port, "--gnss-port", serial["gnss"].port, "--model", bench.model,
-               "--susp-rate-hz", repr(bench.drive.profile.suspension.rate_hz),
-               "--susp-sigma-m", repr(bench.drive.profile.suspension.sigma_m),
-               "--speed", repr(c.speed), "--work", str(work)]
+        args = ["--can-spec", can_dev.pipeline_spec,
+                "--imu-port", serial["imu"].port, "--gnss-port", serial["gnss"].port, "--model", bench.model,
+                "--susp-rate-hz", repr(bench.drive.profile.suspension.rate_hz),
+                "--susp-sigma-m", repr(bench.drive.profile.suspension.sigma_m),
+                "--speed", repr(c.speed), "--work", str(work)]
         if self.part is not None:
-            cmd += ["--output", str(self.part)]
+            args += ["--output", str(self.part)]
         if c.params is not None:
-            cmd += ["--params", str(c.params)]
+            args += ["--params", str(c.params)]
         if c.switch_interval_s:
-            cmd += ["--switch-interval", repr(c.switch_interval_s)]
-        env = dict(os.environ)
-        repo = str(Path(__file__).resolve().parents[2])
-        env["PYTHONPATH"] = repo + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+            args += ["--switch-interval", repr(c.switch_interval_s)]
+        cmd = python_module_command("vdps_hil.hil.child", args)  # -P: nothing from the working directory
+        env = child_environ()
         self._err_path = work / "child.err"
         self._err = open(self._err_path, "w")  # a file, never a pipe that could fill and block the child
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._err,

@@ -10,8 +10,11 @@ Two kinds of file live in ``configs/vehicles/``:
   identifier, predictor and workbench read only model files.
 
 Loading uses :mod:`tomllib` (data only: nothing in a file can execute code); unknown or missing
-keys, wrong types and non-finite numbers are rejected with one-line :class:`VehicleFileError`.
-Identified parameters produce a new object (``dataclasses.replace``), never a mutation.
+keys, wrong types, non-finite numbers and numbers outside their physical range (:data:`RANGES`,
+wide enough for any road vehicle from a city car to a heavy truck; every component of a
+3-vector) are rejected with one-line :class:`VehicleFileError`, and so is a total mass that
+leaves no sprung mass above the four unsprung ones. Identified parameters produce a new object
+(``dataclasses.replace``), never a mutation.
 """
 
 from __future__ import annotations
@@ -145,6 +148,33 @@ class Vehicle:
         return dataclasses.replace(self, params=dataclasses.replace(self.params, **changes))
 
 
+RANGES: dict[str, tuple[float, float]] = {
+    # geometry [m], [-]: CG to axle 0.05-10 m (wheelbase up to a heavy truck's), half track
+    # 0.1-2 m, CG height 0.05-5 m, steering ratio 1-100 (module docstring)
+    "l_f_m": (0.05, 10.0), "l_r_m": (0.05, 10.0),
+    "track_half_front_m": (0.1, 2.0), "track_half_rear_m": (0.1, 2.0),
+    "h_cg_m": (0.05, 5.0), "steer_ratio": (1.0, 100.0),
+    # suspension corner (eq 14): spring C1 [N/m], progression C2 [1/m] (0: linear; 50/m would
+    # multiply the stiffness by e^5 over 10 cm), C3 and static compression [m], damper
+    # [N s/m] (0: none), unsprung mass per corner [kg]
+    "spring_c1_npm": (100.0, 1.0e7), "spring_c2_per_m": (-50.0, 50.0), "spring_c3_m": (-1.0, 1.0),
+    "static_compression_m": (0.0, 1.0), "damper_nspm": (0.0, 1.0e6), "unsprung_mass_kg": (1.0, 2000.0),
+    # tire: rolling radius [m], spin inertia [kg m^2], radial stiffness [N/m]
+    "rolling_radius_m": (0.1, 2.0), "wheel_inertia_kgm2": (0.01, 500.0),
+    "vertical_stiffness_npm": (1.0e4, 1.0e8),
+    # sensor mounting: lever arms [m] per component, rotation [rad] per angle, antenna
+    # baseline [m] (0: a single antenna, no attitude)
+    "imu_lever_arm_m": (-20.0, 20.0), "imu_rotation_rpy_rad": (-math.pi, math.pi),
+    "gnss_lever_arm_m": (-20.0, 20.0), "gnss_attitude_baseline_m": (0.0, 100.0),
+    # the ten identified parameters (priors, or truth): mass [kg], inertias [kg m^2],
+    # tracking stiffnesses [N per unit slip], cornering stiffnesses per axle [N/rad]
+    "mass_kg": (50.0, 1.0e5), "inertia_x_kgm2": (1.0, 1.0e7), "inertia_y_kgm2": (1.0, 1.0e7),
+    "inertia_z_kgm2": (1.0, 1.0e7),
+    **{f"tracking_stiffness_{i}_n": (100.0, 1.0e8) for i in range(1, 5)},
+    "cornering_stiffness_front_nprad": (100.0, 1.0e8), "cornering_stiffness_rear_nprad": (100.0, 1.0e8),
+}
+"""Physical range [lo, hi] of every number of a vehicle file, by field name (units in the name)."""
+
 _SECTIONS = {"geometry": Geometry, "front": Axle, "rear": Axle, "tire": Tire,
              "mounting": Mounting, "params": IdentifiedParams}
 
@@ -172,7 +202,18 @@ def _build(cls, table: Any, where: str):
                     or not all(isinstance(e, (int, float)) and not isinstance(e, bool) and math.isfinite(e) for e in v)):
                 raise VehicleFileError(f"{where}.{n}: expected a list of 3 finite numbers")
             kwargs[n] = tuple(float(e) for e in v)
+        check_range(n, kwargs[n], where)
     return cls(**kwargs)
+
+
+def check_range(name: str, value, where: str) -> None:
+    """``value`` (a number or each component of a vector) inside ``RANGES[name]``, else
+    :class:`VehicleFileError` (one line, naming ``where``)."""
+    lo, hi = RANGES.get(name, (-math.inf, math.inf))
+    for x in value if isinstance(value, tuple) else (value,):
+        if not lo <= x <= hi:
+            raise VehicleFileError(f"{where}.{name} = {x:g} is outside its physical range "
+                                   f"[{lo:g}, {hi:g}]")
 
 
 def parse_vehicle(text: str, origin: str = "<string>") -> Vehicle:
@@ -196,9 +237,10 @@ def parse_vehicle(text: str, origin: str = "<string>") -> Vehicle:
         raise VehicleFileError(f"{origin}[effects]: expected a table")
     if kind == "model" and effects:
         raise VehicleFileError(f"{origin}: a model file may not carry [effects] (truth only)")
-    for n in PARAM_NAMES:
-        if getattr(built["params"], n) <= 0.0:
-            raise VehicleFileError(f"{origin}[params].{n}: must be positive")
+    unsprung = 2.0 * (built["front"].unsprung_mass_kg + built["rear"].unsprung_mass_kg)
+    if built["params"].mass_kg <= unsprung:
+        raise VehicleFileError(f"{origin}[params].mass_kg = {built['params'].mass_kg:g} leaves no sprung "
+                               f"mass above the four unsprung masses ({unsprung:g} kg)")
     return Vehicle(name=str(doc.get("name", Path(origin).stem)), kind=kind,
                    description=str(doc.get("description", "")), effects=effects,
                    source_sha256=hashlib.sha256(text.encode()).hexdigest(), **built)

@@ -1,31 +1,43 @@
-"""Rescue a recording cut off by a crash, a ``kill -9`` or a full disk (``vdps recover``).
+"""Rescue a recording cut off by a crash, a ``kill -9`` or a full disk, or damaged in the
+middle (``vdps recover``).
 
 An MCAP file is a sequence of records ``opcode (1 byte) | length (8 bytes, LE) | body``. A
 logger that dies leaves a file without its summary and footer, usually ending inside a record.
 :func:`recover` walks the records from the start and copies every *complete* one into a new,
 properly closed file:
 
-* a record whose announced length runs past the end of the file ends the scan (the cut);
+* the length of each record is checked against the lengths its own fields imply and, when the
+  file's summary is intact (footer and summary CRC), against the summary's chunk index
+  (``record.mcap_resync``): a record whose length field alone is corrupted is read whole with
+  its true length; a record that cannot be delimited at all is skipped, and the scan
+  resynchronises on the next valid record (or the next chunk of the index), so one damaged spot
+  loses at most the record it hit;
+* a record whose body runs past the end of the file, with nothing valid after it, ends the scan
+  (the cut);
 * a chunk (compressed block of messages) is copied message by message when it decompresses
   and its CRC-32 matches; a damaged chunk is skipped and counted, and the scan goes on after
-  it (its length is known), so data after a damaged spot is not lost;
+  it, so data after a damaged spot is not lost;
 * schemas and channels are re-registered (our writer repeats them in every chunk, so every
-  complete chunk is self-describing), messages keep their ``log_time``, ``publish_time`` and
-  sequence; metadata records and attachments are copied;
+  complete chunk is self-describing; an intact summary supplies those of a lost part),
+  messages keep their ``log_time``, ``publish_time`` and sequence; metadata records and
+  attachments are copied;
 * the data section ends at the ``DataEnd`` record: a file that was closed properly is simply
   rewritten.
 
-What is lost: the chunk that was being written when the process died. The logger closes a
-chunk every ``flush_s`` (0.5 s), so that is at most about the last half second of data.
+What is lost: the chunk that was being written when the process died (the logger closes a chunk
+every ``flush_s``, 0.5 s, so at most about the last half second of data), and the records a
+damaged spot actually hit.
 
 The new file gets a metadata record ``vdps.recover`` with what was done (bytes scanned, where
-the cut was, messages per topic, damaged chunks).
+the cut was, messages per topic, damaged chunks, whether the summary was used, and each
+resynchronisation: the bad record's offset, where the scan resumed, the bytes skipped).
 """
 
 from __future__ import annotations
 
 import io
 import json
+import mmap
 import os
 import struct
 import zlib
@@ -37,12 +49,13 @@ from mcap.opcode import Opcode
 from mcap.records import (Attachment, Channel, Chunk, Header, Message, Metadata, Schema)
 from mcap.writer import CompressionType, IndexType, Writer
 
+from vdps_hil.record.mcap_resync import RecordFinder, read_summary
+
 __all__ = ["recover", "RecoverError", "RECOVER_METADATA"]
 
 MAGIC = b"\x89MCAP0\r\n"
 RECOVER_METADATA = "vdps.recover"
 _HEAD = struct.Struct("<BQ")
-_MAX_RECORD = 1 << 32
 
 
 class RecoverError(Exception):
@@ -65,6 +78,7 @@ class _Copier:
         self.messages_by_topic: dict[str, int] = {}
         self.orphans = 0
         self.last_t_ns: dict[str, int] = {}
+        self.summary = None  # record.mcap_resync.Summary of an intact summary section, or None
 
     def schema(self, s: Schema) -> None:
         if s.id in self.schemas:
@@ -91,8 +105,14 @@ class _Copier:
 
     def message(self, m: Message) -> None:
         cid = self.channels.get(m.channel_id)
+        if cid is None and self.summary is not None and m.channel_id in self.summary.channels:
+            ch = self.summary.channels[m.channel_id]  # its channel record was in a lost part
+            if ch.schema_id in self.summary.schemas:
+                self.schema(self.summary.schemas[ch.schema_id])
+            self.channel(ch)
+            cid = self.channels.get(m.channel_id)
         if cid is None:
-            self.orphans += 1  # its channel record was in a lost part
+            self.orphans += 1  # its channel record was in a lost part (and no summary has it)
             return
         self.out.add_message(cid, m.log_time, bytes(m.data), m.publish_time, m.sequence)
         topic = self.channel_topic[m.channel_id]
@@ -156,7 +176,8 @@ def recover(src: str | os.PathLike | IO[bytes], dst: str | os.PathLike) -> dict:
             raise RecoverError(f"cannot write {dst}: {e.strerror or e}") from None
         report = {"input": name, "input_bytes": size, "complete_bytes": len(MAGIC),
                   "chunks_ok": 0, "chunks_damaged": 0, "damaged": [], "metadata_records": 0,
-                  "attachments": 0, "properly_closed": False, "stop": ""}
+                  "attachments": 0, "properly_closed": False, "stop": "",
+                  "summary_used": False, "resynchronised": []}
         with out_f:
             w = Writer(out_f, compression=CompressionType.ZSTD, index_types=IndexType.ALL,
                        repeat_channels=True, repeat_schemas=True, use_chunking=True,
@@ -189,26 +210,58 @@ def _size_of(f: IO[bytes]) -> int | None:
         return None
 
 
+def _load(f: IO[bytes], size: int | None):
+    """The file's bytes (after its checked magic was read) as a buffer, memory-mapped when it
+    is a real file, and their count."""
+    if size:
+        try:
+            return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ), size
+        except (OSError, ValueError, io.UnsupportedOperation, AttributeError):
+            pass
+    try:
+        f.seek(0)
+        data = f.read()
+    except (OSError, io.UnsupportedOperation):  # a pipe: the magic was read already
+        data = MAGIC + f.read()
+    return data, len(data)
+
+
 def _copy_records(f: IO[bytes], size: int | None, w: Writer, cp: _Copier, report: dict) -> bool:
-    """Walk the records after the magic until the cut or the end of the data section, copying
-    each complete one (``report`` updated); returns whether the output writer was started."""
+    """Walk the records after the magic until the end of the data section or the cut, copying
+    each complete one (``report`` updated) and resynchronising after a damaged one
+    (``record.mcap_resync``); returns whether the output writer was started."""
+    buf, size = _load(f, size)
+    try:
+        summary = read_summary(buf, size)
+        report["summary_used"] = summary is not None
+        cp.summary = summary
+        return _walk(RecordFinder(buf, size, summary), w, cp, report)
+    finally:
+        if isinstance(buf, mmap.mmap):
+            buf.close()
+
+
+def _walk(rf: RecordFinder, w: Writer, cp: _Copier, report: dict) -> bool:
     started = False
     offset = len(MAGIC)
     while True:
-        head = f.read(_HEAD.size)
-        if len(head) < _HEAD.size:
-            report["stop"] = ("end of file" if not head else
+        head = rf.header(offset)
+        if head is None:
+            report["stop"] = ("end of file" if offset >= rf.size else
                               f"cut inside a record header at byte {offset}")
             break
-        op, length = _HEAD.unpack(head)
-        if length > _MAX_RECORD or (size is not None and
-                                    offset + _HEAD.size + length > size):
-            report["stop"] = f"cut inside a record (opcode {op}) at byte {offset}"
-            break
-        body = f.read(length)
-        if len(body) < length:
-            report["stop"] = f"cut inside a record (opcode {op}) at byte {offset}"
-            break
+        op, _ = head
+        length = rf.length(offset)
+        if length is None:
+            nxt = rf.resync(offset)
+            if nxt is None:
+                report["stop"] = f"cut inside a record (opcode {op}) at byte {offset}"
+                break
+            report["resynchronised"].append({"bad_record_at": offset, "opcode": op,
+                                             "resumed_at": nxt, "skipped_bytes": nxt - offset})
+            offset = nxt
+            continue
+        body = bytes(rf.buf[offset + _HEAD.size:offset + _HEAD.size + length])
         rec_offset = offset
         offset += _HEAD.size + length
         if op == Opcode.HEADER and not started:

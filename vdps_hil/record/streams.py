@@ -165,11 +165,13 @@ class CanStream:
 
     def feed(self, t_ns: int, doc) -> list[Sample]:
         try:
-            if doc["is_error_frame"] or doc["is_remote_frame"]:
+            if doc["is_error_frame"]:
                 self.malformed += 1
                 return []
             data = bytes.fromhex(doc["data_hex"])
-            return self.dec.decode(t_ns, doc["arbitration_id"], data, bool(doc["is_extended_id"]))
+            flags = {k: True for k in ("is_fd", "is_remote_frame") if doc[k]}  # counted rejects
+            return self.dec.decode(t_ns, doc["arbitration_id"], data, bool(doc["is_extended_id"]),
+                                   **flags)
         except (KeyError, TypeError, ValueError):
             self.malformed += 1
             return []
@@ -187,5 +189,6 @@ class CanStream:
             return n + int(tr)
         c = self.dec.counters
         return n + sum(int(c.get(k, 0)) for k in ("undecodable", "checksum_mismatch", "counter_jump",
-                                                   "dlc_mismatch", "missing_signal"))
+                                                   "dlc_mismatch", "missing_signal", "remote_frame",
+                                                   "fd_mismatch"))
 

@@ -36,7 +36,7 @@ from typing import Mapping, Sequence
 
 from vdps_hil.model.effects import REGISTRY, EffectSet
 from vdps_hil.model.effects.base import Effect, EffectConfigError
-from vdps_hil.model.params import PARAM_NAMES, Vehicle
+from vdps_hil.model.params import PARAM_NAMES, Vehicle, VehicleFileError, check_range
 
 __all__ = ["ModelFileError", "ModelFile", "save_model", "load_model", "read_model", "SCHEMA", "SCHEMA_VERSION"]
 
@@ -177,9 +177,11 @@ def read_model(path: str | Path) -> ModelFile:
     if bad:
         raise ModelFileError(f"{p}[params]: unknown parameter {bad[0]!r}")
     vals = {k: _num(v, f"{p}[params].{k}") for k, v in params.items()}
-    for k, v in vals.items():
-        if v <= 0:
-            raise ModelFileError(f"{p}[params].{k}: must be positive")
+    for k, v in vals.items():  # the vehicle file's physical ranges (model.params.RANGES)
+        try:
+            check_range(k, v, f"{p}[params]")
+        except VehicleFileError as e:
+            raise ModelFileError(str(e)) from None
     sig = doc.get("sigmas", {})
     if not isinstance(sig, dict):
         raise ModelFileError(f"{p}[sigmas]: expected a table")

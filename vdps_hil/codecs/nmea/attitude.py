@@ -25,7 +25,9 @@ import math
 from typing import Mapping
 
 from vdps_hil.codecs.nmea.fields import (
-    Fields, fmt_heading, fmt_num, fmt_time, heading_yaw, put_field,
+    RANGE_ACCURACY_DEG, RANGE_DOP, RANGE_HEADING_DEG, RANGE_HEAVE_M, RANGE_LENGTH_M, RANGE_ROLL_DEG,
+    RANGE_SIGNED_HEADING_DEG, RANGE_TILT_DEG, Fields, fmt_heading, fmt_num, fmt_time, heading_yaw,
+    put_field,
 )
 from vdps_hil.codecs.nmea.sentence import (
     ATTITUDE_LAYOUTS, ParsedSentence, SentenceError, wrap_sentence,
@@ -125,14 +127,14 @@ def parse_ths(f: Fields, talker: str, **_) -> ParsedSentence:
     f.need(2)
     mode = f.char(1, "mode", "AEMSV")
     out: dict[str, float] = {}
-    h = f.num(0, "heading", required=mode != "V", lo=0.0, hi=360.0)
+    h = f.num(0, "heading", RANGE_HEADING_DEG, required=mode != "V")
     put_field(out, "gnss_yaw_rad", None if h is None else heading_to_yaw(h % 360.0))
     return ParsedSentence("THS", talker, "gnss_att", out, valid=mode in "AE", has_roll=False,
                           extras={"mode": mode})
 
 
 def _sigma(f: Fields, i: int, what: str) -> float | None:
-    v = f.num(i, what, required=False, lo=0.0, hi=360.0)
+    v = f.num(i, what, RANGE_ACCURACY_DEG, required=False)
     return None if v is None else math.radians(v)
 
 
@@ -142,16 +144,16 @@ def parse_pashr(f: Fields, talker: str, *, signs, **_) -> ParsedSentence:
     t = f.time(0)
     out: dict[str, float] = {"gnss_yaw_rad": heading_yaw(f, 1)}
     f.char(2, "true flag", "T")
-    roll = f.num(3, "roll", lo=-180.0, hi=180.0)
-    pitch = f.num(4, "pitch", lo=-90.0, hi=90.0)
+    roll = f.num(3, "roll", RANGE_ROLL_DEG)
+    pitch = f.num(4, "pitch", RANGE_TILT_DEG)
     out["gnss_pitch_rad"] = sgn.pitch_to_paper * math.radians(pitch)
     out["gnss_roll_rad"] = sgn.roll_to_paper * math.radians(roll)
     put_field(out, "gnss_roll_sigma_rad", _sigma(f, 6, "roll accuracy"))
     put_field(out, "gnss_pitch_sigma_rad", _sigma(f, 7, "pitch accuracy"))
     put_field(out, "gnss_yaw_sigma_rad", _sigma(f, 8, "heading accuracy"))
-    extras = {"heave_m": f.num(5, "heave", required=False),
-              "gnss_quality": f.int_(9, "GNSS quality", required=False, hi=99),
-              "ins_status": f.int_(10, "INS status", required=False, hi=99)}
+    extras = {"heave_m": f.num(5, "heave", RANGE_HEAVE_M, required=False),
+              "gnss_quality": f.int_(9, "GNSS quality", 99, required=False),
+              "ins_status": f.int_(10, "INS status", 99, required=False)}
     return ParsedSentence("PASHR", "", "gnss_att", out, has_roll=True, utc_time_s=t,
                           extras=extras)
 
@@ -167,15 +169,15 @@ def parse_pashr_hpr(f: Fields, talker: str, *, signs, baseline, **_) -> ParsedSe
     t = f.time(1)
     out: dict[str, float] = {"gnss_yaw_rad": heading_yaw(f, 2)}
     use_p, use_r = _dual_slots(baseline)
-    pitch = f.num(3, "pitch", required=False, lo=-90.0, hi=90.0)
-    roll = f.num(4, "roll", required=False, lo=-90.0, hi=90.0)
+    pitch = f.num(3, "pitch", RANGE_TILT_DEG, required=False)
+    roll = f.num(4, "roll", RANGE_TILT_DEG, required=False)
     if use_p and pitch is not None:
         out["gnss_pitch_rad"] = sgn.pitch_to_paper * math.radians(pitch)
     if use_r and roll is not None:
         out["gnss_roll_rad"] = sgn.roll_to_paper * math.radians(roll)
-    extras = {"carrier_rms_m": f.num(5, "carrier RMS", required=False, lo=0.0),
-              "baseline_rms_m": f.num(6, "baseline RMS", required=False, lo=0.0),
-              "ambiguity": f.int_(7, "ambiguity", required=False),
+    extras = {"carrier_rms_m": f.num(5, "carrier RMS", RANGE_LENGTH_M, required=False),
+              "baseline_rms_m": f.num(6, "baseline RMS", RANGE_LENGTH_M, required=False),
+              "ambiguity": f.int_(7, "ambiguity", 99, required=False),
               "pitch_printed_deg": pitch, "roll_printed_deg": roll}
     return ParsedSentence("PASHR,HPR", "", "gnss_att", out, has_roll="gnss_roll_rad" in out,
                           utc_time_s=t, extras=extras)
@@ -185,18 +187,18 @@ def parse_hpr(f: Fields, talker: str, *, signs, baseline, **_) -> ParsedSentence
     f.need(5)  # time, heading, pitch, roll, QF
     sgn = signs["HPR"]
     t = f.time(0)
-    qf = f.int_(4, "QF", hi=9)
+    qf = f.int_(4, "QF", 9)
     out: dict[str, float] = {}
     if qf != 0:
         out["gnss_yaw_rad"] = heading_yaw(f, 1)
     use_p, use_r = _dual_slots(baseline)
-    pitch = f.num(2, "pitch", required=False, lo=-90.0, hi=90.0)
-    roll = f.num(3, "roll", required=False, lo=-180.0, hi=180.0)
+    pitch = f.num(2, "pitch", RANGE_TILT_DEG, required=False)
+    roll = f.num(3, "roll", RANGE_ROLL_DEG, required=False)
     if qf != 0 and use_p and pitch is not None:
         out["gnss_pitch_rad"] = sgn.pitch_to_paper * math.radians(pitch)
     if qf != 0 and use_r and roll is not None:
         out["gnss_roll_rad"] = sgn.roll_to_paper * math.radians(roll)
-    extras = {"qf": qf, "num_sats": f.int_(5, "satellites", required=False, hi=999),
+    extras = {"qf": qf, "num_sats": f.int_(5, "satellites", 999, required=False),
               "pitch_printed_deg": pitch, "roll_printed_deg": roll}
     return ParsedSentence("HPR", talker, "gnss_att", out, valid=qf != 0,
                           has_roll="gnss_roll_rad" in out, utc_time_s=t, extras=extras)
@@ -206,25 +208,25 @@ def parse_ptnl_avr(f: Fields, talker: str, *, signs, **_) -> ParsedSentence:
     f.need(10)  # AVR, time, yaw, Yaw, tilt, Tilt, roll, Roll, range, quality
     sgn = signs["PTNL,AVR"]
     t = f.time(1)
-    q = f.int_(9, "quality", hi=9)
+    q = f.int_(9, "quality", 9)
     out: dict[str, float] = {}
     if f.raw(3) != "Yaw":
         raise SentenceError("bad_field", f"AVR: yaw label {f.raw(3)!r}")
-    yaw = f.num(2, "yaw", required=q != 0, lo=-360.0, hi=360.0)
+    yaw = f.num(2, "yaw", RANGE_SIGNED_HEADING_DEG, required=q != 0)
     if yaw is not None:
         out["gnss_yaw_rad"] = heading_to_yaw(yaw % 360.0)
-    tilt = f.num(4, "tilt", required=False, lo=-90.0, hi=90.0)
+    tilt = f.num(4, "tilt", RANGE_TILT_DEG, required=False)
     if tilt is not None:
         if f.raw(5) != "Tilt":
             raise SentenceError("bad_field", f"AVR: tilt label {f.raw(5)!r}")
         out["gnss_pitch_rad"] = sgn.pitch_to_paper * math.radians(tilt)
-    roll = f.num(6, "roll", required=False, lo=-90.0, hi=90.0)
+    roll = f.num(6, "roll", RANGE_TILT_DEG, required=False)
     if roll is not None:
         if f.raw(7) != "Roll":
             raise SentenceError("bad_field", f"AVR: roll label {f.raw(7)!r}")
         out["gnss_roll_rad"] = sgn.roll_to_paper * math.radians(roll)
-    extras = {"range_m": f.num(8, "range", required=False, lo=0.0), "quality": q,
-              "pdop": f.num(10, "PDOP", required=False, lo=0.0),
-              "num_sats": f.int_(11, "satellites", required=False, hi=999)}
+    extras = {"range_m": f.num(8, "range", RANGE_LENGTH_M, required=False), "quality": q,
+              "pdop": f.num(10, "PDOP", RANGE_DOP, required=False),
+              "num_sats": f.int_(11, "satellites", 999, required=False)}
     return ParsedSentence("PTNL,AVR", "", "gnss_att", out, valid=q != 0,
                           has_roll="gnss_roll_rad" in out, utc_time_s=t, extras=extras)

@@ -8,11 +8,30 @@ Printed forms::
     lat/lon  ddmm.mmmm / dddmm.mmmm + hemisphere letter; rounded in integer units of the last
              digit so the minutes never print as 60
     heading  [0, 360) rounded to the printed decimals; 359.996 prints as 0.00, never 360.00
+
+Bounded fields. Every numeric getter takes the field's physical range (no defaults): a value
+outside it -- or a number so long that it parses to inf or 1e299 -- is a ``bad_field`` reject,
+counted by the decoder, never a sample. The ranges (``RANGE_*`` below), wide enough for any
+road vehicle and any receiver's printing, narrow enough that a decoded value is physical::
+
+    speed over ground     0 .. 1000 kn = 0 .. 1852 km/h (514.4 m/s; 1000 kn is the COCOM
+                          export limit built into GNSS receivers)
+    course, heading       0 .. 360 deg (THS, HDT, RMC, VTG, PASHR); PTNL,AVR yaw -360 .. 360
+    roll                  -180 .. 180 deg (PASHR, HPR), -90 .. 90 deg (two-antenna slots)
+    pitch, tilt           -90 .. 90 deg
+    HDOP, PDOP            0 .. 99.99 (receivers print 99.99 for "no solution")
+    altitude (MSL)        -1000 .. 100,000 m (Dead Sea shore -430 m; 100 km: the Karman line)
+    geoid separation      -200 .. 200 m (EGM96 spans -106 .. +85 m)
+    heave                 -100 .. 100 m (PASHR)
+    attitude accuracies   0 .. 180 deg (1-sigma)
+    RMS, baseline length  0 .. 1000 m (PASHR,HPR carrier/baseline RMS, PTNL,AVR range)
+    differential age      0 .. 86,400 s
+    integers              stated per field (quality 0..9, satellites 0..999, ...), at most
+                          18 digits
 """
 
 from __future__ import annotations
 
-import math
 import re
 
 from vdps_hil.codecs.nmea.sentence import SentenceError
@@ -63,6 +82,22 @@ def fmt_num(value: float | None, decimals: int, width: int = 0, sign: bool = Fal
 # Field parsing (parser side)
 # --------------------------------------------------------------------------------------------
 
+# physical ranges of the numeric fields (module docstring), (lo, hi) in the printed unit
+RANGE_SPEED_KN = (0.0, 1000.0)
+RANGE_SPEED_KMH = (0.0, 1852.0)
+RANGE_HEADING_DEG = (0.0, 360.0)
+RANGE_SIGNED_HEADING_DEG = (-360.0, 360.0)
+RANGE_ROLL_DEG = (-180.0, 180.0)
+RANGE_TILT_DEG = (-90.0, 90.0)
+RANGE_DOP = (0.0, 99.99)
+RANGE_ALTITUDE_M = (-1000.0, 100_000.0)
+RANGE_GEOID_SEP_M = (-200.0, 200.0)
+RANGE_HEAVE_M = (-100.0, 100.0)
+RANGE_ACCURACY_DEG = (0.0, 180.0)
+RANGE_LENGTH_M = (0.0, 1000.0)
+RANGE_DIFF_AGE_S = (0.0, 86_400.0)
+_MAX_INT_DIGITS = 18
+
 _NUM_RE = re.compile(r"^[+-]?(?:\d+(?:\.\d*)?|\.\d+)$")
 _INT_RE = re.compile(r"^[+-]?\d+$")
 _TIME_RE = re.compile(r"^(\d{2})(\d{2})(\d{2}(?:\.\d*)?)$")
@@ -85,8 +120,9 @@ class Fields:
     def raw(self, i: int) -> str:
         return self.items[i] if i < len(self.items) else ""
 
-    def num(self, i: int, what: str, required: bool = True, lo: float = -math.inf,
-            hi: float = math.inf) -> float | None:
+    def num(self, i: int, what: str, rng: tuple[float, float], required: bool = True
+            ) -> float | None:
+        """Field ``i`` as a float inside ``rng`` = (lo, hi), finite (module docstring)."""
         s = self.raw(i)
         if s == "":
             if required:
@@ -95,19 +131,20 @@ class Fields:
         if not _NUM_RE.match(s):
             raise SentenceError("bad_field", f"{self.name}: {what}={s!r}")
         v = float(s)
-        if not (lo <= v <= hi):
-            raise SentenceError("bad_field", f"{self.name}: {what}={s} out of [{lo}, {hi}]")
+        lo, hi = rng
+        if not (lo <= v <= hi):  # finite bounds: inf (a 400-digit number) is outside too
+            raise SentenceError("bad_field", f"{self.name}: {what}={s[:24]} out of [{lo}, {hi}]")
         return v
 
-    def int_(self, i: int, what: str, required: bool = True, lo: int = 0,
-             hi: int = 1 << 31) -> int | None:
+    def int_(self, i: int, what: str, hi: int, required: bool = True, lo: int = 0) -> int | None:
+        """Field ``i`` as an integer in ``lo .. hi``."""
         s = self.raw(i)
         if s == "":
             if required:
                 raise SentenceError("empty_field", f"{self.name}: {what} empty")
             return None
-        if not _INT_RE.match(s):
-            raise SentenceError("bad_field", f"{self.name}: {what}={s!r}")
+        if len(s) > _MAX_INT_DIGITS or not _INT_RE.match(s):
+            raise SentenceError("bad_field", f"{self.name}: {what}={s[:24]!r}")
         v = int(s)
         if not (lo <= v <= hi):
             raise SentenceError("bad_field", f"{self.name}: {what}={s} out of [{lo}, {hi}]")
@@ -162,6 +199,5 @@ def put_field(fields: dict, name: str, value: float | None) -> None:
 
 def heading_yaw(f: Fields, i: int, what: str = "heading", signed_ok: bool = False) -> float:
     """The heading printed in field ``i`` [deg, clockwise from N] as a paper yaw [rad]."""
-    lo = -180.0 if signed_ok else 0.0
-    h = f.num(i, what, lo=lo, hi=360.0)
+    h = f.num(i, what, (-180.0, 360.0) if signed_ok else RANGE_HEADING_DEG)
     return heading_to_yaw(h % 360.0)

@@ -18,7 +18,8 @@ from __future__ import annotations
 import datetime as _dt
 
 from vdps_hil.codecs.nmea.fields import (
-    Fields, fmt_heading, fmt_latlon, fmt_num, fmt_time, put_field,
+    RANGE_ALTITUDE_M, RANGE_DIFF_AGE_S, RANGE_DOP, RANGE_GEOID_SEP_M, RANGE_HEADING_DEG,
+    RANGE_SPEED_KMH, RANGE_SPEED_KN, Fields, fmt_heading, fmt_latlon, fmt_num, fmt_time, put_field,
 )
 from vdps_hil.codecs.nmea.sentence import (
     KMH_MPS, KNOT_MPS, ParsedSentence, SentenceError, wrap_sentence,
@@ -80,23 +81,23 @@ def format_vtg(course_rad: float | None, speed_mps: float, *, mode: str = "A",
 def parse_gga(f: Fields, talker: str, **_) -> ParsedSentence:
     f.need(14)
     t = f.time(0)
-    q = f.int_(5, "quality", hi=9)
+    q = f.int_(5, "quality", 9)
     have_fix = q != 0
     out: dict[str, float] = {}
     put_field(out, "gnss_lat_deg", f.latlon(1, True, required=have_fix))
     put_field(out, "gnss_lon_deg", f.latlon(3, False, required=have_fix))
     out["gnss_fix_quality"] = float(q)
-    put_field(out, "gnss_num_sats", f.int_(6, "satellites", required=False, hi=999))
-    put_field(out, "gnss_hdop", f.num(7, "hdop", required=False, lo=0.0))
-    alt = f.num(8, "altitude", required=have_fix, lo=-1.0e5, hi=1.0e6)
+    put_field(out, "gnss_num_sats", f.int_(6, "satellites", 999, required=False))
+    put_field(out, "gnss_hdop", f.num(7, "hdop", RANGE_DOP, required=False))
+    alt = f.num(8, "altitude", RANGE_ALTITUDE_M, required=have_fix)
     if alt is not None:
         f.char(9, "altitude unit", "M")
     put_field(out, "gnss_alt_m", alt)
-    geoid = f.num(10, "geoid separation", required=False, lo=-1.0e3, hi=1.0e3)
+    geoid = f.num(10, "geoid separation", RANGE_GEOID_SEP_M, required=False)
     if geoid is not None:
         f.char(11, "geoid unit", "M")
     put_field(out, "gnss_geoid_sep_m", geoid)
-    extras = {"diff_age_s": f.num(12, "diff age", required=False, lo=0.0),
+    extras = {"diff_age_s": f.num(12, "diff age", RANGE_DIFF_AGE_S, required=False),
               "diff_station": f.raw(13)}
     return ParsedSentence("GGA", talker, "gnss_pos", out, valid=q not in (0, 7, 8),
                           utc_time_s=t, extras=extras)
@@ -114,9 +115,9 @@ def parse_rmc(f: Fields, talker: str, **_) -> ParsedSentence:
     lat = f.latlon(2, True, required=ok)
     lon = f.latlon(4, False, required=ok)
     out: dict[str, float] = {}
-    kn = f.num(6, "speed", required=ok, lo=0.0)
+    kn = f.num(6, "speed", RANGE_SPEED_KN, required=ok)
     put_field(out, "gnss_speed_mps", None if kn is None else kn * KNOT_MPS)
-    course = f.num(7, "course", required=False, lo=0.0, hi=360.0)
+    course = f.num(7, "course", RANGE_HEADING_DEG, required=False)
     put_field(out, "gnss_course_rad", None if course is None else heading_to_yaw(course % 360.0))
     mode = f.char(11, "mode", "ADEFMNPRS", required=False)
     extras = {"lat_deg": lat, "lon_deg": lon, "date_ddmmyy": f.raw(8), "mode": mode}
@@ -127,10 +128,10 @@ def parse_rmc(f: Fields, talker: str, **_) -> ParsedSentence:
 def parse_vtg(f: Fields, talker: str, **_) -> ParsedSentence:
     f.need(8)
     out: dict[str, float] = {}
-    course = f.num(0, "course", required=False, lo=0.0, hi=360.0)
+    course = f.num(0, "course", RANGE_HEADING_DEG, required=False)
     put_field(out, "gnss_course_rad", None if course is None else heading_to_yaw(course % 360.0))
-    kn = f.num(4, "speed kn", required=False, lo=0.0)
-    kmh = f.num(6, "speed km/h", required=False, lo=0.0)
+    kn = f.num(4, "speed kn", RANGE_SPEED_KN, required=False)
+    kmh = f.num(6, "speed km/h", RANGE_SPEED_KMH, required=False)
     if kn is not None:
         out["gnss_speed_mps"] = kn * KNOT_MPS
     elif kmh is not None:

@@ -1,0 +1,61 @@
+"""Tests of vdps_hil.app.children: Python children never import from the working directory.
+Real interpreters, real process pools, modules planted in the working directory."""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing
+import os
+import subprocess
+import sys
+
+from planted_modules import markers, plant
+
+from vdps_hil.app.children import (PACKAGE_ROOT, child_environ, isolate_spawned_children,
+                                   python_module_command)
+
+
+def _plus_one(x: int) -> int:
+    return x + 1
+
+
+def test_plain_python_m_would_import_the_planted_module(tmp_path):
+    """The threat is real here: ``python -m json.tool`` imports ./json.py (a check that the
+    planted modules work, so the tests below can fail)."""
+    d = plant(tmp_path / "cwd")
+    r = subprocess.run([sys.executable, "-m", "json.tool", "--help"], cwd=d, capture_output=True)
+    assert r.returncode != 0 and markers(d) == ["json"]
+
+
+def test_module_command_runs_in_safe_path_mode_and_imports_nothing_from_the_cwd(tmp_path):
+    d = plant(tmp_path / "cwd")
+    cmd = python_module_command("json.tool", ["--help"])
+    assert cmd[:3] == [sys.executable, "-P", "-m"]
+    r = subprocess.run(cmd, cwd=d, capture_output=True, env=child_environ())
+    assert r.returncode == 0, r.stderr
+    assert markers(d) == []
+
+
+def test_child_environ_is_safe_and_finds_the_package(tmp_path):
+    env = child_environ({"PATH": os.environ["PATH"], "PYTHONPATH": "/x"})
+    assert env["PYTHONSAFEPATH"] == "1"
+    assert env["PYTHONPATH"].split(os.pathsep)[-1] == "/x"
+    d = plant(tmp_path / "cwd")
+    code = "import vdps_hil.app.children as c, sys; print(c.PACKAGE_ROOT); assert '' not in sys.path"
+    r = subprocess.run([sys.executable, "-c", code], cwd=d, capture_output=True, text=True,
+                       env=child_environ())
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == PACKAGE_ROOT and markers(d) == []
+
+
+def test_spawned_pool_workers_import_nothing_from_the_cwd(tmp_path, monkeypatch):
+    """multiprocessing's spawn bootstrap (``python -c ...``) imports threading and pickle before
+    it sets the parent's path: without isolate_spawned_children the planted threading.py runs."""
+    d = plant(tmp_path / "cwd")
+    monkeypatch.setenv("PYTHONSAFEPATH", "")  # restored afterwards
+    monkeypatch.chdir(d)
+    isolate_spawned_children()
+    assert os.environ["PYTHONSAFEPATH"] == "1"
+    with cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as ex:
+        assert ex.submit(_plus_one, 1).result(timeout=120) == 2
+    assert markers(d) == []
