@@ -117,6 +117,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
             recorded, probe = _recorded_input(reader, path, config, veh, start, susp_sigma_m)
         if config is not None and sensorset is not None:
             raise ReplayError("give a sensor set or a config, not both")
+        decoded_with = _recorded_decoding(reader, path, dbc, signalmap)
+        dbc, signalmap = decoded_with.dbc, decoded_with.signalmap
         io_kw = dict(dbc=dbc, signalmap=signalmap, bus_map=bus_map, output=output, copy_raw=copy_raw)
         configure = functools.partial(replay_config, veh=veh, susp_sigma_m=susp_sigma_m,
                                       paper_faithful=paper_faithful, sensorset=sensorset, identify=identify,
@@ -126,7 +128,20 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     finally:
         reader.close()
     wall = time.perf_counter() - wall0
-    return _document(path, output, veh, system, side, summary, sensors_desc, wall, model_doc, save_params)
+    doc = _document(path, output, veh, system, side, summary, sensors_desc, wall, model_doc, save_params)
+    doc["decoded_with"] = {"source": decoded_with.source, "files": decoded_with.found}
+    return doc
+
+
+def _recorded_decoding(reader, path, dbc, signalmap):
+    """The signal map and DBC to decode with: the options, else those the recording's metadata
+    names, found by path and content hash (``record.recorded_decoding``)."""
+    from vdps_hil.record.recorded_decoding import RecordedDecodingError, find_recorded_decoding
+
+    try:
+        return find_recorded_decoding(reader, path, dbc=dbc, signalmap=signalmap)
+    except RecordedDecodingError as e:
+        raise ReplayError(str(e)) from None
 
 
 def _starting_point(veh: Vehicle, params, model):

@@ -76,3 +76,20 @@ def fail_user(exc: BaseException) -> None:
 
 def eprint(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
+
+
+def recorded_decoding(path, dbc=None, signalmap=None) -> tuple[str | None, str | None]:
+    """(dbc, signalmap) to decode the recording at ``path`` with: the options when given, else
+    the files its metadata names, found by path and content hash
+    (``record.recorded_decoding``); a file that cannot be found is a one-line UserError."""
+    from vdps_hil.record.reader import RecordingError, RecordingReader
+    from vdps_hil.record.recorded_decoding import RecordedDecodingError, find_recorded_decoding
+
+    if dbc is not None or signalmap is not None:
+        return dbc, signalmap
+    try:
+        with RecordingReader(path) as reader:
+            rd = find_recorded_decoding(reader, path)
+    except (RecordingError, RecordedDecodingError) as e:
+        raise UserError(str(e)) from None
+    return rd.dbc, rd.signalmap

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from vdps_hil.cli.common import UserError, debug_enabled, write_json
+from vdps_hil.cli.common import UserError, debug_enabled, recorded_decoding, write_json
 
 _EXAMPLE = """\b
 Examples:
@@ -72,6 +72,7 @@ def diagnose(recording, vehicle, model_file, dbc, signalmap, report_dir, json_ou
             user += load_entry_point_effects(effect_entries)
     except UserEffectError as e:
         raise UserError(str(e)) from None
+    dbc, signalmap = recorded_decoding(recording, dbc, signalmap)  # what the recording names, unless given
     say = (lambda s: None) if quiet else (lambda s: click.echo(f"vdps diagnose: {s}", err=True))
     from vdps_hil.workbench.diagnosis import diagnose as run
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from vdps_hil.cli.common import UserError, json_option, write_json
+from vdps_hil.cli.common import UserError, eprint, json_option, write_json
 
 _EXAMPLE = """\b
 Examples:
@@ -104,14 +104,45 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
                           jobs=jobs if jobs is not None else (2 if _usable_cpus() >= 2 else 1))
     except ReplayError as e:
         raise UserError(str(e)) from None
+    for note in undecoded_notes(doc):
+        eprint(f"vdps replay: warning: {note}")
+    click.echo(summary_line(doc, output), err=bool(json_out == "-"))
+    write_json(doc, json_out)
+
+
+def summary_line(doc: dict, output=None) -> str:
+    """The one-line summary of a replay: duration, messages, estimates, speed, and the identified
+    mass only where the identifier says it converged (``identification.converged``), else "not
+    converged" (the number would be the model file's prior)."""
     es = doc["estimates_summary"]
     rtf = doc.get("realtime_factor")
     line = (f"vdps replay: {doc['duration_s']:.1f} s, {doc['messages_read']['raw_records']} raw messages, "
             f"{es['count']} estimates, {doc['wall_time_s']:.1f} s wall"
             + (f" ({rtf:.1f}x real time)" if rtf else ""))
-    if "identification" in doc:
-        line += f", mass {doc['identification']['params']['mass_kg']:.0f} kg"
+    ident = doc.get("identification")
+    if ident:
+        conv = ident.get("converged") or {}
+        if conv.get("mass"):
+            sig = (ident.get("sigmas") or {}).get("mass_kg")
+            line += f", mass {ident['params']['mass_kg']:.0f}" + (f" +- {sig:.0f}" if sig else "") + " kg"
+        waiting = sorted(n for n, c in conv.items() if not c)
+        if waiting:
+            line += f"{';' if conv.get('mass') else ','} not converged: {', '.join(waiting)}"
     if output:
         line += f" -> {output}"
-    click.echo(line, err=bool(json_out == "-"))
-    write_json(doc, json_out)
+    return line
+
+
+def undecoded_notes(doc: dict) -> list[str]:
+    """One line per ``/raw/can/`` topic whose frames were not decoded (the decoder's counters
+    ``decode.reader.undecoded``), with the reason and the options that decode it."""
+    notes = []
+    undecoded = (doc.get("decode", {}).get("reader") or {}).get("undecoded") or {}
+    for topic, n in sorted(undecoded.items()):
+        if not topic.startswith("/raw/can/") or not n:
+            continue
+        bus = topic[len("/raw/can/"):]
+        reason = (doc.get("decoding", {}).get(f"can.{bus}") or {}).get("reason", "no decoder")
+        notes.append(f"{n} CAN frames on {topic} were not decoded ({reason}): give --signalmap NAME --dbc FILE "
+                     "(configs/signalmaps/)")
+    return notes
