@@ -78,7 +78,7 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                 signalmap=None, bus_map: Mapping[str, str] | None = None, params=None, save_params=None,
                 config: SystemConfig | None = None, identify: bool = True, predict: bool = True,
                 susp_sigma_m: float = DEFAULT_SUSP_SIGMA_M, paper_faithful=None, copy_raw: bool = True,
-                sensorset=None, input_order: str = "time", jobs: int = 1) -> dict:
+                sensorset=None, input_order: str = "time", jobs: int = 1, foxglove: bool = True) -> dict:
     """Replay a recording's ``/raw/`` topics through :class:`VdpsSystem` (``vdps replay``).
 
     Decodes only ``/raw/`` (``record.decode``), runs the system, writes ``output`` (MCAP: the
@@ -100,7 +100,10 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     copied; a log's recorded settings (``recorded_config``) must match and size the config). ``jobs``: 2
     decodes the recording and writes the output in a second process (``app.replay_io``)
     while this one runs the system: the same messages, less wall time on two free cores (the
-    ``recorded`` order always runs in one). Raises :class:`ReplayError` (one line)."""
+    ``recorded`` order always runs in one). ``foxglove``: the output also holds the Foxglove view
+    (``app.foxglove_view``: ``/decoded/``, ``/gnss/fix``, ``/est/fix``, ``/est/tf``, ``/est/pose``,
+    ``/est/warning``). The signal map and DBC are the options', else those the recording's
+    metadata names (``record.recorded_decoding``). Raises :class:`ReplayError` (one line)."""
     from vdps_hil.record.reader import RecordingError, RecordingReader
 
     wall0 = time.perf_counter()
@@ -123,14 +126,26 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
         configure = functools.partial(replay_config, veh=veh, susp_sigma_m=susp_sigma_m,
                                       paper_faithful=paper_faithful, sensorset=sensorset, identify=identify,
                                       predict=predict)
+        view = _foxglove_view(reader) if foxglove and output is not None else None
         system, side, summary, sensors_desc = _run(path, reader, veh, config, configure, start, model_effects,
-                                                   recorded, probe, jobs, io_kw)
+                                                   recorded, probe, jobs, io_kw, view)
     finally:
         reader.close()
     wall = time.perf_counter() - wall0
     doc = _document(path, output, veh, system, side, summary, sensors_desc, wall, model_doc, save_params)
     doc["decoded_with"] = {"source": decoded_with.source, "files": decoded_with.found}
     return doc
+
+
+def _foxglove_view(reader):
+    """The Foxglove view of the output (``app.foxglove_view``), its log times on the epoch the
+    output writer keeps (``app.replay_io``: the first raw record's log time minus its t_ns)."""
+    from vdps_hil.app.foxglove_view import FoxgloveView
+    from vdps_hil.record import schemas as S
+
+    first = next(iter(reader.iter_records(prefixes=(S.RAW_PREFIX,))), None)
+    epoch = max(0, first.log_time_ns - first.t_ns) if first is not None and first.log_time_ns else 0
+    return FoxgloveView(epoch_ns=epoch)
 
 
 def _recorded_decoding(reader, path, dbc, signalmap):
@@ -194,7 +209,7 @@ def _recorded_input(reader, path, config, veh: Vehicle, start, susp_sigma_m: flo
 
 
 def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, recorded, probe, jobs: int,
-         io_kw: dict):
+         io_kw: dict, view=None):
     """Configure the system (``config``, or ``configure(rates, fields)`` from the first seconds
     or the recorded ``probe``) and run it over the recording: (system, recording side, summary,
     sensor-set description). The recording side (decoding, the output) runs here or in a second
@@ -221,7 +236,7 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
             config = replace(config, model_effects=model_effects)
         system = VdpsSystem(veh, config)
         system.clear_input_log()
-        summary = ReplaySummary()
+        summary = ReplaySummary() if view is None else view.summary()
         source = itertools.chain(head, side)
         counter = None  # the decoded samples are counted by the recording side
         if recorded is not None:
@@ -229,6 +244,9 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
                 pass
             counter = SampleCounter()
             source = recorded
+        if view is not None:
+            view.origin = lambda: system.pipeline.origin
+            source = view.tap(source, side)
         _feed(system, source, None if counter is None else counter.count, kind_map, nodes, summary, side)
         summary.outputs(system.finish(), side.writer)
         side.finish()

@@ -25,7 +25,11 @@ Only /raw/ topics are read (never /truth/; /decoded/ only with --input-order rec
 Output topics: the /raw/ topics copied, /est/state (12 states of eq 7 + road-relative angles, with sigmas),
 /est/innovation/<kind> (innovation, sigma, NIS, status), /est/filtered (alpha-beta),
 /est/ident (identified parameters, sigmas), /est/prediction (rollover assessment),
-/est/can/vdps (the VDPS_Warning frames the system sent)."""
+/est/can/vdps (the VDPS_Warning frames the system sent); the Foxglove view (unless --no-view):
+/decoded/<source>/<kind> (the decoded inputs), /gnss/fix and /est/fix (foxglove.LocationFix),
+/est/tf (foxglove.FrameTransform enu -> vehicle), /est/pose (foxglove.PoseInFrame), /est/warning.
+A recording made by vdps import/log with a signal map is decoded with the signal map and DBC its
+metadata names (found by path and content hash) unless --signalmap/--dbc are given."""
 
 def _usable_cpus() -> int:
     """CPUs this process may run on (its affinity mask where the system has one)."""
@@ -54,6 +58,9 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
                    "the recording's fields].")
 @click.option("-o", "--output", default=None, metavar="OUT.mcap",
               help="Write a complete recording: the raw topics plus the /est/ topics.")
+@click.option("--no-view", is_flag=True,
+              help="Leave the Foxglove view out of -o (/decoded/, /gnss/fix, /est/fix, /est/tf, /est/pose, "
+                   "/est/warning): a smaller, faster output.")
 @json_option
 @click.option("--params", default=None, metavar="FILE",
               help="Start the identifier from parameters saved by an earlier drive.")
@@ -73,7 +80,7 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
               help="2: decode the recording and write the output in a second process while this one runs "
                    "the system (same output, less wall time) [default: 2 when this process may use two or "
                    "more cores, else 1].")
-def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, output, json_out, params,
+def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, output, no_view, json_out, params,
            save_params, no_identify, no_predict, susp_sigma_m, paper_faithful, input_order, jobs):
     """Replay FILE.mcap through the estimator, identifier, predictor and warning (the paper's
     Figure 2) using only its /raw/ topics; print a one-line summary."""
@@ -101,7 +108,8 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
                           signalmap=signalmap, bus_map=buses or None, params=params, save_params=save_params,
                           identify=not no_identify, predict=not no_predict, susp_sigma_m=susp_sigma_m,
                           paper_faithful=paper_faithful or None, sensorset=sensorset, input_order=input_order,
-                          jobs=jobs if jobs is not None else (2 if _usable_cpus() >= 2 else 1))
+                          jobs=jobs if jobs is not None else (2 if _usable_cpus() >= 2 else 1),
+                          foxglove=not no_view)
     except ReplayError as e:
         raise UserError(str(e)) from None
     for note in undecoded_notes(doc):
