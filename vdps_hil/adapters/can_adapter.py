@@ -420,6 +420,13 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
                                f"{str(e).splitlines()[0] if str(e) else ''}") from None
         del can
 
+    @property
+    def lines_read(self) -> int | None:
+        """Lines of a text log read so far (every channel's, for a progress bar); None for a
+        binary log."""
+        feed = getattr(self, "_feed", None)
+        return None if feed is None else feed.consumed
+
     def _close(self) -> None:
         if self._reader is not None:
             try:

@@ -78,7 +78,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                 signalmap=None, bus_map: Mapping[str, str] | None = None, params=None, save_params=None,
                 config: SystemConfig | None = None, identify: bool = True, predict: bool = True,
                 susp_sigma_m: float = DEFAULT_SUSP_SIGMA_M, paper_faithful=None, copy_raw: bool = True,
-                sensorset=None, input_order: str = "time", jobs: int = 1, foxglove: bool = True) -> dict:
+                sensorset=None, input_order: str = "time", jobs: int = 1, foxglove: bool = True,
+                progress=None) -> dict:
     """Replay a recording's ``/raw/`` topics through :class:`VdpsSystem` (``vdps replay``).
 
     Decodes only ``/raw/`` (``record.decode``), runs the system, writes ``output`` (MCAP: the
@@ -103,7 +104,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     ``recorded`` order always runs in one). ``foxglove``: the output also holds the Foxglove view
     (``app.foxglove_view``: ``/decoded/``, ``/gnss/fix``, ``/est/fix``, ``/est/tf``, ``/est/pose``,
     ``/est/warning``). The signal map and DBC are the options', else those the recording's
-    metadata names (``record.recorded_decoding``). Raises :class:`ReplayError` (one line)."""
+    metadata names (``record.recorded_decoding``). ``progress(seconds_done)``: called every few
+    thousand samples with the recording time fed so far. Raises :class:`ReplayError` (one line)."""
     from vdps_hil.record.reader import RecordingError, RecordingReader
 
     wall0 = time.perf_counter()
@@ -128,13 +130,31 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                                       predict=predict)
         view = _foxglove_view(reader) if foxglove and output is not None else None
         system, side, summary, sensors_desc = _run(path, reader, veh, config, configure, start, model_effects,
-                                                   recorded, probe, jobs, io_kw, view)
+                                                   recorded, probe, jobs, io_kw, view, progress)
     finally:
         reader.close()
     wall = time.perf_counter() - wall0
     doc = _document(path, output, veh, system, side, summary, sensors_desc, wall, model_doc, save_params)
     doc["decoded_with"] = {"source": decoded_with.source, "files": decoded_with.found}
     return doc
+
+
+def _progress_tap(source, progress, every: int = 2048):
+    """The samples of ``source`` unchanged; ``progress(seconds since the first sample)`` every
+    ``every`` samples and at the end."""
+    t0 = None
+    n = 0
+    s = None
+    for s in source:
+        if t0 is None:
+            t0 = s.t_ns
+        n += 1
+        if n >= every:
+            n = 0
+            progress((s.t_ns - t0) / 1e9)
+        yield s
+    if s is not None:
+        progress((s.t_ns - t0) / 1e9)
 
 
 def _foxglove_view(reader):
@@ -209,7 +229,7 @@ def _recorded_input(reader, path, config, veh: Vehicle, start, susp_sigma_m: flo
 
 
 def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, recorded, probe, jobs: int,
-         io_kw: dict, view=None):
+         io_kw: dict, view=None, progress=None):
     """Configure the system (``config``, or ``configure(rates, fields)`` from the first seconds
     or the recorded ``probe``) and run it over the recording: (system, recording side, summary,
     sensor-set description). The recording side (decoding, the output) runs here or in a second
@@ -247,6 +267,8 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
         if view is not None:
             view.origin = lambda: system.pipeline.origin
             source = view.tap(source, side)
+        if progress is not None:
+            source = _progress_tap(source, progress)
         _feed(system, source, None if counter is None else counter.count, kind_map, nodes, summary, side)
         summary.outputs(system.finish(), side.writer)
         side.finish()

@@ -47,11 +47,26 @@ def is_live(stream: IO[str] | None = None, quiet: bool = False) -> bool:
         return False
 
 
-def _columns(stream) -> int:
+_FLOAT_BAR = "{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} {unit} [{elapsed}<{remaining}, {rate_fmt}]"
+_OPEN_BAR = "{desc}: {n:.1f} {unit} [{elapsed}, {rate_fmt}]"
+
+
+def _format(total, unit: str) -> str | None:
+    """tqdm's bar format: its default for whole counts, one decimal for amounts (seconds of a
+    recording), no percentage without a total."""
+    if not total:
+        return _OPEN_BAR
+    return None if float(total).is_integer() and unit != "s" else _FLOAT_BAR
+
+
+def _size(stream) -> tuple[int, int]:
+    """(columns, rows) of the terminal ``stream`` writes to, 0 where it does not say (tqdm
+    hides a bar below row 0)."""
     try:
-        return os.get_terminal_size(stream.fileno()).columns
+        size = os.get_terminal_size(stream.fileno())
     except (AttributeError, ValueError, OSError):
-        return 0
+        return 0, 0
+    return size.columns, size.lines
 
 
 class ProgressBar:
@@ -68,10 +83,9 @@ class ProgressBar:
         if self.live:
             from tqdm import tqdm
 
-            sized = _columns(self.stream) > 0  # a terminal that says its width (else 80 columns)
-            self._bar = tqdm(total=total, desc=desc, unit=unit, file=self.stream, dynamic_ncols=sized,
-                             ncols=None if sized else 80, mininterval=0.2, leave=True,
-                             bar_format=None if total else "{desc}: {n:.1f} {unit} [{elapsed}, {rate_fmt}]")
+            cols, rows = _size(self.stream)  # a terminal that does not say its size: 80 x 24
+            self._bar = tqdm(total=total, desc=desc, unit=unit, file=self.stream, ncols=cols or 80,
+                             nrows=rows or 24, mininterval=0.2, leave=True, bar_format=_format(total, unit))
 
     @property
     def n(self) -> float:
@@ -89,30 +103,27 @@ class ProgressBar:
         if self._bar is not None:
             self._bar.update(n)
 
-    def set_total(self, total: float | None) -> None:
-        if self._bar is not None:
-            self._bar.total = total
-            if total:
-                self._bar.bar_format = None  # percentage and ETA now that the total is known
-            self._bar.refresh()
-
     def note(self, text: str) -> None:
         """A line above the bar (on a terminal only)."""
         if self._bar is not None:
             self._bar.write(text, file=self.stream)
 
-    def close(self) -> None:
+    def close(self, done: bool = True) -> None:
+        """End the bar; ``done``: the work finished (the bar shows 100 %), else it stays where it was."""
         if self._bar is not None:
-            if self._bar.total is not None and self._bar.n < self._bar.total:
+            if done and self._bar.total is not None and self._bar.n < self._bar.total:
                 self._bar.update(self._bar.total - self._bar.n)  # the work is done: 100 %
             self._bar.close()
             self._bar = None
 
     def callback(self) -> Callable[[float, float], None]:
-        """``progress(done, total)`` for the work's own loop."""
+        """``progress(done, total)`` for the work's own loop; a new ``total`` starts the bar
+        again (the next phase of the work)."""
         def progress(done: float, total: float | None = None) -> None:
-            if total is not None and self._bar is not None and self._bar.total != total:
-                self.set_total(total)
+            bar = self._bar
+            if total is not None and bar is not None and bar.total != total:
+                bar.reset(total=total)
+                bar.bar_format = _format(total, bar.unit)
             self.update_to(done)
         return progress
 
@@ -130,8 +141,8 @@ class ProgressBar:
     def __enter__(self) -> "ProgressBar":
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, *exc) -> None:
+        self.close(done=exc_type is None)
 
 
 class Progress:

@@ -93,3 +93,20 @@ def recorded_decoding(path, dbc=None, signalmap=None) -> tuple[str | None, str |
     except (RecordingError, RecordedDecodingError) as e:
         raise UserError(str(e)) from None
     return rd.dbc, rd.signalmap
+
+
+def recording_span_s(path) -> float | None:
+    """The time a recording covers [s] from its MCAP statistics (first to last log time; None
+    without a summary, e.g. a file cut off by a crash): the total of a progress bar."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            st = make_reader(f).get_summary().statistics
+        span = (st.message_end_time - st.message_start_time) / 1e9
+    except Exception:  # noqa: BLE001 - no usable summary: a bar without a total
+        return None
+    return span if span > 0 else None
+
+
+quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar on the terminal.")

@@ -3,9 +3,11 @@ into one recording, decoded through a signal map."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
-from vdps_hil.cli.common import UserError, eprint, json_option, write_json
+from vdps_hil.cli.common import UserError, eprint, json_option, quiet_option, write_json
 
 __all__ = ["import_", "parse_dbc_options", "parse_format_options"]
 
@@ -58,6 +60,59 @@ def source_lines(sources: dict) -> list[str]:
     return lines
 
 
+_TEXT_LOGS = (".log", ".asc", ".trc", ".csv", ".nmea", ".txt")
+
+
+class ImportProgress:
+    """One progress bar per imported source (``import_logs`` calls it with the adapter after each
+    read): text logs in records against their line count, binary IMU captures in bytes against
+    the file size, other binary logs (blf, mf4, mcap) without a total."""
+
+    def __init__(self, quiet: bool):
+        self.quiet = quiet
+        self.bar = None
+        self.source = None
+        self.unit = "rec"
+
+    def __call__(self, a) -> None:
+        from vdps_hil.batch.progress import ProgressBar, is_live
+
+        if self.quiet or not is_live():
+            return
+        if a is not self.source:
+            self.close()
+            self.source = a
+            total, self.unit = _expected(a)
+            self.bar = ProgressBar(total, f"vdps import {a.name}", unit=self.unit)
+        lines = getattr(a, "lines_read", None)  # a CAN text log: every channel's lines
+        self.bar.update_to(a.health.bytes if self.unit == "B" else lines if lines is not None else a.health.records)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+    def __enter__(self) -> "ImportProgress":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _expected(a) -> tuple[int | None, str]:
+    """(what the source holds, unit) for its progress bar (``ImportProgress``)."""
+    path = Path(str(a.device))
+    try:
+        if type(a).__name__ == "ImuFileAdapter":
+            return path.stat().st_size, "B"
+        if path.suffix.lower() in _TEXT_LOGS:
+            with open(path, "rb") as f:
+                return sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b"")), "rec"
+    except OSError:
+        pass
+    return None, "rec"
+
+
 @click.command("import")
 @click.option("--can", "can_specs", multiple=True, metavar="BUS=FILE[@CHANNEL]",
               help="A CAN log as bus BUS (asc, blf, candump .log, trc, mf4, csv, mcap); "
@@ -74,7 +129,8 @@ def source_lines(sources: dict) -> list[str]:
                    "which bus fields. A bus named vdps uses the vdps map by default.")
 @click.option("-o", "--output", required=True, metavar="OUT.mcap", help="Recording to write.")
 @json_option
-def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out):
+@quiet_option
+def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out, quiet):
     """Import CAN and serial logs into one recording (raw + decoded + health).
 
     \b
@@ -100,11 +156,12 @@ def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out)
         for s in serial_specs:
             src = parse_serial_source(s)
             serial.append(parse_serial_source(s, fmts.get(src.name)))
-        report = import_logs(output, can, serial, signalmap=signalmap,
-                             dbc=parse_dbc_options(dbcs),
-                             metadata={"command": "vdps import " + " ".join(
-                                 [*(f"--can {s}" for s in can_specs),
-                                  *(f"--serial {s}" for s in serial_specs)])})
+        with ImportProgress(quiet) as progress:
+            report = import_logs(output, can, serial, signalmap=signalmap,
+                                 dbc=parse_dbc_options(dbcs), progress=progress,
+                                 metadata={"command": "vdps import " + " ".join(
+                                     [*(f"--can {s}" for s in can_specs),
+                                      *(f"--serial {s}" for s in serial_specs)])})
     except ImportError_ as e:
         raise UserError(str(e)) from None
     eprint(f"vdps import: wrote {report['written']} messages to {output}"
