@@ -40,3 +40,20 @@ def test_one_line_errors(tmp_path, real_data):
         assert p.returncode == 2, (args, p.stderr)
         assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr
     assert not out.exists()
+
+
+def test_progress_bar_per_source_on_a_terminal_only(tmp_path, real_data):
+    import re
+
+    from terminal import run_on_pty, screen_text
+
+    f = real_data / RAV4
+    args = ("import", "--can", f"pt={f / 'rav4_seg40.candump.log'}@can0",
+            "--serial", f"gnss={real_data / 'gpsd_oxts_rst39' / 'rst39.nmea'}", "-o", tmp_path / "a.mcap")
+    code, raw = run_on_pty(*args)
+    assert code == 0
+    text = screen_text(raw)
+    assert re.search(r"vdps import can\.pt: +\d+%\|", text) and "98800/98800" in text  # every line of the log
+    assert re.search(r"vdps import gnss: 100%\|", text)
+    piped = vdps(*args[:-1], tmp_path / "b.mcap")
+    assert piped.returncode == 0 and "%|" not in piped.stderr

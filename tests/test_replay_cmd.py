@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import re
 import json
 import os
 import sys
@@ -440,3 +441,19 @@ def test_a_dbc_gone_from_everywhere_is_one_line(tmp_path, capsys):
     assert len(err) == 1 and "toyota_new_mc_pt_generated.dbc" in err[0] and "--dbc FILE" in err[0]
     assert main(["diagnose", str(rec)]) == 2  # the workbench finds (or misses) it the same way
     assert "toyota_new_mc_pt_generated.dbc" in capsys.readouterr().err
+
+
+def test_progress_bar_on_a_terminal_and_nothing_when_piped(drive):
+    from terminal import run_on_pty, run_piped, screen_text
+
+    code, raw = run_on_pty("replay", drive, "--no-identify", "--no-predict", "--jobs", "1")
+    assert code == 0
+    text = screen_text(raw)
+    assert re.search(r"vdps replay: +\d+%\|", text) and "100%" in text
+    assert re.search(r"\d\.\d/\d\.\d s \[\d\d:\d\d<\d\d:\d\d", text)  # seconds done/total, elapsed<ETA
+    assert "vdps replay: 3.0 s" in text  # the summary line after the bar
+    piped = run_piped("replay", drive, "--no-identify", "--no-predict", "--jobs", "1")
+    assert piped.returncode == 0 and "%" not in piped.stderr and piped.stderr == ""
+    assert piped.stdout.count("\n") == 1 and piped.stdout.startswith("vdps replay: ")
+    code, raw = run_on_pty("replay", drive, "--no-identify", "--no-predict", "--jobs", "1", "--quiet")
+    assert code == 0 and "%|" not in raw
