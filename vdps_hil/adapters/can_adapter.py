@@ -422,10 +422,8 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
 
     @property
     def lines_read(self) -> int | None:
-        """Lines of a text log read so far (every channel's, for a progress bar); None for a
-        binary log."""
-        feed = getattr(self, "_feed", None)
-        return None if feed is None else feed.consumed
+        """Lines of a text log read so far (all channels', for a progress bar); None if binary."""
+        return None if getattr(self, "_feed", None) is None else self._feed.consumed
 
     def _close(self) -> None:
         if self._reader is not None:
