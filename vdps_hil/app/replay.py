@@ -79,7 +79,7 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                 config: SystemConfig | None = None, identify: bool = True, predict: bool = True,
                 susp_sigma_m: float = DEFAULT_SUSP_SIGMA_M, paper_faithful=None, copy_raw: bool = True,
                 sensorset=None, input_order: str = "time", jobs: int = 1, foxglove: bool = True,
-                progress=None) -> dict:
+                progress=None, serve=None) -> dict:
     """Replay a recording's ``/raw/`` topics through :class:`VdpsSystem` (``vdps replay``).
 
     Decodes only ``/raw/`` (``record.decode``), runs the system, writes ``output`` (MCAP: the
@@ -105,7 +105,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     (``app.foxglove_view``: ``/decoded/``, ``/gnss/fix``, ``/est/fix``, ``/est/tf``, ``/est/pose``,
     ``/est/warning``). The signal map and DBC are the options', else those the recording's
     metadata names (``record.recorded_decoding``). ``progress(seconds_done)``: called every few
-    thousand samples with the recording time fed so far. Raises :class:`ReplayError` (one line)."""
+    thousand samples with the recording time fed so far. ``serve``: an ``app.live_view.LiveServer``
+    that also gets the outputs and the view (with or without ``output``). Raises :class:`ReplayError` (one line)."""
     from vdps_hil.record.reader import RecordingError, RecordingReader
 
     wall0 = time.perf_counter()
@@ -128,9 +129,11 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
         configure = functools.partial(replay_config, veh=veh, susp_sigma_m=susp_sigma_m,
                                       paper_faithful=paper_faithful, sensorset=sensorset, identify=identify,
                                       predict=predict)
-        view = _foxglove_view(reader) if foxglove and output is not None else None
+        view = _foxglove_view(reader) if (foxglove and output is not None) or serve is not None else None
+        if serve is not None:
+            serve.epoch_ns = view.epoch_ns
         system, side, summary, sensors_desc = _run(path, reader, veh, config, configure, start, model_effects,
-                                                   recorded, probe, jobs, io_kw, view, progress)
+                                                   recorded, probe, jobs, io_kw, view, progress, serve)
     finally:
         reader.close()
     wall = time.perf_counter() - wall0
@@ -229,7 +232,7 @@ def _recorded_input(reader, path, config, veh: Vehicle, start, susp_sigma_m: flo
 
 
 def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, recorded, probe, jobs: int,
-         io_kw: dict, view=None, progress=None):
+         io_kw: dict, view=None, progress=None, serve=None):
     """Configure the system (``config``, or ``configure(rates, fields)`` from the first seconds
     or the recorded ``probe``) and run it over the recording: (system, recording side, summary,
     sensor-set description). The recording side (decoding, the output) runs here or in a second
@@ -264,13 +267,18 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
                 pass
             counter = SampleCounter()
             source = recorded
+        out = side
+        if serve is not None:
+            from vdps_hil.app.live_view import ServedSide
+
+            out = ServedSide(side, serve)
         if view is not None:
             view.origin = lambda: system.pipeline.origin
-            source = view.tap(source, side)
+            source = view.tap(source, out)
         if progress is not None:
             source = _progress_tap(source, progress)
-        _feed(system, source, None if counter is None else counter.count, kind_map, nodes, summary, side)
-        summary.outputs(system.finish(), side.writer)
+        _feed(system, source, None if counter is None else counter.count, kind_map, nodes, summary, out)
+        summary.outputs(system.finish(), out.writer)
         side.finish()
         summary.take_counts(side.sample_counts if counter is None else counter.document())
     except ReplayIOError as e:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
@@ -110,3 +111,30 @@ def recording_span_s(path) -> float | None:
 
 
 quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar on the terminal.")
+
+serve_option = click.option(
+    "--serve", "serve_port", type=click.IntRange(0, 65535), default=None, metavar="PORT",
+    help="Also serve the topics live to Foxglove (WebSocket, ws://127.0.0.1:PORT only; 0: a free port; "
+         "layout configs/foxglove/vdps-layout.json).")
+
+
+@contextlib.contextmanager
+def live_server(port: int | None, *, wait: bool):
+    """The ``--serve`` server (``app.live_view.LiveServer``) around a command, or None; its URL on
+    stderr; ``wait``: block until a client subscribes (a replay, so the view starts at the start)."""
+    if port is None:
+        yield None
+        return
+    from vdps_hil.app.live_view import LAYOUT_TOPICS, LiveServer, LiveServerError
+
+    try:
+        live = LiveServer(port)
+    except LiveServerError as e:
+        raise UserError(str(e)) from None
+    with live:
+        live.advertise(LAYOUT_TOPICS)
+        eprint(f"serving on {live.url} (Foxglove: Open connection -> Foxglove WebSocket)"
+               + ("; waiting for a client to subscribe" if wait else ""))
+        while wait and not live.wait_for_subscriber(0.5):
+            pass
+        yield live

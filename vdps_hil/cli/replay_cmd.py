@@ -9,7 +9,8 @@ from pathlib import Path
 
 import click
 
-from vdps_hil.cli.common import UserError, eprint, json_option, quiet_option, recording_span_s, write_json
+from vdps_hil.cli.common import (UserError, eprint, json_option, live_server, quiet_option, recording_span_s,
+                                serve_option, write_json)
 
 _EXAMPLE = """\b
 Examples:
@@ -19,6 +20,7 @@ Examples:
   vdps replay rav4.mcap --vehicle rav4-model --signalmap toyota_rav4_2017 --dbc toyota.dbc \\
       --sensorset rav4-can-ublox
   vdps replay paper.mcap --paper-faithful all --no-identify --no-predict --json -
+  vdps replay paper.mcap --serve 8765     # watch it live in Foxglove (ws://127.0.0.1:8765)
 
 \b
 Only /raw/ topics are read (never /truth/; /decoded/ only with --input-order recorded).
@@ -80,9 +82,10 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
               help="2: decode the recording and write the output in a second process while this one runs "
                    "the system (same output, less wall time) [default: 2 when this process may use two or "
                    "more cores, else 1].")
+@serve_option
 @quiet_option
 def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, output, no_view, json_out, params,
-           save_params, no_identify, no_predict, susp_sigma_m, paper_faithful, input_order, jobs, quiet):
+           save_params, no_identify, no_predict, susp_sigma_m, paper_faithful, input_order, jobs, serve_port, quiet):
     """Replay FILE.mcap through the estimator, identifier, predictor and warning (the paper's
     Figure 2) using only its /raw/ topics; print a one-line summary."""
     from vdps_hil.app.replay import ReplayError, replay_file
@@ -107,13 +110,14 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
     from vdps_hil.batch.progress import ProgressBar
 
     try:
-        with ProgressBar(recording_span_s(recording), "vdps replay", unit="s", quiet=quiet) as bar:
+        with live_server(serve_port, wait=True) as live, \
+                ProgressBar(recording_span_s(recording), "vdps replay", unit="s", quiet=quiet) as bar:
             doc = replay_file(recording, vehicle=vehicle, output=output, model=model_file, dbc=dbc,
                               signalmap=signalmap, bus_map=buses or None, params=params, save_params=save_params,
                               identify=not no_identify, predict=not no_predict, susp_sigma_m=susp_sigma_m,
                               paper_faithful=paper_faithful or None, sensorset=sensorset, input_order=input_order,
                               jobs=jobs if jobs is not None else (2 if _usable_cpus() >= 2 else 1),
-                              foxglove=not no_view, progress=bar.callback())
+                              foxglove=not no_view, progress=bar.callback(), serve=live)
     except ReplayError as e:
         raise UserError(str(e)) from None
     for note in undecoded_notes(doc):
