@@ -145,3 +145,71 @@ def test_vdps_replay_serve_waits_and_serves_the_output_s_messages(tmp_path):
         assert served, t
         assert set(served) <= recorded[t], t  # the same bytes and log times as the -o output
         assert len(served) >= 0.5 * len(recorded[t])  # a slow client may drop some; most arrive
+
+
+def test_vdps_log_serve_streams_the_decoded_topics_and_gnss_fix(tmp_path):
+    """``vdps log --serve 0`` on an emulated slcan bus and two pseudo-terminals (tests/live_devices.py):
+    a client subscribed to /gnss/fix and the decoded IMU receives them while the logger runs; the
+    /raw/ topics are not served."""
+    import signal
+
+    from live_devices import Rig
+
+    rig = Rig(tmp_path, seconds=4.0, logger_args=("--serve", "0"))
+    try:
+        url = None
+        while url is None:
+            line = rig.logger.stderr.readline()
+            assert line, "logger ended before serving"
+            m = re.search(r"serving on (ws://127\.0\.0\.1:\d+)", line)
+            url = m and m.group(1)
+        imu = "/decoded/imu/imu"
+        got: dict[str, list] = {S.GNSS_FIX_TOPIC: [], imu: []}
+        with connect(url, subprotocols=PROTOCOLS) as ws:
+            chans = _advertised(ws, {S.GNSS_FIX_TOPIC, imu}, timeout_s=30)
+            assert not any(t.startswith(S.RAW_PREFIX) for t in chans)
+            subs = _subscribe(ws, chans, [S.GNSS_FIX_TOPIC, imu])
+            while min(len(v) for v in got.values()) < 5:
+                frame = ws.recv(timeout=30)
+                if isinstance(frame, bytes):
+                    sub, log_time, payload = _message(frame)
+                    got[subs[sub]].append(json.loads(payload))
+        assert all(S.validate(d, S.SCHEMAS[S.LOCATION_FIX]) == [] for d in got[S.GNSS_FIX_TOPIC])
+        assert all("specific_force_mps2_z" in d["fields"] for d in got[imu])
+        rig.sent()
+        rig.logger.send_signal(signal.SIGTERM)
+        assert rig.logger.wait(30) == 0
+    finally:
+        if rig.logger.poll() is None:
+            rig.logger.kill()
+        rig.close()
+
+
+def test_vdps_bench_serve_streams_the_estimates(tmp_path):
+    """``vdps bench -o FILE --serve 0`` (virtual CAN, pipeline in this process): a client
+    subscribed to /est/state and /est/tf receives the live estimates; --serve without -o is a
+    one-line error."""
+    vdps = Path(sys.executable).with_name("vdps")
+    bad = subprocess.run([str(vdps), "bench", "--serve", "0", "--duration", "1"], capture_output=True, text=True)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "-o" in bad.stderr
+    proc = subprocess.Popen([str(vdps), "bench", "--duration", "4", "-o", str(tmp_path / "b.mcap"), "--serve", "0",
+                             "--quiet"], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        m = re.search(r"serving on (ws://127\.0\.0\.1:\d+)", proc.stderr.readline())
+        assert m
+        topics = ["/est/state", S.EST_TF_TOPIC]
+        got: dict[str, list] = {t: [] for t in topics}
+        with connect(m.group(1), subprotocols=PROTOCOLS) as ws:
+            subs = _subscribe(ws, _advertised(ws, set(topics), timeout_s=30), topics)
+            while min(len(v) for v in got.values()) < 5:
+                frame = ws.recv(timeout=60)
+                if isinstance(frame, bytes):
+                    sub, _, payload = _message(frame)
+                    got[subs[sub]].append(json.loads(payload))
+        assert all(S.validate(d, S.SCHEMAS[S.FRAME_TRANSFORM]) == [] for d in got[S.EST_TF_TOPIC])
+        assert all("phi_v_rad" in d["values"] for d in got["/est/state"])
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()

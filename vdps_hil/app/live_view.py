@@ -74,6 +74,7 @@ class LiveServer:
         self._channels: dict[str, object] = {}
         self._lock = threading.Lock()
         self.sent = 0
+        self.refused = 0
 
     @property
     def port(self) -> int:
@@ -128,6 +129,19 @@ class LiveServer:
         self.write_json(topic or S.sample_topic(sample.source, sample.kind), S.SAMPLE, sample.t_ns,
                         sample.to_json(), wall_time_ns=sample.wall_time_ns or None,
                         channel_metadata={"source": sample.source, "kind": sample.kind})
+
+    def mirror(self, topic: str, schema_name: str, t_ns: int, payload: bytes, log_time_ns: int,
+               channel_metadata: Mapping[str, str] | None = None) -> None:
+        """``RecordingWriter.mirror``: serve each message a recording writes as written, except the
+        ``/raw/`` topics (hex and base64, not plottable; the decoded ones are served); never
+        raises (a refused message is counted in ``refused``)."""
+        if topic.startswith(S.RAW_PREFIX):
+            return
+        try:
+            self.write_encoded(topic, schema_name, t_ns, payload, wall_time_ns=log_time_ns,
+                               channel_metadata=channel_metadata)
+        except (ValueError, TypeError, KeyError, OverflowError, RuntimeError):
+            self.refused += 1
 
     def close(self) -> None:
         if self._server is not None:
