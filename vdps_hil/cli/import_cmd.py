@@ -3,6 +3,9 @@ into one recording, decoded through a signal map."""
 
 from __future__ import annotations
 
+import os
+import shutil
+import sys
 from pathlib import Path
 
 import click
@@ -113,6 +116,25 @@ def _expected(a) -> tuple[int | None, str]:
     return None, "rec"
 
 
+def _stdin_sources(can: list, work: str) -> list:
+    """``--can BUS=-``: standard input (``candump -L`` lines, e.g. ``candump -L can0 | vdps import
+    --can pt=- ...``) read to its end into ``work/stdin.log``, which python-can's candump reader
+    then imports like a file; at most one source may be ``-``."""
+    from dataclasses import replace
+
+    if sum(1 for c in can if c.path == "-") > 1:
+        raise UserError("only one --can source can read standard input (-)")
+    out = []
+    for c in can:
+        if c.path == "-":
+            path = os.path.join(work, "stdin.log")
+            with open(path, "wb") as f:
+                shutil.copyfileobj(sys.stdin.buffer, f)
+            c = replace(c, path=path)
+        out.append(c)
+    return out
+
+
 @click.command("import")
 @click.option("--can", "can_specs", multiple=True, metavar="BUS=FILE[@CHANNEL]",
               help="A CAN log as bus BUS (asc, blf, candump .log, trc, mf4, csv, mcap); "
@@ -139,6 +161,7 @@ def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out,
                   --dbc toyota_new_mc_pt_generated.dbc -o rav4.mcap
       vdps import --can gnss=gnss1.MF4 --signalmap canedge_gnss_imu --dbc gnss.dbc -o a.mcap
       vdps import --serial gnss=rst39.nmea -o oxts.mcap
+      candump -L can0 | vdps import --can vdps=- -o bus.mcap     # candump -L on standard input
 
     \b
     Serial text time stamps (at the start of a line, before the $ sentence):
@@ -149,9 +172,13 @@ def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out,
     from vdps_hil.record.importer import (ImportError_, import_logs, parse_can_source,
                                           parse_serial_source)
 
+    import tempfile
+
     fmts = parse_format_options(formats)
+    stdin_dir = tempfile.TemporaryDirectory(prefix="vdps-import-stdin-")
     try:
         can = [parse_can_source(s) for s in can_specs]
+        can = _stdin_sources(can, stdin_dir.name)
         serial = []
         for s in serial_specs:
             src = parse_serial_source(s)
@@ -164,6 +191,8 @@ def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out,
                                       *(f"--serial {s}" for s in serial_specs)])})
     except ImportError_ as e:
         raise UserError(str(e)) from None
+    finally:
+        stdin_dir.cleanup()
     eprint(f"vdps import: wrote {report['written']} messages to {output}"
            + (f" ({report['write_errors']} refused by the writer)" if report["write_errors"]
               else ""))
