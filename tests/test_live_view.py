@@ -51,6 +51,15 @@ def _message(frame: bytes) -> tuple[int, int, bytes]:
     return sub, log_time, frame[13:]
 
 
+def _collect(ws, subs: dict[int, str], got: dict[str, list], at_least: int, timeout_s: float) -> None:
+    """Parsed messages into ``got[topic]`` until every topic there has ``at_least``."""
+    while min(len(v) for v in got.values()) < at_least:
+        frame = ws.recv(timeout=timeout_s)
+        if isinstance(frame, bytes):
+            sub, _, payload = _message(frame)
+            got[subs[sub]].append(json.loads(payload))
+
+
 def _listening_addresses(port: int) -> list[str]:
     """Local addresses of the listening TCP sockets on ``port`` (/proc/net/tcp, tcp6)."""
     out = []
@@ -169,11 +178,7 @@ def test_vdps_log_serve_streams_the_decoded_topics_and_gnss_fix(tmp_path):
             chans = _advertised(ws, {S.GNSS_FIX_TOPIC, imu}, timeout_s=30)
             assert not any(t.startswith(S.RAW_PREFIX) for t in chans)
             subs = _subscribe(ws, chans, [S.GNSS_FIX_TOPIC, imu])
-            while min(len(v) for v in got.values()) < 5:
-                frame = ws.recv(timeout=30)
-                if isinstance(frame, bytes):
-                    sub, log_time, payload = _message(frame)
-                    got[subs[sub]].append(json.loads(payload))
+            _collect(ws, subs, got, 5, 30)
         assert all(S.validate(d, S.SCHEMAS[S.LOCATION_FIX]) == [] for d in got[S.GNSS_FIX_TOPIC])
         assert all("specific_force_mps2_z" in d["fields"] for d in got[imu])
         rig.sent()
@@ -202,11 +207,7 @@ def test_vdps_bench_serve_streams_the_estimates(tmp_path):
         got: dict[str, list] = {t: [] for t in topics}
         with connect(m.group(1), subprotocols=PROTOCOLS) as ws:
             subs = _subscribe(ws, _advertised(ws, set(topics), timeout_s=30), topics)
-            while min(len(v) for v in got.values()) < 5:
-                frame = ws.recv(timeout=60)
-                if isinstance(frame, bytes):
-                    sub, _, payload = _message(frame)
-                    got[subs[sub]].append(json.loads(payload))
+            _collect(ws, subs, got, 5, 60)
         assert all(S.validate(d, S.SCHEMAS[S.FRAME_TRANSFORM]) == [] for d in got[S.EST_TF_TOPIC])
         assert all("phi_v_rad" in d["values"] for d in got["/est/state"])
         proc.wait(timeout=120)

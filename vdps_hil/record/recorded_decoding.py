@@ -108,12 +108,17 @@ def _find_signalmap(info: dict, rec_dir: Path):
         if not want or sm.sha256 == want:
             return sm, c
         differs = c
-    what = f"signal map {info.get('name', name)!r} (sha256 {want[:12]}...)"
+    raise _not_found(f"signal map {info.get('name', name)!r} (sha256 {want[:12]}...)", differs, recorded,
+                     f"next to the recording or in {SIGNALMAP_DIR}", "--signalmap FILE (and --dbc FILE)")
+
+
+def _not_found(what: str, differs, recorded: str, where: str, option: str) -> "RecordedDecodingError":
+    """The one-line error of a file the recording names that was not found (or only with other content)."""
     if differs is not None:
-        raise RecordedDecodingError(f"the recording was decoded with {what}; {differs} has other content: "
-                                    "give --signalmap FILE (and --dbc FILE)")
-    raise RecordedDecodingError(f"the recording was decoded with {what}, recorded at {recorded}: not found there, "
-                                f"next to the recording or in {SIGNALMAP_DIR}: give --signalmap FILE (and --dbc FILE)")
+        return RecordedDecodingError(f"the recording was decoded with {what}; {differs} has other content: "
+                                     f"give {option}")
+    return RecordedDecodingError(f"the recording was decoded with {what}, recorded at {recorded}: not found there, "
+                                 f"{where}: give {option}")
 
 
 def _find_dbc(bus: str, info: dict, rec_dir: Path, sigmap, sigmap_path: Path) -> Path:
@@ -133,12 +138,8 @@ def _find_dbc(bus: str, info: dict, rec_dir: Path, sigmap, sigmap_path: Path) ->
         if not want or h == want:
             return c
         differs = c
-    what = f"DBC {name!r} for bus {bus} (sha256 {want[:12]}...)"
-    if differs is not None:
-        raise RecordedDecodingError(f"the recording was decoded with {what}; {differs} has other content: "
-                                    "give --dbc FILE")
-    raise RecordedDecodingError(f"the recording was decoded with {what}, recorded at {recorded}: not found there, "
-                                "next to the recording or beside the signal map: give --dbc FILE")
+    raise _not_found(f"DBC {name!r} for bus {bus} (sha256 {want[:12]}...)", differs, recorded,
+                     "next to the recording or beside the signal map", "--dbc FILE")
 
 
 def find_recorded_decoding(reader, path, *, dbc=None, signalmap=None) -> RecordedDecoding:
