@@ -40,3 +40,43 @@ def test_one_line_errors(tmp_path, real_data):
         assert p.returncode == 2, (args, p.stderr)
         assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr
     assert not out.exists()
+
+
+def test_progress_bar_per_source_on_a_terminal_only(tmp_path, real_data):
+    import re
+
+    from terminal import run_on_pty, screen_text
+
+    f = real_data / RAV4
+    args = ("import", "--can", f"pt={f / 'rav4_seg40.candump.log'}@can0",
+            "--serial", f"gnss={real_data / 'gpsd_oxts_rst39' / 'rst39.nmea'}", "-o", tmp_path / "a.mcap")
+    code, raw = run_on_pty(*args)
+    assert code == 0
+    text = screen_text(raw)
+    assert re.search(r"vdps import can\.pt: +\d+%\|", text) and "98800/98800" in text  # every line of the log
+    assert re.search(r"vdps import gnss: 100%\|", text)
+    piped = vdps(*args[:-1], tmp_path / "b.mcap")
+    assert piped.returncode == 0 and "%|" not in piped.stderr
+
+
+def test_candump_lines_on_standard_input(tmp_path):
+    """``candump -L can0 | vdps import --can vdps=- ...``: dbc/vdps.dbc frames as candump -L lines
+    on a real pipe are imported (every frame on /raw/can/vdps, in order, decoded with their rolling
+    counters); two sources on standard input are one line, exit 2."""
+
+    lines = []
+    for k in range(200):  # 1 kHz front wheel speeds, counter k, 80.00 rad/s both wheels (0.01 rad/s)
+        data = (8000).to_bytes(2, "little") * 2 + bytes([k % 256])
+        lines.append(f"({1.0 + k * 1e-3:.6f}) can0 100#{data.hex().upper()}")
+    text = "\n".join(lines) + "\n"
+    out = tmp_path / "stdin.mcap"
+    p = vdps("import", "--can", "vdps=-", "-o", out, "--quiet", input=text)
+    assert p.returncode == 0, p.stderr
+    with RecordingReader(out) as r:
+        raw = [doc for _, _, doc in r.iter_messages(topics=["/raw/can/vdps"])]
+        ws = [s for s in r.iter_samples() if s.kind == "wheel_speed"]
+    assert [d["data_hex"] for d in raw] == [ln.split("#")[1].lower() for ln in lines]
+    assert [int(s.fields["seq_counter"]) for s in ws] == list(range(200))
+    assert all(abs(s.fields["wheel_speed_radps_1"] - 80.0) < 1e-9 for s in ws)
+    p = vdps("import", "--can", "a=-", "--can", "b=-", "-o", tmp_path / "x.mcap", input="")
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import re
 import json
 import os
 import sys
@@ -311,3 +312,151 @@ def test_input_order_recorded_reproduces_the_live_estimates(bench_recording, tmp
 def test_input_order_recorded_needs_a_bench_recording(drive):
     code, text = run("replay", str(drive), "--input-order", "recorded")
     assert code == 2 and "no recorded input order" in text and "Traceback" not in text
+
+
+def _mcap_topics(path):
+    """topic -> (schema name, [decoded JSON documents]) read with the mcap library itself."""
+    from mcap.reader import make_reader
+
+    out: dict = {}
+    with open(path, "rb") as f:
+        for schema, channel, msg in make_reader(f).iter_messages():
+            out.setdefault(channel.topic, (schema.name, []))[1].append(json.loads(msg.data))
+    return out
+
+
+def test_output_is_a_foxglove_dashboard(drive, tmp_path):
+    """The output opened with the mcap library: /gnss/fix and /est/fix are foxglove.LocationFix,
+    /est/tf foxglove.FrameTransform, /est/pose foxglove.PoseInFrame, with exactly the field names
+    of those schemas; the decoded inputs are kept on /decoded/; --no-view leaves all that out."""
+    from vdps_hil.record import schemas as S
+
+    out = tmp_path / "o.mcap"
+    code, _ = run("replay", str(drive), "-o", str(out), "--no-identify", "--no-predict", "--jobs", "2")
+    assert code == 0
+    got = _mcap_topics(out)
+    want = {"/gnss/fix": S.LOCATION_FIX, "/est/fix": S.LOCATION_FIX, "/est/tf": S.FRAME_TRANSFORM,
+            "/est/pose": S.POSE_IN_FRAME}
+    for topic, schema in want.items():
+        name, docs = got[topic]
+        assert name == schema and len(docs) > 10, topic
+        for doc in docs[:50]:
+            assert set(doc) == set(S.SCHEMAS[schema]["properties"]), topic
+            assert S.validate(doc, S.SCHEMAS[schema]) == [], topic
+    tf = got["/est/tf"][1][0]
+    assert set(tf["translation"]) == {"x", "y", "z"} and set(tf["rotation"]) == {"x", "y", "z", "w"}
+    decoded = {t for t in got if t.startswith("/decoded/")}
+    assert {"/decoded/imu/imu", "/decoded/gnss/gnss_pos", "/decoded/can.vdps/wheel_speed"} <= decoded
+    assert got["/decoded/imu/imu"][0] == S.SAMPLE
+    bare = tmp_path / "bare.mcap"
+    assert run("replay", str(drive), "-o", str(bare), "--no-identify", "--no-predict", "--no-view")[0] == 0
+    assert not any(t.startswith("/decoded/") or t in want for t in _mcap_topics(bare))
+
+
+def test_summary_line_says_not_converged_instead_of_a_prior(drive):
+    code, text = run("replay", str(drive), "--no-predict")
+    assert code == 0
+    line = text.strip().splitlines()[-1]
+    assert "not converged: " in line
+    prior = load_vehicle("sedan-model", "model").params.mass_kg
+    assert f"mass {prior:.0f} kg" not in line
+
+
+RAV4 = "comma2k19_rav4_2018-08-02_seg40"
+
+
+@pytest.fixture(scope="module")
+def rav4_import(tmp_path_factory):
+    """The RAV4 powertrain bus imported as README "Real cars" says (can0 of the candump log, the
+    shipped signal map, opendbc's DBC): 53,800 frames."""
+    from conftest import REAL_DATA
+
+    seg = REAL_DATA / RAV4
+    if not seg.is_dir():
+        pytest.skip(f"real data not present: {seg}")
+    d = tmp_path_factory.mktemp("rav4")
+    out = d / "rav4.mcap"
+    code, text = run("import", "--can", f"pt={seg / 'rav4_seg40.candump.log'}@can0", "--signalmap", "toyota_rav4_2017",
+                     "--dbc", str(seg / "toyota_new_mc_pt_generated.dbc"), "-o", str(out))
+    assert code == 0, text
+    return out
+
+
+def test_rav4_import_replays_without_signalmap_or_dbc(rav4_import, tmp_path):
+    js = tmp_path / "r.json"
+    r = CliRunner().invoke(cli, ["replay", str(rav4_import), "--vehicle", "rav4-model", "--no-identify",
+                                 "--no-predict", "--jobs", "1", "--json", str(js)], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    doc = json.loads(js.read_text())
+    assert doc["decode"]["can.pt"]["frames"] == 53_800
+    assert doc["decode"]["reader"]["undecoded"] == {}
+    assert doc["decoding"]["can.pt"]["decoded"] is True
+    assert doc["decoded_with"]["source"] == "recording"
+    assert doc["messages_read"]["per_source_kind"]["can.pt/wheel_speed"] > 4000
+    assert "not decoded" not in r.output
+
+
+def test_undecoded_can_frames_are_said_loudly(drive, tmp_path):
+    """A bus no signal map decodes: one warning line with the count and the options."""
+    from vdps_hil.record.decode import raw_copier
+    from vdps_hil.record.writer import RecordingWriter
+
+    rec = tmp_path / "two-buses.mcap"
+    with RecordingReader(drive) as r, RecordingWriter(rec) as w:
+        copy = raw_copier(r, w)
+        for m in r.iter_records(prefixes=("/raw/",)):
+            copy(m)
+        for k in range(40):
+            w.write_can("radar", 1_000_000 * k, {"arbitration_id": 0x200, "data": bytes(8)})
+    r = CliRunner().invoke(cli, ["replay", str(rec), "--no-identify", "--no-predict", "--jobs", "1"],
+                           catch_exceptions=False)
+    assert r.exit_code == 0
+    warn = [ln for ln in r.output.splitlines() if "warning" in ln]
+    assert warn == ["vdps replay: warning: 40 CAN frames on /raw/can/radar were not decoded (no signal map for "
+                    "this bus): give --signalmap NAME --dbc FILE (configs/signalmaps/)"]
+    assert "not decoded" not in run("replay", str(drive), "--no-identify", "--no-predict")[1]
+
+
+def test_a_dbc_gone_from_everywhere_is_one_line(tmp_path, capsys):
+    import itertools
+    import shutil
+
+    from conftest import REAL_DATA
+    from vdps_hil.cli.main import main
+
+    seg = REAL_DATA / RAV4
+    if not seg.is_dir():
+        pytest.skip(f"real data not present: {seg}")
+    log = tmp_path / "pt.log"
+    with open(seg / "rav4_seg40.candump.log", "rb") as f:
+        log.write_bytes(b"".join(itertools.islice(f, 2000)))
+    d = tmp_path / "dbc"
+    d.mkdir()
+    dbc = d / "toyota_new_mc_pt_generated.dbc"
+    shutil.copy(seg / dbc.name, dbc)
+    rec = tmp_path / "rec.mcap"
+    assert main(["import", "--can", f"pt={log}@can0", "--signalmap", "toyota_rav4_2017", "--dbc", str(dbc),
+                 "-o", str(rec)]) == 0
+    dbc.unlink()
+    capsys.readouterr()
+    assert main(["replay", str(rec), "--no-identify", "--no-predict"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "toyota_new_mc_pt_generated.dbc" in err[0] and "--dbc FILE" in err[0]
+    assert main(["diagnose", str(rec)]) == 2  # the workbench finds (or misses) it the same way
+    assert "toyota_new_mc_pt_generated.dbc" in capsys.readouterr().err
+
+
+def test_progress_bar_on_a_terminal_and_nothing_when_piped(drive):
+    from terminal import run_on_pty, run_piped, screen_text
+
+    code, raw = run_on_pty("replay", drive, "--no-identify", "--no-predict", "--jobs", "1")
+    assert code == 0
+    text = screen_text(raw)
+    assert re.search(r"vdps replay: +\d+%\|", text) and "100%" in text
+    assert re.search(r"\d\.\d/\d\.\d s \[\d\d:\d\d<\d\d:\d\d", text)  # seconds done/total, elapsed<ETA
+    assert "vdps replay: 3.0 s" in text  # the summary line after the bar
+    piped = run_piped("replay", drive, "--no-identify", "--no-predict", "--jobs", "1")
+    assert piped.returncode == 0 and "%" not in piped.stderr and piped.stderr == ""
+    assert piped.stdout.count("\n") == 1 and piped.stdout.startswith("vdps replay: ")
+    code, raw = run_on_pty("replay", drive, "--no-identify", "--no-predict", "--jobs", "1", "--quiet")
+    assert code == 0 and "%|" not in raw

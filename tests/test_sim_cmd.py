@@ -78,3 +78,27 @@ def test_commonroad_truth_prints_its_backend_and_warnings(tmp_path, capsys):
     with RecordingReader(out) as r:
         meta = r.metadata()["truth.drive"]
     assert json.loads(meta["truth"])["parameter_set"] == 3 and meta["vehicle"] == "commonroad-mb-3"
+
+
+def test_gnss_fix_for_foxglove_and_a_progress_bar_only_on_a_terminal(tmp_path):
+    """The recording carries /gnss/fix (foxglove.LocationFix) of every GGA it wrote, at the
+    GNSS rate, on the simulated clock; the bar is drawn on a pseudo-terminal, not into a pipe."""
+    import re
+
+    from mcap.reader import make_reader
+    from terminal import run_on_pty, run_piped, screen_text
+
+    out = tmp_path / "p.mcap"
+    code, raw = run_on_pty("sim", "paper", "--duration", "2", "-o", out)
+    assert code == 0
+    text = screen_text(raw)
+    assert re.search(r"vdps sim paper: +\d+%\|.*\d\.\d/2\.0 s \[\d\d:\d\d<\d\d:\d\d", text) and "100%" in text
+    with open(out, "rb") as f:
+        fixes = [(s.name, m.log_time, json.loads(m.data)) for s, ch, m in make_reader(f).iter_messages()
+                 if ch.topic == "/gnss/fix"]
+    assert len(fixes) in (10, 11)  # 5 Hz over 2 s
+    name, log_time, doc = fixes[0]
+    assert name == "foxglove.LocationFix" and abs(doc["latitude"] - 24.787) < 0.01
+    assert doc["timestamp"]["sec"] * 10**9 + doc["timestamp"]["nsec"] == log_time
+    piped = run_piped("sim", "paper", "--duration", "0.5", "-o", tmp_path / "q.mcap")
+    assert piped.returncode == 0 and "%|" not in piped.stdout + piped.stderr

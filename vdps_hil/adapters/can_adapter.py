@@ -421,6 +421,11 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
                                f"{str(e).splitlines()[0] if str(e) else ''}") from None
         del can
 
+    @property
+    def lines_read(self) -> int | None:
+        """Lines of a text log read so far (all channels', for a progress bar); None if binary."""
+        return None if getattr(self, "_feed", None) is None else self._feed.consumed
+
     def _close(self) -> None:
         if self._reader is not None:
             try:

@@ -78,7 +78,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
                 signalmap=None, bus_map: Mapping[str, str] | None = None, params=None, save_params=None,
                 config: SystemConfig | None = None, identify: bool = True, predict: bool = True,
                 susp_sigma_m: float = DEFAULT_SUSP_SIGMA_M, paper_faithful=None, copy_raw: bool = True,
-                sensorset=None, input_order: str = "time", jobs: int = 1) -> dict:
+                sensorset=None, input_order: str = "time", jobs: int = 1, foxglove: bool = True,
+                progress=None, serve=None) -> dict:
     """Replay a recording's ``/raw/`` topics through :class:`VdpsSystem` (``vdps replay``).
 
     Decodes only ``/raw/`` (``record.decode``), runs the system, writes ``output`` (MCAP: the
@@ -100,7 +101,12 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     copied; a log's recorded settings (``recorded_config``) must match and size the config). ``jobs``: 2
     decodes the recording and writes the output in a second process (``app.replay_io``)
     while this one runs the system: the same messages, less wall time on two free cores (the
-    ``recorded`` order always runs in one). Raises :class:`ReplayError` (one line)."""
+    ``recorded`` order always runs in one). ``foxglove``: the output also holds the Foxglove view
+    (``app.foxglove_view``: ``/decoded/``, ``/gnss/fix``, ``/est/fix``, ``/est/tf``, ``/est/pose``,
+    ``/est/warning``). The signal map and DBC are the options', else those the recording's
+    metadata names (``record.recorded_decoding``). ``progress(seconds_done)``: called every few
+    thousand samples with the recording time fed so far. ``serve``: an ``app.live_view.LiveServer``
+    that also gets the outputs and the view (with or without ``output``). Raises :class:`ReplayError` (one line)."""
     from vdps_hil.record.reader import RecordingError, RecordingReader
 
     wall0 = time.perf_counter()
@@ -117,16 +123,63 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
             recorded, probe = _recorded_input(reader, path, config, veh, start, susp_sigma_m)
         if config is not None and sensorset is not None:
             raise ReplayError("give a sensor set or a config, not both")
+        decoded_with = _recorded_decoding(reader, path, dbc, signalmap)
+        dbc, signalmap = decoded_with.dbc, decoded_with.signalmap
         io_kw = dict(dbc=dbc, signalmap=signalmap, bus_map=bus_map, output=output, copy_raw=copy_raw)
         configure = functools.partial(replay_config, veh=veh, susp_sigma_m=susp_sigma_m,
                                       paper_faithful=paper_faithful, sensorset=sensorset, identify=identify,
                                       predict=predict)
+        view = _foxglove_view(reader) if (foxglove and output is not None) or serve is not None else None
+        if serve is not None:
+            serve.epoch_ns = view.epoch_ns
         system, side, summary, sensors_desc = _run(path, reader, veh, config, configure, start, model_effects,
-                                                   recorded, probe, jobs, io_kw)
+                                                   recorded, probe, jobs, io_kw, view, progress, serve)
     finally:
         reader.close()
     wall = time.perf_counter() - wall0
-    return _document(path, output, veh, system, side, summary, sensors_desc, wall, model_doc, save_params)
+    doc = _document(path, output, veh, system, side, summary, sensors_desc, wall, model_doc, save_params)
+    doc["decoded_with"] = {"source": decoded_with.source, "files": decoded_with.found}
+    return doc
+
+
+def _progress_tap(source, progress, every: int = 2048):
+    """The samples of ``source`` unchanged; ``progress(seconds since the first sample)`` every
+    ``every`` samples and at the end."""
+    t0 = None
+    n = 0
+    s = None
+    for s in source:
+        if t0 is None:
+            t0 = s.t_ns
+        n += 1
+        if n >= every:
+            n = 0
+            progress((s.t_ns - t0) / 1e9)
+        yield s
+    if s is not None:
+        progress((s.t_ns - t0) / 1e9)
+
+
+def _foxglove_view(reader):
+    """The Foxglove view of the output (``app.foxglove_view``), its log times on the epoch the
+    output writer keeps (``app.replay_io``: the first raw record's log time minus its t_ns)."""
+    from vdps_hil.app.foxglove_view import FoxgloveView
+    from vdps_hil.record import schemas as S
+
+    first = next(iter(reader.iter_records(prefixes=(S.RAW_PREFIX,))), None)
+    epoch = max(0, first.log_time_ns - first.t_ns) if first is not None and first.log_time_ns else 0
+    return FoxgloveView(epoch_ns=epoch)
+
+
+def _recorded_decoding(reader, path, dbc, signalmap):
+    """The signal map and DBC to decode with: the options, else those the recording's metadata
+    names, found by path and content hash (``record.recorded_decoding``)."""
+    from vdps_hil.record.recorded_decoding import RecordedDecodingError, find_recorded_decoding
+
+    try:
+        return find_recorded_decoding(reader, path, dbc=dbc, signalmap=signalmap)
+    except RecordedDecodingError as e:
+        raise ReplayError(str(e)) from None
 
 
 def _starting_point(veh: Vehicle, params, model):
@@ -179,7 +232,7 @@ def _recorded_input(reader, path, config, veh: Vehicle, start, susp_sigma_m: flo
 
 
 def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, recorded, probe, jobs: int,
-         io_kw: dict):
+         io_kw: dict, view=None, progress=None, serve=None):
     """Configure the system (``config``, or ``configure(rates, fields)`` from the first seconds
     or the recorded ``probe``) and run it over the recording: (system, recording side, summary,
     sensor-set description). The recording side (decoding, the output) runs here or in a second
@@ -206,7 +259,7 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
             config = replace(config, model_effects=model_effects)
         system = VdpsSystem(veh, config)
         system.clear_input_log()
-        summary = ReplaySummary()
+        summary = ReplaySummary() if view is None else view.summary()
         source = itertools.chain(head, side)
         counter = None  # the decoded samples are counted by the recording side
         if recorded is not None:
@@ -214,8 +267,18 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
                 pass
             counter = SampleCounter()
             source = recorded
-        _feed(system, source, None if counter is None else counter.count, kind_map, nodes, summary, side)
-        summary.outputs(system.finish(), side.writer)
+        out = side
+        if serve is not None:
+            from vdps_hil.app.live_view import ServedSide
+
+            out = ServedSide(side, serve)
+        if view is not None:
+            view.origin = lambda: system.pipeline.origin
+            source = view.tap(source, out)
+        if progress is not None:
+            source = _progress_tap(source, progress)
+        _feed(system, source, None if counter is None else counter.count, kind_map, nodes, summary, out)
+        summary.outputs(system.finish(), out.writer)
         side.finish()
         summary.take_counts(side.sample_counts if counter is None else counter.document())
     except ReplayIOError as e:

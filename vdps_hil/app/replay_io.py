@@ -237,6 +237,12 @@ class _EncodingForwarder:
         self._proc._call("write_encoded", (topic, schema_name, t_ns, payload),
                          {"wall_time_ns": wall_time_ns, "channel_metadata": channel_metadata})
 
+    def write_encoded(self, topic: str, schema_name: str, t_ns: int, payload: bytes, *,
+                      wall_time_ns: int | None = None, channel_metadata: Mapping[str, str] | None = None) -> None:
+        """A message already encoded (the Foxglove view's samples), written by the child."""
+        self._proc._call("write_encoded", (topic, schema_name, t_ns, payload),
+                         {"wall_time_ns": wall_time_ns, "channel_metadata": channel_metadata})
+
     def write_estimate(self, topic: str, t_ns: int, values, sigmas=None) -> None:
         full = self._topics.get(topic)
         if full is None:

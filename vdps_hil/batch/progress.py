@@ -1,24 +1,31 @@
-"""Progress of a batch: counts, a bar and an ETA on one terminal line (or one log line per
-finished task when the output is not a terminal, e.g. a cluster job's log file).
+"""Progress of long commands on a terminal: one bar with a percentage, elapsed time and an ETA
+(tqdm), and nothing at all when standard error is not a terminal or with ``--quiet``.
 
-ETA. Tasks reused from a previous run (resume) cost nothing; the others are assumed to take
-as long on average as the ones finished so far, and to run ``W`` at a time::
+:class:`ProgressBar` is the one door for every long command (``vdps replay``, ``diagnose``,
+``sim``, ``paper``, ``import``, ``batch``): ``ProgressBar(total, desc, unit=...)``, then
+``update_to(position)`` (absolute, e.g. seconds of the recording done) or ``advance(n)``,
+``note(text)`` for a line above the bar (a stage starts), ``close()`` (also as a context
+manager). The work itself never imports this module: it takes a callback (``progress(done,
+total)`` or ``progress(text)``) that the command line connects to a bar (``callback``,
+``stage_callback``), so the library layers stay free of terminal code.
 
-    rate  = n_done / (t_now - t_first_submit)         [tasks/s]   (over computed tasks only)
-    ETA   = (n_todo - n_done) / rate                  [s]
+The ETA is tqdm's: the remaining amount at the rate observed so far (smoothed), so a command
+whose pace is uneven (a diagnosis's stages, a batch's long drives first) shows a rough figure
+early that improves as it runs.
 
-This is the observed throughput, so it includes the parallelism, the cluster start-up and the
-mix of long and short drives seen so far (long drives are submitted first, see ``engine``, so
-the estimate tends to be pessimistic early and converges as the batch runs).
+:class:`Progress` is the batch's task counter on top of a bar: counts of finished, failed and
+reused tasks, the engine line, and failures as lines above the bar; off a terminal only those
+lines (no per-task progress lines).
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import time
-from typing import IO
+from typing import IO, Callable
 
-__all__ = ["Progress", "format_duration"]
+__all__ = ["Progress", "ProgressBar", "format_duration", "is_live"]
 
 
 def format_duration(s: float | None) -> str:
@@ -31,29 +38,133 @@ def format_duration(s: float | None) -> str:
     return f"{h}:{m:02d}:{sec:02d}" if h else f"{m}:{sec:02d}"
 
 
+def is_live(stream: IO[str] | None = None, quiet: bool = False) -> bool:
+    """Whether a bar is drawn: not ``quiet`` and ``stream`` (default stderr) is a terminal."""
+    stream = sys.stderr if stream is None else stream
+    try:
+        return not quiet and bool(stream.isatty())
+    except (AttributeError, ValueError):  # no isatty, or a closed stream
+        return False
+
+
+_FLOAT_BAR = "{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} {unit} [{elapsed}<{remaining}, {rate_fmt}]"
+_OPEN_BAR = "{desc}: {n:.1f} {unit} [{elapsed}, {rate_fmt}]"
+
+
+def _format(total, unit: str) -> str | None:
+    """tqdm's bar format: its default for whole counts, one decimal for amounts (seconds of a
+    recording), no percentage without a total."""
+    if not total:
+        return _OPEN_BAR
+    return None if float(total).is_integer() and unit != "s" else _FLOAT_BAR
+
+
+def _size(stream) -> tuple[int, int]:
+    """(columns, rows) of the terminal ``stream`` writes to, 0 where it does not say (tqdm
+    hides a bar below row 0)."""
+    try:
+        size = os.get_terminal_size(stream.fileno())
+    except (AttributeError, ValueError, OSError):
+        return 0, 0
+    return size.columns, size.lines
+
+
+class ProgressBar:
+    """A tqdm bar on ``stream`` (default stderr) when it is a terminal and not ``quiet``; else
+    every call does nothing (module docstring). ``total`` None: no percentage, only the amount
+    done and the rate. ``unit``: what ``total`` counts (``"s"`` of a recording, ``"run"``...)."""
+
+    def __init__(self, total: float | None, desc: str, *, unit: str = "it", quiet: bool = False,
+                 stream: IO[str] | None = None, live: bool | None = None):
+        self.stream = sys.stderr if stream is None else stream
+        self.live = is_live(self.stream, quiet) if live is None else bool(live)
+        self.desc = desc
+        self._bar = None
+        if self.live:
+            from tqdm import tqdm
+
+            cols, rows = _size(self.stream)  # a terminal that does not say its size: 80 x 24
+            self._bar = tqdm(total=total, desc=desc, unit=unit, file=self.stream, ncols=cols or 80,
+                             nrows=rows or 24, mininterval=0.2, leave=True, bar_format=_format(total, unit))
+
+    @property
+    def n(self) -> float:
+        return 0.0 if self._bar is None else self._bar.n
+
+    def update_to(self, position: float) -> None:
+        """Move the bar to ``position`` (never backwards)."""
+        bar = self._bar
+        if bar is not None and position > bar.n:
+            if bar.total is not None:
+                position = min(position, bar.total)
+            bar.update(position - bar.n)
+
+    def advance(self, n: float = 1) -> None:
+        if self._bar is not None:
+            self._bar.update(n)
+
+    def note(self, text: str) -> None:
+        """A line above the bar (on a terminal only)."""
+        if self._bar is not None:
+            self._bar.write(text, file=self.stream)
+
+    def close(self, done: bool = True) -> None:
+        """End the bar; ``done``: the work finished (the bar shows 100 %), else it stays where it was."""
+        if self._bar is not None:
+            if done and self._bar.total is not None and self._bar.n < self._bar.total:
+                self._bar.update(self._bar.total - self._bar.n)  # the work is done: 100 %
+            self._bar.close()
+            self._bar = None
+
+    def callback(self) -> Callable[[float, float], None]:
+        """``progress(done, total)`` for the work's own loop; a new ``total`` starts the bar
+        again (the next phase of the work)."""
+        def progress(done: float, total: float | None = None) -> None:
+            bar = self._bar
+            if total is not None and bar is not None and bar.total != total:
+                bar.reset(total=total)
+                bar.bar_format = _format(total, bar.unit)
+            self.update_to(done)
+        return progress
+
+    def stage_callback(self) -> Callable[[str], None]:
+        """``progress(text)`` for work that reports stages by name: each a step of the bar,
+        its name shown after the bar."""
+        def stage(text: str) -> None:
+            if self._bar is not None:
+                if self._bar.n or getattr(self, "_staged", False):
+                    self.advance(1)
+                self._staged = True
+                self._bar.set_postfix_str(text)
+        return stage
+
+    def __enter__(self) -> "ProgressBar":
+        return self
+
+    def __exit__(self, exc_type, *exc) -> None:
+        self.close(done=exc_type is None)
+
+
 class Progress:
-    """Counts and ETA of a running batch (module docstring).
+    """Counts and the bar of a running batch (module docstring).
 
     ``start(total, reused)``, ``engine(info)``, ``update(outcome)`` per finished task,
-    ``close()``. ``stream`` (default stderr); ``live`` (redraw one line; default: the stream
-    is a terminal); ``enabled=False`` prints nothing but still counts. ``label`` prefixes
-    every line. ``clock`` is injectable for tests.
+    ``close()``. ``stream`` (default stderr); ``live`` (draw the bar; default: the stream is a
+    terminal); ``enabled=False`` prints nothing but still counts. ``label`` prefixes every line.
+    ``clock`` is injectable for tests (the counts' ETA, :meth:`eta_s`).
     """
 
     def __init__(self, label: str = "vdps batch", *, stream: IO[str] | None = None,
-                 live: bool | None = None, enabled: bool = True, width: int = 24, clock=time.monotonic):
+                 live: bool | None = None, enabled: bool = True, clock=time.monotonic):
         self.label = label
         self.stream = stream if stream is not None else sys.stderr
-        isatty = getattr(self.stream, "isatty", lambda: False)
-        self.live = bool(isatty()) if live is None else live
+        self.live = is_live(self.stream) if live is None else live
         self.enabled = enabled
-        self.width = width
         self.clock = clock
         self.total = self.reused = self.ok = self.failed = 0
         self.t0 = None
-        self._drawn = False
+        self._bar: ProgressBar | None = None
 
-    # -- counts
     @property
     def done(self) -> int:
         """Finished tasks, reused ones included."""
@@ -64,6 +175,8 @@ class Progress:
         return self.ok + self.failed
 
     def eta_s(self) -> float | None:
+        """Remaining tasks at the throughput observed over the computed ones (reused ones cost
+        nothing)."""
         todo = self.total - self.reused
         if self.computed == 0 or self.t0 is None:
             return None if todo > 0 else 0.0
@@ -73,23 +186,19 @@ class Progress:
         return (todo - self.computed) * elapsed / self.computed
 
     def line(self) -> str:
-        frac = self.done / self.total if self.total else 1.0
-        filled = int(round(frac * self.width))
-        bar = "#" * filled + "-" * (self.width - filled)
-        elapsed = 0.0 if self.t0 is None else self.clock() - self.t0
-        parts = [f"{self.label} [{bar}] {self.done}/{self.total}", f"ok {self.ok}",
-                 f"failed {self.failed}"]
+        parts = [f"{self.label}: {self.done}/{self.total}", f"ok {self.ok}", f"failed {self.failed}"]
         if self.reused:
             parts.append(f"reused {self.reused}")
-        return ", ".join(parts) + f" | {format_duration(elapsed)} elapsed, ETA {format_duration(self.eta_s())}"
+        return ", ".join(parts) + f", ETA {format_duration(self.eta_s())}"
 
-    # -- events
     def start(self, total: int, reused: int = 0) -> None:
         self.total, self.reused = int(total), int(reused)
         self.t0 = self.clock()
+        if self.enabled and self.live:
+            self._bar = ProgressBar(self.total, self.label, unit="task", stream=self.stream, live=True)
+            self._bar.advance(self.reused)
         if self.reused:
             self._say(f"{self.label}: {self.reused} of {self.total} results reused (unchanged key)")
-        self._draw()
 
     def engine(self, info: dict) -> None:
         where = info.get("scheduler") or info.get("backend")
@@ -110,33 +219,19 @@ class Progress:
             self.failed += 1
             err = outcome.error or {}
             self._say(f"{self.label}: FAILED {outcome.id}: {err.get('type', '')}: {err.get('message', '')}")
-        if not self.live:
-            self._say(f"{self.line()}  <- {outcome.id} {outcome.status}")
-        else:
-            self._draw()
+        if self._bar is not None:
+            self._bar.advance(1)
 
     def close(self) -> None:
-        if self.enabled and self.live and self._drawn:
-            self._draw()
-            self.stream.write("\n")
-            self.stream.flush()
-            self._drawn = False
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
 
-    # -- output
     def _say(self, text: str) -> None:
         if not self.enabled:
             return
-        if self.live and self._drawn:
-            self.stream.write("\r\x1b[2K")
-            self._drawn = False
-        self.stream.write(text + "\n")
-        self.stream.flush()
-        if self.live:
-            self._draw()
-
-    def _draw(self) -> None:
-        if not (self.enabled and self.live):
-            return
-        self.stream.write("\r\x1b[2K" + self.line())
-        self.stream.flush()
-        self._drawn = True
+        if self._bar is not None:
+            self._bar.note(text)
+        else:
+            self.stream.write(text + "\n")
+            self.stream.flush()

@@ -9,11 +9,12 @@ import sys
 
 import click
 
-from vdps_hil.cli.common import UserError, json_option, write_json
+from vdps_hil.cli.common import UserError, json_option, live_server, serve_option, write_json
 
 _EXAMPLE = """\b
 Examples:
   vdps bench --react -o bench.mcap
+  vdps bench --react -o bench.mcap --serve 8765   # watch it live in Foxglove (ws://127.0.0.1:8765)
   vdps bench --scenario paper-left-turn --duration 12 --json -
   vdps bench --can pty --speed 0.5          # pipeline in its own process, slcan on a pty
   vdps bench --can tcp                      # pipeline in its own process, TCP on 127.0.0.1
@@ -67,8 +68,9 @@ drive torque cut, brake pressure 0 -> full in 300 ms, 2500 N m per wheel on all 
                    "identifier and start the pipeline from the parameters it identified (as --params).")
 @click.option("--quiet", is_flag=True, help="No live status line.")
 @json_option
+@serve_option
 def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec, sim_can, react, seed, profile,
-          output, params, calibrate_on, quiet, json_out):
+          output, params, calibrate_on, quiet, json_out, serve_port):
     """Run the hardware-in-the-loop bench on one machine with nothing plugged in: the simulated
     vehicle on CAN and serial ports in real time, the live pipeline, its warning on CAN, a
     simulated ECU. Prints what happened: warning time, lead time, ECU action, upright or not."""
@@ -104,9 +106,14 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
         tmp.cleanup()
         raise UserError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
     to_stderr = json_out == "-"
+    if serve_port is not None and (output is None or b.transport.cross_process):
+        tmp.cleanup()
+        raise UserError("--serve serves the -o recording of a pipeline in this process: give -o, --can virtual")
     status = None if quiet else _StatusLine(sys.stderr)
     try:
-        result = b.run(status)
+        with live_server(serve_port, wait=False) as live:
+            b.mirror = None if live is None else live.mirror
+            result = b.run(status)
     except BenchError as e:
         if status is not None:
             status.end()

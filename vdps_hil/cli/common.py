@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
@@ -76,3 +77,64 @@ def fail_user(exc: BaseException) -> None:
 
 def eprint(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
+
+
+def recorded_decoding(path, dbc=None, signalmap=None) -> tuple[str | None, str | None]:
+    """(dbc, signalmap) to decode the recording at ``path`` with: the options when given, else
+    the files its metadata names, found by path and content hash
+    (``record.recorded_decoding``); a file that cannot be found is a one-line UserError."""
+    from vdps_hil.record.reader import RecordingError, RecordingReader
+    from vdps_hil.record.recorded_decoding import RecordedDecodingError, find_recorded_decoding
+
+    if dbc is not None or signalmap is not None:
+        return dbc, signalmap
+    try:
+        with RecordingReader(path) as reader:
+            rd = find_recorded_decoding(reader, path)
+    except (RecordingError, RecordedDecodingError) as e:
+        raise UserError(str(e)) from None
+    return rd.dbc, rd.signalmap
+
+
+def recording_span_s(path) -> float | None:
+    """The time a recording covers [s] from its MCAP statistics (first to last log time; None
+    without a summary, e.g. a file cut off by a crash): the total of a progress bar."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            st = make_reader(f).get_summary().statistics
+        span = (st.message_end_time - st.message_start_time) / 1e9
+    except Exception:  # noqa: BLE001 - no usable summary: a bar without a total
+        return None
+    return span if span > 0 else None
+
+
+quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar on the terminal.")
+
+serve_option = click.option(
+    "--serve", "serve_port", type=click.IntRange(0, 65535), default=None, metavar="PORT",
+    help="Also serve the topics live to Foxglove (WebSocket, ws://127.0.0.1:PORT only; 0: a free port; "
+         "layout configs/foxglove/vdps-layout.json).")
+
+
+@contextlib.contextmanager
+def live_server(port: int | None, *, wait: bool):
+    """The ``--serve`` server (``app.live_view.LiveServer``) around a command, or None; its URL on
+    stderr; ``wait``: block until a client subscribes (a replay, so the view starts at the start)."""
+    if port is None:
+        yield None
+        return
+    from vdps_hil.app.live_view import LAYOUT_TOPICS, LiveServer, LiveServerError
+
+    try:
+        live = LiveServer(port)
+    except LiveServerError as e:
+        raise UserError(str(e)) from None
+    with live:
+        live.advertise(LAYOUT_TOPICS)
+        eprint(f"serving on {live.url} (Foxglove: Open connection -> Foxglove WebSocket)"
+               + ("; waiting for a client to subscribe" if wait else ""))
+        while wait and not live.wait_for_subscriber(0.5):
+            pass
+        yield live

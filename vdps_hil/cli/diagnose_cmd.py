@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from vdps_hil.cli.common import UserError, debug_enabled, write_json
+from vdps_hil.cli.common import UserError, debug_enabled, recorded_decoding, write_json
 
 _EXAMPLE = """\b
 Examples:
@@ -41,7 +41,7 @@ Only the recording's /raw/ topics and the model vehicle file are read. --effect-
 @click.option("--effect-entry", "effect_entries", multiple=True, metavar="NAME",
               help="Load the named entry point of group vdps_hil.effects; repeatable.")
 @click.option("--no-simulation", is_flag=True, help="Skip the predictor runs (simulation error).")
-@click.option("--quiet", is_flag=True, help="No progress lines on stderr.")
+@click.option("--quiet", is_flag=True, help="No progress bar on the terminal.")
 def diagnose(recording, vehicle, model_file, dbc, signalmap, report_dir, json_out, add, save_model, effect_files,
              effect_entries, no_simulation, quiet):
     """Diagnose the model on RECORDING: residual of every equation of eq 13, where it fails,
@@ -72,12 +72,15 @@ def diagnose(recording, vehicle, model_file, dbc, signalmap, report_dir, json_ou
             user += load_entry_point_effects(effect_entries)
     except UserEffectError as e:
         raise UserError(str(e)) from None
-    say = (lambda s: None) if quiet else (lambda s: click.echo(f"vdps diagnose: {s}", err=True))
+    dbc, signalmap = recorded_decoding(recording, dbc, signalmap)  # what the recording names, unless given
+    from vdps_hil.batch.progress import ProgressBar
     from vdps_hil.workbench.diagnosis import diagnose as run
 
+    stages = 3 + (0 if no_simulation else 1) + (5 if add else 0)  # the stages the workbench names
     try:
-        dg = run(recording, veh, model=model_file, dbc=dbc, signalmap=signalmap, add=add, user_effects=user,
-                 save_model=save_model, with_simulation=not no_simulation, progress=say)
+        with ProgressBar(stages, "vdps diagnose", unit="stage", quiet=quiet) as bar:
+            dg = run(recording, veh, model=model_file, dbc=dbc, signalmap=signalmap, add=add, user_effects=user,
+                     save_model=save_model, with_simulation=not no_simulation, progress=bar.stage_callback())
     except (DatasetError, ModelFileError, ValueError) as e:
         if debug_enabled():
             raise

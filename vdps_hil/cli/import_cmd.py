@@ -3,9 +3,14 @@ into one recording, decoded through a signal map."""
 
 from __future__ import annotations
 
+import os
+import shutil
+import sys
+from pathlib import Path
+
 import click
 
-from vdps_hil.cli.common import UserError, eprint, json_option, write_json
+from vdps_hil.cli.common import UserError, eprint, json_option, quiet_option, write_json
 
 __all__ = ["import_", "parse_dbc_options", "parse_format_options"]
 
@@ -58,6 +63,78 @@ def source_lines(sources: dict) -> list[str]:
     return lines
 
 
+_TEXT_LOGS = (".log", ".asc", ".trc", ".csv", ".nmea", ".txt")
+
+
+class ImportProgress:
+    """One progress bar per imported source (``import_logs`` calls it with the adapter after each
+    read): text logs in records against their line count, binary IMU captures in bytes against
+    the file size, other binary logs (blf, mf4, mcap) without a total."""
+
+    def __init__(self, quiet: bool):
+        self.quiet = quiet
+        self.bar = None
+        self.source = None
+        self.unit = "rec"
+
+    def __call__(self, a) -> None:
+        from vdps_hil.batch.progress import ProgressBar, is_live
+
+        if self.quiet or not is_live():
+            return
+        if a is not self.source:
+            self.close()
+            self.source = a
+            total, self.unit = _expected(a)
+            self.bar = ProgressBar(total, f"vdps import {a.name}", unit=self.unit)
+        lines = getattr(a, "lines_read", None)  # a CAN text log: every channel's lines
+        self.bar.update_to(a.health.bytes if self.unit == "B" else lines if lines is not None else a.health.records)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+    def __enter__(self) -> "ImportProgress":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _expected(a) -> tuple[int | None, str]:
+    """(what the source holds, unit) for its progress bar (``ImportProgress``)."""
+    path = Path(str(a.device))
+    try:
+        if type(a).__name__ == "ImuFileAdapter":
+            return path.stat().st_size, "B"
+        if path.suffix.lower() in _TEXT_LOGS:
+            with open(path, "rb") as f:
+                return sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b"")), "rec"
+    except OSError:
+        pass
+    return None, "rec"
+
+
+def _stdin_sources(can: list, work: str) -> list:
+    """``--can BUS=-``: standard input (``candump -L`` lines, e.g. ``candump -L can0 | vdps import
+    --can pt=- ...``) read to its end into ``work/stdin.log``, which python-can's candump reader
+    then imports like a file; at most one source may be ``-``."""
+    from dataclasses import replace
+
+    if sum(1 for c in can if c.path == "-") > 1:
+        raise UserError("only one --can source can read standard input (-)")
+    out = []
+    for c in can:
+        if c.path == "-":
+            path = os.path.join(work, "stdin.log")
+            with open(path, "wb") as f:
+                shutil.copyfileobj(sys.stdin.buffer, f)
+            c = replace(c, path=path)
+        out.append(c)
+    return out
+
+
 @click.command("import")
 @click.option("--can", "can_specs", multiple=True, metavar="BUS=FILE[@CHANNEL]",
               help="A CAN log as bus BUS (asc, blf, candump .log, trc, mf4, csv, mcap); "
@@ -74,7 +151,8 @@ def source_lines(sources: dict) -> list[str]:
                    "which bus fields. A bus named vdps uses the vdps map by default.")
 @click.option("-o", "--output", required=True, metavar="OUT.mcap", help="Recording to write.")
 @json_option
-def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out):
+@quiet_option
+def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out, quiet):
     """Import CAN and serial logs into one recording (raw + decoded + health).
 
     \b
@@ -83,6 +161,7 @@ def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out)
                   --dbc toyota_new_mc_pt_generated.dbc -o rav4.mcap
       vdps import --can gnss=gnss1.MF4 --signalmap canedge_gnss_imu --dbc gnss.dbc -o a.mcap
       vdps import --serial gnss=rst39.nmea -o oxts.mcap
+      candump -L can0 | vdps import --can vdps=- -o bus.mcap     # candump -L on standard input
 
     \b
     Serial text time stamps (at the start of a line, before the $ sentence):
@@ -93,20 +172,27 @@ def import_(can_specs, serial_specs, formats, dbcs, signalmap, output, json_out)
     from vdps_hil.record.importer import (ImportError_, import_logs, parse_can_source,
                                           parse_serial_source)
 
+    import tempfile
+
     fmts = parse_format_options(formats)
+    stdin_dir = tempfile.TemporaryDirectory(prefix="vdps-import-stdin-")
     try:
         can = [parse_can_source(s) for s in can_specs]
+        can = _stdin_sources(can, stdin_dir.name)
         serial = []
         for s in serial_specs:
             src = parse_serial_source(s)
             serial.append(parse_serial_source(s, fmts.get(src.name)))
-        report = import_logs(output, can, serial, signalmap=signalmap,
-                             dbc=parse_dbc_options(dbcs),
-                             metadata={"command": "vdps import " + " ".join(
-                                 [*(f"--can {s}" for s in can_specs),
-                                  *(f"--serial {s}" for s in serial_specs)])})
+        with ImportProgress(quiet) as progress:
+            report = import_logs(output, can, serial, signalmap=signalmap,
+                                 dbc=parse_dbc_options(dbcs), progress=progress,
+                                 metadata={"command": "vdps import " + " ".join(
+                                     [*(f"--can {s}" for s in can_specs),
+                                      *(f"--serial {s}" for s in serial_specs)])})
     except ImportError_ as e:
         raise UserError(str(e)) from None
+    finally:
+        stdin_dir.cleanup()
     eprint(f"vdps import: wrote {report['written']} messages to {output}"
            + (f" ({report['write_errors']} refused by the writer)" if report["write_errors"]
               else ""))

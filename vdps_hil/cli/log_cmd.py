@@ -12,7 +12,7 @@ import time
 
 import click
 
-from vdps_hil.cli.common import UserError, eprint, json_option, write_json
+from vdps_hil.cli.common import UserError, eprint, json_option, live_server, serve_option, write_json
 from vdps_hil.cli.import_cmd import parse_dbc_options, parse_format_options
 
 __all__ = ["log", "build_live_adapters"]
@@ -133,8 +133,9 @@ class _Status:
               help="--pipeline starts from saved identified parameters (vdps replay --save-params): "
                    "warnings valid at once [default: the priors, valid once the cornering stiffnesses converge].")
 @json_option
+@serve_option
 def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rotate_mb,
-        rotate_s, flush_s, quiet, pipeline, vehicle, params, json_out):
+        rotate_s, flush_s, quiet, pipeline, vehicle, params, json_out, serve_port):
     """Record live CAN buses and serial devices losslessly into one MCAP.
 
     \b
@@ -167,7 +168,10 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
                           params_file=None if params is None else os.path.basename(params))
     session = LogSession(adapters, writer, flush_s=flush_s, status=_Status(quiet), tap=tap)
     try:
-        summary = session.run(stop, duration)
+        with live_server(serve_port, wait=False) as live:
+            writer.mirror = None if live is None else live.mirror
+            summary = session.run(stop, duration)
+            writer.mirror = None
         if tap is not None and session.tap is tap:  # a tap that failed wrote no order
             _finish_tap(tap, session, summary)
     finally:

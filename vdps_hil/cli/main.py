@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
               "Replay/diagnose many drives or run Monte Carlo studies on a local or Dask cluster."),
     "diagnose": ("vdps_hil.cli.diagnose_cmd", "diagnose",
                  "Model workbench: where the model fails, which effect is missing, add it."),
+    "plot": ("vdps_hil.cli.plot_cmd", "plot", "Plot signals of a recording against time (PNG or HTML)."),
     "paper": ("vdps_hil.cli.paper_cmd", "paper",
               "Run the paper's experiments through the real chain; print ours next to the paper's."),
 }

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from vdps_hil.cli.common import UserError, eprint, json_option, write_json
+from vdps_hil.cli.common import UserError, json_option, quiet_option, write_json
 
 _EXAMPLE = """\b
 Examples:
@@ -30,7 +30,8 @@ snr_table, weighting_table (one profile: at the top level; both: under profiles.
 @click.option("--seed0", type=int, default=1, show_default=True, help="First seed.")
 @click.option("--workers", type=int, default=2, show_default=True, help="Processes running drives in parallel.")
 @json_option
-def paper(quick, profiles, seeds, seed0, workers, json_out):
+@quiet_option
+def paper(quick, profiles, seeds, seed0, workers, json_out, quiet):
     """Run the paper's experiments (Hsu & Chen 2012, sections 7-8) and print ours next to the
     paper's figures: fusion errors, identification at 10.25 s, left-turn and rollover
     predictions, warning lead time and false alarms, Tables 2 and 3."""
@@ -53,8 +54,9 @@ def paper(quick, profiles, seeds, seed0, workers, json_out):
         kw["seeds"] = seeds
     opt = PaperOptions.quick(**kw) if quick else PaperOptions(**kw)
 
-    def progress(done, total):
-        eprint(f"vdps paper: {done}/{total} runs")
-    doc = run_paper(opt, progress=progress)
+    from vdps_hil.batch.progress import ProgressBar
+
+    with ProgressBar(None, "vdps paper", unit="run", quiet=quiet) as bar:
+        doc = run_paper(opt, progress=bar.callback())
     click.echo(format_report(doc), err=json_out == "-")  # stdout stays pure JSON with --json -
     write_json(doc, json_out)

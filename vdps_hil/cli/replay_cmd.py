@@ -9,7 +9,8 @@ from pathlib import Path
 
 import click
 
-from vdps_hil.cli.common import UserError, eprint, json_option, write_json
+from vdps_hil.cli.common import (UserError, eprint, json_option, live_server, quiet_option, recording_span_s,
+                                serve_option, write_json)
 
 _EXAMPLE = """\b
 Examples:
@@ -19,13 +20,18 @@ Examples:
   vdps replay rav4.mcap --vehicle rav4-model --signalmap toyota_rav4_2017 --dbc toyota.dbc \\
       --sensorset rav4-can-ublox
   vdps replay paper.mcap --paper-faithful all --no-identify --no-predict --json -
+  vdps replay paper.mcap --serve 8765     # watch it live in Foxglove (ws://127.0.0.1:8765)
 
 \b
 Only /raw/ topics are read (never /truth/; /decoded/ only with --input-order recorded).
 Output topics: the /raw/ topics copied, /est/state (12 states of eq 7 + road-relative angles, with sigmas),
 /est/innovation/<kind> (innovation, sigma, NIS, status), /est/filtered (alpha-beta),
 /est/ident (identified parameters, sigmas), /est/prediction (rollover assessment),
-/est/can/vdps (the VDPS_Warning frames the system sent)."""
+/est/can/vdps (the VDPS_Warning frames the system sent); the Foxglove view (unless --no-view):
+/decoded/<source>/<kind> (the decoded inputs), /gnss/fix and /est/fix (foxglove.LocationFix),
+/est/tf (foxglove.FrameTransform enu -> vehicle), /est/pose (foxglove.PoseInFrame), /est/warning.
+A recording made by vdps import/log with a signal map is decoded with the signal map and DBC its
+metadata names (found by path and content hash) unless --signalmap/--dbc are given."""
 
 def _usable_cpus() -> int:
     """CPUs this process may run on (its affinity mask where the system has one)."""
@@ -54,6 +60,9 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
                    "the recording's fields].")
 @click.option("-o", "--output", default=None, metavar="OUT.mcap",
               help="Write a complete recording: the raw topics plus the /est/ topics.")
+@click.option("--no-view", is_flag=True,
+              help="Leave the Foxglove view out of -o (/decoded/, /gnss/fix, /est/fix, /est/tf, /est/pose, "
+                   "/est/warning): a smaller, faster output.")
 @json_option
 @click.option("--params", default=None, metavar="FILE",
               help="Start the identifier from parameters saved by an earlier drive.")
@@ -73,8 +82,10 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
               help="2: decode the recording and write the output in a second process while this one runs "
                    "the system (same output, less wall time) [default: 2 when this process may use two or "
                    "more cores, else 1].")
-def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, output, json_out, params,
-           save_params, no_identify, no_predict, susp_sigma_m, paper_faithful, input_order, jobs):
+@serve_option
+@quiet_option
+def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, output, no_view, json_out, params,
+           save_params, no_identify, no_predict, susp_sigma_m, paper_faithful, input_order, jobs, serve_port, quiet):
     """Replay FILE.mcap through the estimator, identifier, predictor and warning (the paper's
     Figure 2) using only its /raw/ topics; print a one-line summary."""
     from vdps_hil.app.replay import ReplayError, replay_file
@@ -96,26 +107,62 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
         if not eq or not rec or not mp:
             raise UserError(f"--bus {spec!r}: expected REC=MAP")
         buses[rec] = mp
+    from vdps_hil.batch.progress import ProgressBar
+
     try:
-        doc = replay_file(recording, vehicle=vehicle, output=output, model=model_file, dbc=dbc,
-                          signalmap=signalmap, bus_map=buses or None, params=params, save_params=save_params,
-                          identify=not no_identify, predict=not no_predict, susp_sigma_m=susp_sigma_m,
-                          paper_faithful=paper_faithful or None, sensorset=sensorset, input_order=input_order,
-                          jobs=jobs if jobs is not None else (2 if _usable_cpus() >= 2 else 1))
+        with live_server(serve_port, wait=True) as live, \
+                ProgressBar(recording_span_s(recording), "vdps replay", unit="s", quiet=quiet) as bar:
+            doc = replay_file(recording, vehicle=vehicle, output=output, model=model_file, dbc=dbc,
+                              signalmap=signalmap, bus_map=buses or None, params=params, save_params=save_params,
+                              identify=not no_identify, predict=not no_predict, susp_sigma_m=susp_sigma_m,
+                              paper_faithful=paper_faithful or None, sensorset=sensorset, input_order=input_order,
+                              jobs=jobs if jobs is not None else (2 if _usable_cpus() >= 2 else 1),
+                              foxglove=not no_view, progress=bar.callback(), serve=live)
     except ReplayError as e:
         raise UserError(str(e)) from None
+    for note in undecoded_notes(doc):
+        eprint(f"vdps replay: warning: {note}")
+    problems = doc.get("decode", {}).get("reader", {}).get("problems") or []
+    if problems:  # skipped parts of a damaged file are said without --json too
+        more = f" (and {len(problems) - 1} more: see --json decode.reader.problems)" if len(problems) > 1 else ""
+        eprint(f"vdps replay: warning: parts of {recording} skipped: {problems[0]}{more}")
+    click.echo(summary_line(doc, output), err=bool(json_out == "-"))
+    write_json(doc, json_out)
+
+
+def summary_line(doc: dict, output=None) -> str:
+    """The one-line summary of a replay: duration, messages, estimates, speed, and the identified
+    mass only where the identifier says it converged (``identification.converged``), else "not
+    converged" (the number would be the model file's prior)."""
     es = doc["estimates_summary"]
     rtf = doc.get("realtime_factor")
     line = (f"vdps replay: {doc['duration_s']:.1f} s, {doc['messages_read']['raw_records']} raw messages, "
             f"{es['count']} estimates, {doc['wall_time_s']:.1f} s wall"
             + (f" ({rtf:.1f}x real time)" if rtf else ""))
-    if "identification" in doc:
-        line += f", mass {doc['identification']['params']['mass_kg']:.0f} kg"
+    ident = doc.get("identification")
+    if ident:
+        conv = ident.get("converged") or {}
+        if conv.get("mass"):
+            sig = (ident.get("sigmas") or {}).get("mass_kg")
+            line += f", mass {ident['params']['mass_kg']:.0f}" + (f" +- {sig:.0f}" if sig else "") + " kg"
+        waiting = sorted(n for n, c in conv.items() if not c)
+        if waiting:
+            line += f"{';' if conv.get('mass') else ','} not converged: {', '.join(waiting)}"
     if output:
         line += f" -> {output}"
-    click.echo(line, err=bool(json_out == "-"))
-    problems = doc.get("decode", {}).get("reader", {}).get("problems") or []
-    if problems:  # skipped parts of a damaged file are said without --json too
-        more = f" (and {len(problems) - 1} more: see --json decode.reader.problems)" if len(problems) > 1 else ""
-        eprint(f"vdps replay: warning: parts of {recording} skipped: {problems[0]}{more}")
-    write_json(doc, json_out)
+    return line
+
+
+def undecoded_notes(doc: dict) -> list[str]:
+    """One line per ``/raw/can/`` topic whose frames were not decoded (the decoder's counters
+    ``decode.reader.undecoded``), with the reason and the options that decode it."""
+    notes = []
+    undecoded = (doc.get("decode", {}).get("reader") or {}).get("undecoded") or {}
+    for topic, n in sorted(undecoded.items()):
+        if not topic.startswith("/raw/can/") or not n:
+            continue
+        bus = topic[len("/raw/can/"):]
+        reason = (doc.get("decoding", {}).get(f"can.{bus}") or {}).get("reason", "no decoder")
+        notes.append(f"{n} CAN frames on {topic} were not decoded ({reason}): give --signalmap NAME --dbc FILE "
+                     "(configs/signalmaps/)")
+    return notes

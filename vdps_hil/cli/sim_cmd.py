@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from vdps_hil.cli.common import UserError, json_option, write_json
+from vdps_hil.cli.common import UserError, json_option, quiet_option, write_json
 
 _EXAMPLE = """\b
 Examples:
@@ -50,9 +50,11 @@ Without -o the recording is written to ./<scenario>.mcap."""
 @click.option("-o", "--output", default=None, metavar="FILE.mcap",
               help="Recording to write [default: ./<scenario>.mcap].")
 @json_option
-def sim(scenario, duration_s, seed, profile, vehicle, effects, faults, truth, flat_road, output, json_out):
+@quiet_option
+def sim(scenario, duration_s, seed, profile, vehicle, effects, faults, truth, flat_road, output, json_out, quiet):
     """Simulate SCENARIO (a name in configs/scenarios/ or a .toml path) and write its recording:
-    /raw/can/vdps, /raw/serial/imu, /raw/serial/gnss and /truth/state (100 Hz), /truth/events."""
+    /raw/can/vdps, /raw/serial/imu, /raw/serial/gnss, /gnss/fix (foxglove.LocationFix of the GNSS
+sentences) and /truth/state (100 Hz), /truth/events."""
     from vdps_hil.sim.drive import CONFIG_ERRORS, DEFAULT_PROFILE, Drive
 
     try:
@@ -67,8 +69,11 @@ def sim(scenario, duration_s, seed, profile, vehicle, effects, faults, truth, fl
         raise UserError(f"-o {output}: is a directory")
     if not out.parent.exists():
         raise UserError(f"-o {output}: directory {out.parent} does not exist")
+    from vdps_hil.batch.progress import ProgressBar
+
     try:
-        summary = drive.run(out)
+        with ProgressBar(None, f"vdps sim {drive.scenario.name}", unit="s", quiet=quiet) as bar:
+            summary = drive.run(out, progress=bar.callback())
     except OSError as e:
         raise UserError(f"cannot write {output}: {e.strerror or e}") from None
     doc = summary.to_json()

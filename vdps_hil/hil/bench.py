@@ -119,6 +119,9 @@ class Bench:
     """One bench run (module docstring). ``run(status)`` returns a :class:`BenchResult`;
     ``status(doc)`` (optional) gets a live status dict about four times a second."""
 
+    mirror = None
+    """``RecordingWriter.mirror`` of the ``-o`` recording (``vdps bench --serve``), or None."""
+
     def __init__(self, config: BenchConfig | None = None):
         from vdps_hil.sim.drive import CONFIG_ERRORS, DEFAULT_PROFILE, Drive
 
@@ -161,9 +164,10 @@ class Bench:
         if not c.output:
             return None
         try:
-            return RecordingWriter(c.output, metadata={"source": "vdps bench"},
-                                   content_hashes={"dbc.vdps": self.drive.dbc_path},
-                                   sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
+            w = RecordingWriter(c.output, metadata={"source": "vdps bench"},
+                                content_hashes={"dbc.vdps": self.drive.dbc_path}, sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
+            w.mirror = self.mirror
+            return w
         except OSError as e:
             raise BenchError(f"cannot write {c.output}: {e.strerror or e}") from None
 

@@ -51,6 +51,7 @@ from vdps_hil.adapters.imu_adapter import ImuAdapter, ImuProtocol
 from vdps_hil.adapters.nmea_adapter import NmeaAdapter, NmeaProtocol
 from vdps_hil.adapters.serial_adapter import SerialAdapter
 from vdps_hil.app.est_topics import est_docs  # the /est/ layout of ``vdps replay``
+from vdps_hil.app.foxglove_view import FoxgloveView
 from vdps_hil.bus.raw import RawCan, RawSerial
 from vdps_hil.bus.samples import Sample
 from vdps_hil.bus.subscription import Subscription
@@ -244,6 +245,9 @@ class PipelineNode:
             a.subscribe(self.sub)
         self.writer = writer
         self.recorder = Recorder(writer) if writer is not None else None
+        # the Foxglove view of the outputs (/est/fix, /est/tf, /est/pose, /est/warning), on the writer's clock
+        self.view = None if writer is None else FoxgloveView(lambda: system.pipeline.origin,
+                                                             epoch_ns=getattr(writer, "sim_epoch_ns", None))
         self.sequencer = InputSequencer(sequence_s) if sequence_s else None
         self._dbc_by_id = {aid: sp for aid, sp in self.can.decoder.dbc.by_id.items() if sp.crc is None}
         self._counters_seen: dict[int, int] = {}
@@ -419,6 +423,7 @@ class PipelineNode:
                 doc = S.raw_can_doc(o.t_ns, o.arbitration_id, o.data, direction="tx")
                 self._write(lambda: w.write_json(f"/est/can/{o.bus}", S.RAW_CAN, o.t_ns, doc,
                                                  channel_metadata={"bus": o.bus}))
+                self.view.outputs((o,), w)
             return True
         if name == "Estimate":
             self.last_estimate = o
@@ -430,6 +435,8 @@ class PipelineNode:
         if w is not None:
             for topic, t, vals, sig in est_docs(o):
                 self._write(lambda: w.write_estimate(topic, t, vals, sig))
+            if name == "Estimate":
+                self.view.outputs((o,), w)
         return False
 
     def _write(self, fn) -> None:

@@ -11,6 +11,9 @@ topic                          schema                 one message per
 ``/raw/serial/<device>``       ``vdps.RawSerial.v1``  read chunk of a serial device
 ``/decoded/<source>/<kind>``   ``vdps.Sample.v1``     bus sample (``vdps_hil.bus.samples``)
 ``/gnss/fix`` (any topic)      ``foxglove.LocationFix``  GNSS position sample, for Foxglove maps
+``/est/fix``                   ``foxglove.LocationFix``  estimated CG position (replay, live pipeline)
+``/est/tf``                    ``foxglove.FrameTransform``  estimated pose: frame ``vehicle`` in ``enu``
+``/est/pose``                  ``foxglove.PoseInFrame``  the same pose, for the 3D panel's path
 ``/truth/...``                 ``vdps.Truth.v1``      simulation epoch (100 Hz), simulation only
 ``/est/...``                   ``vdps.Estimate.v1``   estimator output epoch
 =============================  =====================  ==========================================
@@ -42,6 +45,12 @@ import os
 import re
 from typing import Any, Mapping
 
+from vdps_hil.record.foxglove_schemas import (  # noqa: F401 - re-exported: the layout's Foxglove part
+    COVARIANCE_APPROXIMATED, COVARIANCE_DIAGONAL_KNOWN, COVARIANCE_KNOWN, COVARIANCE_UNKNOWN, ENU_FRAME,
+    EST_FIX_TOPIC, EST_POSE_TOPIC, EST_TF_TOPIC, FOXGLOVE_SCHEMAS, FRAME_TRANSFORM, GNSS_FIX_TOPIC, LOCATION_FIX,
+    POSE_IN_FRAME, VEHICLE_FRAME, foxglove_time, frame_transform_doc, geodetic_fix_doc, location_fix_doc,
+    pose_in_frame_doc)
+
 LAYOUT_VERSION = "1"
 """Recording layout version written to the ``vdps.recording`` metadata record."""
 
@@ -57,14 +66,12 @@ RAW_SERIAL_PREFIX = "/raw/serial/"
 DECODED_PREFIX = "/decoded/"
 TRUTH_PREFIX = "/truth/"
 EST_PREFIX = "/est/"
-GNSS_FIX_TOPIC = "/gnss/fix"
 
 RAW_CAN = "vdps.RawCan.v1"
 RAW_SERIAL = "vdps.RawSerial.v1"
 SAMPLE = "vdps.Sample.v1"
 TRUTH = "vdps.Truth.v1"
 ESTIMATE = "vdps.Estimate.v1"
-LOCATION_FIX = "foxglove.LocationFix"
 
 DEFAULT_SIM_EPOCH_NS = 1_352_419_200_000_000_000
 """Fixed wall-clock epoch of simulated recordings: 2012-11-09T00:00:00Z (the paper's
@@ -161,53 +168,16 @@ _ESTIMATE_SCHEMA = {
     "required": ["t_ns", "values"],
 }
 
-# Foxglove's published LocationFix schema (foxglove/schemas), re-stated field by field.
-_LOCATION_FIX_SCHEMA = {
-    "title": LOCATION_FIX,
-    "description": "A navigation satellite fix for any Global Navigation Satellite System",
-    "type": "object",
-    "properties": {
-        "timestamp": {
-            "type": "object", "title": "time", "description": "Timestamp of the message",
-            "properties": {"sec": {"type": "integer", "minimum": 0},
-                           "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999}},
-        },
-        "frame_id": {"type": "string",
-                     "description": "Frame for the sensor. Latitude and longitude readings "
-                                    "are at the origin of the frame."},
-        "latitude": {"type": "number", "description": "Latitude in degrees"},
-        "longitude": {"type": "number", "description": "Longitude in degrees"},
-        "altitude": {"type": "number", "description": "Altitude in meters"},
-        "position_covariance": {
-            "type": "array", "items": {"type": "number"}, "minItems": 9, "maxItems": 9,
-            "description": "Position covariance (m^2) defined relative to a tangential plane "
-                           "through the reported position. The components are East, North, "
-                           "and Up (ENU), in row-major order.",
-        },
-        "position_covariance_type": {
-            "title": "foxglove.PositionCovarianceType", "type": "integer",
-            "enum": [0, 1, 2, 3],
-            "description": "If position_covariance is available, position_covariance_type "
-                           "must be set to indicate the type of covariance. "
-                           "0 UNKNOWN, 1 APPROXIMATED, 2 DIAGONAL_KNOWN, 3 KNOWN",
-        },
-    },
-}
-
 SCHEMAS: dict[str, dict] = {
     RAW_CAN: _RAW_CAN_SCHEMA,
     RAW_SERIAL: _RAW_SERIAL_SCHEMA,
     SAMPLE: _SAMPLE_SCHEMA,
     TRUTH: _TRUTH_SCHEMA,
     ESTIMATE: _ESTIMATE_SCHEMA,
-    LOCATION_FIX: _LOCATION_FIX_SCHEMA,
+    **FOXGLOVE_SCHEMAS,
 }
 """Schema name -> JSON schema. Extend with :func:`register_schema`, never by editing one."""
 
-COVARIANCE_UNKNOWN = 0
-COVARIANCE_APPROXIMATED = 1
-COVARIANCE_DIAGONAL_KNOWN = 2
-COVARIANCE_KNOWN = 3
 
 
 def register_schema(name: str, schema: Mapping[str, Any]) -> None:
@@ -335,44 +305,6 @@ def estimate_doc(t_ns: int, values: Mapping[str, float],
     if sigmas is not None:
         doc["sigmas"] = clean_json(dict(sigmas))
     return doc
-
-
-def location_fix_doc(sample, *, frame_id: str = "gnss", stamp_ns: int | None = None,
-                     ellipsoidal: bool = True) -> dict | None:
-    """A ``foxglove.LocationFix`` document from a ``gnss_pos`` Sample, or None without a fix.
-
-    ``timestamp`` = ``stamp_ns`` (default: the sample's wall time, else its ``t_ns``).
-    ``altitude`` = ``gnss_alt_m + gnss_geoid_sep_m`` (height above the WGS-84 ellipsoid, as
-    Foxglove/ROS expect) when ``ellipsoidal`` and the separation is known, else ``gnss_alt_m``
-    (0 when unknown). Covariance: diagonal ENU ``(sigma_h^2, sigma_h^2, sigma_v^2)`` with type
-    DIAGONAL_KNOWN when ``gnss_pos_sigma_h_m`` is known (sigma_v defaults to 2 sigma_h, type
-    APPROXIMATED), else zeros with type UNKNOWN. Returns None when latitude or longitude is not
-    finite (nothing to show on a map).
-    """
-    lat, lon = sample.get("gnss_lat_deg"), sample.get("gnss_lon_deg")
-    if not (math.isfinite(lat) and math.isfinite(lon)):
-        return None
-    alt = sample.get("gnss_alt_m")
-    alt = alt if math.isfinite(alt) else 0.0
-    sep = sample.get("gnss_geoid_sep_m")
-    if ellipsoidal and math.isfinite(sep):
-        alt += sep
-    sh, sv = sample.get("gnss_pos_sigma_h_m"), sample.get("gnss_pos_sigma_v_m")
-    cov = [0.0] * 9
-    cov_type = COVARIANCE_UNKNOWN
-    if math.isfinite(sh) and sh >= 0:
-        cov_type = COVARIANCE_DIAGONAL_KNOWN
-        if not (math.isfinite(sv) and sv >= 0):
-            sv, cov_type = 2.0 * sh, COVARIANCE_APPROXIMATED
-        cov[0] = cov[4] = sh * sh
-        cov[8] = sv * sv
-    if stamp_ns is None:
-        stamp_ns = sample.wall_time_ns or sample.t_ns
-    stamp_ns = check_time_ns("stamp_ns", stamp_ns)
-    return {"timestamp": {"sec": stamp_ns // 1_000_000_000, "nsec": stamp_ns % 1_000_000_000},
-            "frame_id": frame_id, "latitude": float(lat), "longitude": float(lon),
-            "altitude": float(alt), "position_covariance": cov,
-            "position_covariance_type": cov_type}
 
 
 # --- provenance -------------------------------------------------------------------------------

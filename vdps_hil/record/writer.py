@@ -114,6 +114,9 @@ class RecordingWriter:
         self._serial_meta: dict[str, tuple[str, str]] = {}
         self._can_topics: dict[str, str] = {}
         self._est_topics: set[str] = set()  # estimate topics already checked (absolute)
+        self.mirror: Callable[..., None] | None = None
+        """``mirror(topic, schema, t_ns, payload, log_time_ns, channel_metadata)`` after each
+        message written (a live view: ``app.live_view.LiveServer.mirror``); never raises."""
         self._closed = True
         self._open_file(path)
 
@@ -212,6 +215,8 @@ class RecordingWriter:
             self._add_message(ch.id, log_time, payload, t_ns, ch.seq)
             ch.seq = (ch.seq + 1) & 0xFFFFFFFF
             self.stats.messages[topic] = self.stats.messages.get(topic, 0) + 1
+        if self.mirror is not None:
+            self.mirror(topic, schema_name, t_ns, payload, log_time, channel_metadata)
 
     def copier(self, channel_of: Callable[[str], tuple[str, Mapping[str, str]] | None]
                ) -> Callable[[tuple], None]:

@@ -167,8 +167,9 @@ class Drive:
                 params.setdefault(name, {}).update(p)
         return effects_from_names(names, self.vehicle.effects, params)
 
-    def run(self, output: str | os.PathLike | IO[bytes]) -> DriveSummary:
-        """Write the drive to a recording (a path or a binary stream) and return its summary."""
+    def run(self, output: str | os.PathLike | IO[bytes], progress=None) -> DriveSummary:
+        """Write the drive to a recording (a path or a binary stream) and return its summary;
+        ``progress(simulated_s, duration_s)`` after each block (a progress bar's callback)."""
         wall0 = time.perf_counter()
         writer = RecordingWriter(output, metadata={"source": "vdps sim"},
                                  content_hashes={"dbc.vdps": self.dbc_path},
@@ -176,8 +177,10 @@ class Drive:
         sink = RecordingSink(writer)
         try:
             session = self.start(sink)
+            end_s = session.end_ns / 1e9
             while session.advance():
-                pass
+                if progress is not None:
+                    progress(session.t_ns / 1e9, end_s)
             summary = session.summary(output, wall0)
             sink.metadata("truth.summary", summary.to_json())
         finally:

@@ -9,6 +9,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from vdps_hil.record.gnss_fix import GnssFixTap
 from vdps_hil.record.writer import RecordingWriter
 
 __all__ = ["DriveSink", "RecordingSink"]
@@ -71,11 +72,13 @@ class DriveSink:
 
 
 class RecordingSink(DriveSink):
-    """A DriveSink writing the recording layout of the module docstring with a RecordingWriter."""
+    """A DriveSink writing the recording layout of the module docstring with a RecordingWriter,
+    plus ``/gnss/fix`` decoded from the NMEA stream (``record.gnss_fix``) for Foxglove's map."""
 
     def __init__(self, writer: RecordingWriter):
         self.writer = writer
         self._frames: list[_Frame] = []
+        self._fix_taps: dict[str, GnssFixTap] = {}
 
     def metadata(self, name, data) -> None:
         self.writer.add_metadata(name, data)
@@ -96,8 +99,15 @@ class RecordingSink(DriveSink):
 
     def serial_chunks(self, device, baud, fmt, chunks) -> None:
         w = self.writer
+        tap = None
+        if fmt == "nmea":  # /gnss/fix for Foxglove's map, decoded from the bytes written
+            tap = self._fix_taps.get(device)
+            if tap is None:
+                tap = self._fix_taps[device] = GnssFixTap(w, device, baud)
         for tc, data in chunks:
             w.write_serial(device, tc, data, baud=baud, fmt=fmt)
+            if tap is not None:
+                tap.feed(tc, data)
 
     @property
     def messages(self) -> dict[str, int]:
