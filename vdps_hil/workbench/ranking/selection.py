@@ -389,8 +389,11 @@ def _group_has_signal(d: Design, name: str, g: int) -> bool:
 def _parameter_entries(d: Design, ref: Vehicle, base: Vehicle, current, ratio, s2,
                        cfg: RankingConfig) -> list[RankEntry]:
     """The identified parameters as entries: value, sigma, explained fraction of moving each
-    from the reference (model file) value to the identified one."""
+    from the reference (model file) value to the identified one. Plausible: the value lies
+    within ``base_bounds`` times the model file's (positive; the base fit keeps the model's
+    value inside them, ``model_value``)."""
     out = []
+    lo, hi = cfg.base_bounds
     G, c, yy, _ = d.stats()
     th_all, _, _ = d.fit(current)
     pos = {k: j for j, k in enumerate(current)}
@@ -400,7 +403,8 @@ def _parameter_entries(d: Design, ref: Vehicle, base: Vehicle, current, ratio, s
         if p not in d.blocks:
             out.append(RankEntry(effect=PARAM_ALIASES[p], kind="parameter", explained_fraction=0.0,
                                  explained_by_equation={}, parameters={p: (cur, math.nan)}, plausible=cur > 0,
-                                 excited=False, excitation_z=math.nan, group=[], reference={p: ref_v}))
+                                 excited=False, excitation_z=math.nan, group=[], reference={p: ref_v},
+                                 model_value={p: cur}, plausible_range={p: (lo * ref_v, hi * ref_v)}))
             continue
         k = d.blocks[p][0]
         # residual with the parameter back at the reference: y + X_p (ref - cur) ... in scaled units
@@ -412,8 +416,9 @@ def _parameter_entries(d: Design, ref: Vehicle, base: Vehicle, current, ratio, s
         sig = sigma_of(d, p, current, s2, ratio)[0]
         val = cur + th_all[pos[k]] / d.scale[k]
         e = RankEntry(effect=PARAM_ALIASES[p], kind="parameter", explained_fraction=ef, explained_by_equation={},
-                      parameters={p: (val, sig)}, plausible=val > 0, excited=True, excitation_z=math.nan,
-                      group=[], reference={p: ref_v})
+                      parameters={p: (val, sig)}, plausible=bool(lo * ref_v <= val <= hi * ref_v),
+                      excited=True, excitation_z=math.nan, group=[], reference={p: ref_v}, model_value={p: cur},
+                      plausible_range={p: (lo * ref_v, hi * ref_v)})
         out.append(e)
     out.sort(key=lambda e: -e.explained_fraction)
     return out
