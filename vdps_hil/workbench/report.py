@@ -283,6 +283,7 @@ def render_report(dg) -> str:
         parts.append(_table([[f"{h} s", _fmt(d.get("position_m"), "m"), _fmt(d.get("yaw_deg"), "deg"),
                               _fmt(d.get("roll_deg"), "deg"), _fmt(d.get("speed_mps"), "m/s")] for h, d in sb.items()],
                             ["horizon", "position", "yaw", "roll", "speed"]))
+    parts += [f"<p class=\"msg\">{html.escape(m)}</p>" for m in dg.simulation_notes()]
     parts.append("</body></html>")
     return "\n".join(parts)
 
