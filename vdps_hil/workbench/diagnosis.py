@@ -163,24 +163,24 @@ def _before_after_lines(before: dict, after: dict | None) -> list[str]:
             a = sa.get(h, {})
             parts = []
             for k, unit in (("position_m", "m"), ("yaw_deg", "deg"), ("roll_deg", "deg"), ("speed_mps", "m/s")):
-                s = f"{k.split('_')[0]} {_sim_value(d, k)}"
+                s = f"{k.split('_')[0]} {_sim_value(d, k, unit)}"
                 if a:
-                    s += f" -> {_sim_value(a, k)}"
-                parts.append(s + f" {unit}")
+                    s += f" -> {_sim_value(a, k, unit)}"
+                parts.append(s)
             out.append(f"  {h:>4s} s  " + ", ".join(parts) + _diverged_phrase(d, a))
     return out
 
 
-def _sim_value(d: dict, k: str) -> str:
+def _sim_value(d: dict, k: str, unit: str) -> str:
     """One simulation-error figure: the number, or why there is none (never ``nan``)."""
     v = _num(d.get(k))
     if v is not None:
-        return f"{v:.3f}"
+        return f"{v:.3f} {unit}"
     return "diverged" if d.get("n_diverged") else "none"
 
 
 def _diverged_phrase(d: dict, a: dict) -> str:
-    parts = [f"{x['n_diverged']} of {x['n'] + x['n_diverged']} {w}predictions diverged"
+    parts = [f"{w}{x['n_diverged']} of {x['n'] + x['n_diverged']} predictions diverged"
              for x, w in ((d, "" if not a else "before: "), (a, "after: ")) if x and x.get("n_diverged")]
     return ("  (" + "; ".join(parts) + ", left out)") if parts else ""
 
