@@ -13,6 +13,7 @@ import math
 from vdps_hil.units import GRAVITY_MPS2
 
 from .candidate_base import PARAM_ALIASES, PARAM_LABELS
+from .coverage import EFFECT_NEEDS
 from .residuals import EQUATION_LABELS
 
 __all__ = ["describe_entry", "describe_ranking", "separating_maneuver", "group_maneuver", "EFFECT_LABELS",
@@ -117,7 +118,9 @@ def describe_entry(rk, e) -> str:
                     + " would separate them")
         return msg
     if not e.excited:
-        return f"{label}: not excited -- this drive cannot show it (z = {e.excitation_z:.1f} at its typical size)"
+        need = EFFECT_NEEDS.get(e.effect)
+        return (f"{label}: not excited -- this drive cannot show it (z = {e.excitation_z:.1f} at its typical size)"
+                + (f"; needs {need}" if need else ""))
     body = _effect_words(rk, e)
     msg = f"{label}: {body}; {_explains(e)}"
     if not e.plausible:

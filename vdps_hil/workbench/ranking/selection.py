@@ -51,6 +51,7 @@ from vdps_hil.model.params import Vehicle
 
 from ..candidate_base import PARAM_ALIASES, Candidate
 from ..candidates import default_candidates
+from ..coverage import MIN_ROWS, coverage_messages, unusable_reason
 from ..dataset import DriveTable
 from ..innovations import Innovations, compute_innovations
 from ..residuals import DYNAMIC_EQUATIONS, RowStates, row_states
@@ -113,8 +114,8 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     if mask is not None:
         table = table.slice(mask)
     states = row_states(table, vehicle)
-    if len(states.index) < 50:
-        raise ValueError("too few usable rows (moving faster than 5 m/s with every signal present)")
+    if len(states.index) < MIN_ROWS:
+        raise ValueError(unusable_reason(table))
     inn = compute_innovations(table)
     point, d, always, _ = identify(table, vehicle, effects, states, inn, cfg, reference=vehicle)
     cands = list(candidates) if candidates is not None else default_candidates(effects, user_effects)
@@ -131,7 +132,9 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
                 n_eff / n_rows)
     ev = _excitation(s)
     _forward_selection(s, ev)
-    return _result(s, ev)
+    rk = _result(s, ev)
+    rk.messages = coverage_messages(table, states.index) + rk.messages
+    return rk
 
 
 def _prior_contribution(G: np.ndarray, base: list, d, name: str, c) -> tuple[float, float]:
