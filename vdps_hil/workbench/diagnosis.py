@@ -216,7 +216,8 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
         say("simulation error of the identified model")
         t1 = time.perf_counter()
         sim = simulation_errors(table, base.vehicle, base.effects)
-        before["simulation_error"] = sim.summary()
+        if not sim.missing_inputs:  # else no figures, only the note naming the missing inputs
+            before["simulation_error"] = sim.summary()
         tm["simulation"] = time.perf_counter() - t1
     add_res = None
     if add:
