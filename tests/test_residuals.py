@@ -115,3 +115,28 @@ def test_noise_sigma_is_the_sensor_noise(drive):
     m = TRUE.params.mass_kg
     assert 0.5 * m * 0.002 < s["long"] < 3.0 * m * 0.004  # IMU 0.02 m/s^2 at 1 kHz through 10 Hz
     assert 0.0 < s["wheel_speed_1"] < 0.01
+
+
+def test_without_wheel_torques_only_the_equations_that_need_them_are_dropped(drive):
+    """A partial sensor set (the RAV4: no wheel torques): the same rows stay usable, the
+    longitudinal, wheel-spin and wheel-speed rows are not evaluated, the lateral and yaw
+    balances still are (and unchanged where the torques do not enter: a step steer at
+    constant speed has small drive torques), and the slip nuisance is off."""
+    import dataclasses
+
+    tab, st, res = drive
+    cols = dict(tab.columns)
+    for i in range(1, 5):
+        cols[f"wheel_torque_nm_{i}"] = np.full(len(tab), np.nan)
+    part = dataclasses.replace(tab, columns=cols)
+    st2 = R.row_states(part, TRUE)
+    assert not st2.has_torque and len(st2.index) == len(st.index)
+    r2 = R.compute_residuals(part, TRUE, EffectSet(), states=st2)
+    names = list(R.EQUATIONS)
+    gone = ["long", *[f"wheel_{i}" for i in range(1, 5)], *[f"wheel_speed_{i}" for i in range(1, 5)]]
+    for eq in gone:
+        assert not r2.available[names.index(eq)]
+    for eq in ("lat", "yaw"):
+        k = names.index(eq)
+        assert r2.available[k] and np.isfinite(r2.values[:, k]).mean() > 0.9
+    assert np.all(r2.nuisance[:, :, 2:6] == 0.0)

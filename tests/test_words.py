@@ -37,3 +37,26 @@ def test_known_groups_have_their_maneuvers():
 def test_equation_phrases():
     assert W.equation_phrase("lat") == "lateral residual"
     assert W.equation_phrase("innov_vel") == "GNSS velocity innovations"
+
+
+def _param_entry(value, plausible):
+    from vdps_hil.workbench.ranking.results import RankEntry
+
+    ref = 1655.0
+    used = min(max(value, 0.2 * ref), 5.0 * ref)
+    return RankEntry(effect="inertia_z", kind="parameter", explained_fraction=0.3, explained_by_equation={},
+                     parameters={"inertia_z_kgm2": (value, 48.0)}, plausible=plausible, excited=True,
+                     excitation_z=float("nan"), group=[], reference={"inertia_z_kgm2": ref},
+                     model_value={"inertia_z_kgm2": used}, plausible_range={"inertia_z_kgm2": (0.2 * ref, 5.0 * ref)})
+
+
+def test_an_implausible_parameter_is_never_called_identified():
+    """A negative yaw inertia (seen on a CommonRoad sine) is labelled as not identified, in the
+    one-line form the text summary prints too (up to the first ';'), with the value the model keeps."""
+    msg = W.describe_entry(_rk(), _param_entry(-14.92, False))
+    head = msg.split(";")[0]
+    assert "NOT identified" in head and "implausible" in head and "negative" in head
+    assert "identified -14" not in msg
+    assert "the model keeps 331 kg m^2" in head  # the lower bound, 0.2 x the model file's 1655
+    ok = W.describe_entry(_rk(), _param_entry(1800.0, True))
+    assert ok.startswith("yaw inertia: identified 1800") and "NOT" not in ok

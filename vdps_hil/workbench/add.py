@@ -217,8 +217,9 @@ def before_after(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: S
                                          vehicle_at=v0, effects_at=e0)
                 sim1 = simulation_errors(tab_after, vehicle, effects, starts_s=starts, horizons_s=horizons_s,
                                          vehicle_at=v1, effects_at=e1)
-                before["simulation_error"] = sim0.summary()
-                after["simulation_error"] = sim1.summary()
+                if not sim0.missing_inputs:  # else only the note naming the missing inputs
+                    before["simulation_error"] = sim0.summary()
+                    after["simulation_error"] = sim1.summary()
     params = {}
     for e in m1.effects:
         if e.name in m1.sigmas:

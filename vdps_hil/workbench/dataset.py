@@ -1,9 +1,11 @@
 """A drive as one time-aligned table of measured and estimated signals (the workbench's input).
 
 Only the ``/raw/`` topics of a recording are read (``record.decode.decode_recording``) and only
-a *model* vehicle file: the estimator pipeline (``estimation.pipeline.EstimatorPipeline``, eq
-7-12) runs on the decoded samples exactly as it runs live, and the table puts its outputs next
-to the sensor signals on one uniform grid (default 50 Hz: the signals are low-passed at 10 Hz).
+a *model* vehicle file: the estimator (eq 7-12) and the identifier (eq 19-23) run on the decoded
+samples exactly as ``vdps replay`` runs them (``estimator_run``: the Figure 2 node configured by
+the replay's rule, the sensor set named or inferred from the recording), and the table puts the
+estimator's outputs next to the sensor signals on one uniform grid (default 50 Hz: the signals
+are low-passed at 10 Hz). The identifier's outcome is kept as ``table.rls``.
 
 Columns (SI, names carry units; ``i`` = wheel 1..4 FL FR RR RL, axes body x fwd y left z up)
 ---------------------------------------------------------------------------------------------
@@ -51,6 +53,7 @@ one grid (:func:`build_table`).
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 from dataclasses import dataclass, field
@@ -61,11 +64,13 @@ from scipy.signal import butter, filtfilt
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation.pipeline import PipelineConfig
+from vdps_hil.pipeline.configure import DEFAULT_SUSP_SIGMA_M, SystemConfigError, sample_stats, system_config
+from vdps_hil.pipeline.node import SystemConfig
 from vdps_hil.model.effects.base import MeasurementEffect
 from vdps_hil.model.frames import dcm_gv_batch
 from vdps_hil.model.params import Vehicle
 
-from .estimator_run import EstimatorRun, innovation_tables, run_estimator
+from .estimator_run import EstimatorRun, RlsResult, innovation_tables, renamed, run_system
 from .imu_effects import gyro_track, imu_corrected
 from .streams import (ANGULAR_RATE_FIELDS, GNSS_ATT_FIELDS, GNSS_POS_FIELDS, GNSS_VEL_FIELDS, SPECIFIC_FORCE_FIELDS,
                       SUSPENSION_FIELDS, WHEEL_SPEED_FIELDS, WHEEL_TORQUE_FIELDS, DatasetError, Smoother, Streams,
@@ -86,13 +91,18 @@ class DatasetConfig:
     period_s: grid step [s] (default 0.02: five samples per period of the cutoff); cutoff_hz: zero-phase low-pass of every signal [Hz];
     settle_s: time after the estimator's initialisation left out (filter transient) [s];
     velocity_crossover_hz: below it the velocity is the estimator's, above it the integrated IMU's;
-    min_rate_for_derivative_hz: slower sensors give no derivative; pipeline: estimator config."""
+    min_rate_for_derivative_hz: slower sensors give no derivative; sensorset: a named sensor set
+    (``configs/sensorsets``; default inferred from the recording, as ``vdps replay``);
+    susp_sigma_m: the suspension sensor's sigma (``vdps replay --susp-sigma``); pipeline: an
+    estimator config replacing the sensor set's."""
 
     period_s: float = 0.02
     cutoff_hz: float = 10.0
     settle_s: float = 1.0
     min_rate_for_derivative_hz: float = 20.0
     velocity_crossover_hz: float = 0.2
+    sensorset: str | None = None
+    susp_sigma_m: float = DEFAULT_SUSP_SIGMA_M
     pipeline: PipelineConfig | None = None
 
     def __post_init__(self):
@@ -118,6 +128,8 @@ class DriveTable:
     rates_hz: dict[str, float]
     vehicle: Vehicle
     counters: dict = field(default_factory=dict)
+    rls: RlsResult | None = None
+    sensors: dict = field(default_factory=dict)
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.columns[name]
@@ -158,7 +170,7 @@ class DriveTable:
 
         return DriveTable(self.t0_ns, t, {k: v[mask] for k, v in self.columns.items()},
                           {k: v[mask] for k, v in self.sigma.items()}, cut(self.gnss), cut(self.innovations),
-                          dict(self.rates_hz), self.vehicle, dict(self.counters))
+                          dict(self.rates_hz), self.vehicle, dict(self.counters), self.rls, dict(self.sensors))
 
 
 def build_table(samples: Streams | Sequence[Sample], run: EstimatorRun, vehicle: Vehicle,
@@ -194,7 +206,7 @@ def build_table(samples: Streams | Sequence[Sample], run: EstimatorRun, vehicle:
     gnss = _gnss_tables(samples, run.origin, rel)
     innov = innovation_tables(run.innovations, rel)
     counters = {"estimator": run.counters, "samples": samples.count}
-    return DriveTable(t0_ns, grid, cols, sig, gnss, innov, rates, vehicle, counters)
+    return DriveTable(t0_ns, grid, cols, sig, gnss, innov, rates, vehicle, counters, run.rls)
 
 
 def _state_columns(run: EstimatorRun, grid: np.ndarray, rel: Callable, sm: Smoother, cols: dict,
@@ -362,17 +374,42 @@ def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap
 
     if samples is not None and imu_effects and iter(samples) is samples:
         samples = list(samples)  # a one-shot iterator cannot be read twice
-    feed = source()
+    it = iter(source())
+    head, rates, fields = sample_stats(it)
+    if not head:
+        raise DatasetError(f"{path}: no decodable /raw/ samples")
+    system, kind_map, make_nodes, desc = _system_config(rates, fields, vehicle, cfg)
     if imu_effects:
-        feed = imu_corrected(source(), imu_effects, gyro_track(feed, cfg.cutoff_hz))
+        track = gyro_track(renamed(itertools.chain(head, it), kind_map, make_nodes()), cfg.cutoff_hz)
+        feed = imu_corrected(renamed(source(), kind_map, make_nodes()), imu_effects, track)
+    else:
+        feed = renamed(itertools.chain(head, it), kind_map, make_nodes())
     streams = Streams()
+    run = run_system(streams.tap(feed), vehicle, system, cfg.period_s)
+    table = build_table(streams, run, vehicle, cfg)
+    table.sensors = desc
+    return table
+
+
+def _system_config(rates, fields, vehicle: Vehicle, cfg: DatasetConfig):
+    """(SystemConfig without predictor, kind map, a factory of fresh calibration nodes, sensor-set
+    description) as ``vdps replay`` configures itself from the first seconds."""
     try:
-        run = run_estimator(streams.tap(feed), vehicle, cfg.pipeline, cfg.period_s)
-    except DatasetError:
-        if not streams.count:
-            raise DatasetError(f"{path}: no decodable /raw/ samples") from None
-        raise
-    return build_table(streams, run, vehicle, cfg)
+        system, kind_map, _, desc = system_config(rates, fields, vehicle, cfg.susp_sigma_m, None, cfg.sensorset,
+                                                  predict=False)
+    except SystemConfigError as e:
+        raise DatasetError(str(e)) from None
+    if cfg.pipeline is not None:
+        system = SystemConfig.for_profile(rates.get("suspension", 1.0), cfg.susp_sigma_m, pipeline=cfg.pipeline,
+                                          predict=False)
+
+    def make_nodes():
+        if cfg.sensorset is None:
+            return []
+        from vdps_hil.estimation.sensorsets import load_sensorset
+
+        return load_sensorset(cfg.sensorset).calibration_nodes(vehicle)
+    return system, kind_map, make_nodes, desc
 
 
 def table_from_samples(samples: Iterable[Sample], vehicle: Vehicle, config: DatasetConfig | None = None,

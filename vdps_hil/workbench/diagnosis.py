@@ -79,7 +79,8 @@ class Diagnosis:
                  "worst_windows": [w.to_json() for w in self.windows],
                  "regimes": {k: v.to_json() for k, v in self.regimes.items()},
                  "estimator_nis": _nis(self.table), "duration_s": self.table.duration_s,
-                 "timings_s": dict(self.timings), "saved_model": self.saved_model}
+                 "timings_s": dict(self.timings), "saved_model": self.saved_model,
+                 "simulation_notes": self.simulation_notes()}
         if self.add is not None:
             extra["added"] = self.add.to_json()
         return {"ranking": ranking, "recommendation": rk.recommendation, "equivalent_to": list(rk.equivalent_to),
@@ -107,8 +108,18 @@ class Diagnosis:
             out.append("worst windows: " + "; ".join(f"{w.t_start_s:.1f}-{w.t_end_s:.1f} s ({w.equation})"
                                                       for w in self.windows))
         out += _before_after_lines(self.before, self.add.after if self.add else None)
+        out += self.simulation_notes()
         if self.saved_model:
             out.append(f"model written to {self.saved_model}")
+        return out
+
+
+    def simulation_notes(self) -> list[str]:
+        """Why a simulation error is missing or partial (missing inputs, diverged predictions)."""
+        sims = [self.sim] if self.add is None else [self.add.sim_before, self.add.sim_after]
+        out = []
+        for label, sim in zip(("", "before: ", "after: ")[0 if self.add is None else 1:], sims):
+            out += [label + n for n in (sim.notes() if sim is not None else [])]
         return out
 
 
@@ -152,15 +163,26 @@ def _before_after_lines(before: dict, after: dict | None) -> list[str]:
             a = sa.get(h, {})
             parts = []
             for k, unit in (("position_m", "m"), ("yaw_deg", "deg"), ("roll_deg", "deg"), ("speed_mps", "m/s")):
-                v = d.get(k)
-                if v is None:
-                    continue
-                s = f"{k.split('_')[0]} {v:.3f}"
-                if a.get(k) is not None:
-                    s += f" -> {a[k]:.3f}"
-                parts.append(s + f" {unit}")
-            out.append(f"  {h:>4s} s  " + ", ".join(parts))
+                s = f"{k.split('_')[0]} {_sim_value(d, k, unit)}"
+                if a:
+                    s += f" -> {_sim_value(a, k, unit)}"
+                parts.append(s)
+            out.append(f"  {h:>4s} s  " + ", ".join(parts) + _diverged_phrase(d, a))
     return out
+
+
+def _sim_value(d: dict, k: str, unit: str) -> str:
+    """One simulation-error figure: the number, or why there is none (never ``nan``)."""
+    v = _num(d.get(k))
+    if v is not None:
+        return f"{v:.3f} {unit}"
+    return "diverged" if d.get("n_diverged") else "none"
+
+
+def _diverged_phrase(d: dict, a: dict) -> str:
+    parts = [f"{w}{x['n_diverged']} of {x['n'] + x['n_diverged']} predictions diverged"
+             for x, w in ((d, "" if not a else "before: "), (a, "after: ")) if x and x.get("n_diverged")]
+    return ("  (" + "; ".join(parts) + ", left out)") if parts else ""
 
 
 def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = None, dbc=None, signalmap=None,
@@ -194,7 +216,8 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
         say("simulation error of the identified model")
         t1 = time.perf_counter()
         sim = simulation_errors(table, base.vehicle, base.effects)
-        before["simulation_error"] = sim.summary()
+        if not sim.missing_inputs:  # else no figures, only the note naming the missing inputs
+            before["simulation_error"] = sim.summary()
         tm["simulation"] = time.perf_counter() - t1
     add_res = None
     if add:

@@ -1,30 +1,57 @@
-"""The estimator over a drive: a fresh :class:`~vdps_hil.estimation.pipeline.EstimatorPipeline`
-(eq 7-12) fed the decoded samples exactly as it runs live, its estimate taken on a grid, its
-innovations per measurement kind kept as packed arrays (:func:`run_estimator`).
+"""The estimator and the identifier over a drive, exactly as ``vdps replay`` runs them: the
+Figure 2 node (``pipeline.node.VdpsSystem``: suspension conditioning, the estimator of eq 7-12,
+the identifier's RLS of eq 19-23; no predictor) configured by the replay's own rule
+(``pipeline.configure``: sensor set named or inferred, suspension averaging from the measured
+rate), fed the decoded samples in time order (kinds renamed by the sensor set's kind map,
+through its calibration nodes). Its estimate is taken on a grid, its innovations per
+measurement kind kept as packed arrays, and the identifier's last report kept as the reference
+the workbench's own base fit is checked against (:func:`run_system`).
 """
 
 from __future__ import annotations
 
 import math
 from array import array
-from dataclasses import dataclass
-from typing import Sequence
+from dataclasses import dataclass, field
+from typing import Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from vdps_hil.bus.samples import Sample
-from vdps_hil.estimation.pipeline import EstimatorPipeline, Innovation, PipelineConfig
+from vdps_hil.estimation.estimates import Estimate
+from vdps_hil.estimation.pipeline import Innovation
 from vdps_hil.model.params import Vehicle
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 
 from .streams import DatasetError
 
-__all__ = ["EstimatorRun", "run_estimator", "InnovationLog", "innovation_tables"]
+__all__ = ["EstimatorRun", "RlsResult", "run_system", "renamed", "InnovationLog", "innovation_tables"]
+
+
+@dataclass
+class RlsResult:
+    """The identifier's outcome on the drive (``vdps replay``'s RLS): parameters, sigmas,
+    converged flags per problem (mass, tracking, cornering, inertia), whether each problem was
+    excited, rows used per problem."""
+
+    params: dict[str, float]
+    sigmas: dict[str, float]
+    converged: dict[str, bool]
+    excited: dict[str, bool] = field(default_factory=dict)
+    rows_used: dict[str, int] = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        fin = (lambda v: float(v) if v is not None and math.isfinite(v) else None)  # noqa: E731
+        return {"params": {k: fin(v) for k, v in self.params.items()},
+                "sigmas": {k: fin(v) for k, v in self.sigmas.items()},
+                "converged": dict(self.converged), "excited": dict(self.excited), "rows_used": dict(self.rows_used)}
 
 
 @dataclass
 class EstimatorRun:
     """The estimator's outputs sampled for the table: per grid instant the estimate (its own
-    t_ns, x, sigma) and every Innovation; ``origin`` is the ENU origin it chose; counters."""
+    t_ns, x, sigma) and every Innovation; ``origin`` is the ENU origin it chose; counters; the
+    identifier's outcome (``rls``, None without identification)."""
 
     est_t_ns: np.ndarray
     est_x: np.ndarray
@@ -32,37 +59,63 @@ class EstimatorRun:
     innovations: "InnovationLog | list[Innovation]"
     origin: object
     counters: dict
+    rls: RlsResult | None = None
 
 
-def run_estimator(samples: Sequence[Sample], vehicle: Vehicle, config: PipelineConfig | None = None,
-                  period_s: float = 0.01) -> EstimatorRun:
-    """Feed the samples to a fresh :class:`EstimatorPipeline`; take its estimate each time the
-    bus time crosses a multiple of ``period_s``."""
-    p = EstimatorPipeline(vehicle, config)
+def renamed(samples: Iterable[Sample], kind_map: Mapping[str, str], nodes: Sequence = ()) -> Iterator[Sample]:
+    """The samples with their kinds renamed by a sensor set's kind map (e.g. the RAV4's
+    ``esc_imu`` -> ``imu``), through its calibration nodes (as ``vdps replay`` feeds them)."""
+    for s in samples:
+        if kind_map and s.kind in kind_map:
+            s = Sample(s.t_ns, s.source, kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
+        for node in nodes:
+            s = node.process(s)
+        yield s
+
+
+def run_system(samples: Iterable[Sample], vehicle: Vehicle, config: SystemConfig, period_s: float = 0.01
+               ) -> EstimatorRun:
+    """Feed the samples to a fresh :class:`VdpsSystem` (no predictor); take its estimate each
+    time the filter time crosses a multiple of ``period_s``; keep its innovations and the
+    identifier's last report (module docstring)."""
+    p = VdpsSystem(vehicle, config)
     step = int(round(period_s * 1e9))
     nxt = None
     ts, xs, ss, innov = [], [], [], InnovationLog()
-    for i, s in enumerate(samples):
-        out = p.handle(s)
-        if i % 4096 == 4095:
-            p.clear_input_log()  # its replay log (input_log) would hold the whole drive (as system.replay_file)
+
+    def take(out):
+        nonlocal nxt
         for o in out:
             if isinstance(o, Innovation):
                 innov.add(o)
-        t = s.t_ns
-        if nxt is None:
-            nxt = (t // step + 1) * step
-        if t >= nxt:
-            nxt = (t // step + 1) * step
-            e = p.estimate()
-            if e is not None and (not ts or e.t_ns > ts[-1]):
-                ts.append(e.t_ns)
-                xs.append(e.x)
-                ss.append(e.sigma)
+            elif isinstance(o, Estimate):
+                if nxt is None or o.t_ns >= nxt:
+                    nxt = (o.t_ns // step + 1) * step
+                    if not ts or o.t_ns > ts[-1]:
+                        ts.append(o.t_ns)
+                        xs.append(o.x)
+                        ss.append(o.sigma)
+
+    for i, s in enumerate(samples):
+        take(p.handle(s))
+        if i % 4096 == 4095:
+            p.clear_input_log()  # its replay log would hold the whole drive (as replay_file)
+    take(p.finish())
     if not ts:
         raise DatasetError("the estimator never initialised (no GNSS fix with a heading in the recording)")
-    return EstimatorRun(np.array(ts, dtype=np.int64), np.array(xs), np.array(ss), innov, p.origin,
-                        dict(p.counters))
+    rls = _rls_result(p)
+    return EstimatorRun(np.array(ts, dtype=np.int64), np.array(xs), np.array(ss), innov, p.pipeline.origin,
+                        dict(p.pipeline.counters), rls)
+
+
+def _rls_result(system: VdpsSystem) -> RlsResult | None:
+    idf = system.identifier
+    if idf is None:
+        return None
+    st = idf.status()
+    return RlsResult(dict(idf.params.as_dict()), dict(idf.sigmas), dict(idf.converged),
+                     {k: bool(v) for k, v in st.get("excited", {}).items()},
+                     {k: int(c.get("rows_used", 0)) for k, c in st.get("counters", {}).items()})
 
 
 class InnovationLog:

@@ -149,7 +149,9 @@ def regime_bins(table: DriveTable, res: EquationResiduals, n_bins: int = 6) -> d
             counts[b] = int(sel.sum())
             if counts[b]:
                 vals = res.values[sel]
-                with np.errstate(invalid="ignore"):
-                    rms[b] = np.sqrt(np.nanmean(vals * vals, axis=0))
+                fin = np.isfinite(vals)
+                n_fin = fin.sum(axis=0)  # an equation not evaluated (partial sensor set): NaN, no warning
+                ss = np.where(fin, vals * vals, 0.0).sum(axis=0)
+                rms[b] = np.where(n_fin > 0, np.sqrt(ss / np.maximum(n_fin, 1)), np.nan)
         out[name] = RegimeBins(name, qs, 0.5 * (qs[:-1] + qs[1:]), counts, rms)
     return out

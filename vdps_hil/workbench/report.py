@@ -55,8 +55,11 @@ def _img(uri: str, alt: str) -> str:
 def _main_equations(dg, k: int = 3) -> list[str]:
     """The equations with the largest noise-weighted residual (plus the recommendation's)."""
     res = dg.residuals
-    with np.errstate(invalid="ignore"):
-        w = np.nanmean((res.values / res.sigma) ** 2, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z2 = (res.values / res.sigma) ** 2
+    fin = np.isfinite(z2)
+    # mean over the evaluated rows; NaN for an equation a partial sensor set does not evaluate
+    w = np.where(fin.any(axis=0), np.where(fin, z2, 0.0).sum(axis=0) / np.maximum(fin.sum(axis=0), 1), np.nan)
     order = [EQUATIONS[i] for i in np.argsort(-np.nan_to_num(w)) if res.available[i] and np.isfinite(w[i])]
     eqs = [e for e in ("long", "lat", "yaw") if e in order]
     rec = dg.ranking.entry(dg.ranking.recommendation) if dg.ranking.recommendation else None
@@ -283,6 +286,7 @@ def render_report(dg) -> str:
         parts.append(_table([[f"{h} s", _fmt(d.get("position_m"), "m"), _fmt(d.get("yaw_deg"), "deg"),
                               _fmt(d.get("roll_deg"), "deg"), _fmt(d.get("speed_mps"), "m/s")] for h, d in sb.items()],
                             ["horizon", "position", "yaw", "roll", "speed"]))
+    parts += [f"<p class=\"msg\">{html.escape(m)}</p>" for m in dg.simulation_notes()]
     parts.append("</body></html>")
     return "\n".join(parts)
 

@@ -53,7 +53,7 @@ from .row_model import RowModel
 
 __all__ = ["EQUATIONS", "DYNAMIC_EQUATIONS", "KINEMATIC_EQUATIONS", "EQUATION_LABELS", "EQUATION_UNITS",
            "EquationResiduals", "compute_residuals", "RowStates", "row_states", "parameter_columns",
-           "MIN_SPEED_MPS", "effect_quantities", "imu_kinematics", "finite_or_zero"]
+           "MIN_SPEED_MPS", "effect_quantities", "usable_rows", "TORQUE_COLUMNS", "imu_kinematics", "finite_or_zero"]
 
 KINEMATIC_EQUATIONS: tuple[str, ...] = tuple(f"wheel_speed_{i}" for i in range(1, 5))
 EQUATIONS: tuple[str, ...] = tuple(DYNAMIC_EQUATIONS) + KINEMATIC_EQUATIONS
@@ -80,6 +80,7 @@ class RowStates:
     env: list
     meas: np.ndarray  # (n, 22): f(3), omega_dot(3), wheel_accel(4), wheel speeds(4), H(4), H_dot(4)
     has_susp: bool
+    has_torque: bool = True
 
 
 def row_states(table: DriveTable, vehicle: Vehicle) -> RowStates:
@@ -87,15 +88,8 @@ def row_states(table: DriveTable, vehicle: Vehicle) -> RowStates:
     from the suspension when it is measured, eq 5)."""
     pred = Predictor(vehicle, PredictorConfig(horizon_s=0.02, step_s=0.01))
     c = table.columns
-    need = ["specific_force_b_mps2_x", "specific_force_b_mps2_y", "specific_force_b_mps2_z",
-            "rate_b_radps_x", "rate_b_radps_y", "rate_b_radps_z", "steer_wheel_angle_rad",
-            *[f"wheel_speed_radps_{i}" for i in range(1, 5)], *[f"wheel_torque_nm_{i}" for i in range(1, 5)],
-            *[f"vel_g_mps_{a}" for a in "enu"], "roll_g_rad", "pitch_g_rad", "yaw_g_rad"]
-    ok = np.ones(len(table), bool)
-    for n in need:
-        ok &= np.isfinite(c[n])
-    speed = np.hypot(c["vel_g_mps_e"], c["vel_g_mps_n"])
-    ok &= speed >= MIN_SPEED_MPS
+    has_torque = table.has(*TORQUE_COLUMNS)
+    ok = usable_rows(table)
     has_susp = table.has("susp_deflection_m_1", "susp_deflection_rate_mps_1")
     idx = np.flatnonzero(ok)
     xs, us, envs = [], [], []
@@ -121,8 +115,33 @@ def row_states(table: DriveTable, vehicle: Vehicle) -> RowStates:
         x0, env, _ = pred.core_state(init)
         xs.append(x0)
         envs.append(env)
-        us.append(Inputs(c["steer_wheel_angle_rad"][k], tuple(c[f"wheel_torque_nm_{i}"][k] for i in range(1, 5))))
-    return RowStates(idx, xs, us, envs, meas, has_susp)
+        torque = tuple(c[f"wheel_torque_nm_{i}"][k] for i in range(1, 5)) if has_torque else (0.0,) * 4
+        us.append(Inputs(c["steer_wheel_angle_rad"][k], torque))
+    return RowStates(idx, xs, us, envs, meas, has_susp, has_torque=has_torque)
+
+
+TORQUE_COLUMNS = tuple(f"wheel_torque_nm_{i}" for i in range(1, 5))
+NEEDED_COLUMNS = ("specific_force_b_mps2_x", "specific_force_b_mps2_y", "specific_force_b_mps2_z",
+                  "rate_b_radps_x", "rate_b_radps_y", "rate_b_radps_z", "steer_wheel_angle_rad",
+                  *[f"wheel_speed_radps_{i}" for i in range(1, 5)], *TORQUE_COLUMNS,
+                  *[f"vel_g_mps_{a}" for a in "enu"], "roll_g_rad", "pitch_g_rad", "yaw_g_rad")
+"""Signals a usable row needs (the wheel torques only when the drive has them at all: without
+them the equations that need them are not evaluated, ``compute_residuals``)."""
+TORQUE_EQUATIONS = (0, *range(6, 14))
+"""Equations (``EQUATIONS`` index) that need the wheel torques: long, wheel_i, wheel_speed_i."""
+
+
+def usable_rows(table: DriveTable) -> np.ndarray:
+    """Rows moving at >= ``MIN_SPEED_MPS`` with every needed signal finite (``NEEDED_COLUMNS``;
+    the wheel torques only when the drive has them)."""
+    c = table.columns
+    has_torque = table.has(*TORQUE_COLUMNS)
+    ok = np.ones(len(table), bool)
+    for n in NEEDED_COLUMNS:
+        if n in TORQUE_COLUMNS and not has_torque:
+            continue
+        ok &= np.isfinite(c[n]) if n in c else False
+    return ok & (np.hypot(c["vel_g_mps_e"], c["vel_g_mps_n"]) >= MIN_SPEED_MPS)
 
 
 def finite_or_zero(v: float) -> float:
@@ -218,6 +237,13 @@ def compute_residuals(table: DriveTable, vehicle: Vehicle, effects: EffectSet | 
     if not st.has_susp:
         avail[2:5] = False  # vert, roll, pitch need the suspension forces (eq 14)
         vals[:, 2:5] = np.nan
+    if not st.has_torque:
+        # no wheel torques: the longitudinal balance and the wheel rows are not evaluated, and the
+        # longitudinal tire forces are not free per row (their only evidence, the spin balance, is gone)
+        avail[list(TORQUE_EQUATIONS)] = False
+        vals[:, list(TORQUE_EQUATIONS)] = np.nan
+        if nuis is not None:
+            nuis[:, :, 2:6] = 0.0
     bad = ~np.all(np.isfinite(vals[:, avail]), axis=1)
     vals[bad] = np.nan
     sigma = _noise_sigma(vals, table.period_s) if with_nuisance else np.full(14, np.nan)

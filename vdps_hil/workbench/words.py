@@ -13,6 +13,7 @@ import math
 from vdps_hil.units import GRAVITY_MPS2
 
 from .candidate_base import PARAM_ALIASES, PARAM_LABELS
+from .coverage import EFFECT_NEEDS
 from .residuals import EQUATION_LABELS
 
 __all__ = ["describe_entry", "describe_ranking", "separating_maneuver", "group_maneuver", "EFFECT_LABELS",
@@ -107,6 +108,8 @@ def describe_entry(rk, e) -> str:
         unit, k = _unit(p)
         if not e.excited:
             return f"{label}: not excited on this drive, held at the model file's {ref / k:.4g} {unit}"
+        if not e.plausible:
+            return _implausible_parameter(label, e, p, v, s, ref, unit, k)
         msg = f"{label}: identified {v / k:.4g} +- {s / k:.2g} {unit} (model file {ref / k:.4g} {unit})"
         if e.group:
             alts = [g for g in e.group if g != e.effect]
@@ -115,7 +118,9 @@ def describe_entry(rk, e) -> str:
                     + " would separate them")
         return msg
     if not e.excited:
-        return f"{label}: not excited -- this drive cannot show it (z = {e.excitation_z:.1f} at its typical size)"
+        need = EFFECT_NEEDS.get(e.effect)
+        return (f"{label}: not excited -- this drive cannot show it (z = {e.excitation_z:.1f} at its typical size)"
+                + (f"; needs {need}" if need else ""))
     body = _effect_words(rk, e)
     msg = f"{label}: {body}; {_explains(e)}"
     if not e.plausible:
@@ -125,6 +130,18 @@ def describe_entry(rk, e) -> str:
         msg += ("; cannot be told apart on this drive from " + ", ".join(EFFECT_LABELS.get(a, a) for a in alts)
                 + " (" + group_maneuver(e.group) + " would separate them)")
     return msg
+
+
+def _implausible_parameter(label, e, p, v, s, ref, unit, k) -> str:
+    """An identified value outside its plausible range: never called identified; the value the
+    model keeps (the nearest bound) is named."""
+    lo, hi = e.plausible_range.get(p, (0.0, math.inf))
+    used = e.model_value.get(p, math.nan)
+    why = ("negative, " if v <= 0 else "") + ("below" if v < lo else "above") + " the plausible range"
+    rng = f"{lo / k:.4g}-{hi / k:.4g} {unit}" if math.isfinite(hi) else f"> {lo / k:.4g} {unit}"
+    return (f"{label}: NOT identified -- implausible fit {v / k:.4g} +- {s / k:.2g} {unit}, {why} {rng} (model "
+            f"file {ref / k:.4g} {unit}), the model keeps {used / k:.4g} {unit}; this drive does not determine "
+            "it, or the base model misses an effect that it absorbs")
 
 
 def _unit(p: str) -> tuple[str, float]:

@@ -197,7 +197,9 @@ def excited_parameters(table: DriveTable, states: RowStates, cfg: RankingConfig)
     roll / pitch / yaw inertia       angular acceleration about that axis >= ``excite_angacc_radps2``
     slip stiffness of wheel i        its wheel torque >= ``excite_torque_nm``
     ===============================  ===========================================================
-    """
+
+    Without suspension signals the roll and pitch inertias are held (their balances are not
+    evaluated), without wheel torques too the mass."""
     c = table.columns
     idx = states.index
     out = {"mass_kg"}
@@ -215,6 +217,11 @@ def excited_parameters(table: DriveTable, states: RowStates, cfg: RankingConfig)
     for i in range(1, 5):
         if sd(f"wheel_torque_nm_{i}") >= cfg.excite_torque_nm:
             out.add(f"tracking_stiffness_{i}_n")
+    # a partial sensor set: what the missing equations carried is not identified
+    if not getattr(states, "has_susp", True):
+        out -= {"inertia_x_kgm2", "inertia_y_kgm2"}  # roll and pitch balances need the suspension
+        if not getattr(states, "has_torque", True):
+            out.discard("mass_kg")  # neither the longitudinal nor the vertical balance is evaluated
     return out & set(cfg.identify)
 
 

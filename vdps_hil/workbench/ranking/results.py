@@ -40,6 +40,8 @@ class RankEntry:
     message: str = ""
     reference: dict[str, float] = field(default_factory=dict)
     explained_gain_by_equation: dict[str, float] = field(default_factory=dict)
+    model_value: dict[str, float] = field(default_factory=dict)  # a parameter: the value the model uses
+    plausible_range: dict[str, tuple[float, float]] = field(default_factory=dict)  # a parameter: its bounds
 
     def to_json(self) -> dict:
         num = json_number
@@ -48,7 +50,10 @@ class RankEntry:
                 "parameters": {k: {"value": num(v), "sigma": num(s)} for k, (v, s) in self.parameters.items()},
                 "plausible": bool(self.plausible), "excited": bool(self.excited),
                 "excitation_z": num(self.excitation_z), "group": list(self.group), "selected": bool(self.selected),
-                "delta_bic": num(self.delta_bic), "message": self.message}
+                "delta_bic": num(self.delta_bic), "message": self.message,
+                **({"model_value": {k: num(v) for k, v in self.model_value.items()}} if self.model_value else {}),
+                **({"plausible_range": {k: [num(a), num(b)] for k, (a, b) in self.plausible_range.items()}}
+                   if self.plausible_range else {})}
 
 
 def json_number(v):

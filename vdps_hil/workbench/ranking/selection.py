@@ -51,6 +51,7 @@ from vdps_hil.model.params import Vehicle
 
 from ..candidate_base import PARAM_ALIASES, Candidate
 from ..candidates import default_candidates
+from ..coverage import MIN_ROWS, coverage_messages, unusable_reason
 from ..dataset import DriveTable
 from ..innovations import Innovations, compute_innovations
 from ..residuals import DYNAMIC_EQUATIONS, RowStates, row_states
@@ -113,8 +114,8 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     if mask is not None:
         table = table.slice(mask)
     states = row_states(table, vehicle)
-    if len(states.index) < 50:
-        raise ValueError("too few usable rows (moving faster than 5 m/s with every signal present)")
+    if len(states.index) < MIN_ROWS:
+        raise ValueError(unusable_reason(table))
     inn = compute_innovations(table)
     point, d, always, _ = identify(table, vehicle, effects, states, inn, cfg, reference=vehicle)
     cands = list(candidates) if candidates is not None else default_candidates(effects, user_effects)
@@ -131,7 +132,9 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
                 n_eff / n_rows)
     ev = _excitation(s)
     _forward_selection(s, ev)
-    return _result(s, ev)
+    rk = _result(s, ev)
+    rk.messages = coverage_messages(table, states.index) + rk.messages
+    return rk
 
 
 def _prior_contribution(G: np.ndarray, base: list, d, name: str, c) -> tuple[float, float]:
@@ -389,8 +392,11 @@ def _group_has_signal(d: Design, name: str, g: int) -> bool:
 def _parameter_entries(d: Design, ref: Vehicle, base: Vehicle, current, ratio, s2,
                        cfg: RankingConfig) -> list[RankEntry]:
     """The identified parameters as entries: value, sigma, explained fraction of moving each
-    from the reference (model file) value to the identified one."""
+    from the reference (model file) value to the identified one. Plausible: the value lies
+    within ``base_bounds`` times the model file's (positive; the base fit keeps the model's
+    value inside them, ``model_value``)."""
     out = []
+    lo, hi = cfg.base_bounds
     G, c, yy, _ = d.stats()
     th_all, _, _ = d.fit(current)
     pos = {k: j for j, k in enumerate(current)}
@@ -400,7 +406,8 @@ def _parameter_entries(d: Design, ref: Vehicle, base: Vehicle, current, ratio, s
         if p not in d.blocks:
             out.append(RankEntry(effect=PARAM_ALIASES[p], kind="parameter", explained_fraction=0.0,
                                  explained_by_equation={}, parameters={p: (cur, math.nan)}, plausible=cur > 0,
-                                 excited=False, excitation_z=math.nan, group=[], reference={p: ref_v}))
+                                 excited=False, excitation_z=math.nan, group=[], reference={p: ref_v},
+                                 model_value={p: cur}, plausible_range={p: (lo * ref_v, hi * ref_v)}))
             continue
         k = d.blocks[p][0]
         # residual with the parameter back at the reference: y + X_p (ref - cur) ... in scaled units
@@ -412,8 +419,9 @@ def _parameter_entries(d: Design, ref: Vehicle, base: Vehicle, current, ratio, s
         sig = sigma_of(d, p, current, s2, ratio)[0]
         val = cur + th_all[pos[k]] / d.scale[k]
         e = RankEntry(effect=PARAM_ALIASES[p], kind="parameter", explained_fraction=ef, explained_by_equation={},
-                      parameters={p: (val, sig)}, plausible=val > 0, excited=True, excitation_z=math.nan,
-                      group=[], reference={p: ref_v})
+                      parameters={p: (val, sig)}, plausible=bool(lo * ref_v <= val <= hi * ref_v),
+                      excited=True, excitation_z=math.nan, group=[], reference={p: ref_v}, model_value={p: cur},
+                      plausible_range={p: (lo * ref_v, hi * ref_v)})
         out.append(e)
     out.sort(key=lambda e: -e.explained_fraction)
     return out
