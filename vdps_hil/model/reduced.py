@@ -78,7 +78,7 @@ def supports(model: Model) -> bool:
 
 @kernel()
 def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens):
-    """Hand-specialised kernel of the reduced model's stages in one loop (module docstring):
+    """The hand-specialised kernel of the reduced model's stages in one loop (module docstring):
     writes x_dot (16) into ``xd``, F_z,i into ``fzs``, n_b into ``nb``, kappa_i into ``kaps``
     and den_i into ``dens``. ``csd`` (4, 2): cos/sin of the road-wheel angles; ``ng``: road
     normal, ENU."""
