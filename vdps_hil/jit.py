@@ -80,6 +80,8 @@ def cache_key() -> str:
 
 
 os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(_CACHE_BASE, cache_key()))
+if "numba.core.config" in sys.modules:  # numba imported first: it read its cache directory already
+    sys.modules["numba.core.config"].CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
 
 
 def kernel(*signatures, **options) -> Callable:
