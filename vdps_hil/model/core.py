@@ -336,8 +336,12 @@ class Model:
         """x_dot and named diagnostics (slow path, for snapshots): see ``snapshot_fields``."""
         raw: dict = {}
         xd = self.f(x, u, env, raw)
-        return xd, _named(xd, raw["_acc_b"], raw["_g_b"], raw["_force_b"], raw["_moment_b"], raw["_height_cg"],
-                          raw["_air_b"], raw["_rec"])
+        return xd, self._named(x, xd, raw, env)
+
+    def _named(self, x, xd, raw: dict, env: Env) -> dict:
+        """The named diagnostics from x_dot and the raw diagnostics ``raw`` of ``f(x, u, env, raw)``."""
+        return _named(xd, raw["_acc_b"], raw["_g_b"], raw["_force_b"], raw["_moment_b"], raw["_height_cg"],
+                      raw["_air_b"], raw["_rec"])
 
     def evaluate_from(self, x, xd, diag, env: Env) -> tuple[list, dict]:
         """``evaluate``'s result from x_dot and the compiled core's diagnostics array ``diag``

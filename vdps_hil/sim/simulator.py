@@ -282,7 +282,7 @@ class Simulator(FixedStepTruth):
 
     def _chunkable(self) -> bool:
         ov = self._override
-        return (self._compiled and self._time_only and not self._step_hooks
+        return (self._compiled and self._time_only and self._source is self._time_source and not self._step_hooks
                 and (ov is None or isinstance(ov, Inputs)))
 
     def _columns_ahead(self, n0: int, m: int) -> list[list[float]]:

@@ -125,6 +125,7 @@ class FixedStepTruth:
         self._source = (lambda t, x, _u=inputs: _u) if isinstance(inputs, Inputs) else inputs
         self._time_columns = cols
         self._time_only = cols is not None
+        self._time_source = self._source  # the source the columns describe (replaced: not time-only)
         self._override = None
 
     @property
