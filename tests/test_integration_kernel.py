@@ -55,7 +55,7 @@ def test_compiled_loop_equals_its_python_source_bit_for_bit(case, monkeypatch):
     kw = dict(ros2=case != "heun", coupling=case != "ros2-uncoupled", stop_ponr=case == "ponr",
               tip=0.0 if case == "ponr" else 0.8, roll_limit=0.05 if case == "roll-limit" else 1.5)
     compiled = _run(ik.reduced_loop, x0, U, ng, **kw)
-    for name in ("reduced_rhs", "wheel_spin_jacobian", "_coupling_geometry", "_w_factors", "_roll_v"):
+    for name in ("reduced_rhs", "wheel_spin_jacobian", "_coupling_geometry", "_w_factors", "_roll_v", "_keep"):
         fn = getattr(ik, name)
         monkeypatch.setattr(ik, name, getattr(fn, "py_func", fn))
     reference = _run(ik.reduced_loop.py_func, x0, U, ng, **kw)

@@ -79,6 +79,16 @@ def _roll_v(nb, x):
 
 
 @kernel()
+def _keep(X, FZ, T, PHI, RATE, k, x, fz, t, phi_v, rate):
+    """Row ``k`` of the outputs: state, loads, time, phi_v and its rate."""
+    X[k] = x
+    FZ[k] = fz
+    T[k] = t
+    PHI[k] = phi_v
+    RATE[k] = rate
+
+
+@kernel()
 def reduced_loop(x0, U_csd, U_tq, U_br, ng, K, C, h, n_steps, out_every, jac_every, ros2, coupling,
                  stop_ponr, tip_angle, roll_limit, gamma, X, FZ, T, PHI, RATE):
     """A hand-specialised kernel: one prediction on the reduced core (module docstring)."""
@@ -100,11 +110,7 @@ def reduced_loop(x0, U_csd, U_tq, U_br, ng, K, C, h, n_steps, out_every, jac_eve
         record = n % out_every == 0 or n == n_steps
         phi_v, rate = _roll_v(nb, x)
         if record:
-            X[n_out] = x
-            FZ[n_out] = fz
-            T[n_out] = n * h
-            PHI[n_out] = phi_v
-            RATE[n_out] = rate
+            _keep(X, FZ, T, PHI, RATE, n_out, x, fz, n * h, phi_v, rate)
             n_out += 1
             n_fed = n_out
             if stop_ponr and abs(phi_v) > tip_angle and phi_v * rate > 0.0:
@@ -112,11 +118,7 @@ def reduced_loop(x0, U_csd, U_tq, U_br, ng, K, C, h, n_steps, out_every, jac_eve
                 break
         if abs(phi_v) > roll_limit:
             if not record:
-                X[n_out] = x
-                FZ[n_out] = fz
-                T[n_out] = n * h
-                PHI[n_out] = phi_v
-                RATE[n_out] = rate
+                _keep(X, FZ, T, PHI, RATE, n_out, x, fz, n * h, phi_v, rate)
                 n_out += 1
             stop = 2
             break
