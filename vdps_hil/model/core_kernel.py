@@ -7,7 +7,7 @@ Reference and equality
 ----------------------
 The stages stay the reference and the source of the equations. The stages that work on floats
 and tuples alone (``body_attitude``, ``ackermann_angles``, ``spring_force_n``, ``air_velocity_b``,
-``pose_rates``) and the effects' force laws are :func:`~vdps_hil.jit.inline` functions this
+``pose_rates``, ``wheel_axes``) and the effects' force laws are :func:`~vdps_hil.jit.inline` functions this
 kernel calls as they are; the stages that take the model's constants and effect hooks
 (``corner_loads``, ``tire_at_corner``, ``compliance_steer_angle``, ``corner_wrench``,
 ``effect_wrench``, ``body_accelerations``, ``unsprung_accelerations``) are mirrored here one
@@ -48,7 +48,7 @@ from .effects.base import STATIC_HOOKS
 from .effects.rolling import WHEEL_ROLLING_RESISTANCE, rolling_resistance_torque
 from .effects.tires import (STIFFNESS_LOAD_DEPENDENT, TIRE_LINEAR, TIRE_MAGIC_FORMULA, linear_tire_forces,
                             load_dependent_stiffness_factor, magic_formula_forces)
-from .stages import ackermann_angles, air_velocity_b, body_attitude, pose_rates, spring_force_n
+from .stages import ackermann_angles, air_velocity_b, body_attitude, pose_rates, spring_force_n, wheel_axes
 
 HOOK_TIRE, HOOK_STIFFNESS, HOOK_WRENCH, HOOK_WHEEL = 0.0, 1.0, 2.0, 3.0
 HOOK_IDS = {"tire_forces": HOOK_TIRE, "cornering_stiffness_factor": HOOK_STIFFNESS,
@@ -122,13 +122,7 @@ def _corner_loads(K, C, E, x, h_cg, n_b, vel, rate, S):
 @inline
 def _tire_at_corner(S, i, delta, n_b, x, v_floor, E):
     """Mirror of ``stages.tire_at_corner``: (F_a, F_b, kappa, alpha, e_l (3), e_t (3))."""
-    nx, ny, nz = n_b
-    cd, sd = math.cos(delta), math.sin(delta)
-    hn = cd * nx + sd * ny
-    lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
-    inv = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
-    lx, ly, lz = lx * inv, ly * inv, lz * inv
-    tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
+    lx, ly, lz, tx, ty, tz = wheel_axes(delta, n_b)
     vwx, vwy, vwz = S[i, S_VWX], S[i, S_VWY], S[i, S_VWZ]
     vl = vwx * lx + vwy * ly + vwz * lz
     vt = vwx * tx + vwy * ty + vwz * tz

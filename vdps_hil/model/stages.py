@@ -28,7 +28,7 @@ some 10^4-10^5 times per simulated drive. Tuples passed between the stages:
 * a **wrench** ``(F_x, F_y, F_z, M_x, M_y, M_z)`` in body axes about the sprung CG [N, N m].
 
 The stages on floats and tuples alone (``spring_force_n``, ``ackermann_angles``,
-``body_attitude``, ``air_velocity_b``, ``pose_rates``) are :func:`~vdps_hil.jit.inline`: the
+``body_attitude``, ``wheel_axes``, ``air_velocity_b``, ``pose_rates``) are :func:`~vdps_hil.jit.inline`: the
 compiled core (:mod:`vdps_hil.model.core_kernel`) calls these very functions; the others it
 mirrors operation for operation (tested bit for bit equal to ``derivative_function``).
 """
@@ -174,6 +174,19 @@ def corner_loads(k: CoreConstants, susp, susp_rate, h_cg: float, n_b, vel, rate)
     return ck
 
 
+@inline
+def wheel_axes(delta: float, n_b) -> tuple[float, float, float, float, float, float]:
+    """Eq 15-16's wheel axes in the road plane, body axes: ``(e_l (3), e_t (3))`` with
+    e_l = unit((cos d, sin d, 0) - ((cos d, sin d, 0) . n) n) and e_t = n x e_l."""
+    nx, ny, nz = n_b
+    cd, sd = math.cos(delta), math.sin(delta)
+    hn = cd * nx + sd * ny
+    lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
+    inv = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
+    lx, ly, lz = lx * inv, ly * inv, lz * inv
+    return lx, ly, lz, ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
+
+
 def tire_at_corner(c, delta: float, n_b, oms, v_floor: float, tire_fn):
     """Eq 15-16 at one corner state ``c`` with road-wheel angle ``delta``:
     ``(F_a, F_b, kappa, alpha, e_l (3), e_t (3))``::
@@ -183,13 +196,7 @@ def tire_at_corner(c, delta: float, n_b, oms, v_floor: float, tire_fn):
         kappa = (r_i omega_i - v_l) / den,  alpha = -atan(v_t / den)
         F_a, F_b = tire_fn(F_z, F_z0, kappa, alpha, C_kappa, C_alpha)"""
     (i, xi, yi, zi, hw, fz, fs, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0) = c
-    nx, ny, nz = n_b
-    cd, sd = math.cos(delta), math.sin(delta)
-    hn = cd * nx + sd * ny
-    lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
-    inv = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
-    lx, ly, lz = lx * inv, ly * inv, lz * inv
-    tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
+    lx, ly, lz, tx, ty, tz = wheel_axes(delta, n_b)
     vl = vwx * lx + vwy * ly + vwz * lz
     vt = vwx * tx + vwy * ty + vwz * tz
     den = vl if vl > 0.0 else -vl
