@@ -1,35 +1,21 @@
 """The specialised reduced core (model/reduced.py) is the same equations as the generic core:
 equal to Model.f on random states, inputs and roads (relative 1e-9; measured ~1e-12), its
 diagnostics equal the core's, and its closed-form wheel-spin Jacobian equals a forward
-difference of Model.f."""
+difference of Model.f. The compiled kernels equal their Python source run by CPython
+(``py_func``) bit for bit (0 ulp: the same IEEE operations in the same order, the same libm)."""
 
 import math
 import random
 
+import numpy as np
 import pytest
 
 from vdps_hil.model.core import Env, Inputs, Model
 from vdps_hil.model.effects import EffectSet, LinearTire, make_effect
 from vdps_hil.model.params import load_vehicle
-from vdps_hil.model.reduced import ReducedLinearCore, supports
+from vdps_hil.model.reduced import ReducedLinearCore, reduced_rhs, supports, wheel_spin_jacobian
 
-
-def _random_case(model: Model, rng: random.Random, lift: bool):
-    """A state near trim at 5-30 m/s with perturbed attitude, rates, slips (and a large roll when
-    ``lift``, so wheels leave the ground), random steering, drive torques and brakes, and a road."""
-    env = Env(rng.uniform(-0.08, 0.08), rng.uniform(-0.08, 0.08))
-    x = model.design_state(rng.uniform(5.0, 30.0), env, heading_rad=rng.uniform(-3.0, 3.0))
-    x[3] += rng.gauss(0.0, 0.3 if lift else 0.02)
-    x[4] += rng.gauss(0.0, 0.02)
-    for j in (0, 1, 2):
-        x[j] += rng.gauss(0.0, 0.02)  # heave: loads from compressed to unloaded
-    for j in (7, 8, 9, 10, 11):
-        x[j] += rng.gauss(0.0, 0.5)
-    for j in range(12, 16):
-        x[j] *= 1.0 + rng.gauss(0.0, 0.05)
-    brakes = [rng.uniform(0.0, 800.0) if rng.random() < 0.5 else 0.0 for _ in range(4)]
-    u = Inputs(rng.uniform(-3.0, 3.0), [rng.gauss(0.0, 400.0) for _ in range(4)], brakes)
-    return x, u, env
+from core_cases import random_case
 
 
 @pytest.mark.parametrize("name", ["sedan-model", "suv-model"])
@@ -41,7 +27,7 @@ def test_equals_the_generic_core(name, extra):
     rng = random.Random(6)
     n_lifted = 0
     for k in range(300):
-        x, u, env = _random_case(model, rng, lift=k % 3 == 0)
+        x, u, env = random_case(model, rng, lift=k % 3 == 0)
         out = {}
         ref = model.f(x, u, env, out)
         xd, fz, nb, kap, den = core.f(x, core.inputs(u), env)
@@ -60,7 +46,7 @@ def test_wheel_spin_jacobian_equals_a_forward_difference_of_the_core():
     core = ReducedLinearCore(model)
     rng = random.Random(7)
     for _ in range(100):
-        x, u, env = _random_case(model, rng, lift=False)
+        x, u, env = random_case(model, rng, lift=False)
         x[12] = rng.choice([x[12], 0.7, -1.9, 3.0])  # also inside the brake's hold band
         f0 = model.f(x, u, env)
         _, fz, _, _, den = core.f(x, core.inputs(u), env)
@@ -96,3 +82,24 @@ def test_straight_rolling_on_a_level_road_is_steady():
     assert fz[0] == pytest.approx(fz[1], rel=1e-12) and fz[3] == pytest.approx(fz[2], rel=1e-12)
     assert min(fz) > 0.0
     assert math.isclose(xd[0], 20.0, rel_tol=1e-12)
+
+
+def test_compiled_kernels_equal_their_python_source_bit_for_bit():
+    """0 ulp on x_dot, loads, n_b, slips, slip denominators and the wheel-spin Jacobian (the
+    kernel as compiled vs ``py_func``; with ``VDPS_JIT=0`` both sides are the Python source)."""
+    model = Model(load_vehicle("suv-model"), EffectSet([LinearTire()]), unsprung_dof=False)
+    core = ReducedLinearCore(model)
+    rng = random.Random(11)
+    for k in range(100):
+        x, u, env = random_case(model, rng, lift=k % 3 == 0)
+        csd, tq, br = core.inputs(u)
+        args = (np.array(x), csd, tq, br, np.array(env.normal_g), core.K, core.C)
+        outs = [[np.empty(16), np.empty(4), np.empty(3), np.empty(4), np.empty(4)] for _ in range(2)]
+        reduced_rhs(*args, *outs[0])
+        reduced_rhs.py_func(*args, *outs[1])
+        for a, b in zip(*outs):
+            assert np.array_equal(a, b)
+        jd = [np.empty(4), np.empty(4)]
+        wheel_spin_jacobian(np.array(x), br, outs[0][1], outs[0][4], core.K, core.C, jd[0])
+        wheel_spin_jacobian.py_func(np.array(x), br, outs[0][1], outs[0][4], core.K, core.C, jd[1])
+        assert np.array_equal(jd[0], jd[1])

@@ -17,6 +17,16 @@ Compilation and its cache
   :data:`KERNEL_MODULES` and runs its ``warm()``), so no command a user runs pays the compile.
 * ``VDPS_JIT=0`` in the environment turns compilation off: every kernel runs as its Python
   reference (for debugging, and for the equality tests' reference side).
+* numba keys a cached kernel on its own source file only, not on the files of the functions it
+  calls (a known numba limitation: a changed callee in another module would leave the caller's
+  stale machine code in use). So the cache directory carries a key, a hash of the source files
+  of :data:`KERNEL_MODULES` and :data:`KERNEL_SOURCES` (the modules whose :func:`inline`
+  functions kernels call): any change to one of them starts a fresh cache; ``--warm`` removes
+  the directories of other keys.
+
+Two decorators: :func:`kernel` (a compiled function, callable from Python and from other
+kernels) and :func:`inline` (a plain Python function that kernels may also call, compiled into
+them: numba's ``register_jitable``; from Python it runs as written, so it is its own reference).
 
 Layer 0 (imports nothing of ours), so every package may use it.
 """
@@ -29,17 +39,49 @@ import sys
 import time
 from typing import Callable
 
-__all__ = ["ENABLED", "KERNEL_MODULES", "kernel", "warm"]
+__all__ = ["ENABLED", "KERNEL_MODULES", "KERNEL_SOURCES", "cache_key", "inline", "kernel", "warm"]
 
 ENABLED = os.environ.get("VDPS_JIT", "1").strip().lower() not in ("0", "false", "no", "off")
 """False when ``VDPS_JIT=0``: kernels run as plain Python."""
 
-os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(sys.prefix, "var", "cache", "vdps-hil", "numba"))
-
-KERNEL_MODULES: list[str] = []
+KERNEL_MODULES: list[str] = [
+    "vdps_hil.model.reduced", "vdps_hil.model.core_kernel", "vdps_hil.prediction.integration_kernel",
+    "vdps_hil.sim.step_kernel",
+]
 """Modules that define kernels and a ``warm()`` that compiles them with representative
 arguments (``python -m vdps_hil.jit --warm``). A module adds itself here by name, in this
 file, when it gains kernels."""
+
+KERNEL_SOURCES: list[str] = [
+    "vdps_hil.model.frames", "vdps_hil.model.stages", "vdps_hil.model.effects.tires",
+    "vdps_hil.model.effects.aero", "vdps_hil.model.effects.rolling",
+]
+"""Modules without kernels of their own whose :func:`inline` functions kernels call: part of
+the cache key (module docstring)."""
+
+_CACHE_BASE = os.path.join(sys.prefix, "var", "cache", "vdps-hil", "numba")
+
+
+def cache_key() -> str:
+    """Hash of the source files of :data:`KERNEL_MODULES` and :data:`KERNEL_SOURCES` (12 hex)."""
+    import hashlib
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    h = hashlib.sha256()
+    for name in sorted(set(KERNEL_MODULES) | set(KERNEL_SOURCES)):
+        path = os.path.join(root, *name.split(".")) + ".py"
+        h.update(name.encode())
+        try:
+            with open(path, "rb") as fh:
+                h.update(fh.read())
+        except OSError:
+            h.update(b"missing")
+    return h.hexdigest()[:12]
+
+
+os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(_CACHE_BASE, cache_key()))
+if "numba.core.config" in sys.modules:  # numba imported first: it read its cache directory already
+    sys.modules["numba.core.config"].CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
 
 
 def kernel(*signatures, **options) -> Callable:
@@ -60,6 +102,30 @@ def kernel(*signatures, **options) -> Callable:
     return wrap
 
 
+def inline(fn: Callable) -> Callable:
+    """Decorator: ``fn`` stays a plain Python function (its own reference) that kernels may call;
+    compiled into each kernel that calls it (numba's ``register_jitable``). Its module belongs in
+    :data:`KERNEL_SOURCES` (or :data:`KERNEL_MODULES`)."""
+    if ENABLED:
+        from numba.extending import register_jitable
+
+        register_jitable(fn)
+    return fn
+
+
+def _prune_cache() -> None:
+    """Remove cache directories of other keys under the default cache base."""
+    import shutil
+
+    here = os.environ["NUMBA_CACHE_DIR"]
+    if os.path.dirname(here) != _CACHE_BASE or not os.path.isdir(_CACHE_BASE):
+        return
+    for name in os.listdir(_CACHE_BASE):
+        path = os.path.join(_CACHE_BASE, name)
+        if path != here and os.path.isdir(path):
+            shutil.rmtree(path, ignore_errors=True)
+
+
 def warm(verbose: bool = False) -> dict[str, float]:
     """Import every kernel module and run its ``warm()``; returns seconds per module."""
     out = {}
@@ -75,6 +141,7 @@ def warm(verbose: bool = False) -> dict[str, float]:
 
 if __name__ == "__main__":  # python -m vdps_hil.jit --warm
     if "--warm" in sys.argv[1:]:
+        _prune_cache()
         took = warm(verbose=True)
         print(f"compiled kernels of {len(took)} modules in {sum(took.values()):.1f} s"
               f"{'' if ENABLED else ' (VDPS_JIT=0: nothing compiled)'}")

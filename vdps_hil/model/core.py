@@ -96,8 +96,10 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable, Mapping, Sequence
 
+from vdps_hil import jit
 from vdps_hil.units import GRAVITY_MPS2
 
+from . import core_kernel
 from .effects import EffectSet, LinearTire
 from .effects.base import Effect
 from .params import Vehicle
@@ -190,6 +192,33 @@ class Env:
         object.__setattr__(self, "wind_enu_mps", tuple(float(w) for w in self.wind_enu_mps))
 
 
+_AXIS_KEYS = tuple((f"accel_b_mps2_{a}", f"specific_force_b_mps2_{a}", f"angular_accel_b_radps2_{a}",
+                    f"force_b_n_{a}", f"moment_b_nm_{a}") for a in "xyz")
+_AIR_KEYS = tuple(f"air_vel_b_mps_{a}" for a in "xyz")
+_CORNER_KEYS = tuple(tuple(f"{stem}_{i}" for stem in (
+    "tire_force_long_n", "tire_force_lat_n", "normal_load_n", "slip_ratio", "slip_angle_rad", "susp_deflection_m",
+    "susp_deflection_rate_mps", "susp_force_n", "wheel_torque_nm", "effect_wheel_torque_nm", "road_wheel_angle_rad",
+    "rolling_radius_m", "wheel_centre_height_m", "wheel_accel_radps2")) for i in range(1, 5))
+
+
+def _named(xd, acc, g_b, force, moment, h_cg, air, recs) -> dict:
+    """The named diagnostics of ``Model.evaluate`` (body, then per corner i = 1..4)."""
+    d: dict[str, float] = {}
+    for k, (ka, ks, kw, kf, km) in enumerate(_AXIS_KEYS):
+        d[ka] = acc[k]
+        d[ks] = acc[k] - g_b[k]
+        d[kw] = xd[9 + k]
+        d[kf] = force[k]
+        d[km] = moment[k]
+    d["height_cg_above_road_m"] = h_cg
+    for k, ka in enumerate(_AIR_KEYS):
+        d[ka] = air[k]
+    for i, rec in enumerate(recs):
+        (fa, fb, fz, kap, alp, H, Hd, tq, teff, delta, ri, hw, fs, ftx, fty, ftz) = rec
+        d.update(zip(_CORNER_KEYS[i], (fa, fb, fz, kap, alp, H, Hd, fs, tq, teff, delta, ri, hw, xd[12 + i])))
+    return d
+
+
 def derivatives(x: Sequence[float], u: "Inputs", p: "Model", env: "Env") -> list[float]:
     """f(x, u, p, env) -> x_dot: the core as a pure function of state, inputs, parameters (a
     :class:`Model`: vehicle + effects + variant) and environment. Same as ``p.f(x, u, env)``."""
@@ -204,6 +233,11 @@ class Model:
     13-16. When ``effects`` has no tire model, ``linear_tire`` is used. Build once, call ``f``
     many times: ``f`` composes the stages of :mod:`vdps_hil.model.stages` over the model's
     constants (:class:`~vdps_hil.model.stages.CoreConstants`), on plain floats (no numpy inside).
+
+    ``f`` is the compiled core (:mod:`vdps_hil.model.core_kernel`, bit for bit the stages) when
+    every effect has a compiled form, else the stages in Python; ``f_python`` is always the
+    stages; ``compiled_status`` says which and why ("compiled", or the reason for Python);
+    ``kernel_arrays`` the packed constants (K, C, E) of the compiled core, or None.
 
     Attributes: ``layout`` (StateLayout), ``vehicle``, ``effects`` (EffectSet incl. the tire),
     ``static_load_n`` (F_z0 per corner on a level road [N]), ``rolling_radius_m`` (per corner),
@@ -257,11 +291,18 @@ class Model:
                 w = e.wind_enu_mps()
                 wind_extra = [wind_extra[k] + w[k] for k in range(3)]
         self.effect_wind_enu_mps = tuple(wind_extra)
-        self.f = self._build()
+        self.f_python, k = self._build()
+        self.kernel_arrays, status = core_kernel.pack_model(k, dyn)
+        if self.kernel_arrays is not None and not jit.ENABLED:
+            status = "python (VDPS_JIT=0)"
+        self.compiled_status = status
+        self.f = (core_kernel.compiled_function(self.kernel_arrays, self.layout.size)
+                  if self.kernel_arrays is not None and jit.ENABLED else self.f_python)
 
     # ------------------------------------------------------------------ the core
-    def _build(self) -> Callable:
-        """f from the model's constants and the stages of :mod:`vdps_hil.model.stages`."""
+    def _build(self) -> tuple[Callable, CoreConstants]:
+        """(f, constants): f from the model's constants and the stages of
+        :mod:`vdps_hil.model.stages`."""
         veh = self.vehicle
         geo, p = veh.geometry, veh.params
         g = GRAVITY_MPS2
@@ -288,7 +329,7 @@ class Model:
             wheel_fns=tuple(e.wheel_torque for e in dyn if "wheel_torque" in e.HOOKS),
             k_c=sum(e.compliance_steer() for e in dyn if "compliance_steer" in e.HOOKS),
             wind_effects=self.effect_wind_enu_mps)
-        return derivative_function(k)
+        return derivative_function(k), k
 
     # ------------------------------------------------------------------ helpers
     def evaluate(self, x, u: Inputs, env: Env) -> tuple[list, dict]:
@@ -297,36 +338,19 @@ class Model:
         xd = self.f(x, u, env, raw)
         return xd, self._named(x, xd, raw, env)
 
-    def _named(self, x, xd, raw, env: Env) -> dict:
-        d: dict[str, float] = {}
-        ax_, ay_, az_ = raw["_acc_b"]
-        gx, gy, gz = raw["_g_b"]
-        for k, a in enumerate("xyz"):
-            d[f"accel_b_mps2_{a}"] = raw["_acc_b"][k]
-            d[f"specific_force_b_mps2_{a}"] = raw["_acc_b"][k] - raw["_g_b"][k]
-            d[f"angular_accel_b_radps2_{a}"] = xd[9 + k]
-            d[f"force_b_n_{a}"] = raw["_force_b"][k]
-            d[f"moment_b_nm_{a}"] = raw["_moment_b"][k]
-        d["height_cg_above_road_m"] = raw["_height_cg"]
-        for k, a in enumerate("xyz"):
-            d[f"air_vel_b_mps_{a}"] = raw["_air_b"][k]
-        for i, rec in enumerate(raw["_rec"], start=1):
-            (fa, fb, fz, kap, alp, H, Hd, tq, teff, delta, ri, hw, fs, ftx, fty, ftz) = rec
-            d[f"tire_force_long_n_{i}"] = fa
-            d[f"tire_force_lat_n_{i}"] = fb
-            d[f"normal_load_n_{i}"] = fz
-            d[f"slip_ratio_{i}"] = kap
-            d[f"slip_angle_rad_{i}"] = alp
-            d[f"susp_deflection_m_{i}"] = H
-            d[f"susp_deflection_rate_mps_{i}"] = Hd
-            d[f"susp_force_n_{i}"] = fs
-            d[f"wheel_torque_nm_{i}"] = tq
-            d[f"effect_wheel_torque_nm_{i}"] = teff
-            d[f"road_wheel_angle_rad_{i}"] = delta
-            d[f"rolling_radius_m_{i}"] = ri
-            d[f"wheel_centre_height_m_{i}"] = hw
-            d[f"wheel_accel_radps2_{i}"] = xd[12 + i - 1]
-        return d
+    def _named(self, x, xd, raw: dict, env: Env) -> dict:
+        """The named diagnostics from x_dot and the raw diagnostics ``raw`` of ``f(x, u, env, raw)``."""
+        return _named(xd, raw["_acc_b"], raw["_g_b"], raw["_force_b"], raw["_moment_b"], raw["_height_cg"],
+                      raw["_air_b"], raw["_rec"])
+
+    def evaluate_from(self, x, xd, diag, env: Env) -> tuple[list, dict]:
+        """``evaluate``'s result from x_dot and the compiled core's diagnostics array ``diag``
+        (:mod:`vdps_hil.model.core_kernel`) already computed at ``x``."""
+        d = diag.tolist()
+        k = core_kernel
+        return xd, _named(xd, d[k.D_ACC:k.D_ACC + 3], d[k.D_GB:k.D_GB + 3], d[k.D_FORCE:k.D_FORCE + 3],
+                          d[k.D_MOMENT:k.D_MOMENT + 3], d[k.D_HCG], d[k.D_AIR:k.D_AIR + 3],
+                          [d[16 * i:16 * i + 16] for i in range(4)])
 
     def regressor_quantities(self, q: Mapping[str, float]) -> dict[str, float]:
         """``q`` (e.g. a truth snapshot or the estimator's equivalents of its names) completed

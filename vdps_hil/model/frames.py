@@ -16,6 +16,8 @@ import math
 
 import numpy as np
 
+from vdps_hil.jit import inline
+
 
 def rot_x(phi: float) -> np.ndarray:
     """R(x, phi) of eq 1."""
@@ -44,6 +46,7 @@ def dcm_global_to_vehicle(phi_g: float, theta_g: float, psi_g: float) -> np.ndar
     return rot_x(phi_g) @ rot_y(theta_g) @ rot_z(psi_g)
 
 
+@inline
 def dcm_gv_elements(sf, cf, st, ct, sp, cp):
     """The nine elements of C_g^v (eq 1, closed form), row by row, from the sines and cosines
     of the Euler angles (sf, cf = sin, cos phi_g; st, ct of theta_g; sp, cp of psi_g)::
@@ -54,7 +57,8 @@ def dcm_gv_elements(sf, cf, st, ct, sp, cp):
 
     The one place this formula is written: on floats it is the scalar form (the physics core,
     the EKF's kinematics), on numpy arrays the element-wise vectorised form
-    (:func:`dcm_gv_batch`); the same IEEE operations in both."""
+    (:func:`dcm_gv_batch`); the same IEEE operations in both; compiled kernels call it too
+    (:func:`~vdps_hil.jit.inline`)."""
     return (ct * cp, ct * sp, st,
             -cf * sp - sf * st * cp, cf * cp - sf * st * sp, sf * ct,
             sf * sp - cf * st * cp, -sf * cp - cf * st * sp, cf * ct)

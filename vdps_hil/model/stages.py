@@ -26,6 +26,11 @@ some 10^4-10^5 times per simulated drive. Tuples passed between the stages:
   H_dot_i, v_w,i (3), r_i, C_kappa,i, C_alpha,i, F_z0,i)`` with z_i the wheel centre's body z,
   h_w,i its height over the road along n, F_s,i the suspension force;
 * a **wrench** ``(F_x, F_y, F_z, M_x, M_y, M_z)`` in body axes about the sprung CG [N, N m].
+
+The stages on floats and tuples alone (``spring_force_n``, ``ackermann_angles``,
+``body_attitude``, ``wheel_axes``, ``air_velocity_b``, ``pose_rates``) are :func:`~vdps_hil.jit.inline`: the
+compiled core (:mod:`vdps_hil.model.core_kernel`) calls these very functions; the others it
+mirrors operation for operation (tested bit for bit equal to ``derivative_function``).
 """
 
 from __future__ import annotations
@@ -34,15 +39,19 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
+from vdps_hil.jit import inline
+
 from .frames import dcm_gv_elements
 
 
+@inline
 def spring_force_n(h_spring_m: float, c1: float, c2: float, c3: float) -> float:
     """Eq 14 spring: K_s H with K_s = C1 exp(C2 (H - C3)); H compression from free length [m].
     Negative H (extension past free length) gives tension, standing in for the rebound stop."""
     return c1 * math.exp(c2 * (h_spring_m - c3)) * h_spring_m
 
 
+@inline
 def ackermann_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front_m: float) -> tuple[float, float]:
     """Front road-wheel angles (delta_1 FL, delta_2 FR) [rad] for a bicycle-model angle
     delta_m: tan delta_1,2 = L tan delta_m / (L -+ t_f tan delta_m)."""
@@ -85,6 +94,7 @@ class CoreConstants:
     wind_effects: tuple
 
 
+@inline
 def body_attitude(pos, euler, normal_g, g: float):
     """Eq 1 and the road plane at the body: ``((sin phi, cos phi, sin theta, cos theta), C, n_b,
     g_b, h_cg)`` with C = C_g^v (9 elements row by row), n_b = C n_g the road normal in body
@@ -164,6 +174,19 @@ def corner_loads(k: CoreConstants, susp, susp_rate, h_cg: float, n_b, vel, rate)
     return ck
 
 
+@inline
+def wheel_axes(delta: float, n_b) -> tuple[float, float, float, float, float, float]:
+    """Eq 15-16's wheel axes in the road plane, body axes: ``(e_l (3), e_t (3))`` with
+    e_l = unit((cos d, sin d, 0) - ((cos d, sin d, 0) . n) n) and e_t = n x e_l."""
+    nx, ny, nz = n_b
+    cd, sd = math.cos(delta), math.sin(delta)
+    hn = cd * nx + sd * ny
+    lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
+    inv = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
+    lx, ly, lz = lx * inv, ly * inv, lz * inv
+    return lx, ly, lz, ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
+
+
 def tire_at_corner(c, delta: float, n_b, oms, v_floor: float, tire_fn):
     """Eq 15-16 at one corner state ``c`` with road-wheel angle ``delta``:
     ``(F_a, F_b, kappa, alpha, e_l (3), e_t (3))``::
@@ -173,13 +196,7 @@ def tire_at_corner(c, delta: float, n_b, oms, v_floor: float, tire_fn):
         kappa = (r_i omega_i - v_l) / den,  alpha = -atan(v_t / den)
         F_a, F_b = tire_fn(F_z, F_z0, kappa, alpha, C_kappa, C_alpha)"""
     (i, xi, yi, zi, hw, fz, fs, H, Hd, vwx, vwy, vwz, ri, ckap, calp, fz0) = c
-    nx, ny, nz = n_b
-    cd, sd = math.cos(delta), math.sin(delta)
-    hn = cd * nx + sd * ny
-    lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
-    inv = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
-    lx, ly, lz = lx * inv, ly * inv, lz * inv
-    tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
+    lx, ly, lz, tx, ty, tz = wheel_axes(delta, n_b)
     vl = vwx * lx + vwy * ly + vwz * lz
     vt = vwx * tx + vwy * ty + vwz * tz
     den = vl if vl > 0.0 else -vl
@@ -263,6 +280,7 @@ def corner_wrench(k: CoreConstants, ck, deltas, n_b, oms, u, record: bool):
     return (Fx, Fy, Fz, Mx, My, Mz), wdots, fzt, rec
 
 
+@inline
 def air_velocity_b(vel, c, wind_env, wind_effects) -> tuple[float, float, float]:
     """Air velocity relative to the body, body axes: v_b - C_g^v (w_env + w_effects)."""
     vx, vy, vz = vel
@@ -321,6 +339,7 @@ def body_accelerations(k: CoreConstants, wrench, g_b, ck, rate):
     return (ax_, ay_, az_), dw, (Mx, My, Mz)
 
 
+@inline
 def pose_rates(trig, c, vel, rate) -> tuple[float, float, float, float, float, float]:
     """dp_g/dt = (C_g^v)^T v_b and d(phi, theta, psi)/dt = C_omega^-1 omega
     (``frames.c_omega_inv``, consistent with eq 1)."""

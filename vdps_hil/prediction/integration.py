@@ -48,13 +48,16 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from vdps_hil.model.core import Env, Inputs, Model
 from vdps_hil.model.reduced import ReducedLinearCore
-from vdps_hil.model.rollover import RolloverMonitor
+from vdps_hil.model.rollover import TIP_UP_LOAD_FRACTION, RolloverMonitor
 from vdps_hil.model.stages import ackermann_angles
 
 from .config import PredictorConfig
 from .initial_state import InputSource
+from .integration_kernel import STOP_REASONS, reduced_loop
 
 ROS2_GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
 """gamma of Verwer's ROS2 (L-stable choice)."""
@@ -182,102 +185,46 @@ def propagate_generic(model: Model, cfg: PredictorConfig, x: list, env: Env, hel
     return xs, fzs, ts, stop, n, n_eval
 
 
-def _coupling_geometry(uc, gh: float, radii, corner_xy) -> list[float]:
-    """gamma h / r_i times (cos d_i, sin d_i, x_i sin d_i - y_i cos d_i) for i = 1..4 (12 values):
-    v_l,i -> v_x, v_y, omega_z, for the per-input constants ``uc`` of the reduced core."""
-    return ([gh / radii[k] * uc[0][k][0] for k in range(4)]
-            + [gh / radii[k] * uc[0][k][1] for k in range(4)]
-            + [gh / radii[k] * (corner_xy[k][0] * uc[0][k][1] - corner_xy[k][1] * uc[0][k][0])
-               for k in range(4)])
-
-
-def _reduced_w_factors(jd4, x, kap, gh: float, vfloor: float, kc):
-    """((1 / (1 - gamma h J_kk)) x 4, coupling (12 values, None without ``kc``)) from the closed-form
-    wheel-spin Jacobian ``jd4`` (clipped to <= 0) and the slip ratios ``kap`` at ``x``."""
-    j0, j1, j2, j3 = [0.0 if (j > 0.0 or j != j) else j for j in jd4]
-    ws = (1.0 / (1.0 - gh * j0), 1.0 / (1.0 - gh * j1), 1.0 / (1.0 - gh * j2), 1.0 / (1.0 - gh * j3))
-    if kc is None:
-        return ws, None
-    # d omega_dot / d v_l = J_kk * (d kappa / d v_l) / (d kappa / d omega)
-    if abs(x[6]) > vfloor:
-        q = (-j0 * (1.0 + kap[0]), -j1 * (1.0 + kap[1]), -j2 * (1.0 + kap[2]), -j3 * (1.0 + kap[3]))
-    else:
-        q = (-j0, -j1, -j2, -j3)
-    return ws, [a * b for a, b in zip(q + q + q, kc)]
-
-
 def propagate_reduced(core: ReducedLinearCore, cfg: PredictorConfig, x: list, env: Env, held: Inputs | None,
                       src: InputSource | None, monitor: RolloverMonitor):
     """The loop of :func:`propagate_generic` on :class:`ReducedLinearCore`: the same steps, stop
     rules and ROS2 W-method, with the wheel-spin Jacobian in closed form instead of a forward
-    difference and the W-solve written out for the four wheel rows (a hand-specialised kernel,
-    tested equal to the generic loop in ``tests/test_predictor.py``)."""
-    F, jacobian, inputs_of = core.f, core.wheel_spin_jacobian, core.inputs
-    model = core.model
+    difference and the W-solve written out for the four wheel rows, compiled as one call
+    (:func:`vdps_hil.prediction.integration_kernel.reduced_loop`; tested equal to the generic
+    loop in ``tests/test_predictor.py``). Input-driven: ``src`` is sampled at every step time
+    n h of the horizon before the loop starts. The rollover monitor is fed the kept steps after
+    the loop (:func:`feed_monitor`)."""
     h = cfg.step_s
-    n_steps, out_every, jac_every = cfg.n_steps, cfg.output_every, cfg.jacobian_every
-    ros2, coupling = cfg.integrator == "ros2", cfg.jacobian_coupling
-    stop_ponr = cfg.stop_at_point_of_no_return
-    # gamma h; ROS2 x_n+1 = x_n + 3/2 h k1 + 1/2 h k2; Heun x_n+1 = x_n + h/2 (f(x_n) + f(x_n + h f(x_n)))
-    gh, h_k1, h_k2 = ROS2_GAMMA * h, 1.5 * h, 0.5 * h
-    radii, corner_xy, vfloor = model.rolling_radius_m, model.corner_xy, model.slip_speed_floor_mps
-    w0 = w1 = w2 = w3 = 1.0  # 1 / (1 - gamma h J_kk)
-    cx0 = cx1 = cx2 = cx3 = cy0 = cy1 = cy2 = cy3 = cz0 = cz1 = cz2 = cz3 = 0.0  # coupling to v_x, v_y, omega_z
-    uc_c = kc = None
-    atan2, isfinite = math.atan2, math.isfinite
-    uc = inputs_of(held) if held is not None else None
-    xs: list[list[float]] = []
-    fzs: list = []
-    ts: list[float] = []
-    stop = "horizon"
-    n = n_eval = 0
-    while True:
-        t_rel = n * h
-        if src is not None:
-            uc = inputs_of(src(t_rel))
-        f0, fz, (nx, ny, nz), kap, den = F(x, uc, env)
-        n_eval += 1
-        record = n % out_every == 0 or n == n_steps
-        ended = keep_step(xs, fzs, ts, monitor, stop_ponr, record, t_rel, x, fz, atan2(ny, nz), nx)
-        if ended is not None:
-            stop = ended
-            break
-        if n >= n_steps:
-            break
-        if not ros2:
-            f1 = F([a + h * b for a, b in zip(x, f0)], uc, env)[0]
-            n_eval += 1
-            x = [a + h_k2 * (b + c) for a, b, c in zip(x, f0, f1)]  # Heun: h/2 = h_k2
-        else:
-            if n % jac_every == 0:
-                if coupling and uc is not uc_c:
-                    uc_c, kc = uc, _coupling_geometry(uc, gh, radii, corner_xy)
-                (w0, w1, w2, w3), cpl = _reduced_w_factors(jacobian(x, uc, fz, den), x, kap, gh, vfloor,
-                                                           kc if coupling else None)
-                if cpl is not None:
-                    (cx0, cx1, cx2, cx3, cy0, cy1, cy2, cy3, cz0, cz1, cz2, cz3) = cpl
-            # stage 1: k1 = W^-1 f(x_n) (W = I on the body rows)
-            k1 = f0
-            a6, a7, a11 = k1[6], k1[7], k1[11]
-            k1[12] = (k1[12] + cx0 * a6 + cy0 * a7 + cz0 * a11) * w0
-            k1[13] = (k1[13] + cx1 * a6 + cy1 * a7 + cz1 * a11) * w1
-            k1[14] = (k1[14] + cx2 * a6 + cy2 * a7 + cz2 * a11) * w2
-            k1[15] = (k1[15] + cx3 * a6 + cy3 * a7 + cz3 * a11) * w3
-            # stage 2: k2 = W^-1 (f(x_n + h k1) - 2 k1); x_n+1 = x_n + 3/2 h k1 + 1/2 h k2
-            f1 = F([a + h * b for a, b in zip(x, k1)], uc, env)[0]
-            n_eval += 1
-            xn = [a + h_k1 * b + h_k2 * (c - 2.0 * b) for a, b, c in zip(x, k1, f1)]  # body rows
-            a6, a7, a11 = f1[6] - 2.0 * k1[6], f1[7] - 2.0 * k1[7], f1[11] - 2.0 * k1[11]
-            xn[12] = x[12] + h_k1 * k1[12] + h_k2 * (f1[12] - 2.0 * k1[12] + cx0 * a6 + cy0 * a7 + cz0 * a11) * w0
-            xn[13] = x[13] + h_k1 * k1[13] + h_k2 * (f1[13] - 2.0 * k1[13] + cx1 * a6 + cy1 * a7 + cz1 * a11) * w1
-            xn[14] = x[14] + h_k1 * k1[14] + h_k2 * (f1[14] - 2.0 * k1[14] + cx2 * a6 + cy2 * a7 + cz2 * a11) * w2
-            xn[15] = x[15] + h_k1 * k1[15] + h_k2 * (f1[15] - 2.0 * k1[15] + cx3 * a6 + cy3 * a7 + cz3 * a11) * w3
-            x = xn
-        n += 1
-        if not isfinite(x[6] + x[9] + x[12] + x[3] + x[4]):
-            stop = "non_finite"
-            break
-    return xs, fzs, ts, stop, n, n_eval
+    n_steps = cfg.n_steps
+    if held is not None:
+        uc = [core.inputs(held)]
+    else:
+        uc = [core.inputs(src(n * h)) for n in range(n_steps + 1)]
+    u_csd = np.stack([u[0] for u in uc])
+    u_tq = np.stack([u[1] for u in uc])
+    u_br = np.stack([u[2] for u in uc])
+    m = n_steps // cfg.output_every + 3
+    X, FZ, T, PHI, RATE = np.empty((m, 16)), np.empty((m, 4)), np.empty(m), np.empty(m), np.empty(m)
+    n_out, n_fed, n, n_eval, stop = reduced_loop(
+        np.asarray(x, dtype=float), u_csd, u_tq, u_br, np.asarray(env.normal_g, dtype=float), core.K, core.C, h,
+        n_steps, cfg.output_every, cfg.jacobian_every, cfg.integrator == "ros2", cfg.jacobian_coupling,
+        cfg.stop_at_point_of_no_return, monitor.tip_angle_rad, ROLL_LIMIT_RAD, ROS2_GAMMA, X, FZ, T, PHI, RATE)
+    feed_monitor(monitor, T[:n_fed], FZ[:n_fed], PHI[:n_fed], RATE[:n_fed])
+    return X[:n_out], FZ[:n_out], T[:n_out], STOP_REASONS[stop], n, n_eval
+
+
+def feed_monitor(monitor: RolloverMonitor, t_s: np.ndarray, fz: np.ndarray, roll: np.ndarray,
+                 roll_rate: np.ndarray) -> None:
+    """``monitor.update`` at every sample where it can change something: where an inside pair of
+    wheels is below the tip-up load, the sample after one, or where |phi_v| is not within the
+    static tip angle (at every other sample ``update`` returns at once with its state unchanged,
+    so the events are those of feeding every sample)."""
+    thr = [TIP_UP_LOAD_FRACTION * s for s in monitor.static_loads_n]
+    low = ((fz[:, 0] < thr[0]) & (fz[:, 3] < thr[3])) | ((fz[:, 1] < thr[1]) & (fz[:, 2] < thr[2]))
+    feed = low | ~(np.abs(roll) <= monitor.tip_angle_rad)
+    feed[1:] |= low[:-1]
+    for k in np.flatnonzero(feed).tolist():
+        monitor.update(float(t_s[k]), tuple(fz[k].tolist()), float(roll[k]), float(roll_rate[k]))
 
 
 def keep_step(xs: list, fzs: list, ts: list, monitor: "RolloverMonitor", stop_ponr: bool, record: bool,
@@ -303,4 +250,4 @@ def keep_step(xs: list, fzs: list, ts: list, monitor: "RolloverMonitor", stop_po
     return None
 
 
-__all__ = ["ROLL_LIMIT_RAD", "ROS2_GAMMA", "keep_step", "propagate_generic", "propagate_reduced"]
+__all__ = ["ROLL_LIMIT_RAD", "ROS2_GAMMA", "feed_monitor", "keep_step", "propagate_generic", "propagate_reduced"]

@@ -363,7 +363,10 @@ class WarningChain:
         t_ns = int(t_ns)
         if initial_state is not None and self.cadence.due(t_ns):
             try:
-                a = RolloverAssessment.from_prediction(self.predictor.predict(initial_state))
+                r = self.predictor.predict(initial_state)
+                if r.stop_reason == "non_finite":  # the compiled core overflows to inf, not OverflowError
+                    raise FloatingPointError(f"the prediction diverged (non-finite state after {r.n_steps} steps)")
+                a = RolloverAssessment.from_prediction(r)
             except (OverflowError, ZeroDivisionError, FloatingPointError, ValueError) as e:
                 # a diverging or absurd prediction (e.g. an estimate far outside the model's
                 # range) must not stop the warning path: count it and say "fault" on the bus

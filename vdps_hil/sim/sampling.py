@@ -93,28 +93,40 @@ class Block:
 
 
 class StepRecorder:
-    """Hooks into a Simulator and records the truth a sensor needs at every step (and at the
-    step where it is attached). ``take()`` returns the rows recorded since the last call."""
+    """Records the truth a sensor needs at every step of a Simulator (and at the step where it
+    is attached): the compiled steps write the rows themselves (``sim.attach_recorder``), else a
+    step hook computes them (``sim.kinematics()``). ``take()`` returns the rows recorded since
+    the last call."""
 
     def __init__(self, sim):
         self.sim = sim
         lay = sim.model.layout
         self._susp = lay.slices.get("susp_defl")
-        self._rows: list[float] = []
+        self._buf = np.empty((1024, len(_COLS)))
+        self._pos = 0
+        attach = getattr(sim, "attach_recorder", None)
+        if attach is not None and attach(self):
+            return
         self._hook(sim)
         sim.add_step_hook(self._hook)
+
+    def reserve(self, m: int) -> np.ndarray:
+        """Room for the next ``m`` rows (a view the simulator fills; ``commit`` keeps them)."""
+        if self._pos + m > len(self._buf):
+            grown = np.empty((max(2 * len(self._buf), self._pos + m), len(_COLS)))
+            grown[:self._pos] = self._buf[:self._pos]
+            self._buf = grown
+        return self._buf[self._pos:self._pos + m]
+
+    def commit(self, m: int) -> None:
+        self._pos += m
 
     def _hook(self, sim) -> None:
         k = sim.kinematics()
         u = sim.current_inputs()
         x = sim.x
-        r = self._rows
-        r.append(float(sim.n))
-        r.extend(k.specific_force_mps2)
-        r.extend(k.angular_rate_radps)
-        r.extend(k.angular_accel_radps2)
-        r.extend(x[0:9])
-        r.extend(x[12:16])
+        r = [float(sim.n), *k.specific_force_mps2, *k.angular_rate_radps, *k.angular_accel_radps2, *x[0:9],
+             *x[12:16]]
         if self._susp is not None:
             r.extend(x[self._susp])
         else:  # reduced model: deflections follow from the pose (slow path, rarely used)
@@ -123,10 +135,12 @@ class StepRecorder:
         r.append(u.steer_wheel_angle_rad)
         r.extend(u.wheel_torque_nm)
         r.extend(u.brake_torque_nm)
+        self.reserve(1)[0] = r
+        self.commit(1)
 
     def take(self) -> Block:
-        a = np.array(self._rows, dtype=float).reshape(-1, len(_COLS))
-        self._rows.clear()
+        a = self._buf[:self._pos].copy()
+        self._pos = 0
         n = a[:, 0].astype(np.int64)
         return Block(n, n * np.int64(self.sim.dt_ns), a)
 

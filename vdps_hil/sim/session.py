@@ -209,8 +209,7 @@ class DriveSession:
         target = min(target, self._end_n)
         t0 = time.perf_counter()
         tw0 = self._timing["truth_write"]
-        while sim.n < target and not sim.stopped:
-            sim.step()
+        sim.step_n(target)
         self._timing["physics_and_recorder"] += time.perf_counter() - t0 - (self._timing["truth_write"] - tw0)
         block = self._recorder.take()
         last = sim.stopped or sim.n >= self._end_n

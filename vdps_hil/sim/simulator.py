@@ -49,24 +49,26 @@ from __future__ import annotations
 import math
 from typing import Callable, Sequence
 
+import numpy as np
+
+from vdps_hil import jit
 from vdps_hil.model.core import Env, Inputs, Model
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import ImuKinematics
-from vdps_hil.model.frames import decompose_vehicle
+from vdps_hil.model.frames import dcm_global_to_road, dcm_global_to_vehicle, euler_ypr_from_dcm
 from vdps_hil.model.params import Vehicle, load_vehicle
 
 from vdps_hil.model.rollover import RolloverMonitor
+from vdps_hil.model.core_kernel import N_DIAG
+from vdps_hil.units import GRAVITY_MPS2, NS_PER_S
 
-from .stepping import FixedStepTruth, InputSource, SimulationError, rk_step, snapshot_ltr
+from .step_kernel import N_REC, record_row, truth_steps
+from .step_kernel import rk_step as rk_step_kernel
+from .stepping import FixedStepTruth, InputSource, SimulationError, input_row, rk_step, snapshot_ltr
 
-
-
-def _fast_inputs(steer: float, torques: tuple, brakes: tuple) -> Inputs:
-    u = object.__new__(Inputs)
-    object.__setattr__(u, "steer_wheel_angle_rad", steer)
-    object.__setattr__(u, "wheel_torque_nm", torques)
-    object.__setattr__(u, "brake_torque_nm", brakes)
-    return u
+_NO_ARRAY = np.empty(0)
+_LOAD_KEYS = tuple(f"normal_load_n_{i}" for i in range(1, 5))
+_WHEEL_KEYS = tuple((f"wheel_speed_radps_{i}", f"brake_torque_nm_{i}") for i in range(1, 5))
 
 
 __all__ = ["Simulator", "SimulationError", "InputSource"]
@@ -106,6 +108,7 @@ class Simulator(FixedStepTruth):
         if effects is None:
             effects = scenario.effect_set(vehicle) if scenario is not None else EffectSet()
         self.env = env if env is not None else (scenario.env() if scenario is not None else Env())
+        self._road_t = dcm_global_to_road(self.env.bank_rad, self.env.grade_rad, 0.0).T  # (C_g^r)^T, eq 4
         kw = {} if slip_speed_floor_mps is None else {"slip_speed_floor_mps": slip_speed_floor_mps}
         self.model = Model(vehicle, effects.dynamics if isinstance(effects, EffectSet) else effects,
                            unsprung_dof=unsprung_dof, **kw)
@@ -129,6 +132,7 @@ class Simulator(FixedStepTruth):
                 heading = scenario.initial_heading_rad
                 east, north = scenario.initial_east_m, scenario.initial_north_m
             x0 = self.model.trim_state(speed or 0.0, self.env, heading, east_m=east, north_m=north)
+        self._init_compiled(integrator)
         self.x = x0
         self.duration_s = duration_s if duration_s is not None else (scenario.duration_s if scenario is not None else None)
         if stop_at_point_of_no_return is None:
@@ -146,9 +150,37 @@ class Simulator(FixedStepTruth):
         self._k1 = None  # (n, u, k1) cache of f at the current state
         self._u = None  # inputs in force for the current step
         self._u_n = -1
+        self._recorder = None  # a StepRecorder whose rows the compiled steps write
         self._emit_truth()
 
+    def _init_compiled(self, integrator: str) -> None:
+        """The compiled core's arrays, or ``_compiled = False`` (module docstring)."""
+        arrays = self.model.kernel_arrays
+        self._compiled = arrays is not None and jit.ENABLED
+        self._rk4 = integrator == "rk4"
+        if self._compiled:
+            self._K, self._C, self._E = arrays
+            self._S = np.empty((4, 15))
+            self._env_a = np.array((*self.env.normal_g, *self.env.wind_enu_mps))
+            self._k1a = np.empty(self.model.layout.size)
+            self._k1_key = None  # (n, u) the array k1a holds f for
+            self._ua_key, self._ua = None, None
+            self._diag = None  # (n, u, D): diagnostics of the state at a truth instant
+
     # ------------------------------------------------------------------ state
+    @property
+    def x(self) -> list[float]:
+        """The state vector (a list; with the compiled core a view of ``self._xa``)."""
+        if self._xl is None:
+            self._xl = self._xa.tolist()
+        return self._xl
+
+    @x.setter
+    def x(self, value) -> None:
+        self._xl = [float(v) for v in value]
+        self._xa = np.array(self._xl, dtype=float)
+        self._k1 = self._k1_key = None
+
     @property
     def state(self) -> list[float]:
         """A copy of the state vector (layout: ``self.model.layout``)."""
@@ -177,7 +209,14 @@ class Simulator(FixedStepTruth):
         return self._u
 
     # ------------------------------------------------------------------ stepping
-    def _deriv_now(self, u: Inputs) -> list:
+    def _deriv_now(self, u: Inputs):
+        """f(x, u) at the current state (cached per step and inputs)."""
+        if self._compiled:
+            if self._k1_key is None or self._k1_key[0] != self.n or self._k1_key[1] is not u:
+                record_row(self._xa, self._k1a, self._u_array(u), self.n, self._env_a, self._K, self._C, self._E,
+                           self._S, _NO_ARRAY, _NO_ARRAY)
+                self._k1_key = (self.n, u)
+            return self._k1a
         k = self._k1
         if k is not None and k[0] == self.n and k[1] is u:
             return k[2]
@@ -185,20 +224,111 @@ class Simulator(FixedStepTruth):
         self._k1 = (self.n, u, k1)
         return k1
 
+    def _u_array(self, u: Inputs) -> np.ndarray:
+        if u is not self._ua_key:
+            self._ua_key, self._ua = u, np.array(input_row(u))
+        return self._ua
+
     def step(self) -> bool:
         """One integration step; False when stopped."""
         if self.stopped:
             return False
         u = self.current_inputs()
+        if self._compiled:
+            self._deriv_now(u)
+            ok = rk_step_kernel(self._xa, self._k1a, self._u_array(u), self.dt_s, self._rk4, self._env_a, self._K,
+                                self._C, self._E, self._S)
+            self._xl = self._k1_key = None
+            self.n += 1
+            if not ok:
+                self._non_finite()
+            if self._recorder is not None:
+                self._record_now()
+            return self._after_step()
         f, env = self.model.f, self.env
         xn = rk_step(lambda x: f(x, u, env), self.x, self._deriv_now(u), self.dt_s, self.integrator)
         self.x = xn
         self.n += 1
         if not math.isfinite(xn[6] + xn[9] + xn[12]):
-            self.stopped = True
-            self.stop_reason = "non-finite state"
-            raise SimulationError(f"non-finite state at t = {self.t_s:.3f} s")
+            self._non_finite()
         return self._after_step()
+
+    def _non_finite(self) -> None:
+        self.stopped = True
+        self.stop_reason = "non-finite state"
+        raise SimulationError(f"non-finite state at t = {self.t_s:.3f} s")
+
+    # ------------------------------------------------------------------ compiled stepping
+    def attach_recorder(self, recorder) -> bool:
+        """Let the compiled steps write ``recorder``'s rows (``sampling.StepRecorder``), starting
+        with the row of the current step; False (use a step hook) without the compiled core."""
+        if not self._compiled:
+            return False
+        self._recorder = recorder
+        self._record_now()
+        return True
+
+    def _record_now(self) -> None:
+        """The recorder's row of the current step (and f there under the current inputs; with
+        the diagnostics a truth snapshot will use when one is due)."""
+        u = self.current_inputs()
+        D = np.empty(N_DIAG) if self.n % self._truth_every == 0 else _NO_ARRAY
+        record_row(self._xa, self._k1a, self._u_array(u), self.n, self._env_a, self._K, self._C, self._E, self._S,
+                   self._recorder.reserve(1)[0], D)
+        self._recorder.commit(1)
+        self._k1_key = (self.n, u)
+        if D.size:
+            self._diag = (self.n, u, D)
+
+    def _chunkable(self) -> bool:
+        ov = self._override
+        return (self._compiled and self._time_only and self._source is self._time_source and not self._step_hooks
+                and (ov is None or isinstance(ov, Inputs)))
+
+    def _columns_ahead(self, n0: int, m: int) -> list[list[float]]:
+        """The 9 input channels of steps n0 + 1 .. n0 + m from the open-loop source
+        (``_chunkable``) or the held override."""
+        ov = self._override
+        if ov is not None:
+            return [[v] * m for v in input_row(ov)]
+        dt, ns = self.dt_ns, NS_PER_S
+        return self._time_columns([(n0 + j) * dt / ns for j in range(1, m + 1)])
+
+    def step_n(self, n_target: int) -> int:
+        """Step to step count ``n_target`` (or until stopped); returns the step count reached.
+        Open-loop inputs: up to one truth period per compiled call (module docstring)."""
+        every = self._truth_every
+        while self.n < n_target and not self.stopped:
+            if not self._chunkable():
+                self.step()
+                continue
+            n0 = self.n
+            m = min(n_target - n0, every - n0 % every)
+            u0 = self.current_inputs()
+            self._deriv_now(u0)
+            cols = self._columns_ahead(n0, m)
+            U = np.empty((m + 1, 9))
+            U[0] = self._u_array(u0)
+            for c, col in enumerate(cols):
+                U[1:, c] = col
+            rec = self._recorder.reserve(m) if self._recorder is not None else _NO_ARRAY.reshape(0, N_REC)
+            D = np.empty(N_DIAG) if (n0 + m) % every == 0 else _NO_ARRAY
+            done = truth_steps(self._xa, self._k1a, U, m, self.dt_s, self._rk4, self._env_a, self._K, self._C,
+                               self._E, rec, n0, D)
+            if self._recorder is not None:
+                self._recorder.commit(done)
+            self.n = n0 + done
+            self._xl = None
+            r = [col[done - 1] for col in cols]
+            u = self._override if self._override is not None else Inputs(r[0], r[1:5], r[5:9])
+            self._u, self._u_n = u, self.n
+            self._k1_key = (self.n, u)
+            if done < m:
+                self._non_finite()
+            if D.size:
+                self._diag = (self.n, u, D)
+            self._after_step()
+        return self.n
 
     # ------------------------------------------------------------------ truth
     def kinematics(self) -> ImuKinematics:
@@ -208,7 +338,7 @@ class Simulator(FixedStepTruth):
         x = self.x
         vx, vy, vz, wx, wy, wz = x[6:12]
         phi, theta = x[3], x[4]
-        from vdps_hil.units import GRAVITY_MPS2 as g
+        g = GRAVITY_MPS2
         gb = (-g * math.sin(theta), -g * math.sin(phi) * math.cos(theta), -g * math.cos(phi) * math.cos(theta))
         a = (k1[6] + wy * vz - wz * vy, k1[7] + wz * vx - wx * vz, k1[8] + wx * vy - wy * vx)
         return ImuKinematics(self.t_s, (a[0] - gb[0], a[1] - gb[1], a[2] - gb[2]), (wx, wy, wz),
@@ -218,7 +348,11 @@ class Simulator(FixedStepTruth):
         """The truth snapshot at the current time (see the module docstring)."""
         u = self.current_inputs()
         x = self.x
-        xd, d = self.model.evaluate(x, u, self.env)
+        dg = self._diag if self._compiled else None
+        if dg is not None and dg[0] == self.n and dg[1] is u:
+            xd, d = self.model.evaluate_from(x, self._deriv_now(u).tolist(), dg[2], self.env)
+        else:
+            xd, d = self.model.evaluate(x, u, self.env)
         pe, pn, pu, phi, theta, psi, vx, vy, vz, wx, wy, wz = x[:12]
         s: dict = {"t_s": self.t_s, "t_ns": self.t_ns, "pos_e_m": pe, "pos_n_m": pn, "pos_u_m": pu}
         env = self.env
@@ -233,16 +367,16 @@ class Simulator(FixedStepTruth):
         s["speed_mps"] = math.sqrt(vx * vx + vy * vy + vz * vz)
         s["sideslip_rad"] = math.atan2(vy, abs(vx)) if (abs(vx) + abs(vy)) > 0.1 else 0.0
         s["roll_g_rad"], s["pitch_g_rad"], s["yaw_g_rad"] = phi, theta, (psi + math.pi) % (2 * math.pi) - math.pi
-        pv, tv, yv = decompose_vehicle(phi, theta, psi, env.bank_rad, env.grade_rad)
+        pv, tv, yv = euler_ypr_from_dcm(dcm_global_to_vehicle(phi, theta, psi) @ self._road_t)  # decompose_vehicle
         s["roll_v_rad"], s["pitch_v_rad"], s["yaw_v_rad"] = pv, tv, yv
         # road-relative Euler rates: the road does not rotate, so C_omega^-1(phi_v, theta_v) omega
         cp, sp, ct, st = math.cos(pv), math.sin(pv), math.cos(tv), math.sin(tv)
         s["roll_rate_v_radps"] = wx - st / ct * sp * wy - st / ct * cp * wz
         s["rate_b_radps_x"], s["rate_b_radps_y"], s["rate_b_radps_z"] = wx, wy, wz
         s.update(d)
-        for i in range(4):
-            s[f"wheel_speed_radps_{i + 1}"] = x[12 + i]
-            s[f"brake_torque_nm_{i + 1}"] = u.brake_torque_nm[i]
+        for i, (kw, kb) in enumerate(_WHEEL_KEYS):
+            s[kw] = x[12 + i]
+            s[kb] = u.brake_torque_nm[i]
         s["steer_wheel_angle_rad"] = u.steer_wheel_angle_rad
         s["road_bank_rad"], s["road_grade_rad"] = env.bank_rad, env.grade_rad
         s["ltr"] = snapshot_ltr(s)
@@ -250,7 +384,7 @@ class Simulator(FixedStepTruth):
 
     def _emit_truth(self) -> None:
         s = self.snapshot()
-        fz = [s[f"normal_load_n_{i}"] for i in range(1, 5)]
+        fz = [s[k] for k in _LOAD_KEYS]
         evs = self.rollover.update(s["t_s"], fz, s["roll_v_rad"], s["roll_rate_v_radps"])
         s["events"] = [e.to_json() for e in evs]
         self._deliver_truth(s)

@@ -21,7 +21,8 @@ from typing import Callable, Sequence
 from vdps_hil.model.core import Inputs
 from vdps_hil.units import NS_PER_S
 
-__all__ = ["SimulationError", "FixedStepTruth", "InputSource", "rk_step", "snapshot_ltr", "INTEGRATORS"]
+__all__ = ["SimulationError", "FixedStepTruth", "InputSource", "input_row", "rk_step", "schedule_columns", "snapshot_ltr",
+           "INTEGRATORS"]
 
 INTEGRATORS = ("rk2", "rk4")
 InputSource = Callable[[float, Sequence[float]], Inputs]
@@ -46,6 +47,26 @@ def rk_step(f: Callable[[list], list], x: Sequence[float], k1: Sequence[float], 
     k2 = f([a + h * b for a, b in zip(x, k1)])
     h2 = 0.5 * h
     return [a + h2 * (b + c) for a, b, c in zip(x, k1, k2)]
+
+
+def input_row(u: Inputs) -> tuple[float, ...]:
+    """(steering wheel angle, drive torques 1-4, brake torques 1-4): one row of inputs."""
+    return (u.steer_wheel_angle_rad, *u.wheel_torque_nm, *u.brake_torque_nm)
+
+
+def schedule_columns(signals) -> Callable[[Sequence[float]], list[list[float]]]:
+    """``columns(times)``: the 9 input channels (``input_row`` order) of a scenario's open-loop
+    schedule (its ``signals``) at those times, the values ``Scenario.schedule_function`` gives
+    without a base (channels not in the schedule zero, brakes max(0, signal))."""
+    fns = [signals.get(c) for c in ("steer_wheel_angle_rad", *(f"wheel_torque_nm_{i}" for i in range(1, 5)))]
+    bfs = [signals.get(f"brake_torque_nm_{i}") for i in range(1, 5)]
+
+    def columns(times):
+        zero = [0.0] * len(times)
+        return ([[f(t) for t in times] if f is not None else zero for f in fns]
+                + [[max(0.0, f(t)) for t in times] if f is not None else zero for f in bfs])
+
+    return columns
 
 
 def snapshot_ltr(s: dict) -> float:
@@ -85,12 +106,26 @@ class FixedStepTruth:
 
     def _init_inputs(self, inputs, scenario, model, env) -> None:
         """The input source: ``inputs`` (Inputs held, or a source), else the scenario's schedule
-        or driver (reading ``model`` and ``env``), else zero inputs; no override."""
+        or driver (reading ``model`` and ``env``), else zero inputs; no override.
+        ``_time_only``: the source is a function of time alone (held inputs or a schedule
+        without a driver), so the inputs of several steps may be sampled ahead."""
+        cols = None
         if inputs is None and scenario is not None:
-            inputs = scenario.input_source(model, env)
+            if scenario.driver_spec is None:
+                sched = scenario.schedule_function()
+                inputs = lambda t, x: sched(t)  # noqa: E731  (as Scenario.input_source without a driver)
+                cols = schedule_columns(scenario.signals)
+            else:
+                inputs = scenario.input_source(model, env)
         if inputs is None:
             inputs = Inputs()
+        if isinstance(inputs, Inputs):
+            row = input_row(inputs)
+            cols = lambda ts, _r=row: [[v] * len(ts) for v in _r]  # noqa: E731
         self._source = (lambda t, x, _u=inputs: _u) if isinstance(inputs, Inputs) else inputs
+        self._time_columns = cols
+        self._time_only = cols is not None
+        self._time_source = self._source  # the source the columns describe (replaced: not time-only)
         self._override = None
 
     @property
@@ -126,11 +161,15 @@ class FixedStepTruth:
     def step(self) -> bool:
         raise NotImplementedError
 
+    def step_n(self, n_target: int) -> int:
+        """Step to step count ``n_target`` (or until stopped); returns the step count reached."""
+        while self.n < n_target and not self.stopped:
+            self.step()
+        return self.n
+
     def step_to(self, t_s: float) -> float:
         """Advance to the last step time <= t_s (or until stopped). Returns the time reached."""
-        target = int(math.floor(t_s * NS_PER_S / self.dt_ns + 1e-9))
-        while self.n < target and not self.stopped:
-            self.step()
+        self.step_n(int(math.floor(t_s * NS_PER_S / self.dt_ns + 1e-9)))
         return self.t_s
 
     def run(self, duration_s: float | None = None) -> list[dict]:

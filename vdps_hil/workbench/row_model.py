@@ -26,6 +26,7 @@ import numpy as np
 from vdps_hil.model.core import Model
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.params import Vehicle
+from vdps_hil.model.stages import wheel_axes
 from vdps_hil.units import GRAVITY_MPS2
 
 __all__ = ["RowModel"]
@@ -160,12 +161,7 @@ class RowModel:
         out = np.zeros((14, 8))
         for i in range(4):
             delta, ri, hw, alp = rec[i][9], rec[i][10], rec[i][11], rec[i][4]
-            cd, sd = math.cos(delta), math.sin(delta)
-            hn = cd * nx + sd * ny
-            lx, ly, lz = cd - hn * nx, sd - hn * ny, -hn * nz
-            inv = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
-            lx, ly, lz = lx * inv, ly * inv, lz * inv
-            tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
+            lx, ly, lz, tx, ty, tz = wheel_axes(delta, n_b)
             xi, yi = self.corners[i]
             rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
             out[0, i], out[1, i], out[2, i] = -lx, -ly, -lz

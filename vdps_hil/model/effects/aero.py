@@ -8,6 +8,10 @@ Symbols (body axes at the sprung CG, x fwd y left z up)::
 
 * ``aero_drag``:  F_x = -1/2 rho C_d A |v_air| v_air,x   (at the CG, no moment)
 * ``crosswind``:  F_y = -1/2 rho C_Y A |v_air| v_air,y,  M_z = x_cp F_y  (and brings its wind)
+
+Compiled form: each force is written once, as a :func:`~vdps_hil.jit.inline` function the
+effect's ``body_wrench`` calls and the compiled core calls (codes ``WRENCH_AERO_DRAG``,
+``WRENCH_CROSSWIND``; parameters as numbers, :meth:`~vdps_hil.model.effects.base.DynamicsEffect.kernel_terms`).
 """
 
 from __future__ import annotations
@@ -15,9 +19,27 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
+from vdps_hil.jit import inline
+
 from .base import DynamicsEffect, ParamSpec
 
 AIR_DENSITY_KGPM3 = 1.225  # ISA sea level, 15 degC
+WRENCH_AERO_DRAG = 1
+WRENCH_CROSSWIND = 2
+
+
+@inline
+def drag_wrench(air_density_kgpm3, cda_m2, ax, ay, az):
+    """``aero_drag``: (F_x, 0, 0, 0, 0, 0), F_x = -1/2 rho C_d A |v_air| v_air,x [N]."""
+    k = -0.5 * air_density_kgpm3 * cda_m2
+    return (k * math.sqrt(ax * ax + ay * ay + az * az) * ax, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@inline
+def crosswind_wrench(air_density_kgpm3, side_force_area_m2, cp_x_m, ax, ay, az):
+    """``crosswind``: (0, F_y, 0, 0, 0, x_cp F_y), F_y = -1/2 rho C_Y A |v_air| v_air,y [N]."""
+    fy = -0.5 * air_density_kgpm3 * side_force_area_m2 * math.sqrt(ax * ax + ay * ay + az * az) * ay
+    return (0.0, fy, 0.0, 0.0, 0.0, cp_x_m * fy)
 
 
 def _air_speed(q: Mapping[str, float]) -> tuple[float, float, float]:
@@ -45,9 +67,12 @@ class AeroDrag(DynamicsEffect):
     )
 
     def body_wrench(self, vel_b, omega_b, air_b):
-        ax, ay, az = air_b
-        k = -0.5 * self._values["air_density_kgpm3"] * self._values["cda_m2"]
-        return (k * math.sqrt(ax * ax + ay * ay + az * az) * ax, 0.0, 0.0, 0.0, 0.0, 0.0)
+        v = self._values
+        return drag_wrench(v["air_density_kgpm3"], v["cda_m2"], *air_b)
+
+    def kernel_terms(self):
+        v = self._values
+        return (("body_wrench", WRENCH_AERO_DRAG, (v["air_density_kgpm3"], v["cda_m2"])),)
 
     def regressors(self, q):
         ax, ay, sp = _air_speed(q)
@@ -86,10 +111,12 @@ class Crosswind(DynamicsEffect):
         return (s * math.cos(a), s * math.sin(a), 0.0)
 
     def body_wrench(self, vel_b, omega_b, air_b):
-        ax, ay, az = air_b
-        fy = -0.5 * self._values["air_density_kgpm3"] * self._values["side_force_area_m2"] \
-            * math.sqrt(ax * ax + ay * ay + az * az) * ay
-        return (0.0, fy, 0.0, 0.0, 0.0, self._values["cp_x_m"] * fy)
+        v = self._values
+        return crosswind_wrench(v["air_density_kgpm3"], v["side_force_area_m2"], v["cp_x_m"], *air_b)
+
+    def kernel_terms(self):
+        v = self._values
+        return (("body_wrench", WRENCH_CROSSWIND, (v["air_density_kgpm3"], v["side_force_area_m2"], v["cp_x_m"])),)
 
     def regressors(self, q):
         ax, ay, sp = _air_speed(q)

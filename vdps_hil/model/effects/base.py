@@ -18,6 +18,14 @@ default magnitudes, and a docstring giving its formula. Two families:
   ``wheel_torque``            extra torque [N m] on wheel i's spin axis
   ==========================  ==================================================================
 
+  The compiled core (:mod:`vdps_hil.model.core_kernel`) takes an effect through
+  ``kernel_terms()``: ``(hook, code, parameters)`` per per-call hook, the code naming the
+  effect's compiled contribution (an :func:`~vdps_hil.jit.inline` function the effect's own
+  method also calls, so the formula is written once). Hooks the core resolves at construction
+  (``STATIC_HOOKS``) need no term. An effect without a compiled form (``kernel_terms()`` is
+  None, the default for per-call hooks, or a subclass overriding a hook of its parent's
+  compiled form) makes its model run on the Python core, stated by ``Model.compiled_status``.
+
   Where an effect's contribution is linear in its parameters it offers ``regressors(q)``:
   ``{equation: {parameter: d(contribution)/d(parameter)}}`` over the equations of eq 13
   (``EQUATIONS``), evaluated from named quantities ``q`` (the names of the truth snapshot, see
@@ -50,6 +58,8 @@ spin balances [N m]."""
 DYNAMICS_HOOKS: tuple[str, ...] = ("tire_forces", "rolling_radius_factor",
                                    "cornering_stiffness_factor", "compliance_steer",
                                    "body_wrench", "wheel_torque")
+STATIC_HOOKS: frozenset[str] = frozenset({"rolling_radius_factor", "compliance_steer"})
+"""Hooks the core evaluates once, when a model is built (no per-call contribution)."""
 
 
 class EffectConfigError(ValueError):
@@ -166,6 +176,11 @@ class DynamicsEffect(Effect):
 
     def wheel_torque(self, corner: int, omega_radps: float, fz_n: float, radius_m: float) -> float:
         return 0.0
+
+    def kernel_terms(self) -> tuple[tuple[str, int, tuple[float, ...]], ...] | None:
+        """The compiled form: ``((hook, code, parameters), ...)`` for each per-call hook (module
+        docstring); ``()`` when every hook is static; None: no compiled form."""
+        return () if set(self.HOOKS) <= STATIC_HOOKS else None
 
     def regressors(self, q: Mapping[str, float]) -> dict[str, dict[str, float]]:
         """{equation: {parameter: d(contribution)/d(parameter)}} at the quantities ``q``.

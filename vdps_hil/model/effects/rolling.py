@@ -7,13 +7,29 @@
 f_r rolling resistance coefficient [-], r_i rolling radius [m], F_z,i normal load [N],
 sat(s) = max(-1, min(1, s)) with v_eps = 0.1 m/s (keeps the law continuous at standstill).
 In steady free rolling the road's longitudinal force on the tire is then -f_r F_z,i.
+Compiled form: :func:`rolling_resistance_torque` (a :func:`~vdps_hil.jit.inline` function the
+effect and the compiled core both call; code ``WHEEL_ROLLING_RESISTANCE``).
 """
 
 from __future__ import annotations
 
+from vdps_hil.jit import inline
+
 from .base import DynamicsEffect, ParamSpec
 
 ROLLING_SPEED_EPS_MPS = 0.1
+WHEEL_ROLLING_RESISTANCE = 1
+
+
+@inline
+def rolling_resistance_torque(coefficient, omega_radps, fz_n, radius_m):
+    """T_rr = -f_r r F_z sat(omega r / v_eps) [N m] (module docstring)."""
+    s = omega_radps * radius_m / ROLLING_SPEED_EPS_MPS
+    if s > 1.0:
+        s = 1.0
+    elif s < -1.0:
+        s = -1.0
+    return -coefficient * radius_m * fz_n * s
 
 
 class RollingResistance(DynamicsEffect):
@@ -31,12 +47,10 @@ class RollingResistance(DynamicsEffect):
         object.__setattr__(self, "_fr", self._values["coefficient"])
 
     def wheel_torque(self, corner, omega_radps, fz_n, radius_m):
-        s = omega_radps * radius_m / ROLLING_SPEED_EPS_MPS
-        if s > 1.0:
-            s = 1.0
-        elif s < -1.0:
-            s = -1.0
-        return -self._fr * radius_m * fz_n * s
+        return rolling_resistance_torque(self._fr, omega_radps, fz_n, radius_m)
+
+    def kernel_terms(self):
+        return (("wheel_torque", WHEEL_ROLLING_RESISTANCE, (self._fr,)),)
 
     def regressors(self, q):
         out = {}

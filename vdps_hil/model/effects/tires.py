@@ -15,6 +15,11 @@ Symbols (one corner i; wheel axes in the road plane, eq 15-16)::
 * ``load_dependent_cornering_stiffness``: C_alpha(F_z) = C_alpha,0 (1 + a d - b d^2),
   d = F_z/F_z0 - 1.
 * ``low_pressure_tire``: one wheel's rolling radius is smaller.
+
+Compiled form (:meth:`~vdps_hil.model.effects.base.DynamicsEffect.kernel_terms`): the force
+laws and the stiffness factor are written once, as :func:`~vdps_hil.jit.inline` functions the
+effects' methods call and the compiled core (:mod:`vdps_hil.model.core_kernel`) calls with the
+parameters as numbers (codes ``TIRE_LINEAR``, ``TIRE_MAGIC_FORMULA``, ``STIFFNESS_LOAD_DEPENDENT``).
 """
 
 from __future__ import annotations
@@ -22,7 +27,51 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
+from vdps_hil.jit import inline
+
 from .base import DynamicsEffect, EffectConfigError, ParamSpec, TireModel
+
+TIRE_LINEAR = 1
+TIRE_MAGIC_FORMULA = 2
+STIFFNESS_LOAD_DEPENDENT = 1
+
+
+@inline
+def linear_tire_forces(fz_n, kappa, alpha_rad, c_kappa_n, c_alpha_nprad):
+    """Eq 15: (F_a, F_b) = (C_kappa kappa, C_alpha alpha); (0, 0) off the ground (F_z <= 0)."""
+    if fz_n <= 0.0:
+        return 0.0, 0.0
+    return c_kappa_n * kappa, c_alpha_nprad * alpha_rad
+
+
+@inline
+def magic_formula_forces(fz_n, fz0_n, kappa, alpha_rad, c_kappa_n, c_alpha_nprad, mu0, ez, cx, ex, cy, ey):
+    """(F_a, F_b) of :class:`MagicFormulaTire` (its docstring) with its six parameters."""
+    if fz_n <= 0.0:
+        return 0.0, 0.0
+    mu = mu0 * (1.0 + ez * (fz_n / fz0_n - 1.0))
+    if mu < 0.05 * mu0:
+        mu = 0.05 * mu0
+    d = mu * fz_n
+    x = c_kappa_n * kappa / d
+    y = c_alpha_nprad * alpha_rad / d
+    rho = math.sqrt(x * x + y * y)
+    if rho < 1e-12:
+        return c_kappa_n * kappa, c_alpha_nprad * alpha_rad
+    bx = rho / cx
+    gx = math.sin(cx * math.atan(bx - ex * (bx - math.atan(bx))))
+    by = rho / cy
+    gy = math.sin(cy * math.atan(by - ey * (by - math.atan(by))))
+    s = d / rho
+    return s * gx * x, s * gy * y
+
+
+@inline
+def load_dependent_stiffness_factor(fz_n, fz0_n, load_slope, load_degression):
+    """max(0, 1 + a d - b d^2), d = F_z / F_z0 - 1 (:class:`LoadDependentCorneringStiffness`)."""
+    d = fz_n / fz0_n - 1.0
+    f = 1.0 + load_slope * d - load_degression * d * d
+    return f if f > 0.0 else 0.0
 
 
 class LinearTire(TireModel):
@@ -42,9 +91,10 @@ class LinearTire(TireModel):
     LINEAR_IN_PARAMETERS = True
 
     def tire_forces(self, fz_n, fz0_n, kappa, alpha_rad, c_kappa_n, c_alpha_nprad):
-        if fz_n <= 0.0:
-            return 0.0, 0.0
-        return c_kappa_n * kappa, c_alpha_nprad * alpha_rad
+        return linear_tire_forces(fz_n, kappa, alpha_rad, c_kappa_n, c_alpha_nprad)
+
+    def kernel_terms(self):
+        return (("tire_forces", TIRE_LINEAR, ()),)
 
     def regressors(self, q: Mapping[str, float]) -> dict[str, dict[str, float]]:
         """No parameters of its own: its stiffnesses are the vehicle's (eq 21-22 identify them)."""
@@ -109,25 +159,10 @@ class MagicFormulaTire(TireModel):
         return math.sin(c * math.atan(brho - e * (brho - math.atan(brho))))
 
     def tire_forces(self, fz_n, fz0_n, kappa, alpha_rad, c_kappa_n, c_alpha_nprad):
-        if fz_n <= 0.0:
-            return 0.0, 0.0
-        mu0, ez, cx, ex, cy, ey = self._k
-        mu = mu0 * (1.0 + ez * (fz_n / fz0_n - 1.0))
-        if mu < 0.05 * mu0:
-            mu = 0.05 * mu0
-        d = mu * fz_n
-        x = c_kappa_n * kappa / d
-        y = c_alpha_nprad * alpha_rad / d
-        rho = math.sqrt(x * x + y * y)
-        if rho < 1e-12:
-            return c_kappa_n * kappa, c_alpha_nprad * alpha_rad
-        atan = math.atan
-        bx = rho / cx
-        gx = math.sin(cx * atan(bx - ex * (bx - atan(bx))))
-        by = rho / cy
-        gy = math.sin(cy * atan(by - ey * (by - atan(by))))
-        s = d / rho
-        return s * gx * x, s * gy * y
+        return magic_formula_forces(fz_n, fz0_n, kappa, alpha_rad, c_kappa_n, c_alpha_nprad, *self._k)
+
+    def kernel_terms(self):
+        return (("tire_forces", TIRE_MAGIC_FORMULA, self._k),)
 
     def peak_force(self, fz_n: float, fz0_n: float) -> float:
         """D = mu(F_z) F_z [N]: the force the tire cannot exceed."""
@@ -157,9 +192,12 @@ class LoadDependentCorneringStiffness(DynamicsEffect):
     )
 
     def cornering_stiffness_factor(self, corner, fz_n, fz0_n):
-        d = fz_n / fz0_n - 1.0
-        f = 1.0 + self._values["load_slope"] * d - self._values["load_degression"] * d * d
-        return f if f > 0.0 else 0.0
+        v = self._values
+        return load_dependent_stiffness_factor(fz_n, fz0_n, v["load_slope"], v["load_degression"])
+
+    def kernel_terms(self):
+        v = self._values
+        return (("cornering_stiffness_factor", STIFFNESS_LOAD_DEPENDENT, (v["load_slope"], v["load_degression"])),)
 
     def regressors(self, q: Mapping[str, float]) -> dict[str, dict[str, float]]:
         """Lateral tire force change in the body lat/yaw equations (small slip, small steer):
