@@ -49,29 +49,32 @@ def test_a_filter_locked_out_by_its_gate_is_let_back_in():
     assert mon.inflations == 1
 
 
-def test_consistency_returns_once_the_window_holds_accepted_updates_only():
-    mon = AidingMonitor(AidingChecks(min_accepted=3))
+def test_consistency_returns_once_the_large_innovations_have_left_the_window():
+    """Window of 3 updates of 3 dof: consistent while sum NIS <= chi2_0.999(9) = 27.9."""
+    mon = AidingMonitor(AidingChecks(window=3))
     k = ObsKind.GNSS_ATT
     for t in (0, 200, 400):
         mon.observe(_res(k, t, "accepted"))
     assert mon.consistent(400 * MS)
-    mon.observe(_res(k, 600, "gated"))
-    assert not mon.consistent(600 * MS)
+    mon.observe(_res(k, 600, "gated", nis=22.0))  # a marginal gating among small ones: 24 <= 27.9
+    assert mon.consistent(600 * MS)
+    mon.observe(_res(k, 700, "gated", nis=400.0))  # a large innovation: the state is off
+    assert not mon.consistent(700 * MS)
     for i, t in enumerate((800, 1000, 1200)):
         mon.observe(_res(k, t, "accepted"))
         assert mon.consistent(t * MS) == (i == 2)
 
 
 def test_accepted_but_too_large_innovations_are_inconsistent():
-    mon = AidingMonitor(AidingChecks(min_accepted=3))
-    for t in (0, 200, 400):  # NIS per dof 8 each: accepted by a loose gate, but far from 1
-        mon.observe(_res(ObsKind.GNSS_POS, t, "accepted", nis=24.0))
+    mon = AidingMonitor(AidingChecks(window=3))
+    for t in (0, 200, 400):  # NIS 12 each (3 dof): each under the gate, together far above chi2(9)
+        mon.observe(_res(ObsKind.GNSS_POS, t, "accepted", nis=12.0))
     assert not mon.consistent(400 * MS)
 
 
 def test_a_kind_that_stopped_updating_does_not_decide():
     mon = AidingMonitor(AidingChecks(stale_s=1.0))
-    mon.observe(_res(ObsKind.GNSS_VEL, 0, "gated", nu=(0.5, 0.01)))
+    mon.observe(_res(ObsKind.GNSS_VEL, 0, "gated", nu=(0.5, 0.01), nis=100.0))
     assert not mon.consistent(500 * MS)
     assert mon.consistent(1500 * MS)  # a GNSS outage: the IMU alone decides then
 
@@ -94,5 +97,5 @@ def test_health_names_the_reason():
     assert health(imu, aid, 600 * MS) == "imu_fault"
     for k in range(601, 1200):
         imu.check(k * MS, g, (0.0, 0.0, 0.0))
-    aid.observe(_res(ObsKind.GNSS_POS, 1199, "gated"))
+    aid.observe(_res(ObsKind.GNSS_POS, 1199, "gated", nis=200.0))
     assert health(imu, aid, 1199 * MS) == "inconsistent"

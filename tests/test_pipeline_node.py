@@ -76,7 +76,8 @@ def test_warning_frames_decode_with_crc_and_counter_at_50_hz(paper_run):
     assert max(int(s.fields["warning_level"]) for s in got) < 2  # no warning (caution allowed)
     status = [int(s.fields["warning_status"]) for s in got]
     # from the priors: "not converged" (1) until the cornering problem converges (~1.2 s here), then valid
-    assert set(status) <= {0, 1, 2} and status[0] == 1 and status[-1] == 0 and status.count(0) > 0.3 * len(status)
+    # 3 (fault): the aiding innovations were inconsistent (a fix gated in the start-up transient)
+    assert set(status) <= {0, 1, 2, 3} and status[0] == 1 and status[-1] == 0 and status.count(0) > 0.3 * len(status)
 
 
 def _live_status(cfg, samples):
@@ -103,7 +104,8 @@ def test_warning_from_the_priors_is_valid_only_while_the_cornering_problem_has_c
     while it has (both phases occur in this 2.5 s drive: it converges at ~1.2 s)."""
     system, rows = _live_status(SystemConfig.for_profile(1000.0, 0.001), paper_samples)
     assert system.require_converged == ("cornering",)
-    settled = [r for r in rows if r[2] == r[3] and r[4] and r[1] != 2]  # the flag did not flip within the sample
+    # the flag did not flip within the sample; 2 and 3: the fault handling's (aiding_monitor.health)
+    settled = [r for r in rows if r[2] == r[3] and r[4] and r[1] not in (2, 3)]
     assert len(settled) > 0.9 * len(rows)
     assert all(r[1] == (0 if r[3] else 1) for r in settled)
     assert sum(1 for r in settled if r[1] == 1) >= 10 and sum(1 for r in settled if r[1] == 0) >= 10

@@ -17,9 +17,11 @@ measurement is applied again: it now passes the gate and pulls the state back (c
 ``inflations``). A consistent filter gates 3 updates in a row with probability (1e-4)^3.
 
 Consistency (``consistent``): the estimate is consistent with the measurements while, for each
-aiding kind that updated within ``stale_s``, its last ``min_accepted`` updates (fewer at the
-start) were all accepted and their mean NIS per degree of freedom is below the chi-square
-``nis_probability`` quantile of that many degrees of freedom, per dof. The warning is valid only then (``pipeline.node``); it
+aiding kind that updated within ``stale_s``, the NIS of its last ``window`` updates
+(accepted or gated; fewer at the start) sum to at most the chi-square ``nis_probability``
+quantile of their summed degrees of freedom (a consistent filter: sum NIS ~ chi2(sum dof)). One
+marginally gated fix among small ones passes; a run of large innovations, as after an IMU
+outage or before an inflation has been worked off, does not. The warning is valid only then (``pipeline.node``); it
 returns to valid when the innovations are accepted and small again.
 """
 
@@ -48,12 +50,12 @@ class AidingChecks:
     """Settings of the aiding monitor (module docstring)."""
 
     inflate_after_gated: int = 3  # 0: never inflate
-    min_accepted: int = 3
+    window: int = 3
     stale_s: float = 1.0
     nis_probability: float = 0.999
 
     def __post_init__(self):
-        for name in ("inflate_after_gated", "min_accepted"):
+        for name in ("inflate_after_gated", "window"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < (0 if name == "inflate_after_gated" else 1):
                 raise ValueError(f"AidingChecks.{name} must be an integer >= {0 if name[0] == 'i' else 1}, got {v!r}")
@@ -70,7 +72,7 @@ class AidingMonitor:
         self.checks = c = checks or AidingChecks()
         self._stale_ns = int(round(c.stale_s * 1e9))
         self._gated = dict.fromkeys(AIDING_KINDS, 0)
-        self._recent = {k: deque(maxlen=c.min_accepted) for k in AIDING_KINDS}  # (accepted, nis/dof)
+        self._recent = {k: deque(maxlen=c.window) for k in AIDING_KINDS}  # (NIS, dof)
         self._last_t = dict.fromkeys(AIDING_KINDS, None)
         self._limits: dict[int, float] = {}
         self.inflations = 0
@@ -83,7 +85,8 @@ class AidingMonitor:
             return False
         self._last_t[k] = res.t_ns
         ok = res.status == "accepted"
-        self._recent[k].append((ok, res.nis / res.dof if ok and res.dof else math.inf))
+        if res.dof and math.isfinite(res.nis):
+            self._recent[k].append((res.nis, res.dof))
         if ok:
             self._gated[k] = 0
             return False
@@ -119,14 +122,15 @@ class AidingMonitor:
             if last is None or t_ns - last > self._stale_ns:
                 continue
             rec = self._recent[k]
-            if not all(ok for ok, _ in rec) or sum(v for _, v in rec) / len(rec) > self._nis_limit(len(rec)):
+            dof = sum(d for _, d in rec)
+            if dof and sum(v for v, _ in rec) > self._nis_limit(dof):
                 return False
         return True
 
     def _nis_limit(self, n: int) -> float:
         lim = self._limits.get(n)
-        if lim is None:  # per dof of n unit-dof terms (the window mean is of NIS per dof)
-            lim = self._limits[n] = chi2_quantile(self.checks.nis_probability, n) / n
+        if lim is None:
+            lim = self._limits[n] = chi2_quantile(self.checks.nis_probability, n)
         return lim
 
 

@@ -9,7 +9,8 @@ check           rule (a sample that fails is rejected, counted, and never used: 
                 EKF input, not by the alpha-beta rates)
 ==============  ===========================================================================
 finite          every axis finite (else the adapter's NaN reaches the filter)
-time            t not earlier than the last sample (continuity: a clock that steps back)
+time            t not more than the timeout before the newest sample (a clock that steps back;
+                the jitter of serial time stamps within the timeout is taken)
 plausible       |w_i| < ``max_rate_radps`` and |f_i| < ``max_specific_force_mps2`` per axis:
                 above the sensor's range (saturation, the value is clipped) or above what a
                 car body does (openpilot's locationd uses 10 rad/s and 100 m/s^2)
@@ -17,8 +18,10 @@ spike           |w_i - w_ref,i| > ``rate_jump_radps`` + min(``max_rate_accel_rad
                 ``rate_slew_cap_radps``), w_ref: the last accepted sample, dt its age (and
                 the same for f with ``force_jump_mps2``, ``max_jerk_mps3``,
                 ``force_slew_cap_mps2``): a change no car body makes between two samples.
-                A deviation that persists ``reanchor_s`` is taken as real (re-anchored,
-                counted): the check cannot lock the IMU out for good. The first sample
+                It starts a run of rejected samples, which ends when a sample steps back by
+                the run's offset (the spike ends) or is within the jump of w_ref again. A
+                run that lasts ``reanchor_s`` is taken as real (re-anchored, counted): the
+                check cannot lock the IMU out for good. The first sample
                 after a gap (nothing seen for the timeout) has no reference and is taken.
 gap             no accepted sample for longer than ``timeout_s`` (or 10 learned periods):
                 the span without samples is an *outage*
@@ -91,7 +94,8 @@ class ImuMonitor:
         self._reanchor_ns = int(round(c.reanchor_s * 1e9))
         self._last_t = _NEVER  # last sample seen (any verdict)
         self._ref: tuple[int, tuple, tuple] | None = None  # (t, f, w) of the last accepted sample
-        self._reject_since: int | None = None  # start of the current run of spike rejections
+        self._run: tuple | None = None  # spike run: (start, offset of (f, w) to the reference, last sample)
+        self._jumps = (c.force_jump_mps2,) * 3 + (c.rate_jump_radps,) * 3
         self._period_ns = 0.0  # learned sample period (EWMA of accepted intervals)
         self.t_good = _NEVER  # last accepted sample
         self.gap = (_NEVER, _NEVER)  # (last good before, first good after) of the latest outage
@@ -111,28 +115,41 @@ class ImuMonitor:
         c = self.checks
         if not math.isfinite(f[0] + f[1] + f[2] + w[0] + w[1] + w[2]):
             return self._reject("not_finite", t_ns)
-        if t_ns < self._last_t:
+        if t_ns < self._last_t - self.timeout_ns:
             return self._reject("time", t_ns)
         after_gap = t_ns - self._last_t > self.timeout_ns  # nothing seen for a while: no reference
-        self._last_t = t_ns
+        self._last_t = max(self._last_t, t_ns)
         if max(abs(w[0]), abs(w[1]), abs(w[2])) >= c.max_rate_radps or \
                 max(abs(f[0]), abs(f[1]), abs(f[2])) >= c.max_specific_force_mps2:
             return self._reject("implausible", t_ns)
         ref = self._ref
-        if ref is not None and not after_gap:
-            dt = (t_ns - ref[0]) * 1e-9
-            lim_w = c.rate_jump_radps + min(c.max_rate_accel_radps2 * dt, c.rate_slew_cap_radps)
-            lim_f = c.force_jump_mps2 + min(c.max_jerk_mps3 * dt, c.force_slew_cap_mps2)
-            jump = any(abs(a - b) > lim_w for a, b in zip(w, ref[2])) or \
-                any(abs(a - b) > lim_f for a, b in zip(f, ref[1]))
-            if jump:
-                if self._reject_since is None:
-                    self._reject_since = t_ns
-                if t_ns - self._reject_since < self._reanchor_ns:
-                    return self._reject("spike", t_ns)
-                self.counters["reanchored"] += 1  # persistent: a real change (module docstring)
+        if ref is not None and not after_gap and self._spike(t_ns, (*f, *w), (*ref[1], *ref[2]), ref[0]):
+            return self._reject("spike", t_ns)
         self._accept(t_ns, f, w)
         return True
+
+    def _spike(self, t_ns: int, v, r, t_ref: int) -> bool:
+        """Spike check of the sample v = (f, w) against the last accepted r (module docstring):
+        outside a run, a step beyond jump + slew starts one; inside, the run ends when the
+        sample steps back by the run's offset or is back within the jump of r."""
+        c, jumps, run = self.checks, self._jumps, self._run
+        if run is None:
+            dt = max(0, t_ns - t_ref) * 1e-9
+            sf, sw = min(c.max_jerk_mps3 * dt, c.force_slew_cap_mps2), min(c.max_rate_accel_radps2 * dt,
+                                                                             c.rate_slew_cap_radps)
+            if any(abs(a - b) > j + (sf if i < 3 else sw) for i, (a, b, j) in enumerate(zip(v, r, jumps))):
+                self._run = (t_ns, tuple(a - b for a, b in zip(v, r)), v)
+                return True
+            return False
+        start, off, prev = run
+        back = all(abs(a - p + o) <= j for a, p, o, j in zip(v, prev, off, jumps))
+        if back or all(abs(a - b) <= j for a, b, j in zip(v, r, jumps)):
+            return False
+        if t_ns - start < self._reanchor_ns:
+            self._run = (start, off, v)
+            return True
+        self.counters["reanchored"] += 1  # persistent: a real change (module docstring)
+        return False
 
     def _reject(self, reason: str, t_ns: int) -> bool:
         self.counters[reason] += 1
@@ -140,7 +157,7 @@ class ImuMonitor:
         return False
 
     def _accept(self, t_ns: int, f, w) -> None:
-        self._reject_since = None
+        self._run = None
         prev = self.t_good
         if prev != _NEVER:
             dt = t_ns - prev
@@ -148,9 +165,9 @@ class ImuMonitor:
                 self.gap = (prev, t_ns)
                 self.counters["outages"] += 1
                 self.last_fault_ns = t_ns
-            else:
+            elif dt > 0:
                 self._period_ns = dt if self._period_ns == 0.0 else self._period_ns + 0.05 * (dt - self._period_ns)
-        self.t_good = t_ns
+        self.t_good = max(prev, t_ns)
         self._ref = (t_ns, tuple(f), tuple(w))
         self.counters["accepted"] += 1
 

@@ -53,8 +53,8 @@ the held inputs (steering, wheel torques) or a rate/wheel speed are missing, els
 itself sends 3 "fault" for a stale prediction. ``SystemConfig.require_converged`` set to a tuple
 overrides that rule (``()``: never gate). Fault tolerance: 2 also while the IMU is missing or
 within ``ImuChecks.settle_s`` of an IMU fault, 3 while the aiding innovations say the estimate is
-inconsistent (``estimation.aiding_monitor.health``); the identifier is not fed then either
-(counted per reason in ``counters["unhealthy"]``).
+inconsistent (``estimation.aiding_monitor.health``), counted per reason in
+``counters["unhealthy"]``; the identifier is not fed on the estimates of an IMU fault.
 
 File replay (``vdps replay``, the batch tasks) is the application around this node:
 ``vdps_hil.app.replay.replay_file``.
@@ -372,7 +372,8 @@ class VdpsSystem:
         if why is not None:
             self.counters["unhealthy"][why] += 1
         if self.identifier is not None:
-            if why is None and (self._next_ident is None or t >= self._next_ident):
+            imu_ok = why is None or not why.startswith("imu")  # no RLS on an IMU outage's estimates
+            if imu_ok and (self._next_ident is None or t >= self._next_ident):
                 self._next_ident = t - t % self._ident_ns + self._ident_ns
                 inp = self.feeder.inputs(est, filt)
                 if inp is not None:
