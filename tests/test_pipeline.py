@@ -11,6 +11,7 @@ import pytest
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.experiments import synthetic as syn
+from vdps_hil.estimation.aiding_monitor import AidingChecks
 from vdps_hil.estimation.ekf_config import EkfConfig, SensorSet
 from vdps_hil.estimation.estimates import Estimate, Innovation
 from vdps_hil.model.frames import dcm_gv
@@ -326,18 +327,14 @@ def test_wheel_outliers_and_hard_braking_are_left_out():
 
 
 def test_reacquires_after_persistent_gating():
-    """From 10 s on every fix is 40 m east of the truth (a jump the filter gates): after five
-    gated fixes position, velocity and yaw are reset to the fixes (counted once), later fixes are
-    accepted and the estimate follows the shifted fixes (< 1.5 m off them at the end)."""
-    shifted = []
-    for s in _samples():
-        if s.kind == "gnss_pos" and s.t_ns >= 10_000_000_000:
-            east = DEFAULT_ORIGIN.to_geodetic(np.array([40.0, 0.0, 0.0]))[1] - DEFAULT_ORIGIN.lon_deg
-            s = dataclasses.replace(s, fields={**s.fields, "gnss_lon_deg": s.fields["gnss_lon_deg"] + east})
-        shifted.append(s)
-    p, out = _run(shifted, PipelineConfig(reacquire_after_gated=5))
+    """From 10 s on every fix is 40 m east of the truth (a jump the filter gates). With the
+    re-acquisition rule alone (``reacquire_after_gated=5``, inflation off): after five gated fixes
+    position, velocity and yaw are reset to the fixes (counted once), later fixes are accepted
+    and the estimate follows the shifted fixes (< 1.5 m off them at the end)."""
+    shifted = _shifted_fixes()
+    p, out = _run(shifted, PipelineConfig(reacquire_after_gated=5, aiding_checks=AidingChecks(inflate_after_gated=0)))
     c = p.counters
-    assert c["reacquisitions"] == 1 and c["ekf"]["reacquisitions"] == 1
+    assert c["reacquisitions"] == 1 and c["ekf"]["reacquisitions"] == 1 and c["inflations"] == 0
     inn = [o for o in out if isinstance(o, Innovation) and o.kind == "gnss_pos"]
     statuses = [o.status for o in inn if o.t_ns >= 10e9]
     assert statuses[:5] == ["gated"] * 5 and all(s == "accepted" for s in statuses[5:])
@@ -345,8 +342,31 @@ def test_reacquires_after_persistent_gating():
     assert abs(e[-1, 0] - 40.0) < 1.5 and abs(e[-1, 1]) < 1.5
     with pytest.raises(ValueError):
         PipelineConfig(reacquire_after_gated=-1)
-    p_off, _ = _run(shifted)  # the default (paper's set): no re-acquisition
-    assert p_off.counters["reacquisitions"] == 0 and p_off.rejected()["ekf.gnss_pos"] > 40
+    p_off, _ = _run(shifted, PipelineConfig(aiding_checks=AidingChecks(inflate_after_gated=0)))
+    assert p_off.counters["reacquisitions"] == 0 and p_off.rejected()["ekf.gnss_pos"] > 40  # locked out
+
+
+def _shifted_fixes():
+    shifted = []
+    for s in _samples():
+        if s.kind == "gnss_pos" and s.t_ns >= 10_000_000_000:
+            east = DEFAULT_ORIGIN.to_geodetic(np.array([40.0, 0.0, 0.0]))[1] - DEFAULT_ORIGIN.lon_deg
+            s = dataclasses.replace(s, fields={**s.fields, "gnss_lon_deg": s.fields["gnss_lon_deg"] + east})
+        shifted.append(s)
+    return shifted
+
+
+def test_default_gate_cannot_lock_the_filter_out_of_its_fixes():
+    """Issue 20 (the gate's lock-out): the same 40 m jump with the defaults. The aiding monitor
+    inflates the position after the third gated fix in a row and accepts it (``aiding_monitor``):
+    the estimate follows the fixes (< 1.5 m at the end) and no later fix is gated. (Before, the
+    default gated every fix to the end of the drive.)"""
+    p, out = _run(_shifted_fixes())
+    assert p.counters["inflations"] >= 1
+    statuses = [o.status for o in out if isinstance(o, Innovation) and o.kind == "gnss_pos" and o.t_ns >= 11e9]
+    assert statuses and all(s == "accepted" for s in statuses)
+    t, e, _ = _errors(out)
+    assert abs(e[-1, 0] - 40.0) < 1.5 and abs(e[-1, 1]) < 1.5
 
 
 def test_separate_gnss_velocity_latency():

@@ -76,7 +76,8 @@ def test_warning_frames_decode_with_crc_and_counter_at_50_hz(paper_run):
     assert max(int(s.fields["warning_level"]) for s in got) < 2  # no warning (caution allowed)
     status = [int(s.fields["warning_status"]) for s in got]
     # from the priors: "not converged" (1) until the cornering problem converges (~1.2 s here), then valid
-    assert set(status) <= {0, 1, 2} and status[0] == 1 and status[-1] == 0 and status.count(0) > 0.3 * len(status)
+    # 3 (fault): the aiding innovations were inconsistent (a fix gated in the start-up transient)
+    assert set(status) <= {0, 1, 2, 3} and status[0] == 1 and status[-1] == 0 and status.count(0) > 0.3 * len(status)
 
 
 def _live_status(cfg, samples):
@@ -103,7 +104,8 @@ def test_warning_from_the_priors_is_valid_only_while_the_cornering_problem_has_c
     while it has (both phases occur in this 2.5 s drive: it converges at ~1.2 s)."""
     system, rows = _live_status(SystemConfig.for_profile(1000.0, 0.001), paper_samples)
     assert system.require_converged == ("cornering",)
-    settled = [r for r in rows if r[2] == r[3] and r[4] and r[1] != 2]  # the flag did not flip within the sample
+    # the flag did not flip within the sample; 2 and 3: the fault handling's (aiding_monitor.health)
+    settled = [r for r in rows if r[2] == r[3] and r[4] and r[1] not in (2, 3)]
     assert len(settled) > 0.9 * len(rows)
     assert all(r[1] == (0 if r[3] else 1) for r in settled)
     assert sum(1 for r in settled if r[1] == 1) >= 10 and sum(1 for r in settled if r[1] == 0) >= 10
@@ -235,3 +237,60 @@ def test_system_predictor_uses_the_saved_model_drag():
         res = system.predictor.predict(init)
         end[label] = float(res.vel_b_mps[-1][0])
     assert 1.5 <= end["plain"] - end["drag"] <= 3.0, end
+
+
+# ------------------------------------------------------------------ fault tolerance (issue 20)
+_ERR_STATES = (0, 1, 3, 4, 6, 7, 8)  # horizontal position, horizontal velocity, roll, pitch, yaw
+
+
+def _recovered(r, t_back_s: float, t_fault_s: float) -> dict:
+    """Per state of _ERR_STATES: the share of epochs within the filter's own 3 sigma, and
+    whether from t_back + 2 s on the error stays at its pre-fault level: below max(2 x its 95th
+    percentile over the 2 s before the fault, 3 x the mean sigma then)."""
+    t, e, s = r["t_s"], np.abs(r["err"]), r["sigma"]
+    inside = np.mean([(e[:, i] <= 3.0 * s[:, i]) for i in _ERR_STATES])
+    before = (t >= t_fault_s - 2.0) & (t < t_fault_s)
+    after = t >= t_back_s + 2.0
+    back = all(e[after, i].max() <= max(2.0 * np.percentile(e[before, i], 95), 3.0 * s[before, i].mean())
+               for i in _ERR_STATES)
+    return {"inside_3sigma": float(inside), "recovered": back}
+
+
+def test_imu_disconnect_is_bridged_honestly_and_recovered_within_2_s():
+    """Issue 20 finding 2: the IMU's serial line is cut for 2 s (3-5 s) on the paper's drive.
+    Today's filter predicted on the last input with the IMU's own noise (velocity sigma 0.03 m/s
+    while the error grew to 20 m/s) and then gated every fix. Specification: the errors stay
+    within the filter's own 3 sigma in >= 99 % of the epochs (position, velocity, attitude), the
+    velocity sigma grows with the outage (here > 10 x), and 2 s after the IMU returns every error
+    is back at its pre-fault level."""
+    m = _nees_tool()
+    r = m.run_chain("paper", 11, duration_s=9.0, faults=["serial_disconnect:device=imu,t_s=3,duration_s=2"])
+    d = _recovered(r, 5.0, 3.0)
+    assert d["inside_3sigma"] >= 0.99
+    assert d["recovered"]
+    t, s = r["t_s"], r["sigma"]
+    assert s[(t > 4.8) & (t < 5.0), 3].max() > 10.0 * s[(t > 2.0) & (t < 3.0), 3].mean()
+
+
+def test_gyro_spike_is_rejected_and_no_valid_warning_is_sent():
+    """Issue 20 finding 3: a 50 ms, 200 deg/s yaw-rate spike at 5 s on the paper's drive (no
+    rollover). Specification: no VDPS_Warning of level >= 2 with status valid; the frames during
+    the fault are not valid (status 2, sensor missing) and valid frames return within 2 s; the
+    yaw error stays below 1 deg (the spike would integrate to 10 deg)."""
+    buf = io.BytesIO()
+    Drive("paper", seed=7, duration_s=8.0, faults=["gyro_spike:t_s=5,duration_s=0.05,amplitude_degps=200"]).run(buf)
+    buf.seek(0)
+    samples = list(decode_recording(buf))
+    system, out = VdpsSystem.replay(MODEL, SystemConfig.for_profile(1000.0, 0.001, start_params=MODEL.params),
+                                    samples)
+    dec = VdpsCanDecoder()
+    rows = [(d.t_ns * 1e-9, int(d.fields["warning_level"]), int(d.fields["warning_status"]))
+            for o in out if isinstance(o, CanFrame) for d in dec.decode(o.t_ns, o.arbitration_id, o.data)]
+    assert not [r for r in rows if r[1] >= 2 and r[2] == 0]
+    during = [r for r in rows if 5.0 < r[0] < 5.3]
+    assert during and all(r[2] == 2 for r in during)
+    assert any(r[2] == 0 for r in rows if 5.3 <= r[0] <= 7.0)
+    assert system.pipeline.imu_monitor.counters["spike"] == 50
+    m = _nees_tool()
+    r = m.run_chain("paper", 7, duration_s=8.0, faults=["gyro_spike:t_s=5,duration_s=0.05,amplitude_degps=200"])
+    assert np.degrees(np.abs(r["err"][r["t_s"] > 4.0, 8])).max() < 1.0

@@ -284,6 +284,10 @@ class MultiRateEKF:
             raise ValueError(f"IMU input must be two 3-vectors, got shapes {f.shape} and {w.shape}")
         self._f, self._w = f.copy(), w.copy()
 
+    def set_input_psd(self, q_u=None) -> None:
+        """Input-error PSD q_u (6,) of the next predicts (None: ``EkfConfig.input_psd()``; an IMU outage)."""
+        self._q_in = self.config.input_psd() if q_u is None else np.array(q_u, dtype=float).reshape(6)
+
     # ---------------------------------------------------------------- predict
     def predict_to(self, t_ns: int) -> bool:
         """Propagate to ``t_ns`` with the current input. False if not initialised or t_ns is in

@@ -26,34 +26,26 @@ steer           latest steering wheel angle (for the identifier)
 Sensor mounting from the *model* vehicle file: the IMU rotation and lever arm (``imu_input``)
 and the GNSS antenna lever arm (EKF ``gnss_pos``/``gnss_vel``).
 
-Real-car extensions (``EkfConfig`` switches, all off for the paper's Table-1 set):
+Real-car extensions (``EkfConfig`` switches, all off for the paper's Table-1 set): a
+``wheel_speed`` update every ``wheel_speed_period_s`` from the wheel samples of the last
+``wheel_speed_window_s`` (``wheel_speed``); the non-holonomic constraint every ``nhc_period_s``
+(``measurements.nhc_measurement``); gyro rates for the observation models corrected with b_g;
+re-acquisition: after ``reacquire_after_gated`` consecutive gated ``gnss_pos`` updates (0, the
+default: never; real-car sets: 5) position, velocity and yaw are reset to the newest fix.
 
-* Wheel speed: every ``wheel_speed_period_s`` one ``wheel_speed`` update from the wheel samples
-  of the last ``wheel_speed_window_s`` (per-wheel means, outliers dropped, skipped when braking or
-  slipping hard, sigma inflated by the wheel acceleration and torque: ``wheel_speed``).
-* Non-holonomic constraint: every ``nhc_period_s`` after a predict, z = [0, 0] with a lateral
-  sigma that grows with the lateral acceleration and the yaw rate (``measurements.nhc_measurement``).
-* Gyro rates handed to the observation models (lever arms) are bias-corrected with the filter's
-  b_g.
-* Re-acquisition: after ``reacquire_after_gated`` consecutive gated ``gnss_pos`` updates (0, the
-  default: never; the real-car sensor sets use 5) position, velocity and yaw are reset to the
-  newest fix (``initialisation``; ``MultiRateEKF.reacquire``; counted ``reacquisitions``).
+Fault tolerance (``imu_monitor``, ``aiding_monitor``): IMU samples failing the rate, continuity,
+spike or saturation checks are rejected; a predict over a span without accepted samples runs on
+the outage input and noise (the covariance grows with the outage); a run of gated aiding
+updates inflates the states they observe and re-applies the fix; ``aiding_monitor.health``
+says when the estimate is not fit to warn on. Latencies (``Latencies``): a fixed delay per sensor kind, late
+measurements through the EKF history. Initialisation at a GNSS fix once a heading is known
+(``initialisation.initial_state``), again after a NaN reset. Sequencing (``imu_hold_s``, 50 ms):
+a measurement later than the newest IMU sample waits for it (``sequencing``); ``finish()``
+releases what is held at the end of the input.
 
-Latency per sensor (``Latencies``): a fixed delay subtracted from ``t_ns`` of that kind (an
-adapter that stamps at reception); the EKF applies measurements that are then in its past with
-its history buffer (``ekf`` module docstring).
-
-Initialisation: at a GNSS fix once a heading is known (``initialisation.initial_state``).
-After a NaN reset of the EKF the next fix re-initialises.
-
-Sequencing (``imu_hold_s``, default 50 ms): a measurement that can advance the filter and is
-later than the newest IMU sample waits for the IMU samples up to its time (``sequencing``).
-``finish()`` releases what is held at the end of the input.
-
-Replay: every sample handed to ``handle`` is appended to ``input_log``; feeding the same
-samples to a fresh pipeline (``EstimatorPipeline.replay``) reproduces the outputs exactly.
-The pipeline never reads simulator truth: it accepts only a model vehicle file and ignores
-(counts) samples from ``/truth`` sources or of kind ``truth*``.
+Replay: every sample handed to ``handle`` is logged (``input_log``); a fresh pipeline fed the
+same samples (``replay``) reproduces the outputs exactly. Never reads simulator truth: a model
+vehicle file only; ``/truth`` sources and ``truth*`` kinds are ignored and counted.
 """
 
 from __future__ import annotations
@@ -63,10 +55,12 @@ import math
 import numpy as np
 
 from vdps_hil.bus.samples import Sample
+from vdps_hil.estimation.aiding_monitor import AidingMonitor
 from vdps_hil.estimation.alpha_beta import TimedAlphaBetaBank
 from vdps_hil.estimation.ekf import MultiRateEKF, UpdateResult
 from vdps_hil.estimation.estimates import Estimate, FilteredSignals, Innovation
 from vdps_hil.estimation.imu_input import ImuMounting, MeanInput
+from vdps_hil.estimation.imu_monitor import ImuMonitor
 from vdps_hil.estimation.initialisation import LatestAiding, initial_state, reacquisition_states
 from vdps_hil.estimation.measurements import (ZrRateBuilder, gnss_velocity_measurement, nhc_measurement,
                                               suspension_measurement, y2_gps_measurement)
@@ -126,10 +120,12 @@ class EstimatorPipeline:
         self._level_f = None  # recent mean specific force (initialisation by levelling)
         self._aid = LatestAiding()  # latest aiding data for initialisation / re-acquisition
         self._gated_run = 0
+        self.imu_monitor, self.aiding_monitor = ImuMonitor(cfg.imu_checks), AidingMonitor(cfg.aiding_checks)
         self._zr_rate = ZrRateBuilder(heave_rate_sigma_mps=cfg.heave_rate_sigma_mps)
         self._log: list[Sample] = []
         self._counts = {"messages": 0, "ignored": 0, "truth_ignored": 0, "invalid": 0, "estimates": 0,
-                        "wheel_outliers": 0, "wheel_accel_skipped": 0, "wheel_too_few": 0, "reacquisitions": 0}
+                        "wheel_outliers": 0, "wheel_accel_skipped": 0, "wheel_too_few": 0, "reacquisitions": 0,
+                        "outage_predicts": 0, "inflations": 0}
         self._rejected = dict.fromkeys(KINDS, 0)
         self._per_kind = dict.fromkeys(KINDS, 0)
         self._obs = None
@@ -252,6 +248,9 @@ class EstimatorPipeline:
             self._rejected["imu"] += 1
             return
         f, w = fw
+        if not self.imu_monitor.check(t, f, w):  # missing / implausible IMU (imu_monitor)
+            self._rejected["imu"] += 1
+            return
         self._ab_gyro.update(t, (_NAN, _NAN, w[2]) if self._esc3 else w)
         if self._imu.lever_arm_m is not None:
             f = self._imu.at_cg(f, self._ab_gyro.x, self._ab_gyro.v)
@@ -265,11 +264,14 @@ class EstimatorPipeline:
         if t - ekf.t_ns >= self._period_ns:
             self._flush(t, out)
 
-    def _set_mean_input(self) -> None:
+    def _set_mean_input(self, t1: int) -> None:
+        """The input of a predict to t1: the mean of the IMU samples, or the outage input and
+        noise when the accepted samples do not cover the span (``imu_monitor``)."""
         mean = self._mean.take()
         if mean is not None:
             self._f_in, self._w_in = mean
-            self.ekf.set_input(self._f_in, self._w_in)
+        if self.imu_monitor.apply_input(self.ekf, t1, self._f_in, self._w_in, mean is not None):
+            self._counts["outage_predicts"] += 1
 
     def _rate_corrected(self) -> tuple[float, float, float]:
         """The last mean gyro input minus the filter's gyro bias [rad/s] (body axes)."""
@@ -279,7 +281,7 @@ class EstimatorPipeline:
 
     def _flush(self, t: int, out: list) -> None:
         """Predict to t with the mean of the accumulated IMU samples; emit an estimate."""
-        self._set_mean_input()
+        self._set_mean_input(t)
         was = self.ekf.initialized
         self.ekf.predict_to(t)
         if not self.ekf.initialized:
@@ -301,7 +303,7 @@ class EstimatorPipeline:
         """Bring the filter to a measurement at t (if it is not in the filter's past)."""
         ekf = self.ekf
         if t > ekf.t_ns:
-            self._set_mean_input()
+            self._set_mean_input(t)
             ekf.predict_to(t)
             if not ekf.initialized:
                 self._after_reset()
@@ -310,10 +312,18 @@ class EstimatorPipeline:
 
     def _update(self, kind: ObsKind, z, R, t: int, out: list, aux=None) -> UpdateResult:
         was = self.ekf.initialized
-        res = self.ekf.update(kind, z, R, t, aux)
+        ekf = self.ekf
+        res = ekf.update(kind, z, R, t, aux)
         out.append(Innovation.from_result(res))
-        if was and not self.ekf.initialized:
+        if was and not ekf.initialized:
             self._after_reset()
+        elif self.aiding_monitor.observe(res) and t >= ekf.t_ns:  # inflate and accept (aiding_monitor)
+            xf, pf = ekf.full_state()
+            if ekf.reacquire(t, self.aiding_monitor.inflation(res, xf, pf)):
+                self._counts["inflations"] += 1
+                res = ekf.update(kind, z, R, t, aux)
+                out.append(Innovation.from_result(res))
+                self.aiding_monitor.observe(res)
         return res
 
     def _nhc_update(self, t: int, out: list) -> None:
@@ -328,6 +338,7 @@ class EstimatorPipeline:
         self._update(ObsKind.NHC, z, R, t, out, aux=w)
 
     def _after_reset(self) -> None:
+        self.aiding_monitor.reset()
         self._mean.reset()
         self._zr_rate.reset()
         if self._obs is not None:

@@ -10,7 +10,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from vdps_hil.estimation.aiding_monitor import AidingChecks
 from vdps_hil.estimation.ekf_config import EkfConfig
+from vdps_hil.estimation.imu_monitor import ImuChecks
 from vdps_hil.units import deg2rad
 
 
@@ -82,6 +84,8 @@ class PipelineConfig:
     reacquire_after_gated: int = 0  # off for the paper's set (its 10 dB SNR runs gate 5 fixes in a row)
     reacquire_velocity_sigma_mps: float = 1.0
     imu_hold_s: float = 0.05  # sequencing (module docstring): longest hold of a measurement; 0: off
+    imu_checks: ImuChecks = field(default_factory=ImuChecks)  # missing / implausible IMU (imu_monitor)
+    aiding_checks: AidingChecks = field(default_factory=AidingChecks)  # gate lock-out, consistency
 
     def __post_init__(self):
         for name in ("predict_period_s", "gnss_pos_sigma_h_m", "gnss_pos_sigma_v_m", "gnss_att_sigma_rad",

@@ -51,7 +51,10 @@ until the identification problems named in the warning policy's ``require_conver
 (``configs/prediction/default.toml``: ``["cornering"]``) have converged; 2 "sensor missing" when
 the held inputs (steering, wheel torques) or a rate/wheel speed are missing, else 0; the node
 itself sends 3 "fault" for a stale prediction. ``SystemConfig.require_converged`` set to a tuple
-overrides that rule (``()``: never gate).
+overrides that rule (``()``: never gate). Fault tolerance: 2 also while the IMU is missing or
+within ``ImuChecks.settle_s`` of an IMU fault, 3 while the aiding innovations say the estimate is
+inconsistent (``estimation.aiding_monitor.health``), counted per reason in
+``counters["unhealthy"]``; the identifier is not fed on the estimates of an IMU fault.
 
 File replay (``vdps replay``, the batch tasks) is the application around this node:
 ``vdps_hil.app.replay.replay_file``.
@@ -64,6 +67,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Iterable
 
 from vdps_hil.bus.samples import Sample
+from vdps_hil.estimation.aiding_monitor import health
 from vdps_hil.estimation.estimates import Estimate
 from vdps_hil.estimation.pipeline import EstimatorPipeline
 from vdps_hil.estimation.pipeline_config import PipelineConfig
@@ -231,7 +235,8 @@ class VdpsSystem:
         self._log: list[Sample] = []
         self._last_estimate: Estimate | None = None
         self.counters = {"samples": 0, "estimates": 0, "ident_updates": 0, "predictions": 0, "frames": 0,
-                         "status": {"valid": 0, "not_converged": 0, "sensor_missing": 0}}
+                         "status": {"valid": 0, "not_converged": 0, "sensor_missing": 0, "fault": 0},
+                         "unhealthy": {"imu_missing": 0, "imu_fault": 0, "inconsistent": 0}}
 
     # ------------------------------------------------------------------ public
     def handle(self, sample: Sample) -> list:
@@ -363,8 +368,12 @@ class VdpsSystem:
         out.append(est)
         if self.config.emit_filtered:
             out.append(filt)
+        why = health(p.imu_monitor, p.aiding_monitor, t)  # fault tolerance (module docstring)
+        if why is not None:
+            self.counters["unhealthy"][why] += 1
         if self.identifier is not None:
-            if self._next_ident is None or t >= self._next_ident:
+            imu_ok = why is None or not why.startswith("imu")  # no RLS on an IMU outage's estimates
+            if imu_ok and (self._next_ident is None or t >= self._next_ident):
                 self._next_ident = t - t % self._ident_ns + self._ident_ns
                 inp = self.feeder.inputs(est, filt)
                 if inp is not None:
@@ -373,9 +382,9 @@ class VdpsSystem:
             if self._next_report is None or t >= self._next_report:
                 self._next_report = t - t % self._report_ns + self._report_ns
                 out.append(self.ident_report(t))
-        self._chain_tick(t, (est, filt_eff), out)
+        self._chain_tick(t, (est, filt_eff), out, why)
 
-    def _chain_tick(self, t_ns: int, ef, out: list) -> None:
+    def _chain_tick(self, t_ns: int, ef, out: list, why: str | None = None) -> None:
         chain = self._chain
         if chain is None:
             return
@@ -395,6 +404,8 @@ class VdpsSystem:
                 conv = self.identifier.converged
                 if not all(conv.get(n, False) for n in self.require_converged):
                     status = WarningStatus.NOT_CONVERGED
+            if status == WarningStatus.VALID and why is not None:
+                status = WarningStatus.SENSOR_MISSING if why.startswith("imu") else WarningStatus.FAULT
         elif self.pipeline.ekf.initialized:
             return  # between estimate instants: the chain runs at the estimate cadence
         params = self._params()
@@ -404,7 +415,7 @@ class VdpsSystem:
         n_before = chain.assessments_total
         frames = chain.handle(t_ns, init, status)
         key = {WarningStatus.VALID: "valid", WarningStatus.NOT_CONVERGED: "not_converged",
-               WarningStatus.SENSOR_MISSING: "sensor_missing"}[status]
+               WarningStatus.SENSOR_MISSING: "sensor_missing", WarningStatus.FAULT: "fault"}[status]
         self.counters["status"][key] += 1
         if chain.assessments_total > n_before:
             a = chain.last_assessment
