@@ -395,7 +395,6 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
         return can.LogReader(self.path)
 
     def _open(self) -> None:
-        import can
         from can.io.player import MESSAGE_READERS, _update_reader_plugins
 
         if not os.path.isfile(self.path):
@@ -419,7 +418,6 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
         except Exception as e:  # noqa: BLE001 - a broken file is the person's input
             raise AdapterError(f"CAN log {self.path}: unreadable: {type(e).__name__}: "
                                f"{str(e).splitlines()[0] if str(e) else ''}") from None
-        del can
 
     @property
     def lines_read(self) -> int | None:
