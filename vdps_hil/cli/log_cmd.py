@@ -38,6 +38,8 @@ def build_live_adapters(can_specs, serial_specs, formats, signalmap, dbcs):
     except SignalMapError as e:
         raise UserError(str(e)) from None
     adapters, info = [], {}
+    if sum(s.endswith("=-") for s in can_specs) > 1:
+        raise UserError("--can BUS=-: standard input can feed one bus only")
     try:
         for spec in can_specs:
             if "=" not in spec:
@@ -46,7 +48,7 @@ def build_live_adapters(can_specs, serial_specs, formats, signalmap, dbcs):
             bus, iface = spec.split("=", 1)
             check_name("bus", bus)
             dec, _ = _can_decoder(bus, sigmap, dbc, info)  # a map's log channel: files only
-            adapters.append(CanAdapter(bus, iface, decoder=dec))
+            adapters.append(_stdin_adapter(bus, dec) if iface == "-" else CanAdapter(bus, iface, decoder=dec))
         for spec in serial_specs:
             if "=" not in spec:
                 raise UserError(f"--serial {spec!r}: expected NAME=PORT[@BAUD]")
@@ -68,6 +70,16 @@ def build_live_adapters(can_specs, serial_specs, formats, signalmap, dbcs):
     meta_sm = None if sigmap is None else {"name": sigmap.name, "path": str(sigmap.path),
                                           "sha256": sigmap.sha256}
     return adapters, info, meta_sm
+
+
+def _stdin_adapter(bus: str, decoder):
+    """``--can BUS=-``: candump -L lines on standard input (``adapters.candump_stream``)."""
+    import sys
+
+    from vdps_hil.adapters.can_adapter import CanAdapter
+    from vdps_hil.adapters.candump_stream import CandumpStreamBus
+
+    return CanAdapter(bus, None, decoder=decoder, bus=CandumpStreamBus(sys.stdin.buffer))
 
 
 class _Status:
@@ -102,7 +114,8 @@ class _Status:
 @click.command("log")
 @click.option("--can", "can_specs", multiple=True, metavar="BUS=INTERFACE:CHANNEL",
               help="A live CAN bus: any python-can interface string (socketcan:can0, "
-                   "pcan:PCAN_USBBUS1,bitrate=500000, slcan:/dev/ttyACM0, virtual:hil).")
+                   "pcan:PCAN_USBBUS1,bitrate=500000, slcan:/dev/ttyACM0, virtual:hil); "
+                   "'-': candump -L lines on standard input (candump -L can0 | vdps log --can pt=- ...).")
 @click.option("--serial", "serial_specs", multiple=True, metavar="NAME=PORT[@BAUD]",
               help="A serial device (NMEA GNSS, or the IMU when NAME starts with imu).")
 @click.option("--format", "formats", multiple=True, metavar="NAME=nmea|imu",
