@@ -11,20 +11,15 @@ import json
 import pytest
 from click.testing import CliRunner
 from mcap.reader import make_reader
+from replayed_drive import replayed_drive
 
 from vdps_hil.app.export_topics import flatten, select_topics
 from vdps_hil.cli.main import cli
-from vdps_hil.sim.drive import Drive
 
 
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory):
-    from vdps_hil.app.replay import replay_file
-
-    d = tmp_path_factory.mktemp("export")
-    Drive("paper", seed=6, duration_s=2.0).run(d / "paper.mcap")
-    replay_file(d / "paper.mcap", output=d / "out.mcap")
-    return d
+    return replayed_drive(tmp_path_factory.mktemp("export"), seed=6)
 
 
 def _read(path) -> list[dict]:
