@@ -143,3 +143,25 @@ def test_bad_input_is_one_line(args, tmp_path):
         run_piped("monitor", *args, timeout=60, cwd=tmp_path)
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and r.stderr.startswith("vdps: error:"), r.stderr
+
+
+def test_real_rav4_import_is_decoded_with_the_recorded_dbc(real_data, tmp_path):
+    """The comma2k19 RAV4 drive imported with its signal map and Toyota DBC: ``vdps monitor`` finds
+    the DBC from the recording's metadata (no --dbc), counts every 0xAA frame of the candump log,
+    and shows the last one's wheel speeds as cantools decodes that line."""
+    seg = real_data / "comma2k19_rav4_2018-08-02_seg40"
+    dbc = seg / "toyota_new_mc_pt_generated.dbc"
+    r = run_piped("import", "--can", f"pt={seg / 'rav4_seg40.candump.log'}@can0", "--signalmap", "toyota_rav4_2017",
+                  "--dbc", f"pt={dbc}", "-o", tmp_path / "rav4.mcap", timeout=300)
+    assert r.returncode == 0, r.stderr
+    lines = [ln.split()[2] for ln in (seg / "rav4_seg40.candump.log").read_text().splitlines()
+             if ln.split()[1:2] == ["can0"] and ln.split()[2].startswith("0AA#")]
+    r = run_piped("monitor", tmp_path / "rav4.mcap", "--once", "--id", "0xAA", timeout=300)
+    assert r.returncode == 0, r.stderr
+    table = _table(r.stdout)
+    assert list(table) == ["WHEEL_SPEEDS"] and int(table["WHEEL_SPEEDS"][""][3]) == len(lines) > 1000
+    want = cantools.database.load_file(dbc, strict=False).get_message_by_frame_id(0xAA).decode(
+        bytes.fromhex(lines[-1].split("#")[1]), decode_choices=False)
+    for sig in ("WHEEL_SPEED_FL", "WHEEL_SPEED_FR", "WHEEL_SPEED_RR", "WHEEL_SPEED_RL"):
+        assert float(table["WHEEL_SPEEDS"][sig][1]) == pytest.approx(want[sig], rel=1e-5), sig
+        assert table["WHEEL_SPEEDS"][sig][2] == "km/h"
