@@ -165,3 +165,14 @@ def test_real_rav4_import_is_decoded_with_the_recorded_dbc(real_data, tmp_path):
     for sig in ("WHEEL_SPEED_FL", "WHEEL_SPEED_FR", "WHEEL_SPEED_RR", "WHEEL_SPEED_RL"):
         assert float(table["WHEEL_SPEEDS"][sig][1]) == pytest.approx(want[sig], rel=1e-5), sig
         assert table["WHEEL_SPEEDS"][sig][2] == "km/h"
+
+
+def test_recording_on_a_terminal_is_played_at_its_pace(drive):
+    """At ``--speed 1`` the 2 s drive is redrawn as it plays: the frame counts of the screens grow
+    over about 2 s of redraws, not all at once; the last screen holds every frame."""
+    code, raw = run_on_pty("monitor", drive, "--speed", "1", timeout=120, cols=110, rows=40)
+    assert code == 0, raw
+    counts = [int(m.group(1)) for m in re.finditer(r"frames (\d+), shown", raw)]
+    assert len(counts) >= 10 and counts == sorted(counts)  # 10 redraws a second
+    total = sum(n for n, _ in _last_frames(drive).values())
+    assert counts[-1] == total and sum(0 < c < total for c in counts) >= 5
