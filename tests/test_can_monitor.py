@@ -176,3 +176,23 @@ def test_recording_on_a_terminal_is_played_at_its_pace(drive):
     assert len(counts) >= 10 and counts == sorted(counts)  # 10 redraws a second
     total = sum(n for n, _ in _last_frames(drive).values())
     assert counts[-1] == total and sum(0 < c < total for c in counts) >= 5
+
+
+def test_candump_lines_on_stdin(drive, tmp_path):
+    """``candump -L can0 | vdps monitor -``: the drive's frames as candump lines (python-can's
+    writer) through a real pipe give the same table as the recording; the end of input ends it."""
+    import can
+
+    from vdps_hil.record.reader import RecordingReader
+
+    with RecordingReader(drive) as r, can.CanutilsLogWriter(tmp_path / "dump.log", channel="can0") as w:
+        for _, m in r.iter_raw_can("vdps"):
+            w.on_message_received(m)
+    with open(tmp_path / "dump.log", "rb") as f:
+        r = run_piped("monitor", "-", "--once", stdin=f, timeout=120)
+    assert r.returncode == 0, r.stderr
+    piped, recorded = _table(r.stdout), _table(run_piped("monitor", drive, "--once", timeout=120).stdout)
+    assert set(piped) == set(recorded) and len(piped) >= 5
+    for name, sigs in recorded.items():
+        assert piped[name][""][3] == sigs[""][3]  # frame counts
+        assert {k: v[1] for k, v in piped[name].items() if k} == {k: v[1] for k, v in sigs.items() if k}

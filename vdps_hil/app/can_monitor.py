@@ -12,7 +12,9 @@ Sources: a recording (``.mcap``: its ``/raw/can/`` topics, each bus with the DBC
 names, found as ``vdps replay`` and ``vdps plot`` find it, ``record.recorded_decoding``; the
 ``vdps`` bus with ``dbc/vdps.dbc``), played at its own pace times ``speed`` (0: at once); or a
 python-can interface string (``virtual:hil``, ``socketcan:can0``, ``pcan:PCAN_USBBUS1,bitrate=500000``;
-``adapters.can_adapter.parse_can_spec``) decoded with ``dbc`` (default ``dbc/vdps.dbc``).
+``adapters.can_adapter.parse_can_spec``) or ``-`` (``candump -L`` lines on standard input,
+``adapters.candump_stream``; the end of the input ends the monitor) decoded with ``dbc`` (default
+``dbc/vdps.dbc``).
 
 Filters: ``ids`` (frame IDs, ``0x100`` or ``256``, or message names) keeps only those messages;
 ``signals`` (shell patterns on signal names, case-insensitive) keeps only matching signals and
@@ -262,23 +264,34 @@ def bus_source(spec: str, dbc=None, bus_name: str = "can") -> tuple[dict, Iterat
     from vdps_hil.adapters.can_adapter import parse_can_spec
     from vdps_hil.codecs.can_dbc import DEFAULT_DBC_PATH
 
-    try:
-        iface, channel, kwargs = parse_can_spec(spec)
-    except AdapterError as e:
-        raise MonitorError(str(e)) from None
+    from vdps_hil.adapters.base import EndOfInput
+    from vdps_hil.adapters.candump_stream import STDIN_SPEC, CandumpStreamBus
+
     db = _dbc(dbc if dbc is not None else DEFAULT_DBC_PATH)
     import can
 
-    try:
-        bus = can.Bus(interface=iface, channel=channel, **kwargs)
-    except Exception as e:  # noqa: BLE001 - python-can raises many types for a missing device
-        raise MonitorError(f"cannot open CAN interface {spec!r}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") \
-            from None
+    if spec == STDIN_SPEC:
+        bus = CandumpStreamBus(sys.stdin.buffer)
+    else:
+        try:
+            iface, channel, kwargs = parse_can_spec(spec)
+        except AdapterError as e:
+            raise MonitorError(str(e)) from None
+        try:
+            bus = can.Bus(interface=iface, channel=channel, **kwargs)
+        except Exception as e:  # noqa: BLE001 - python-can raises many types for a missing device
+            msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise MonitorError(f"cannot open CAN interface {spec!r}: {msg}") from None
 
     def frames():
         try:
             while True:
-                msg = bus.recv(0.1)
+                try:
+                    msg = bus.recv(0.1)
+                except ValueError:  # a candump line that does not parse: skipped
+                    continue
+                except EndOfInput:
+                    return
                 if msg is None:
                     yield None
                 elif not (msg.is_remote_frame or msg.is_error_frame):
@@ -300,7 +313,7 @@ def run_monitor(source: str, *, dbc=None, signalmap=None, ids=(), signals=(), on
     is_file = source.lower().endswith(".mcap") or os.path.isfile(source)
     if not is_file and (signalmap is not None):
         raise MonitorError("--signalmap is for a recording; give a live bus --dbc FILE")
-    if not is_file and once and duration_s is None:
+    if not is_file and once and duration_s is None and source != "-":
         raise MonitorError("--once on a live bus needs --duration SECONDS")
     if not speed >= 0:
         raise MonitorError("--speed must be >= 0")

@@ -11,7 +11,8 @@ Examples:
   vdps monitor virtual:hil                         # the bench's bus, dbc/vdps.dbc
   vdps monitor socketcan:can0 --dbc car.dbc --id 0x1AA,0x1AB
   vdps monitor rav4.mcap --signal 'WHEEL_SPEED*'    # a recording, at its own pace
-  vdps monitor paper.mcap --once --id VDPS_SteerAngle   # the table at the end, printed once"""
+  vdps monitor paper.mcap --once --id VDPS_SteerAngle   # the table at the end, printed once
+  candump -L can0 | vdps monitor - --dbc car.dbc    # candump -L lines on standard input"""
 
 
 @click.command("monitor", epilog=_EXAMPLE)
@@ -30,7 +31,8 @@ Examples:
               help="A recording's pace (1: as recorded, 0: at once).")
 def monitor(source, dbc, signalmap, ids, signals, once, duration_s, speed):
     """Watch the decoded CAN signals of SOURCE (a python-can interface string such as virtual:hil
-    or socketcan:can0, or a recording FILE.mcap) by message; changed values highlighted."""
+    or socketcan:can0, a recording FILE.mcap, or - for candump -L lines on standard input) by
+    message; changed values highlighted."""
     from vdps_hil.app.can_monitor import MonitorError, run_monitor
 
     try:
