@@ -94,5 +94,11 @@ class CandumpStreamBus(can.BusABC):
             raise item
         return item, False
 
+    def __del__(self) -> None:
+        # python-can warns about a bus never shut down; this one holds no device (a CanAdapter
+        # given it as an open bus leaves it to its owner), so it is shut down quietly here
+        if not getattr(self, "_is_shutdown", True):
+            self.shutdown()
+
     def send(self, msg, timeout=None) -> None:
         raise can.CanOperationError("a candump stream is receive-only")
