@@ -24,11 +24,12 @@ def screen_text(raw: str) -> str:
 
 
 def run_on_pty(*args, timeout: float = 300.0, cols: int = 100, rows: int = 30,
-               stdin=subprocess.DEVNULL, env=None) -> tuple[int, str]:
-    """(exit code, everything the child wrote to its terminal) of ``vdps ARGS`` on a pty."""
+               stdin=subprocess.DEVNULL, env=None, code: str = VDPS) -> tuple[int, str]:
+    """(exit code, everything the child wrote to its terminal) of ``vdps ARGS`` on a pty
+    (``code``: the child's Python program, ``vdps`` by default)."""
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", rows, cols, 0, 0))
-    p = subprocess.Popen([sys.executable, "-c", VDPS, *map(str, args)], stdin=stdin, stdout=slave,
+    p = subprocess.Popen([sys.executable, "-c", code, *map(str, args)], stdin=stdin, stdout=slave,
                          stderr=slave, close_fds=True, env=env)
     os.close(slave)
     chunks = []

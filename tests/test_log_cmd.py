@@ -61,7 +61,7 @@ def test_nothing_lost_at_table1_rates_and_sigterm_closes_cleanly(tmp_path):
 
 def test_bad_interface_and_port_are_one_line_exit_2(tmp_path):
     out = tmp_path / "x.mcap"
-    for args in (["--can", "vdps=nosuch:chan"], ["--can", "vdps"],
+    for args in (["--can", "vdps=nosuch:chan"], ["--can", "vdps"], ["--can", "a=-", "--can", "b=-"],
                  ["--serial", f"gnss={tmp_path / 'no_tty'}@115200"],
                  ["--serial", "gnss=/dev/null@fast"], []):
         p = vdps("log", *args, "-o", out, "--duration", "1")
@@ -204,3 +204,53 @@ def test_rotated_pipeline_log_records_no_input_order(tmp_path):
     assert any(_est(f)["/est/state"] for f in files)
     p = vdps("replay", files[0], "--input-order", "recorded")
     assert p.returncode == 2 and "no recorded input order" in p.stderr
+
+
+def test_candump_lines_on_stdin_are_logged_live(tmp_path):
+    """``candump -L can0 | vdps log --can vdps=- ...``: every frame of a simulated drive, written as
+    candump -L lines (python-can's writer) into a real pipe in two bursts 1.5 s apart with a bad
+    line between, is recorded raw and decoded, stamped on arrival (the pause shows), the bad line
+    counted; with ``-@can0`` lines of another candump channel are recorded raw on their own bus and
+    not decoded (the counters run on); the log ends at the end of the input."""
+    import subprocess
+    import sys
+
+    import can
+
+    from live_devices import VDPS
+    from vdps_hil.sim.drive import Drive
+
+    Drive("paper", seed=3, duration_s=0.5).run(tmp_path / "sim.mcap")
+    with RecordingReader(tmp_path / "sim.mcap") as r:
+        frames = [m for _, m in r.iter_raw_can("vdps")]
+    with can.CanutilsLogWriter(tmp_path / "dump.log", channel="can0") as w:
+        for m in frames:
+            m.channel = None  # written as the writer's channel, can0
+            w.on_message_received(m)
+    lines = (tmp_path / "dump.log").read_text().splitlines(keepends=True)
+    assert len(lines) == len(frames) > 500
+    half = len(lines) // 2
+    p = subprocess.Popen([sys.executable, "-c", VDPS, "log", "--can", "vdps=-@can0", "-o", str(tmp_path / "out.mcap")],
+                         stdin=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t_end = time.monotonic() + 60
+    while not (tmp_path / "out.mcap").exists() and p.poll() is None and time.monotonic() < t_end:
+        time.sleep(0.05)  # the logger is recording
+    p.stdin.write("".join(lines[:half]))
+    p.stdin.flush()
+    time.sleep(1.5)
+    other = [ln.replace(" can0 ", " can1 ") for ln in lines[:50]]  # another bus in the same stream
+    p.stdin.write("not a frame\n" + "".join(x for pair in zip(lines[half:], other) for x in pair) + "".join(lines[half + 50:]))
+    p.stdin.close()
+    rc, err = p.wait(120), p.stderr.read()
+    assert rc == 0, err[-800:]
+    with RecordingReader(tmp_path / "out.mcap") as r:
+        got = [m for _, m in r.iter_raw_can("vdps")]
+        on_can1 = [m for _, m in r.iter_raw_can("vdps.can1")]
+        t_raw = [rec.t_ns for rec in r.iter_records("/raw/can/vdps")]
+        steer = [s.fields["seq_counter"] for s in r.iter_samples() if s.kind == "steer"]
+        health = json.loads(r.metadata()["vdps.health"]["can.vdps"])
+    assert [(m.arbitration_id, bytes(m.data)) for m in got] == [(m.arbitration_id, bytes(m.data)) for m in frames]
+    assert steer == [k % 256 for k in range(len(steer))] and len(steer) >= 45  # 100 Hz for 0.5 s, none lost
+    assert t_raw[half] - t_raw[half - 1] > 0.5e9  # host time on arrival: the pause is in the file
+    assert health["counters"]["bad_frames"] == 1
+    assert [bytes(m.data) for m in on_can1] == [bytes(m.data) for m in frames[:50]]  # kept raw, not decoded as vdps

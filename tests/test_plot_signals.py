@@ -10,20 +10,15 @@ import json
 import pytest
 from click.testing import CliRunner
 from mcap.reader import make_reader
+from replayed_drive import replayed_drive
 
 from vdps_hil.app.plot_signals import PlotError, collect_series
 from vdps_hil.cli.main import cli
-from vdps_hil.sim.drive import Drive
 
 
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory):
-    from vdps_hil.app.replay import replay_file
-
-    d = tmp_path_factory.mktemp("plot")
-    Drive("paper", seed=5, duration_s=2.0).run(d / "paper.mcap")
-    replay_file(d / "paper.mcap", output=d / "out.mcap")
-    return d
+    return replayed_drive(tmp_path_factory.mktemp("plot"), seed=5)
 
 
 def test_topic_keys_are_the_recorded_values(drive):

@@ -16,7 +16,7 @@ import math
 import os
 from typing import Iterable
 
-__all__ = ["PlotError", "collect_series", "plot_signals", "write_figure"]
+__all__ = ["PlotError", "collect_series", "plot_signals", "recorded_samples", "write_figure"]
 
 
 class PlotError(ValueError):
@@ -48,21 +48,26 @@ def _split(signal: str, topics: Iterable[str]) -> tuple[str, str] | None:
     return None if best is None else (best, signal[len(best) + 1:])
 
 
-def _decoded_fields(reader, path, names: set[str]) -> dict[str, tuple[list, list]]:
+def recorded_samples(reader, path):
+    """The bus samples of a recording (``reader`` of the file at ``path``): its ``/raw/`` topics
+    decoded with the signal map and DBC its metadata names, else its ``/decoded/`` topics.
+    PlotError (one line) when the recorded decoding cannot be found."""
     from vdps_hil.record import schemas as S
     from vdps_hil.record.decode import DecodeError, decode_recording
     from vdps_hil.record.recorded_decoding import RecordedDecodingError, find_recorded_decoding
 
+    if not any(t.startswith(S.RAW_PREFIX) for t in reader.topics()):
+        return reader.iter_samples()
+    try:
+        rd = find_recorded_decoding(reader, path)
+        return decode_recording(reader, dbc=rd.dbc, signalmap=rd.signalmap)
+    except (RecordedDecodingError, DecodeError) as e:
+        raise PlotError(str(e).splitlines()[0]) from None
+
+
+def _decoded_fields(reader, path, names: set[str]) -> dict[str, tuple[list, list]]:
     out: dict[str, tuple[list, list]] = {}
-    if any(t.startswith(S.RAW_PREFIX) for t in reader.topics()):
-        try:
-            rd = find_recorded_decoding(reader, path)
-            samples = decode_recording(reader, dbc=rd.dbc, signalmap=rd.signalmap)
-        except (RecordedDecodingError, DecodeError) as e:
-            raise PlotError(str(e).splitlines()[0]) from None
-    else:
-        samples = reader.iter_samples()
-    for s in samples:
+    for s in recorded_samples(reader, path):
         for n in names.intersection(s.fields):
             ts, vs = out.setdefault(n, ([], []))
             ts.append(s.t_ns)

@@ -38,6 +38,8 @@ def build_live_adapters(can_specs, serial_specs, formats, signalmap, dbcs):
     except SignalMapError as e:
         raise UserError(str(e)) from None
     adapters, info = [], {}
+    if sum(s.partition("=")[2].partition("@")[0] == "-" for s in can_specs) > 1:
+        raise UserError("--can BUS=-: standard input can feed one bus only")
     try:
         for spec in can_specs:
             if "=" not in spec:
@@ -46,7 +48,8 @@ def build_live_adapters(can_specs, serial_specs, formats, signalmap, dbcs):
             bus, iface = spec.split("=", 1)
             check_name("bus", bus)
             dec, _ = _can_decoder(bus, sigmap, dbc, info)  # a map's log channel: files only
-            adapters.append(CanAdapter(bus, iface, decoder=dec))
+            stdin = iface == "-" or iface.startswith("-@")
+            adapters.append(_stdin_adapter(bus, dec, iface[2:]) if stdin else CanAdapter(bus, iface, decoder=dec))
         for spec in serial_specs:
             if "=" not in spec:
                 raise UserError(f"--serial {spec!r}: expected NAME=PORT[@BAUD]")
@@ -68,6 +71,19 @@ def build_live_adapters(can_specs, serial_specs, formats, signalmap, dbcs):
     meta_sm = None if sigmap is None else {"name": sigmap.name, "path": str(sigmap.path),
                                           "sha256": sigmap.sha256}
     return adapters, info, meta_sm
+
+
+def _stdin_adapter(bus: str, decoder, channel: str):
+    """``--can BUS=-[@CHANNEL]``: candump -L lines on standard input (``adapters.candump_stream``);
+    with ``@CHANNEL`` only that candump channel is ``BUS``, the others are recorded raw as
+    ``BUS.<channel>`` (``candump -L any``)."""
+    import sys
+
+    from vdps_hil.adapters.can_adapter import CanAdapter
+    from vdps_hil.adapters.candump_stream import CandumpStreamBus
+
+    return CanAdapter(bus, None, decoder=decoder, bus=CandumpStreamBus(sys.stdin.buffer),
+                      decode_channels=[channel] if channel else None)
 
 
 class _Status:
@@ -102,7 +118,8 @@ class _Status:
 @click.command("log")
 @click.option("--can", "can_specs", multiple=True, metavar="BUS=INTERFACE:CHANNEL",
               help="A live CAN bus: any python-can interface string (socketcan:can0, "
-                   "pcan:PCAN_USBBUS1,bitrate=500000, slcan:/dev/ttyACM0, virtual:hil).")
+                   "pcan:PCAN_USBBUS1,bitrate=500000, slcan:/dev/ttyACM0, virtual:hil); "
+                   "'-[@CHANNEL]': candump -L lines on standard input (candump -L can0 | vdps log --can pt=- ...).")
 @click.option("--serial", "serial_specs", multiple=True, metavar="NAME=PORT[@BAUD]",
               help="A serial device (NMEA GNSS, or the IMU when NAME starts with imu).")
 @click.option("--format", "formats", multiple=True, metavar="NAME=nmea|imu",
