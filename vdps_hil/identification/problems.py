@@ -119,7 +119,7 @@ from vdps_hil.identification.config import IdentConfig
 from vdps_hil.identification.forces import moments_from_inputs
 from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.identification.inputs import IdentInputs
-from vdps_hil.model.params import Geometry, IdentifiedParams, Vehicle
+from vdps_hil.model.params import IdentifiedParams, Vehicle
 
 
 @dataclass(frozen=True)
@@ -198,22 +198,25 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
                   [wz * wx, dy, -wz * wx],
                   [-wx * wy, wx * wy, dz]])
     b = moments_from_inputs(vehicle, params, inp, cfg.moment_form)
-    db = np.zeros((3, 6)) if inp.moments_nm is not None else _moment_sensitivity(vehicle.geometry, inp)
+    db = np.zeros((3, 6)) if inp.moments_nm is not None else _moment_sensitivity(vehicle, inp)
     if (cfg.moment_form == "measured" and inp.specific_force_b_mps2 is not None
             and inp.vehicle_angles_rad is not None):
         db[:2, :] = 0.0  # M_x, M_y no longer use the tire stiffnesses
     return Regressor(a, b, _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps), db)
 
 
-def _moment_sensitivity(geometry: Geometry, inp: IdentInputs) -> np.ndarray:
+def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
     """d(M_x, M_y, M_z)/d(C_lambda,1..4, C_alpha,f, C_alpha,r): the moments are linear in the
-    tire stiffnesses; dM/dF_x,i = (0, -h, -y_i), dM/dF_y,i = (h, 0, x_i)."""
+    tire stiffnesses; dM/dF_x,i = (0, -h, -y_i), dM/dF_y,i = (h - h_rc,i, 0, x_i) (h_rc,i the
+    roll-centre height of the corner's axle, ``model.chassis``; 0 in the paper's model)."""
+    geometry = vehicle.geometry
     xy = np.array(geometry.corner_xy_m())
     h = geometry.h_cg_m
+    h_rc = np.array([vehicle.chassis.roll_centre_height_m(i) for i in range(4)])
     d = np.asarray(inp.wheel_angle_rad)
     lam, al = np.asarray(inp.slip_ratio), np.asarray(inp.slip_angle_rad)
     dm_dfx = np.stack([np.zeros(4), np.full(4, -h), -xy[:, 1]])  # 3 x 4
-    dm_dfy = np.stack([np.full(4, h), np.zeros(4), xy[:, 0]])
+    dm_dfy = np.stack([h - h_rc, np.zeros(4), xy[:, 0]])
     c, s = np.cos(d), np.sin(d)
     out = np.zeros((3, 6))
     out[:, :4] = dm_dfx * (lam * c) + dm_dfy * (lam * s)

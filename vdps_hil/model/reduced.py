@@ -60,8 +60,12 @@ STATIC_HOOKS = frozenset({"rolling_radius_factor"})
 
 def supports(model: Model) -> bool:
     """True when ``model`` is the reduced model with the linear tire and no per-call effect
-    hooks (the paper's set; a static ``rolling_radius_factor`` is allowed)."""
+    hooks (the paper's set; a static ``rolling_radius_factor`` is allowed) on a vehicle without
+    anti-roll bars or roll centres (``model.chassis``; its Ackermann fraction is supported)."""
     if model.unsprung_dof or type(model.effects.tire) is not LinearTire:
+        return False
+    ch = model.vehicle.chassis
+    if ch.has_anti_roll_bars or ch.has_roll_centres:  # the generic core has them (model.chassis)
         return False
     return all(e is model.effects.tire or set(e.HOOKS) <= STATIC_HOOKS for e in model.effects.dynamics)
 
@@ -81,7 +85,7 @@ class ReducedLinearCore:
         self.model = model
         veh = model.vehicle
         geo = veh.geometry
-        self._steer = (geo.steer_ratio, geo.wheelbase_m, geo.track_half_front_m)
+        self._steer = (geo.steer_ratio, geo.wheelbase_m, geo.track_half_front_m, veh.chassis.ackermann_fraction)
         self.iw_inv = 1.0 / veh.tire.wheel_inertia_kgm2
         corners = []
         for i in range(4):
@@ -96,8 +100,8 @@ class ReducedLinearCore:
 
     def inputs(self, u: Inputs) -> tuple:
         """The per-input constants: ((cos delta_i, sin delta_i) x 4, drive torques, brakes)."""
-        ratio, wheelbase, t_f = self._steer
-        d1, d2 = ackermann_angles(u.steer_wheel_angle_rad / ratio, wheelbase, t_f)
+        ratio, wheelbase, t_f, e_a = self._steer
+        d1, d2 = ackermann_angles(u.steer_wheel_angle_rad / ratio, wheelbase, t_f, e_a)
         return (((math.cos(d1), math.sin(d1)), (math.cos(d2), math.sin(d2)), (1.0, 0.0), (1.0, 0.0)),
                 u.wheel_torque_nm, u.brake_torque_nm)
 
