@@ -30,7 +30,7 @@ __all__ = ["CACHE_VERSION", "DriveKey", "cache_path", "drive_inputs", "inputs_fr
 
 CACHE_VERSION = 1
 _FIELDS = tuple(f.name for f in dataclasses.fields(IdentInputs))
-_OPTIONAL = ("moments_nm", "specific_force_b_mps2", "vehicle_angles_rad")
+_OPTIONAL = ("moments_nm", "specific_force_b_mps2", "vehicle_angles_rad", "lateral_velocity_sigma_mps")
 
 
 class DriveKey(NamedTuple):
@@ -60,8 +60,9 @@ def inputs_to_arrays(inputs: list[IdentInputs]) -> dict[str, np.ndarray]:
         if name in _OPTIONAL:
             if all(v is None for v in vals):
                 continue
-            width = len(next(v for v in vals if v is not None))
-            vals = [(np.nan,) * width if v is None else v for v in vals]
+            first = next(v for v in vals if v is not None)
+            empty = np.nan if isinstance(first, float) else (np.nan,) * len(first)
+            vals = [empty if v is None else v for v in vals]
         out[name] = np.array(vals, dtype=float)
     return out
 

@@ -132,6 +132,7 @@ class Regressor:
     b: np.ndarray
     rows: np.ndarray
     db_dup: np.ndarray | None = None
+    gated: str | None = None  # the excitation gate that refused every row (counted by the identifier)
 
 
 def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
@@ -186,7 +187,40 @@ def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPa
     b = m * acc - np.array([np.sum(fa * np.cos(d)), np.sum(fa * np.sin(d))])
     lam = np.asarray(inp.slip_ratio)
     db = np.column_stack([acc, -np.vstack([lam * np.cos(d), lam * np.sin(d)])])  # d/d[m, C_lambda,1..4]
-    return Regressor(a, b, _gate(a, cfg.cornering.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps), db)
+    rows = _gate(a, cfg.cornering.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps)
+    gated = lateral_gate(inp, al, float(acc[1]), cfg.cornering)
+    if gated is not None:
+        rows = np.zeros(2, dtype=bool)
+    return Regressor(a, b, rows, db, gated)
+
+
+def lateral_gate(inp: IdentInputs, slip_angle_rad, lateral_accel_mps2: float, pc) -> str | None:
+    """The cornering problem's excitation gates (``ProblemConfig``), or None when they pass:
+
+    * ``"lateral excitation"``: |a_y| = |ydd_a + xd_a psid_v - G_y| below
+      ``lateral_accel_min_mps2``: the lateral force is not above its noise, so whatever the
+      noise does to the slip-angle estimate (which is what a straight drive shows) eq 22 would
+      fit noise;
+    * ``"linear range"``: |a_y| beyond ``lateral_accel_max_mps2``: eq 15's F = C_alpha alpha
+      holds in the tire's linear range only (a saturating tire's secant stiffness is below its
+      slope);
+    * ``"slip noise"``: the larger axle slip angle |(alpha_1 + alpha_2) / 2|, |(alpha_3 +
+      alpha_4) / 2| below ``slip_noise_factor`` x sigma_alpha, sigma_alpha = sigma(yd_a) / |xd_a|
+      (the EKF's lateral velocity uncertainty, ``IdentInputs.lateral_velocity_sigma_mps``)."""
+    ay = abs(lateral_accel_mps2)
+    if not math.isfinite(ay):
+        return None  # the NaN guard counts it
+    if ay < pc.lateral_accel_min_mps2:
+        return "lateral excitation"
+    if ay > pc.lateral_accel_max_mps2:
+        return "linear range"
+    sv = inp.lateral_velocity_sigma_mps
+    if pc.slip_noise_factor > 0.0 and sv is not None and math.isfinite(sv):
+        al = np.asarray(slip_angle_rad, dtype=float)
+        axle = max(abs(al[0] + al[1]), abs(al[2] + al[3])) / 2.0
+        if axle < pc.slip_noise_factor * sv / max(abs(inp.xd_a_mps), 1e-9):
+            return "slip noise"
+    return None
 
 
 def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams,
