@@ -12,15 +12,16 @@ from vdps_hil.identification.problems import Regressor
 from vdps_hil.identification.rls import WeightedRLS
 
 NOISE = 0.5  # row noise sd -> Q = 1 / NOISE
+STRICT = StatusConfig(mismatch_variance_max=4.0, mismatch_whiteness_max=0.5)  # Q is the true noise here
 
 
-def _drive(extra, seed=3, n=3000):
+def _drive(extra, seed=3, n=3000, cfg=STRICT):
     """Cornering-shaped problem (2 rows, 2 parameters) at 100 Hz: b = A x + noise + extra(t, row)."""
     rng = np.random.default_rng(seed)
     x_true = np.array([2.0, -1.0])
     q = (1.0 / NOISE, 1.0 / NOISE)
     rls = WeightedRLS(np.array([1.0, 1.0]), np.array([5.0, 5.0]), q)
-    mon = MismatchMonitor("cornering", StatusConfig(), q)
+    mon = MismatchMonitor("cornering", cfg, q)
     for k in range(n):
         t = k * 0.01
         a = rng.normal(0.0, 1.0, (2, 2)) + np.array([[math.sin(t), 0.0], [0.0, math.cos(0.7 * t)]])
@@ -51,6 +52,14 @@ def test_a_missing_term_that_follows_the_maneuver_is_a_mismatch_of_its_row():
     lat = {t.name: t for t in mon.tests()}["lateral"]
     assert lat.whiteness > 0.5
     assert mon.variance_scale > 5.0  # the correlated residual carries far less information
+
+
+def test_shipped_thresholds_flag_a_missing_term_far_above_the_design_noise():
+    # the shipped [status] (Q a design weight: variance up to 50 passes, whiteness off)
+    small = _drive(lambda t, i: 3.0 * NOISE * math.sin(2 * math.pi * 0.2 * t) if i == 1 else 0.0, cfg=StatusConfig())
+    assert not small.mismatch
+    big = _drive(lambda t, i: 12.0 * NOISE * math.sin(2 * math.pi * 0.2 * t) if i == 1 else 0.0, cfg=StatusConfig())
+    assert big.failed_rows == ("lateral",)
 
 
 def test_too_few_rows_are_not_tested_and_the_test_can_be_switched_off():

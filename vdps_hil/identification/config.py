@@ -73,9 +73,9 @@ class StatusConfig:
     min_variance_ratio: float = 4.0
     mismatch_test: bool = True
     mismatch_min_rows: int = 200
-    mismatch_variance_max: float = 4.0
+    mismatch_variance_max: float = 50.0
     mismatch_lag_s: float = 0.5
-    mismatch_whiteness_max: float = 0.5
+    mismatch_whiteness_max: float = 1.0
 
 
 @dataclass(frozen=True)

@@ -155,13 +155,15 @@ class Identifier:
     @property
     def covariances(self) -> dict[str, np.ndarray]:
         """Problem -> covariance of its parameters (physical units): the RLS's own
-        (``parameter_covariance``) times the residuals' long-run variance ratio
-        (``MismatchMonitor.variance_scale``) plus the consider covariance of the upstream estimates it
+        (``parameter_covariance``, AR(1) inflation f_j included) scaled by max(1, tau / f_j) where
+        the residuals' long-run variance ratio tau (``MismatchMonitor.variance_scale``) exceeds
+        the AR(1) factor (residuals correlated over the maneuver, not just the samples), plus the consider covariance of the upstream estimates it
         used (block-diagonal over the upstream problems, cascaded in update order)."""
         out: dict[str, np.ndarray] = {}
         for name in PROBLEM_NAMES:
             rls = self._rls[name]
-            c = rls.parameter_covariance * self._mismatch[name].variance_scale
+            d = np.sqrt(np.maximum(self._mismatch[name].variance_scale / rls.autocorr_inflation, 1.0))
+            c = rls.parameter_covariance * np.outer(d, d)
             ups = UPSTREAM[name]
             if ups:
                 blocks = [out[u] for u in ups]

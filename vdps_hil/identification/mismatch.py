@@ -25,7 +25,9 @@ against its predicted variance and correlated over the maneuver's time scale. Pe
   over the K bins (n_k residuals, mean m_k each); 1 for uncorrelated residuals, the factor by
   which residuals correlated over the maneuver shrink the information the RLS counted. The
   identifier multiplies a problem's covariance by ``variance_scale`` = max(1, tau) over its
-  rows (``Identifier.covariances``): the sigmas stay honest when the residuals are not white.
+  rows; where tau exceeds the RLS's own AR(1) inflation f_j the identifier scales the
+  parameter's variance by tau / f_j (``Identifier.covariances``): the sigmas stay honest when
+  the residuals are correlated over the maneuver, not only from sample to sample.
 
 A row is tested once it has ``mismatch_min_rows`` residuals; the problem is a **model
 mismatch** when any of its rows fails, and the report names those rows (``ROW_NAMES``), so the

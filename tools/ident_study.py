@@ -1,0 +1,87 @@
+"""Issue 17's acceptance study: does the identifier say when it is wrong on a truth that is not
+its model? (``vdps_hil.experiments.ident_study``.)
+
+    python tools/ident_study.py --cache /tmp/ident_cache --sets 1 3 --seeds 102 111 --json out.json
+
+Per drive (CommonRoad multibody sets 1/3, the four ``cr-*`` maneuvers, each seed; drives that
+are not cached are simulated, ~1-10 min each) every parameter's status and error; then per
+(set, maneuver, parameter) the statuses, median and worst |error| of the identified ones, and
+over all drives the 2-sigma coverage of the identified parameters, identified values on a bound
+and the cornering updates on the straight drive. ``--cached-only`` uses the drives in the cache.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from vdps_hil.experiments.ident_drives import DriveKey, cache_path
+from vdps_hil.experiments.ident_study import CR_SCENARIOS, TUNING_SEEDS, evaluate
+
+
+def _summary(results, statuses) -> dict:
+    by = collections.defaultdict(list)
+    for (key, res) in results:
+        for r in res:
+            by[(key.truth, key.scenario, r.name)].append(r)
+    rows = []
+    for (truth, sc, name), rs in sorted(by.items()):
+        ident = [r for r in rs if r.status == "identified"]
+        errs = [abs(r.rel_error) for r in ident]
+        rows.append({"truth": truth, "scenario": sc, "param": name, "drives": len(rs),
+                     "statuses": dict(collections.Counter(r.status for r in rs)),
+                     "identified_median_abs_err": float(np.median(errs)) if errs else None,
+                     "identified_worst_abs_err": float(max(errs)) if errs else None,
+                     "all_median_abs_err": float(np.median([abs(r.rel_error) for r in rs]))})
+    ident = [r for _, res in results for r in res if r.status == "identified"]
+    straight = [st["counters"]["cornering"]["updates"] for (k, _), st in zip(results, statuses)
+                if k.scenario == "cr-straight-pulses"]
+    return {"drives": len(results), "rows": rows,
+            "identified": len(ident),
+            "identified_on_bound": sum(r.on_bound for r in ident),
+            "coverage_2sigma": (sum(r.covered for r in ident) / len(ident)) if ident else None,
+            "identified_within_15pct": (sum(abs(r.rel_error) <= 0.15 for r in ident) / len(ident)) if ident else None,
+            "straight_cornering_updates": straight}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cache", default="/tmp/ident_cache")
+    ap.add_argument("--sets", type=int, nargs="+", default=[1, 3])
+    ap.add_argument("--seeds", type=int, nargs=2, default=[102, 111], metavar=("FIRST", "LAST"))
+    ap.add_argument("--cached-only", action="store_true")
+    ap.add_argument("--json", default=None)
+    a = ap.parse_args(argv)
+    if 2 in a.sets:
+        print("ident_study: parameter set 2 is kept out of the project", file=sys.stderr)
+        return 2
+    seeds = [s for s in range(a.seeds[0], a.seeds[1] + 1) if s not in TUNING_SEEDS]
+    results, statuses = [], []
+    for seed in seeds:
+        for cr in a.sets:
+            for sc in CR_SCENARIOS:
+                key = DriveKey(sc, f"commonroad-mb:{cr}", f"cr{cr}-model", seed)
+                if a.cached_only and not cache_path(a.cache, key).exists():
+                    continue
+                res, st = evaluate(key, a.cache)
+                results.append((key, res))
+                statuses.append(st)
+                print(key.name, {n: s["status"] for n, s in st["status"].items()}, flush=True)
+    doc = _summary(results, statuses)
+    doc["drive_results"] = [r.to_json() for _, res in results for r in res]
+    for row in doc["rows"]:
+        print(f"{row['truth']:17s} {row['scenario']:19s} {row['param']:32s} {row['statuses']} "
+              f"med {row['identified_median_abs_err']} worst {row['identified_worst_abs_err']}")
+    print({k: v for k, v in doc.items() if k not in ("rows", "drive_results")})
+    if a.json:
+        Path(a.json).write_text(json.dumps(doc, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
