@@ -24,6 +24,7 @@ def straight(tmp_path_factory):
     return evaluate(key, tmp_path_factory.mktemp("drives"))
 
 
+@pytest.mark.slow
 def test_straight_drive_makes_no_cornering_update_and_claims_no_cornering_stiffness(straight):
     res, st = straight
     assert st["counters"]["cornering"]["updates"] == 0
@@ -34,6 +35,7 @@ def test_straight_drive_makes_no_cornering_update_and_claims_no_cornering_stiffn
             assert r.status == "not excited"
 
 
+@pytest.mark.slow
 def test_nothing_reported_identified_sits_on_a_bound(straight):
     res, st = straight
     assert len(res) == 10

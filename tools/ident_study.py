@@ -49,6 +49,37 @@ def _summary(results, statuses) -> dict:
             "straight_cornering_updates": straight}
 
 
+def ours_check(seeds, cache, t_end_s: float = 10.25) -> None:
+    """Our own simulator (``paper-left-turn``, sedan, table1-susp1k): relative errors at the
+    paper's T0 with the shipped configuration and with the issue-17 gates off (before/after)."""
+    import dataclasses
+
+    from vdps_hil.experiments.ident_drives import drive_inputs
+    from vdps_hil.experiments.ident_study import truth_params
+    from vdps_hil.identification.config import load_ident_config
+    from vdps_hil.identification.identifier import Identifier
+    from vdps_hil.model.params import load_vehicle
+
+    new = load_ident_config()
+    old = dataclasses.replace(new, upstream_idle_inputs=0, cornering=dataclasses.replace(
+        new.cornering, lateral_accel_min_mps2=0.0, slip_noise_factor=0.0))
+    veh, tp = load_vehicle("sedan-model"), load_vehicle("sedan-truth").params.as_dict()
+    errs = {"gates off": collections.defaultdict(list), "shipped": collections.defaultdict(list)}
+    for seed in seeds:
+        inputs = drive_inputs(DriveKey("paper-left-turn", "ours", "sedan-model", seed), cache)
+        for tag, cfg in (("gates off", old), ("shipped", new)):
+            idf = Identifier(veh, cfg)
+            for inp in inputs:
+                if inp.t_ns / 1e9 > t_end_s:
+                    break
+                idf.update(inp)
+            for n, v in idf.params.as_dict().items():
+                errs[tag][n].append(abs(v / tp[n] - 1.0))
+            print(seed, tag, {n: st.status for n, st in idf.problem_status.items()})
+    for tag, e in errs.items():
+        print(tag, "median |err| %:", {n: round(100 * float(np.median(v)), 2) for n, v in e.items()})
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cache", default="/tmp/ident_cache")
@@ -56,7 +87,12 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, nargs=2, default=[102, 111], metavar=("FIRST", "LAST"))
     ap.add_argument("--cached-only", action="store_true")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--ours", type=int, nargs="*", default=None, metavar="SEED",
+                    help="only the check on our own simulator (paper-left-turn) with these seeds")
     a = ap.parse_args(argv)
+    if a.ours is not None:
+        ours_check([s for s in a.ours if s not in TUNING_SEEDS], a.cache)
+        return 0
     if 2 in a.sets:
         print("ident_study: parameter set 2 is kept out of the project", file=sys.stderr)
         return 2
