@@ -17,7 +17,7 @@ import numpy as np
 from vdps_hil.identification.config import (PROBLEM_NAMES, PROBLEM_PARAMS, UPSTREAM, IdentConfig,
                                             load_ident_config)
 from vdps_hil.identification.inputs import IdentInputs
-from vdps_hil.identification.mismatch import MismatchMonitor
+from vdps_hil.identification.mismatch import CROSS_CHECKS, MismatchMonitor
 from vdps_hil.identification.problems import REGRESSORS
 from vdps_hil.identification.rls import RLSCounters, WeightedRLS
 from vdps_hil.identification.status import ProblemStatus, problem_status
@@ -214,8 +214,11 @@ class Identifier:
     def problem_status(self) -> dict[str, ProblemStatus]:
         """Problem -> its ``status.ProblemStatus`` (per parameter: identified or why not)."""
         sig = self.sigmas
+        failed = {name: m.failed_rows for name, m in self._mismatch.items()}
+        for name, checks in CROSS_CHECKS.items():  # downstream rows that test this problem too
+            failed[name] += tuple(f"{p}.{row}" for p, row in checks if row in failed[p])
         return {name: problem_status(name, PROBLEM_PARAMS[name], rls, self._sigma0[name], sig,
-                                     self._mismatch[name].failed_rows, self._gated[name], self.config)
+                                     failed[name], self._gated[name], self.config)
                 for name, rls in self._rls.items()}
 
     @property

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ROW_NAMES", "MismatchMonitor", "RowTest"]
+__all__ = ["CROSS_CHECKS", "ROW_NAMES", "MismatchMonitor", "RowTest"]
 
 ROW_NAMES: dict[str, tuple[str, ...]] = {
     "mass": ("vertical",),
@@ -55,6 +55,13 @@ ROW_NAMES: dict[str, tuple[str, ...]] = {
     "inertia": ("roll", "pitch", "yaw"),
 }
 """The rows of each problem's regressor (eq 20-23) by name."""
+
+CROSS_CHECKS: dict[str, tuple[tuple[str, str], ...]] = {"cornering": (("inertia", "yaw"),)}
+"""Rows of a downstream problem that test a problem's parameters too: eq 22 fits the sum of the
+axle forces (F_f + F_r = m a_y), and only eq 23's yaw row weighs one axle against the other
+(M_z = l_f F_f - l_r F_r, the eq 15 forces of the identified C_alpha, ``forces``). A failed yaw
+row therefore marks the cornering problem a mismatch too (named "inertia.yaw"): the front/rear
+split it found does not balance the yaw moment."""
 
 
 @dataclass(frozen=True)
