@@ -63,3 +63,19 @@ def test_straight_drive_makes_no_cornering_update_whatever_the_slip_noise():
 def test_causes_are_ordered_and_identified_is_not_one_of_them():
     assert CAUSES[0] == "not excited" and CAUSES[1] == "at bound"
     assert IDENTIFIED not in CAUSES and len(set(CAUSES)) == len(CAUSES)
+
+
+def test_a_yaw_moment_the_model_lacks_marks_the_cornering_split_a_mismatch():
+    # an extra slow yaw moment (2 kN m, ~20x the yaw row's design noise): eq 23's yaw row fails,
+    # and it is the only row that weighs the front against the rear lateral forces
+    ident = Identifier(MODEL)
+    rng = np.random.default_rng(13)
+    for k in range(700):
+        inp = forward(rng, k)
+        wd = list(inp.omega_dot_radps2)
+        wd[2] += 2000.0 * np.sin(0.5 * k * 0.01) / TRUE.inertia_z_kgm2
+        ident.update(dataclasses.replace(inp, omega_dot_radps2=tuple(wd)))
+    st = ident.problem_status
+    assert "yaw" in st["inertia"].mismatch_rows and st["inertia"].status == "model mismatch"
+    assert st["cornering"].status == "model mismatch" and "inertia.yaw" in st["cornering"].mismatch_rows
+    assert not ident.converged["cornering"]
