@@ -13,13 +13,14 @@ def test_adapters_per_built_in_effect():
                      "rolling_resistance": "RegressorCandidate",
                      "load_dependent_cornering_stiffness": "NumericCandidate",
                      "low_pressure_tire": "LowPressureCandidate", "crosswind": "CrosswindCandidate",
-                     "steering_compliance": "NumericCandidate", "imu_bias": "MeasurementCandidate",
+                     "steering_compliance": "NumericCandidate", "roll_stiffness": "RegressorCandidate",
+                     "imu_bias": "MeasurementCandidate",
                      "imu_lever_arm": "MeasurementCandidate"}
 
 
 def test_default_candidates_skip_the_models_effects_and_the_linear_tire():
     names = [c.name for c in C.default_candidates(EffectSet([REGISTRY["aero_drag"]()]))]
-    assert "aero_drag" not in names and "linear_tire" not in names and len(names) == 8
+    assert "aero_drag" not in names and "linear_tire" not in names and len(names) == 9
 
 
 def test_user_effect_without_regressors_is_numeric():

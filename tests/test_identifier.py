@@ -25,7 +25,7 @@ def test_exact_consistent_data_recover_all_ten_parameters_to_1e9(rng, form):
         ident.update(forward(rng, k))
     err = rel_err(ident.params)
     assert max(abs(e) for e in err.values()) < 1e-9, err
-    assert all(c.updates > 200 for c in ident.counters.values())
+    assert all(c.updates > 150 for c in ident.counters.values())  # cornering: |a_y| < 0.5 m/s^2 gated
     assert ident.vehicle.params == ident.params and ident.vehicle.geometry == MODEL.geometry
 
 
@@ -40,10 +40,13 @@ def test_default_config_moves_every_parameter_from_prior_toward_truth(rng):
         assert abs(err[n]) < abs(prior_err[n]) / 5.0, (n, err[n], prior_err[n])
 
 
-def _warmed_up(rng, n=100):
+def _warmed_up(rng, n=200):
+    # 200 inputs (the cornering gate refuses |a_y| < 0.5 m/s^2, so inertia needs them to start)
+    # at 5 ms steps: they end before the k >= 100 inputs (10 ms steps) of the tests
     ident = Identifier(MODEL)
     for k in range(n):
-        ident.update(forward(rng, k))
+        inp = forward(rng, k)
+        ident.update(dataclasses.replace(inp, t_ns=inp.t_ns // 2))
     return ident
 
 

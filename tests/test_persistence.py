@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from vdps_hil.identification.persistence import (SCHEMA, SCHEMA_VERSION, ParamsFileError, load_params,
-                                                 parse_params, reset_params, save_params)
+                                                 parse_params, reset_params, save_params, unsettled_problems)
 from vdps_hil.identification.identifier import Identifier
 from vdps_hil.model.params import PARAM_NAMES, load_vehicle
 
@@ -139,3 +139,13 @@ def test_any_text_loads_or_fails_with_one_line(text):
         for n in PARAM_NAMES:
             v, p = getattr(got.params, n), getattr(MODEL.params, n)
             assert math.isfinite(v) and 0.3 * p <= v <= 3.0 * p
+
+
+def test_a_file_says_which_problems_were_not_identified_when_saved(tmp_path):
+    path = tmp_path / "p.json"
+    status = {"mass": "converged", "tracking": "at bound", "cornering": "model mismatch", "inertia": "converged"}
+    save_params(path, IDENTIFIED, MODEL, meta={"status": status})
+    assert unsettled_problems(load_params(path, MODEL)) == {"tracking": "at bound", "cornering": "model mismatch"}
+    save_params(path, IDENTIFIED, MODEL)  # a file that does not say: nothing is taken as identified
+    assert unsettled_problems(load_params(path, MODEL)) == {n: "unknown" for n in status}
+

@@ -12,6 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from vdps_hil.cli.main import cli
+from vdps_hil.identification.config import PROBLEM_NAMES
 from vdps_hil.identification.persistence import load_params
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.record.decode import copy_raw_topics
@@ -125,16 +126,26 @@ def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_p
     """``vdps replay`` applies the system's validity rule by default: from the model file's priors
     the warnings say "not converged" until the cornering problem converges (then valid); with
     ``--params`` they are valid at once: only the chain ticks before the EKF initialises are "not
-    converged", as many as in a run without the identifier (nothing to wait for)."""
+    converged", as many as in a run without the identifier (nothing to wait for). A file whose
+    problems were not all converged when saved (or that does not say) waits like the priors, and
+    the JSON says so (``params_unsettled``)."""
     from vdps_hil.identification.persistence import save_params
 
-    saved = tmp_path / "p.json"
-    save_params(saved, load_vehicle("sedan-model").params, load_vehicle("sedan-model"))
-    st = {}
-    for name, extra in (("priors", ()), ("params", ("--params", str(saved))), ("no-ident", ("--no-identify",))):
+    veh = load_vehicle("sedan-model")
+    saved, unsure = tmp_path / "p.json", tmp_path / "u.json"
+    save_params(saved, veh.params, veh, meta={"status": {n: "converged" for n in PROBLEM_NAMES}})
+    save_params(unsure, veh.params, veh, meta={"status": {**{n: "converged" for n in PROBLEM_NAMES},
+                                                          "cornering": "model mismatch"}})
+    st, docs = {}, {}
+    for name, extra in (("priors", ()), ("params", ("--params", str(saved))), ("no-ident", ("--no-identify",)),
+                        ("unsure", ("--params", str(unsure)))):
         code, _ = run("replay", str(drive), *extra, "--json", str(tmp_path / f"{name}.json"))
         assert code == 0
-        st[name] = json.loads((tmp_path / f"{name}.json").read_text())["system"]["status"]
+        docs[name] = json.loads((tmp_path / f"{name}.json").read_text())
+        st[name] = docs[name]["system"]["status"]
+    assert docs["unsure"]["params_unsettled"] == {"cornering": "model mismatch"}
+    assert "params_unsettled" not in docs["params"]
+    assert st["unsure"]["not_converged"] >= st["params"]["not_converged"] + 50
     assert st["params"]["not_converged"] == st["no-ident"]["not_converged"] > 0
     assert st["priors"]["not_converged"] >= st["params"]["not_converged"] + 50  # >= 0.5 s waiting
     assert st["priors"]["valid"] > 0  # converged within the 3 s drive (seed 5)

@@ -10,7 +10,8 @@ output                      topic
                             eq 4, with sigmas
 ``Innovation``              ``/est/innovation/<kind>``: innovation, NIS, gate, status code
 ``FilteredSignals``         ``/est/filtered``: the alpha-beta outputs
-``IdentReport``             ``/est/ident``: parameters with sigmas, identifiability, converged
+``IdentReport``             ``/est/ident``: parameters with sigmas, identifiability, converged,
+                            ``status_<param>`` (``PARAM_STATUS``)
 ``PredictionReport``        ``/est/prediction``: TTR, peak LTR, peak roll
 ``CanFrame``                ``/est/can/<bus>`` (vdps.RawCan.v1, direction tx)
 ==========================  =================================================================
@@ -22,12 +23,16 @@ import math
 
 from vdps_hil.estimation.estimates import Estimate, FilteredSignals, Innovation
 from vdps_hil.estimation.states import STATE_NAMES
+from vdps_hil.identification.status import CAUSES, IDENTIFIED
 from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport
 
-__all__ = ["INNOVATION_STATUS", "est_docs", "write_output"]
+__all__ = ["INNOVATION_STATUS", "PARAM_STATUS", "est_docs", "write_output"]
 
 INNOVATION_STATUS = ("accepted", "gated", "nan", "too_old", "disabled", "not_initialized")
 """``status_code`` of ``/est/innovation/<kind>`` messages: index in this tuple."""
+
+PARAM_STATUS = (IDENTIFIED, *CAUSES)
+"""``status_<param>`` of ``/est/ident`` messages: index in this tuple (0: identified)."""
 
 _STATE_KEYS = (*STATE_NAMES, "phi_v_rad", "theta_v_rad", "psi_v_rad")
 """Keys of /est/state: the 12 states of eq 7 and the vehicle angles of eq 4."""
@@ -77,6 +82,7 @@ def est_docs(o) -> list[tuple[str, int, dict, dict | None]]:
         vals.update({f"identifiability_{k}": v for k, v in o.identifiability.items()})
         vals.update({f"converged_{k}": 1.0 if v else 0.0 for k, v in o.converged.items()})
         vals.update({f"updates_{k}": float(v) for k, v in o.updates.items()})
+        vals.update({f"status_{k}": float(PARAM_STATUS.index(v)) for k, v in (o.param_status or {}).items()})
         return [("/est/ident", o.t_ns, vals, dict(o.sigmas))]
     if isinstance(o, PredictionReport):
         nan = math.nan

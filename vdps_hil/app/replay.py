@@ -96,8 +96,9 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
         view = _foxglove_view(reader) if (foxglove and output is not None) or serve is not None else None
         if serve is not None:
             serve.epoch_ns = view.epoch_ns
+        unsettled = tuple((model_doc or {}).get("params_unsettled", ()))
         system, side, summary, sensors_desc = _run(path, reader, veh, config, configure, start, model_effects,
-                                                   recorded, probe, jobs, io_kw, view, progress, serve)
+                                                   recorded, probe, jobs, io_kw, view, progress, serve, unsettled)
     finally:
         reader.close()
     wall = time.perf_counter() - wall0
@@ -149,17 +150,21 @@ def _recorded_decoding(reader, path, dbc, signalmap):
 def _starting_point(veh: Vehicle, params, model):
     """(identifier start parameters, workbench model effects, model summary) from ``--params``
     or ``--model`` (not both), or Nones."""
-    start = None
+    start, model_doc = None, None
     if params is not None and model is not None:
         raise ReplayError("give --params or --model (a saved model carries its parameters), not both")
     if params is not None:
-        from vdps_hil.identification.persistence import ParamsFileError, load_params
+        from vdps_hil.identification.persistence import ParamsFileError, load_params, unsettled_problems
 
         try:
-            start = load_params(params, veh).params
+            saved = load_params(params, veh)
         except ParamsFileError as e:
             raise ReplayError(str(e)) from None
-    model_effects, model_doc = None, None
+        start = saved.params
+        unsettled = unsettled_problems(saved)
+        if unsettled:  # the chain waits for the live identifier on these (persistence docstring)
+            model_doc = {"params_unsettled": unsettled}
+    model_effects = None
     if model is not None:
         start, model_effects, model_doc = _load_workbench_model(model, veh)
     return start, model_effects, model_doc
@@ -196,12 +201,13 @@ def _recorded_input(reader, path, config, veh: Vehicle, start, susp_sigma_m: flo
 
 
 def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, recorded, probe, jobs: int,
-         io_kw: dict, view=None, progress=None, serve=None):
+         io_kw: dict, view=None, progress=None, serve=None, unsettled: tuple[str, ...] = ()):
     """Configure the system (``config``, or ``configure(rates, fields)`` from the first seconds
     or the recorded ``probe``) and run it over the recording: (system, recording side, summary,
     sensor-set description). The recording side (decoding, the output) runs here or in a second
     process (``app.replay_io``); raw records read before the configuration is accepted wait, so
-    a refused one writes nothing."""
+    a refused one writes nothing. ``unsettled``: problems of a ``--params`` file that were not
+    converged when saved: the warnings stay invalid until the live identifier converges them."""
     from vdps_hil.app.replay_io import LocalRecordingSide, RecordingProcess, ReplayIOError, SampleCounter
 
     side = None
@@ -219,6 +225,8 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
                            "vehicle": veh.name, "vehicle_sha256": veh.source_sha256})
         if start is not None:
             config = replace(config, start_params=start)
+        if unsettled:
+            config = replace(config, require_converged=unsettled)
         if model_effects is not None:
             config = replace(config, model_effects=model_effects)
         system = VdpsSystem(veh, config)
@@ -286,7 +294,9 @@ def _document(path, output, veh: Vehicle, system: VdpsSystem, side, summary: Rep
                 "vehicle": veh.name, "sensor_set": sensors_desc, "wall_time_s": wall,
                 "realtime_factor": (doc["duration_s"] / wall) if wall > 0 and doc["duration_s"] else None,
                 "jobs": 2 if isinstance(side, RecordingProcess) else 1})
-    if model_doc is not None:
+    if model_doc is not None and "params_unsettled" in model_doc:
+        doc["params_unsettled"] = model_doc["params_unsettled"]  # warnings wait for these problems
+    elif model_doc is not None:
         doc["model"] = model_doc
     if save_params is not None:
         from vdps_hil.identification.persistence import ParamsFileError, save_params as _save
@@ -295,7 +305,8 @@ def _document(path, output, veh: Vehicle, system: VdpsSystem, side, summary: Rep
         try:
             _save(save_params, idf.params, veh, sigmas=idf.sigmas,
                   meta={"source": os.path.basename(os.fspath(path)), "updates":
-                        {n: c.updates for n, c in idf.counters.items()}})
+                        {n: c.updates for n, c in idf.counters.items()},
+                        "status": {n: st.status for n, st in idf.problem_status.items()}})
         except ParamsFileError as e:
             raise ReplayError(str(e)) from None
         doc["saved_params"] = os.fspath(save_params)

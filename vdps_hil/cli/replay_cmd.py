@@ -127,6 +127,15 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
         more = f" (and {len(problems) - 1} more: see --json decode.reader.problems)" if len(problems) > 1 else ""
         eprint(f"vdps replay: warning: parts of {recording} skipped: {problems[0]}{more}")
     click.echo(summary_line(doc, output), err=bool(json_out == "-"))
+    for name, st in doc.get("identification", {}).get("status", {}).items():
+        if st["status"] != "converged":  # never a silent "identified": say which and why
+            why = [f"{p} {v['status']}" for p, v in st["params"].items() if v["status"] != "identified"]
+            rows = f" (rows: {', '.join(st['mismatch_rows'])})" if st["mismatch_rows"] else ""
+            click.echo(f"  {name}: {st['status']}{rows}: {'; '.join(why)}", err=bool(json_out == "-"))
+    if doc.get("params_unsettled"):
+        click.echo("  --params: not identified when saved: " + ", ".join(
+            f"{k} {v}" for k, v in doc["params_unsettled"].items()) + "; warnings invalid until identified here",
+            err=bool(json_out == "-"))
     write_json(doc, json_out)
 
 

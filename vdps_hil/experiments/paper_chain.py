@@ -61,13 +61,15 @@ def system_config(profile, *, identify: bool = True, predict: bool = True, ident
                                     ident=ident, **kw)
 
 
-def _simulate(scenario, prof, seed: int, duration_s: float | None, truth_vehicle: str | None):
-    """The drive into an in-memory recording: (reader, /truth/state snapshots, /truth/events)."""
+def _simulate(scenario, prof, seed: int, duration_s: float | None, truth_vehicle: str | None,
+              truth: str | None = None):
+    """The drive into an in-memory recording: (reader, /truth/state snapshots, /truth/events);
+    ``truth``: a truth backend spec (``sim.truth_backends``, e.g. "commonroad-mb:1")."""
     from vdps_hil.record.reader import RecordingReader
     from vdps_hil.sim.drive import Drive
 
     buf = io.BytesIO()
-    Drive(scenario, profile=prof, seed=seed, duration_s=duration_s, vehicle=truth_vehicle).run(buf)
+    Drive(scenario, profile=prof, seed=seed, duration_s=duration_s, vehicle=truth_vehicle, truth=truth).run(buf)
     buf.seek(0)
     reader = RecordingReader(buf)
     truth = [d["values"] for _, _, d in reader.iter_messages(["/truth/state"])]  # harness only
@@ -115,7 +117,8 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
               identify: bool = True, predict: bool = True, ident_config=None, sheet_profile=None,
               ident_report_period_s: float = 0.05, capture_t_s: Sequence[float] = (),
               capture_all: bool = False, record_inputs: bool = False, fusion_window_s=None,
-              truth_vehicle: str | None = None, system_kw: Mapping[str, Any] | None = None) -> dict:
+              truth_vehicle: str | None = None, system_kw: Mapping[str, Any] | None = None,
+              truth_backend: str | None = None) -> dict:
     """One drive through the real chain (module docstring). Returns a dict:
 
     ``truth`` (the /truth/state snapshots, harness only), ``events`` (/truth/events),
@@ -126,7 +129,8 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
     ``fusion_std`` (per state over ``fusion_window_s``),
     ``status`` (system counters) and ``wall_s``.
     ``sheet_profile``: the data sheet the chain is configured from (default: ``profile``);
-    ``truth_vehicle``: the simulated vehicle instead of the scenario's; ``system_kw``: further
+    ``truth_vehicle``: the simulated vehicle instead of the scenario's; ``truth_backend``: a truth
+    backend spec instead of our simulator (``sim.truth_backends``); ``system_kw``: further
     ``SystemConfig`` fields (``require_converged``, ``start_params``)."""
     from vdps_hil.estimation.estimates import Estimate
     from vdps_hil.geodesy import DEFAULT_ORIGIN
@@ -137,7 +141,7 @@ def chain_run(scenario, profile, seed: int, *, model: str = "sedan-model", durat
 
     wall0 = time.perf_counter()
     prof = profile_of(profile)
-    reader, truth, events = _simulate(scenario, prof, seed, duration_s, truth_vehicle)
+    reader, truth, events = _simulate(scenario, prof, seed, duration_s, truth_vehicle, truth_backend)
     by_t = {int(s["t_ns"]): s for s in truth}
     sheet = profile_of(sheet_profile) if sheet_profile is not None else prof
     cfg = system_config(sheet, identify=identify, predict=predict, ident=ident_config,

@@ -9,6 +9,7 @@ prior sigma, excitation gate) are parsed from TOML with one-line errors (``Ident
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass
@@ -55,6 +56,26 @@ class ProblemConfig:
     prior_rel_sigma: float  # prior sd as a fraction of the prior value
     excitation_min: tuple[float, ...]  # per row, in the regressor row's unit
     p0_scaled: float | None = None  # if set: P_Q(0) = p0_scaled I (the paper's P(0)), overrides prior_rel_sigma
+    lateral_accel_min_mps2: float = 0.0  # cornering only: no row below this lateral excitation (``problems``)
+    lateral_accel_max_mps2: float = math.inf  # cornering only: no row beyond eq 15's linear range
+    slip_noise_factor: float = 0.0  # cornering only: |alpha_axle| >= factor x sigma_alpha
+
+
+@dataclass(frozen=True)
+class StatusConfig:
+    """When a parameter is reported identified (``identification.status``): ``bound_margin``
+    (a value within this fraction of its bound's distance is "at bound"), ``min_variance_ratio``
+    (prior / posterior variance along the parameter, unit residual variance, below which the
+    drive taught too little: "not identifiable"), and the model-mismatch test of each problem
+    (``identification.mismatch``: ``mismatch_*``)."""
+
+    bound_margin: float = 0.02
+    min_variance_ratio: float = 4.0
+    mismatch_test: bool = True
+    mismatch_min_rows: int = 200
+    mismatch_variance_max: float = 50.0
+    mismatch_lag_s: float = 0.5
+    mismatch_whiteness_max: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -76,6 +97,8 @@ class IdentConfig:
     cornering: ProblemConfig
     inertia: ProblemConfig
     moment_form: str = "stiffness"  # eq 23's b: "stiffness" (eq 15 forces) or "measured" (docstring)
+    upstream_idle_inputs: int = 0  # an upstream problem unexcited for this many inputs does not block (0: off)
+    status: StatusConfig = StatusConfig()
 
     def problem(self, name: str) -> ProblemConfig:
         return getattr(self, name)
@@ -84,7 +107,10 @@ class IdentConfig:
 _GENERAL_KEYS = {"form", "bounds_mode", "bounds_factor", "min_speed_mps", "sigma_autocorr", "min_dof",
                  "converged_rel_sigma", "min_updates_converged", "steer_form", "mass_form", "upstream_min_updates",
                  "upstream_max_wait"}
+_GENERAL_OPTIONAL = {"moment_form", "upstream_idle_inputs"}
 _PROBLEM_KEYS = {"q", "w", "forgetting", "prior_rel_sigma", "excitation_min"}
+_PROBLEM_OPTIONAL = {"p0_scaled", "lateral_accel_min_mps2", "lateral_accel_max_mps2", "slip_noise_factor"}
+_CORNERING_ONLY = {"lateral_accel_min_mps2", "lateral_accel_max_mps2", "slip_noise_factor"}
 
 
 def _num(v, where: str, positive: bool = False, nonneg: bool = False) -> float:
@@ -120,15 +146,19 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise IdentConfigError(f"{origin}: malformed TOML: {e}") from None
-    _check_keys(doc, {"schema_version", "general", *PROBLEM_NAMES}, origin)
+    _check_keys({k: v for k, v in doc.items() if k != "status"}, {"schema_version", "general", *PROBLEM_NAMES}, origin)
     if doc["schema_version"] != CONFIG_SCHEMA_VERSION:
         raise IdentConfigError(f"{origin}: schema_version {doc['schema_version']!r} is not "
                                f"{CONFIG_SCHEMA_VERSION}")
     g = doc["general"]
-    moment_form = g.get("moment_form", "stiffness") if isinstance(g, dict) else "stiffness"
+    opt = {k: v for k, v in g.items() if k in _GENERAL_OPTIONAL} if isinstance(g, dict) else {}
+    moment_form = opt.get("moment_form", "stiffness")
     if isinstance(g, dict):
-        g = {k: v for k, v in g.items() if k != "moment_form"}  # optional key
+        g = {k: v for k, v in g.items() if k not in _GENERAL_OPTIONAL}
     _check_keys(g, _GENERAL_KEYS, f"{origin}[general]")
+    idle = opt.get("upstream_idle_inputs", 0)
+    if isinstance(idle, bool) or not isinstance(idle, int) or idle < 0:
+        raise IdentConfigError(f"{origin}[general].upstream_idle_inputs: expected a non-negative integer")
     if moment_form not in MOMENT_FORMS:
         raise IdentConfigError(f"{origin}[general].moment_form: one of {MOMENT_FORMS}, got {moment_form!r}")
     if g["form"] not in FORMS:
@@ -151,8 +181,10 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
     for name in PROBLEM_NAMES:
         where = f"{origin}[{name}]"
         t = doc[name]
-        _check_keys({k: v for k, v in t.items() if k != "p0_scaled"} if isinstance(t, dict) else t,
+        _check_keys({k: v for k, v in t.items() if k not in _PROBLEM_OPTIONAL} if isinstance(t, dict) else t,
                     _PROBLEM_KEYS, where)
+        if name != "cornering" and set(t) & _CORNERING_ONLY:
+            raise IdentConfigError(f"{where}: {sorted(set(t) & _CORNERING_ONLY)[0]!r} applies to [cornering] only")
         m, n = PROBLEM_ROWS[name], len(PROBLEM_PARAMS[name])
         w = t["w"]
         if w == "prior":
@@ -166,7 +198,8 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
             q=_nums(t["q"], m, f"{where}.q", positive=True), w=w_t, forgetting=lam,
             prior_rel_sigma=_num(t["prior_rel_sigma"], f"{where}.prior_rel_sigma", positive=True),
             excitation_min=_nums(t["excitation_min"], m, f"{where}.excitation_min", nonneg=True),
-            p0_scaled=(_num(t["p0_scaled"], f"{where}.p0_scaled", positive=True) if "p0_scaled" in t else None))
+            p0_scaled=(_num(t["p0_scaled"], f"{where}.p0_scaled", positive=True) if "p0_scaled" in t else None),
+            **{k: _num(t[k], f"{where}.{k}", nonneg=True) for k in _CORNERING_ONLY if k in t})
     return IdentConfig(
         form=g["form"], bounds_mode=g["bounds_mode"], bounds_factor=(lo, hi),
         min_speed_mps=_num(g["min_speed_mps"], f"{origin}[general].min_speed_mps", nonneg=True),
@@ -175,7 +208,33 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
                                  positive=True),
         min_updates_converged=g["min_updates_converged"], steer_form=g["steer_form"], mass_form=g["mass_form"],
         upstream_min_updates=g["upstream_min_updates"], upstream_max_wait=g["upstream_max_wait"],
-        moment_form=moment_form, **problems)
+        moment_form=moment_form, upstream_idle_inputs=idle, status=_status_config(doc.get("status", {}), origin),
+        **problems)
+
+
+def _status_config(t, origin: str) -> StatusConfig:
+    """The optional ``[status]`` table (``StatusConfig``; every key optional)."""
+    where = f"{origin}[status]"
+    if not isinstance(t, dict):
+        raise IdentConfigError(f"{where}: expected a table")
+    known = {f.name: f.type for f in dataclasses.fields(StatusConfig)}
+    unknown = sorted(set(t) - set(known))
+    if unknown:
+        raise IdentConfigError(f"{where}: unknown key {unknown[0]!r}")
+    kw = {}
+    for k, v in t.items():
+        default = getattr(StatusConfig, k)
+        if isinstance(default, bool):
+            if not isinstance(v, bool):
+                raise IdentConfigError(f"{where}.{k}: expected true or false")
+            kw[k] = v
+        elif isinstance(default, int):
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise IdentConfigError(f"{where}.{k}: expected a non-negative integer")
+            kw[k] = v
+        else:
+            kw[k] = _num(v, f"{where}.{k}", nonneg=True)
+    return StatusConfig(**kw)
 
 
 def load_ident_config(path: str | Path | None = None) -> IdentConfig:

@@ -75,7 +75,8 @@ sqrt(1 + 2 ((t - t_k) / T)^2 + ...) ~ 2.2 at t - t_k = T).
 
 For eq 23's ``"measured"`` moment form the inputs also carry the specific force at the CG in
 body axes (``specific_force_b_mps2`` = f_cg above) and the road-relative roll and pitch
-(``vehicle_angles_rad``, eq 4 of the estimate).
+(``vehicle_angles_rad``, eq 4 of the estimate); for the excitation gates the EKF's 1-sigma of
+the lateral velocity yd_a (``lateral_velocity_sigma_mps``, from the ENU velocity sigmas).
 
 Symbols and units: v_g [m/s] ENU; f [m/s^2]; w [rad/s]; wd [rad/s^2]; l [m] (body axes);
 angles [rad]; lambda [-]; alpha [rad]; G [m/s^2].
@@ -258,7 +259,7 @@ class IdentFeeder:
             wheel_speed_radps=filtered.wheel_speed_radps, wheel_accel_radps2=filtered.wheel_accel_radps2,
             wheel_torque_nm=torque, slip_ratio=slip, slip_angle_rad=alpha,
             wheel_angle_rad=delta, specific_force_b_mps2=tuple(float(v) for v in f_cg),
-            vehicle_angles_rad=(phi_v, theta_v))
+            vehicle_angles_rad=(phi_v, theta_v), lateral_velocity_sigma_mps=_lateral_sigma(estimate, c_ga))
         self.counters["inputs"] += 1
         if not _all_finite(inp):
             self.counters["incomplete"] += 1
@@ -283,6 +284,13 @@ class IdentFeeder:
         if not np.isfinite(omega).all():  # the slips need the rates (v_w = v_b + w x r_w)
             slip = alpha = (_NAN,) * 4
         return slip, alpha, delta
+
+
+def _lateral_sigma(estimate, c_ga: np.ndarray) -> float:
+    """1-sigma of yd_a from the EKF's ENU velocity sigmas (their correlation neglected):
+    sqrt(sum_j C_ga[1, j]^2 sigma_v,j^2)."""
+    sv = np.asarray(estimate.sigma[3:6], dtype=float)
+    return float(math.sqrt(float(np.sum((c_ga[1] * sv) ** 2))))
 
 
 def _all_finite(inp: IdentInputs) -> bool:

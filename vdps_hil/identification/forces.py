@@ -28,6 +28,11 @@ truth variant ``unsprung_dof=True``), checked against it in ``tests/test_problem
   vehicle-frame forces in the aux frame). ``IdentInputs.moments_nm`` overrides them. This is
   ``moment_form = "stiffness"``.
 
+  Chassis parts of the model file (``model.chassis``): the strut forces F_s,i include the
+  anti-roll bars' F_arb,i (``model.spring_law``); roll centres move each axle's lateral force
+  lever from h_cg to h_cg - h_rc,axle, i.e. M_x -= h_rc,f F_y,f + h_rc,r F_y,r (the linkage's
+  vertical force pair, ``chassis.roll_centre_forces_n``; no M_y, M_z).
+
   ``moment_form = "measured"`` (default in ``configs/identification/default.toml``): the tire
   forces enter M_x and M_y only through their sums, which the accelerometer measures: in body
   axes sum_i F_tire,i = m f_b (f_b the specific force at the CG, body axes; F_tire includes the
@@ -39,7 +44,9 @@ truth variant ``unsprung_dof=True``), checked against it in ``tests/test_problem
       M_z = as "stiffness" (the yaw moment needs the split between the axles)
 
   (F_z,i = eq 14's normal load, H_bar the mean deflection, z_w,i = -(h_cg - r) + H_i; the
-  physics core's moments to first order in the road-relative angles and the deflections). Why:
+  physics core's moments to first order in the road-relative angles and the deflections). With
+  roll centres M_x -= (h_rc,f l_r + h_rc,r l_f) / L m f_b,y (the axles' share of the measured
+  lateral force at a steady yaw rate, F_y,f = m f_b,y l_r / L). Why:
   the roll moment is the small difference of two large ones (the struts' y_i F_s,i and the
   tires' h_cg sum F_y): with F_y from C_alpha alpha (eq 15) a 5 % stiffness error or the Magic
   Formula's saturation, and the omitted F_z n_b,y term (body roll over the road tilts the normal
@@ -112,6 +119,9 @@ def moments_from_inputs(vehicle: Vehicle, params: IdentifiedParams, inp: IdentIn
     fa, fb = tire_forces_wheel_n(inp.slip_ratio, inp.slip_angle_rad, params)
     fx, fy = tire_forces_body_n(fa, fb, inp.wheel_angle_rad)
     m = body_moments_nm(vehicle.geometry, fs, fx, fy) + unsprung_inertia_moments_nm(vehicle, inp)
+    ch = vehicle.chassis
+    if ch.has_roll_centres:
+        m[0] -= ch.roll_centre_height_front_m * (fy[0] + fy[1]) + ch.roll_centre_height_rear_m * (fy[2] + fy[3])
     if form == "measured" and inp.specific_force_b_mps2 is not None and inp.vehicle_angles_rad is not None:
         m[0], m[1] = measured_roll_pitch_moments_nm(vehicle, params.mass_kg, inp, fs)
     return m
@@ -139,6 +149,9 @@ def measured_roll_pitch_moments_nm(vehicle: Vehicle, mass_kg: float, inp: IdentI
     n = road_normal_body(*inp.vehicle_angles_rad)
     f = inp.specific_force_b_mps2
     lever = h - float(np.mean(hh))
+    ch = vehicle.chassis
+    if ch.has_roll_centres:
+        lever -= (ch.roll_centre_height_front_m * geo.l_r_m + ch.roll_centre_height_rear_m * geo.l_f_m) / geo.wheelbase_m
     mx = float(np.sum(xy[:, 1] * fs) + lever * mass_kg * f[1] - r * n[1] * fz + np.sum(zw * mu) * f[1])
     my = float(-np.sum(xy[:, 0] * fs) - lever * mass_kg * f[0] + r * n[0] * fz - np.sum(zw * mu) * f[0])
     return mx, my

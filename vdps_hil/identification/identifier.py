@@ -2,7 +2,9 @@
 (``problems``, eq 20-23), updated in the order mass, tracking, cornering, inertia (Gauss-Seidel:
 each with the newest estimates of the others; a problem waits for its ``config.UPSTREAM`` problems),
 with the parameters' covariances including what the upstream estimates contribute (consider
-covariance), identifiability and convergence.
+covariance), identifiability and convergence; a problem is "converged" only when every
+parameter of it is identified (``status``: not at a bound, excited, no model mismatch, the drive
+taught more than the prior).
 """
 
 from __future__ import annotations
@@ -15,8 +17,10 @@ import numpy as np
 from vdps_hil.identification.config import (PROBLEM_NAMES, PROBLEM_PARAMS, UPSTREAM, IdentConfig,
                                             load_ident_config)
 from vdps_hil.identification.inputs import IdentInputs
+from vdps_hil.identification.mismatch import CROSS_CHECKS, MismatchMonitor
 from vdps_hil.identification.problems import REGRESSORS
 from vdps_hil.identification.rls import RLSCounters, WeightedRLS
+from vdps_hil.identification.status import ProblemStatus, problem_status
 from vdps_hil.model.params import IdentifiedParams, Vehicle
 
 
@@ -36,10 +40,15 @@ class Identifier:
         self._prior = vehicle.params
         self._start = start if start is not None else vehicle.params
         self.config = config if config is not None else load_ident_config()
+        self._sigma0: dict[str, np.ndarray] = {}
         self._rls = {name: self._make(name) for name in PROBLEM_NAMES}
         self._excited = {name: False for name in PROBLEM_NAMES}
         self._waiting = {name: 0 for name in PROBLEM_NAMES}
         self._ready = {name: False for name in PROBLEM_NAMES}
+        self._idle = {name: 0 for name in PROBLEM_NAMES}  # consecutive inputs without an update
+        self._gated = {name: {} for name in PROBLEM_NAMES}  # excitation gate -> inputs it refused
+        self._mismatch = {name: MismatchMonitor(name, self.config.status, self.config.problem(name).q)
+                          for name in PROBLEM_NAMES}
         self._inputs_rejected = 0
         self._last_t_ns: int | None = None
         self._params = self._collect()
@@ -52,6 +61,7 @@ class Identifier:
         lo, hi = self.config.bounds_factor
         w = np.abs(prior) if pc.w is None else np.array(pc.w)
         sigma0 = pc.prior_rel_sigma * np.abs(prior) if pc.p0_scaled is None else math.sqrt(pc.p0_scaled) * w
+        self._sigma0[name] = np.broadcast_to(np.asarray(sigma0, dtype=float), prior.shape).copy()
         return WeightedRLS(
             x0, sigma0, pc.q, w,
             forgetting=pc.forgetting, lower=lo * prior, upper=hi * prior,
@@ -79,19 +89,33 @@ class Identifier:
                 self._excited[name] = False
                 continue
             reg = REGRESSORS[name](inputs, self._vehicle, self._params, self.config)
-            self._excited[name] = self._rls[name].update(reg.a, reg.b, reg.rows, db_dtheta=reg.db_dup)
+            if reg.gated is not None:
+                self._gated[name][reg.gated] = self._gated[name].get(reg.gated, 0) + 1
+            rls = self._rls[name]
+            x_prior, c_prior = rls.x, rls.covariance
+            self._excited[name] = rls.update(reg.a, reg.b, reg.rows, db_dtheta=reg.db_dup)
             if self._excited[name]:
+                self._mismatch[name].observe(inputs.t_ns, reg, x_prior, c_prior)
                 self._params = self._collect()
+                self._idle[name] = 0
+            else:
+                self._idle[name] += 1
 
     def _upstream_ready(self, name: str) -> bool:
-        """Ready when every upstream problem has ``upstream_min_updates`` updates, or after
-        ``upstream_max_wait`` calls (an upstream problem that is never excited, e.g. the
-        tracking stiffness of a wheel that never slips, contributes ~ C lambda ~ 0 to b anyway).
-        Once ready a problem stays ready until a reset."""
+        """Ready when every upstream problem has ``upstream_min_updates`` updates or has been
+        unexcited for the last ``upstream_idle_inputs`` inputs (an unexcited upstream problem, e.g.
+        the tracking stiffness at a constant speed, contributes ~ C lambda ~ 0 to b: its rows are
+        gated because lambda is small), or after ``upstream_max_wait`` calls. Once ready a problem
+        stays ready until a reset."""
         if self._ready[name]:
             return True
-        if (all(self._rls[up].counters.updates >= self.config.upstream_min_updates for up in UPSTREAM[name])
-                or self._waiting[name] >= self.config.upstream_max_wait):
+        cfg = self.config
+        idle = cfg.upstream_idle_inputs
+
+        def settled(up):
+            return (self._rls[up].counters.updates >= cfg.upstream_min_updates
+                    or (idle > 0 and self._idle[up] >= idle))
+        if all(settled(up) for up in UPSTREAM[name]) or self._waiting[name] >= cfg.upstream_max_wait:
             self._ready[name] = True
         return self._ready[name]
 
@@ -104,6 +128,9 @@ class Identifier:
                 raise KeyError(f"unknown problem {name!r}; one of {PROBLEM_NAMES}")
             self._rls[name].reset(np.array([getattr(self._start, n) for n in PROBLEM_PARAMS[name]]))
             self._excited[name] = False
+            self._idle[name] = 0
+            self._gated[name] = {}
+            self._mismatch[name].reset()
         self._ready = {name: False for name in PROBLEM_NAMES}  # dependants re-check their upstream
         self._waiting = {name: 0 for name in PROBLEM_NAMES}
         self._params = self._collect()
@@ -128,12 +155,15 @@ class Identifier:
     @property
     def covariances(self) -> dict[str, np.ndarray]:
         """Problem -> covariance of its parameters (physical units): the RLS's own
-        (``parameter_covariance``) plus the consider covariance of the upstream estimates it
+        (``parameter_covariance``, AR(1) inflation f_j included) scaled by max(1, tau / f_j) where
+        the residuals' long-run variance ratio tau (``MismatchMonitor.variance_scale``) exceeds
+        the AR(1) factor (residuals correlated over the maneuver, not just the samples), plus the consider covariance of the upstream estimates it
         used (block-diagonal over the upstream problems, cascaded in update order)."""
         out: dict[str, np.ndarray] = {}
         for name in PROBLEM_NAMES:
             rls = self._rls[name]
-            c = rls.parameter_covariance
+            d = np.sqrt(np.maximum(self._mismatch[name].variance_scale / rls.autocorr_inflation, 1.0))
+            c = rls.parameter_covariance * np.outer(d, d)
             ups = UPSTREAM[name]
             if ups:
                 blocks = [out[u] for u in ups]
@@ -181,16 +211,26 @@ class Identifier:
         return self._inputs_rejected
 
     @property
-    def converged(self) -> dict[str, bool]:
-        """Problem -> every sigma/|x| (``sigmas``, upstream included) below
-        ``converged_rel_sigma`` after enough updates."""
-        out = {}
+    def problem_status(self) -> dict[str, ProblemStatus]:
+        """Problem -> its ``status.ProblemStatus`` (per parameter: identified or why not)."""
         sig = self.sigmas
-        for name, rls in self._rls.items():
-            rel = np.array([sig[n] for n in PROBLEM_PARAMS[name]]) / np.maximum(np.abs(rls.x), 1e-300)
-            out[name] = bool(rls.counters.updates >= self.config.min_updates_converged
-                             and np.all(rel < self.config.converged_rel_sigma))
-        return out
+        failed = {name: m.failed_rows for name, m in self._mismatch.items()}
+        for name, checks in CROSS_CHECKS.items():  # downstream rows that test this problem too
+            failed[name] += tuple(f"{p}.{row}" for p, row in checks if row in failed[p])
+        return {name: problem_status(name, PROBLEM_PARAMS[name], rls, self._sigma0[name], sig,
+                                     failed[name], self._gated[name], self.config)
+                for name, rls in self._rls.items()}
+
+    @property
+    def converged(self) -> dict[str, bool]:
+        """Problem -> every parameter identified (``status``): excited, off its bounds, no model
+        mismatch, identifiable, and every sigma/|x| (upstream included) below
+        ``converged_rel_sigma`` after ``min_updates_converged`` updates."""
+        return {name: st.converged for name, st in self.problem_status.items()}
+
+    def mismatch_tests(self, name: str):
+        """The residual tests of one problem's rows (``mismatch.RowTest``)."""
+        return self._mismatch[name].tests()
 
     @staticmethod
     def upstream_param_names(name: str) -> tuple[str, ...]:
@@ -209,6 +249,8 @@ class Identifier:
             "identifiability": self.identifiability,
             "excited": self.excited,
             "converged": self.converged,
+            "status": {n: st.to_json() for n, st in self.problem_status.items()},
+            "mismatch": {n: [t.to_json() for t in m.tests()] for n, m in self._mismatch.items()},
             "counters": {n: {f.name: getattr(c, f.name) for f in fields(c)} for n, c in self.counters.items()},
             "waiting_upstream": self.waiting_upstream,
             "inputs_rejected": self._inputs_rejected,

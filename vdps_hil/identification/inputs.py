@@ -45,6 +45,7 @@ class IdentInputs:
     moments_nm: tuple[float, float, float] | None = None  # override of (M_x, M_y, M_z)
     specific_force_b_mps2: tuple[float, float, float] | None = None  # f at the CG, body axes ("measured")
     vehicle_angles_rad: tuple[float, float] | None = None  # road-relative (phi_v, theta_v), eq 4
+    lateral_velocity_sigma_mps: float | None = None  # EKF 1-sigma of yd_a (excitation gates)
 
     def __post_init__(self):
         if not isinstance(self.t_ns, int) or isinstance(self.t_ns, bool):
@@ -59,6 +60,8 @@ class IdentInputs:
         if self.specific_force_b_mps2 is not None:
             object.__setattr__(self, "specific_force_b_mps2", _tup(self.specific_force_b_mps2, 3,
                                                                    "specific_force_b_mps2"))
+        if self.lateral_velocity_sigma_mps is not None:
+            object.__setattr__(self, "lateral_velocity_sigma_mps", float(self.lateral_velocity_sigma_mps))
         if self.vehicle_angles_rad is not None:
             object.__setattr__(self, "vehicle_angles_rad", _tup(self.vehicle_angles_rad, 2, "vehicle_angles_rad"))
 

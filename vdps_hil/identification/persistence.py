@@ -12,6 +12,11 @@ File format (JSON, UTF-8, written atomically: temporary file + rename)::
       "meta": {...}                          # optional free-form JSON (counters, time, source)
     }
 
+``meta.status`` (written by ``vdps replay --save-params``): problem -> the identifier's status
+when saved ("converged", or why not: ``identification.status``). :func:`unsettled_problems`
+reads it back: a warning chain started from such a file stays invalid until the live identifier
+has identified those problems (``app.replay``), and says so.
+
 Loading checks (each failure is one line, :class:`ParamsFileError`): size <= 1 MB, valid JSON,
 the schema name, a supported schema version, the vehicle name of the model file in use, all
 ten parameters present as finite numbers and no unknown ones, and the **sanity bounds**: each
@@ -30,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
 
+from vdps_hil.identification.config import PROBLEM_NAMES
 from vdps_hil.model.params import PARAM_NAMES, IdentifiedParams, Vehicle
 
 SCHEMA = "vdps-hil/identified-params"
@@ -191,3 +197,13 @@ def reset_params(path: str | Path) -> bool:
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "ParamsFileError", "PersistedParams", "check_params",
            "load_params", "parse_params", "reset_params", "save_params"]
+
+
+def unsettled_problems(persisted: PersistedParams) -> dict[str, str]:
+    """Problem -> status of the problems that were not "converged" when the file was saved
+    (``meta.status``); every problem ("unknown") when the file does not say."""
+    st = persisted.meta.get("status") if isinstance(persisted.meta, dict) else None
+    if not isinstance(st, dict):
+        return {name: "unknown" for name in PROBLEM_NAMES}
+    return {name: str(st.get(name, "unknown")) for name in PROBLEM_NAMES if st.get(name) != "converged"}
+

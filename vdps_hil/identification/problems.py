@@ -119,7 +119,7 @@ from vdps_hil.identification.config import IdentConfig
 from vdps_hil.identification.forces import moments_from_inputs
 from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.identification.inputs import IdentInputs
-from vdps_hil.model.params import Geometry, IdentifiedParams, Vehicle
+from vdps_hil.model.params import IdentifiedParams, Vehicle
 
 
 @dataclass(frozen=True)
@@ -132,6 +132,7 @@ class Regressor:
     b: np.ndarray
     rows: np.ndarray
     db_dup: np.ndarray | None = None
+    gated: str | None = None  # the excitation gate that refused every row (counted by the identifier)
 
 
 def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
@@ -186,7 +187,40 @@ def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPa
     b = m * acc - np.array([np.sum(fa * np.cos(d)), np.sum(fa * np.sin(d))])
     lam = np.asarray(inp.slip_ratio)
     db = np.column_stack([acc, -np.vstack([lam * np.cos(d), lam * np.sin(d)])])  # d/d[m, C_lambda,1..4]
-    return Regressor(a, b, _gate(a, cfg.cornering.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps), db)
+    rows = _gate(a, cfg.cornering.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps)
+    gated = lateral_gate(inp, al, float(acc[1]), cfg.cornering)
+    if gated is not None:
+        rows = np.zeros(2, dtype=bool)
+    return Regressor(a, b, rows, db, gated)
+
+
+def lateral_gate(inp: IdentInputs, slip_angle_rad, lateral_accel_mps2: float, pc) -> str | None:
+    """The cornering problem's excitation gates (``ProblemConfig``), or None when they pass:
+
+    * ``"lateral excitation"``: |a_y| = |ydd_a + xd_a psid_v - G_y| below
+      ``lateral_accel_min_mps2``: the lateral force is not above its noise, so whatever the
+      noise does to the slip-angle estimate (which is what a straight drive shows) eq 22 would
+      fit noise;
+    * ``"linear range"``: |a_y| beyond ``lateral_accel_max_mps2``: eq 15's F = C_alpha alpha
+      holds in the tire's linear range only (a saturating tire's secant stiffness is below its
+      slope);
+    * ``"slip noise"``: the larger axle slip angle |(alpha_1 + alpha_2) / 2|, |(alpha_3 +
+      alpha_4) / 2| below ``slip_noise_factor`` x sigma_alpha, sigma_alpha = sigma(yd_a) / |xd_a|
+      (the EKF's lateral velocity uncertainty, ``IdentInputs.lateral_velocity_sigma_mps``)."""
+    ay = abs(lateral_accel_mps2)
+    if not math.isfinite(ay):
+        return None  # the NaN guard counts it
+    if ay < pc.lateral_accel_min_mps2:
+        return "lateral excitation"
+    if ay > pc.lateral_accel_max_mps2:
+        return "linear range"
+    sv = inp.lateral_velocity_sigma_mps
+    if pc.slip_noise_factor > 0.0 and sv is not None and math.isfinite(sv):
+        al = np.asarray(slip_angle_rad, dtype=float)
+        axle = max(abs(al[0] + al[1]), abs(al[2] + al[3])) / 2.0
+        if axle < pc.slip_noise_factor * sv / max(abs(inp.xd_a_mps), 1e-9):
+            return "slip noise"
+    return None
 
 
 def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams,
@@ -198,22 +232,25 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
                   [wz * wx, dy, -wz * wx],
                   [-wx * wy, wx * wy, dz]])
     b = moments_from_inputs(vehicle, params, inp, cfg.moment_form)
-    db = np.zeros((3, 6)) if inp.moments_nm is not None else _moment_sensitivity(vehicle.geometry, inp)
+    db = np.zeros((3, 6)) if inp.moments_nm is not None else _moment_sensitivity(vehicle, inp)
     if (cfg.moment_form == "measured" and inp.specific_force_b_mps2 is not None
             and inp.vehicle_angles_rad is not None):
         db[:2, :] = 0.0  # M_x, M_y no longer use the tire stiffnesses
     return Regressor(a, b, _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps), db)
 
 
-def _moment_sensitivity(geometry: Geometry, inp: IdentInputs) -> np.ndarray:
+def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
     """d(M_x, M_y, M_z)/d(C_lambda,1..4, C_alpha,f, C_alpha,r): the moments are linear in the
-    tire stiffnesses; dM/dF_x,i = (0, -h, -y_i), dM/dF_y,i = (h, 0, x_i)."""
+    tire stiffnesses; dM/dF_x,i = (0, -h, -y_i), dM/dF_y,i = (h - h_rc,i, 0, x_i) (h_rc,i the
+    roll-centre height of the corner's axle, ``model.chassis``; 0 in the paper's model)."""
+    geometry = vehicle.geometry
     xy = np.array(geometry.corner_xy_m())
     h = geometry.h_cg_m
+    h_rc = np.array([vehicle.chassis.roll_centre_height_m(i) for i in range(4)])
     d = np.asarray(inp.wheel_angle_rad)
     lam, al = np.asarray(inp.slip_ratio), np.asarray(inp.slip_angle_rad)
     dm_dfx = np.stack([np.zeros(4), np.full(4, -h), -xy[:, 1]])  # 3 x 4
-    dm_dfy = np.stack([np.full(4, h), np.zeros(4), xy[:, 0]])
+    dm_dfy = np.stack([h - h_rc, np.zeros(4), xy[:, 0]])
     c, s = np.cos(d), np.sin(d)
     out = np.zeros((3, 6))
     out[:, :4] = dm_dfx * (lam * c) + dm_dfy * (lam * s)

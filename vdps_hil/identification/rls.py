@@ -387,6 +387,16 @@ class WeightedRLS:
         return self._w.copy()
 
     @property
+    def lower(self) -> np.ndarray:
+        """The physical lower bounds (a copy)."""
+        return self._lower.copy()
+
+    @property
+    def upper(self) -> np.ndarray:
+        """The physical upper bounds (a copy)."""
+        return self._upper.copy()
+
+    @property
     def q(self) -> np.ndarray:
         return self._q.copy()
 

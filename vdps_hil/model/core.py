@@ -79,7 +79,13 @@ dt < 2.78 tau (``Model.max_stable_step_s``). Brake torques B_i >= 0 oppose rotat
 
 Steering: the mean front road-wheel angle delta_m = delta_sw / steer_ratio is the bicycle-model
 angle; the wheel angles follow Ackermann: tan delta_1,2 = L tan delta_m / (L -+ t_f tan delta_m)
-(the mean of delta_1,2 equals delta_m to third order). Rear wheels do not steer.
+(the mean of delta_1,2 equals delta_m to third order), blended with parallel steer by the
+vehicle's Ackermann fraction. Rear wheels do not steer.
+
+Chassis parts (``model.chassis``, a vehicle file's optional ``[chassis]``; absent: the paper's
+model, bit for bit): anti-roll bars add F_arb,i = K_arb (H_i - H_j) / T^2 to the strut forces
+(plus the auxiliary roll stiffness of ``anti_roll_stiffness`` effects, e.g. ``roll_stiffness``);
+roll centres add the linkage's vertical force pair J_i = -+ F_y,axle h_rc / T.
 
 Road: a plane through the global origin with bank phi_r and grade theta_r (eq 2, psi_r = 0);
 gravity enters through g_b, which equals eq 13's [G_x, G_y, G_z] when the body lies in the road
@@ -328,8 +334,25 @@ class Model:
             wrench_fns=tuple(e.body_wrench for e in dyn if "body_wrench" in e.HOOKS),
             wheel_fns=tuple(e.wheel_torque for e in dyn if "wheel_torque" in e.HOOKS),
             k_c=sum(e.compliance_steer() for e in dyn if "compliance_steer" in e.HOOKS),
-            wind_effects=self.effect_wind_enu_mps)
+            wind_effects=self.effect_wind_enu_mps, **self._chassis_constants())
         return derivative_function(k), k
+
+    def _chassis_constants(self) -> dict:
+        """The chassis parts (``model.chassis``) of the vehicle plus the auxiliary roll stiffness
+        of ``anti_roll_stiffness`` effects, as ``CoreConstants`` fields (None: not present)."""
+        veh = self.vehicle
+        ch, geo = veh.chassis, veh.geometry
+        kf, kr = ch.anti_roll_stiffness_front_nmprad, ch.anti_roll_stiffness_rear_nmprad
+        for e in self.effects.dynamics:
+            if "anti_roll_stiffness" in e.HOOKS:
+                ef, er = e.anti_roll_stiffness()
+                kf, kr = kf + ef, kr + er
+        tf, tr = 2.0 * geo.track_half_front_m, 2.0 * geo.track_half_rear_m
+        self.anti_roll_stiffness_nmprad = (kf, kr)
+        return {"ackermann_fraction": ch.ackermann_fraction,
+                "arb": (kf, kr, tf, tr) if (kf != 0.0 or kr != 0.0) else None,
+                "roll_centre": ((ch.roll_centre_height_front_m, ch.roll_centre_height_rear_m, tf, tr)
+                                if ch.has_roll_centres else None)}
 
     # ------------------------------------------------------------------ helpers
     def evaluate(self, x, u: Inputs, env: Env) -> tuple[list, dict]:
@@ -356,8 +379,9 @@ class Model:
         """``q`` (e.g. a truth snapshot or the estimator's equivalents of its names) completed
         with the model's constants that effects' ``regressors`` need: ``static_load_n_i``,
         ``cornering_stiffness_nprad_i`` (C_alpha,i before effects), ``corner_x_m_i``,
-        ``rolling_radius_nominal_m``, ``cornering_stiffness_front_nprad``, ``l_f_m`` and
-        ``front_lateral_force_n`` (from ``tire_force_lat_n_1/2`` when present)."""
+        ``rolling_radius_nominal_m``, ``cornering_stiffness_front_nprad``, ``l_f_m``,
+        ``track_front_m``, ``track_rear_m`` and ``front_lateral_force_n`` (from
+        ``tire_force_lat_n_1/2`` when present)."""
         out = dict(q)
         p = self.vehicle.params
         for i in range(4):
@@ -366,6 +390,8 @@ class Model:
             out[f"corner_x_m_{i + 1}"] = self.corner_xy[i][0]
             out.setdefault(f"rolling_radius_m_{i + 1}", self.rolling_radius_m[i])
         out["rolling_radius_nominal_m"] = self.vehicle.tire.rolling_radius_m
+        out["track_front_m"] = 2.0 * self.vehicle.geometry.track_half_front_m
+        out["track_rear_m"] = 2.0 * self.vehicle.geometry.track_half_rear_m
         out["cornering_stiffness_front_nprad"] = p.cornering_stiffness_front_nprad
         out["l_f_m"] = self.vehicle.geometry.l_f_m
         if "tire_force_lat_n_1" in q and "tire_force_lat_n_2" in q:

@@ -306,6 +306,8 @@ def kernel_terms_of(effect) -> tuple | None:
 def pack_model(k, effects) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray] | None, str]:
     """((K, C, E), "compiled") from a model's ``stages.CoreConstants`` ``k`` and its dynamics
     effects (tire first), or (None, reason) when an effect has no compiled form."""
+    if k.arb is not None or k.roll_centre is not None or k.ackermann_fraction != 1.0:
+        return None, "the vehicle's chassis parts (model.chassis) have no compiled form"
     rows = []
     for e in effects:
         terms = kernel_terms_of(e)

@@ -27,6 +27,8 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, get_type_hints
 
+from .chassis import PAPER_CHASSIS, Chassis
+
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
 VEHICLE_DIR = CONFIG_DIR / "vehicles"
 
@@ -130,6 +132,7 @@ class Vehicle:
     params: IdentifiedParams  # truth values (truth file) or priors (model file)
     effects: dict = field(default_factory=dict)  # truth only: effect name -> {param: value}
     source_sha256: str = ""
+    chassis: Chassis = PAPER_CHASSIS  # optional [chassis]: anti-roll bars, roll centres, Ackermann
 
     def axle(self, corner: int) -> Axle:
         """Axle of corner 0..3 (0-based FL, FR, RR, RL)."""
@@ -221,7 +224,7 @@ def parse_vehicle(text: str, origin: str = "<string>") -> Vehicle:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise VehicleFileError(f"{origin}: malformed TOML: {e}") from None
-    allowed = {"name", "kind", "description", "effects", *_SECTIONS}
+    allowed = {"name", "kind", "description", "effects", "chassis", *_SECTIONS}
     unknown = sorted(set(doc) - allowed)
     if unknown:
         raise VehicleFileError(f"{origin}: unknown key {unknown[0]!r}")
@@ -243,7 +246,26 @@ def parse_vehicle(text: str, origin: str = "<string>") -> Vehicle:
                                f"mass above the four unsprung masses ({unsprung:g} kg)")
     return Vehicle(name=str(doc.get("name", Path(origin).stem)), kind=kind,
                    description=str(doc.get("description", "")), effects=effects,
-                   source_sha256=hashlib.sha256(text.encode()).hexdigest(), **built)
+                   source_sha256=hashlib.sha256(text.encode()).hexdigest(),
+                   chassis=_build_chassis(doc.get("chassis", {}), f"{origin}[chassis]"), **built)
+
+
+def _build_chassis(table: Any, where: str) -> Chassis:
+    """The optional ``[chassis]`` table (``model.chassis``): every key optional, a missing one
+    at the paper's value."""
+    if not isinstance(table, dict):
+        raise VehicleFileError(f"{where}: expected a table")
+    names = [f.name for f in fields(Chassis)]
+    unknown = sorted(set(table) - set(names))
+    if unknown:
+        raise VehicleFileError(f"{where}: unknown key {unknown[0]!r}")
+    for n, v in table.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise VehicleFileError(f"{where}.{n}: expected a finite number, got {v!r}")
+    try:
+        return Chassis(**{n: float(v) for n, v in table.items()})
+    except ValueError as e:
+        raise VehicleFileError(f"{where}: {e}") from None
 
 
 def resolve_vehicle_path(name_or_path: str | Path) -> Path:

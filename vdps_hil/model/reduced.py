@@ -54,7 +54,7 @@ from vdps_hil.units import GRAVITY_MPS2
 from .core import BRAKE_HOLD_SPEED_RADPS, Inputs, Model
 from .effects import LinearTire
 from .frames import dcm_gv_elements
-from .stages import ackermann_angles
+from .stages import steer_angles
 
 STATIC_HOOKS = frozenset({"rolling_radius_factor"})
 """Effect hooks the core resolves at construction (nothing to do per call)."""
@@ -70,8 +70,12 @@ C_X, C_Y, C_C1, C_C2, C_C3, C_SR, C_DS, C_R, C_CKAP, C_CALP, C_MUG = range(11)
 
 def supports(model: Model) -> bool:
     """True when ``model`` is the reduced model with the linear tire and no per-call effect
-    hooks (the paper's set; a static ``rolling_radius_factor`` is allowed)."""
+    hooks (the paper's set; a static ``rolling_radius_factor`` is allowed) on a vehicle without
+    anti-roll bars or roll centres (``model.chassis``; its Ackermann fraction is supported)."""
     if model.unsprung_dof or type(model.effects.tire) is not LinearTire:
+        return False
+    ch = model.vehicle.chassis
+    if ch.has_anti_roll_bars or ch.has_roll_centres:  # the generic core has them (model.chassis)
         return False
     return all(e is model.effects.tire or set(e.HOOKS) <= STATIC_HOOKS for e in model.effects.dynamics)
 
@@ -217,7 +221,7 @@ class ReducedLinearCore:
         self.model = model
         veh = model.vehicle
         geo, p = veh.geometry, veh.params
-        self._steer = (geo.steer_ratio, geo.wheelbase_m, geo.track_half_front_m)
+        self._steer = (geo.steer_ratio, geo.wheelbase_m, geo.track_half_front_m, veh.chassis.ackermann_fraction)
         corners = []
         for i in range(4):
             ax = veh.axle(i)
@@ -240,8 +244,8 @@ class ReducedLinearCore:
     def inputs(self, u: Inputs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The per-input constants: (cos/sin of the road-wheel angles (4, 2), drive torques (4,),
         brake torques (4,))."""
-        ratio, wheelbase, t_f = self._steer
-        d1, d2 = ackermann_angles(u.steer_wheel_angle_rad / ratio, wheelbase, t_f)
+        ratio, wheelbase, t_f, e_a = self._steer
+        d1, d2 = steer_angles(u.steer_wheel_angle_rad / ratio, wheelbase, t_f, e_a)
         csd = np.array(((math.cos(d1), math.sin(d1)), (math.cos(d2), math.sin(d2)), (1.0, 0.0), (1.0, 0.0)))
         return csd, np.array(u.wheel_torque_nm, dtype=float), np.array(u.brake_torque_nm, dtype=float)
 

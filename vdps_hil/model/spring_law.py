@@ -1,7 +1,10 @@
 """The spring law of eq 14 per corner of a vehicle: the suspension forces the identifier (eq 14,
 eq 23's moments) and the suspension conditioning of the Figure-2 node both use.
 
-    F_z,i = K_s,i(H_i) H_i + D_s,i Hd_i + m_u,i g          (eq 14; K_s(H) H = ``stages.spring_force_n``)
+    F_z,i = K_s,i(H_i) H_i + D_s,i Hd_i + F_arb,i + m_u,i g   (eq 14; K_s(H) H = ``stages.spring_force_n``)
+
+F_arb,i = K_arb (H_i - H_j) / T^2: the anti-roll bar of the corner's axle, if the vehicle file
+has one (``model.chassis.anti_roll_forces_n``; the deflections from design ride height).
 
 ==========  =====  ===================================================================
 symbol      unit   meaning
@@ -20,6 +23,7 @@ import math
 
 import numpy as np
 
+from vdps_hil.model.chassis import anti_roll_forces_n
 from vdps_hil.model.params import Vehicle
 from vdps_hil.model.stages import spring_force_n
 from vdps_hil.units import GRAVITY_MPS2
@@ -44,6 +48,13 @@ def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
       the free length stands in for the rebound stop, as in the core)."""
     h = spring_compression_m(vehicle, susp_deflection_m)
     hd = np.asarray(susp_rate_mps, dtype=float)
+    ch = vehicle.chassis
+    farb = None
+    if ch.has_anti_roll_bars:
+        geo = vehicle.geometry
+        farb = anti_roll_forces_n(ch.anti_roll_stiffness_front_nmprad, ch.anti_roll_stiffness_rear_nmprad,
+                                  2.0 * geo.track_half_front_m, 2.0 * geo.track_half_rear_m,
+                                  np.asarray(susp_deflection_m, dtype=float))
     out = np.empty(4)
     for i in range(4):
         ax = vehicle.axle(i)
@@ -52,6 +63,8 @@ def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
             out[i] = math.nan
             continue
         fsp = spring_force_n(min(hs, 10.0), ax.spring_c1_npm, ax.spring_c2_per_m, ax.spring_c3_m)
+        if farb is not None:
+            fsp += float(farb[i])
         if not include_unsprung_weight:
             out[i] = fsp + ax.damper_nspm * hd[i]
             continue

@@ -7,7 +7,8 @@ The order of one evaluation (symbols and the model's assumptions: :mod:`vdps_hil
     body_attitude        C_g^v (eq 1), road normal n_b, gravity g_b, CG height over the road
     ackermann_angles     front road-wheel angles from the bicycle angle
     corner_loads         per corner: wheel-centre position and velocity, suspension deflection,
-                         normal load (eq 14; with unsprung DOF: tire radial spring), C_alpha,i
+                         normal load (eq 14; with unsprung DOF: tire radial spring), C_alpha,i,
+                         anti-roll bar forces (``model.chassis``, if the vehicle has bars)
     compliance_steer_angle   delta_c = -K_c (F_b,1 + F_b,2) (secant solve)
     tire_at_corner       road-plane tire axes, slips and tire forces (eq 15-16)
     corner_wrench        tire forces -> body force and moment about the CG; wheel spin (eq 13)
@@ -41,6 +42,7 @@ from typing import Callable
 
 from vdps_hil.jit import inline
 
+from .chassis import anti_roll_forces_n, blend_ackermann, roll_centre_forces_n
 from .frames import dcm_gv_elements
 
 
@@ -54,10 +56,20 @@ def spring_force_n(h_spring_m: float, c1: float, c2: float, c3: float) -> float:
 @inline
 def ackermann_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front_m: float) -> tuple[float, float]:
     """Front road-wheel angles (delta_1 FL, delta_2 FR) [rad] for a bicycle-model angle
-    delta_m: tan delta_1,2 = L tan delta_m / (L -+ t_f tan delta_m)."""
+    delta_m: tan delta_1,2 = L tan delta_m / (L -+ t_f tan delta_m) (full Ackermann)."""
     tm = math.tan(delta_mean_rad)
     return (math.atan2(wheelbase_m * tm, wheelbase_m - track_half_front_m * tm),
             math.atan2(wheelbase_m * tm, wheelbase_m + track_half_front_m * tm))
+
+
+def steer_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front_m: float,
+                 ackermann_fraction: float) -> tuple[float, float]:
+    """``ackermann_angles`` blended with parallel steer by the vehicle's Ackermann fraction
+    (``chassis.blend_ackermann``; 1: full Ackermann, the compiled core's only case)."""
+    d1, d2 = ackermann_angles(delta_mean_rad, wheelbase_m, track_half_front_m)
+    if ackermann_fraction == 1.0:
+        return d1, d2
+    return blend_ackermann(delta_mean_rad, d1, d2, ackermann_fraction)
 
 
 @dataclass(frozen=True, slots=True)
@@ -68,7 +80,9 @@ class CoreConstants:
     ``zw0``: body z of the wheel centres at design ride height [m]; ``r_load``: rolling radius
     of the rigid tire (reduced model) [m]; ``corner_masses``: (i, x_i, y_i, m_u,i) per corner;
     the effect hooks as tuples of bound methods; ``k_c``: summed compliance steer [rad/N];
-    ``wind_effects``: the effects' own wind, ENU [m/s]."""
+    ``wind_effects``: the effects' own wind, ENU [m/s]; the chassis parts (``model.chassis``):
+    ``ackermann_fraction`` [-], ``arb`` = (K_arb,f, K_arb,r [N m/rad], T_f, T_r [m]) or None,
+    ``roll_centre`` = (h_rc,f, h_rc,r, T_f, T_r [m]) or None (None: the paper's model)."""
 
     unsprung_dof: bool
     g: float
@@ -92,6 +106,9 @@ class CoreConstants:
     wheel_fns: tuple
     k_c: float
     wind_effects: tuple
+    ackermann_fraction: float = 1.0
+    arb: tuple | None = None
+    roll_centre: tuple | None = None
 
 
 @inline
@@ -124,7 +141,7 @@ def corner_loads(k: CoreConstants, susp, susp_rate, h_cg: float, n_b, vel, rate)
 
         z_i = z_w0 + H_i,   h_w,i = h_cg + n_b . (x_i, y_i, z_i)
         F_z,i = k_t (r_free,i - h_w,i)  if positive, else 0
-        F_s,i = K_s(H_s) H_s + D_s H_dot_i,   H_s = static compression + H_i
+        F_s,i = K_s(H_s) H_s + D_s H_dot_i + F_arb,i,   H_s = static compression + H_i
         v_w,i = v_b + omega x r_w,i + H_dot_i e_z
 
     The paper's reduced model (``susp`` None; rigid tires, unsprung masses moving with the body):
@@ -133,12 +150,15 @@ def corner_loads(k: CoreConstants, susp, susp_rate, h_cg: float, n_b, vel, rate)
         h_w,i = h_cg + n_b . (x_i, y_i, z_w0),   v_w,i = v_b + omega x r_w,i
         H_i = r - h_w,i,   H_dot_i = -n_b . v_w,i
         F_z,i = 0                                          if K_s(H_s) H_s + m_u g <= 0 (lifted)
-              = max(0, K_s(H_s) H_s + D_s H_dot_i + m_u g)   otherwise;   F_s,i = F_z,i"""
+              = max(0, K_s(H_s) H_s + D_s H_dot_i + m_u g)   otherwise;   F_s,i = F_z,i
+
+    (with anti-roll bars F_arb,i of ``chassis.anti_roll_forces_n`` is added to K_s(H_s) H_s)."""
     nx, ny, nz = n_b
     vx, vy, vz = vel
     wx, wy, wz = rate
     dof, zw0, stiff_fns = k.unsprung_dof, k.zw0, k.stiffness_fns
     kt, r_load = k.tire_radial_stiffness, k.r_load
+    farb = None if k.arb is None else _anti_roll(k, susp, h_cg, n_b)
     ck = []
     for (i, xi, yi, mu, c1, c2, c3, sc, ds, ri, rfree, ckap, calp, fz0, mug) in k.corners:
         if dof:
@@ -149,6 +169,8 @@ def corner_loads(k: CoreConstants, susp, susp_rate, h_cg: float, n_b, vel, rate)
             defl = rfree - hw
             fz = kt * defl if defl > 0.0 else 0.0
             fs = spring_force_n(sc + H, c1, c2, c3) + ds * Hd
+            if farb is not None:
+                fs += farb[i]
             vwx = vx + wy * zi - wz * yi
             vwy = vy + wz * xi - wx * zi
             vwz = vz + wx * yi - wy * xi + Hd
@@ -161,6 +183,8 @@ def corner_loads(k: CoreConstants, susp, susp_rate, h_cg: float, n_b, vel, rate)
             H = r_load - hw
             Hd = -(nx * vwx + ny * vwy + nz * vwz)
             fsp = spring_force_n(sc + H, c1, c2, c3)
+            if farb is not None:
+                fsp += farb[i]
             if fsp + mug <= 0.0:  # eq 14 clamp: lift-off
                 fz = 0.0
             else:
@@ -185,6 +209,17 @@ def wheel_axes(delta: float, n_b) -> tuple[float, float, float, float, float, fl
     inv = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
     lx, ly, lz = lx * inv, ly * inv, lz * inv
     return lx, ly, lz, ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
+
+
+def _anti_roll(k: CoreConstants, susp, h_cg: float, n_b) -> tuple:
+    """F_arb,i (``chassis.anti_roll_forces_n``) from the deflections: the states (unsprung DOF)
+    or, in the reduced model, H_i = r - h_w,i of the pose over the road plane."""
+    if susp is None:
+        nx, ny, nz = n_b
+        zw0, r = k.zw0, k.r_load
+        susp = [r - (h_cg + nx * c[1] + ny * c[2] + nz * zw0) for c in k.corners]
+    kf, kr, tf, tr = k.arb
+    return anti_roll_forces_n(kf, kr, tf, tr, susp)
 
 
 def tire_at_corner(c, delta: float, n_b, oms, v_floor: float, tire_fn):
@@ -235,7 +270,13 @@ def corner_wrench(k: CoreConstants, ck, deltas, n_b, oms, u, record: bool):
         body moment sum r_c,i x F_tire,i (+ r_w,i x (F_s,i - F_tz,i) e_z with unsprung DOF)
         I_w omega_dot_i = T_i - B_i sat(omega_i / 2 rad/s) - r_i F_a,i + T_eff,i
 
-    Returns (wrench, omega_dot (4), tire body-z forces (4), per-corner records or None)."""
+    With roll centres (``model.chassis``) the linkage's vertical forces J_i
+    (``chassis.roll_centre_forces_n``, from each axle's lateral tire force in body axes) act on
+    the body along its z axis at the struts (and, with unsprung DOF, -J_i on the unsprung mass;
+    in the reduced model they are part of the reported normal load).
+
+    Returns (wrench, omega_dot (4), tire body-z forces (4), per-corner records or None, the
+    roll-centre forces J (4) or None)."""
     dof, v_floor, tire_fn = k.unsprung_dof, k.v_floor, k.tire_fn
     wheel_fns, iw_inv, wbrake = k.wheel_fns, k.iw_inv, k.brake_hold_radps
     nx, ny, nz = n_b
@@ -277,7 +318,29 @@ def corner_wrench(k: CoreConstants, ck, deltas, n_b, oms, u, record: bool):
         wdots[i] = (tq - ri * fa + teff) * iw_inv
         if rec is not None:
             rec.append((fa, fb, fz, kap, alp, H, Hd, tq, teff, deltas[i], ri, hw, fs, ftx, fty, ftz))
-    return (Fx, Fy, Fz, Mx, My, Mz), wdots, fzt, rec
+    if k.roll_centre is None:
+        return (Fx, Fy, Fz, Mx, My, Mz), wdots, fzt, rec, None
+    jac = _roll_centre(k, ck, deltas, n_b, oms)
+    for (i, xi, yi, *_), j in zip(ck, jac):
+        Fz += j
+        Mx += yi * j
+        My -= xi * j
+        if rec is not None and not dof:
+            r = rec[i]
+            rec[i] = (*r[0:2], r[2] + j, *r[3:])
+    return (Fx, Fy, Fz, Mx, My, Mz), wdots, fzt, rec, jac
+
+
+def _roll_centre(k: CoreConstants, ck, deltas, n_b, oms) -> tuple:
+    """J_i of ``chassis.roll_centre_forces_n`` from the axles' lateral tire forces (body y of
+    F_a e_l + F_b e_t; the tire law evaluated again at each corner: only vehicles with roll
+    centres pay for it)."""
+    fy = [0.0, 0.0]
+    for c in ck:
+        fa, fb, _k, _a, lx, ly, lz, tx, ty, tz = tire_at_corner(c, deltas[c[0]], n_b, oms, k.v_floor, k.tire_fn)
+        fy[0 if c[0] < 2 else 1] += fa * ly + fb * ty
+    hf, hr, tf, tr = k.roll_centre
+    return roll_centre_forces_n(hf, hr, tf, tr, fy[0], fy[1])
 
 
 @inline
@@ -352,10 +415,12 @@ def pose_rates(trig, c, vel, rate) -> tuple[float, float, float, float, float, f
             wx - tth * sph * wy - tth * cph * wz, -cph * wy + sph * wz, (sph * wy + cph * wz) / cth)
 
 
-def unsprung_accelerations(k: CoreConstants, ck, fzt, acc, dw, rate, gz: float) -> list[float]:
+def unsprung_accelerations(k: CoreConstants, ck, fzt, acc, dw, rate, gz: float, jac=None) -> list[float]:
     """H_ddot_i of the unsprung masses (unsprung DOF only), from their balance along body z::
 
-        m_u (a_z + (omega_dot x r_w)_z + (omega x (omega x r_w))_z + H_ddot) = F_tz' - F_s + m_u g_z"""
+        m_u (a_z + (omega_dot x r_w)_z + (omega x (omega x r_w))_z + H_ddot) = F_tz' - F_s - J + m_u g_z
+
+    (J_i the roll-centre forces of ``corner_wrench``, None: zero)."""
     wx, wy, wz = rate
     dwx, dwy, _ = dw
     az_ = acc[2]
@@ -364,7 +429,8 @@ def unsprung_accelerations(k: CoreConstants, ck, fzt, acc, dw, rate, gz: float) 
     for (i, xi, yi, mu) in k.corner_masses:
         zi = ck[i][3]
         acc_z = az_ + (dwx * yi - dwy * xi) + (wz * (wx * xi + wy * yi + wz * zi) - zi * ww)
-        hdd.append((fzt[i] - ck[i][6]) / mu + gz - acc_z)
+        f_link = ck[i][6] if jac is None else ck[i][6] + jac[i]
+        hdd.append((fzt[i] - f_link) / mu + gz - acc_z)
     return hdd
 
 
@@ -372,7 +438,7 @@ def derivative_function(k: CoreConstants) -> Callable:
     """``f(x, u, env, out=None) -> x_dot``: the stages above in order (module docstring).
     ``out``: optional dict filled with the diagnostics ``Model.evaluate`` names."""
     dof, g, v_floor, tire_fn, k_c = k.unsprung_dof, k.g, k.v_floor, k.tire_fn, k.k_c
-    steer = (k.steer_ratio, k.wheelbase_m, k.track_half_front_m)
+    steer = (k.steer_ratio, k.wheelbase_m, k.track_half_front_m, k.ackermann_fraction)
     wrench_fns, wind_effects = k.wrench_fns, k.wind_effects
 
     def f(x, u, env, out=None):
@@ -380,13 +446,13 @@ def derivative_function(k: CoreConstants) -> Callable:
         (pe, pn, pu, phi, theta, psi, vx, vy, vz, wx, wy, wz, om1, om2, om3, om4) = x[0:16]
         vel, rate, oms = (vx, vy, vz), (wx, wy, wz), (om1, om2, om3, om4)
         trig, c, n_b, g_b, h_cg = body_attitude((pe, pn, pu), (phi, theta, psi), env.normal_g, g)
-        ratio, wheelbase, t_f = steer
-        d1, d2 = ackermann_angles(u.steer_wheel_angle_rad / ratio, wheelbase, t_f)
+        ratio, wheelbase, t_f, e_a = steer
+        d1, d2 = steer_angles(u.steer_wheel_angle_rad / ratio, wheelbase, t_f, e_a)
         susp, susp_rate = (x[16:20], x[20:24]) if dof else (None, None)
         ck = corner_loads(k, susp, susp_rate, h_cg, n_b, vel, rate)
         dcomp = compliance_steer_angle(k_c, ck[0:2], d1, d2, n_b, oms, v_floor, tire_fn) if k_c != 0.0 else 0.0
         deltas = (d1 + dcomp, d2 + dcomp, 0.0, 0.0)
-        wrench, wdots, fzt, rec = corner_wrench(k, ck, deltas, n_b, oms, u, out is not None)
+        wrench, wdots, fzt, rec, jac = corner_wrench(k, ck, deltas, n_b, oms, u, out is not None)
         if wrench_fns:
             air = air_velocity_b(vel, c, env.wind_enu_mps, wind_effects)
             wrench = effect_wrench(wrench_fns, wrench, vel, rate, air)
@@ -397,7 +463,7 @@ def derivative_function(k: CoreConstants) -> Callable:
               *dw, *wdots]
         if dof:
             xd.extend(x[20:24])
-            xd.extend(unsprung_accelerations(k, ck, fzt, acc, dw, rate, g_b[2]))
+            xd.extend(unsprung_accelerations(k, ck, fzt, acc, dw, rate, g_b[2], jac))
         if out is not None:
             out["_rec"] = rec
             out["_acc_b"] = acc
@@ -413,7 +479,7 @@ def derivative_function(k: CoreConstants) -> Callable:
     return f
 
 
-__all__ = ["CoreConstants", "ackermann_angles", "air_velocity_b", "body_accelerations", "body_attitude",
+__all__ = ["CoreConstants", "ackermann_angles", "steer_angles", "air_velocity_b", "body_accelerations", "body_attitude",
            "compliance_steer_angle", "corner_loads", "corner_wrench",
            "derivative_function", "effect_wrench", "pose_rates", "spring_force_n", "tire_at_corner",
            "unsprung_accelerations"]

@@ -320,8 +320,10 @@ class VdpsSystem:
         idf = self.identifier
         if idf is None:
             return None
-        return IdentReport(int(t_ns), idf.params.as_dict(), idf.sigmas, idf.identifiability, idf.converged,
-                           {n: c.updates for n, c in idf.counters.items()})
+        ps = idf.problem_status
+        return IdentReport(int(t_ns), idf.params.as_dict(), idf.sigmas, idf.identifiability,
+                           {n: st.converged for n, st in ps.items()}, {n: c.updates for n, c in idf.counters.items()},
+                           {p.name: p.status for st in ps.values() for p in st.params})
 
     def status(self) -> dict:
         d = {"counters": dict(self.counters), "pipeline": self.pipeline.counters,

@@ -34,7 +34,7 @@ class CanFrame:
 class IdentReport:
     """Identifier state at ``t_ns``: parameter values and sigmas (field names of
     ``IdentifiedParams``, SI), minimum eigenvalue of A^T Q^T Q A per problem, converged flags,
-    updates per problem."""
+    updates per problem, and per parameter "identified" or why not (``param_status``)."""
 
     t_ns: int
     params: Mapping[str, float]
@@ -42,11 +42,12 @@ class IdentReport:
     identifiability: Mapping[str, float]
     converged: Mapping[str, bool]
     updates: Mapping[str, int]
+    param_status: Mapping[str, str] = None  # parameter -> "identified" or why not (identification.status)
 
     def to_json(self) -> dict:
         return {"t_ns": self.t_ns, "params": dict(self.params), "sigmas": dict(self.sigmas),
                 "identifiability": dict(self.identifiability), "converged": dict(self.converged),
-                "updates": dict(self.updates)}
+                "updates": dict(self.updates), "param_status": dict(self.param_status or {})}
 
 
 @dataclass(frozen=True)

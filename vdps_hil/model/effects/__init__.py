@@ -18,6 +18,7 @@ aero_drag                          dynamics    aero
 crosswind                          dynamics    aero
 rolling_resistance                 dynamics    rolling
 steering_compliance                dynamics    steering
+roll_stiffness                     dynamics    chassis (anti-roll bars; ``model.chassis``)
 imu_bias                           measurement imu
 imu_lever_arm                      measurement imu
 ================================== =========== ==================================================
@@ -28,6 +29,7 @@ from __future__ import annotations
 from typing import Iterable, Mapping
 
 from .aero import AeroDrag, Crosswind
+from .chassis import RollStiffness
 from .base import (DYNAMICS_HOOKS, EQUATIONS, DynamicsEffect, Effect, EffectConfigError, EffectSet,
                    ImuKinematics, MeasurementEffect, ParamSpec, TireModel)
 from .imu import ImuBias, ImuLeverArm
@@ -74,5 +76,5 @@ __all__ = ["REGISTRY", "BUILTIN_EFFECTS", "EffectRegistry", "TIRE_MODEL_NAMES", 
            "effects_from_names", "Effect", "DynamicsEffect", "MeasurementEffect", "TireModel", "EffectSet",
            "EffectConfigError", "ParamSpec", "ImuKinematics", "EQUATIONS", "DYNAMICS_HOOKS", "LinearTire",
            "MagicFormulaTire", "AeroDrag", "Crosswind", "RollingResistance",
-           "LoadDependentCorneringStiffness", "LowPressureTire", "SteeringCompliance", "ImuBias",
+           "LoadDependentCorneringStiffness", "LowPressureTire", "SteeringCompliance", "RollStiffness", "ImuBias",
            "ImuLeverArm"]

@@ -16,6 +16,8 @@ default magnitudes, and a docstring giving its formula. Two families:
   ``compliance_steer``        front road-wheel angles delta_i -= K_c * (F_b,1 + F_b,2)
   ``body_wrench``             force [N] and moment [N m] about the sprung CG, body axes
   ``wheel_torque``            extra torque [N m] on wheel i's spin axis
+  ``anti_roll_stiffness``     auxiliary roll stiffness (front, rear) [N m/rad] added to the
+                              vehicle's anti-roll bars (``model.chassis``; static)
   ==========================  ==================================================================
 
   The compiled core (:mod:`vdps_hil.model.core_kernel`) takes an effect through
@@ -57,8 +59,8 @@ spin balances [N m]."""
 
 DYNAMICS_HOOKS: tuple[str, ...] = ("tire_forces", "rolling_radius_factor",
                                    "cornering_stiffness_factor", "compliance_steer",
-                                   "body_wrench", "wheel_torque")
-STATIC_HOOKS: frozenset[str] = frozenset({"rolling_radius_factor", "compliance_steer"})
+                                   "body_wrench", "wheel_torque", "anti_roll_stiffness")
+STATIC_HOOKS: frozenset[str] = frozenset({"rolling_radius_factor", "compliance_steer", "anti_roll_stiffness"})
 """Hooks the core evaluates once, when a model is built (no per-call contribution)."""
 
 
@@ -156,6 +158,7 @@ class DynamicsEffect(Effect):
         body_wrench(vel_b, omega_b, air_b) -> (Fx, Fy, Fz, Mx, My, Mz)   [N, N m] about the CG
             vel_b: CG velocity, omega_b: body rates, air_b: CG velocity relative to the air
         wheel_torque(corner, omega_radps, fz_n, radius_m) -> torque [N m] on the spin axis
+        anti_roll_stiffness() -> (K_front, K_rear) [N m/rad]
     """
 
     family: ClassVar[str] = "dynamics"
@@ -176,6 +179,9 @@ class DynamicsEffect(Effect):
 
     def wheel_torque(self, corner: int, omega_radps: float, fz_n: float, radius_m: float) -> float:
         return 0.0
+
+    def anti_roll_stiffness(self) -> tuple[float, float]:
+        return (0.0, 0.0)
 
     def kernel_terms(self) -> tuple[tuple[str, int, tuple[float, ...]], ...] | None:
         """The compiled form: ``((hook, code, parameters), ...)`` for each per-call hook (module

@@ -18,6 +18,7 @@ from typing import Iterable, Iterator, Mapping
 
 from .aero import AeroDrag, Crosswind
 from .base import Effect, EffectConfigError
+from .chassis import RollStiffness
 from .imu import ImuBias, ImuLeverArm
 from .rolling import RollingResistance
 from .steering import SteeringCompliance
@@ -25,7 +26,7 @@ from .tires import LinearTire, LoadDependentCorneringStiffness, LowPressureTire,
 
 BUILTIN_EFFECTS: tuple[type[Effect], ...] = (
     LinearTire, MagicFormulaTire, AeroDrag, RollingResistance, LoadDependentCorneringStiffness,
-    LowPressureTire, Crosswind, SteeringCompliance, ImuBias, ImuLeverArm)
+    LowPressureTire, Crosswind, SteeringCompliance, RollStiffness, ImuBias, ImuLeverArm)
 """The built-in effect classes, in the order the registry lists them."""
 
 

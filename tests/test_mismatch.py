@@ -1,0 +1,69 @@
+"""The model-mismatch test (identification.mismatch): residuals that are what the noise model
+predicts pass; a missing term that follows the maneuver fails and is named by its row; the
+long-run variance ratio inflates the sigmas only for correlated residuals (fixed seeds)."""
+
+import math
+
+import numpy as np
+
+from vdps_hil.identification.config import StatusConfig
+from vdps_hil.identification.mismatch import MismatchMonitor
+from vdps_hil.identification.problems import Regressor
+from vdps_hil.identification.rls import WeightedRLS
+
+NOISE = 0.5  # row noise sd -> Q = 1 / NOISE
+STRICT = StatusConfig(mismatch_variance_max=4.0, mismatch_whiteness_max=0.5)  # Q is the true noise here
+
+
+def _drive(extra, seed=3, n=3000, cfg=STRICT):
+    """Cornering-shaped problem (2 rows, 2 parameters) at 100 Hz: b = A x + noise + extra(t, row)."""
+    rng = np.random.default_rng(seed)
+    x_true = np.array([2.0, -1.0])
+    q = (1.0 / NOISE, 1.0 / NOISE)
+    rls = WeightedRLS(np.array([1.0, 1.0]), np.array([5.0, 5.0]), q)
+    mon = MismatchMonitor("cornering", cfg, q)
+    for k in range(n):
+        t = k * 0.01
+        a = rng.normal(0.0, 1.0, (2, 2)) + np.array([[math.sin(t), 0.0], [0.0, math.cos(0.7 * t)]])
+        b = a @ x_true + rng.normal(0.0, NOISE, 2) + np.array([extra(t, 0), extra(t, 1)])
+        reg = Regressor(a, b, np.array([True, True]))
+        x0, c0 = rls.x, rls.covariance
+        if rls.update(a, b, reg.rows):
+            mon.observe(int(round(t * 1e9)), reg, x0, c0)
+    return mon
+
+
+def test_residuals_of_the_right_model_pass_and_keep_the_sigmas():
+    mon = _drive(lambda t, i: 0.0)
+    tests = mon.tests()
+    assert not mon.mismatch and mon.failed_rows == ()
+    for t in tests:
+        assert t.n == 3000
+        assert abs(t.variance - 1.0) < 0.15  # unit variance within its sampling error (n = 3000)
+        assert abs(t.whiteness) < 0.3
+    assert mon.variance_scale < 1.6
+
+
+def test_a_missing_term_that_follows_the_maneuver_is_a_mismatch_of_its_row():
+    # a slow 0.2 Hz term of 3 noise sd in the lateral row only (a saturating tire, say)
+    mon = _drive(lambda t, i: 3.0 * NOISE * math.sin(2 * math.pi * 0.2 * t) if i == 1 else 0.0)
+    assert mon.mismatch
+    assert mon.failed_rows == ("lateral",)
+    lat = {t.name: t for t in mon.tests()}["lateral"]
+    assert lat.whiteness > 0.5
+    assert mon.variance_scale > 5.0  # the correlated residual carries far less information
+
+
+def test_shipped_thresholds_flag_a_missing_term_far_above_the_design_noise():
+    # the shipped [status] (Q a design weight: variance up to 50 passes, whiteness off)
+    small = _drive(lambda t, i: 3.0 * NOISE * math.sin(2 * math.pi * 0.2 * t) if i == 1 else 0.0, cfg=StatusConfig())
+    assert not small.mismatch
+    big = _drive(lambda t, i: 12.0 * NOISE * math.sin(2 * math.pi * 0.2 * t) if i == 1 else 0.0, cfg=StatusConfig())
+    assert big.failed_rows == ("lateral",)
+
+
+def test_too_few_rows_are_not_tested_and_the_test_can_be_switched_off():
+    mon = _drive(lambda t, i: 10.0 * NOISE * math.sin(t), n=150)
+    assert not mon.mismatch and mon.variance_scale == 1.0
+    off = MismatchMonitor("cornering", StatusConfig(mismatch_test=False), (2.0, 2.0))
+    assert not off.mismatch

@@ -1,0 +1,189 @@
+"""The model-mismatch test of one identification problem: are its residuals what its noise model
+predicts?
+
+Each update of a problem's RLS (``rls.WeightedRLS``, eq 19) has, before the update, the
+estimate x(k) and its covariance C(k) = W P(k) W (unit residual variance). The a priori
+residual of a used row i and the variance the problem's own noise model predicts for it are::
+
+    v_i = b_i - A_i x(k),     s_i = 1 / Q_ii^2 + A_i C(k) A_i^T,     r_i = v_i / sqrt(s_i)
+
+(Q_ii = 1 / noise sd of row i: the design assumption of ``configs/identification``). With the
+right model the normalised residuals r_i are the recursive residuals of least squares (Brown,
+Durbin & Evans 1975): zero mean, unit variance and, beyond the short correlation the filtered
+inputs give them, uncorrelated. A model that does not hold (a missing anti-roll bar in the roll
+row, a saturating tire in the lateral row) leaves a residual that follows the maneuver: large
+against its predicted variance and correlated over the maneuver's time scale. Per row:
+
+* **variance**: the mean of r_i^2 over the drive; a row fails when it exceeds
+  ``mismatch_variance_max``;
+* **whiteness**: the residuals are averaged in bins of ``mismatch_lag_s`` (longer than the
+  filters' correlation, shorter than a maneuver) and the lag-1 autocorrelation of the bin means
+  is taken, rho = sum (m_k - mbar)(m_k+1 - mbar) / sum (m_k - mbar)^2 over consecutive bins; a
+  row fails when rho exceeds ``mismatch_whiteness_max``.
+
+* **long-run variance** (batch means): tau = (sum_k n_k (m_k - rbar)^2 / (K - 1)) / var(r)
+  over the K bins (n_k residuals, mean m_k each); 1 for uncorrelated residuals, the factor by
+  which residuals correlated over the maneuver shrink the information the RLS counted. The
+  identifier multiplies a problem's covariance by ``variance_scale`` = max(1, tau) over its
+  rows; where tau exceeds the RLS's own AR(1) inflation f_j the identifier scales the
+  parameter's variance by tau / f_j (``Identifier.covariances``): the sigmas stay honest when
+  the residuals are correlated over the maneuver, not only from sample to sample.
+
+A row is tested once it has ``mismatch_min_rows`` residuals; the problem is a **model
+mismatch** when any of its rows fails, and the report names those rows (``ROW_NAMES``), so the
+model workbench can take over (which effect explains them). The thresholds
+(``configs/identification/default.toml`` ``[status]``) were chosen on the drives of
+``experiments.ident_study.TUNING_SEEDS`` and are checked on other seeds
+(``tools/ident_study.py``).
+
+Symbols: v [unit of b_i]; s [unit of b_i^2]; r, rho [-]; Q [1/unit of b_i].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["CROSS_CHECKS", "ROW_NAMES", "MismatchMonitor", "RowTest"]
+
+ROW_NAMES: dict[str, tuple[str, ...]] = {
+    "mass": ("vertical",),
+    "tracking": ("wheel_1", "wheel_2", "wheel_3", "wheel_4"),
+    "cornering": ("longitudinal", "lateral"),
+    "inertia": ("roll", "pitch", "yaw"),
+}
+"""The rows of each problem's regressor (eq 20-23) by name."""
+
+CROSS_CHECKS: dict[str, tuple[tuple[str, str], ...]] = {"cornering": (("inertia", "yaw"),)}
+"""Rows of a downstream problem that test a problem's parameters too: eq 22 fits the sum of the
+axle forces (F_f + F_r = m a_y), and only eq 23's yaw row weighs one axle against the other
+(M_z = l_f F_f - l_r F_r, the eq 15 forces of the identified C_alpha, ``forces``). A failed yaw
+row therefore marks the cornering problem a mismatch too (named "inertia.yaw"): the front/rear
+split it found does not balance the yaw moment."""
+
+
+@dataclass(frozen=True)
+class RowTest:
+    """One row's statistics: ``n`` residuals, ``variance`` = mean r^2, ``mean`` = mean r,
+    ``whiteness`` = lag-1 autocorrelation of the bin means and ``long_run`` = tau (both None
+    below 4 bins), ``failed``."""
+
+    name: str
+    n: int
+    variance: float
+    mean: float
+    whiteness: float | None
+    long_run: float | None
+    failed: bool
+
+    def to_json(self) -> dict:
+        return {"row": self.name, "n": self.n, "variance": self.variance, "mean": self.mean,
+                "whiteness": self.whiteness, "long_run": self.long_run, "failed": self.failed}
+
+
+class _Row:
+    __slots__ = ("n", "s1", "s2", "bin", "bin_sum", "bin_n", "means", "counts")
+
+    def __init__(self):
+        self.n, self.s1, self.s2 = 0, 0.0, 0.0
+        self.bin, self.bin_sum, self.bin_n = None, 0.0, 0
+        self.means: list[float] = []
+        self.counts: list[int] = []
+
+    def add(self, k_bin: int, r: float) -> None:
+        self.n += 1
+        self.s1 += r
+        self.s2 += r * r
+        if k_bin != self.bin:
+            self.close()
+            self.bin = k_bin
+        self.bin_sum += r
+        self.bin_n += 1
+
+    def close(self) -> None:
+        if self.bin_n:
+            self.means.append(self.bin_sum / self.bin_n)
+            self.counts.append(self.bin_n)
+        self.bin_sum, self.bin_n = 0.0, 0
+
+    def _bins(self) -> tuple[np.ndarray, np.ndarray]:
+        m = self.means + ([self.bin_sum / self.bin_n] if self.bin_n else [])
+        c = self.counts + ([self.bin_n] if self.bin_n else [])
+        return np.asarray(m, dtype=float), np.asarray(c, dtype=float)
+
+    def whiteness(self) -> float | None:
+        m, _ = self._bins()
+        if len(m) < 4:
+            return None
+        a = m - float(np.mean(m))
+        den = float(a @ a)
+        return float(a[1:] @ a[:-1]) / den if den > 0.0 else 0.0
+
+    def long_run(self) -> float | None:
+        m, c = self._bins()
+        if len(m) < 4 or self.n < 2:
+            return None
+        rbar = self.s1 / self.n
+        var = (self.s2 - self.n * rbar * rbar) / (self.n - 1)
+        if not var > 0.0:
+            return None
+        return float(np.sum(c * (m - rbar) ** 2) / (len(m) - 1)) / var
+
+
+class MismatchMonitor:
+    """The residual statistics of one problem (module docstring). ``observe`` after each
+    update that used rows; ``tests()`` / ``failed_rows`` / ``mismatch`` read them."""
+
+    def __init__(self, problem: str, status_config, q):
+        self.problem = problem
+        self.config = status_config
+        self.names = ROW_NAMES[problem]
+        self._q = np.asarray(q, dtype=float)
+        self._bin_ns = max(int(round(status_config.mismatch_lag_s * 1e9)), 1)
+        self.reset()
+
+    def reset(self) -> None:
+        self._rows = [_Row() for _ in self.names]
+
+    def observe(self, t_ns: int, reg, x_prior: np.ndarray, c_prior: np.ndarray) -> None:
+        """The normalised a priori residuals of the rows ``reg`` used (module docstring)."""
+        a, b = reg.a, reg.b
+        with np.errstate(invalid="ignore", over="ignore"):
+            use = np.asarray(reg.rows, dtype=bool) & np.isfinite(a).all(axis=1) & np.isfinite(b)
+        if not use.any():
+            return
+        k_bin = t_ns // self._bin_ns
+        v = b - a @ x_prior
+        s = 1.0 / self._q ** 2 + np.einsum("ij,jk,ik->i", a, c_prior, a)
+        for i in np.flatnonzero(use):
+            self._rows[i].add(k_bin, float(v[i] / math.sqrt(s[i])))
+
+    def tests(self) -> tuple[RowTest, ...]:
+        cfg = self.config
+        out = []
+        for name, row in zip(self.names, self._rows):
+            n = row.n
+            var = row.s2 / n if n else math.nan
+            mean = row.s1 / n if n else math.nan
+            white = row.whiteness()
+            tested = n >= cfg.mismatch_min_rows and cfg.mismatch_test
+            failed = bool(tested and (var > cfg.mismatch_variance_max
+                                      or (white is not None and white > cfg.mismatch_whiteness_max)))
+            out.append(RowTest(name, n, var, mean, white, row.long_run(), failed))
+        return tuple(out)
+
+    @property
+    def variance_scale(self) -> float:
+        """max(1, tau) over the rows with ``mismatch_min_rows`` residuals (module docstring)."""
+        taus = [t.long_run for t in self.tests() if t.long_run is not None and t.n >= self.config.mismatch_min_rows]
+        return max([1.0, *taus])
+
+    @property
+    def failed_rows(self) -> tuple[str, ...]:
+        return tuple(t.name for t in self.tests() if t.failed)
+
+    @property
+    def mismatch(self) -> bool:
+        return bool(self.failed_rows)
