@@ -12,7 +12,7 @@ from vdps_hil.model.chassis import (PAPER_CHASSIS, Chassis, anti_roll_forces_n, 
                                     roll_centre_forces_n)
 from vdps_hil.model.core import Env, Inputs, Model
 from vdps_hil.model.params import VehicleFileError, load_vehicle, parse_vehicle, resolve_vehicle_path
-from vdps_hil.model.stages import ackermann_angles
+from vdps_hil.model.stages import ackermann_angles, steer_angles
 
 SEDAN = load_vehicle("sedan-truth")
 TF, TR = 2 * SEDAN.geometry.track_half_front_m, 2 * SEDAN.geometry.track_half_rear_m
@@ -42,9 +42,9 @@ def test_roll_centre_forces_shorten_the_lateral_lever_by_h_rc():
 def test_ackermann_fraction_blends_full_ackermann_and_parallel_steer():
     L, tf, dm = SEDAN.geometry.wheelbase_m, SEDAN.geometry.track_half_front_m, 0.1
     full = ackermann_angles(dm, L, tf)
-    assert ackermann_angles(dm, L, tf, 1.0) == full
-    assert ackermann_angles(dm, L, tf, 0.0) == pytest.approx((dm, dm), abs=1e-15)
-    half = ackermann_angles(dm, L, tf, 0.5)
+    assert steer_angles(dm, L, tf, 1.0) == full
+    assert steer_angles(dm, L, tf, 0.0) == pytest.approx((dm, dm), abs=1e-15)
+    half = steer_angles(dm, L, tf, 0.5)
     assert half == pytest.approx(((dm + full[0]) / 2, (dm + full[1]) / 2), abs=1e-15)
     assert full[0] > dm > full[1]  # left turn: the inner (left) wheel steers more
     assert blend_ackermann(dm, *full, 1.0) == full
