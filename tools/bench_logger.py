@@ -112,6 +112,9 @@ def emulate(args) -> int:
 
     d = Path(args.dir)
     d.mkdir(parents=True, exist_ok=True)
+    # first calls load the DBC (about 1 s): warm up before the logger is told to start
+    encode_wheel_speeds([20.0] * 4, 0)
+    encode_imu_packet(0, [0.0, 0.0, 9.81], [0.0] * 3, 0)
     devs = {"can": PtyDevice(d / "can", args.fifo), "imu": PtyDevice(d / "imu", args.fifo),
             "gnss": PtyDevice(d / "gnss", args.fifo)}
     (d / "ready.json").write_text(json.dumps({k: v.name for k, v in devs.items()}))
@@ -176,8 +179,12 @@ def emulate(args) -> int:
     t_end = t0 + args.seconds
     next_progress = t0
     prog = open(d / "progress.jsonl", "w")
+    last = t0
+    max_gap = 0.0  # the emulator's own longest stall (a loaded machine): bursts follow it
     while True:
         now = time.monotonic()
+        max_gap = max(max_gap, now - last)
+        last = now
         if now >= t_end:
             break
         el = now - t0
@@ -204,6 +211,7 @@ def emulate(args) -> int:
     prog.write(json.dumps({"t": time.monotonic(), "sent": sent, "dropped": dropped}) + "\n")
     prog.close()
     result = {"seconds": t_stop - t0, "sent": sent, "dropped_at_device": dropped,
+              "emulator_max_stall_s": max_gap,
               "unsent_bytes": {k: len(v.pending) for k, v in devs.items()},
               "can_frames": frames_sent, "rates_hz": streams}
     (d / "sent.json").write_text(json.dumps(result))
@@ -317,7 +325,8 @@ def loss(sent: dict, got: dict, with_serial: bool) -> dict:
     out = {"can_frames_sent": sent["can_frames"] + s["extra"] - dev["extra"],
            "can_frames_got": got["can_frames"],
            "extra_missing": s["extra"] - len(set(extra)),
-           "dropped_at_device": sum(dev[k] for k in streams)}
+           "dropped_at_device": sum(dev[k] for k in streams),
+           "emulator_max_stall_s": round(sent.get("emulator_max_stall_s", 0.0), 4)}
     if with_serial:
         out["imu_missing"] = s["imu"] - got["imu"]
         out["gnss_missing"] = s["gnss"] - got["gnss_att"]
