@@ -151,8 +151,11 @@ def _child(sock: socket.socket, max_buffer: int) -> int:
                         quitting = True
         if quitting:
             break
-    while dev >= 0 and read_dev(False):  # what the device still holds
-        pass
+    while dev >= 0:  # what the device still holds (never waiting: the fd may block)
+        ready = poller.poll(0)
+        ev = next((e for fd, e in ready if fd == dev), 0)
+        if not ev or not read_dev(bool(ev & (select.POLLHUP | select.POLLERR | select.POLLNVAL))):
+            break
     if drop_n:
         pending.extend(HDR.pack(OVERFLOW, drop_t, DROPS.size))
         pending.extend(DROPS.pack(drop_n, drop_b))

@@ -10,9 +10,9 @@ Three stages, so that nothing downstream can make a device lose data:
    nothing else; a full buffer drops and counts (``reader_overflow``).
 2. **Raw first**: the session loop takes what every reader holds and writes the raw records
    (``/raw/can/<bus>``, ``/raw/serial/<device>``) at once.
-3. **Decoding after**: the same records are decoded in arrival order in the time left; a batch
-   that waited longer than ``decode_lag_s`` is not decoded (``decoded_skipped``, its raw records
-   are in the file, the decoder forgets its sequence state so the skip is not taken for data
+3. **Decoding after**: the same records are decoded in arrival order in the time left (50 ms per
+   loop, then the readers are served again); a record read more than ``decode_lag_s`` ago is
+   not decoded (``decoded_skipped``, its raw record is in the file, the decoder forgets its sequence state so the skip is not taken for data
    lost on the wire). When the disk (or the file-size limit of the process) leaves less than
    ``reserve_bytes``, decoded samples are no longer written (``decoded_skipped_disk``) and the
    rest goes to the raw records. The ``tap`` (``vdps log --pipeline``) runs in a thread of its
@@ -41,6 +41,9 @@ from vdps_hil.adapters.base import Adapter, AdapterError
 from vdps_hil.record.recorder import Recorder
 
 __all__ = ["LogSession", "open_all", "start_readers", "room_bytes", "DEFAULT_RESERVE_BYTES"]
+
+DECODE_SLICE = 64
+"""Payloads decoded between two looks at the clock (a slow decoder yields to raw writing)."""
 
 DEFAULT_RESERVE_BYTES = 64 << 20
 """Room kept for raw records once the disk is nearly full (minutes of every device here)."""
@@ -179,7 +182,7 @@ class LogSession:
         self.errors: list[str] = []
         self.fatal: str | None = None
         self.decoded_ok = True  # False once the disk reserve is reached
-        self._backlog: deque = deque()  # (adapter, stamped payloads, monotonic time taken)
+        self._backlog: deque = deque()  # (adapter, stamped payloads, index of the next to decode)
         self._tap_worker: _TapWorker | None = None
         self.raw_written = 0
         self.decode_backlog_max = 0
@@ -213,29 +216,38 @@ class LogSession:
     def _take_raw(self, final: bool = False) -> int:
         """Stage 2 for every adapter; returns the number of payloads taken."""
         n = 0
-        now = time.monotonic()
         for a in self.adapters:
             stamped = a.stop_reader() if final else a.collect()
             if stamped:
                 self._write_raw(a, stamped)
-                self._backlog.append((a, stamped, now))
+                self._backlog.append((a, stamped, 0))
                 n += len(stamped)
         self.decode_backlog_max = max(self.decode_backlog_max, len(self._backlog))
         return n
 
     def _decode(self, budget_s: float) -> None:
-        """Stage 3 for up to ``budget_s`` of time."""
+        """Stage 3 for up to ``budget_s`` of time, in slices of ``DECODE_SLICE`` payloads;
+        payloads whose read time is more than ``decode_lag_s`` ago are not decoded."""
         t_end = time.monotonic() + budget_s
         backlog = self._backlog
+        lag_ns = int(self.decode_lag_s * 1e9)
         while backlog:
-            a, stamped, t_taken = backlog.popleft()
-            now = time.monotonic()
-            if now - t_taken > self.decode_lag_s:
-                a.skip_decoding(stamped)
-                continue
-            samples = a.decode_stamped(stamped)
+            a, stamped, i = backlog[0]
+            j, n = i, len(stamped)
+            if not a.clock.replay:
+                old = time.monotonic_ns() - lag_ns
+                while j < n and stamped[j][0] < old:
+                    j += 1
+                if j > i:
+                    a.skip_decoding(stamped[i:j])
+            k = min(n, j + DECODE_SLICE)
+            samples = a.decode_stamped(stamped[j:k])
             if samples:
                 self._write_samples(a, samples)
+            if k >= n:
+                backlog.popleft()
+            else:
+                backlog[0] = (a, stamped, k)
             if time.monotonic() >= t_end:
                 break
 
@@ -317,8 +329,8 @@ class LogSession:
             else:
                 for a in self.adapters:
                     a.stop_reader()
-            for a, stamped, _ in self._backlog:
-                a.skip_decoding(stamped)
+            for a, stamped, i in self._backlog:
+                a.skip_decoding(stamped[i:])
             self._backlog.clear()
             if self._tap_worker is not None:
                 self._tap_worker.close(self.tap_drain_s)
