@@ -322,3 +322,62 @@ def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
     c = a.health.all_counters()
     assert c["outages"] == 1 and c["reconnects"] == 1
     assert c["bad_frames"] >= 1 and c["lost_frames"] == 0
+
+
+def test_slcan_reader_process_parses_frames_and_reconnects(tmp_path):
+    """The starvation-proof path: a reader process drains the slcan port, the adapter parses
+    the lines it collects; an unplug is reported by the reader and the replugged port is
+    handed to it again."""
+    import os
+    import pty
+    import tty
+
+    from vdps_hil.adapters.can_adapter import slcan_line
+
+    link = tmp_path / "ttyACM1"
+
+    def plug():
+        m, s = pty.openpty()
+        tty.setraw(s)
+        if link.is_symlink():
+            link.unlink()
+        link.symlink_to(os.ttyname(s))
+        return m, s
+
+    def collect(until, timeout=5.0):
+        got = []
+        t_end = time.monotonic() + timeout
+        while not until(got) and time.monotonic() < t_end:
+            got += a.collect()
+            time.sleep(0.01)
+        return got
+
+    m, s = plug()
+    a = CanAdapter("vdps", f"slcan:{link},sleep_after_open=0", decoder=VdpsCanDecoder(),
+                   reconnect_s=0.05)
+    a.open()
+    a.start_reader()
+    try:
+        assert a.health.reader == "process"
+        os.write(m, b"".join(slcan_line(f.arbitration_id, bytes(f.data))
+                             for k in range(50) for f in encode_wheel_speeds([5.0] * 4, k)))
+        got = collect(lambda g: len(g) >= 100)
+        assert len(a.raw_events(got)) == 100 and len(a.decode_stamped(got)) == 100
+        os.close(m)
+        os.close(s)
+        link.unlink()
+        collect(lambda g: a.health.state == "lost")
+        assert a.health.state == "lost"
+        m, s = plug()
+        collect(lambda g: a.health.state == "open")
+        os.write(m, b"".join(slcan_line(f.arbitration_id, bytes(f.data))
+                             for f in encode_wheel_speeds([6.0] * 4, 50)))
+        got = collect(lambda g: len([x for x in g if x[2] is not None and hasattr(x[2], "data")]) >= 2)
+        samples = a.decode_stamped(got)
+    finally:
+        a.close()
+        os.close(m)
+        os.close(s)
+    assert len(samples) == 2 and samples[-1].fields["wheel_speed_radps_3"] == pytest.approx(6.0)
+    c = a.health.all_counters()
+    assert c["outages"] == 1 and c["reconnects"] == 1 and c["lost_frames"] == 0
