@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import os
 import resource
-import select
 import threading
 import time
 from collections import deque
@@ -271,13 +270,12 @@ class LogSession:
                 self.errors.append(f"disk: {room} bytes left (< reserve {self.reserve_bytes}): "
                                    "decoded topics stopped")
 
-    def _wait(self) -> None:
-        fds = [a.reader.fileno() for a in self.adapters if a.reader is not None]
-        fds = [f for f in fds if f is not None]
-        if fds and len(fds) == len(self.adapters):
-            select.select(fds, [], [], self.poll_s)
-        else:
-            time.sleep(self.poll_s)
+    def _wait(self, until: float) -> None:
+        """Sleep to the next tick (one loop per ``poll_s``, not one per read: the readers
+        buffer, and a loop per read costs more CPU than the reading)."""
+        dt = until - time.monotonic()
+        if dt > 0:
+            time.sleep(dt)
 
     def _periodic(self, now: float, due: dict) -> None:
         if now >= due["flush"]:
@@ -310,10 +308,11 @@ class LogSession:
                 n = self._take_raw()
                 self._decode(0.05)
                 self._periodic(time.monotonic(), due)
-                if not n and not self._backlog:
-                    if all(a.reader is not None and not a.reader.alive for a in self.adapters):
-                        break  # every input ended
-                    self._wait()
+                if not n and not self._backlog and \
+                        all(a.reader is not None and not a.reader.alive for a in self.adapters):
+                    break  # every input ended
+                if not self._backlog:  # the readers hold what comes meanwhile
+                    self._wait(now + self.poll_s)
         except OSError as e:  # the file system refused a write (disk full ...)
             self.fatal = f"recording stopped: {e.strerror or e}"
             self.errors.append(self.fatal)
