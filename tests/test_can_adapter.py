@@ -270,26 +270,30 @@ def test_run_in_thread_until_stopped(rng):
     assert len(sub.drain()) == 100 and a.health.all_counters()["lost_frames"] == 0
 
 
-def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
-    """The slcan path end to end (our chunked reader), including a USB-CAN adapter that is
-    unplugged and plugged back in under the same name."""
+def _plug(link):
+    """A pseudo-terminal (raw) named by the symlink ``link``, as a USB-CAN adapter plugged in
+    (again) under the same name: (master, slave) descriptors."""
     import os
     import pty
     import tty
 
+    m, s = pty.openpty()
+    tty.setraw(s)
+    if link.is_symlink():
+        link.unlink()
+    link.symlink_to(os.ttyname(s))
+    return m, s
+
+
+def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
+    """The slcan path end to end (our chunked reader), including a USB-CAN adapter that is
+    unplugged and plugged back in under the same name."""
+    import os
+
     from vdps_hil.adapters.can_adapter import slcan_line
 
     link = tmp_path / "ttyACM0"
-
-    def plug():
-        m, s = pty.openpty()
-        tty.setraw(s)
-        if link.is_symlink():
-            link.unlink()
-        link.symlink_to(os.ttyname(s))
-        return m, s
-
-    m, s = plug()
+    m, s = _plug(link)
     a = CanAdapter("vdps", f"slcan:{link},sleep_after_open=0", decoder=VdpsCanDecoder(),
                    reconnect_s=0.05)
     sub = a.subscribe(raw=False)
@@ -306,7 +310,7 @@ def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
         while a.health.state != "lost" and time.monotonic() < t_end:
             a.poll(0.02)
         assert a.health.state == "lost"
-        m, s = plug()
+        m, s = _plug(link)
         t_end = time.monotonic() + 3
         while a.health.state != "open" and time.monotonic() < t_end:
             a.poll(0.02)
@@ -329,21 +333,10 @@ def test_slcan_reader_process_parses_frames_and_reconnects(tmp_path):
     the lines it collects; an unplug is reported by the reader and the replugged port is
     handed to it again."""
     import os
-    import pty
-    import tty
 
     from vdps_hil.adapters.can_adapter import slcan_line
 
     link = tmp_path / "ttyACM1"
-
-    def plug():
-        m, s = pty.openpty()
-        tty.setraw(s)
-        if link.is_symlink():
-            link.unlink()
-        link.symlink_to(os.ttyname(s))
-        return m, s
-
     def collect(until, timeout=5.0):
         got = []
         t_end = time.monotonic() + timeout
@@ -352,7 +345,7 @@ def test_slcan_reader_process_parses_frames_and_reconnects(tmp_path):
             time.sleep(0.01)
         return got
 
-    m, s = plug()
+    m, s = _plug(link)
     a = CanAdapter("vdps", f"slcan:{link},sleep_after_open=0", decoder=VdpsCanDecoder(),
                    reconnect_s=0.05)
     a.open()
@@ -368,7 +361,7 @@ def test_slcan_reader_process_parses_frames_and_reconnects(tmp_path):
         link.unlink()
         collect(lambda g: a.health.state == "lost")
         assert a.health.state == "lost"
-        m, s = plug()
+        m, s = _plug(link)
         collect(lambda g: a.health.state == "open")
         os.write(m, b"".join(slcan_line(f.arbitration_id, bytes(f.data))
                              for f in encode_wheel_speeds([6.0] * 4, 50)))
