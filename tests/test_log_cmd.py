@@ -63,7 +63,8 @@ def test_nothing_lost_at_table1_rates_and_sigterm_closes_cleanly(tmp_path):
     assert raw_imu_seq == [k % 65536 for k in range(s["imu"])]
     assert raw_can == sent["can_frames"]
     assert raw_gga == s["gnss"]
-    assert all(h["drops"] == 0 for h in health.values()), health
+    assert all(h["drops"] == 0 for h in health.values()), \
+        {k: (h["loss"], {c: n for c, n in h["counters"].items() if n}) for k, h in health.items()}
     assert health["can.vdps"]["counters"]["lost_frames"] == 0
     # the decoded topics: complete unless skipping was counted, in order either way
     skipped = sum(h["loss"]["decoded_skipped"] for h in health.values())

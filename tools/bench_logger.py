@@ -88,19 +88,21 @@ class PtyDevice:
         self.pending = bytearray()
         self.dropped = 0
         self.bytes = 0
+        self.late_bytes = 0  # late bytes still pending: they do not take FIFO room
 
     def send(self, msg: bytes, late: bool = False) -> bool:
         """Queue one whole message; False (dropped, counted) if the FIFO is full. A ``late``
         message (the emulator itself was stalled past its due time) is queued regardless: the
         device would have sent it while the emulator was not running, so its burst is not
-        charged to the reader."""
+        charged to the reader (nor are later messages queued behind it)."""
         if late:
             self.pending += msg
+            self.late_bytes += len(msg)
             self.pump()
             return True
-        if len(self.pending) + len(msg) > self.fifo:
+        if len(self.pending) - self.late_bytes + len(msg) > self.fifo:
             self.pump()
-            if len(self.pending) + len(msg) > self.fifo:
+            if len(self.pending) - self.late_bytes + len(msg) > self.fifo:
                 self.dropped += 1
                 return False
         self.pending += msg
@@ -115,6 +117,7 @@ class PtyDevice:
                     return
                 raise
             self.bytes += n
+            self.late_bytes = max(0, self.late_bytes - n)
             del self.pending[:n]
 
     def read_commands(self) -> bytes:
@@ -122,6 +125,13 @@ class PtyDevice:
             return os.read(self.master, 4096)
         except OSError:
             return b""
+
+
+def _publish(path: Path, doc: dict) -> None:
+    """Write ``doc`` as JSON so that ``path`` appears complete (others wait for it to exist)."""
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(doc))
+    os.replace(tmp, path)
 
 
 def emulate(args) -> int:
@@ -142,7 +152,7 @@ def emulate(args) -> int:
     encode_imu_packet(0, [0.0, 0.0, 9.81], [0.0] * 3, 0)
     devs = {"can": PtyDevice(d / "can", args.fifo), "imu": PtyDevice(d / "imu", args.fifo),
             "gnss": PtyDevice(d / "gnss", args.fifo)}
-    (d / "ready.json").write_text(json.dumps({k: v.name for k, v in devs.items()}))
+    _publish(d / "ready.json", {k: v.name for k, v in devs.items()})
     rng = np.random.default_rng(args.seed)
     can_dev, imu_dev, gnss_dev = devs["can"], devs["imu"], devs["gnss"]
     streams = {  # name -> rate [Hz]
@@ -245,7 +255,7 @@ def emulate(args) -> int:
               "emulator_max_stall_s": max_gap, "emulator_late_msgs": late_msgs,
               "unsent_bytes": {k: len(v.pending) for k, v in devs.items()},
               "can_frames": frames_sent, "rates_hz": streams}
-    (d / "sent.json").write_text(json.dumps(result))
+    _publish(d / "sent.json", result)
     t_linger = time.monotonic() + args.linger
     while not (d / "stop").exists() and time.monotonic() < t_linger:
         can_dev.read_commands()
