@@ -39,8 +39,12 @@ class Rig:
         self.out = d / "out.mcap"
         self.emu = subprocess.Popen([sys.executable, str(TOOL), "emulate", "--dir", str(d),
                                      "--seconds", str(seconds), "--extra-fps", str(extra_fps),
-                                     "--linger", "60", "--wait", "60"])
-        assert wait_for(d / "ready.json", 30), "emulator did not start"
+                                     "--linger", "60", "--wait", "240"])
+        # start-up is not real-time: on a loaded machine imports alone can take a minute
+        if not wait_for(d / "ready.json", 180):
+            self.emu.kill()
+            self.emu.wait()
+            raise AssertionError("emulator did not start")
         self.logger = subprocess.Popen(
             [sys.executable, "-c", VDPS, "log",
              "--can", f"vdps=slcan:{d / 'can'},sleep_after_open=0",
@@ -49,7 +53,7 @@ class Rig:
              "--json", str(d / "log.json"), *map(str, logger_args)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         rotating = any(str(a).startswith("--rotate") for a in logger_args)
-        if not wait_for(d / "out_0000.mcap" if rotating else self.out, 60):
+        if not wait_for(d / "out_0000.mcap" if rotating else self.out, 180):
             self.logger.kill()
             self.close()
             raise AssertionError(f"logger did not start: {self.logger.stderr.read()[-800:]}")
@@ -73,3 +77,16 @@ class Rig:
         if self.logger.poll() is None:
             self.logger.kill()
             self.logger.wait()
+
+
+def raw_serial(reader) -> tuple[list[int], int]:
+    """The IMU packet counters and the number of GGA sentences in a recording's raw serial
+    topics (``imu``, ``gnss``), decoded again here: the raw topics are the recording."""
+    from vdps_hil.codecs.imu_decoder import ImuDecoder
+
+    raw = {"imu": bytearray(), "gnss": bytearray()}
+    for dev, _, data in reader.iter_raw_serial():
+        raw.setdefault(dev, bytearray()).extend(data)
+    dec = ImuDecoder("imu")
+    seq = [int(smp.fields["seq_counter"]) for smp in dec.feed(0, bytes(raw["imu"])) + dec.flush()]
+    return seq, bytes(raw["gnss"]).count(b"GGA,")

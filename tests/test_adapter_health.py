@@ -51,3 +51,23 @@ def test_nested_decoder_counters_are_summed():
     assert c["unknown_id"] == 2 and c["dlc_mismatch"] == 5 and c["lost_frames"] == 3
     assert a.health.drops == 3
     assert a.health.error_total() == 5  # unknown IDs are not errors
+
+
+def test_loss_is_sorted_by_where_it_happened():
+    class Lossy(ListAdapter):
+        def decoder_counters(self):
+            return {"seq_gaps": 3, "bus": {"lost_frames": 2}}
+
+    a = Lossy([])
+    h = a.health
+    h.count("reader_overflow", 5)
+    h.count("os_overrun", 7)
+    h.count("decoded_skipped", 11)
+    h.os_counters = "yes"
+    lo = h.snapshot()["loss"]
+    assert (lo["os"], lo["reader"], lo["sequence"], lo["decoded_skipped"]) == (7, 5, 5, 11)
+    assert lo["detail"] == {"os_overrun": 7, "reader_overflow": 5, "seq_gaps": 3,
+                            "lost_frames": 2, "decoded_skipped": 11}
+    assert h.drops == 17  # decoding skipped is not raw data lost
+    line = a.status_line()
+    assert "drops 17 (os 7, reader 5, seq 5), decode skipped 11" in line

@@ -274,26 +274,30 @@ def test_run_in_thread_until_stopped(rng):
     assert len(sub.drain()) == 100 and a.health.all_counters()["lost_frames"] == 0
 
 
-def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
-    """The slcan path end to end (our chunked reader), including a USB-CAN adapter that is
-    unplugged and plugged back in under the same name."""
+def _plug(link):
+    """A pseudo-terminal (raw) named by the symlink ``link``, as a USB-CAN adapter plugged in
+    (again) under the same name: (master, slave) descriptors."""
     import os
     import pty
     import tty
 
+    m, s = pty.openpty()
+    tty.setraw(s)
+    if link.is_symlink():
+        link.unlink()
+    link.symlink_to(os.ttyname(s))
+    return m, s
+
+
+def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
+    """The slcan path end to end (our chunked reader), including a USB-CAN adapter that is
+    unplugged and plugged back in under the same name."""
+    import os
+
     from vdps_hil.adapters.can_adapter import slcan_line
 
     link = tmp_path / "ttyACM0"
-
-    def plug():
-        m, s = pty.openpty()
-        tty.setraw(s)
-        if link.is_symlink():
-            link.unlink()
-        link.symlink_to(os.ttyname(s))
-        return m, s
-
-    m, s = plug()
+    m, s = _plug(link)
     a = CanAdapter("vdps", f"slcan:{link},sleep_after_open=0", decoder=VdpsCanDecoder(),
                    reconnect_s=0.05)
     sub = a.subscribe(raw=False)
@@ -310,7 +314,7 @@ def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
         while a.health.state != "lost" and time.monotonic() < t_end:
             a.poll(0.02)
         assert a.health.state == "lost"
-        m, s = plug()
+        m, s = _plug(link)
         t_end = time.monotonic() + 3
         while a.health.state != "open" and time.monotonic() < t_end:
             a.poll(0.02)
@@ -326,3 +330,51 @@ def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
     c = a.health.all_counters()
     assert c["outages"] == 1 and c["reconnects"] == 1
     assert c["bad_frames"] >= 1 and c["lost_frames"] == 0
+
+
+def test_slcan_reader_process_parses_frames_and_reconnects(tmp_path):
+    """The starvation-proof path: a reader process drains the slcan port, the adapter parses
+    the lines it collects; an unplug is reported by the reader and the replugged port is
+    handed to it again."""
+    import os
+
+    from vdps_hil.adapters.can_adapter import slcan_line
+
+    link = tmp_path / "ttyACM1"
+    def collect(until, timeout=5.0):
+        got = []
+        t_end = time.monotonic() + timeout
+        while not until(got) and time.monotonic() < t_end:
+            got += a.collect()
+            time.sleep(0.01)
+        return got
+
+    m, s = _plug(link)
+    a = CanAdapter("vdps", f"slcan:{link},sleep_after_open=0", decoder=VdpsCanDecoder(),
+                   reconnect_s=0.05)
+    a.open()
+    a.start_reader()
+    try:
+        assert a.health.reader == "process"
+        os.write(m, b"".join(slcan_line(f.arbitration_id, bytes(f.data))
+                             for k in range(50) for f in encode_wheel_speeds([5.0] * 4, k)))
+        got = collect(lambda g: len(g) >= 100)
+        assert len(a.raw_events(got)) == 100 and len(a.decode_stamped(got)) == 100
+        os.close(m)
+        os.close(s)
+        link.unlink()
+        collect(lambda g: a.health.state == "lost")
+        assert a.health.state == "lost"
+        m, s = _plug(link)
+        collect(lambda g: a.health.state == "open")
+        os.write(m, b"".join(slcan_line(f.arbitration_id, bytes(f.data))
+                             for f in encode_wheel_speeds([6.0] * 4, 50)))
+        got = collect(lambda g: len([x for x in g if x[2] is not None and hasattr(x[2], "data")]) >= 2)
+        samples = a.decode_stamped(got)
+    finally:
+        a.close()
+        os.close(m)
+        os.close(s)
+    assert len(samples) == 2 and samples[-1].fields["wheel_speed_radps_3"] == pytest.approx(6.0)
+    c = a.health.all_counters()
+    assert c["outages"] == 1 and c["reconnects"] == 1 and c["lost_frames"] == 0

@@ -105,3 +105,29 @@ def test_sensor_repeat_rejected_and_counted():
     assert len(dec.decode(0, m.arbitration_id, bytes(m.data))) == 1
     assert dec.decode(1000, m.arbitration_id, bytes(m.data)) == []
     assert dec.counters["VDPS_Suspension"]["counter_repeat"] == 1
+
+
+def test_a_stalled_reader_is_not_a_loss_of_whole_counter_cycles():
+    """A reader that stalls 0.5 s and then reads the backlog in one burst stamps the burst with
+    one receive time: a long gap (500 periods at 1 kHz, ~2 counter cycles) with counter +1,
+    then frames 0 ns apart. Nothing was lost; a real silence followed by paced frames is."""
+    dec = VdpsCanDecoder()
+    period = 1_000_000
+    t, k = 0, 0
+    for _ in range(300):  # paced: the period is learned
+        m = encode_steer(0.0, k % 256)
+        dec.decode(t, m.arbitration_id, bytes(m.data))
+        t, k = t + period, k + 1
+    t += 500 * period  # the stall: the backlog of 500 frames arrives at once
+    for _ in range(500):
+        m = encode_steer(0.0, k % 256)
+        assert len(dec.decode(t, m.arbitration_id, bytes(m.data))) == 1
+        k += 1
+    for _ in range(50):  # paced again
+        t += period
+        m = encode_steer(0.0, k % 256)
+        dec.decode(t, m.arbitration_id, bytes(m.data))
+        k += 1
+    c = dec.counters["VDPS_SteerAngle"]
+    assert c["lost_frames"] == 0 and c["stall_gaps"] == 1
+    assert c["accepted"] == 850

@@ -58,6 +58,9 @@ def test_cli_text_json_and_errors(tmp_path, real_data):
     assert "/decoded/can.vdps/steer" in p.stdout and "unknown_id 1" in p.stdout
     assert "catalogue fields provided:" in p.stdout
     doc = json.loads((tmp_path / "i.json").read_text())
+    lost = doc["health"]["can.vdps"]["loss"]  # the 1 s hole: frames the counters say are missing
+    assert lost["sequence"] == doc["health"]["can.vdps"]["counters"]["lost_frames"] > 0
+    assert f"lost: os ?, reader 0, seq counters {lost['sequence']}; decoding skipped 0" in p.stdout
     assert doc["topics"]["/decoded/can.vdps/steer"]["count"] == 200
     junk = tmp_path / "j.mcap"
     junk.write_bytes(b"garbage")

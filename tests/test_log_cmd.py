@@ -7,7 +7,7 @@ import json
 import signal
 import time
 
-from live_devices import Rig, vdps
+from live_devices import Rig, raw_serial, vdps
 
 from vdps_hil.record.reader import RecordingReader
 
@@ -26,11 +26,22 @@ def _stop_with_sigterm(rig, wait_s: float):
     return sent, rc, err
 
 
+def _in_order(got: list[int], want: list[int]) -> bool:
+    """``got`` is ``want`` with some items left out, the rest in order."""
+    it = iter(want)
+    return all(any(g == w for w in it) for g in got)
+
+
 def test_nothing_lost_at_table1_rates_and_sigterm_closes_cleanly(tmp_path):
+    """The raw topics hold every frame, packet and sentence sent, by their own counters; the
+    decoded topics too, except what the session says it skipped (decoding behind by more than
+    its lag limit on a starved machine), and what they hold is in order."""
     rig = Rig(tmp_path, seconds=2.0)
-    sent, rc, err = _stop_with_sigterm(rig, 30)
+    sent, rc, err = _stop_with_sigterm(rig, 120)
     assert rc == 0, err[-800:]
-    assert sum(sent["dropped_at_device"].values()) == 0  # the logger kept up with the links
+    # the logger kept up with the links
+    assert sum(sent["dropped_at_device"].values()) == 0, {k: v for k, v in sent.items()
+                                                          if k != "sent"}
     s = sent["sent"]
     with RecordingReader(rig.out) as r:
         assert not r.truncated  # closed properly by SIGTERM
@@ -45,16 +56,27 @@ def test_nothing_lost_at_table1_rates_and_sigterm_closes_cleanly(tmp_path):
             elif smp.kind == "gnss_att":
                 gnss += 1
         raw_can = sum(1 for _ in r.iter_raw_can())
-        health = json.loads(r.metadata()["vdps.health"]["can.vdps"])
-    # every packet, in order, by its own counter
-    assert imu_seq == [k % 65536 for k in range(s["imu"])]
+        raw_imu_seq, raw_gga = raw_serial(r)
+        health = {k: json.loads(v) for k, v in r.metadata()["vdps.health"].items()
+                  if k != "recorder"}
+    # the raw topics: every packet, in order, by its own counter
+    assert raw_imu_seq == [k % 65536 for k in range(s["imu"])]
+    assert raw_can == sent["can_frames"]
+    assert raw_gga == s["gnss"]
+    assert all(h["drops"] == 0 for h in health.values()), \
+        {k: (h["loss"], {c: n for c, n in h["counters"].items() if n}) for k, h in health.items()}
+    assert health["can.vdps"]["counters"]["lost_frames"] == 0
+    # the decoded topics: complete unless skipping was counted, in order either way
+    skipped = sum(h["loss"]["decoded_skipped"] for h in health.values())
+    want = {"imu": (imu_seq, s["imu"], 65536), "gnss_att": ([0] * gnss, s["gnss"], 1)}
     for key, n in (("front", s["wheel_speed"]), ("rear", s["wheel_speed"]),
                    ("wheel_torque", s["wheel_torque"]), ("steer", s["steer"]),
                    ("suspension", s["suspension"])):
-        assert can_seq[key] == [k % 256 for k in range(n)], key
-    assert raw_can == sent["can_frames"]
-    assert gnss == s["gnss"]
-    assert health["counters"]["lost_frames"] == 0 and health["drops"] == 0
+        want[key] = (can_seq.get(key, []), n, 256)
+    for key, (got, n, mod) in want.items():
+        full = [k % mod for k in range(n)]
+        assert _in_order(got, full), key
+        assert len(got) == n or skipped > 0, (key, len(got), n)
     summary = json.loads((tmp_path / "log.json").read_text())
     assert summary["queue_overflow"] == 0 and summary["write_errors"] == 0
 
@@ -167,7 +189,7 @@ def _est(path):
 def _live_pipeline_run(tmp_path, *logger_args):
     """A 5 s `vdps log --pipeline` on the emulated devices (slcan, IMU, GNSS on ptys), stopped by
     SIGTERM: the log's JSON summary."""
-    _, rc, err = _stop_with_sigterm(Rig(tmp_path, seconds=5.0, logger_args=("--pipeline", *logger_args)), 60)
+    _, rc, err = _stop_with_sigterm(Rig(tmp_path, seconds=5.0, logger_args=("--pipeline", *logger_args)), 120)
     assert rc == 0, err[-800:]
     return json.loads((tmp_path / "log.json").read_text())
 

@@ -6,7 +6,7 @@ import os
 import signal
 import time
 
-from live_devices import Rig, vdps
+from live_devices import Rig, raw_serial, vdps
 
 from vdps_hil.record.reader import RecordingReader
 
@@ -17,7 +17,7 @@ def test_kill_9_then_recover_loses_at_most_the_last_second(tmp_path):
         time.sleep(2.0)
         os.kill(rig.logger.pid, signal.SIGKILL)
         t_kill = time.monotonic()  # CLOCK_MONOTONIC is shared by the processes
-        rig.logger.wait(10)
+        rig.logger.wait(60)
         rig.sent()
         progress = rig.progress()
     finally:
@@ -31,7 +31,7 @@ def test_kill_9_then_recover_loses_at_most_the_last_second(tmp_path):
     assert not rep["properly_closed"] and rep["messages"] > 0
     with RecordingReader(fixed) as r:
         assert not r.truncated
-        imu = [int(s.fields["seq_counter"]) for s in r.iter_samples() if s.kind == "imu"]
+        imu = raw_serial(r)[0]  # the raw topic: decoding may lag on a loaded machine
         can = sum(1 for _ in r.iter_raw_can())
     # what the emulator had sent one second before the kill must all be there
     before = [p for p in progress if p["t"] <= t_kill - 1.0]

@@ -120,3 +120,31 @@ def test_file_adapter_stamps_by_wire_time(tmp_path):
     assert len(chunks) == 10
     # 1000 bytes at 100 kbit/s, 10 bits per byte: 0.1 s per chunk, stamped at its end
     assert [c.t_ns for c in chunks] == [5 + (k + 1) * 100_000_000 for k in range(10)]
+
+
+def test_uart_loss_counters_are_read_into_the_health():
+    """A real UART (8250 driver): the OS's own loss counters are known; on a pty they are not."""
+    if not os.path.exists("/dev/ttyS0"):
+        pytest.skip("no UART device node here")
+    a = SerialAdapter("gps", "/dev/ttyS0", 9600)
+    try:
+        a.open()
+    except AdapterError as e:
+        pytest.skip(f"UART not usable: {e}")
+    try:
+        a.check_os_counters()
+        a.check_os_counters()
+        assert a.health.os_counters == "yes"
+        assert a.status()["loss"]["os"] == 0 and "(os 0," in a.status_line()
+    finally:
+        a.close()
+    m, s = pty.openpty()
+    b = SerialAdapter("gnss", os.ttyname(s), 115200)
+    b.open()
+    try:
+        b.check_os_counters()
+        assert b.health.os_counters.startswith("unavailable") and "(os ?," in b.status_line()
+    finally:
+        b.close()
+        os.close(m)
+        os.close(s)

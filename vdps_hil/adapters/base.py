@@ -1,7 +1,6 @@
 """Adapter base class: one reader per physical device, timestamping, health and fan-out.
 
-An *adapter* owns one physical (or recorded) device -- a CAN interface, a serial port, a log
-file -- and is the only thing that reads it. Subclasses implement three small methods:
+An *adapter* owns one device (CAN interface, serial port, log file), its only reader. Subclasses:
 
 * ``_open()`` / ``_close()``: acquire and release the device (``_open`` raises
   :class:`AdapterError` with one line when a person's configuration is wrong);
@@ -11,19 +10,13 @@ file -- and is the only thing that reads it. Subclasses implement three small me
 * ``_raw(t_ns, wall_time_ns, payload)`` and ``_decode(t_ns, payload)``: the raw record to keep
   and the decoded :class:`~vdps_hil.bus.samples.Sample` list.
 
-Everything else happens here, once, for every adapter:
-
-Time. Every record is stamped by the adapter's clock (``vdps_hil.bus.clocks``):
-:class:`~vdps_hil.bus.clocks.SystemClock` live (monotonic ``t_ns``, wall time from one fixed
-offset), :class:`~vdps_hil.bus.clocks.ReplayClock` for recorded input (the file's own ``t_ns``).
-
-Health: per source and per sample kind, learned rates, timeouts and counters
-(``adapters.health``: :class:`~vdps_hil.adapters.health.SourceHealth`).
-
-Fan-out. Listeners receive events (``RawCan``, ``RawSerial``, ``Sample``; ``vdps_hil.bus.raw``)
-through :class:`~vdps_hil.bus.subscription.Subscription` objects: bounded queues, never blocking
-the reader; an overflow drops the event for that subscription and counts it (on the
-subscription per source, and in the source's ``queue_overflow``).
+Everything else happens here, once, for every adapter. Time: every record is stamped by the
+adapter's clock (``vdps_hil.bus.clocks``: ``SystemClock`` live, monotonic ``t_ns`` and wall time
+from one fixed offset; ``ReplayClock`` for recorded input, the file's own ``t_ns``). Health: per
+source and sample kind, learned rates, timeouts and counters (``adapters.health.SourceHealth``).
+Fan-out: listeners receive events (``RawCan``, ``RawSerial``, ``Sample``; ``vdps_hil.bus.raw``)
+through ``bus.subscription.Subscription`` objects, bounded queues that never block the reader;
+an overflow drops the event for that subscription and counts it (per source, ``queue_overflow``).
 """
 
 from __future__ import annotations
@@ -42,6 +35,9 @@ from vdps_hil.bus.subscription import Subscription
 from vdps_hil.units import NS_PER_S
 
 __all__ = ["Adapter", "AdapterError", "DeviceLost", "EndOfInput"]
+
+_DECODE_GAP = object()
+"""Payload marking a break in the input (device lost): the decoder forgets partial input there."""
 
 
 class AdapterError(Exception):
@@ -145,6 +141,9 @@ class Adapter(ABC):
         self.health.state = "open"
 
     def close(self) -> None:
+        if self.reader is not None:
+            self._reader.stop()
+            self._reader = None
         if self._open_flag:
             self._open_flag = False
             try:
@@ -165,7 +164,7 @@ class Adapter(ABC):
     def __exit__(self, *exc):
         self.close()
 
-    def _lost(self, why: str) -> None:
+    def _lost(self, why: str, reset_decoder: bool = True) -> None:
         h = self.health
         self._open_flag = False
         try:
@@ -178,7 +177,8 @@ class Adapter(ABC):
         h.state = "lost"
         h.last_error = why.splitlines()[0] if why else "device lost"
         self._next_retry_ns = now + int(self.reconnect_s * NS_PER_S)
-        self._on_lost()
+        if reset_decoder:
+            self._on_lost()
 
     def _on_lost(self) -> None:
         """Hook: reset decoder state (a partial line) when the device is lost."""
@@ -235,11 +235,29 @@ class Adapter(ABC):
         return len(items)
 
     def ingest(self, items: Iterable[tuple[int | None, Any]]) -> None:
-        """Stamp, record and decode payloads (the common path of live and replay input)."""
+        """Stamp, record and decode payloads (the common path of live and replay input): each
+        payload's raw record is published, then its samples."""
+        for t_ns, wall, payload, backwards in self.stamp(items):
+            raw = self._raw(t_ns, wall, payload)
+            if raw is not None:
+                self._publish(raw)
+            for s in self._decode_one(t_ns, wall, payload, backwards):
+                self._publish(s)
+
+    def stamp(self, items: Iterable[tuple[int | None, Any]]) -> list[tuple[int, int, Any, bool]]:
+        """``(t_ns, wall_time_ns, payload, went_backwards)`` of each payload: a ``None`` time
+        stamped with the clock now (once per call), the records counted."""
         clock = self.clock
         h = self.health
         stamp = None
+        out = []
+        last = self._last_raw_t_ns
+        gaps = 0
         for t_ns, payload in items:
+            if payload is _DECODE_GAP:
+                out.append((t_ns, 0, payload, False))
+                gaps += 1
+                continue
             if t_ns is None:
                 if stamp is None:
                     stamp = clock.now()
@@ -248,26 +266,65 @@ class Adapter(ABC):
                 wall = clock.wall(t_ns)
                 if clock.replay:
                     clock.last_ns = t_ns
-            h.records += 1
-            if t_ns < self._last_raw_t_ns:
+            if t_ns < last:
                 h.count("time_backwards")
-                backwards = True
+                out.append((t_ns, wall, payload, True))
             else:
-                self._last_raw_t_ns = t_ns
-                backwards = False
-            raw = self._raw(t_ns, wall, payload)
-            if raw is not None:
-                self._publish(raw)
-            try:
-                samples = self._decode(t_ns, payload)
-            except Exception as e:  # noqa: BLE001 - a decoder bug must not stop the logger
-                h.count("decoder_exceptions")
-                h.last_error = f"decoder: {type(e).__name__}: {e}".splitlines()[0]
-                continue
-            for s in samples:
-                self._publish_sample(s, t_ns, wall, backwards)
+                last = t_ns
+                out.append((t_ns, wall, payload, False))
+        h.records += len(out) - gaps
+        self._last_raw_t_ns = last
+        return out
 
-    def _publish_sample(self, s: Sample, t_ns: int, wall: int, backwards: bool) -> None:
+    def raw_events(self, stamped: Sequence[tuple[int, int, Any, bool]]) -> list:
+        """The raw records (``RawCan``/``RawSerial``) of stamped payloads."""
+        raw = self._raw
+        out = []
+        for t_ns, wall, payload, _ in stamped:
+            if payload is _DECODE_GAP:
+                continue
+            r = raw(t_ns, wall, payload)
+            if r is not None:
+                out.append(r)
+        return out
+
+    def decode_stamped(self, stamped: Sequence[tuple[int, int, Any, bool]]) -> list[Sample]:
+        """The samples of stamped payloads, health kept (a decoder exception is counted)."""
+        out = []
+        for t_ns, wall, payload, backwards in stamped:
+            if payload is _DECODE_GAP:
+                self._decode_gap()
+                continue
+            out += self._decode_one(t_ns, wall, payload, backwards)
+        return out
+
+    def skip_decoding(self, stamped: Sequence[tuple[int, int, Any, bool]],
+                      counter: str = "decoded_skipped") -> None:
+        """Payloads recorded raw but not decoded (the decoder was behind): counted as
+        ``counter``; the decoder forgets its sequence state so the skipped payloads are not
+        taken for data lost before us."""
+        n = sum(1 for it in stamped if it[2] is not _DECODE_GAP)
+        if n:
+            self.health.count(counter, n)
+            self._decode_gap()
+
+    def _decode_gap(self) -> None:
+        """Hook: the decoder does not see some payloads (skipped, or the device was lost):
+        forget partial input and sequence state (default: :meth:`_on_lost`)."""
+        self._on_lost()
+
+    def _decode_one(self, t_ns: int, wall: int, payload: Any, backwards: bool) -> list[Sample]:
+        h = self.health
+        try:
+            samples = self._decode(t_ns, payload)
+        except Exception as e:  # noqa: BLE001 - a decoder bug must not stop the logger
+            h.count("decoder_exceptions")
+            h.last_error = f"decoder: {type(e).__name__}: {e}".splitlines()[0]
+            return []
+        return [self._account_sample(s, t_ns, wall, backwards) for s in samples]
+
+    def _account_sample(self, s: Sample, t_ns: int, wall: int, backwards: bool) -> Sample:
+        """Health of one decoded sample; returns it with its wall time and validity set."""
         h = self.health
         ks = h.kinds.get(s.kind)
         if ks is None:
@@ -284,7 +341,7 @@ class Adapter(ABC):
         if s.wall_time_ns == 0 or valid != s.valid:
             s = dataclasses.replace(s, wall_time_ns=s.wall_time_ns or (wall + s.t_ns - t_ns),
                                     valid=valid)
-        self._publish(s)
+        return s
 
     def _flush_decoder(self) -> Iterable[Sample]:
         """Hook: samples a decoder still holds at the end of the input (default none)."""
@@ -301,7 +358,7 @@ class Adapter(ABC):
             self.health.last_error = f"decoder flush: {type(e).__name__}: {e}".splitlines()[0]
             return
         for s in samples:
-            self._publish_sample(s, s.t_ns, self.clock.wall(s.t_ns), False)
+            self._publish(self._account_sample(s, s.t_ns, self.clock.wall(s.t_ns), False))
 
     def check_timeouts(self, now_ns: int) -> list[str]:
         """Mark sample kinds that stopped arriving; returns those newly timed out."""
@@ -325,16 +382,119 @@ class Adapter(ABC):
         finally:
             self.close()
 
+    def _publish_sample(self, s: Sample, t_ns: int, wall: int, backwards: bool) -> None:
+        self._publish(self._account_sample(s, t_ns, wall, backwards))
+
+    # -- the reader path (LogSession): reading apart from decoding and writing ----------------
+
+    def reader_fd(self) -> int | None:
+        """Hook: a file descriptor a reader process may drain (None: a reader thread calls
+        ``_read``)."""
+        return None
+
+    def _chunk_items(self, t_ns: int, data: bytes) -> list[tuple[int, Any]]:
+        """Hook: the payloads in bytes a reader process read (default: the chunk itself)."""
+        self.health.bytes += len(data)
+        return [(t_ns, data)]
+
+    def _reader_lost(self) -> None:
+        """Hook: the reader lost the device; forget partial bytes of ``_chunk_items``."""
+
+    def check_os_counters(self) -> None:
+        """Read the OS's loss counters of the device (``adapters.oscount``) into the health."""
+        fd = self.reader_fd() if self._open_flag else None
+        if fd is not None:
+            from vdps_hil.adapters.oscount import OsCounters
+
+            if getattr(self, "_os_counters", None) is None:
+                self._os_counters = OsCounters(self.health)
+            self._os_counters.update(fd)
+
+    def start_reader(self, max_buffer_bytes: int | None = None) -> None:
+        """Start draining the device in a process (``reader_fd``) or a thread of its own;
+        :meth:`collect` then takes what it read. Opens the device if it is closed."""
+        from vdps_hil.adapters import reader as R
+
+        if not self._open_flag and self.health.state == "closed":
+            self.open()
+        fd = self.reader_fd() if self._open_flag else None
+        if fd is not None and not self.clock.replay:
+            kw = {} if max_buffer_bytes is None else {"max_buffer_bytes": max_buffer_bytes}
+            self._reader = R.FdReader(self.name, **kw)
+            self._reader.give(fd)
+            self.health.reader = "process"
+        else:
+            now = (lambda: self.clock.now()[0])
+            self._reader = R.ThreadReader(self.name, self._read, now, lost=(DeviceLost,),
+                                          end=(EndOfInput,))
+            self.health.reader = "thread"
+
+    @property
+    def reader(self):
+        return getattr(self, "_reader", None)
+
+    def collect(self, final: bool = False) -> list[tuple[int, int, Any, bool]]:
+        """What the reader read since the last call, stamped (never waits); device losses,
+        reader overflows and failed reads are accounted here, and a lost device is reopened
+        every ``reconnect_s``. ``final``: stop the reader and take its last records."""
+        from vdps_hil.adapters import reader as R
+
+        rd = self._reader
+        recs = rd.stop() if final else rd.take()
+        h = self.health
+        items: list = []
+        for kind, t_ns, body in recs:
+            if kind == R.DATA:
+                if isinstance(body, (bytes, bytearray)) and rd.fileno() is not None:
+                    items += self._chunk_items(t_ns, body)
+                else:
+                    items.append((t_ns, body))
+            elif kind == R.LOST:
+                if self._open_flag:
+                    self._lost(body, reset_decoder=False)
+                self._reader_lost()
+                items.append((t_ns, _DECODE_GAP))
+            elif kind == R.OVERFLOW:
+                h.count("reader_overflow", body[0])
+                if body[1]:
+                    h.count("reader_overflow_bytes", body[1])
+                h.last_error = f"reader buffer full: {body[0]} reads dropped"
+            elif kind == R.ERROR:
+                h.count("read_errors")
+                h.last_error = body
+        if not final and not self._open_flag and h.state == "lost" and self._try_reconnect():
+            rd.give(self.reader_fd())
+        if not self.clock.replay:
+            now, _ = self.clock.now()
+            if now - self._last_check_ns > 10_000_000:
+                self._last_check_ns = now
+                self.check_timeouts(now)
+        return self.stamp(items)
+
+    def stop_reader(self) -> list[tuple[int, int, Any, bool]]:
+        """Stop the reader; returns what it still held, stamped."""
+        if self.reader is None:
+            return []
+        try:
+            return self.collect(final=True)
+        finally:
+            self._reader = None
+
     def status(self) -> dict:
         """A snapshot of the health for a status line or a recording."""
         now, _ = self.clock.now()
         return self.health.snapshot(now)
 
     def status_line(self) -> str:
-        """``name: 1000.0 Hz imu, 5.0 Hz gnss_pos | drops 0 errors 0 [state]``."""
+        """``imu: 5000 rec, 1000.0 Hz imu | drops 0 (os ?, reader 0, seq 0), decode skipped 0,
+        errors 0`` (``os ?``: the OS keeps no loss counters for this device)."""
         h = self.health
         rates = ", ".join(f"{k.rate_hz:.1f} Hz {name}{' TIMEOUT' if k.timed_out else ''}"
                           for name, k in sorted(h.kinds.items())) or "no samples"
         state = "" if h.state == "open" else f" [{h.state.upper()}]"
-        return (f"{self.name}: {h.records} rec, {rates} | drops {h.drops} errors "
-                f"{h.error_total()}{state}")
+        c = h.all_counters()
+        loss = h.loss(c)
+        os_ = loss["os"] if h.os_counters == "yes" else "?"
+        return (f"{self.name}: {h.records} rec, {rates} | drops {h.drops} (os {os_}, reader "
+                f"{loss['reader']}, seq {loss['sequence']}), decode skipped "
+                f"{loss['decoded_skipped']}, errors {h.error_total()}{state}")

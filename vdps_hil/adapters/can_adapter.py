@@ -29,63 +29,14 @@ import os
 from typing import Any, Iterable, Mapping, Sequence
 
 from vdps_hil.adapters.base import Adapter, AdapterError, DeviceLost, EndOfInput
+from vdps_hil.adapters.slcan import SlcanLines, fast_slcan_class, slcan_line
 from vdps_hil.bus.clocks import ReplayClock
 from vdps_hil.bus.raw import RawCan
 
-__all__ = ["CanAdapter", "CanFileAdapter", "parse_can_spec", "CAN_LOG_SUFFIXES"]
+__all__ = ["CanAdapter", "CanFileAdapter", "parse_can_spec", "slcan_line", "CAN_LOG_SUFFIXES"]
 
 CAN_LOG_SUFFIXES = (".asc", ".blf", ".log", ".trc", ".mf4", ".csv", ".db")
 """Log formats python-can reads (``.mf4`` needs asammdf), plus ``.mcap`` (ours)."""
-
-
-def _fast_slcan_class():
-    """python-can's slcan bus, reading what is waiting instead of one byte per call.
-
-    python-can's ``slcanBus._read`` calls ``serial.read(1)`` once per byte (about 22 calls per
-    frame), which tops out near 13,000 frames/s on its own and far lower next to a recorder.
-    This subclass keeps the protocol, the options and every other method of python-can's class
-    and only replaces the byte reading: it reads ``in_waiting`` bytes at once, splits at CR
-    (frame/OK) and BEL (error), and never raises on bytes that are not ASCII (they are replaced,
-    and the malformed line is rejected by the frame parser and counted by the adapter).
-    """
-    import serial
-    from can.exceptions import error_check
-    from can.interfaces.slcan import slcanBus
-
-    class FastSlcanBus(slcanBus):
-        def _read(self, timeout):
-            buf = self._buffer
-            deadline = serial.Timeout(timeout)
-            with error_check("Could not read from serial device"):
-                while True:
-                    i = buf.find(b"\r")
-                    k = buf.find(b"\x07", 0, i if i >= 0 else len(buf))
-                    if k >= 0:
-                        i = k
-                    if i >= 0:
-                        line = bytes(buf[:i + 1]).decode("ascii", "replace")
-                        del buf[:i + 1]
-                        return line
-                    port = self.serialPortOrig
-                    n = port.in_waiting
-                    data = port.read(n if n else 1)
-                    if data:
-                        buf.extend(data)
-                        if len(buf) > 65536:  # garbage without terminators: drop it
-                            del buf[:-64]
-                        continue
-                    if deadline.expired():
-                        return None
-
-    return FastSlcanBus
-
-
-def slcan_line(arbitration_id: int, data: bytes, is_extended_id: bool = False) -> bytes:
-    """The slcan (Lawicel) ASCII line of a classic data frame: ``t`` + 3 hex ID (``T`` + 8 for
-    29-bit) + DLC digit + data hex + CR. What an slcan adapter sends for a received frame."""
-    if is_extended_id:
-        return b"T%08X%d%s\r" % (arbitration_id, len(data), data.hex().upper().encode())
-    return b"t%03X%d%s\r" % (arbitration_id, len(data), data.hex().upper().encode())
 
 
 def _value(text: str) -> Any:
@@ -171,6 +122,11 @@ class _CanDecodeMixin:
             return {}
         return c() if callable(c) else c
 
+    def _decode_gap(self) -> None:
+        reset = getattr(self.decoder, "reset_sequence", None)
+        if reset is not None:
+            reset()  # frames not decoded are not frames lost on the bus
+
 
 class CanAdapter(_CanDecodeMixin, Adapter):
     """A live CAN bus through python-can.
@@ -194,6 +150,7 @@ class CanAdapter(_CanDecodeMixin, Adapter):
         self.bus = bus
         self._external_bus = bus is not None
         self._last_dev_ns = -1
+        self._slcan: SlcanLines | None = None
         if spec is not None:
             self.iface, self.channel, self.bus_kwargs = parse_can_spec(spec)
         elif bus is None:
@@ -206,7 +163,7 @@ class CanAdapter(_CanDecodeMixin, Adapter):
 
         try:
             if self.iface == "slcan":  # same protocol and options, reads in chunks
-                self.bus = _fast_slcan_class()(channel=self.channel, **self.bus_kwargs)
+                self.bus = fast_slcan_class()(channel=self.channel, **self.bus_kwargs)
             else:
                 self.bus = can.Bus(interface=self.iface, channel=self.channel,
                                    **self.bus_kwargs)
@@ -258,6 +215,29 @@ class CanAdapter(_CanDecodeMixin, Adapter):
                     self.health.count("device_time_backwards")
                 self._last_dev_ns = dev
         return out
+
+    def reader_fd(self) -> int | None:
+        """slcan: the descriptor of the adapter's serial port (a reader process drains it and
+        :class:`SlcanLines` parses the lines here); other interfaces: None (a reader thread
+        calls ``recv``)."""
+        port = getattr(self.bus, "serialPortOrig", None)
+        if self._external_bus or port is None:
+            return None
+        try:
+            from serial.serialposix import Serial
+        except ImportError:
+            return None
+        return port.fd if isinstance(port, Serial) and port.fd is not None else None
+
+    def _chunk_items(self, t_ns: int, data: bytes):
+        if self._slcan is None:
+            self._slcan = SlcanLines(self.health)
+        self.health.bytes += len(data)
+        return self._slcan.feed(t_ns, data, self.clock.wall(t_ns) / 1e9)
+
+    def _reader_lost(self) -> None:
+        if self._slcan is not None:
+            self._slcan.reset()
 
     def send(self, msg) -> None:
         """Send a frame on this bus and publish it as a ``tx`` raw record."""

@@ -15,6 +15,7 @@ marked ``valid=False``), ``queue_overflow`` (a listener's queue was full: the ev
 for that listener only and counted), ``reconnects``/``outages``/``outage_s`` (device lost and back), ``read_errors``,
 ``decoder_exceptions`` (a decoder raised: a bug, counted, never a crash), and the decoder's own
 counters (unknown IDs, DLC mismatches, bad checksums, garbage, non-UTF-8 ...) merged in.
+``loss`` sorts what was lost by where it happened (:data:`LOSS_STAGES`).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from typing import Callable, Mapping
 
 from vdps_hil.units import NS_PER_S
 
-__all__ = ["DROP_COUNTERS", "ERROR_COUNTERS", "KindStats", "SourceHealth"]
+__all__ = ["DROP_COUNTERS", "ERROR_COUNTERS", "LOSS_STAGES", "KindStats", "SourceHealth"]
 
 
 @dataclasses.dataclass
@@ -117,6 +118,8 @@ class SourceHealth:
         self.lost_since_ns: int | None = None
         self.last_record_t_ns = -1
         self.last_error = ""
+        self.reader = "inline"  # what drains the device: inline (poll), thread or process
+        self.os_counters = "not read"  # the OS's own loss counters: "yes", or why not
         self.decoder_counters: Callable[[], Mapping[str, int]] | None = None
 
     def count(self, name: str, n: int = 1) -> None:
@@ -124,8 +127,8 @@ class SourceHealth:
 
     @property
     def drops(self) -> int:
-        """Lost data: our queue overflows plus what the decoders saw missing (sequence
-        counters: ``seq_gaps``, ``lost_frames``)."""
+        """Raw data lost (:data:`DROP_COUNTERS`): the OS's overruns, our reader's and queues'
+        overflows, what the devices' sequence counters say is missing, refused raw writes."""
         c = self.all_counters()
         return sum(c.get(k, 0) for k in DROP_COUNTERS)
 
@@ -142,14 +145,28 @@ class SourceHealth:
         merged.update(self.counters)
         return merged
 
+    def loss(self, counters: Mapping[str, int] | None = None) -> dict:
+        """Where data was lost (:data:`LOSS_STAGES`): per stage the sum of its counters, the
+        non-zero counters themselves under ``detail``, and whether the OS's counters were
+        read (``os_counters``)."""
+        c = self.all_counters() if counters is None else counters
+        out: dict = {stage: sum(c.get(k, 0) for k in names)
+                     for stage, names in LOSS_STAGES.items()}
+        out["detail"] = {k: c[k] for names in LOSS_STAGES.values() for k in names if c.get(k)}
+        out["os_counters"] = self.os_counters
+        out["read_by"] = self.reader
+        return out
+
     def snapshot(self, now_ns: int | None = None) -> dict:
         outage = self.outage_ns
         if self.lost_since_ns is not None and now_ns is not None:
             outage += max(0, now_ns - self.lost_since_ns)
+        c = self.all_counters()
         return {"source": self.source, "transport": self.transport, "device": self.device,
                 "state": self.state, "records": self.records, "bytes": self.bytes,
-                "samples": self.samples, "drops": self.drops, "outage_s": outage / NS_PER_S,
-                "last_error": self.last_error, "counters": self.all_counters(),
+                "samples": self.samples, "drops": sum(c.get(k, 0) for k in DROP_COUNTERS),
+                "outage_s": outage / NS_PER_S, "last_error": self.last_error, "counters": c,
+                "loss": self.loss(c),
                 "kinds": {k: v.snapshot() for k, v in sorted(self.kinds.items())}}
 
     def error_total(self) -> int:
@@ -178,9 +195,29 @@ ERROR_COUNTERS = frozenset({
     # file adapters: lines of a text log that could not be read
     "bad_lines", "non_utf8_lines",
     # this base class
-    "time_backwards", "decoder_exceptions", "read_errors"})
+    "time_backwards", "decoder_exceptions", "read_errors",
+    # the serial driver (TIOCGICOUNT): bytes with framing or parity errors
+    "os_frame_errors", "os_parity_errors"})
 """Counter names that mean a rejected or faulty input (summed as ``errors`` in the status).
 Unknown CAN IDs, unsupported sentences and frames of other channels are not errors."""
 
-DROP_COUNTERS = ("queue_overflow", "seq_gaps", "lost_frames")
-"""Counter names that mean data lost on the way (summed as ``drops``)."""
+LOSS_STAGES: dict[str, tuple[str, ...]] = {
+    "os": ("os_overrun", "os_buf_overrun"),
+    "reader": ("reader_overflow", "queue_overflow"),
+    "sequence": ("seq_gaps", "lost_frames"),
+    "decoded_skipped": ("decoded_skipped", "decoded_skipped_disk", "decoded_write_errors"),
+    "raw_write_errors": ("raw_write_errors",),
+}
+"""Where data is lost, per source. ``os``: what the serial driver says it dropped (overruns of
+the UART and of its buffer, ``TIOCGICOUNT``; not known for pseudo-terminals and most USB-CAN
+adapters). ``reader``: what our reader's bounded buffer (or a listener's queue) had no room
+for. ``sequence``: what the devices' own counters say is missing (IMU packet counter, CAN
+rolling counters): lost anywhere before the decoder, on the wire, in the device, the OS or our
+reader. ``decoded_skipped``: raw records kept but not decoded (the decoder was behind) and
+samples not written (disk reserve reached, or refused). ``raw_write_errors``: raw records the
+recording refused."""
+
+DROP_COUNTERS = ("queue_overflow", "seq_gaps", "lost_frames", "reader_overflow", "os_overrun",
+                 "os_buf_overrun", "raw_write_errors")
+"""Counter names that mean raw data lost on the way (summed as ``drops``; decoded samples
+skipped while their raw records were kept are not drops)."""

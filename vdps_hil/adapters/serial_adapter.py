@@ -139,6 +139,17 @@ class SerialAdapter(_SerialBase):
             finally:
                 self.ser = None
 
+    def reader_fd(self) -> int | None:
+        """The port's descriptor when pyserial opened a POSIX device (a reader process drains
+        it); None for URL handlers (``socket://``, ``loop://``: a reader thread)."""
+        try:
+            from serial.serialposix import Serial
+        except ImportError:  # not a POSIX system
+            return None
+        if isinstance(self.ser, Serial) and self.ser.fd is not None:
+            return self.ser.fd
+        return None
+
     def _read(self, timeout_s: float) -> Sequence[tuple[int | None, Any]]:
         import serial
 

@@ -1,5 +1,6 @@
 """``vdps info``: what a recording holds -- topics, counts, rates, duration, gaps, per-source
-health (decode counters) and the catalogue fields it provides."""
+health (decode counters, and where data was lost: the OS, our reader, the devices' sequence
+counters, decoding skipped) and the catalogue fields it provides."""
 
 from __future__ import annotations
 
@@ -87,6 +88,9 @@ def summarize(path: str | os.PathLike) -> dict:
             pass
     for src, doc in health_msgs.items():  # a file cut off before the end: last health message
         health.setdefault(src, doc)
+    for doc in health.values():
+        if isinstance(doc, dict):
+            doc["loss"] = loss_of(doc)
     rec_md = md.get(S.METADATA_NAME, {})
     return {
         "path": os.fspath(path), "bytes": os.path.getsize(path), "truncated": truncated,
@@ -103,6 +107,20 @@ def summarize(path: str | os.PathLike) -> dict:
         "hashes": {k: v for k, v in rec_md.items() if k.startswith("hash.")},
         "metadata": md,
     }
+
+
+def loss_of(h: dict) -> dict:
+    """Where a source lost data (``adapters.health.LOSS_STAGES``): the recorded ``loss`` of a
+    source's health, or the same sums from its counters (recordings made before it existed)."""
+    from vdps_hil.adapters.health import LOSS_STAGES
+
+    if isinstance(h.get("loss"), dict):
+        return h["loss"]
+    c = h.get("counters", {})
+    out = {stage: sum(c.get(k, 0) for k in names) for stage, names in LOSS_STAGES.items()}
+    out["detail"] = {k: c[k] for names in LOSS_STAGES.values() for k in names if c.get(k)}
+    out["os_counters"] = "not recorded"
+    return out
 
 
 def _health_line(src: str, h: dict) -> str:
@@ -122,6 +140,14 @@ def _health_line(src: str, h: dict) -> str:
         s += "; " + ", ".join(f"{k} {v}" for k, v in notes.items())
     if h.get("outage_s"):
         s += f"; outage {h['outage_s']:.2f} s"
+    lo = loss_of(h)
+    os_ = lo.get("os", 0) if lo.get("os_counters") == "yes" else "?"
+    s += (f"\n    lost: os {os_}, reader {lo.get('reader', 0)}, seq counters "
+          f"{lo.get('sequence', 0)}; decoding skipped {lo.get('decoded_skipped', 0)}")
+    if lo.get("detail"):
+        s += " " + json.dumps(lo["detail"], sort_keys=True)
+    if lo.get("os_counters") not in (None, "yes"):
+        s += f" (os: {lo['os_counters']})"
     return s
 
 

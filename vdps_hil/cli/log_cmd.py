@@ -86,6 +86,13 @@ def _stdin_adapter(bus: str, decoder, channel: str):
                       decode_channels=[channel] if channel else None)
 
 
+class RecordingStopped(UserError):
+    """The file system refused the recording (disk full): one line, exit status 1; the file
+    holds everything up to there (``vdps recover`` closes it)."""
+
+    exit_code = 1
+
+
 class _Status:
     """Live status on stderr: rewritten in place on a terminal, a line per source every
     ``every_s`` otherwise."""
@@ -137,6 +144,9 @@ class _Status:
 @click.option("--flush-s", type=float, default=0.5, show_default=True, metavar="S",
               help="Close the MCAP chunk in progress every S seconds (a crash loses at most "
                    "about that much).")
+@click.option("--reserve-mb", type=float, default=64.0, show_default=True, metavar="MB",
+              help="When less than MB is left on the disk, decoded topics stop (counted) and the "
+                   "rest is kept for the raw topics.")
 @click.option("--quiet", is_flag=True, help="No live status.")
 @click.option("--pipeline", is_flag=True,
               help="Run the estimator, identifier, predictor and warning live on the decoded "
@@ -152,7 +162,7 @@ class _Status:
 @json_option
 @serve_option
 def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rotate_mb,
-        rotate_s, flush_s, quiet, pipeline, vehicle, params, json_out, serve_port):
+        rotate_s, flush_s, reserve_mb, quiet, pipeline, vehicle, params, json_out, serve_port):
     """Record live CAN buses and serial devices losslessly into one MCAP.
 
     \b
@@ -160,16 +170,23 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
       vdps log --can vdps=socketcan:can0 --serial gnss=/dev/ttyUSB0@115200 \\
                --serial imu=/dev/ttyUSB1@921600 -o track.mcap
     Raw frames and bytes always go to /raw/..., decoded samples to /decoded/..., GNSS fixes
-    to /gnss/fix (Foxglove map), health to /health/... . Stops cleanly on Ctrl-C, SIGTERM or
-    --duration; a killed logger's file is rescued by `vdps recover`.
+    to /gnss/fix (Foxglove map), health to /health/... . Each device is drained by a reader
+    of its own; raw records are written first, decoding and --pipeline come after and lose
+    their own work (counted) when they fall behind, never the raw records. The status shows
+    per device what was lost and where (os, reader, seq counters, decode skipped). Stops
+    cleanly on Ctrl-C, SIGTERM or --duration; a killed logger's file is rescued by `vdps
+    recover`.
     """
-    from vdps_hil.app.session import LogSession
+    from vdps_hil.app.session import LogSession, start_readers
 
     _check_options(can_specs, serial_specs, duration, flush_s, rotate_mb, rotate_s)
+    if reserve_mb < 0:
+        raise UserError("--reserve-mb must not be negative")
     model, start = _pipeline_start(pipeline, vehicle, params)
     adapters, info, sigmap = build_live_adapters(can_specs, serial_specs, formats, signalmap,
                                                  dbcs)
     _open_adapters(adapters)  # devices first: a bad port fails before a file is created
+    start_readers(adapters)  # and drained from now on
     writer = _open_writer(output, rotate_mb, rotate_s, adapters,
                           _recording_metadata(can_specs, serial_specs, adapters, info, sigmap),
                           _content_hashes(info, sigmap))
@@ -183,7 +200,10 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
     if pipeline:  # a rotated recording gets no input order (PipelineTap)
         tap = PipelineTap(model, writer, start, record_order=not (rotate_mb or rotate_s),
                           params_file=None if params is None else os.path.basename(params))
-    session = LogSession(adapters, writer, flush_s=flush_s, status=_Status(quiet), tap=tap)
+    session = LogSession(adapters, writer, flush_s=flush_s, status=_Status(quiet), tap=tap,
+                         reserve_bytes=int(reserve_mb * 1e6))
+    if tap is not None:
+        tap.recording_allowed = lambda: session.decoded_ok
     try:
         with live_server(serve_port, wait=False) as live:
             writer.mirror = None if live is None else live.mirror
@@ -196,6 +216,8 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
             signal.signal(s, h)
         writer.close()
     _report(summary, getattr(writer, "files", [output]), session, tap, quiet, json_out)
+    if summary.get("fatal"):
+        raise RecordingStopped(summary["fatal"])
 
 
 def _check_options(can_specs, serial_specs, duration, flush_s, rotate_mb, rotate_s) -> None:
@@ -300,8 +322,12 @@ def _finish_tap(tap: "PipelineTap", session, summary: dict) -> None:
 def _report(summary: dict, files: list, session, tap, quiet: bool, json_out) -> None:
     """The closing lines on stderr and the ``--json`` summary."""
     if not quiet:
+        lost = {src: {k: v for k, v in d.items() if k in ("os", "reader", "sequence",
+                                                           "decoded_skipped") and v}
+                for src, d in summary["loss"].items()}
+        lost = {k: v for k, v in lost.items() if v}
         eprint(f"vdps log: {summary['written']} messages in {summary['duration_s']:.1f} s to "
-               f"{', '.join(files)}; queue overflows {summary['queue_overflow']}")
+               f"{', '.join(files)}; lost: {lost or 'nothing'}")
         for ln in session.status_lines():
             eprint("  " + ln)
     summary["files"] = files
@@ -352,6 +378,15 @@ class PipelineTap:
         self._decoder = VdpsCanDecoder(source="pipeline")
         self.samples = self.estimates = self.frames = 0
         self.last_warning: dict | None = None
+        self.input_dropped = 0  # samples the session could not queue for us (we were behind)
+        self.est_skipped = 0  # outputs not written: the disk reserve was reached
+        self.recording_allowed = lambda: True
+
+    def input_lost(self, n: int) -> None:
+        """The session dropped ``n`` samples (this tap was behind): the run is no longer the
+        recording's input order, so none is recorded."""
+        self.input_dropped += n
+        self.order = None
 
     def __call__(self, events) -> None:
         for ev in events:
@@ -407,6 +442,9 @@ class PipelineTap:
     def _outputs(self, outs) -> None:
         from vdps_hil.app.est_topics import write_output
 
+        if not self.recording_allowed():
+            self.est_skipped += len(outs)
+            return
         for out in outs:
             if isinstance(out, self._est_type):
                 self.estimates += 1
@@ -452,4 +490,5 @@ class PipelineTap:
     def summary(self) -> dict:
         return {"samples": self.samples, "estimates": self.estimates, "warning_frames": self.frames,
                 "last_warning": self.last_warning, "error": self.error,
+                "input_dropped": self.input_dropped, "outputs_skipped_disk": self.est_skipped,
                 "input_order_recorded": self.order is not None and self.system is not None}

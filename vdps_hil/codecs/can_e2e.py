@@ -10,9 +10,12 @@ Every frame carries a rolling counter (8 bits ``seq_counter`` on sensor frames, 
 
 * sensor frames: ``delta = 0`` -> reject (``counter_repeat``: duplicated or stale frame);
   ``delta >= 1`` -> accept, ``lost_frames += delta - 1``. Once the frame period T has been
-  learned (running mean of the gaps between consecutive frames), a gap dt longer than half a
-  counter cycle is unwrapped: ``delta += 2^bits * round((dt / T - delta) / 2^bits)``, so a
-  silence of several wraps is still counted frame by frame.
+  learned (running mean of the plausible gaps, dt < 4 T, between consecutive frames), a gap dt
+  longer than half a counter cycle suggests ``W = round((dt / T - delta) / 2^bits)`` whole
+  wraps, so a silence of several wraps is still counted frame by frame. The ``W 2^bits`` frames
+  are counted only when the next frame comes at the frame pace (its dt >= T / 4): frames a
+  stalled reader delivers in one burst carry the burst's receive time, so a long dt followed by
+  a burst (dt ~ 0) is the reader's stall, not a loss (``stall_gaps`` counts those).
 * VDPS_Warning (AUTOSAR-E2E-like): ``warning_crc`` (byte 0) must equal CRC-8/SAE-J1850 of bytes
   1..7, else reject (``crc_mismatch``; the counter of a corrupted frame is not trusted and not
   stored). Then ``delta = 0`` -> reject (``counter_repeat``); ``1 <= delta <= 3`` -> accept,
@@ -65,15 +68,17 @@ def crc8_j1850(data: bytes | bytearray | memoryview) -> int:
 # Rolling counters
 # ---------------------------------------------------------------------------------------------
 class SequenceState:
-    """The rolling counter of one message as last accepted: counter ``last``, its time ``t_ns``
-    and the learned frame period ``period_ns`` (None until two consecutive frames came)."""
+    """The rolling counter of one message as last accepted: counter ``last``, its time ``t_ns``,
+    the learned frame period ``period_ns`` (None until two consecutive frames came) and the
+    wrapped frames ``pending`` that the next frame's pace confirms (module docstring)."""
 
-    __slots__ = ("last", "t_ns", "period_ns")
+    __slots__ = ("last", "t_ns", "period_ns", "pending")
 
     def __init__(self):
         self.last: int | None = None
         self.t_ns: int | None = None
         self.period_ns: float | None = None
+        self.pending = 0
 
     def check(self, c: int, t_ns: int, modulus: int, protected: bool, max_delta: int,
               counts: dict) -> str | None:
@@ -92,14 +97,21 @@ class SequenceState:
             counts["lost_frames"] += delta - 1
             self.last, self.t_ns = c, t_ns
             return "counter_jump" if delta > max_delta else None
-        if self.period_ns and dt > 0 and dt / self.period_ns > modulus / 2:
-            wraps = round((dt / self.period_ns - delta) / modulus)
-            delta += modulus * max(wraps, 0)
-        if delta == 0:
+        p = self.period_ns
+        wrapped = 0
+        if p and dt > 0 and dt / p > modulus / 2:
+            wrapped = modulus * max(round((dt / p - delta) / modulus), 0)
+        if delta == 0 and not wrapped:
             return "counter_repeat"
-        if delta == 1 and dt > 0:
-            p = self.period_ns
+        if self.pending:  # the previous frame followed a long gap: a loss if this one is paced
+            if p and dt * 4 >= p:
+                counts["lost_frames"] += self.pending
+            else:
+                counts["stall_gaps"] = counts.get("stall_gaps", 0) + 1
+            self.pending = 0
+        if delta == 1 and dt > 0 and (p is None or dt < 4 * p):
             self.period_ns = float(dt) if p is None else p + (dt - p) / 16
-        counts["lost_frames"] += delta - 1
+        counts["lost_frames"] += max(delta - 1, 0)
+        self.pending = wrapped - (1 if delta == 0 else 0)
         self.last, self.t_ns = c, t_ns
         return None

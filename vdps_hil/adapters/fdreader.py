@@ -1,0 +1,290 @@
+"""A device reader in its own process: it drains one file descriptor (a serial port, a
+pseudo-terminal, an slcan adapter's port) and does nothing else, so no decoding, writing or
+estimating in the logger can make it miss bytes.
+
+The parent opens the device (pyserial sets the baud and the raw mode; python-can sends the slcan
+set-up commands) and hands the descriptor over a Unix socket (``SCM_RIGHTS``). The child loops::
+
+    poll(device, socket)
+    device readable  -> data = read(fd, 64 KiB); t_ns = CLOCK_MONOTONIC now
+                        append (DATA, t_ns, data) to its buffer, or drop it when the buffer
+                        holds max_buffer_bytes (counted, reported as one OVERFLOW record
+                        before the next data: chunks, bytes, time of the first drop)
+    socket writable  -> send what the buffer holds
+    read error / EOF -> one LOST record (the errno text); the fd is closed, the next one the
+                        parent hands over is read
+    "Q" from parent  -> read what the device still holds, send everything, exit
+
+so each chunk carries the monotonic time at which its read returned (the same clock as the
+parent's ``SystemClock``), and the only waits of the child are ``poll`` and the read itself. The
+child runs this file alone (``python -I -S``: the standard library only, start-up ~20 ms) and ignores SIGINT (Ctrl-C in
+a terminal reaches the whole process group; the parent decides when the reader stops). It
+exits when the parent's end of the socket closes (the parent died).
+
+Records on the socket: ``struct "<BqI"`` (kind, t_ns, length) then ``length`` bytes. Kinds:
+``DATA`` (bytes as read), ``LOST`` (UTF-8 reason), ``OVERFLOW`` (``"<QQ"``: chunks, bytes).
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+
+__all__ = ["FdReader", "DATA", "LOST", "OVERFLOW", "DEFAULT_BUFFER_BYTES"]
+
+HDR = struct.Struct("<BqI")
+DROPS = struct.Struct("<QQ")
+DATA, LOST, OVERFLOW = 0, 1, 2
+READ_SIZE = 65536
+SEND_SIZE = 1 << 20
+DEFAULT_BUFFER_BYTES = 256 << 20
+"""Bytes a reader holds for a parent that is behind: minutes of a 921,600 baud link."""
+
+
+# --- the child ------------------------------------------------------------------------------
+
+def _child(sock: socket.socket, max_buffer: int) -> int:
+    sock.setblocking(False)
+    for opt in (getattr(socket, "SO_SNDBUFFORCE", None), socket.SO_SNDBUF):
+        if opt is None:
+            continue
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, opt, 4 << 20)
+            break
+        except OSError:
+            continue
+    pending = bytearray()
+    dev = -1
+    drop_n = drop_b = 0
+    drop_t = 0
+    quitting = False
+    poller = select.poll()
+    sock_fd = sock.fileno()
+    registered_out = False
+    poller.register(sock_fd, select.POLLIN)
+
+    def lost(why: str) -> None:
+        nonlocal dev
+        poller.unregister(dev)
+        try:
+            os.close(dev)
+        except OSError:
+            pass
+        dev = -1
+        msg = why.encode("utf-8", "replace")[:500]
+        pending.extend(HDR.pack(LOST, time.monotonic_ns(), len(msg)))
+        pending.extend(msg)
+
+    def read_dev(hup: bool) -> bool:
+        """One read; False when nothing was there. A terminal in pyserial's raw mode (VMIN 0)
+        reads nothing when nothing is waiting: only with a hang-up is that the end."""
+        nonlocal drop_n, drop_b, drop_t
+        try:
+            data = os.read(dev, READ_SIZE)
+        except (BlockingIOError, InterruptedError):
+            return False
+        except OSError as e:
+            lost(f"read failed: {e.strerror or e}")
+            return False
+        t = time.monotonic_ns()
+        if not data:
+            if hup:
+                lost("hang-up (device closed)")
+            return False
+        if len(pending) + len(data) > max_buffer:
+            if not drop_n:
+                drop_t = t
+            drop_n += 1
+            drop_b += len(data)
+            return True
+        if drop_n:
+            pending.extend(HDR.pack(OVERFLOW, drop_t, DROPS.size))
+            pending.extend(DROPS.pack(drop_n, drop_b))
+            drop_n = drop_b = 0
+        pending.extend(HDR.pack(DATA, t, len(data)))
+        pending.extend(data)
+        return True
+
+    while True:
+        want_out = bool(pending)
+        if want_out != registered_out:
+            poller.modify(sock_fd, select.POLLIN | (select.POLLOUT if want_out else 0))
+            registered_out = want_out
+        try:
+            events = poller.poll(200)
+        except InterruptedError:
+            continue
+        for fd, ev in events:
+            if fd == dev:
+                read_dev(bool(ev & (select.POLLHUP | select.POLLERR | select.POLLNVAL)))
+            elif fd == sock_fd:
+                if ev & select.POLLOUT and pending:
+                    try:
+                        n = sock.send(memoryview(pending)[:SEND_SIZE])
+                        del pending[:n]
+                    except (BlockingIOError, InterruptedError):
+                        pass
+                    except OSError:
+                        return 0  # the parent is gone
+                if ev & (select.POLLIN | select.POLLHUP | select.POLLERR):
+                    try:
+                        msg, fds, _, _ = socket.recv_fds(sock, 16, 4)
+                    except (BlockingIOError, InterruptedError):
+                        continue
+                    except OSError:
+                        return 0
+                    if not msg:
+                        return 0  # parent closed its end
+                    for newfd in fds:
+                        if dev >= 0:
+                            poller.unregister(dev)
+                            os.close(dev)
+                        dev = newfd
+                        poller.register(dev, select.POLLIN)
+                    if b"Q" in msg:
+                        quitting = True
+        if quitting:
+            break
+    while dev >= 0:  # what the device still holds (never waiting: the fd may block)
+        ready = poller.poll(0)
+        ev = next((e for fd, e in ready if fd == dev), 0)
+        if not ev or not read_dev(bool(ev & (select.POLLHUP | select.POLLERR | select.POLLNVAL))):
+            break
+    if drop_n:
+        pending.extend(HDR.pack(OVERFLOW, drop_t, DROPS.size))
+        pending.extend(DROPS.pack(drop_n, drop_b))
+    sock.setblocking(True)
+    try:
+        sock.sendall(pending)
+        sock.shutdown(socket.SHUT_WR)
+    except OSError:
+        pass
+    return 0
+
+
+def main(argv=None) -> int:
+    """``python -m vdps_hil.adapters.fdreader SOCKET_FD MAX_BUFFER_BYTES``"""
+    argv = sys.argv[1:] if argv is None else argv
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sock = socket.socket(fileno=int(argv[0]))
+    return _child(sock, int(argv[1]))
+
+
+# --- the parent's handle --------------------------------------------------------------------
+
+class FdReader:
+    """The parent's side of one reader process.
+
+    ``give(fd)`` hands a device descriptor to the child (again after a reconnect). ``take()``
+    returns the records received so far without waiting, in order: ``(DATA, t_ns, bytes)``,
+    ``(LOST, t_ns, reason)``, ``(OVERFLOW, t_ns, (chunks, bytes))``. ``stop()`` lets the child
+    read what the device still holds and returns the last records. ``fileno()`` is readable
+    when something came.
+    """
+
+    def __init__(self, name: str, max_buffer_bytes: int = DEFAULT_BUFFER_BYTES):
+        self.name = name
+        parent, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            self.proc = subprocess.Popen(  # this file alone: standard library only, no site
+                [sys.executable, "-I", "-S", os.path.abspath(__file__), str(child.fileno()),
+                 str(int(max_buffer_bytes))],
+                pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, close_fds=True)
+        finally:
+            child.close()
+        self.sock = parent
+        self.sock.setblocking(False)
+        self._buf = bytearray()
+        self._eof = False
+
+    def fileno(self) -> int:
+        return self.sock.fileno()
+
+    def give(self, fd: int) -> None:
+        socket.send_fds(self.sock, [b"F"], [fd])
+
+    def _parse(self) -> list:
+        buf = self._buf
+        out = []
+        pos, n = 0, len(buf)
+        unpack = HDR.unpack_from
+        hs = HDR.size
+        while n - pos >= hs:
+            kind, t_ns, length = unpack(buf, pos)
+            end = pos + hs + length
+            if end > n:
+                break
+            body = bytes(buf[pos + hs:end])
+            if kind == LOST:
+                body = body.decode("utf-8", "replace")
+            elif kind == OVERFLOW:
+                body = DROPS.unpack(body)
+            out.append((kind, t_ns, body))
+            pos = end
+        del buf[:pos]
+        return out
+
+    def take(self, max_bytes: int = 8 << 20) -> list:
+        """What the child sent so far (never waits)."""
+        got = 0
+        while got < max_bytes and not self._eof:
+            try:
+                b = self.sock.recv(SEND_SIZE)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                self._eof = True
+                break
+            if not b:
+                self._eof = True
+                break
+            self._buf += b
+            got += len(b)
+        return self._parse()
+
+    @property
+    def alive(self) -> bool:
+        return not self._eof and self.proc.poll() is None
+
+    def stop(self, timeout_s: float = 5.0) -> list:
+        """Ask the child to finish; returns the last records."""
+        try:
+            self.sock.send(b"Q")
+        except OSError:
+            pass
+        t_end = time.monotonic() + timeout_s
+        while not self._eof and time.monotonic() < t_end:
+            select.select([self.sock], [], [], 0.05)
+            try:
+                b = self.sock.recv(SEND_SIZE)
+            except (BlockingIOError, InterruptedError):
+                continue
+            except OSError:
+                break
+            if not b:
+                break
+            self._buf += b
+        out = self._parse()
+        self.close()
+        return out
+
+    def close(self) -> None:
+        try:
+            self.sock.close()
+        except OSError:
+            pass
+        try:
+            self.proc.wait(2.0)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
