@@ -16,7 +16,8 @@ import pytest
 from scipy.stats import chi2
 
 from vdps_hil.experiments import synthetic as syn
-from vdps_hil.estimation.ekf import MultiRateEKF, filter_jacobians
+from vdps_hil.estimation.ekf import MultiRateEKF
+from vdps_hil.estimation.ekf_reference import filter_jacobians
 from vdps_hil.estimation.ekf_config import EkfConfig, PaperFaithful, SensorSet
 from vdps_hil.estimation.kinematics import process_f, linearize
 from vdps_hil.estimation.observations import ObsKind, make_models
