@@ -36,7 +36,10 @@ ENABLED = os.environ.get("VDPS_JIT", "1").strip().lower() not in ("0", "false", 
 
 os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(sys.prefix, "var", "cache", "vdps-hil", "numba"))
 
-KERNEL_MODULES: list[str] = []
+KERNEL_MODULES: list[str] = [
+    "vdps_hil.estimation.ekf_kernels",
+    "vdps_hil.estimation.ekf_update_kernels",
+]
 """Modules that define kernels and a ``warm()`` that compiles them with representative
 arguments (``python -m vdps_hil.jit --warm``). A module adds itself here by name, in this
 file, when it gains kernels."""
