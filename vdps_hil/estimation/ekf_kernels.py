@@ -4,7 +4,7 @@ the covariance propagation, on plain float64 arrays with explicit loops.
 
 Reference: the numpy functions of :mod:`vdps_hil.estimation.kinematics` (``dcm_gv_partials``,
 ``dcm_gr_partials``, ``road_normal``, ``vehicle_angles_eq4``, ``step``, ``linearize``,
-``transition``) and ``MultiRateEKF._propagate_reference``; ``tests/test_ekf_kernels.py`` holds
+``transition``) and ``ekf_reference.propagate_reference``; ``tests/test_ekf_kernels.py`` holds
 each kernel equal to them within 1e-12 (relative to the largest element) and the compiled
 kernels bit-equal to their own Python form (``py_func``). The formulas are those of the
 reference, term for term; only the small matrix products are loops (a fixed summation order

@@ -3,7 +3,7 @@ observation models of eq 9-11 with their Jacobians, and one update step (innovat
 iterated EKF, Joseph form) on plain float64 arrays.
 
 Reference: the model classes of :mod:`vdps_hil.estimation.observations` (``h``, ``jacobian``,
-``residual``) and ``MultiRateEKF._apply_reference``; ``tests/test_ekf_kernels.py`` holds the
+``residual``) and ``ekf_reference.update_reference``; ``tests/test_ekf_kernels.py`` holds the
 kernels equal to them within 1e-12 and the compiled kernels bit-equal to their Python form.
 The formulas are the reference's term for term; the small products are loops (fixed order)
 and S^-1 is Gauss-Jordan elimination with partial pivoting (numpy: LAPACK), so the estimates
