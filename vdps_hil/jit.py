@@ -39,6 +39,7 @@ os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(sys.prefix, "var", "cache"
 KERNEL_MODULES: list[str] = [
     "vdps_hil.estimation.ekf_kernels",
     "vdps_hil.estimation.ekf_update_kernels",
+    "vdps_hil.identification.rls_kernels",
 ]
 """Modules that define kernels and a ``warm()`` that compiles them with representative
 arguments (``python -m vdps_hil.jit --warm``). A module adds itself here by name, in this

@@ -1,0 +1,168 @@
+"""Compiled kernels of the weighted RLS of eq 19 in covariance form (hand-specialised numeric
+kernels, ``vdps_hil.jit``): the row selection, one update and the accumulated diagnostics, on
+plain float64 arrays with explicit loops.
+
+Reference: ``rls.WeightedRLS.update`` and ``_step_covariance`` (numpy; what runs with
+``VDPS_JIT=0``). ``tests/test_rls_kernels.py`` holds the kernels equal to them within 1e-12
+(relative to the largest element) and the compiled kernels bit-equal to their own Python form.
+The formulas are the reference's term for term (``rls`` module docstring)::
+
+    rows: selected and finite;   Q A, A_Q = Q A W, y = Q b      (k rows)
+    v = y - A_Q x_Q,   S = lambda I + A_Q P A_Q^T,   K = P A_Q^T S^-1
+    x_Q+ = x_Q + K v,  P+ = sym((I - K A_Q) (P / lambda) (I - K A_Q)^T + K K^T)
+    J increment = lambda v^T S^-1 v
+
+and, after the bounds (``accumulate``): info += (Q A)^T Q A, info_scaled += A_Q^T A_Q (both
+discounted by lambda), the score g = A_Q^T (y - A_Q x_Q+) and its lag-0 / lag-1 sums.
+The small products are loops (a fixed summation order instead of BLAS) and S^-1 is Gauss-Jordan
+elimination with partial pivoting (numpy: LAPACK), so the estimates move in their last bits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vdps_hil.estimation.ekf_update_kernels import _inverse
+from vdps_hil.jit import kernel
+
+__all__ = ["accumulate", "covariance_step", "warm"]
+
+
+@kernel()
+def covariance_step(a, b, sel, qv, w, xq, P, lam, qa, aq, y, xq_new, P_new):
+    """One eq-19 step on the rows ``sel`` of (a, b) that are finite: fills qa, aq, y (first k
+    rows), xq_new and P_new; returns (k, rows left out as non-finite, J increment). k = 0: nothing
+    else is written. Hand-specialised: equal to ``WeightedRLS._step_covariance`` (module
+    docstring)."""
+    m, n = a.shape
+    k = 0
+    nan_rows = 0
+    for i in range(m):
+        if not sel[i]:
+            continue
+        ok = b[i] - b[i] == 0.0
+        for j in range(n):
+            ok = ok and a[i, j] - a[i, j] == 0.0
+        if not ok:
+            nan_rows += 1
+            continue
+        for j in range(n):
+            qa[k, j] = qv[i] * a[i, j]
+            aq[k, j] = qa[k, j] * w[j]
+        y[k] = qv[i] * b[i]
+        k += 1
+    if k == 0:
+        return 0, nan_rows, 0.0
+    v = np.empty(k)
+    for r in range(k):
+        s = 0.0
+        for j in range(n):
+            s += aq[r, j] * xq[j]
+        v[r] = y[r] - s
+    pa = np.empty((n, k))  # P A_Q^T
+    for i in range(n):
+        for r in range(k):
+            s = 0.0
+            for j in range(n):
+                s += P[i, j] * aq[r, j]
+            pa[i, r] = s
+    S = np.empty((k, k))
+    for r in range(k):
+        for c in range(k):
+            s = 0.0
+            for j in range(n):
+                s += aq[r, j] * pa[j, c]
+            S[r, c] = s + (lam if r == c else 0.0)
+    s_inv = np.empty((k, k))
+    _inverse(S, s_inv)  # S >= lambda I: never singular
+    K = np.empty((n, k))
+    for i in range(n):
+        for c in range(k):
+            s = 0.0
+            for r in range(k):
+                s += pa[i, r] * s_inv[r, c]
+            K[i, c] = s
+    for i in range(n):
+        s = 0.0
+        for r in range(k):
+            s += K[i, r] * v[r]
+        xq_new[i] = xq[i] + s
+    ika = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            s = 0.0
+            for r in range(k):
+                s += K[i, r] * aq[r, j]
+            ika[i, j] = (1.0 if i == j else 0.0) - s
+    t = np.empty((n, n))  # (I - K A_Q) (P / lambda)
+    for i in range(n):
+        for j in range(n):
+            s = 0.0
+            for l in range(n):
+                s += ika[i, l] * (P[l, j] / lam)
+            t[i, j] = s
+    for i in range(n):
+        for j in range(n):
+            s = 0.0
+            for l in range(n):
+                s += t[i, l] * ika[j, l]
+            kk = 0.0
+            for r in range(k):
+                kk += K[i, r] * K[j, r]
+            P_new[i, j] = s + kk
+    for i in range(n):
+        for j in range(i, n):
+            h = 0.5 * (P_new[i, j] + P_new[j, i])
+            P_new[i, j] = h
+            P_new[j, i] = h
+    q = 0.0
+    for r in range(k):
+        s = 0.0
+        for c in range(k):
+            s += s_inv[r, c] * v[c]
+        q += v[r] * s
+    return k, nan_rows, lam * q
+
+
+@kernel()
+def accumulate(qa, aq, y, k, xq_new, lam, info, info_scaled, gg, g1, g_prev, has_prev):
+    """The diagnostics of an accepted update (in place): info, info_scaled, gg, g1 (when
+    ``has_prev``) and g_prev <- the score g. Hand-specialised: equal to the reference's lines in
+    ``WeightedRLS.update`` (module docstring)."""
+    n = xq_new.shape[0]
+    for i in range(n):
+        for j in range(n):
+            s = 0.0
+            t = 0.0
+            for r in range(k):
+                s += qa[r, i] * qa[r, j]
+                t += aq[r, i] * aq[r, j]
+            info[i, j] = lam * info[i, j] + s
+            info_scaled[i, j] = lam * info_scaled[i, j] + t
+    e = np.empty(k)
+    for r in range(k):
+        s = 0.0
+        for j in range(n):
+            s += aq[r, j] * xq_new[j]
+        e[r] = y[r] - s
+    for j in range(n):
+        s = 0.0
+        for r in range(k):
+            s += aq[r, j] * e[r]
+        gg[j] = lam * gg[j] + s * s
+        if has_prev:
+            g1[j] = lam * g1[j] + s * g_prev[j]
+        g_prev[j] = s
+
+
+def warm() -> None:
+    """Compile (or load from the cache) both kernels with the argument types the RLS uses."""
+    m, n = 3, 2
+    a, b = np.ones((m, n)), np.ones(m)
+    sel = np.ones(m, dtype=np.bool_)
+    qa, aq, y = np.empty((m, n)), np.empty((m, n)), np.empty(m)
+    xq_new, P_new = np.empty(n), np.empty((n, n))
+    k, _, _ = covariance_step(a, b, sel, np.ones(m), np.ones(n), np.zeros(n), np.eye(n), 1.0, qa, aq, y, xq_new,
+                              P_new)
+    accumulate(qa, aq, y, k, xq_new, 1.0, np.zeros((n, n)), np.zeros((n, n)), np.zeros(n), np.zeros(n),
+               np.zeros(n), True)
