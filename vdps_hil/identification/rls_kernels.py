@@ -14,15 +14,16 @@ The formulas are the reference's term for term (``rls`` module docstring)::
 
 and, after the bounds (``accumulate``): info += (Q A)^T Q A, info_scaled += A_Q^T A_Q (both
 discounted by lambda), the score g = A_Q^T (y - A_Q x_Q+) and its lag-0 / lag-1 sums.
-The small products are loops (a fixed summation order instead of BLAS) and S^-1 is Gauss-Jordan
-elimination with partial pivoting (numpy: LAPACK), so the estimates move in their last bits.
+The gain and the Joseph form are the EKF update's kernels (``ekf_update_kernels``: loops in a fixed
+summation order instead of BLAS, S^-1 by Gauss-Jordan elimination with partial pivoting instead of
+LAPACK), so the estimates move in their last bits.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from vdps_hil.estimation.ekf_update_kernels import _inverse
+from vdps_hil.estimation.ekf_update_kernels import _gain, _joseph
 from vdps_hil.jit import kernel
 
 __all__ = ["accumulate", "covariance_step", "warm"]
@@ -32,7 +33,7 @@ __all__ = ["accumulate", "covariance_step", "warm"]
 def covariance_step(a, b, sel, qv, w, xq, P, lam, qa, aq, y, xq_new, P_new):
     """One eq-19 step on the rows ``sel`` of (a, b) that are finite: fills qa, aq, y (first k
     rows), xq_new and P_new; returns (k, rows left out as non-finite, J increment). k = 0: nothing
-    else is written. Hand-specialised: equal to ``WeightedRLS._step_covariance`` (module
+    else is written. A hand-specialised kernel, equal to ``WeightedRLS._step_covariance`` (module
     docstring)."""
     m, n = a.shape
     k = 0
@@ -59,62 +60,21 @@ def covariance_step(a, b, sel, qv, w, xq, P, lam, qa, aq, y, xq_new, P_new):
         for j in range(n):
             s += aq[r, j] * xq[j]
         v[r] = y[r] - s
-    pa = np.empty((n, k))  # P A_Q^T
-    for i in range(n):
-        for r in range(k):
-            s = 0.0
-            for j in range(n):
-                s += P[i, j] * aq[r, j]
-            pa[i, r] = s
-    S = np.empty((k, k))
+    A = aq[:k]
+    eye = np.zeros((k, k))
     for r in range(k):
-        for c in range(k):
-            s = 0.0
-            for j in range(n):
-                s += aq[r, j] * pa[j, c]
-            S[r, c] = s + (lam if r == c else 0.0)
-    s_inv = np.empty((k, k))
-    _inverse(S, s_inv)  # S >= lambda I: never singular
-    K = np.empty((n, k))
-    for i in range(n):
-        for c in range(k):
-            s = 0.0
-            for r in range(k):
-                s += pa[i, r] * s_inv[r, c]
-            K[i, c] = s
+        eye[r, r] = 1.0
+    K, S, s_inv = np.empty((n, k)), np.empty((k, k)), np.empty((k, k))
+    _gain(P, A, lam * eye, K, S, s_inv)  # S = lambda I + A_Q P A_Q^T >= lambda I: never singular
     for i in range(n):
         s = 0.0
         for r in range(k):
             s += K[i, r] * v[r]
         xq_new[i] = xq[i] + s
-    ika = np.empty((n, n))
     for i in range(n):
         for j in range(n):
-            s = 0.0
-            for r in range(k):
-                s += K[i, r] * aq[r, j]
-            ika[i, j] = (1.0 if i == j else 0.0) - s
-    t = np.empty((n, n))  # (I - K A_Q) (P / lambda)
-    for i in range(n):
-        for j in range(n):
-            s = 0.0
-            for l in range(n):
-                s += ika[i, l] * (P[l, j] / lam)
-            t[i, j] = s
-    for i in range(n):
-        for j in range(n):
-            s = 0.0
-            for l in range(n):
-                s += t[i, l] * ika[j, l]
-            kk = 0.0
-            for r in range(k):
-                kk += K[i, r] * K[j, r]
-            P_new[i, j] = s + kk
-    for i in range(n):
-        for j in range(i, n):
-            h = 0.5 * (P_new[i, j] + P_new[j, i])
-            P_new[i, j] = h
-            P_new[j, i] = h
+            P_new[i, j] = P[i, j] / lam
+    _joseph(P_new, K, A, eye)  # (I - K A_Q) (P / lambda) (I - K A_Q)^T + K K^T, symmetrised
     q = 0.0
     for r in range(k):
         s = 0.0
@@ -127,7 +87,7 @@ def covariance_step(a, b, sel, qv, w, xq, P, lam, qa, aq, y, xq_new, P_new):
 @kernel()
 def accumulate(qa, aq, y, k, xq_new, lam, info, info_scaled, gg, g1, g_prev, has_prev):
     """The diagnostics of an accepted update (in place): info, info_scaled, gg, g1 (when
-    ``has_prev``) and g_prev <- the score g. Hand-specialised: equal to the reference's lines in
+    ``has_prev``) and g_prev <- the score g. A hand-specialised kernel, equal to the reference's lines in
     ``WeightedRLS.update`` (module docstring)."""
     n = xq_new.shape[0]
     for i in range(n):
