@@ -28,8 +28,8 @@ import math
 
 import numpy as np
 
-from vdps_hil.estimation.ekf_kernels import (N_EXT, dcm_gr_partials_k, dcm_gv_partials_k, expand_k,
-                                             road_normal_k, vehicle_angles_eq4_k, wrap_yaw)
+from vdps_hil.estimation.ekf_kernels import (N_EXT, _matmul, _matmul_bt, dcm_gr_partials_k, dcm_gv_partials_k,
+                                             expand_k, road_normal_k, vehicle_angles_eq4_k, wrap_yaw)
 from vdps_hil.jit import kernel
 
 __all__ = ["ACCEPTED", "GATED", "KIND_CODES", "NAN", "MODEL_DIMS", "model_eval", "model_params", "update", "warm"]
@@ -282,26 +282,14 @@ def _gain(P, H, R, K, S, S_inv):
     """S = H P H^T + R, S^-1 and K = P H^T S^-1; False if S is singular."""
     n, k = P.shape[0], H.shape[0]
     pht = np.empty((n, k))
-    for i in range(n):
-        for j in range(k):
-            s = 0.0
-            for c in range(n):
-                s += P[i, c] * H[j, c]
-            pht[i, j] = s
+    _matmul_bt(P, H, pht)
+    _matmul(H, pht, S)
     for i in range(k):
         for j in range(k):
-            s = 0.0
-            for c in range(n):
-                s += H[i, c] * pht[c, j]
-            S[i, j] = s + R[i, j]
+            S[i, j] += R[i, j]
     if not _inverse(S, S_inv):
         return False
-    for i in range(n):
-        for j in range(k):
-            s = 0.0
-            for c in range(k):
-                s += pht[i, c] * S_inv[c, j]
-            K[i, j] = s
+    _matmul(pht, S_inv, K)
     return True
 
 
@@ -310,35 +298,20 @@ def _joseph(P, K, H, R):
     """P <- sym((I - K H) P (I - K H)^T + K R K^T) in place."""
     n, k = P.shape[0], H.shape[0]
     ikh = np.empty((n, n))
+    _matmul(K, H, ikh)
     for i in range(n):
         for j in range(n):
-            s = 0.0
-            for c in range(k):
-                s += K[i, c] * H[c, j]
-            ikh[i, j] = (1.0 if i == j else 0.0) - s
+            ikh[i, j] = (1.0 if i == j else 0.0) - ikh[i, j]
     tmp = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            s = 0.0
-            for c in range(n):
-                s += ikh[i, c] * P[c, j]
-            tmp[i, j] = s
+    _matmul(ikh, P, tmp)
     kr = np.empty((n, k))
-    for i in range(n):
-        for j in range(k):
-            s = 0.0
-            for c in range(k):
-                s += K[i, c] * R[c, j]
-            kr[i, j] = s
+    _matmul(K, R, kr)
+    _matmul_bt(tmp, ikh, P)
+    krk = np.empty((n, n))
+    _matmul_bt(kr, K, krk)
     for i in range(n):
         for j in range(n):
-            s = 0.0
-            for c in range(n):
-                s += tmp[i, c] * ikh[j, c]
-            t = 0.0
-            for c in range(k):
-                t += kr[i, c] * K[j, c]
-            P[i, j] = s + t
+            P[i, j] += krk[i, j]
     for i in range(n):
         for j in range(i + 1, n):
             s = 0.5 * (P[i, j] + P[j, i])
