@@ -30,6 +30,18 @@ __all__ = ["accumulate", "covariance_step", "warm"]
 
 
 @kernel()
+def _residual(aq, y, k, xq):
+    """y - A_Q x_Q on the first k rows."""
+    out = np.empty(k)
+    for r in range(k):
+        s = 0.0
+        for j in range(xq.shape[0]):
+            s += aq[r, j] * xq[j]
+        out[r] = y[r] - s
+    return out
+
+
+@kernel()
 def covariance_step(a, b, sel, qv, w, xq, P, lam, qa, aq, y, xq_new, P_new):
     """One eq-19 step on the rows ``sel`` of (a, b) that are finite: fills qa, aq, y (first k
     rows), xq_new and P_new; returns (k, rows left out as non-finite, J increment). k = 0: nothing
@@ -54,12 +66,7 @@ def covariance_step(a, b, sel, qv, w, xq, P, lam, qa, aq, y, xq_new, P_new):
         k += 1
     if k == 0:
         return 0, nan_rows, 0.0
-    v = np.empty(k)
-    for r in range(k):
-        s = 0.0
-        for j in range(n):
-            s += aq[r, j] * xq[j]
-        v[r] = y[r] - s
+    v = _residual(aq, y, k, xq)  # a priori innovation
     A = aq[:k]
     eye = np.zeros((k, k))
     for r in range(k):
@@ -99,12 +106,7 @@ def accumulate(qa, aq, y, k, xq_new, lam, info, info_scaled, gg, g1, g_prev, has
                 t += aq[r, i] * aq[r, j]
             info[i, j] = lam * info[i, j] + s
             info_scaled[i, j] = lam * info_scaled[i, j] + t
-    e = np.empty(k)
-    for r in range(k):
-        s = 0.0
-        for j in range(n):
-            s += aq[r, j] * xq_new[j]
-        e[r] = y[r] - s
+    e = _residual(aq, y, k, xq_new)  # a posteriori residual
     for j in range(n):
         s = 0.0
         for r in range(k):
