@@ -194,18 +194,59 @@ def ekf_micro() -> dict | None:
     return bench_ekf.cycle_times()
 
 
+def python_reference(profile: str, a, tmp: str) -> dict:
+    """The same profile benchmarked in a child with ``VDPS_JIT=0`` (every kernel as its Python
+    reference), run right after the compiled one so both see the same machine load."""
+    import subprocess
+
+    js = os.path.join(tmp, f"{profile}-python.json")
+    subprocess.run([sys.executable, os.path.abspath(__file__), "--profiles", profile, "--duration", str(a.duration),
+                    "--repeat", str(a.repeat), "--json", js, "--no-micro"],
+                   env=dict(os.environ, VDPS_JIT="0"), check=True, stdout=subprocess.DEVNULL)
+    with open(js, encoding="utf-8") as f:
+        return json.load(f)["profiles"][profile]
+
+
+_COLUMNS = (("decode_rtf", "decode"), ("estimator_rtf", "estimator"), ("identify_rtf", "+identify"),
+            ("predict_rtf", "+predict"), ("replay_file_estimator_rtf", "replay est."),
+            ("replay_file_full_rtf", "replay full"))
+
+
+def print_side_by_side(prof: str, comp: dict, ref: dict) -> None:
+    """One profile: RTF compiled, VDPS_JIT=0, and their ratio, per stage."""
+    print(f"{prof}: {'':11s}" + "".join(f"{label:>13s}" for _, label in _COLUMNS))
+    for name, r in (("compiled", comp), ("VDPS_JIT=0", ref)):
+        print(f"  {name:19s}" + "".join(f"{r[k]:12.1f}x" for k, _ in _COLUMNS))
+    print(f"  {'ratio':19s}" + "".join(f"{comp[k] / ref[k]:12.2f} " for k, _ in _COLUMNS))
+    print(f"  EKF cycle: {comp['ekf']['cycle_us']:.0f} us compiled, {ref['ekf']['cycle_us']:.0f} us VDPS_JIT=0")
+    for j in ("jobs1", "jobs2"):
+        c, p = comp["command"][j], ref["command"][j]
+        print(f"  command vdps replay -o --no-identify --no-predict --jobs {j[-1]} (wall, fresh process): "
+              f"{c['wall_s']:.2f} s compiled, {p['wall_s']:.2f} s VDPS_JIT=0", flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--duration", type=float, default=30.0)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--profiles", default="table1,table1-susp1k")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--compare-python", action="store_true",
+                    help="also run each profile with VDPS_JIT=0 (in a child, right after) and print both")
+    ap.add_argument("--no-micro", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
-    doc = {"profiles": {}, "load_average": os.getloadavg()}
+    from vdps_hil import jit
+
+    doc = {"profiles": {}, "jit": jit.ENABLED, "load_average": {"start": os.getloadavg()}}
     with tempfile.TemporaryDirectory() as tmp:
         for prof in a.profiles.split(","):
             r = bench_profile(prof, a.duration, a.repeat, tmp)
             doc["profiles"][prof] = r
+            if a.compare_python:
+                ref = python_reference(prof, a, tmp)
+                doc.setdefault("python_reference", {})[prof] = ref
+                print_side_by_side(prof, r, ref)
+                continue
             print(f"{prof}: decode {r['decode_rtf']:.1f}x, estimator {r['estimator_rtf']:.1f}x, "
                   f"+identify {r['identify_rtf']:.1f}x, +predict {r['predict_rtf']:.1f}x; vdps replay: "
                   f"estimator {r['replay_file_estimator_rtf']:.1f}x, +identify {r['replay_file_identify_rtf']:.1f}x, "
@@ -215,7 +256,9 @@ def main(argv=None) -> int:
             print(f"  command vdps replay -o (estimator only, wall, fresh process): " + ", ".join(
                 f"--jobs {j[-1]} {c[j]['wall_s']:.2f} s = {c[j]['rtf_with_startup']:.1f}x with start-up, "
                 f"{c[j]['rtf_replay']:.1f}x replay" for j in ("jobs1", "jobs2")), flush=True)
-    micro = ekf_micro()
+    doc["load_average"]["end"] = os.getloadavg()
+    print(f"load average (1, 5, 15 min): start {doc['load_average']['start']}, end {doc['load_average']['end']}")
+    micro = None if a.no_micro else ekf_micro()
     if micro is not None:
         doc["ekf_micro_us"] = micro
         print("EKF micro-benchmark (tools/bench_ekf.py):", json.dumps(micro))

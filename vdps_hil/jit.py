@@ -46,7 +46,8 @@ ENABLED = os.environ.get("VDPS_JIT", "1").strip().lower() not in ("0", "false", 
 
 KERNEL_MODULES: list[str] = [
     "vdps_hil.model.reduced", "vdps_hil.model.core_kernel", "vdps_hil.prediction.integration_kernel",
-    "vdps_hil.sim.step_kernel",
+    "vdps_hil.sim.step_kernel", "vdps_hil.estimation.ekf_kernels", "vdps_hil.estimation.ekf_update_kernels",
+    "vdps_hil.identification.rls_kernels",
 ]
 """Modules that define kernels and a ``warm()`` that compiles them with representative
 arguments (``python -m vdps_hil.jit --warm``). A module adds itself here by name, in this

@@ -43,15 +43,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vdps_hil import jit
+from vdps_hil.estimation import ekf_kernels as PK
+from vdps_hil.estimation import ekf_update_kernels as UK
 from vdps_hil.estimation.chi2 import chi2_quantile
 from vdps_hil.estimation.ekf_config import EkfConfig
 from vdps_hil.estimation.ekf_history import Event, EventHistory
-from vdps_hil.estimation.kinematics import linearize, step, transition
+from vdps_hil.estimation.ekf_reference import propagate_reference, update_reference, wrap_positions
 from vdps_hil.estimation.observations import (ObsKind, make_models, rear_axle_ground_point,
                                               wheel_positions)
-from vdps_hil.estimation.states import N_EXT, N_FULL, AugStates, States, StateLayout
+from vdps_hil.estimation.states import N_EXT, AugStates, States
 
-_TWO_PI = 2.0 * math.pi
 
 NONLINEAR_KINDS = (ObsKind.GNSS_VEL, ObsKind.Y2_GPS, ObsKind.Y1_SUS, ObsKind.Y2_SUS_PLANE, ObsKind.Y2_SUS_RATE)
 """Kinds updated with the iterated EKF (``EkfConfig.update_iterations``): their h couples angle
@@ -82,32 +84,6 @@ class UpdateResult:
 _STATUSES = ("accepted", "gated", "nan", "too_old", "disabled", "not_initialized")
 
 
-def filter_jacobians(layout: StateLayout, x_ext, f_b, w_b) -> tuple[np.ndarray, np.ndarray]:
-    """(F, G) of the continuous model in the filter layout at the extended state ``x_ext``
-    (N_EXT) with the bias-corrected inputs ``f_b``, ``w_b``: F = d x_dot / d x (n x n),
-    G = d x_dot / d [f, w] (n x 6). The bias columns are -G of their input axes (``ekf_config``
-    module docstring, IMU bias states); augmented states have zero rows (random walks)."""
-    idx = layout.full_index
-    nk = layout.n_kinematic
-    kin = idx[:nk]
-    F12, G12 = linearize(x_ext[:N_FULL], f_b, w_b)
-    if nk == layout.n:
-        return F12[np.ix_(kin, kin)], G12[kin]
-    n = layout.n
-    F = np.zeros((n, n))
-    F[:nk, :nk] = F12[np.ix_(kin, kin)]
-    Gk = G12[kin]
-    for j in range(nk, n):
-        s = int(idx[j])
-        if AugStates.BG_X <= s <= AugStates.BG_Z:
-            F[:nk, j] = -Gk[:, 3 + s - AugStates.BG_X]
-        elif AugStates.BA_X <= s <= AugStates.BA_Z:
-            F[:nk, j] = -Gk[:, s - AugStates.BA_X]
-    G = np.zeros((n, 6))
-    G[:nk] = Gk
-    return F, G
-
-
 class MultiRateEKF:
     """The multi-rate EKF of eq 7-11 (pure object: no threads, no devices, no clocks).
 
@@ -115,14 +91,20 @@ class MultiRateEKF:
     12 states of eq 7 with derived/fixed ones filled in."""
 
     def __init__(self, config: EkfConfig | None = None, gnss_lever_arm_m=(0.0, 0.0, 0.0), wheel_positions_m=None,
-                 nhc_point_m=(0.0, 0.0, 0.0)):
+                 nhc_point_m=(0.0, 0.0, 0.0), compiled: bool | None = None):
         self.config = config or EkfConfig()
         self.layout = self.config.layout()
         self._idx = self.layout.full_index
         self._n = self.layout.n
         self._aug = self.layout.augmented
-        self._ix = np.ix_(self._idx, self._idx)
         self._models = make_models(gnss_lever_arm_m, wheel_positions_m, nhc_point_m)
+        self.compiled = jit.ENABLED if compiled is None else bool(compiled)
+        """Predict and update run the compiled kernels (``ekf_kernels``, ``ekf_update_kernels``);
+        False: their numpy reference (``ekf_reference``; the default with ``VDPS_JIT=0``)."""
+        self._lay = PK.layout_arrays(self.layout)  # idx, pos, flags, yaw for the kernels
+        m = self._models
+        self._model_params = UK.model_params(m[ObsKind.GNSS_POS].lever_arm_m, m[ObsKind.NHC].point_m,
+                                             m[ObsKind.WHEEL_SPEED].wheel_positions_m)
         self._kinds = self.config.kinds()
         self._q_in = self.config.input_psd()
         q_rw = np.zeros(N_EXT)
@@ -131,12 +113,14 @@ class MultiRateEKF:
         q_rw[AugStates.BG_X:AugStates.BG_Z + 1] = self.config.gyro_bias_rw ** 2
         q_rw[AugStates.BA_X:AugStates.BA_Z + 1] = self.config.accel_bias_rw ** 2
         q_rw[AugStates.WHEEL_SCALE] = self.config.wheel_scale_rw ** 2
-        self._q_rw = np.diag(q_rw[self._idx])
+        self._q_rw_diag = q_rw[self._idx]
+        self._q_rw = np.diag(self._q_rw_diag)
         self._pos_bg = [(self.layout.index(AugStates.BG_X + a), a) for a in self.layout.gyro_bias_axes]
         self._pos_ba = [(self.layout.index(AugStates.BA_X + a), a) for a in self.layout.accel_bias_axes]
         self._g = self.config.gravity_in_model_mps2
         p = self.config.gate_probability
         self._gates = {d: (chi2_quantile(p, d) if p is not None else math.inf) for d in range(1, 7)}
+        self._gate_array = np.array([self._gates.get(d, math.inf) for d in range(7)])
         self._yaw_pos = [i for i, s in enumerate(self._idx) if s in (States.PSI_G, States.PSI_V)]
         self._iterations = {k: self.config.update_iterations for k in NONLINEAR_KINDS}
         self._hist_ns = int(round(self.config.history_s * 1e9))
@@ -309,30 +293,14 @@ class MultiRateEKF:
         return self._x is not None
 
     def _propagate(self, dt: float) -> None:
-        idx, n = self._idx, self._n
-        if self._aug:
-            xe = np.zeros(N_EXT)
-            xe[idx] = self._x
-            f = self._f - xe[AugStates.BA_X:AugStates.BA_Z + 1]
-            w = self._w - xe[AugStates.BG_X:AugStates.BG_Z + 1]
-            F, G = filter_jacobians(self.layout, xe, f, w)
-            xn = xe.copy()
-            xn[:N_FULL] = step(xe[:N_FULL], f, w, dt, self._g)
+        if self.compiled:
+            x, P, phi = self._x.copy(), self._P.copy(), np.empty((self._n, self._n))
+            idx, _, flags, yaw = self._lay
+            PK.propagate(x, P, idx, flags, yaw, self._f, self._w, dt, self._g, self._q_in, self._q_rw_diag, phi)
         else:
-            xf = np.zeros(N_FULL)
-            xf[idx] = self._x
-            F, G = linearize(xf, self._f, self._w)
-            xn = step(xf, self._f, self._w, dt, self._g)
-            if n != N_FULL:
-                F = F[self._ix]
-                G = G[idx]
-        phi = transition(F, dt)
-        qc = (G * self._q_in) @ G.T + self._q_rw
-        qd = (phi @ qc @ phi.T + qc) * (0.5 * dt)
-        P = phi @ self._P @ phi.T + qd
-        self._P = 0.5 * (P + P.T)
-        self._x = xn[idx]
-        self._wrap()
+            x, P, phi = propagate_reference(self.layout, self._x, self._P, self._f, self._w, dt, self._g,
+                                            self._q_in, self._q_rw, self._yaw_pos)
+        self._x, self._P = x, P
         self._counts["predicts"] += 1
         if self.on_predict is not None and not self._replaying:
             self.on_predict(phi)
@@ -365,71 +333,44 @@ class MultiRateEKF:
         return self._delayed(kind, z, R, t_m, aux)
 
     def _apply(self, kind: ObsKind, z, R, t_m: int, aux, count: bool, delayed: bool = False) -> UpdateResult:
-        model = self._models[kind]
         ok = np.isfinite(z)
         if not ok.any():
             return self._finish(UpdateResult(kind, t_m, "nan", delayed=delayed), count)
         if self._hist_ns > 0:
             self._record(False, t_m, (kind, z.copy(), R.copy(), aux))
-        xf, E = self.layout.expand(self._x, ext=self._aug)
-        y = model.h(xf, aux)
-        H = model.jacobian(xf, aux)
-        H = H @ (E if H.shape[1] == E.shape[0] else E[:H.shape[1]])
-        nu = model.residual(z, y)
-        if not ok.all():
-            nu, H, R = nu[ok], H[ok], R[np.ix_(ok, ok)]
-        if not np.isfinite(R).all() or not np.isfinite(nu).all():
+        if self.compiled:
+            status, dof, nis, gate, innov, sig, x, P, H, R = self._update_compiled(kind, z, R, aux)
+        else:
+            status, dof, nis, gate, innov, sig, x, P, H, R = update_reference(
+                self._models[kind], self.layout, self._x, self._P, z, R, aux, self._iterations.get(kind, 1),
+                self._gates, self._yaw_pos)
+        if not dof:  # non-finite R or innovation, or a singular S
             return self._finish(UpdateResult(kind, t_m, "nan", delayed=delayed), count)
-        P = self._P
-        PHt = P @ H.T
-        S = H @ PHt + R
-        try:
-            S_inv = np.linalg.inv(S)
-        except np.linalg.LinAlgError:
-            return self._finish(UpdateResult(kind, t_m, "nan", delayed=delayed), count)
-        nis = float(nu @ S_inv @ nu)
-        dof = int(nu.shape[0])
-        gate = self._gates.get(dof, math.inf)
-        innov = tuple(float(v) for v in nu)
-        sig = tuple(float(math.sqrt(max(0.0, S[i, i]))) for i in range(dof))
         if count:
-            self._last_innov = nu.copy()
-        if not math.isfinite(nis) or nis > gate:
-            status = "gated" if math.isfinite(nis) else "nan"
-            return self._finish(UpdateResult(kind, t_m, status, innov, sig, nis, dof, gate, delayed), count)
-        K = PHt @ S_inv
-        x0 = self._x
-        x_new = x0 + K @ nu
-        for _ in range(self._iterations.get(kind, 1) - 1):
-            # iterated EKF (Gauss-Newton): relinearise at the new estimate
-            dx = x_new - x0
-            xf_i, E_i = self.layout.expand(x_new, ext=self._aug)
-            H_i = model.jacobian(xf_i, aux)
-            H_i = H_i @ (E_i if H_i.shape[1] == E_i.shape[0] else E_i[:H_i.shape[1]])
-            nu_i = model.residual(z, model.h(xf_i, aux))
-            if not ok.all():
-                H_i, nu_i = H_i[ok], nu_i[ok]
-            PHt_i = P @ H_i.T
-            try:
-                K_i = PHt_i @ np.linalg.inv(H_i @ PHt_i + R)
-            except np.linalg.LinAlgError:
-                break
-            x_next = x0 + K_i @ (nu_i + H_i @ dx)
-            H, K = H_i, K_i
-            step_size = float(np.abs(x_next - x_new).max())
-            x_new = x_next
-            if not math.isfinite(step_size) or step_size < 1e-12:
-                break
-        self._x = x_new
-        ikh = np.eye(self._n) - K @ H
-        P = ikh @ P @ ikh.T + K @ R @ K.T
-        self._P = 0.5 * (P + P.T)
-        self._wrap()
+            self._last_innov = np.array(innov)
+        res = UpdateResult(kind, t_m, status, innov, sig, nis, dof, gate, delayed)
+        if status != "accepted":
+            return self._finish(res, count)
+        self._x, self._P = x, P
         if self.on_update is not None and not self._replaying:
             self.on_update(H, R)
-        res = self._finish(UpdateResult(kind, t_m, "accepted", innov, sig, nis, dof, gate, delayed), count)
+        res = self._finish(res, count)
         self._check_finite()
         return res
+
+    def _update_compiled(self, kind: ObsKind, z, R, aux) -> tuple:
+        """``update_reference``'s result from the compiled kernel (``ekf_update_kernels.update``)."""
+        code = _KIND_CODE[kind]
+        aux_arr, has_aux = _aux_array(code, aux)
+        n, m = self._n, z.shape[0]
+        x, P = self._x.copy(), self._P.copy()
+        innov, sig, H, R_used = np.empty(m), np.empty(m), np.empty((m, n)), np.empty((m, m))
+        idx, pos, flags, yaw = self._lay
+        params, wheels = self._model_params
+        st, dof, nis, gate, _ = UK.update(code, x, P, z, R, aux_arr, has_aux, idx, pos, flags, yaw, params, wheels,
+                                          self._iterations.get(kind, 1), self._gate_array, innov, sig, H, R_used)
+        inn, sg = tuple(innov[:dof].tolist()), tuple(sig[:dof].tolist())
+        return (_KERNEL_STATUS[st], dof, nis, gate, inn, sg, x, P, H[:dof], R_used[:dof, :dof])
 
     def _finish(self, res: UpdateResult, count: bool) -> UpdateResult:
         if count:
@@ -480,14 +421,28 @@ class MultiRateEKF:
         return self.layout.full_covariance(self._x, self._P)
 
     def _wrap(self) -> None:
-        for i in self._yaw_pos:
-            v = self._x[i]
-            if v >= math.pi or v < -math.pi:
-                self._x[i] = (v + math.pi) % _TWO_PI - math.pi
+        wrap_positions(self._x, self._yaw_pos)
 
     def _check_finite(self) -> None:
         if self._x is not None and not (math.isfinite(float(self._x.sum())) and math.isfinite(float(self._P.sum()))):
             self.reset("nan")
+
+
+_KIND_CODE = {ObsKind(v): i for i, v in enumerate(UK.KIND_CODES)}
+_KERNEL_STATUS = {UK.ACCEPTED: "accepted", UK.GATED: "gated", UK.NAN: "nan"}
+_NO_AUX = np.zeros(11)
+
+
+def _aux_array(code: int, aux) -> tuple[np.ndarray, bool]:
+    """The ``aux`` of an update as the kernel's float array (``ekf_update_kernels``)."""
+    if aux is None:
+        return _NO_AUX, False
+    if code == 7:  # wheel speed: (w, headings, weights)
+        w, d, a = aux
+        return np.array([*(float(v) for v in w), *(float(v) for v in d), *(float(v) for v in a)]), True
+    if code == 3:  # y2_gps: theta_v
+        return np.array([float(aux)]), True
+    return np.array([float(v) for v in aux]), True
 
 
 def _ro(a):

@@ -32,7 +32,7 @@ runs eq 7-11 as before; the sensor sets of real cars in ``configs/sensorsets`` s
   w_b = w_meas - b_g, f_b = f_meas - b_a, with b random walks (``gyro_bias_rw`` [rad/s/sqrt(s)],
   ``accel_bias_rw`` [m/s^2/sqrt(s)]) and prior sigmas ``gyro_bias_sigma_radps``,
   ``accel_bias_sigma_mps2``; d x_dot / d b_g = -G_w, d x_dot / d b_a = -G_f (G = d f/d [f, w];
-  ``ekf.filter_jacobians``). Only the axes the IMU has (ESC cluster: b_g,z, b_a,x, b_a,y).
+  ``ekf_reference.filter_jacobians``). Only the axes the IMU has (ESC cluster: b_g,z, b_a,x, b_a,y).
 * Wheel speed (``wheel_speed``): the ``wheel_speed`` observation (``observations.WheelSpeed``),
   optionally with the scale state k_w (``wheel_scale_state``, random walk ``wheel_scale_rw``).
 * Non-holonomic constraint (``nonholonomic``): the ``nhc`` observation

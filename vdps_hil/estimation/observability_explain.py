@@ -42,7 +42,7 @@ from typing import Sequence
 
 import numpy as np
 
-from vdps_hil.estimation.ekf import filter_jacobians
+from vdps_hil.estimation.ekf_reference import filter_jacobians
 from vdps_hil.estimation.ekf_config import EkfConfig
 from vdps_hil.estimation.kinematics import transition, vehicle_angles_eq4
 from vdps_hil.estimation.observability import DEFAULT_RTOL, ObservabilityReport, default_scales, observability_rank

@@ -83,6 +83,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vdps_hil import jit
+from vdps_hil.identification import rls_kernels as RK
+
 FORMS = ("covariance", "sqrt_information")
 BOUNDS_MODES = ("clamp", "reject")
 MAX_INFLATION = 100.0
@@ -153,6 +156,8 @@ class WeightedRLS:
         self.names = tuple(names) if names is not None else tuple(f"x{i}" for i in range(n))
         if len(self.names) != n:
             raise ValueError("names must have one entry per parameter")
+        self._compiled = jit.ENABLED and form == "covariance"
+        """Covariance-form updates through the compiled ``rls_kernels`` (numpy with VDPS_JIT=0)."""
         self._resets = -1
         self.reset()
 
@@ -192,15 +197,15 @@ class WeightedRLS:
         if a.shape != (self.m, self.n) or b.shape != (self.m,):
             raise ValueError(f"A must be ({self.m}, {self.n}) and b ({self.m},); got {a.shape}, {b.shape}")
         sel = np.ones(self.m, dtype=bool) if rows is None else np.asarray(rows, dtype=bool).reshape(self.m)
+        qv = self._q if q is None else _vector("q", q, self.m)
+        if self._compiled:
+            return self._update_compiled(a, b, sel, qv, db_dtheta)
         finite = np.isfinite(a).all(axis=1) & np.isfinite(b)
         self._c["nan_rows"] += int(np.count_nonzero(sel & ~finite))
         sel = sel & finite
         k = int(np.count_nonzero(sel))
         if k == 0:
-            self._c["not_excited"] += 1
-            self._g_prev = None
-            return False
-        qv = self._q if q is None else _vector("q", q, self.m)
+            return self._not_excited()
         qa = qv[sel, None] * a[sel]  # Q A (physical), k x n
         aq = qa * self._w[None, :]  # A_Q = Q A W
         y = qv[sel] * b[sel]  # Q b
@@ -213,19 +218,9 @@ class WeightedRLS:
         else:
             xq_new, r_new, drss = self._step_sqrt(aq, y, lam)
             p_new = None
-        if not (np.all(np.isfinite(xq_new)) and np.isfinite(drss)):
-            self._c["nan_rows"] += k  # cannot happen with finite rows; never keep it
-            self._g_prev = None
+        xq_new = self._bounded(xq_new, drss, k)
+        if xq_new is None:
             return False
-        x_new = xq_new * self._w
-        if np.any(x_new < self._lower) or np.any(x_new > self._upper):
-            if self.bounds_mode == "reject":
-                self._c["rejected"] += 1
-                self._g_prev = None
-                return False
-            x_new = np.clip(x_new, self._lower, self._upper)
-            xq_new = x_new / self._w
-            self._c["clamped"] += 1
 
         self._xq = xq_new
         if p_new is not None:
@@ -233,10 +228,7 @@ class WeightedRLS:
         else:
             self._R = r_new
             self._z = r_new @ xq_new
-        if lam < 1.0:
-            self._anti_windup()
-        self._rss = lam * self._rss + drss
-        self._nrows = lam * self._nrows + k
+        self._commit_common(drss, k)
         self._info = lam * self._info + qa.T @ qa
         self._info_scaled = lam * self._info_scaled + aq.T @ aq
         e_post = y - aq @ xq_new  # a posteriori residual
@@ -246,16 +238,74 @@ class WeightedRLS:
             self._g1 = lam * self._g1 + g * self._g_prev
         self._g_prev = g
         if db_dtheta is not None:
-            d = np.asarray(db_dtheta, dtype=float)
-            if d.ndim != 2 or d.shape[0] != self.m:
-                raise ValueError(f"db_dtheta must be ({self.m}, p), got {d.shape}")
-            contrib = aq.T @ (qv[sel, None] * np.nan_to_num(d[sel], nan=0.0, posinf=0.0, neginf=0.0))
-            if self._sens is None or self._sens.shape != contrib.shape:
-                self._sens = np.zeros_like(contrib)
-            self._sens = lam * self._sens + contrib
+            self._add_sensitivity(db_dtheta, qv, sel, aq)
+        return True
+
+    def _update_compiled(self, a, b, sel, qv, db_dtheta) -> bool:
+        """``update`` in covariance form through the compiled ``rls_kernels`` (equal to the numpy
+        lines of ``update`` within 1e-12; ``tests/test_rls_kernels.py``)."""
+        m, n, lam = self.m, self.n, self.forgetting
+        qa, aq, y = np.empty((m, n)), np.empty((m, n)), np.empty(m)
+        xq_new, p_new = np.empty(n), np.empty((n, n))
+        c = np.ascontiguousarray
+        k, nan_rows, drss = RK.covariance_step(c(a), c(b), c(sel), c(qv), self._w, self._xq, self._P, lam, qa, aq, y,
+                                               xq_new, p_new)
+        self._c["nan_rows"] += nan_rows
+        if k == 0:
+            return self._not_excited()
+        xq_new = self._bounded(xq_new, drss, k)
+        if xq_new is None:
+            return False
+        self._xq, self._P = xq_new, p_new
+        self._commit_common(drss, k)
+        has_prev = self._g_prev is not None
+        g = np.zeros(n) if not has_prev else self._g_prev
+        RK.accumulate(qa, aq, y, k, xq_new, lam, self._info, self._info_scaled, self._gg, self._g1, g, has_prev)
+        self._g_prev = g
+        if db_dtheta is not None:
+            sel = sel & np.isfinite(a).all(axis=1) & np.isfinite(b)
+            self._add_sensitivity(db_dtheta, qv, sel, aq[:k])
+        return True
+
+    def _not_excited(self) -> bool:
+        self._c["not_excited"] += 1
+        self._g_prev = None
+        return False
+
+    def _bounded(self, xq_new, drss: float, k: int):
+        """The candidate x_Q within the bounds (clamped), or None: non-finite or rejected."""
+        if not (np.all(np.isfinite(xq_new)) and np.isfinite(drss)):
+            self._c["nan_rows"] += k  # cannot happen with finite rows; never keep it
+            self._g_prev = None
+            return None
+        x_new = xq_new * self._w
+        if np.any(x_new < self._lower) or np.any(x_new > self._upper):
+            if self.bounds_mode == "reject":
+                self._c["rejected"] += 1
+                self._g_prev = None
+                return None
+            x_new = np.clip(x_new, self._lower, self._upper)
+            xq_new = x_new / self._w
+            self._c["clamped"] += 1
+        return xq_new
+
+    def _commit_common(self, drss: float, k: int) -> None:
+        lam = self.forgetting
+        if lam < 1.0:
+            self._anti_windup()
+        self._rss = lam * self._rss + drss
+        self._nrows = lam * self._nrows + k
         self._c["updates"] += 1
         self._c["rows_used"] += k
-        return True
+
+    def _add_sensitivity(self, db_dtheta, qv, sel, aq) -> None:
+        d = np.asarray(db_dtheta, dtype=float)
+        if d.ndim != 2 or d.shape[0] != self.m:
+            raise ValueError(f"db_dtheta must be ({self.m}, p), got {d.shape}")
+        contrib = aq.T @ (qv[sel, None] * np.nan_to_num(d[sel], nan=0.0, posinf=0.0, neginf=0.0))
+        if self._sens is None or self._sens.shape != contrib.shape:
+            self._sens = np.zeros_like(contrib)
+        self._sens = self.forgetting * self._sens + contrib
 
     def _step_covariance(self, aq, y, lam):
         """Eq 19 (sign corrected), P line in Joseph form. Returns (x_Q, P, J increment)."""
