@@ -50,122 +50,141 @@ DEFAULT_BUFFER_BYTES = 256 << 20
 # --- the child ------------------------------------------------------------------------------
 
 def _child(sock: socket.socket, max_buffer: int) -> int:
-    sock.setblocking(False)
-    for opt in (getattr(socket, "SO_SNDBUFFORCE", None), socket.SO_SNDBUF):
-        if opt is None:
-            continue
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, opt, 4 << 20)
-            break
-        except OSError:
-            continue
-    pending = bytearray()
-    dev = -1
-    drop_n = drop_b = 0
-    drop_t = 0
-    quitting = False
-    poller = select.poll()
-    sock_fd = sock.fileno()
-    registered_out = False
-    poller.register(sock_fd, select.POLLIN)
+    return _Child(sock, max_buffer).run()
 
-    def lost(why: str) -> None:
-        nonlocal dev
-        poller.unregister(dev)
+
+_HANGUP = select.POLLHUP | select.POLLERR | select.POLLNVAL
+
+
+class _Child:
+    """The reader process: the device's bytes, stamped at each read, into ``pending`` (at most
+    ``max_buffer`` bytes; reads beyond are dropped and counted as one OVERFLOW record), sent to
+    the parent whenever its socket takes them; control messages carry a new device descriptor
+    or "Q" (quit: drain what the device holds, send everything, close)."""
+
+    def __init__(self, sock: socket.socket, max_buffer: int):
+        sock.setblocking(False)
+        for opt in (getattr(socket, "SO_SNDBUFFORCE", None), socket.SO_SNDBUF):
+            if opt is None:
+                continue
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, opt, 4 << 20)
+                break
+            except OSError:
+                continue
+        self.sock, self.max_buffer = sock, max_buffer
+        self.pending = bytearray()
+        self.dev = -1
+        self.drop_n = self.drop_b = self.drop_t = 0
+        self.poller = select.poll()
+        self.sock_fd = sock.fileno()
+        self.registered_out = False
+        self.poller.register(self.sock_fd, select.POLLIN)
+
+    def lost(self, why: str) -> None:
+        self.poller.unregister(self.dev)
         try:
-            os.close(dev)
+            os.close(self.dev)
         except OSError:
             pass
-        dev = -1
+        self.dev = -1
         msg = why.encode("utf-8", "replace")[:500]
-        pending.extend(HDR.pack(LOST, time.monotonic_ns(), len(msg)))
-        pending.extend(msg)
+        self.pending.extend(HDR.pack(LOST, time.monotonic_ns(), len(msg)))
+        self.pending.extend(msg)
 
-    def read_dev(hup: bool) -> bool:
+    def read_dev(self, hup: bool) -> bool:
         """One read; False when nothing was there. A terminal in pyserial's raw mode (VMIN 0)
         reads nothing when nothing is waiting: only with a hang-up is that the end."""
-        nonlocal drop_n, drop_b, drop_t
         try:
-            data = os.read(dev, READ_SIZE)
+            data = os.read(self.dev, READ_SIZE)
         except (BlockingIOError, InterruptedError):
             return False
         except OSError as e:
-            lost(f"read failed: {e.strerror or e}")
+            self.lost(f"read failed: {e.strerror or e}")
             return False
         t = time.monotonic_ns()
         if not data:
             if hup:
-                lost("hang-up (device closed)")
+                self.lost("hang-up (device closed)")
             return False
-        if len(pending) + len(data) > max_buffer:
-            if not drop_n:
-                drop_t = t
-            drop_n += 1
-            drop_b += len(data)
+        pending = self.pending
+        if len(pending) + len(data) > self.max_buffer:
+            if not self.drop_n:
+                self.drop_t = t
+            self.drop_n += 1
+            self.drop_b += len(data)
             return True
-        if drop_n:
-            pending.extend(HDR.pack(OVERFLOW, drop_t, DROPS.size))
-            pending.extend(DROPS.pack(drop_n, drop_b))
-            drop_n = drop_b = 0
+        self.flush_drops()
         pending.extend(HDR.pack(DATA, t, len(data)))
         pending.extend(data)
         return True
 
-    while True:
-        want_out = bool(pending)
-        if want_out != registered_out:
-            poller.modify(sock_fd, select.POLLIN | (select.POLLOUT if want_out else 0))
-            registered_out = want_out
+    def flush_drops(self) -> None:
+        if self.drop_n:
+            self.pending.extend(HDR.pack(OVERFLOW, self.drop_t, DROPS.size))
+            self.pending.extend(DROPS.pack(self.drop_n, self.drop_b))
+            self.drop_n = self.drop_b = 0
+
+    def on_socket(self, ev: int) -> str | None:
+        """Send what the parent takes, read its control message: "gone" (the parent is gone or
+        closed its end), "quit", or None."""
+        if ev & select.POLLOUT and self.pending:
+            try:
+                n = self.sock.send(memoryview(self.pending)[:SEND_SIZE])
+                del self.pending[:n]
+            except (BlockingIOError, InterruptedError):
+                pass
+            except OSError:
+                return "gone"
+        if not ev & (select.POLLIN | select.POLLHUP | select.POLLERR):
+            return None
         try:
-            events = poller.poll(200)
-        except InterruptedError:
-            continue
-        for fd, ev in events:
-            if fd == dev:
-                read_dev(bool(ev & (select.POLLHUP | select.POLLERR | select.POLLNVAL)))
-            elif fd == sock_fd:
-                if ev & select.POLLOUT and pending:
-                    try:
-                        n = sock.send(memoryview(pending)[:SEND_SIZE])
-                        del pending[:n]
-                    except (BlockingIOError, InterruptedError):
-                        pass
-                    except OSError:
-                        return 0  # the parent is gone
-                if ev & (select.POLLIN | select.POLLHUP | select.POLLERR):
-                    try:
-                        msg, fds, _, _ = socket.recv_fds(sock, 16, 4)
-                    except (BlockingIOError, InterruptedError):
-                        continue
-                    except OSError:
+            msg, fds, _, _ = socket.recv_fds(self.sock, 16, 4)
+        except (BlockingIOError, InterruptedError):
+            return None
+        except OSError:
+            return "gone"
+        if not msg:
+            return "gone"
+        for newfd in fds:
+            if self.dev >= 0:
+                self.poller.unregister(self.dev)
+                os.close(self.dev)
+            self.dev = newfd
+            self.poller.register(newfd, select.POLLIN)
+        return "quit" if b"Q" in msg else None
+
+    def run(self) -> int:
+        quitting = False
+        while not quitting:
+            want_out = bool(self.pending)
+            if want_out != self.registered_out:
+                self.poller.modify(self.sock_fd, select.POLLIN | (select.POLLOUT if want_out else 0))
+                self.registered_out = want_out
+            try:
+                events = self.poller.poll(200)
+            except InterruptedError:
+                continue
+            for fd, ev in events:
+                if fd == self.dev:
+                    self.read_dev(bool(ev & _HANGUP))
+                elif fd == self.sock_fd:
+                    what = self.on_socket(ev)
+                    if what == "gone":
                         return 0
-                    if not msg:
-                        return 0  # parent closed its end
-                    for newfd in fds:
-                        if dev >= 0:
-                            poller.unregister(dev)
-                            os.close(dev)
-                        dev = newfd
-                        poller.register(dev, select.POLLIN)
-                    if b"Q" in msg:
-                        quitting = True
-        if quitting:
-            break
-    while dev >= 0:  # what the device still holds (never waiting: the fd may block)
-        ready = poller.poll(0)
-        ev = next((e for fd, e in ready if fd == dev), 0)
-        if not ev or not read_dev(bool(ev & (select.POLLHUP | select.POLLERR | select.POLLNVAL))):
-            break
-    if drop_n:
-        pending.extend(HDR.pack(OVERFLOW, drop_t, DROPS.size))
-        pending.extend(DROPS.pack(drop_n, drop_b))
-    sock.setblocking(True)
-    try:
-        sock.sendall(pending)
-        sock.shutdown(socket.SHUT_WR)
-    except OSError:
-        pass
-    return 0
+                    quitting = quitting or what == "quit"
+        while self.dev >= 0:  # what the device still holds (never waiting: the fd may block)
+            ev = next((e for fd, e in self.poller.poll(0) if fd == self.dev), 0)
+            if not ev or not self.read_dev(bool(ev & _HANGUP)):
+                break
+        self.flush_drops()
+        self.sock.setblocking(True)
+        try:
+            self.sock.sendall(self.pending)
+            self.sock.shutdown(socket.SHUT_WR)
+        except OSError:
+            pass
+        return 0
 
 
 def main(argv=None) -> int:
