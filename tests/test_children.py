@@ -23,7 +23,10 @@ def test_plain_python_m_would_import_the_planted_module(tmp_path):
     """The threat is real here: ``python -m json.tool`` imports ./json.py (a check that the
     planted modules work, so the tests below can fail)."""
     d = plant(tmp_path / "cwd")
-    r = subprocess.run([sys.executable, "-m", "json.tool", "--help"], cwd=d, capture_output=True)
+    # without safe-path mode: a test before this one in the same process may have set
+    # PYTHONSAFEPATH=1 for its pools (isolate_spawned_children), which every child inherits
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONSAFEPATH"}
+    r = subprocess.run([sys.executable, "-m", "json.tool", "--help"], cwd=d, capture_output=True, env=env)
     assert r.returncode != 0 and markers(d) == ["json"]
 
 
