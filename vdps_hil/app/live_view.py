@@ -44,6 +44,10 @@ class LiveServerError(ValueError):
     """The server cannot start (port in use, bad port): one line."""
 
 
+SUBSCRIBE_SETTLE_S = 0.2
+"""Time between the first ``on_subscribe`` and the first message (``wait_for_subscriber``)."""
+
+
 class _Listener(ServerListener):
     """The server's listener: sets ``subscribed`` at the first subscription (the other events
     keep the SDK's defaults)."""
@@ -85,8 +89,14 @@ class LiveServer:
         return f"ws://{LOCALHOST}:{self.port}"
 
     def wait_for_subscriber(self, timeout_s: float | None = None) -> bool:
-        """Block until a client subscribes to a channel (True) or ``timeout_s`` passes (False)."""
-        return self._listener.subscribed.wait(timeout_s)
+        """Block until a client subscribes to a channel (True) or ``timeout_s`` passes (False).
+        The SDK calls ``on_subscribe`` before it routes the channel to the client: a message
+        logged at once is lost (seen on a quiet machine), so this returns ``SUBSCRIBE_SETTLE_S``
+        after the first subscription."""
+        if not self._listener.subscribed.wait(timeout_s):
+            return False
+        time.sleep(SUBSCRIBE_SETTLE_S)
+        return True
 
     def advertise(self, topics: Mapping[str, str]) -> None:
         """Open the channels ``{topic: schema name}`` now (a client can subscribe before data flows)."""
