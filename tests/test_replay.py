@@ -47,8 +47,9 @@ def test_replay_with_a_saved_model(tmp_path):
 
 def test_saved_imu_bias_is_taken_out_of_the_readings(tmp_path):
     """A drive whose IMU has a large hidden bias (0.3 m/s^2 on x and y, 0.01 rad/s on z: a
-    badly calibrated unit; lane change, seed 3, 12 s): without the model the EKF's gated GNSS
-    updates mostly fail (measured: 32/60 positions, 7/60 velocities accepted); with a saved
+    badly calibrated unit; lane change, seed 3, 12 s): without the model the EKF's GNSS
+    innovations are inconsistent (measured before the aiding monitor: 32/60 positions, 7/60
+    velocities accepted; with it 60/60, 53/63 attitudes, 42/68 velocities); with a saved
     model naming that bias, ``VdpsSystem`` removes it from every IMU reading and >= 95 % of
     the GNSS position and attitude updates pass the chi-square gate."""
     from vdps_hil.model.effects import REGISTRY, EffectSet
@@ -65,7 +66,12 @@ def test_saved_imu_bias_is_taken_out_of_the_readings(tmp_path):
     fixed = replay_file(drive, model=m, identify=False, predict=False)["innovations"]
     for kind in ("gnss_pos", "gnss_att"):
         assert fixed[kind]["accepted"] >= 0.95 * fixed[kind]["updates"], fixed[kind]
-        assert plain[kind]["accepted"] < 0.8 * plain[kind]["updates"], plain[kind]
+    # without the model the bias shows: since the aiding monitor re-acquires after 3 gated
+    # fixes (issue 20) the positions pass again, but the GNSS innovations are not consistent
+    # (gated fixes): over the three kinds, the accepted fractions sum to 0.3 less than with it
+    kinds = ("gnss_pos", "gnss_att", "gnss_vel")
+    assert sum(plain[k]["accepted"] / plain[k]["updates"] for k in kinds) < \
+        sum(fixed[k]["accepted"] / fixed[k]["updates"] for k in kinds) - 0.3, (plain, fixed)
 
 
 def test_sample_stats_takes_the_first_seconds_and_leaves_the_rest():
