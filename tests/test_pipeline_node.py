@@ -77,7 +77,10 @@ def test_warning_frames_decode_with_crc_and_counter_at_50_hz(paper_run):
     status = [int(s.fields["warning_status"]) for s in got]
     # from the priors: "not converged" (1) until the cornering problem converges (~1.2 s here), then valid
     # 3 (fault): the aiding innovations were inconsistent (a fix gated in the start-up transient)
-    assert set(status) <= {0, 1, 2, 3} and status[0] == 1 and status[-1] == 0 and status.count(0) > 0.3 * len(status)
+    # measured (seed 7, 2.5 s): 1 to 1.25 s, 0, 3 at 1.42-1.48 s (20 inconsistent frames), 1 again
+    # to 1.96 s (the cornering problem's status fell back: identification.status), 0 to the end:
+    # 36 of 126 frames valid (was > 30 % before the status and aiding monitors; now > 25 %)
+    assert set(status) <= {0, 1, 2, 3} and status[0] == 1 and status[-1] == 0 and status.count(0) > 0.25 * len(status)
 
 
 def _live_status(cfg, samples):
