@@ -32,7 +32,7 @@ KNOWN_WEAK: dict[str, str] = {
     "load_dependent_cornering_stiffness": (
         "since the same change: seed 21 (sine-sweep) recommends magic_formula_tire (20 % explained) and "
         "names the load-dependent stiffness only as 'also consistent with this drive', not as its "
-        "equivalence group; seed 22 is a hit"),
+        "equivalence group (the test stops there: seed 22 not judged)"),
 }
 """Effect -> reason (measured, see the module docstring)."""
 
