@@ -200,7 +200,8 @@ def test_pipeline_input_order_lets_replay_reproduce_the_live_estimates(tmp_path)
     tap recorded, the same /est/state message byte for byte, and the same warning frames; a
     replay with another vehicle is refused in one line."""
     summary = _live_pipeline_run(tmp_path)
-    assert summary["pipeline"]["input_order_recorded"] and summary["pipeline"]["error"] is None
+    assert summary["pipeline"]["input_order_recorded"] and summary["pipeline"]["error"] is None, \
+        (summary["pipeline"], summary.get("reader_errors"))
     live = _est(tmp_path / "out.mcap")
     assert len(live["/est/state"]) > 10 and len(live["/est/can/vdps"]) > 50
     p = vdps("replay", tmp_path / "out.mcap", "--input-order", "recorded", "-o", tmp_path / "r.mcap")

@@ -372,6 +372,7 @@ class PipelineTap:
         self.kind_map: dict[str, str] = {}
         self.error: str | None = None  # the system could not be configured (no IMU): not running
         self.order = InputOrder() if record_order else None
+        self.order_written = False
         self._pending: list = []
         self._t0: int | None = None
         self._fed_since_clear = 0
@@ -471,6 +472,7 @@ class PipelineTap:
             from vdps_hil.record.input_order import INPUT_ORDER_METADATA
 
             self.writer.add_metadata(INPUT_ORDER_METADATA, self.order.metadata(system=self.settings))
+            self.order_written = True
 
     def status_line(self) -> str:
         if self.system is None:
@@ -491,4 +493,4 @@ class PipelineTap:
         return {"samples": self.samples, "estimates": self.estimates, "warning_frames": self.frames,
                 "last_warning": self.last_warning, "error": self.error,
                 "input_dropped": self.input_dropped, "outputs_skipped_disk": self.est_skipped,
-                "input_order_recorded": self.order is not None and self.system is not None}
+                "input_order_recorded": self.order_written}
