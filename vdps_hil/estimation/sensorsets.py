@@ -204,19 +204,13 @@ def infer_sensor_set(fields_by_kind: Mapping[str, Iterable[str]]) -> tuple[Senso
     kinds = {k: set(v) for k, v in fields_by_kind.items()}
     kind_map: dict[str, str] = {}
     imu = None
-    for k, f in kinds.items():
-        if six <= f:
-            imu = "6axis"
+    for name, needed in (("6axis", six), ("esc3", esc)):  # the first kind with all six axes, else the ESC's three
+        k = next((k for k, f in kinds.items() if needed <= f), None)
+        if k is not None:
+            imu = name
             if k != "imu":
                 kind_map[k] = "imu"
             break
-    if imu is None:
-        for k, f in kinds.items():
-            if esc <= f:
-                imu = "esc3"
-                if k != "imu":
-                    kind_map[k] = "imu"
-                break
     if imu is None:
         raise SensorSetError("no IMU: no sample kind carries specific force x/y and yaw rate")
     all_fields = set().union(*kinds.values()) if kinds else set()

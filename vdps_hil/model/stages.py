@@ -66,10 +66,8 @@ def steer_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front_m: 
                  ackermann_fraction: float) -> tuple[float, float]:
     """``ackermann_angles`` blended with parallel steer by the vehicle's Ackermann fraction
     (``chassis.blend_ackermann``; 1: full Ackermann, the compiled core's only case)."""
-    d1, d2 = ackermann_angles(delta_mean_rad, wheelbase_m, track_half_front_m)
-    if ackermann_fraction == 1.0:
-        return d1, d2
-    return blend_ackermann(delta_mean_rad, d1, d2, ackermann_fraction)
+    return blend_ackermann(delta_mean_rad, *ackermann_angles(delta_mean_rad, wheelbase_m, track_half_front_m),
+                           ackermann_fraction)
 
 
 @dataclass(frozen=True, slots=True)
