@@ -8,9 +8,11 @@ pipeline from parameters identified on a calibration drive of the same SUV (``--
 car after its first drive): from the model file's priors the system's validity rule keeps every
 frame "not converged" through the 3.7 s fishhook (the cornering problem has not converged).
 
-CI_SPEED is a third of the highest speed at which tools/bench_hil.py showed nothing dropped for
-the embedded transport while running at that speed (3x on this 2-core machine with other jobs
-at load 3 and at load 8): 1x here."""
+The runs go at a speed this machine supports now (``ci_speed``): 1x, or the speed at which the
+bench's own probe (``hil.headroom``, measured once per module) leaves 2x headroom when that is
+lower (a loaded machine); every physical assertion is on the simulated time axis, so it holds at
+any speed. A pipeline given a quarter of the CPU it needs skips its own work, counts it and stays
+within a few deadlines of its input."""
 
 from __future__ import annotations
 
@@ -27,9 +29,6 @@ from vdps_hil.hil.transports import listening_sockets
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.profiles import load_profile
 
-CI_SPEED = 1.0
-
-
 def assert_nothing_lost(d: dict) -> None:
     assert d["frames_sent"] > 0 and d["frames_received"] == d["frames_sent"]
     assert d["lines_sent"] > 0 and d["lines_received"] == d["lines_sent"]
@@ -37,6 +36,14 @@ def assert_nothing_lost(d: dict) -> None:
     assert d["seq_counters"]["can_counter_breaks"] == 0 and d["seq_counters"]["imu_seq_gaps"] == 0
     assert d["dropped"] == 0 and sum(d["dropped_at_device"].values()) == 0
     assert d["rejected"] == {"can": 0, "imu": 0, "gnss": 0}
+
+
+@pytest.fixture(scope="module")
+def ci_speed() -> float:
+    """1x, or the speed with 2x measured headroom when this machine has less now."""
+    h = Bench(BenchConfig(scenario="fishhook-suv")).measure_headroom()
+    print(f"bench tests: {h.describe()}")
+    return min(1.0, h.supported_speed)
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +63,7 @@ def calibrated_params(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def rollover_run(tmp_path_factory, calibrated_params):
+def rollover_run(tmp_path_factory, calibrated_params, ci_speed):
     out = tmp_path_factory.mktemp("bench") / "fishhook.mcap"
     seen = []
 
@@ -64,15 +71,16 @@ def rollover_run(tmp_path_factory, calibrated_params):
         s["listening"] = listening_sockets(s["pids"]["simulator"])
         seen.append(s)
 
-    r = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, output=str(out),
+    r = Bench(BenchConfig(scenario="fishhook-suv", speed=ci_speed, output=str(out),
                           params=calibrated_params)).run(status)
     return r.to_json(), out, seen
 
 
-def test_embedded_bench_loses_nothing_warns_early_and_rolls_over_without_the_ecu(rollover_run):
+def test_embedded_bench_loses_nothing_warns_early_and_rolls_over_without_the_ecu(rollover_run, ci_speed):
     d, _, seen = rollover_run
-    assert d["transport"] == "virtual" and d["speed"] == CI_SPEED and not d["react"] and d["params"]
+    assert d["transport"] == "virtual" and d["speed"] == ci_speed and not d["react"] and d["params"]
     assert_nothing_lost(d)
+    assert d["deadline_misses"]["samples"] == 0 and d["warning_status"]["sensor_missing"] == 0
     assert d["rolled_over"] and d["stop_reason"] == "point_of_no_return"
     assert d["lead_reference"] == "this_run"
     assert d["point_of_no_return_t_s"] == pytest.approx(3.72, abs=0.02)
@@ -86,7 +94,7 @@ def test_embedded_bench_loses_nothing_warns_early_and_rolls_over_without_the_ecu
         assert math.isfinite(d["warning_latency_ms"][k]) and d["warning_latency_ms"][k] >= 0
     assert d["warning_latency_ms"]["p50"] <= d["warning_latency_ms"]["p99"] <= d["warning_latency_ms"]["max"]
     assert d["sends"] > 0 and 0 <= d["late_sends"] <= d["sends"]
-    assert d["realtime_factor"] > 0.5 * CI_SPEED
+    assert d["realtime_factor"] > 0.5 * ci_speed
     # the status line saw the run progress and end; the embedded bench listens on no network
     # socket but loopback
     assert seen[-1]["final"] and seen[-1]["frames_sent"] == d["frames_sent"]
@@ -136,8 +144,8 @@ def test_live_estimates_are_bit_identical_to_a_replay_in_the_recorded_input_orde
                                      for k, v in vals.items()}
 
 
-def test_with_react_the_ecu_brakes_and_the_suv_stays_upright(calibrated_params):
-    d = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, react=True,
+def test_with_react_the_ecu_brakes_and_the_suv_stays_upright(calibrated_params, ci_speed):
+    d = Bench(BenchConfig(scenario="fishhook-suv", speed=ci_speed, react=True,
                           params=calibrated_params)).run().to_json()
     assert_nothing_lost(d)
     assert not d["rolled_over"] and d["stop_reason"] == "duration" and d["duration_s"] == pytest.approx(7.0)
@@ -151,8 +159,8 @@ def test_with_react_the_ecu_brakes_and_the_suv_stays_upright(calibrated_params):
     assert d["max_abs_roll_deg"] < 20.0
 
 
-def test_no_warning_on_paper_left_turn():
-    d = Bench(BenchConfig(scenario="paper-left-turn", speed=CI_SPEED)).run().to_json()
+def test_no_warning_on_paper_left_turn(ci_speed):
+    d = Bench(BenchConfig(scenario="paper-left-turn", speed=ci_speed)).run().to_json()
     assert_nothing_lost(d)
     assert not d["rolled_over"] and d["truth_events"] == []
     assert d["warning_frames_accepted"] > 0  # the warning is on the bus, 50 Hz ...
@@ -164,7 +172,7 @@ def test_no_warning_on_paper_left_turn():
     assert 0 < d["warning_frames_not_valid"] <= d["warning_frames_accepted"]
 
 
-def test_cross_process_bench_over_loopback_tcp(calibrated_params):
+def test_cross_process_bench_over_loopback_tcp(calibrated_params, ci_speed):
     """The pipeline in its own process (python -m vdps_hil.hil.child), CAN over the socketcand
     protocol on 127.0.0.1 (the transport tools/bench_hil.py chose), serial on ptys; while it runs
     every socket either process listens on is on 127.0.0.1."""
@@ -174,7 +182,7 @@ def test_cross_process_bench_over_loopback_tcp(calibrated_params):
         for pid in set(s["pids"].values()):
             sockets.extend(listening_sockets(pid))
 
-    d = Bench(BenchConfig(scenario="fishhook-suv", speed=CI_SPEED, can="tcp",
+    d = Bench(BenchConfig(scenario="fishhook-suv", speed=ci_speed, can="tcp",
                           params=calibrated_params)).run(status).to_json()
     assert d["transport"] == "tcp" and d["can"]["listen"].startswith("127.0.0.1:")
     assert_nothing_lost(d)
@@ -183,14 +191,14 @@ def test_cross_process_bench_over_loopback_tcp(calibrated_params):
     assert sockets and all(addr == "127.0.0.1" for addr, _ in sockets), sockets
 
 
-def test_cross_process_bench_over_slcan_on_a_pty(tmp_path, monkeypatch):
+def test_cross_process_bench_over_slcan_on_a_pty(tmp_path, monkeypatch, ci_speed):
     """Run where modules named json, threading, numpy, ... lie in the working directory: the
     pipeline process (python -P -m vdps_hil.hil.child) imports none of them."""
     from planted_modules import markers, plant
 
     monkeypatch.chdir(plant(tmp_path / "cwd"))
     out = tmp_path / "pty.mcap"
-    d = Bench(BenchConfig(scenario="paper", duration_s=1.5, speed=CI_SPEED, can="pty", output=str(out))).run()
+    d = Bench(BenchConfig(scenario="paper", duration_s=1.5, speed=ci_speed, can="pty", output=str(out))).run()
     d = d.to_json()
     assert markers(tmp_path / "cwd") == []
     assert d["transport"] == "pty" and d["can"]["pipeline_spec"].startswith("slcan:/dev/pts/")
@@ -216,12 +224,28 @@ def test_bad_configurations_are_one_line_errors(kw, words):
     assert words in str(e.value) and "\n" not in str(e.value)
 
 
-def test_an_injected_fault_shows_in_the_sequence_counters_not_as_a_bench_loss():
-    d = Bench(BenchConfig(scenario="paper", duration_s=1.0, speed=CI_SPEED,
+def test_an_injected_fault_shows_in_the_sequence_counters_not_as_a_bench_loss(ci_speed):
+    d = Bench(BenchConfig(scenario="paper", duration_s=1.0, speed=ci_speed,
                           faults=("dropped_frames:fraction=0.05",))).run().to_json()
     assert d["faults"] == ["dropped_frames:fraction=0.05"]
     assert d["dropped"] == 0 and d["frames_received"] == d["frames_sent"]  # the wires lost nothing
     assert d["seq_counters"]["can_counter_breaks"] > 0  # the pipeline sees the frames the fault removed
+
+
+def test_a_pipeline_short_of_cpu_skips_its_own_work_counts_it_and_says_so(ci_speed, calibrated_params):
+    """At 8x the supported speed (a quarter of the CPU the pipeline needs) the embedded pipeline
+    misses its deadline: it skips samples (counted per kind), the cycles it handles stay within
+    a few deadlines of their input instead of falling seconds behind (the drive is 2.5 s), and
+    its warnings say "sensor missing" (the skipped IMU span is an outage to the estimator).
+    Started from identified parameters, so "not converged" does not hide the status."""
+    d = Bench(BenchConfig(scenario="fishhook-suv", duration_s=2.5, speed=8 * ci_speed,
+                          params=calibrated_params)).run().to_json()
+    m = d["deadline_misses"]
+    assert m["samples"] > 0 and m["episodes"] >= 1 and m["by_kind"]["imu"] > 0 and m["deadline_ms"] == 100.0
+    assert m["samples"] == sum(m["by_kind"].values()) and not d["pipeline_keeps_up"]
+    assert d["warning_latency_ms"]["p99"] <= 3 * m["deadline_ms"]
+    assert d["warning_status"]["sensor_missing"] > 0
+    assert d["output_cycles"] > 0 and d["output_cycles_unmatched"] == 0
 
 
 def test_the_pipeline_process_never_imports_the_simulator():

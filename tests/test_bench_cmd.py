@@ -1,6 +1,8 @@
 """Tests of ``vdps bench``: a run prints what happened in plain words and writes the --json
-document with the issue's keys; the status line; the JSON on stdout moves the words to stderr;
-mistakes are one line with exit status 2 and nothing written."""
+document with the issue's keys; by default the pipeline runs in its own process and the
+headroom measured before the run is stated; the status line; the JSON on stdout moves the words
+to stderr; mistakes are one line with exit status 2 and nothing written. The runs go at a speed
+this machine supports now (``speed``: 1x, or less on a loaded machine)."""
 
 from __future__ import annotations
 
@@ -19,19 +21,32 @@ KEYS = {"frames_sent": int, "frames_received": int, "lines_sent": int, "lines_re
 
 
 @pytest.fixture(scope="module")
+def speed() -> str:
+    """1x, or the speed with 2x headroom when this machine has less now (``hil.headroom``)."""
+    from vdps_hil.hil.bench import Bench
+    from vdps_hil.hil.bench_config import BenchConfig
+
+    h = Bench(BenchConfig(scenario="paper", duration_s=1.5)).measure_headroom(probe_s=0.5)
+    return f"{min(1.0, h.supported_speed):.3g}"
+
+
+@pytest.fixture(scope="module")
 def short_run(tmp_path_factory):
     d = tmp_path_factory.mktemp("cmd")
     out, js = d / "b.mcap", d / "b.json"
     return d, out, js
 
 
-def test_bench_prints_what_happened_and_writes_json_and_recording(short_run, capsys):
+def test_bench_prints_what_happened_and_writes_json_and_recording(short_run, speed, capsys):
     d, out, js = short_run
-    rc = main(["bench", "--scenario", "paper", "--duration", "1.2", "-o", str(out), "--json", str(js)])
+    rc = main(["bench", "--scenario", "paper", "--duration", "1.2", "--speed", speed, "-o", str(out),
+               "--json", str(js)])
     assert rc == 0
     cap = capsys.readouterr()
     text = cap.out
     assert "vdps bench: paper" in text and "ECU reaction off" in text
+    assert "pipeline in its own process; CAN over TCP on 127.0.0.1" in text  # the default transport
+    assert f"  headroom: " in text and f"x at speed {float(speed):g}x (measured before the run" in text
     assert "the pipeline received every one of them" in text
     assert "warning: none" in text and "stayed upright" in text
     assert f"recording: {out}" in text and out.stat().st_size > 0
@@ -44,14 +59,16 @@ def test_bench_prints_what_happened_and_writes_json_and_recording(short_run, cap
     assert set(doc["warning_latency_ms"]) >= {"p50", "p99"}
     assert doc["dropped"] == 0 and doc["frames_received"] == doc["frames_sent"] > 0
     assert doc["rolled_over"] is False and doc["output"] == str(out)
+    assert doc["transport"] == "tcp" and doc["headroom"]["headroom"] >= 1.0 and doc["headroom"]["speed"] == float(speed)
 
 
-def test_json_on_stdout_moves_the_words_to_stderr(tmp_path, monkeypatch, capsys):
+def test_json_on_stdout_moves_the_words_to_stderr(tmp_path, monkeypatch, speed, capsys):
     monkeypatch.chdir(tmp_path)
-    assert main(["bench", "--scenario", "paper", "--duration", "0.5", "--quiet", "--json", "-"]) == 0
+    assert main(["bench", "--scenario", "paper", "--duration", "0.5", "--speed", speed, "--can", "virtual",
+                 "--no-headroom-check", "--quiet", "--json", "-"]) == 0
     cap = capsys.readouterr()
     doc = json.loads(cap.out)
-    assert doc["scenario"] == "paper" and doc["output"] is None
+    assert doc["scenario"] == "paper" and doc["output"] is None and doc["headroom"] is None
     assert "vdps bench: paper" in cap.err and not [ln for ln in cap.err.splitlines() if ln.startswith("t ")]
     assert not list(tmp_path.iterdir())  # no -o: no recording
 
@@ -67,7 +84,8 @@ def _doc(**over) -> dict:
                     "full_brake_t_s": 1.53, "actuator": {"delay_s": 0.1, "brake_torque_full_nm_per_wheel": 2500.0}},
             "rolled_over": False, "truth_events": [], "max_abs_roll_deg": 7.2,
             "warning_latency_ms": {"p50": 1.3, "p99": 25.0}, "output_cycles": 29514, "pipeline_keeps_up": True,
-            "output": "bench.mcap"}
+            "output": "bench.mcap", "deadline_misses": {"samples": 0},
+            "headroom": {"headroom": 3.14, "speed": 1.0, "simulator_cost_s_per_s": 0.1, "pipeline_cost_s_per_s": 0.2}}
     base.update(over)
     return base
 
@@ -81,6 +99,12 @@ def test_the_words_say_warning_time_lead_ecu_action_outcome_and_recording():
     assert "full brakes (2500 N m per wheel) at 1.53 s" in text
     assert "stayed upright" in text and "without the ECU it would have rolled over at 3.72 s" in text
     assert "recording: bench.mcap" in text
+    assert "headroom: 3.1x at speed 1x (measured before the run: simulator 100 ms + pipeline 200 ms" in text
+    assert "deadline misses" not in text
+    late = "\n".join(describe(_doc(deadline_misses={"samples": 812, "episodes": 3, "deadline_ms": 100.0,
+                                                    "first_t_s": 1.25})))
+    assert ("deadline misses: the pipeline fell more than 100 ms behind 3 time(s) and skipped 812 samples "
+            "(first at 1.25 s); its warnings said 'sensor missing' meanwhile") in late
     rolled = "\n".join(describe(_doc(react=False, rolled_over=True, lead_reference="this_run", dropped=4,
                                      pipeline_keeps_up=False, output=None)))
     assert "ROLLED OVER" in rolled and "4 were LOST" in rolled and "listening only" in rolled
@@ -116,12 +140,13 @@ def test_help_shows_examples_and_the_transports(capsys):
     assert "vdps bench --react -o bench.mcap" in out and "socketcan:vcan0" in out and "127.0.0.1" in out
 
 
-def test_calibrate_starts_the_pipeline_from_a_calibration_drive(tmp_path, capsys):
+def test_calibrate_starts_the_pipeline_from_a_calibration_drive(tmp_path, speed, capsys):
     """``--calibrate paper``: the same SUV first drives the paper's scenario offline, the chain
     identifies its parameters, and the bench's pipeline starts from them, so its warnings are
-    valid from the start (``make run`` uses this). 1.5 s of the fishhook at 1x."""
+    valid from the start (``make run`` uses this). 1.5 s of the fishhook."""
     js = tmp_path / "b.json"
-    rc = main(["bench", "--calibrate", "paper", "--duration", "1.5", "--quiet", "--json", str(js)])
+    rc = main(["bench", "--calibrate", "paper", "--duration", "1.5", "--speed", speed, "--no-headroom-check",
+               "--quiet", "--json", str(js)])
     assert rc == 0
     text = capsys.readouterr().out
     assert "calibration: pipeline started from the parameters identified on 'paper'" in text

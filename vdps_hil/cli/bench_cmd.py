@@ -17,20 +17,27 @@ Examples:
   vdps bench --react -o bench.mcap --serve 8765   # watch it live in Foxglove (ws://127.0.0.1:8765)
   vdps bench --scenario paper-left-turn --duration 12 --json -
   vdps bench --can pty --speed 0.5          # pipeline in its own process, slcan on a pty
-  vdps bench --can tcp                      # pipeline in its own process, TCP on 127.0.0.1
+  vdps bench --can virtual                  # everything in one process (python-can virtual bus)
   vdps bench --can socketcan:vcan0          # a Linux vcan (sudo ip link add dev vcan0 type vcan)
 
 \b
---can SPEC: virtual (default: one process, python-can's virtual bus; serial on ptys),
-pty (simulator as an slcan adapter on a pseudo-terminal, pipeline in a child process),
-tcp (simulator as a socketcand server on 127.0.0.1 only, pipeline in a child process),
+--can SPEC: tcp (default; with --serve: virtual): the simulator as a socketcand server on
+127.0.0.1 only, the pipeline in a child process; virtual (one process, python-can's virtual
+bus; serial on ptys); pty (simulator as an slcan adapter on a pseudo-terminal, pipeline in a
+child process),
 or a python-can interface string INTERFACE:CHANNEL[,key=value...] opened by both sides
 (socketcan:vcan0; with --sim-can the simulator opens another interface, e.g. two USB
 adapters wired together: --can pcan:PCAN_USBBUS1 --sim-can kvaser:0).
 
 \b
 ECU reaction (--react): after the first valid VDPS_Warning with level >= 2, 100 ms dead time,
-drive torque cut, brake pressure 0 -> full in 300 ms, 2500 N m per wheel on all four wheels."""
+drive torque cut, brake pressure 0 -> full in 300 ms, 2500 N m per wheel on all four wheels.
+
+\b
+Headroom: before the run the bench times a second of its own drive and pipeline on this
+machine (vdps_hil.hil.headroom); below 1x it refuses (exit 2), below 2x it warns; the summary
+states it. A pipeline that falls behind skips its own work, counts it and says "sensor
+missing" in its warnings rather than accumulating lag."""
 
 
 @click.command("bench", epilog=_EXAMPLE)
@@ -49,8 +56,8 @@ drive torque cut, brake pressure 0 -> full in 300 ms, 2500 N m per wheel on all 
               help="Simulated seconds (default: the scenario's).")
 @click.option("--speed", type=float, default=1.0, show_default=True, metavar="X",
               help="Simulated seconds per wall second.")
-@click.option("--can", "can_spec", default="virtual", show_default=True, metavar="SPEC",
-              help="CAN transport (see below).")
+@click.option("--can", "can_spec", default=None, metavar="SPEC",
+              help="CAN transport (see below) [default: tcp, with --serve virtual].")
 @click.option("--sim-can", "sim_can", default=None, metavar="SPEC",
               help="Interface the simulator opens when --can is an interface string (default: the same).")
 @click.option("--react/--no-react", default=False, show_default=True,
@@ -67,10 +74,12 @@ drive torque cut, brake pressure 0 -> full in 300 ms, 2500 N m per wheel on all 
               help="First drive SCENARIO (e.g. paper) with the same vehicle, offline, replay it with the "
                    "identifier and start the pipeline from the parameters it identified (as --params).")
 @click.option("--quiet", is_flag=True, help="No live status line.")
+@click.option("--headroom-check/--no-headroom-check", "headroom_check", default=True, show_default=True,
+              help="Measure the headroom before the run and refuse a run below 1x (see below).")
 @json_option
 @serve_option
 def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec, sim_can, react, seed, profile,
-          output, params, calibrate_on, quiet, json_out, serve_port):
+          output, params, calibrate_on, quiet, headroom_check, json_out, serve_port):
     """Run the hardware-in-the-loop bench on one machine with nothing plugged in: the simulated
     vehicle on CAN and serial ports in real time, the live pipeline, its warning on CAN, a
     simulated ECU. Prints what happened: warning time, lead time, ECU action, upright or not."""
@@ -89,6 +98,8 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
             raise UserError(f"-o {output}: directory {out.parent} does not exist")
     if calibrate_on is not None and params is not None:
         raise UserError("give --params or --calibrate, not both")
+    if can_spec is None:
+        can_spec = "virtual" if serve_port is not None else "tcp"
     cal = None
     tmp = tempfile.TemporaryDirectory(prefix="vdps-bench-cal-")
     try:
@@ -109,6 +120,8 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
     if serve_port is not None and (output is None or b.transport.cross_process):
         tmp.cleanup()
         raise UserError("--serve serves the -o recording of a pipeline in this process: give -o, --can virtual")
+    if headroom_check:
+        _check_headroom(b, tmp)
     status = None if quiet else _StatusLine(sys.stderr)
     try:
         with live_server(serve_port, wait=False) as live:
@@ -130,6 +143,22 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
     for line in describe(doc):
         click.echo(line, err=to_stderr)
     write_json(doc, json_out)
+
+
+def _check_headroom(b, tmp) -> None:
+    """Measure the bench's headroom (``hil.headroom``): refuse below REFUSE_BELOW (one line,
+    exit 2), warn below WARN_BELOW."""
+    from vdps_hil.hil.headroom import REFUSE_BELOW, WARN_BELOW
+
+    h = b.measure_headroom()
+    verdict = h.verdict()
+    if verdict == "refuse":
+        tmp.cleanup()
+        raise UserError(f"{h.describe()}: below {REFUSE_BELOW:g}x the pipeline cannot keep up; run at "
+                        f"--speed {h.supported_speed:.2g} or give --no-headroom-check")
+    if verdict == "warn":
+        click.echo(f"vdps bench: warning: {h.describe()}, below {WARN_BELOW:g}x: the pipeline may miss "
+                   f"deadlines (skipped work is counted and its warnings say 'sensor missing')", err=True)
 
 
 class _StatusLine:
@@ -224,6 +253,16 @@ def describe(d: dict) -> list[str]:
     lines.append(f"  latency from sensor frame to pipeline output on the bus: p50 {w['p50']:.1f} ms, "
                  f"p99 {w['p99']:.1f} ms over {d['output_cycles']} pipeline cycles"
                  + ("" if d["pipeline_keeps_up"] else " -- the pipeline did NOT keep up at this speed"))
+    m = d.get("deadline_misses") or {}
+    if m.get("samples"):
+        lines.append(f"  deadline misses: the pipeline fell more than {m['deadline_ms']:g} ms behind "
+                     f"{m['episodes']} time(s) and skipped {m['samples']} samples (first at {m['first_t_s']:.2f} s); "
+                     f"its warnings said 'sensor missing' meanwhile")
+    h = d.get("headroom")
+    if h:
+        lines.append(f"  headroom: {h['headroom']:.1f}x at speed {h['speed']:g}x (measured before the run: simulator "
+                     f"{1e3 * h['simulator_cost_s_per_s']:.0f} ms + pipeline {1e3 * h['pipeline_cost_s_per_s']:.0f} ms "
+                     f"of wall time per simulated second)")
     if d["output"]:
         lines.append(f"  recording: {d['output']} (raw CAN/serial as the pipeline received them, /decoded, /est, "
                      f"/truth)")

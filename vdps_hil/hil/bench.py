@@ -63,9 +63,11 @@ lead times count no frame; ``params`` (``--params FILE``, a file saved by ``vdps
 --save-params``) starts it from identified parameters, as a car after its first drive, and its
 frames are valid at once.
 
-The pipeline *keeps up* when nothing was lost and its slowest output cycle was out within
-``max_lag_s`` (default 0.25 s wall) of its input: a pipeline falling behind shows as a growing
-latency and, once the wires' buffers are full, as lost data.
+The pipeline *keeps up* when nothing was lost, it missed no deadline (``deadline_misses``: a
+pipeline short of CPU skips its own work rather than falling behind, ``hil.node``) and its
+slowest output cycle was out within ``max_lag_s`` (default 0.25 s wall) of its input.
+``headroom``: what ``hil.headroom`` measured before the run (``Bench.measure_headroom``), or
+None.
 """
 
 from __future__ import annotations
@@ -121,6 +123,16 @@ class Bench:
 
     mirror = None
     """``RecordingWriter.mirror`` of the ``-o`` recording (``vdps bench --serve``), or None."""
+    headroom = None
+    """The :class:`~vdps_hil.hil.headroom.Headroom` measured before the run (``measure_headroom``),
+    or None; it goes into the result."""
+
+    def measure_headroom(self, probe_s: float | None = None):
+        """Measure this bench's headroom on this machine now (``hil.headroom``) and keep it."""
+        from .headroom import DEFAULT_PROBE_S, measure_headroom
+
+        self.headroom = measure_headroom(self, DEFAULT_PROBE_S if probe_s is None else probe_s)
+        return self.headroom
 
     def __init__(self, config: BenchConfig | None = None):
         from vdps_hil.sim.drive import CONFIG_ERRORS, DEFAULT_PROFILE, Drive
@@ -360,7 +372,9 @@ class Bench:
         wall = side.wall_s
         sim_s = side.sim_s
         lat_max = ls["warning_latency_ms"]["max"]
-        keeps_up = dropped == 0 and (not math.isfinite(lat_max) or lat_max <= c.max_lag_s * 1e3)
+        misses = counters.get("deadline_misses") or {"samples": 0, "episodes": 0}
+        keeps_up = (dropped == 0 and misses["samples"] == 0
+                    and (not math.isfinite(lat_max) or lat_max <= c.max_lag_s * 1e3))
         ecu_sum = ecu.summary()
         doc = {
             "scenario": self.drive.scenario.name, "vehicle": self.drive.vehicle.name, "model": self.model,
@@ -390,7 +404,9 @@ class Bench:
             "reference_events": [e for e in (reference or []) if e.get("kind") in ("tip_up", "point_of_no_return")],
             "late_sends": pace["late_sends"], "sends": pace["sends"], "late_tolerance_ms": pace["late_tolerance_ms"],
             "send_lateness_ms": pace["lateness_ms"],
-            "pipeline_keeps_up": keeps_up, "max_lag_s": c.max_lag_s,
+            "pipeline_keeps_up": keeps_up, "max_lag_s": c.max_lag_s, "deadline_misses": misses,
+            "warning_status": counters.get("warning_status", {}),
+            "headroom": None if self.headroom is None else self.headroom.to_json(),
             "ecu": ecu_sum, "pipeline": {"outputs": p["outputs"], "errors": p["errors"]},
             "stop_reason": ("interrupted" if getattr(self, "interrupted", False)
                             else side.session.sim.stop_reason or "duration"),

@@ -13,7 +13,8 @@ from pathlib import Path
 from .ecu import ActuatorConfig
 from .pacing import DEFAULT_LATE_TOLERANCE_S
 
-__all__ = ["BenchConfig", "BenchError", "calibrate", "make_system", "model_for", "start_params"]
+__all__ = ["BenchConfig", "BenchError", "calibrate", "make_system", "model_for", "start_params",
+           "warm_pipeline_kernels"]
 
 
 class BenchError(RuntimeError):
@@ -117,6 +118,21 @@ def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: st
         raise BenchError(f"--model {model}: {str(e).splitlines()[0]}") from None
     cfg = SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=refined.params, model_effects=effects)
     return VdpsSystem(vehicle, cfg)
+
+
+def warm_pipeline_kernels() -> None:
+    """Load the pipeline's compiled kernels (``vdps_hil.jit``) before the bench clock starts: the
+    first call of a kernel in a process loads its machine code from the cache (0.5-3 s for all of
+    them, more on a loaded machine), which on the clock is a deadline miss at the start of every
+    run. The simulator's kernels are left out (the pipeline process never imports the
+    simulator)."""
+    import importlib
+
+    from vdps_hil import jit
+
+    for name in jit.KERNEL_MODULES:
+        if not name.startswith("vdps_hil.sim."):
+            getattr(importlib.import_module(name), "warm", lambda: None)()
 
 
 def _saved_workbench_model(path: str):

@@ -56,7 +56,7 @@ def main(argv=None) -> int:
     from vdps_hil.record import schemas as S
     from vdps_hil.record.writer import RecordingWriter
 
-    from .bench_config import make_system
+    from .bench_config import make_system, warm_pipeline_kernels
     from .node import PipelineNode
     from .pacing import BenchClock
 
@@ -70,6 +70,7 @@ def main(argv=None) -> int:
                                      sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
         node = PipelineNode(system, a.can_spec, a.imu_port, a.gnss_port, clock, writer=writer)
         node.open()
+        warm_pipeline_kernels()
     except (AdapterError, ValueError, OSError) as e:
         _say({"error": str(e).splitlines()[0] if str(e) else type(e).__name__})
         return 2

@@ -18,7 +18,7 @@ from vdps_hil.adapters.base import AdapterError
 from vdps_hil.app.children import child_environ, python_module_command
 from vdps_hil.record import schemas as S
 
-from .bench_config import BenchError, make_system
+from .bench_config import BenchError, make_system, warm_pipeline_kernels
 from .latency import CycleLog
 
 __all__ = ["LocalPipeline", "ChildPipeline"]
@@ -46,6 +46,7 @@ class LocalPipeline:
             self.node.open()
         except AdapterError as e:
             raise BenchError(str(e)) from None
+        warm_pipeline_kernels()
 
     def start(self, mono0: int) -> None:
         self._thread = threading.Thread(target=self._run, name="bench-pipeline", daemon=True)

@@ -1,0 +1,49 @@
+"""The bench's headroom (hil.headroom): the measurement of the bench's own drive and pipeline on
+this machine, the verdict thresholds, and the refusal of a run the machine cannot keep up with
+(``vdps bench``: one line, exit 2, nothing written)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from vdps_hil.cli.main import main
+from vdps_hil.hil.bench import Bench
+from vdps_hil.hil.bench_config import BenchConfig
+from vdps_hil.hil.headroom import REFUSE_BELOW, WARN_BELOW, Headroom
+
+
+def test_headroom_is_one_over_speed_times_the_summed_costs_and_the_verdicts_follow_it():
+    h = Headroom(speed=2.0, probe_s=1.0, sim_cost=0.05, pipeline_cost=0.15, wall_s=0.3)
+    assert h.cost == pytest.approx(0.2) and h.headroom == pytest.approx(2.5)
+    assert h.verdict() == "ok" and h.supported_speed == pytest.approx(1 / (WARN_BELOW * 0.2))
+    assert Headroom(4.0, 1.0, 0.05, 0.15, 0.3).verdict() == "warn"  # 1.25x
+    assert Headroom(6.0, 1.0, 0.05, 0.15, 0.3).verdict() == "refuse"  # 0.83x
+    assert REFUSE_BELOW < WARN_BELOW
+    d = h.to_json()
+    assert d["headroom"] == pytest.approx(2.5) and d["verdict"] == "ok"
+    assert "headroom 2.5x at speed 2x" in h.describe() and "\n" not in h.describe()
+
+
+def test_the_measurement_times_the_benchs_own_drive_and_pipeline():
+    b = Bench(BenchConfig(scenario="paper", duration_s=3.0, speed=1.0))
+    h = b.measure_headroom(probe_s=0.5)
+    assert b.headroom is h and h.probe_s == pytest.approx(0.5)
+    # both parts cost something, and no machine runs the chain a million times faster than real time
+    assert 1e-6 < h.sim_cost < 100 and 1e-6 < h.pipeline_cost < 100
+    assert h.headroom == pytest.approx(1.0 / (h.sim_cost + h.pipeline_cost))
+    assert math.isfinite(h.wall_s) and h.wall_s > 0
+
+
+def test_a_run_the_machine_cannot_keep_up_with_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
+    """At 1000x real time the paper drive needs 1000 simulated seconds of work per wall second:
+    no 2-core machine has that headroom."""
+    monkeypatch.chdir(tmp_path)
+    rc = main(["bench", "--scenario", "paper", "--duration", "2", "--speed", "1000", "--quiet",
+               "-o", str(tmp_path / "b.mcap")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("vdps: error: headroom ")
+    assert "below 1x the pipeline cannot keep up" in err and "--no-headroom-check" in err
+    assert not list(tmp_path.iterdir())
