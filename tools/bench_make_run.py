@@ -1,0 +1,123 @@
+"""Acceptance of ``make run`` (issue 19): the README's main job measured side by side in one run,
+on this machine as it is and with a CPU-bound process on the other core, and at ``--speed 5``.
+
+Usage::
+
+    .venv/bin/python tools/bench_make_run.py [--conditions quiet,hog,speed5] [--repeat 1] [--json FILE]
+
+Each condition runs exactly ``make run``'s command (``vdps bench --react --calibrate paper -o
+bench.mcap``, as a subprocess, with ``--json``), except that the calibration drive is done once
+up front (``hil.bench_config.calibrate``, the same call ``--calibrate`` makes) and passed as
+``--params``, so the conditions differ only in what runs beside them:
+
+* ``quiet``: nothing started by this tool;
+* ``hog``: ``python3 -c 'while 1: pass'`` running for the whole run (the issue's CPU-bound
+  process on the other core), stopped after it;
+* ``speed5``: ``--speed 5``, nothing beside; refused when the measured headroom is below 1x
+  (then shown as refused, and run again with ``--no-headroom-check`` to show what happens).
+
+Per run: the headroom measured before it, realtime factor, data lost on the wires, deadline
+misses (samples the pipeline skipped), latency sensor frame -> warning frame (p50/p99), first
+valid warning's lead to the point of no return (of the same drive without the ECU), upright or
+not. Bars: real time, nothing dropped, nothing skipped, frame latency p99 <= 10 ms, lead >= 2 s,
+upright. The load average before and after each run is printed next to it: other work on the
+machine changes every figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+VDPS = str(Path(sys.executable).with_name("vdps"))
+
+
+def run_bench(params: str, work: Path, speed: float, hog: bool, check: bool = True) -> dict:
+    js, out = work / "b.json", work / "bench.mcap"
+    js.unlink(missing_ok=True)
+    cmd = [VDPS, "bench", "--react", "--params", params, "-o", str(out), "--json", str(js), "--quiet",
+           "--speed", f"{speed:g}"] + ([] if check else ["--no-headroom-check"])
+    hog_p = subprocess.Popen([sys.executable, "-c", "while 1: pass"]) if hog else None
+    load0 = os.getloadavg()[0]
+    try:
+        t0 = time.perf_counter()
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+        wall = time.perf_counter() - t0
+    finally:
+        if hog_p is not None:
+            hog_p.kill()
+            hog_p.wait()
+    r = {"cmd": " ".join(cmd[1:]), "rc": p.returncode, "wall_s": wall, "load_before": load0,
+         "load_after": os.getloadavg()[0], "hog": hog, "speed": speed}
+    if p.returncode != 0:
+        r["error"] = (p.stderr.strip().splitlines() or [""])[-1]
+        return r
+    d = json.loads(js.read_text())
+    h = d.get("headroom") or {}
+    r.update({"headroom": h.get("headroom"), "realtime_factor": d["realtime_factor"], "dropped": d["dropped"],
+              "skipped": d["deadline_misses"]["samples"], "frame_latency_ms": d["warning_frame_latency_ms"],
+              "latency_ms": d["warning_latency_ms"], "lead_s": d["warning_lead_time_s"],
+              "rolled_over": d["rolled_over"], "late_sends": d["late_sends"], "sends": d["sends"],
+              "keeps_up": d["pipeline_keeps_up"]})
+    r["meets"] = bool(d["realtime_factor"] >= 0.99 and d["dropped"] == 0 and r["skipped"] == 0
+                      and r["frame_latency_ms"]["p99"] <= 10.0 and (r["lead_s"] or -1) >= 2.0
+                      and not d["rolled_over"])
+    return r
+
+
+def line(name: str, r: dict) -> str:
+    load = f"load {r['load_before']:.1f}->{r['load_after']:.1f}"
+    if r["rc"] != 0:
+        return f"{name:14s} exit {r['rc']}: {r['error']} ({load})"
+    f = r["frame_latency_ms"]
+    lead = "-" if r["lead_s"] is None else f"{r['lead_s']:.2f} s"
+    return (f"{name:14s} headroom {r['headroom'] or float('nan'):.1f}x, {r['realtime_factor']:.2f}x real time, "
+            f"dropped {r['dropped']}, skipped {r['skipped']}, frame latency p50 {f['p50']:.1f} p99 {f['p99']:.1f} ms, "
+            f"lead {lead}, {'ROLLED OVER' if r['rolled_over'] else 'upright'}, late sends {r['late_sends']}/"
+            f"{r['sends']} -> {'meets' if r['meets'] else 'does NOT meet'} the bars ({load})")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--conditions", default="quiet,hog,speed5")
+    ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--json", default=None)
+    a = ap.parse_args(argv)
+    sys.path.insert(0, str(REPO))
+    from vdps_hil.hil.bench import Bench
+    from vdps_hil.hil.bench_config import BenchConfig, calibrate
+
+    out = {"cpus": os.cpu_count(), "runs": []}
+    with tempfile.TemporaryDirectory(prefix="vdps-make-run-") as tmp:
+        work = Path(tmp)
+        b = Bench(BenchConfig(react=True))
+        t0 = time.perf_counter()
+        cal = calibrate("paper", b.truth_vehicle, b.model, work, seed=1000)
+        print(f"calibration drive 'paper' identified in {time.perf_counter() - t0:.1f} s "
+              f"(converged: {', '.join(k for k, v in cal['converged'].items() if v)})", flush=True)
+        for i in range(a.repeat):
+            for cond in a.conditions.split(","):
+                speed, hog = (5.0, False) if cond == "speed5" else (1.0, cond == "hog")
+                r = run_bench(cal["params"], work, speed, hog)
+                r["condition"] = cond
+                out["runs"].append(r)
+                print(line(cond, r), flush=True)
+                if cond == "speed5" and r["rc"] == 2:
+                    r2 = run_bench(cal["params"], work, speed, hog, check=False)
+                    r2["condition"] = "speed5-forced"
+                    out["runs"].append(r2)
+                    print(line("speed5-forced", r2), flush=True)
+    if a.json:
+        Path(a.json).write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
