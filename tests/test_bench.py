@@ -84,7 +84,7 @@ def test_embedded_bench_loses_nothing_warns_early_and_rolls_over_without_the_ecu
     # pipeline past its deadline: then the skipped work is counted and the frames say so
     m = d["deadline_misses"]
     assert m["samples"] == sum(m["by_kind"].values())
-    assert (m["samples"] == 0) == (d["warning_status"]["sensor_missing"] == 0), (m, d["warning_status"])
+    assert m["samples"] == 0 or d["warning_status"]["sensor_missing"] > 0, (m, d["warning_status"])
     assert d["rolled_over"] and d["stop_reason"] == "point_of_no_return"
     assert d["lead_reference"] == "this_run"
     assert d["point_of_no_return_t_s"] == pytest.approx(3.72, abs=0.02)
