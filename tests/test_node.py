@@ -144,3 +144,45 @@ def test_can_frames_are_stamped_with_the_interface_time_on_the_bench_axis():
     assert t[0] == pytest.approx(20_000_000, abs=20_000)  # 10 ms of wall time at speed 2
     assert t[1] == t[0]  # not before the previous frame
     assert t[0] <= t[2] <= now  # a stamp in the future is taken as the reception time
+
+
+def test_a_node_past_its_deadline_skips_its_own_work_until_it_is_back_and_counts_it(drive_recording):
+    """The bench clock reads 150 ms past every input of simulated 0.5-0.7 s (a pipeline held up
+    for 0.2 s) and on time otherwise: with the 100 ms deadline the node skips every sample from
+    the first late IMU sample until an IMU sample is within 50 ms again -- the IMU samples of
+    0.5-0.7 s, one episode -- hands the system none of them, records none under /decoded/, and
+    the estimator sees the skipped span as an IMU outage (a gap longer than its 20 ms timeout)."""
+    now = [0]
+    clock = BenchClock(1.0, mono0_ns=0, monotonic_ns=lambda: now[0])
+    system = make_system("sedan-model", 1000.0, 0.001)
+    out = io.BytesIO()
+    writer = RecordingWriter(out, sim_epoch_ns=DEFAULT_SIM_EPOCH_NS)
+    node = PipelineNode(system, "virtual:test-node-late", "/dev/null-imu", "/dev/null-gnss", clock, writer=writer)
+    node.can.open()
+    try:
+        with RecordingReader(io.BytesIO(drive_recording)) as r:
+            raw = [("can", t, m) for t, m in ((round(m.timestamp * 1e9), m) for _, m in r.iter_raw_can("vdps"))]
+            raw += [(dev, t, d) for dev, t, d in r.iter_raw_serial()]
+        raw.sort(key=lambda x: x[1])
+        adapters = {"can": node.can, "imu": node.imu, "gnss": node.gnss}
+        for src, t, payload in raw:
+            now[0] = t + (150_000_000 if 0.5e9 <= t < 0.7e9 else 0)
+            adapters[src].ingest([(t, payload)])
+            node._handle_events(node.sub.drain())
+        node.release_held()
+        node.finish_recording()
+        writer.close()
+    finally:
+        node.can.close()
+    m = node.counters()["deadline_misses"]
+    assert m["episodes"] == 1 and m["deadline_ms"] == 100.0 and m["samples"] == sum(m["by_kind"].values())
+    assert m["first_t_s"] == pytest.approx(0.5, abs=0.002)
+    assert m["by_kind"]["imu"] == pytest.approx(200, abs=3)  # 0.5-0.7 s of the 1 kHz IMU
+    assert m["by_kind"]["wheel_speed"] > 0 and m["by_kind"]["suspension"] > 0  # every kind goes
+    handled_imu = [s.t_ns for s in system.input_log if s.kind == "imu"]
+    assert not [t for t in handled_imu if 0.501e9 <= t < 0.699e9]
+    assert len(handled_imu) + m["by_kind"]["imu"] == node.counters()["imu"]["packets"]
+    with RecordingReader(io.BytesIO(out.getvalue())) as r:
+        decoded = sum(v.count for k, v in r.topics().items() if k.startswith("/decoded/"))
+        assert decoded == len(system.input_log) == len(input_order_samples(r))
+    assert system.counters["unhealthy"]["imu_fault"] > 0  # the estimator saw the outage

@@ -214,6 +214,8 @@ class ChildPipeline:
         from vdps_hil.record.reader import RecordingReader
         from vdps_hil.record.writer import RecordingWriter
 
+        from . import node  # noqa: F401 - registers the schemas the pipeline process wrote (health, view)
+
         c = self.bench.config
         writer.close()
         out = RecordingWriter(c.output, metadata={"source": "vdps bench"},
