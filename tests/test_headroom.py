@@ -34,6 +34,9 @@ def test_the_measurement_times_the_benchs_own_drive_and_pipeline():
     assert 1e-6 < h.sim_cost < 100 and 1e-6 < h.pipeline_cost < 100
     assert h.headroom == pytest.approx(1.0 / (h.sim_cost + h.pipeline_cost))
     assert math.isfinite(h.wall_s) and h.wall_s > 0
+    # the CPU this process spent per simulated second, per part: at most the wall time it took
+    assert 0 < h.sim_cpu <= 1.05 * h.sim_cost and 0 < h.pipeline_cpu <= 1.05 * h.pipeline_cost
+    assert h.to_json()["pipeline_cpu_s_per_s"] == h.pipeline_cpu
 
 
 def test_a_run_the_machine_cannot_keep_up_with_is_refused_in_one_line(tmp_path, monkeypatch, capsys):

@@ -52,6 +52,14 @@ class Headroom:
     sim_cost: float
     pipeline_cost: float
     wall_s: float
+    sim_cpu: float = math.nan
+    pipeline_cpu: float = math.nan
+    """CPU s (this process) per simulated s of each part: on a machine with nothing else
+    running the wall costs are about these."""
+
+    @property
+    def cpu_cost(self) -> float:
+        return self.sim_cpu + self.pipeline_cpu
 
     @property
     def cost(self) -> float:
@@ -73,13 +81,14 @@ class Headroom:
     def to_json(self) -> dict:
         return {"headroom": self.headroom, "speed": self.speed, "probe_s": self.probe_s,
                 "simulator_cost_s_per_s": self.sim_cost, "pipeline_cost_s_per_s": self.pipeline_cost,
-                "measure_wall_s": self.wall_s, "verdict": self.verdict(),
+                "measure_wall_s": self.wall_s, "verdict": self.verdict(), "simulator_cpu_s_per_s": self.sim_cpu,
+                "pipeline_cpu_s_per_s": self.pipeline_cpu,
                 "refuse_below": REFUSE_BELOW, "warn_below": WARN_BELOW}
 
     def describe(self) -> str:
         return (f"headroom {self.headroom:.1f}x at speed {self.speed:g}x, measured on this machine before the run "
                 f"(simulator {1e3 * self.sim_cost:.0f} ms + pipeline {1e3 * self.pipeline_cost:.0f} ms of wall "
-                f"time per simulated second)")
+                f"time per simulated second; {1e3 * self.cpu_cost:.0f} ms of CPU)")
 
 
 def measure_headroom(bench, probe_s: float = DEFAULT_PROBE_S, warm_s: float = 0.3) -> Headroom:
@@ -95,20 +104,23 @@ def measure_headroom(bench, probe_s: float = DEFAULT_PROBE_S, warm_s: float = 0.
     w0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="vdps-headroom-") as tmp:
         rec = Path(tmp) / "probe.mcap"
-        marks: list[tuple[float, float]] = []
+        marks: list[tuple[float, float, float]] = []
         probe = Drive(d.scenario, profile=d.profile, seed=d.seed, vehicle=d.vehicle, effects=c.effects,
                       faults=c.faults, duration_s=total_s, block_s=c.block_s)
-        probe.run(rec, progress=lambda t_s, _end: marks.append((t_s, time.perf_counter())))
-        sim_cost = _cost(marks, warm_s)
-        pipe_cost = _pipeline_cost(bench, rec, warm_s)
-    return Headroom(float(c.speed), total_s - warm_s, sim_cost, pipe_cost, time.perf_counter() - w0)
+        probe.run(rec, progress=lambda t_s, _end: marks.append((t_s, time.perf_counter(), time.process_time())))
+        sim_cost, sim_cpu = _cost(marks, warm_s)
+        pipe_cost, pipe_cpu = _pipeline_cost(bench, rec, warm_s)
+    return Headroom(float(c.speed), total_s - warm_s, sim_cost, pipe_cost, time.perf_counter() - w0,
+                    sim_cpu, pipe_cpu)
 
 
-def _cost(marks: list[tuple[float, float]], warm_s: float) -> float:
-    """Wall s per simulated s between the first mark at or after ``warm_s`` and the last."""
+def _cost(marks: list[tuple[float, float, float]], warm_s: float) -> tuple[float, float]:
+    """(wall s, CPU s) per simulated s between the first mark at or after ``warm_s`` and the
+    last."""
     first = next((m for m in marks if m[0] >= warm_s), marks[0])
     last = marks[-1]
-    return (last[1] - first[1]) / (last[0] - first[0]) if last[0] > first[0] else 0.0
+    dt = last[0] - first[0]
+    return ((last[1] - first[1]) / dt, (last[2] - first[2]) / dt) if dt > 0 else (0.0, 0.0)
 
 
 def _pipeline_cost(bench, rec: Path, warm_s: float) -> float:
@@ -125,7 +137,7 @@ def _pipeline_cost(bench, rec: Path, warm_s: float) -> float:
     try:
         for s in samples:
             if not marks and s.t_ns >= warm_ns:
-                marks.append((s.t_ns / 1e9, time.perf_counter()))
+                marks.append((s.t_ns / 1e9, time.perf_counter(), time.process_time()))
             for o in system.handle(s):
                 if type(o).__name__ != "CanFrame":
                     for _ in est_docs(o):
@@ -133,5 +145,5 @@ def _pipeline_cost(bench, rec: Path, warm_s: float) -> float:
             t_last = s.t_ns
     finally:
         samples.close()
-    marks.append((t_last / 1e9, time.perf_counter()))
+    marks.append((t_last / 1e9, time.perf_counter(), time.process_time()))
     return _cost(marks, warm_s)
