@@ -27,6 +27,23 @@ def drive_recording():
     return buf.getvalue()
 
 
+def _feed(node, recording: bytes, before=None):
+    """Feed a recording's raw CAN frames and serial chunks to the node's adapters in time order,
+    as their readers would, the node handling what they published after each; yields (source,
+    t_ns, payload) after each; ``before(t_ns)`` is called before each is fed."""
+    with RecordingReader(io.BytesIO(recording)) as r:
+        raw = [("can", t, m) for t, m in ((round(m.timestamp * 1e9), m) for _, m in r.iter_raw_can("vdps"))]
+        raw += [(dev, t, d) for dev, t, d in r.iter_raw_serial()]
+    raw.sort(key=lambda x: x[1])
+    adapters = {"can": node.can, "imu": node.imu, "gnss": node.gnss}
+    for src, t, payload in raw:
+        if before is not None:
+            before(t)
+        adapters[src].ingest([(t, payload)])
+        node._handle_events(node.sub.drain())
+        yield src, t, payload
+
+
 def test_node_handles_records_and_logs_every_sample_in_arrival_order(drive_recording):
     system = make_system("sedan-model", 1000.0, 0.001)
     out = io.BytesIO()
@@ -37,18 +54,11 @@ def test_node_handles_records_and_logs_every_sample_in_arrival_order(drive_recor
     node.can.open()  # the serial adapters are fed directly below, as their readers would
     try:
         n_frames, n_bytes = 0, {"imu": 0, "gnss": 0}
-        with RecordingReader(io.BytesIO(drive_recording)) as r:
-            raw = [("can", t, m) for t, m in ((round(m.timestamp * 1e9), m) for _, m in r.iter_raw_can("vdps"))]
-            raw += [(dev, t, d) for dev, t, d in r.iter_raw_serial()]
-        raw.sort(key=lambda x: x[1])
-        adapters = {"can": node.can, "imu": node.imu, "gnss": node.gnss}
-        for src, t, payload in raw:  # arrival order: time order here
-            adapters[src].ingest([(t, payload)])
+        for src, t, payload in _feed(node, drive_recording):  # arrival order: time order here
             if src == "can":
                 n_frames += 1
             else:
                 n_bytes[src] += len(payload)
-            node._handle_events(node.sub.drain())
         held = len(node.sequencer)
         node.release_held()
         node.finish_recording()
@@ -160,15 +170,11 @@ def test_a_node_past_its_deadline_skips_its_own_work_until_it_is_back_and_counts
     node = PipelineNode(system, "virtual:test-node-late", "/dev/null-imu", "/dev/null-gnss", clock, writer=writer)
     node.can.open()
     try:
-        with RecordingReader(io.BytesIO(drive_recording)) as r:
-            raw = [("can", t, m) for t, m in ((round(m.timestamp * 1e9), m) for _, m in r.iter_raw_can("vdps"))]
-            raw += [(dev, t, d) for dev, t, d in r.iter_raw_serial()]
-        raw.sort(key=lambda x: x[1])
-        adapters = {"can": node.can, "imu": node.imu, "gnss": node.gnss}
-        for src, t, payload in raw:
-            now[0] = t + (150_000_000 if 0.5e9 <= t < 0.7e9 else 0)
-            adapters[src].ingest([(t, payload)])
-            node._handle_events(node.sub.drain())
+        def held_up(t_ns):  # the clock 150 ms past the inputs of 0.5-0.7 s
+            now[0] = t_ns + (150_000_000 if 0.5e9 <= t_ns < 0.7e9 else 0)
+
+        for _ in _feed(node, drive_recording, held_up):
+            pass
         node.release_held()
         node.finish_recording()
         writer.close()

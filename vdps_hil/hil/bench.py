@@ -17,8 +17,9 @@ the VDPS pipeline answering on CAN, a simulated ECU reacting, everything timed.
       v
     Simulator.set_input_override
 
-Processes: ``--can virtual`` (default) runs everything in this process (python-can's virtual
-bus: one process by definition); ``--can pty`` and ``--can tcp`` run the pipeline in a child
+Processes: ``--can virtual`` (``BenchConfig``'s default; ``vdps bench`` defaults to ``tcp``)
+runs everything in this process (python-can's virtual bus: one process by definition);
+``--can pty`` and ``--can tcp`` run the pipeline in a child
 process (``python -m vdps_hil.hil.child``) reached over a pseudo-terminal (slcan) or a
 loopback-only TCP socket (socketcand protocol); an interface string (``socketcan:vcan0``) opens
 that bus on both sides in this process. The child gets the device paths and the bench clock's
