@@ -20,9 +20,10 @@ For each transport:
   cycle out within 0.25 s). With 64 KiB of buffering on the serial wires a pipeline can fall
   seconds behind before anything is lost: the second figure is the one to plan with.
 
-Bars (issue "HIL bench"): p99 <= 50 ms at 1x (first bar), 10 ms (goal). CI runs the embedded
-bench at a third of the embedded transport's ``max_lossless_speed``
-(``tests/test_bench.py::CI_SPEED``). Figures depend on the machine and on what else runs on
+Bars (issue "HIL bench"): p99 <= 50 ms at 1x (first bar), 10 ms (goal). The tests run the
+bench at 1x or, on a loaded machine, at the speed its measured headroom supports
+(``tests/test_bench.py::ci_speed``, ``hil.headroom``); ``tools/bench_make_run.py`` measures
+``make run`` itself against issue 19's bars. Figures depend on the machine and on what else runs on
 it: the tool prints the load average next to them.
 """
 
