@@ -80,7 +80,8 @@ def line(name: str, r: dict) -> str:
         return f"{name:14s} exit {r['rc']}: {r['error']} ({load})"
     f = r["frame_latency_ms"]
     lead = "-" if r["lead_s"] is None else f"{r['lead_s']:.2f} s"
-    return (f"{name:14s} headroom {r['headroom'] or float('nan'):.1f}x, {r['realtime_factor']:.2f}x real time, "
+    head = "not measured" if r["headroom"] is None else f"{r['headroom']:.1f}x"
+    return (f"{name:14s} headroom {head}, {r['realtime_factor']:.2f}x real time, "
             f"dropped {r['dropped']}, skipped {r['skipped']}, frame latency p50 {f['p50']:.1f} p99 {f['p99']:.1f} ms, "
             f"lead {lead}, {'ROLLED OVER' if r['rolled_over'] else 'upright'}, late sends {r['late_sends']}/"
             f"{r['sends']} -> {'meets' if r['meets'] else 'does NOT meet'} the bars ({load})")
