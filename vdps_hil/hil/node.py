@@ -32,15 +32,9 @@ node also writes it to the recording as the metadata record ``hil.input_order`` 
 per sample written, in order; ``record.input_order``), so a replay can feed the recorded
 ``/decoded/`` samples in exactly the live order (``input_order_samples``).
 
-Deadline misses (``deadline_s``, default 0.1 s wall): when an IMU sample (the 1 kHz input,
-stamped about when it is read) reaches the loop more than ``deadline_s`` after its own time
-(bench clock), the node skips its own work -- every sample, its ``/decoded/`` record, its
-outputs -- until an IMU sample is within ``deadline_s / 2`` again, so a pipeline short of CPU drops work instead of accumulating seconds of lag. Every skipped
-sample is counted (``counters()["deadline_misses"]``: samples, episodes, per kind, the first).
-The skipped span is at least ``deadline_s / 2`` of IMU input, longer than the IMU monitor's gap
-timeout (20 ms), so the estimator sees an IMU outage and the warning frames say "sensor
-missing" (status 2) from then until ``ImuChecks.settle_s`` after the IMU is back
-(``pipeline.node``): a late pipeline says so on the bus. ``deadline_s=None``: never skip.
+Deadline misses (``deadline_s``, default 0.1 s wall; ``hil.deadline``): a pipeline that falls
+behind skips its own work until it is back, counted (``counters()["deadline_misses"]``), and its
+warnings say "sensor missing" meanwhile. ``deadline_s=None``: never skip.
 
 Output cycles (``hil.latency``): every ``handle`` adds a row to ``cycles`` with the index of
 the raw record that carried the sample in its stream (the CAN frames received up to it, or the
@@ -70,6 +64,7 @@ from vdps_hil.record import schemas as S
 from vdps_hil.record.input_order import INPUT_ORDER_METADATA, InputOrder, input_order_samples
 from vdps_hil.record.recorder import Recorder
 
+from .deadline import DEFAULT_DEADLINE_S, DeadlineGuard
 from .latency import CycleLog
 
 __all__ = ["PipelineNode", "InputSequencer", "InterfaceTimeCanAdapter", "DeviceTimeProtocol",
@@ -223,17 +218,11 @@ class PipelineNode:
 
     def __init__(self, system, can_spec: str, imu_port: str, gnss_port: str, clock, *, writer=None,
                  bus: str = "vdps", queue_size: int = 1_000_000, poll_s: float = 0.02, device_time: bool = True,
-                 imu_rate_hz: float = 1000.0, sequence_s: float | None = 0.05, deadline_s: float | None = 0.1):
+                 imu_rate_hz: float = 1000.0, sequence_s: float | None = 0.05,
+                 deadline_s: float | None = DEFAULT_DEADLINE_S):
         self.system = system
         self.clock = clock
-        speed = getattr(clock, "speed", 1.0)
-        # in bench ns, never below twice the sequencer's hold (a held measurement is not late)
-        self.deadline_ns = (None if deadline_s is None
-                            else max(int(round(deadline_s * speed * 1e9)), int(2e9 * (sequence_s or 0))))
-        self.resume_ns = None if deadline_s is None else self.deadline_ns // 2
-        self._shedding = False
-        self.skipped = {"samples": 0, "episodes": 0, "by_kind": {}, "first_t_s": None,
-                        "deadline_ms": None if deadline_s is None else 1e3 * deadline_s}
+        self.deadline = DeadlineGuard(clock, deadline_s, sequence_s or 0.0)
         self.bus = bus
         # slcan: python-can's serial timeout (1 ms) restarts with every byte, so a batch read
         # only returns when the batch is full at a steady frame rate (256 frames = 85 ms at
@@ -405,34 +394,13 @@ class PipelineNode:
             for it in items:
                 self._cycle(it)
 
-    def _late(self, s) -> bool:
-        """Whether sample ``s`` is skipped as a deadline miss (module docstring, "Deadline
-        misses"); counts it."""
-        if self.deadline_ns is None:
-            return False
-        sk = self.skipped
-        if s.kind == "imu":  # the IMU (1 kHz, stamped about when it is read) decides
-            late_ns = self.clock.now_ns() - s.t_ns
-            if self._shedding and late_ns <= self.resume_ns:
-                self._shedding = False
-            elif not self._shedding and late_ns > self.deadline_ns:
-                self._shedding = True
-                sk["episodes"] += 1
-        if not self._shedding:
-            return False
-        sk["samples"] += 1
-        sk["by_kind"][s.kind] = sk["by_kind"].get(s.kind, 0) + 1
-        t0 = sk["first_t_s"]
-        sk["first_t_s"] = s.t_ns / 1e9 if t0 is None else t0
-        return True
-
     def _cycle(self, item) -> None:
         """Hand one sample to the system (recording it and its place in the input order), send or
         record the outputs, log the cycle against the raw record that carried the sample; a
         sample past its deadline is skipped and counted instead (never recorded under
         ``/decoded/``, so the input order stays the system's)."""
         s, src, idx = item
-        if self._late(s):
+        if self.deadline.skip(s):
             return
         if self.recorder is not None and self.recorder.write(s):
             self.input_order.note(s)
@@ -515,6 +483,6 @@ class PipelineNode:
                 "gnss": {"bytes": self.received["gnss_bytes"], "lines": gnss_c.get("lines", 0),
                          "rejected": gnss_c.get("rejected", 0), "queue_overflow": gnss_c.get("queue_overflow", 0)},
                 "subscription_overflows": self.sub.overflows, "reader_errors": list(self.errors),
-                "deadline_misses": {**self.skipped, "by_kind": dict(self.skipped["by_kind"])},
+                "deadline_misses": self.deadline.counts(),
                 "warning_status": dict(getattr(self.system, "counters", {}).get("status", {}))}
 

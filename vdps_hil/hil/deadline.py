@@ -1,0 +1,64 @@
+"""Deadline misses of the bench's pipeline: a pipeline short of CPU skips its own work, counted,
+instead of accumulating lag (``hil.node`` asks :meth:`DeadlineGuard.skip` for every sample before
+it handles it).
+
+Rule (``deadline_s``, default 0.1 s wall): when an IMU sample (the 1 kHz input, stamped about
+when it is read) reaches the pipeline loop more than ``deadline_s`` after its own time on the
+bench clock, every sample is skipped -- not handed to the system, not recorded under
+``/decoded/``, no outputs -- until an IMU sample is within ``deadline_s / 2`` again. The deadline
+in bench time is ``deadline_s * X`` (speed ``X``), never less than twice the input sequencer's
+hold (a held measurement is not late).
+
+The skipped span is at least ``deadline_s / 2`` of IMU input, longer than the IMU monitor's gap
+timeout (20 ms), so the estimator sees an IMU outage and the warning frames say "sensor missing"
+(status 2) until ``ImuChecks.settle_s`` after the IMU is back (``pipeline.node``): a late
+pipeline says so on the bus.
+
+Counts (``counts()``): samples skipped, episodes (times the pipeline fell behind), per sample
+kind, the time of the first skipped sample [s] and the deadline [ms].
+"""
+
+from __future__ import annotations
+
+__all__ = ["DeadlineGuard", "DEFAULT_DEADLINE_S"]
+
+DEFAULT_DEADLINE_S = 0.1
+"""Wall seconds an IMU sample may be late before the pipeline skips work (module docstring)."""
+
+
+class DeadlineGuard:
+    """``skip(sample)``: whether to skip ``sample`` (module docstring); ``clock``: the bench
+    clock (``now_ns()`` on the samples' axis, ``speed``); ``hold_s``: the input sequencer's
+    hold [bench s]; ``deadline_s=None``: never skip."""
+
+    def __init__(self, clock, deadline_s: float | None = DEFAULT_DEADLINE_S, hold_s: float = 0.0):
+        self.clock = clock
+        speed = getattr(clock, "speed", 1.0)
+        self.deadline_ns = (None if deadline_s is None
+                            else max(int(round(deadline_s * speed * 1e9)), int(2e9 * hold_s)))
+        self.resume_ns = None if deadline_s is None else self.deadline_ns // 2
+        self.shedding = False
+        self._c = {"samples": 0, "episodes": 0, "by_kind": {}, "first_t_s": None,
+                   "deadline_ms": None if deadline_s is None else 1e3 * deadline_s}
+
+    def skip(self, s) -> bool:
+        if self.deadline_ns is None:
+            return False
+        c = self._c
+        if s.kind == "imu":  # the IMU decides
+            late_ns = self.clock.now_ns() - s.t_ns
+            if self.shedding and late_ns <= self.resume_ns:
+                self.shedding = False
+            elif not self.shedding and late_ns > self.deadline_ns:
+                self.shedding = True
+                c["episodes"] += 1
+        if not self.shedding:
+            return False
+        c["samples"] += 1
+        c["by_kind"][s.kind] = c["by_kind"].get(s.kind, 0) + 1
+        if c["first_t_s"] is None:
+            c["first_t_s"] = s.t_ns / 1e9
+        return True
+
+    def counts(self) -> dict:
+        return {**self._c, "by_kind": dict(self._c["by_kind"])}
