@@ -256,13 +256,16 @@ def test_node_frames_round_trip_through_the_codec(ttr, ltr, roll, status):
 
 def test_a_diverging_prediction_is_a_counted_fault_not_a_crash():
     """An absurd estimate (suspension compressed 2 m: eq 14's exponential spring overflows)
-    must not stop the warning path: the chain counts the failure and sends status 3 (fault)."""
+    must not stop the warning path: the chain counts the failure and sends status 3 (fault) at
+    the prediction's deadline (t0 + prediction_latency_s, when its result would have been used)."""
     chain = WarningChain(Predictor(load_vehicle("sedan-model")))
     bad = PredictorInitialState(t_ns=0, pos_g_m=(0.0, 0.0, 0.5), vel_g_mps=(25.0, 0.0, 0.0),
                                 euler_g_rad=(0.0, 0.0, 0.0), road_bank_rad=0.0, road_grade_rad=0.0,
                                 rate_b_radps=(0.0, 0.0, 0.0), wheel_speed_radps=(80.0,) * 4,
                                 susp_deflection_m=(2.0e3,) * 4, susp_deflection_rate_mps=(0.0,) * 4)
-    frames = chain.handle(0, bad)
+    chain.handle(0, bad)
+    assert chain.prediction_failures == 0  # not before its deadline
+    frames = chain.handle(20 * MS, None)
     assert chain.prediction_failures == 1 and chain.last_failure
     dec = VdpsCanDecoder()
     decoded = [s for f in frames for s in dec.decode(0, f.arbitration_id, bytes(f.data))]

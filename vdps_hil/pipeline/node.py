@@ -120,6 +120,9 @@ class SystemConfig:
     require_converged: tuple[str, ...] | None = None  # None: the warning policy's, if started from the priors
     model_effects: Any = None  # EffectSet of a saved workbench model: dynamics join the predictor,
     # IMU measurement effects are removed from the readings (estimation.imu_correction)
+    prediction_worker: str = "inline"  # prediction.offpath.WORKERS: "inline", "thread", "process"
+    prediction_deadline: str = "wait"  # "wait" (replay) or "drop" (live; prediction.offpath)
+    prediction_drops_t0_ns: tuple[int, ...] = ()  # a live run's dropped predictions, dropped again
 
     def __post_init__(self):
         for name in ("estimate_period_s", "ident_period_s", "ident_report_period_s"):
@@ -129,6 +132,11 @@ class SystemConfig:
         r = self.suspension_rate_hz
         if r is not None and not (math.isfinite(r) and r > 0):
             raise ValueError(f"SystemConfig.suspension_rate_hz must be positive or None, got {r!r}")
+        from vdps_hil.prediction.offpath import DEADLINES, WORKERS
+
+        if self.prediction_worker not in WORKERS or self.prediction_deadline not in DEADLINES:
+            raise ValueError(f"SystemConfig: prediction_worker must be one of {WORKERS} and prediction_deadline "
+                             f"one of {DEADLINES}, got {self.prediction_worker!r}, {self.prediction_deadline!r}")
         if self.suspension_stamp not in SUSPENSION_STAMPS:
             raise ValueError(f"SystemConfig.suspension_stamp must be one of {SUSPENSION_STAMPS}, "
                              f"got {self.suspension_stamp!r}")
@@ -173,9 +181,10 @@ keeps only counts and a recent window and memory does not grow with the drive.""
 
 
 class VdpsSystem:
-    """Figure 2 as one pure node (module docstring)."""
+    """Figure 2 as one pure node (module docstring). ``runner``: the prediction worker
+    (``prediction.offpath.PredictionRunner``; None: one of ``config.prediction_worker``)."""
 
-    def __init__(self, model_vehicle: Vehicle, config: SystemConfig | None = None, origin=None):
+    def __init__(self, model_vehicle: Vehicle, config: SystemConfig | None = None, origin=None, runner=None):
         if getattr(model_vehicle, "kind", None) != "model":
             raise ValueError("VdpsSystem reads only a model vehicle file (kind = \"model\"), never truth")
         self.vehicle = model_vehicle
@@ -216,8 +225,12 @@ class VdpsSystem:
 
                 peff = predictor_effects(effects_from_names(pcfg.effects, {}, pcfg.effect_params),
                                          cfg.model_effects)
-            self._chain = WarningChain(Predictor(model_vehicle.with_params(**params.as_dict()), pcfg, peff),
-                                       pol, node, keep=WARNING_HISTORY)
+            from vdps_hil.prediction.offpath import PredictionRunner
+
+            pred = Predictor(model_vehicle.with_params(**params.as_dict()), pcfg, peff)
+            runner = runner if runner is not None else PredictionRunner(pred, cfg.prediction_worker)
+            self._chain = WarningChain(pred, pol, node, keep=WARNING_HISTORY, runner=runner,
+                                       deadline=cfg.prediction_deadline, drop_t0_ns=cfg.prediction_drops_t0_ns)
             self._chain_params = params
             rc = cfg.require_converged
             if rc is None:  # the policy's rule: gate only a chain started from the priors
@@ -272,7 +285,13 @@ class VdpsSystem:
         res = self.pipeline.finish()
         if res:
             self._after(res, self.pipeline.ekf.t_ns or 0, out)
+        self.close()
         return out
+
+    def close(self) -> None:
+        """Stop the prediction worker (``finish`` does; predictions still pending are never used)."""
+        if self._chain is not None:
+            self._chain.close()
 
     @classmethod
     def replay(cls, model_vehicle: Vehicle, config: SystemConfig | None, samples: Iterable[Sample], origin=None,
@@ -334,7 +353,19 @@ class VdpsSystem:
             d["feeder"] = dict(self.feeder.counters)
         if self.identifier is not None:
             d["identification"] = self.identifier.status()
+        ch = self._chain
+        if ch is not None:
+            d["prediction"] = {"worker": ch.runner.worker, "deadline": ch.deadline,
+                               "latency_s": ch.node.config.prediction_latency_s, "started": ch.started,
+                               "used": ch.assessments_total, "dropped": ch.drops, "failed": ch.prediction_failures,
+                               "dropped_t0_ns": list(ch.dropped_t0_ns)}
         return d
+
+    @property
+    def prediction_drops_t0_ns(self) -> tuple[int, ...]:
+        """The t0 of every prediction dropped at its deadline so far (``SystemConfig.
+        prediction_drops_t0_ns`` of a replay that reproduces this run)."""
+        return () if self._chain is None else tuple(self._chain.dropped_t0_ns)
 
     # ------------------------------------------------------------------ internals
     def _step(self, s: Sample, out: list) -> None:
@@ -412,12 +443,12 @@ class VdpsSystem:
             return  # between estimate instants: the chain runs at the estimate cadence
         params = self._params()
         if init is not None and params is not self._chain_params:
-            chain.predictor = chain.predictor.with_params(params)
+            chain.set_params(params.as_dict())
             self._chain_params = params
         n_before = chain.assessments_total
         frames = chain.handle(t_ns, init, status)
         key = {WarningStatus.VALID: "valid", WarningStatus.NOT_CONVERGED: "not_converged",
-               WarningStatus.SENSOR_MISSING: "sensor_missing", WarningStatus.FAULT: "fault"}[status]
+               WarningStatus.SENSOR_MISSING: "sensor_missing", WarningStatus.FAULT: "fault"}[chain.status]
         self.counters["status"][key] += 1
         if chain.assessments_total > n_before:
             a = chain.last_assessment
