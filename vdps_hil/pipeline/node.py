@@ -56,6 +56,14 @@ within ``ImuChecks.settle_s`` of an IMU fault, 3 while the aiding innovations sa
 inconsistent (``estimation.aiding_monitor.health``), counted per reason in
 ``counters["unhealthy"]``; the identifier is not fed on the estimates of an IMU fault.
 
+Predictions off the sample path (``prediction.offpath``): the chain's prediction at t0 runs on
+a snapshot (parameters, initial state) in ``prediction_worker`` ("inline" by default; "process"
+live) and is used from t0 + ``prediction_latency_s``; ``prediction_deadline`` "wait" (replay:
+no miss by construction) or "drop" (live, ``LIVE_PREDICTIONS``: a late one is dropped, counted
+in ``status()["prediction"]``, and the frames say 3 "fault" until the next is used); a replay
+given the live run's ``prediction_drops_t0_ns`` reproduces it bit for bit. ``finish`` stops
+the worker.
+
 File replay (``vdps replay``, the batch tasks) is the application around this node:
 ``vdps_hil.app.replay.replay_file``.
 """
@@ -78,7 +86,12 @@ from vdps_hil.identification.identifier import Identifier
 from vdps_hil.model.params import IdentifiedParams, Vehicle
 from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport
 
-__all__ = ["SystemConfig", "VdpsSystem", "default_pipeline_config", "predictor_effects"]
+__all__ = ["LIVE_PREDICTIONS", "SystemConfig", "VdpsSystem", "default_pipeline_config", "predictor_effects"]
+
+LIVE_PREDICTIONS = {"prediction_worker": "process", "prediction_deadline": "drop"}
+"""How a live system predicts (the bench, ``vdps log --pipeline``; ``SystemConfig`` fields,
+``prediction.offpath``): in a worker process (``tools/bench_offpath.py``: it keeps the
+prediction's Python off the sample path's GIL), a job late at its deadline dropped."""
 
 
 # ---------------------------------------------------------------------------- configuration
@@ -287,6 +300,10 @@ class VdpsSystem:
             self._after(res, self.pipeline.ekf.t_ns or 0, out)
         self.close()
         return out
+
+    def ready(self, timeout_s: float | None = None) -> bool:
+        """Wait, at set-up, until the prediction worker has started (``PredictionRunner.ready``)."""
+        return self._chain is None or self._chain.runner.ready(timeout_s)
 
     def close(self) -> None:
         """Stop the prediction worker (``finish`` does; predictions still pending are never used)."""

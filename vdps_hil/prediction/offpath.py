@@ -49,6 +49,7 @@ import concurrent.futures as cf
 import multiprocessing
 from typing import Mapping
 
+from .assessment import RolloverAssessment
 from .initial_state import PredictorInitialState
 from .predictor import Predictor
 
@@ -64,8 +65,6 @@ def prediction_job(predictor: Predictor, init: PredictorInitialState):
     """One job (module docstring): (RolloverAssessment, None) or (None, "Type: message").
     A diverging or absurd prediction (an estimate far outside the model's range) is a failure
     the chain counts and reports as "fault", never an exception on the warning path."""
-    from .warning import RolloverAssessment
-
     try:
         r = predictor.predict(init)
         if r.stop_reason == "non_finite":  # the compiled core overflows to inf, not OverflowError
@@ -98,9 +97,24 @@ class _Predictors:
 _WORKER_STATE: _Predictors | None = None
 
 
+def _warm(predictors: _Predictors) -> int:
+    """One prediction from a straight run at 20 m/s (loads the compiled kernels in a worker
+    before the first real job; the result is not used)."""
+    v, r = 20.0, predictors.base.vehicle.tire.rolling_radius_m
+    init = PredictorInitialState(t_ns=0, pos_g_m=(0.0, 0.0, 0.0), vel_g_mps=(v, 0.0, 0.0), euler_g_rad=(0.0, 0.0, 0.0),
+                                 road_bank_rad=0.0, road_grade_rad=0.0, rate_b_radps=(0.0, 0.0, 0.0),
+                                 wheel_speed_radps=(v / r,) * 4)
+    prediction_job(predictors.base, init)
+    return 1
+
+
 def _process_init(vehicle, config, effects, fast) -> None:
     global _WORKER_STATE
     _WORKER_STATE = _Predictors(Predictor(vehicle, config, effects, fast=fast))
+
+
+def _process_warm() -> int:
+    return _warm(_WORKER_STATE)
 
 
 def _process_job(params, init):
@@ -142,7 +156,9 @@ class PredictionRunner:
             fast = predictor.reduced_core is not None
             self._pool = cf.ProcessPoolExecutor(1, mp_context=ctx, initializer=_process_init,
                                                 initargs=(predictor.vehicle, predictor.config, predictor.effects, fast))
-            self._pool.submit(int, 0)  # start the process now, not at the first prediction
+        self._started = None if self._pool is None else self._pool.submit(
+            _process_warm if worker == "process" else _warm, *(() if worker == "process" else (self._local,)))
+        """The worker's start (process start-up, kernels loaded): :meth:`ready`."""
 
     @property
     def predictor(self) -> Predictor:
@@ -157,6 +173,18 @@ class PredictionRunner:
         if self.worker == "thread":
             return self._pool.submit(self._local.job, params, init)
         return self._pool.submit(_process_job, params, init)
+
+    def ready(self, timeout_s: float | None = None) -> bool:
+        """Wait (at set-up, never on the sample path) until the worker has started and run one
+        prediction; False if it has not within ``timeout_s`` (its jobs are then dropped live
+        until it has, or waited for in a replay)."""
+        if self._started is None:
+            return True
+        try:
+            self._started.result(timeout_s)
+        except (cf.TimeoutError, cf.BrokenExecutor):
+            return False
+        return True
 
     def close(self) -> None:
         """Stop the worker (jobs not started are cancelled)."""

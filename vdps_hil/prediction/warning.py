@@ -3,7 +3,7 @@ sends ``VDPS_Warning`` on CAN (paper section 7.3 "the dynamic prediction system 
 rollover event"; the message layout is ``dbc/vdps.dbc`` / :mod:`vdps_hil.codecs.can_dbc`).
 
 Rollover measures of one prediction (definitions of :mod:`vdps_hil.model.rollover`, applied to the
-predicted trajectory; never redefined here)
+predicted trajectory; never redefined here; computed in :mod:`vdps_hil.prediction.assessment`)
 -----------------------------------------------------------------------------------------------
 ::
 
@@ -70,7 +70,6 @@ from pathlib import Path
 from typing import Iterable, Mapping, MutableSequence, Sequence
 
 import can
-import numpy as np
 
 from vdps_hil.codecs.can_dbc import WARNING
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
@@ -79,6 +78,8 @@ from vdps_hil.units import NS_PER_S
 
 from .config import DEFAULT_CONFIG_PATH, PredictionConfigError, load_prediction_document
 from .initial_state import PredictorInitialState
+from .assessment import RolloverAssessment, load_transfer_ratio, predictive_ltr, roll_relative_to_road
+from .offpath import DEADLINES, PredictionRunner
 from .predictor import Cadence, Predictor
 from .result import PredictionResult
 
@@ -97,62 +98,6 @@ class WarningStatus(enum.IntEnum):
     NOT_CONVERGED = 1
     SENSOR_MISSING = 2
     FAULT = 3
-
-
-# ---------------------------------------------------------------------------------------------
-# rollover measures of a prediction
-# ---------------------------------------------------------------------------------------------
-def load_transfer_ratio(normal_load_n) -> np.ndarray:
-    """LTR = (F_right - F_left) / (F_right + F_left) per sample of (N, 4) wheel loads (FL FR RR
-    RL; right = 2, 3), 0 where the total is 0. Same sign as the simulator's ``ltr``."""
-    fz = np.atleast_2d(np.asarray(normal_load_n, dtype=float))
-    left = fz[:, 0] + fz[:, 3]
-    right = fz[:, 1] + fz[:, 2]
-    tot = left + right
-    return np.divide(right - left, tot, out=np.zeros_like(tot), where=tot > 0)
-
-
-def roll_relative_to_road(result: PredictionResult) -> np.ndarray:
-    """phi_v(t) of the prediction [rad] (eq 4)."""
-    return result.euler_v_rad[:, 0]
-
-
-def predictive_ltr(result: PredictionResult) -> tuple[float, float]:
-    """(PLTR, t*): the predicted LTR of largest magnitude (signed) and its time after t0 [s]."""
-    ltr = load_transfer_ratio(result.normal_load_n)
-    k = int(np.argmax(np.abs(ltr)))
-    return float(ltr[k]), float(result.t_s[k])
-
-
-@dataclass(frozen=True)
-class RolloverAssessment:
-    """What the policy needs from one prediction (times after t0 [s]; None = not predicted)."""
-
-    t0_ns: int
-    time_to_point_of_no_return_s: float | None
-    time_to_tip_up_s: float | None
-    peak_ltr: float
-    peak_ltr_t_s: float
-    peak_roll_rad: float
-    horizon_s: float
-    stop_reason: str
-
-    @classmethod
-    def from_prediction(cls, result: PredictionResult) -> "RolloverAssessment":
-        pltr, tpk = predictive_ltr(result)
-        roll = roll_relative_to_road(result)
-        k = int(np.argmax(np.abs(roll)))
-        return cls(int(result.t0_ns), result.point_of_no_return_t_s, result.tip_up_t_s, pltr, tpk,
-                   float(roll[k]), float(result.t_s[-1]), result.stop_reason)
-
-    def ttr_at(self, t_ns: int) -> float | None:
-        """Time from ``t_ns`` to the predicted point of no return [s] (>= 0), or None."""
-        if self.time_to_point_of_no_return_s is None:
-            return None
-        return max(0.0, self.time_to_point_of_no_return_s - (t_ns - self.t0_ns) / NS_PER_S)
-
-    def to_json(self) -> dict:
-        return dict(self.__dict__)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -351,8 +296,6 @@ class WarningChain:
     def __init__(self, predictor: Predictor, policy: WarningPolicy | None = None,
                  node_config: WarningNodeConfig | None = None, keep: int | None = None, *,
                  runner=None, deadline: str = "wait", drop_t0_ns: Iterable[int] = ()):
-        from .offpath import DEADLINES, PredictionRunner
-
         if keep is not None and (isinstance(keep, bool) or not isinstance(keep, int) or keep < 0):
             raise ValueError(f"keep must be None or an integer >= 0, got {keep!r}")
         if deadline not in DEADLINES:
