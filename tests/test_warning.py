@@ -3,7 +3,6 @@ the truth simulator (truth-initialised predictor with the true parameters, held 
 
 import math
 
-import numpy as np
 import pytest
 
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
@@ -16,7 +15,7 @@ from vdps_hil.prediction.initial_state import PredictorInitialState
 from vdps_hil.prediction.predictor import Predictor
 from vdps_hil.prediction.warning import (RolloverAssessment, WarningChain, WarningLevel, WarningNode,
                                          WarningNodeConfig, WarningPolicy, WarningStatus,
-                                         load_transfer_ratio, load_warning_config, replay_assessments,
+                                         load_warning_config, replay_assessments,
                                          warning_config_from_table)
 from vdps_hil.sim.scenarios import load_scenario
 from vdps_hil.sim.simulator import Simulator
@@ -35,14 +34,6 @@ def decode(frames):
 
 
 # ----------------------------------------------------------------------------- measures and policy
-def test_load_transfer_ratio_sign_and_zero_total():
-    fz = np.array([[4000.0, 4000.0, 4000.0, 4000.0],  # even
-                   [0.0, 5000.0, 5000.0, 0.0],  # left wheels off: +1 (roll right side down)
-                   [3000.0, 1000.0, 1000.0, 3000.0],  # (2000 - 6000) / 8000
-                   [0.0, 0.0, 0.0, 0.0]])
-    assert np.allclose(load_transfer_ratio(fz), [0.0, 1.0, -0.5, 0.0])
-
-
 def test_policy_levels():
     pol = WarningPolicy(reaction_time_s=1.0, margin_s=0.5, imminent_time_s=0.5, caution_ltr=0.9)
     assert pol.warning_time_s == 1.5

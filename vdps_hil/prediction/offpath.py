@@ -38,7 +38,10 @@ Which worker (``WORKERS``)
 * ``"process"``: one worker process (``spawn``: no fork of a threaded process); the snapshot and
   the assessment cross as pickles of a few hundred bytes; the predictor is built once in the
   worker from the same vehicle, config and effects. It starts in about a second (numba and the
-  kernel cache); until it answers, live deadlines are missed (counted), a replay waits.
+  kernel cache); until it answers, live deadlines are missed (counted), a replay waits. As for
+  any ``multiprocessing`` start, a script that runs a live system guards its top level with
+  ``if __name__ == "__main__":`` (the worker imports the main module). A worker that died
+  makes every later job a counted failure ("fault"), never an exception on the sample path.
 
 Layer 8 (prediction): imports only what the predictor does.
 """
@@ -170,9 +173,12 @@ class PredictionRunner:
         self._params = params if params is not None else self._params
         if self.worker == "inline":
             return _Done(self._local.job(params, init))
-        if self.worker == "thread":
-            return self._pool.submit(self._local.job, params, init)
-        return self._pool.submit(_process_job, params, init)
+        try:
+            if self.worker == "thread":
+                return self._pool.submit(self._local.job, params, init)
+            return self._pool.submit(_process_job, params, init)
+        except (RuntimeError, AttributeError) as e:  # a dead (BrokenExecutor) or closed worker: a counted failure
+            return _Done((None, f"prediction worker: {type(e).__name__}: {e}"))
 
     def ready(self, timeout_s: float | None = None) -> bool:
         """Wait (at set-up, never on the sample path) until the worker has started and run one
