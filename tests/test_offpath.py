@@ -164,3 +164,39 @@ def test_bad_worker_settings_are_refused():
         SystemConfig(prediction_deadline="never")
     with pytest.raises(ValueError, match="prediction worker"):
         PredictionRunner(Predictor(MODEL), "cluster")
+
+
+def test_a_dead_worker_is_a_counted_fault_not_an_exception():
+    """The worker process killed (SIGKILL) mid-run: the jobs after it are counted failures and the
+    chain sends status 3; a closed worker likewise."""
+    import os
+    import signal
+
+    from vdps_hil.prediction.initial_state import PredictorInitialState
+    from vdps_hil.prediction.warning import WarningChain
+
+    pred = Predictor(MODEL)
+    init = PredictorInitialState(t_ns=0, pos_g_m=(0.0, 0.0, 0.0), vel_g_mps=(20.0, 0.0, 0.0),
+                                 euler_g_rad=(0.0, 0.0, 0.0), road_bank_rad=0.0, road_grade_rad=0.0,
+                                 rate_b_radps=(0.0, 0.0, 0.0), wheel_speed_radps=(60.0,) * 4)
+    runner = PredictionRunner(pred, "process")
+    assert runner.ready(GATE_TIMEOUT_S)
+    chain = WarningChain(pred, runner=runner)
+    chain.handle(0, init)
+    chain.handle(20_000_000, None)
+    assert chain.assessments_total == 1 and chain.prediction_failures == 0
+    for pid in list(runner._pool._processes):
+        os.kill(pid, signal.SIGKILL)
+    frames = []
+    for k in range(1, 4):  # a job per 100 ms, each looked at 20 ms later
+        chain.handle(k * 100_000_000, init)
+        frames += chain.handle(k * 100_000_000 + 20_000_000, None)
+    assert chain.prediction_failures == 3 and "prediction worker" in chain.last_failure
+    assert chain.status == WarningStatus.FAULT
+    dec = VdpsCanDecoder()
+    assert all(int(d.fields["warning_status"]) == WarningStatus.FAULT for f in frames
+               for d in dec.decode(0, f.arbitration_id, bytes(f.data)))
+    chain.close()
+    thread = PredictionRunner(pred, "thread")
+    thread.close()
+    assert thread.submit(None, init).result()[0] is None
