@@ -6,12 +6,11 @@ No wall time is asserted: counts, order and digests only."""
 
 from __future__ import annotations
 
-import io
 import threading
 from concurrent.futures import Future
-from dataclasses import replace
 
 import pytest
+from replayed_drive import drive_samples
 
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.model.params import load_vehicle
@@ -21,8 +20,6 @@ from vdps_hil.prediction.config import load_predictor_config
 from vdps_hil.prediction.offpath import PredictionRunner, prediction_job
 from vdps_hil.prediction.predictor import Predictor
 from vdps_hil.prediction.warning import WarningStatus
-from vdps_hil.record.decode import decode_recording
-from vdps_hil.sim.drive import Drive
 
 MODEL = load_vehicle("sedan-model")
 GATE_TIMEOUT_S = 60.0
@@ -32,10 +29,7 @@ job released by the timeout (asserted never to happen), not as a hung test."""
 
 @pytest.fixture(scope="module")
 def samples():
-    buf = io.BytesIO()
-    Drive("paper", seed=19, duration_s=2.5).run(buf)
-    buf.seek(0)
-    return list(decode_recording(buf))
+    return drive_samples(19, 2.5)
 
 
 def config(**kw):

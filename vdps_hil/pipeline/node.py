@@ -436,8 +436,8 @@ class VdpsSystem:
 
     def _chain_tick(self, t_ns: int, ef, out: list, why: str | None = None) -> None:
         chain = self._chain
-        if chain is None:
-            return
+        if chain is None or (ef is None and self.pipeline.ekf.initialized):
+            return  # between estimate instants (before the imports: this runs per sample)
         from vdps_hil.prediction.initial_state import PredictorInitialState
         from vdps_hil.prediction.warning import WarningStatus
 
@@ -456,8 +456,6 @@ class VdpsSystem:
                     status = WarningStatus.NOT_CONVERGED
             if status == WarningStatus.VALID and why is not None:
                 status = WarningStatus.SENSOR_MISSING if why.startswith("imu") else WarningStatus.FAULT
-        elif self.pipeline.ekf.initialized:
-            return  # between estimate instants: the chain runs at the estimate cadence
         params = self._params()
         if init is not None and params is not self._chain_params:
             chain.set_params(params.as_dict())
