@@ -25,6 +25,7 @@ from vdps_hil.app.est_topics import est_docs
 from vdps_hil.hil.bench import Bench
 from vdps_hil.hil.bench_config import BenchConfig, BenchError, make_system
 from vdps_hil.hil.node import INPUT_ORDER_METADATA, input_order_samples
+from vdps_hil.record.input_order import read_input_order, recorded_drops
 from vdps_hil.hil.transports import listening_sockets
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.profiles import load_profile
@@ -127,12 +128,15 @@ def test_recording_has_the_standard_layout(rollover_run):
 def test_live_estimates_are_bit_identical_to_a_replay_in_the_recorded_input_order(rollover_run, calibrated_params):
     _, out, _ = rollover_run
     with RecordingReader(out) as r:
-        samples = input_order_samples(r)
+        samples, settings = read_input_order(r)
         live = {topic: [(t, doc) for _, t, doc in r.iter_messages([topic])]
                 for topic in ("/est/state", "/est/prediction", "/est/ident")}
     assert not any(s.source.startswith("/truth") or s.kind.startswith("truth") for s in samples)
     p = load_profile("table1-susp1k")
-    system = make_system("suv-model", p.suspension.rate_hz, p.suspension.sigma_m, calibrated_params)
+    # the live pipeline predicted in a worker and dropped late predictions; the replay drops the same
+    assert settings["prediction"]["worker"] == "process" and settings["prediction"]["deadline"] == "drop"
+    system = make_system("suv-model", p.suspension.rate_hz, p.suspension.sigma_m, calibrated_params,
+                         drops=recorded_drops(settings))
     replayed: dict = {k: [] for k in live}
     for s in samples:
         for o in system.handle(s):

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from replayed_drive import drive_samples
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
@@ -35,10 +36,7 @@ def _nees_tool():
 
 @pytest.fixture(scope="module")
 def paper_samples():
-    buf = io.BytesIO()
-    Drive("paper", seed=7, duration_s=2.5).run(buf)
-    buf.seek(0)
-    return list(decode_recording(buf))
+    return drive_samples(7, 2.5)
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,6 @@ the truth simulator (truth-initialised predictor with the true parameters, held 
 
 import math
 
-import numpy as np
 import pytest
 
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
@@ -16,7 +15,7 @@ from vdps_hil.prediction.initial_state import PredictorInitialState
 from vdps_hil.prediction.predictor import Predictor
 from vdps_hil.prediction.warning import (RolloverAssessment, WarningChain, WarningLevel, WarningNode,
                                          WarningNodeConfig, WarningPolicy, WarningStatus,
-                                         load_transfer_ratio, load_warning_config, replay_assessments,
+                                         load_warning_config, replay_assessments,
                                          warning_config_from_table)
 from vdps_hil.sim.scenarios import load_scenario
 from vdps_hil.sim.simulator import Simulator
@@ -35,14 +34,6 @@ def decode(frames):
 
 
 # ----------------------------------------------------------------------------- measures and policy
-def test_load_transfer_ratio_sign_and_zero_total():
-    fz = np.array([[4000.0, 4000.0, 4000.0, 4000.0],  # even
-                   [0.0, 5000.0, 5000.0, 0.0],  # left wheels off: +1 (roll right side down)
-                   [3000.0, 1000.0, 1000.0, 3000.0],  # (2000 - 6000) / 8000
-                   [0.0, 0.0, 0.0, 0.0]])
-    assert np.allclose(load_transfer_ratio(fz), [0.0, 1.0, -0.5, 0.0])
-
-
 def test_policy_levels():
     pol = WarningPolicy(reaction_time_s=1.0, margin_s=0.5, imminent_time_s=0.5, caution_ltr=0.9)
     assert pol.warning_time_s == 1.5
@@ -256,13 +247,16 @@ def test_node_frames_round_trip_through_the_codec(ttr, ltr, roll, status):
 
 def test_a_diverging_prediction_is_a_counted_fault_not_a_crash():
     """An absurd estimate (suspension compressed 2 m: eq 14's exponential spring overflows)
-    must not stop the warning path: the chain counts the failure and sends status 3 (fault)."""
+    must not stop the warning path: the chain counts the failure and sends status 3 (fault) at
+    the prediction's deadline (t0 + prediction_latency_s, when its result would have been used)."""
     chain = WarningChain(Predictor(load_vehicle("sedan-model")))
     bad = PredictorInitialState(t_ns=0, pos_g_m=(0.0, 0.0, 0.5), vel_g_mps=(25.0, 0.0, 0.0),
                                 euler_g_rad=(0.0, 0.0, 0.0), road_bank_rad=0.0, road_grade_rad=0.0,
                                 rate_b_radps=(0.0, 0.0, 0.0), wheel_speed_radps=(80.0,) * 4,
                                 susp_deflection_m=(2.0e3,) * 4, susp_deflection_rate_mps=(0.0,) * 4)
-    frames = chain.handle(0, bad)
+    chain.handle(0, bad)
+    assert chain.prediction_failures == 0  # not before its deadline
+    frames = chain.handle(20 * MS, None)
     assert chain.prediction_failures == 1 and chain.last_failure
     dec = VdpsCanDecoder()
     decoded = [s for f in frames for s in dec.decode(0, f.arbitration_id, bytes(f.data))]

@@ -82,9 +82,9 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     except RecordingError as e:
         raise ReplayError(str(e)) from None
     try:
-        recorded, probe = None, None
+        recorded, probe, drops = None, None, ()
         if input_order == "recorded":
-            recorded, probe = _recorded_input(reader, path, config, veh, start, susp_sigma_m)
+            recorded, probe, drops = _recorded_input(reader, path, config, veh, start, susp_sigma_m)
         if config is not None and sensorset is not None:
             raise ReplayError("give a sensor set or a config, not both")
         decoded_with = _recorded_decoding(reader, path, dbc, signalmap)
@@ -98,7 +98,8 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
             serve.epoch_ns = view.epoch_ns
         unsettled = tuple((model_doc or {}).get("params_unsettled", ()))
         system, side, summary, sensors_desc = _run(path, reader, veh, config, configure, start, model_effects,
-                                                   recorded, probe, jobs, io_kw, view, progress, serve, unsettled)
+                                                   recorded, probe, jobs, io_kw, view, progress, serve, unsettled,
+                                                   drops)
     finally:
         reader.close()
     wall = time.perf_counter() - wall0
@@ -180,9 +181,10 @@ def _check_options(save_params, identify: bool, input_order: str, jobs: int) -> 
 
 
 def _recorded_input(reader, path, config, veh: Vehicle, start, susp_sigma_m: float):
-    """(the recorded input order's samples, the live system's probe statistics or None) of
-    ``--input-order recorded`` (``record.input_order``, ``recorded_config``)."""
-    from vdps_hil.record.input_order import INPUT_ORDER_METADATA, read_input_order
+    """(the recorded input order's samples, the live system's probe statistics or None, the
+    predictions it dropped) of ``--input-order recorded`` (``record.input_order``,
+    ``recorded_config``)."""
+    from vdps_hil.record.input_order import INPUT_ORDER_METADATA, read_input_order, recorded_drops
 
     if INPUT_ORDER_METADATA not in reader.metadata():
         raise ReplayError(f"{os.fspath(path)}: no recorded input order (metadata {INPUT_ORDER_METADATA}, "
@@ -191,23 +193,25 @@ def _recorded_input(reader, path, config, veh: Vehicle, start, susp_sigma_m: flo
     probe = None
     try:
         recorded, settings = read_input_order(reader)
+        drops = recorded_drops(settings)
         if config is None:
             probe = recorded_config(settings, veh, start, susp_sigma_m)
     except ReplayError:
         raise
     except (ValueError, KeyError, IndexError, TypeError, AttributeError) as e:
         raise ReplayError(f"{os.fspath(path)}: recorded input order unreadable: {e}") from None
-    return recorded, probe
+    return recorded, probe, drops
 
 
 def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, recorded, probe, jobs: int,
-         io_kw: dict, view=None, progress=None, serve=None, unsettled: tuple[str, ...] = ()):
+         io_kw: dict, view=None, progress=None, serve=None, unsettled: tuple[str, ...] = (), drops: tuple = ()):
     """Configure the system (``config``, or ``configure(rates, fields)`` from the first seconds
     or the recorded ``probe``) and run it over the recording: (system, recording side, summary,
     sensor-set description). The recording side (decoding, the output) runs here or in a second
     process (``app.replay_io``); raw records read before the configuration is accepted wait, so
     a refused one writes nothing. ``unsettled``: problems of a ``--params`` file that were not
-    converged when saved: the warnings stay invalid until the live identifier converges them."""
+    converged when saved: the warnings stay invalid until the live identifier converges them.
+    ``drops``: the predictions a live run dropped (``--input-order recorded``), dropped again."""
     from vdps_hil.app.replay_io import LocalRecordingSide, RecordingProcess, ReplayIOError, SampleCounter
 
     side = None
@@ -229,6 +233,8 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
             config = replace(config, require_converged=unsettled)
         if model_effects is not None:
             config = replace(config, model_effects=model_effects)
+        if drops:
+            config = replace(config, prediction_drops_t0_ns=drops)
         system = VdpsSystem(veh, config)
         system.clear_input_log()
         summary = ReplaySummary() if view is None else view.summary()

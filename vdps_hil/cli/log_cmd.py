@@ -407,7 +407,7 @@ class PipelineTap:
         from dataclasses import replace
 
         from vdps_hil.app.replay import DEFAULT_SUSP_SIGMA_M, ReplayError, replay_config, sample_stats
-        from vdps_hil.pipeline.node import VdpsSystem
+        from vdps_hil.pipeline.node import LIVE_PREDICTIONS, VdpsSystem
 
         pending, self._pending = self._pending, []
         _, rates, fields = sample_stats(iter(pending), self.probe_s)
@@ -419,7 +419,8 @@ class PipelineTap:
             return
         if self.start is not None:
             cfg = replace(cfg, start_params=self.start)
-        self.system = VdpsSystem(self.model, cfg)
+        self.system = VdpsSystem(self.model, replace(cfg, **LIVE_PREDICTIONS))
+        self.system.ready(60.0)  # the prediction worker started before the first sample (prediction.offpath)
         self.system.clear_input_log()
         self.settings = {"vehicle": self.model.name, "vehicle_sha256": self.model.source_sha256,
                          "start_params": None if self.start is None else self.start.as_dict(),
@@ -471,7 +472,8 @@ class PipelineTap:
         if self.order is not None:
             from vdps_hil.record.input_order import INPUT_ORDER_METADATA
 
-            self.writer.add_metadata(INPUT_ORDER_METADATA, self.order.metadata(system=self.settings))
+            self.writer.add_metadata(INPUT_ORDER_METADATA, self.order.metadata(
+                system=self.settings, prediction=self.system.status()["prediction"]))
             self.order_written = True
 
     def status_line(self) -> str:

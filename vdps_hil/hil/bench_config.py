@@ -90,10 +90,16 @@ def calibrate(scenario: str, truth_vehicle: str, model: str, directory: str | os
             "converged": dict(doc["identification"]["converged"]), "cpu_s": time.process_time() - t0}
 
 
-def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: str | None = None):
+def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: str | None = None, *,
+                live: bool = False, drops: tuple[int, ...] = ()):
     """The VDPS pipeline for the bench: ``VdpsSystem`` with the model vehicle file and the
     suspension sensor's rate and noise (its data sheet, from the sensor profile; not truth),
     started from the priors or from a saved parameter file ``params``.
+
+    ``live`` (the bench's own pipeline): predictions in a worker process, dropped when late
+    (``pipeline.node.LIVE_PREDICTIONS``); the worker is started and warmed here, before
+    the run. Else (a replay of a bench recording) the replay rule, with ``drops`` the live run's
+    dropped predictions (``hil.input_order`` setting ``prediction``).
 
     ``model`` may also be a saved workbench model (``vdps diagnose --save-model``, schema
     ``vdps-model``): then the vehicle file it names, its identified parameters as the
@@ -106,7 +112,8 @@ def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: st
     if saved is None:
         vehicle = load_vehicle(model, "model")
         start = start_params(model, params) if params is not None else None
-        return VdpsSystem(vehicle, SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=start))
+        return _ready(VdpsSystem(vehicle, SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=start,
+                                                                   **_prediction_kw(live, drops))))
     if params is not None:
         raise BenchError("give --params or a saved workbench model as --model (it carries its parameters), not both")
     from vdps_hil.workbench.model_file import ModelFileError, load_model
@@ -116,8 +123,24 @@ def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: st
         refined, effects, _ = load_model(model, vehicle)
     except (ModelFileError, ValueError) as e:
         raise BenchError(f"--model {model}: {str(e).splitlines()[0]}") from None
-    cfg = SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=refined.params, model_effects=effects)
-    return VdpsSystem(vehicle, cfg)
+    cfg = SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=refined.params, model_effects=effects,
+                                   **_prediction_kw(live, drops))
+    return _ready(VdpsSystem(vehicle, cfg))
+
+
+WORKER_START_S = 60.0
+"""How long set-up waits for the prediction worker to start (a loaded machine: seconds)."""
+
+
+def _prediction_kw(live: bool, drops) -> dict:
+    from vdps_hil.pipeline.node import LIVE_PREDICTIONS
+
+    return dict(LIVE_PREDICTIONS) if live else {"prediction_drops_t0_ns": tuple(int(t) for t in drops)}
+
+
+def _ready(system):
+    system.ready(WORKER_START_S)
+    return system
 
 
 def warm_pipeline_kernels() -> None:

@@ -64,7 +64,7 @@ def main(argv=None) -> int:
     clock = BenchClock(a.speed)
     writer = None
     try:
-        system = make_system(a.model, a.susp_rate_hz, a.susp_sigma_m, a.params)
+        system = make_system(a.model, a.susp_rate_hz, a.susp_sigma_m, a.params, live=True)
         if a.output:
             writer = RecordingWriter(a.output, metadata={"source": "vdps bench (pipeline process)"},
                                      sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)

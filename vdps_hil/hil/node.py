@@ -464,7 +464,9 @@ class PipelineNode:
             return
         rec.write_health(self.adapters)
         rec.write_final_health(self.adapters, extra)
-        self.writer.add_metadata(INPUT_ORDER_METADATA, self.input_order.metadata())
+        pred = self.system.status().get("prediction")  # its drops, for a replay (record.input_order)
+        self.writer.add_metadata(INPUT_ORDER_METADATA, self.input_order.metadata(**({} if pred is None else
+                                                                                     {"prediction": pred})))
 
     def status(self) -> dict:
         return {a.name: a.status() for a in self.adapters}

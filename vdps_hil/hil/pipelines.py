@@ -30,7 +30,7 @@ class LocalPipeline:
 
         try:
             sp = bench.drive.profile.suspension
-            system = make_system(bench.model, sp.rate_hz, sp.sigma_m, bench.config.params)
+            system = make_system(bench.model, sp.rate_hz, sp.sigma_m, bench.config.params, live=True)
         except (ValueError, OSError) as e:
             raise BenchError(str(e).splitlines()[0]) from None
         self.node = PipelineNode(system, can_dev.pipeline_spec, serial["imu"].port, serial["gnss"].port, clock,

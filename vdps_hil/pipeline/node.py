@@ -56,6 +56,14 @@ within ``ImuChecks.settle_s`` of an IMU fault, 3 while the aiding innovations sa
 inconsistent (``estimation.aiding_monitor.health``), counted per reason in
 ``counters["unhealthy"]``; the identifier is not fed on the estimates of an IMU fault.
 
+Predictions off the sample path (``prediction.offpath``): the chain's prediction at t0 runs on
+a snapshot (parameters, initial state) in ``prediction_worker`` ("inline" by default; "process"
+live) and is used from t0 + ``prediction_latency_s``; ``prediction_deadline`` "wait" (replay:
+no miss by construction) or "drop" (live, ``LIVE_PREDICTIONS``: a late one is dropped, counted
+in ``status()["prediction"]``, and the frames say 3 "fault" until the next is used); a replay
+given the live run's ``prediction_drops_t0_ns`` reproduces it bit for bit. ``finish`` stops
+the worker.
+
 File replay (``vdps replay``, the batch tasks) is the application around this node:
 ``vdps_hil.app.replay.replay_file``.
 """
@@ -78,7 +86,12 @@ from vdps_hil.identification.identifier import Identifier
 from vdps_hil.model.params import IdentifiedParams, Vehicle
 from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport
 
-__all__ = ["SystemConfig", "VdpsSystem", "default_pipeline_config", "predictor_effects"]
+__all__ = ["LIVE_PREDICTIONS", "SystemConfig", "VdpsSystem", "default_pipeline_config", "predictor_effects"]
+
+LIVE_PREDICTIONS = {"prediction_worker": "process", "prediction_deadline": "drop"}
+"""How a live system predicts (the bench, ``vdps log --pipeline``; ``SystemConfig`` fields,
+``prediction.offpath``): in a worker process (``tools/bench_offpath.py``: it keeps the
+prediction's Python off the sample path's GIL), a job late at its deadline dropped."""
 
 
 # ---------------------------------------------------------------------------- configuration
@@ -120,6 +133,9 @@ class SystemConfig:
     require_converged: tuple[str, ...] | None = None  # None: the warning policy's, if started from the priors
     model_effects: Any = None  # EffectSet of a saved workbench model: dynamics join the predictor,
     # IMU measurement effects are removed from the readings (estimation.imu_correction)
+    prediction_worker: str = "inline"  # prediction.offpath.WORKERS: "inline", "thread", "process"
+    prediction_deadline: str = "wait"  # "wait" (replay) or "drop" (live; prediction.offpath)
+    prediction_drops_t0_ns: tuple[int, ...] = ()  # a live run's dropped predictions, dropped again
 
     def __post_init__(self):
         for name in ("estimate_period_s", "ident_period_s", "ident_report_period_s"):
@@ -129,6 +145,11 @@ class SystemConfig:
         r = self.suspension_rate_hz
         if r is not None and not (math.isfinite(r) and r > 0):
             raise ValueError(f"SystemConfig.suspension_rate_hz must be positive or None, got {r!r}")
+        from vdps_hil.prediction.offpath import DEADLINES, WORKERS
+
+        if self.prediction_worker not in WORKERS or self.prediction_deadline not in DEADLINES:
+            raise ValueError(f"SystemConfig: prediction_worker must be one of {WORKERS} and prediction_deadline "
+                             f"one of {DEADLINES}, got {self.prediction_worker!r}, {self.prediction_deadline!r}")
         if self.suspension_stamp not in SUSPENSION_STAMPS:
             raise ValueError(f"SystemConfig.suspension_stamp must be one of {SUSPENSION_STAMPS}, "
                              f"got {self.suspension_stamp!r}")
@@ -173,9 +194,10 @@ keeps only counts and a recent window and memory does not grow with the drive.""
 
 
 class VdpsSystem:
-    """Figure 2 as one pure node (module docstring)."""
+    """Figure 2 as one pure node (module docstring). ``runner``: the prediction worker
+    (``prediction.offpath.PredictionRunner``; None: one of ``config.prediction_worker``)."""
 
-    def __init__(self, model_vehicle: Vehicle, config: SystemConfig | None = None, origin=None):
+    def __init__(self, model_vehicle: Vehicle, config: SystemConfig | None = None, origin=None, runner=None):
         if getattr(model_vehicle, "kind", None) != "model":
             raise ValueError("VdpsSystem reads only a model vehicle file (kind = \"model\"), never truth")
         self.vehicle = model_vehicle
@@ -216,8 +238,12 @@ class VdpsSystem:
 
                 peff = predictor_effects(effects_from_names(pcfg.effects, {}, pcfg.effect_params),
                                          cfg.model_effects)
-            self._chain = WarningChain(Predictor(model_vehicle.with_params(**params.as_dict()), pcfg, peff),
-                                       pol, node, keep=WARNING_HISTORY)
+            from vdps_hil.prediction.offpath import PredictionRunner
+
+            pred = Predictor(model_vehicle.with_params(**params.as_dict()), pcfg, peff)
+            runner = runner if runner is not None else PredictionRunner(pred, cfg.prediction_worker)
+            self._chain = WarningChain(pred, pol, node, keep=WARNING_HISTORY, runner=runner,
+                                       deadline=cfg.prediction_deadline, drop_t0_ns=cfg.prediction_drops_t0_ns)
             self._chain_params = params
             rc = cfg.require_converged
             if rc is None:  # the policy's rule: gate only a chain started from the priors
@@ -272,7 +298,17 @@ class VdpsSystem:
         res = self.pipeline.finish()
         if res:
             self._after(res, self.pipeline.ekf.t_ns or 0, out)
+        self.close()
         return out
+
+    def ready(self, timeout_s: float | None = None) -> bool:
+        """Wait, at set-up, until the prediction worker has started (``PredictionRunner.ready``)."""
+        return self._chain is None or self._chain.runner.ready(timeout_s)
+
+    def close(self) -> None:
+        """Stop the prediction worker (``finish`` does; predictions still pending are never used)."""
+        if self._chain is not None:
+            self._chain.close()
 
     @classmethod
     def replay(cls, model_vehicle: Vehicle, config: SystemConfig | None, samples: Iterable[Sample], origin=None,
@@ -334,7 +370,19 @@ class VdpsSystem:
             d["feeder"] = dict(self.feeder.counters)
         if self.identifier is not None:
             d["identification"] = self.identifier.status()
+        ch = self._chain
+        if ch is not None:
+            d["prediction"] = {"worker": ch.runner.worker, "deadline": ch.deadline,
+                               "latency_s": ch.node.config.prediction_latency_s, "started": ch.started,
+                               "used": ch.assessments_total, "dropped": ch.drops, "failed": ch.prediction_failures,
+                               "dropped_t0_ns": list(ch.dropped_t0_ns)}
         return d
+
+    @property
+    def prediction_drops_t0_ns(self) -> tuple[int, ...]:
+        """The t0 of every prediction dropped at its deadline so far (``SystemConfig.
+        prediction_drops_t0_ns`` of a replay that reproduces this run)."""
+        return () if self._chain is None else tuple(self._chain.dropped_t0_ns)
 
     # ------------------------------------------------------------------ internals
     def _step(self, s: Sample, out: list) -> None:
@@ -388,8 +436,8 @@ class VdpsSystem:
 
     def _chain_tick(self, t_ns: int, ef, out: list, why: str | None = None) -> None:
         chain = self._chain
-        if chain is None:
-            return
+        if chain is None or (ef is None and self.pipeline.ekf.initialized):
+            return  # between estimate instants (before the imports: this runs per sample)
         from vdps_hil.prediction.initial_state import PredictorInitialState
         from vdps_hil.prediction.warning import WarningStatus
 
@@ -408,16 +456,14 @@ class VdpsSystem:
                     status = WarningStatus.NOT_CONVERGED
             if status == WarningStatus.VALID and why is not None:
                 status = WarningStatus.SENSOR_MISSING if why.startswith("imu") else WarningStatus.FAULT
-        elif self.pipeline.ekf.initialized:
-            return  # between estimate instants: the chain runs at the estimate cadence
         params = self._params()
         if init is not None and params is not self._chain_params:
-            chain.predictor = chain.predictor.with_params(params)
+            chain.set_params(params.as_dict())
             self._chain_params = params
         n_before = chain.assessments_total
         frames = chain.handle(t_ns, init, status)
         key = {WarningStatus.VALID: "valid", WarningStatus.NOT_CONVERGED: "not_converged",
-               WarningStatus.SENSOR_MISSING: "sensor_missing", WarningStatus.FAULT: "fault"}[status]
+               WarningStatus.SENSOR_MISSING: "sensor_missing", WarningStatus.FAULT: "fault"}[chain.status]
         self.counters["status"][key] += 1
         if chain.assessments_total > n_before:
             a = chain.last_assessment

@@ -3,7 +3,7 @@ sends ``VDPS_Warning`` on CAN (paper section 7.3 "the dynamic prediction system 
 rollover event"; the message layout is ``dbc/vdps.dbc`` / :mod:`vdps_hil.codecs.can_dbc`).
 
 Rollover measures of one prediction (definitions of :mod:`vdps_hil.model.rollover`, applied to the
-predicted trajectory; never redefined here)
+predicted trajectory; never redefined here; computed in :mod:`vdps_hil.prediction.assessment`)
 -----------------------------------------------------------------------------------------------
 ::
 
@@ -70,7 +70,6 @@ from pathlib import Path
 from typing import Iterable, Mapping, MutableSequence, Sequence
 
 import can
-import numpy as np
 
 from vdps_hil.codecs.can_dbc import WARNING
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
@@ -79,6 +78,8 @@ from vdps_hil.units import NS_PER_S
 
 from .config import DEFAULT_CONFIG_PATH, PredictionConfigError, load_prediction_document
 from .initial_state import PredictorInitialState
+from .assessment import RolloverAssessment, load_transfer_ratio, predictive_ltr, roll_relative_to_road
+from .offpath import DEADLINES, PredictionRunner
 from .predictor import Cadence, Predictor
 from .result import PredictionResult
 
@@ -97,62 +98,6 @@ class WarningStatus(enum.IntEnum):
     NOT_CONVERGED = 1
     SENSOR_MISSING = 2
     FAULT = 3
-
-
-# ---------------------------------------------------------------------------------------------
-# rollover measures of a prediction
-# ---------------------------------------------------------------------------------------------
-def load_transfer_ratio(normal_load_n) -> np.ndarray:
-    """LTR = (F_right - F_left) / (F_right + F_left) per sample of (N, 4) wheel loads (FL FR RR
-    RL; right = 2, 3), 0 where the total is 0. Same sign as the simulator's ``ltr``."""
-    fz = np.atleast_2d(np.asarray(normal_load_n, dtype=float))
-    left = fz[:, 0] + fz[:, 3]
-    right = fz[:, 1] + fz[:, 2]
-    tot = left + right
-    return np.divide(right - left, tot, out=np.zeros_like(tot), where=tot > 0)
-
-
-def roll_relative_to_road(result: PredictionResult) -> np.ndarray:
-    """phi_v(t) of the prediction [rad] (eq 4)."""
-    return result.euler_v_rad[:, 0]
-
-
-def predictive_ltr(result: PredictionResult) -> tuple[float, float]:
-    """(PLTR, t*): the predicted LTR of largest magnitude (signed) and its time after t0 [s]."""
-    ltr = load_transfer_ratio(result.normal_load_n)
-    k = int(np.argmax(np.abs(ltr)))
-    return float(ltr[k]), float(result.t_s[k])
-
-
-@dataclass(frozen=True)
-class RolloverAssessment:
-    """What the policy needs from one prediction (times after t0 [s]; None = not predicted)."""
-
-    t0_ns: int
-    time_to_point_of_no_return_s: float | None
-    time_to_tip_up_s: float | None
-    peak_ltr: float
-    peak_ltr_t_s: float
-    peak_roll_rad: float
-    horizon_s: float
-    stop_reason: str
-
-    @classmethod
-    def from_prediction(cls, result: PredictionResult) -> "RolloverAssessment":
-        pltr, tpk = predictive_ltr(result)
-        roll = roll_relative_to_road(result)
-        k = int(np.argmax(np.abs(roll)))
-        return cls(int(result.t0_ns), result.point_of_no_return_t_s, result.tip_up_t_s, pltr, tpk,
-                   float(roll[k]), float(result.t_s[-1]), result.stop_reason)
-
-    def ttr_at(self, t_ns: int) -> float | None:
-        """Time from ``t_ns`` to the predicted point of no return [s] (>= 0), or None."""
-        if self.time_to_point_of_no_return_s is None:
-            return None
-        return max(0.0, self.time_to_point_of_no_return_s - (t_ns - self.t0_ns) / NS_PER_S)
-
-    def to_json(self) -> dict:
-        return dict(self.__dict__)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -327,64 +272,113 @@ class WarningNode:
 # predictor + cadence + node
 # ---------------------------------------------------------------------------------------------
 class WarningChain:
-    """The warning path as one pure object: ``handle(t_ns, initial_state, status)`` predicts at
-    the configured cadence (held inputs) and feeds the node; a prediction started at t0 is used
-    from t0 + ``prediction_latency_s`` on (its compute time on the target). ``initial_state``
-    None: no estimate now (status should then say why).
+    """The warning path as one pure object: ``handle(t_ns, initial_state, status)`` starts a
+    prediction at the configured cadence (held inputs) and feeds the node; a prediction started
+    at t0 is used from t0 + ``prediction_latency_s`` on (its compute time on the target), never
+    earlier. ``initial_state`` None: no estimate now (status should then say why).
 
-    Storage: ``frames`` (the sent frames) and ``assessments`` (one per prediction, t0 inside)
-    keep the most recent ``keep`` of each (``keep`` None: all of them, for a study of one
+    Off the sample path (:mod:`vdps_hil.prediction.offpath`): ``runner`` (a
+    :class:`~vdps_hil.prediction.offpath.PredictionRunner`; None: inline) computes the job;
+    ``deadline`` "wait" (replay: no miss by construction) or "drop" (live: a job not done at
+    its deadline is dropped, counted in ``drops`` / ``dropped_t0_ns``, and frames carry status 3
+    "fault" until the next prediction is used); ``drop_t0_ns``: the t0s a live run dropped,
+    dropped again here (a replay reproducing it). ``params``: the identified parameters the next
+    jobs use (:meth:`set_params`; None: the predictor's own).
+
+    Storage: ``frames`` (the sent frames) and ``assessments`` (one per prediction used, t0
+    inside) keep the most recent ``keep`` of each (``keep`` None: all of them, for a study of one
     drive that evaluates the frames afterwards, e.g.
     ``vdps_hil.experiments.scoring.evaluate_warning_frames``); a
     long-running system passes a bound so memory does not grow with the drive (50 frames per
-    second otherwise). Counts over the whole run: ``frames_total``, ``assessments_total``; the
-    latest assessment: ``last_assessment``."""
+    second otherwise). Counts over the whole run: ``frames_total``, ``assessments_total``,
+    ``started``, ``drops``, ``prediction_failures``; the latest assessment: ``last_assessment``."""
 
     def __init__(self, predictor: Predictor, policy: WarningPolicy | None = None,
-                 node_config: WarningNodeConfig | None = None, keep: int | None = None):
+                 node_config: WarningNodeConfig | None = None, keep: int | None = None, *,
+                 runner=None, deadline: str = "wait", drop_t0_ns: Iterable[int] = ()):
         if keep is not None and (isinstance(keep, bool) or not isinstance(keep, int) or keep < 0):
             raise ValueError(f"keep must be None or an integer >= 0, got {keep!r}")
-        self.predictor = predictor
+        if deadline not in DEADLINES:
+            raise ValueError(f"deadline must be one of {', '.join(DEADLINES)}, got {deadline!r}")
+        self.runner = runner if runner is not None else PredictionRunner(predictor)
+        self.deadline = deadline
+        self._drop_set = frozenset(int(t) for t in drop_t0_ns)
+        self.params: Mapping[str, float] | None = None
         self.node = WarningNode(policy, node_config)
         self.cadence = Cadence(predictor.config.cadence_hz)
         self._latency_ns = int(round(self.node.config.prediction_latency_s * NS_PER_S))
-        self._pending: deque[tuple[int, RolloverAssessment]] = deque()
+        self._pending: deque = deque()  # (deadline_ns, t0_ns, future or None: dropped as recorded)
+        self._missed = False
+        self.status = WarningStatus.NOT_CONVERGED
+        """The status of the last ``handle`` after the chain's own rule (a drop or a failure:
+        "fault"); the node may still send "fault" for an old prediction."""
         self.keep = keep
         self.frames: MutableSequence[can.Message] = [] if keep is None else deque(maxlen=keep)
         self.assessments: MutableSequence[RolloverAssessment] = [] if keep is None else deque(maxlen=keep)
         self.frames_total = 0
         self.assessments_total = 0
+        self.started = 0
+        self.drops = 0
+        self.dropped_t0_ns: list[int] = []
         self.last_assessment: RolloverAssessment | None = None
         self.prediction_failures = 0
         self.last_failure: str | None = None
+
+    @property
+    def predictor(self) -> Predictor:
+        """The predictor of the latest parameters."""
+        return self.runner.predictor
+
+    def set_params(self, params: Mapping[str, float] | None) -> None:
+        self.params = None if params is None else dict(params)
 
     def handle(self, t_ns: int, initial_state: PredictorInitialState | None,
                status: int = WarningStatus.VALID) -> list[can.Message]:
         t_ns = int(t_ns)
         if initial_state is not None and self.cadence.due(t_ns):
-            try:
-                r = self.predictor.predict(initial_state)
-                if r.stop_reason == "non_finite":  # the compiled core overflows to inf, not OverflowError
-                    raise FloatingPointError(f"the prediction diverged (non-finite state after {r.n_steps} steps)")
-                a = RolloverAssessment.from_prediction(r)
-            except (OverflowError, ZeroDivisionError, FloatingPointError, ValueError) as e:
-                # a diverging or absurd prediction (e.g. an estimate far outside the model's
-                # range) must not stop the warning path: count it and say "fault" on the bus
-                self.prediction_failures += 1
-                self.last_failure = f"{type(e).__name__}: {e}"
-                status = WarningStatus.FAULT
-            else:
-                self.assessments.append(a)
-                self.assessments_total += 1
-                self.last_assessment = a
-                self._pending.append((t_ns + self._latency_ns, a))
-        ready = None
-        while self._pending and self._pending[0][0] <= t_ns:
-            ready = self._pending.popleft()[1]
+            self.started += 1
+            fut = None if t_ns in self._drop_set else self.runner.submit(self.params, initial_state)
+            self._pending.append((t_ns + self._latency_ns, t_ns, fut))
+        ready, failed = self._collect(t_ns)
+        if status == WarningStatus.VALID and (failed or self._missed):
+            status = WarningStatus.FAULT
+        self.status = WarningStatus(int(status))
         out = self.node.handle(t_ns, ready, status)
         self.frames.extend(out)
         self.frames_total += len(out)
         return out
+
+    def _collect(self, t_ns: int) -> tuple[RolloverAssessment | None, bool]:
+        """The jobs whose deadline has come: used, dropped (``deadline`` "drop" and not done, or
+        dropped as recorded) or failed; (the newest assessment used, whether a job failed)."""
+        ready, failed = None, False
+        while self._pending and self._pending[0][0] <= t_ns:
+            _, t0, fut = self._pending.popleft()
+            if fut is None or (self.deadline == "drop" and not fut.done()):
+                if fut is not None:
+                    fut.cancel()
+                self.drops += 1
+                self.dropped_t0_ns.append(t0)
+                self._missed = True
+                continue
+            try:
+                a, err = fut.result()
+            except Exception as e:  # the worker itself failed (e.g. its process died): a counted failure
+                a, err = None, f"prediction worker: {type(e).__name__}: {e}"
+            if a is None:
+                self.prediction_failures += 1
+                self.last_failure = err
+                failed = True
+                continue
+            self.assessments.append(a)
+            self.assessments_total += 1
+            self.last_assessment = ready = a
+            self._missed = False
+        return ready, failed
+
+    def close(self) -> None:
+        """Stop the worker; jobs still pending are never used."""
+        self.runner.close()
 
 
 def replay_assessments(assessments: Sequence[RolloverAssessment], times_ns: Iterable[int],

@@ -30,7 +30,7 @@ from typing import Any, Mapping
 from vdps_hil.bus.samples import Sample
 from vdps_hil.record import schemas as S
 
-__all__ = ["INPUT_ORDER_METADATA", "InputOrder", "read_input_order", "input_order_samples"]
+__all__ = ["INPUT_ORDER_METADATA", "InputOrder", "read_input_order", "input_order_samples", "recorded_drops"]
 
 INPUT_ORDER_METADATA = "hil.input_order"
 _FORMAT_KEYS = ("topics", "count", "index_bytes", "order_zlib_b64")
@@ -115,3 +115,13 @@ def input_order_samples(reader) -> list[Sample]:
     """The ``/decoded/`` samples of a recording in the order the live system received them
     (metadata ``hil.input_order``): what ``VdpsSystem.replay`` needs to reproduce the live run."""
     return read_input_order(reader)[0]
+
+
+def recorded_drops(settings: Mapping[str, Any]) -> tuple[int, ...]:
+    """The t0 [ns] of the predictions the live system dropped at their deadline (setting
+    ``prediction``, ``VdpsSystem.status()["prediction"]``; none recorded: ()): a replay drops
+    them again (``SystemConfig.prediction_drops_t0_ns``) to reproduce the live run."""
+    drops = (settings.get("prediction") or {}).get("dropped_t0_ns", [])
+    if not isinstance(drops, list) or not all(isinstance(t, int) and not isinstance(t, bool) for t in drops):
+        raise ValueError("prediction.dropped_t0_ns must be a list of integer times")
+    return tuple(drops)

@@ -81,6 +81,10 @@ class ParamSpec:
     upper: float = math.inf
 
 
+def _rebuild_effect(cls, values: dict):
+    return cls(**values)
+
+
 class Effect:
     """Base of every effect. Subclasses set ``name``, ``family``, ``PARAMS`` and a docstring
     with formula, units and default magnitude."""
@@ -111,6 +115,10 @@ class Effect:
 
     def __setattr__(self, key, value):
         raise AttributeError(f"effect {self.name!r} is immutable; use .replace({key}=...)")
+
+    def __reduce__(self):
+        """Pickled as its class and parameters (a prediction worker process rebuilds it)."""
+        return (_rebuild_effect, (type(self), dict(self._values)))
 
     def __getattr__(self, key):
         values = object.__getattribute__(self, "_values")
@@ -260,6 +268,9 @@ class EffectSet:
 
     def __setattr__(self, key, value):
         raise AttributeError("EffectSet is immutable")
+
+    def __reduce__(self):
+        return (EffectSet, (self._effects,))
 
     def __add__(self, other) -> "EffectSet":
         if isinstance(other, Effect):
