@@ -275,6 +275,23 @@ def test_imu_disconnect_is_bridged_honestly_and_recovered_within_2_s():
     assert s[(t > 4.8) & (t < 5.0), 3].max() > 10.0 * s[(t > 2.0) & (t < 3.0), 3].mean()
 
 
+def test_imu_disconnect_shows_sensor_missing_also_before_the_identification_converged():
+    """close/20.md: during a 2 s IMU disconnect (2-4 s) the identifier, started from the model
+    file's priors, had not converged, and the frames said 1 "not converged", hiding 2 "sensor
+    missing". Specification: every warning frame from 0.2 s after the cut to its end has status
+    2, and the frames before the cut are not 2."""
+    buf = io.BytesIO()
+    Drive("paper", seed=7, duration_s=4.5, faults=["serial_disconnect:device=imu,t_s=2,duration_s=2"]).run(buf)
+    buf.seek(0)
+    _, out = VdpsSystem.replay(MODEL, SystemConfig.for_profile(1000.0, 0.001), list(decode_recording(buf)))
+    dec = VdpsCanDecoder()
+    rows = [(d.t_ns * 1e-9, int(d.fields["warning_status"]))
+            for o in out if isinstance(o, CanFrame) for d in dec.decode(o.t_ns, o.arbitration_id, o.data)]
+    during = [st for t, st in rows if 2.2 < t < 4.0]
+    assert len(during) >= 80 and set(during) == {2}, sorted(set(during))
+    assert 2 not in {st for t, st in rows if 1.0 < t < 2.0}
+
+
 def test_gyro_spike_is_rejected_and_no_valid_warning_is_sent():
     """Issue 20 finding 3: a 50 ms, 200 deg/s yaw-rate spike at 5 s on the paper's drive (no
     rollover). Specification: no VDPS_Warning of level >= 2 with status valid; the frames during

@@ -292,6 +292,8 @@ def _signal_rule(where: str, d: Mapping, radius: float | None) -> SignalRule:
     if not isinstance(unit, str):
         raise SignalMapError(f"{where}: unit must be text")
     scale = _num(where, d.get("scale", 1.0), "scale")
+    if scale == 0.0:  # every value would map to the offset: a constant, not a measurement
+        raise SignalMapError(f"{where}: scale must not be 0")
     offset = _num(where, d.get("offset", 0.0), "offset")
     sign = _num(where, d.get("sign", 1), "sign")
     if sign not in (1.0, -1.0):

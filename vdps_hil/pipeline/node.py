@@ -54,7 +54,8 @@ itself sends 3 "fault" for a stale prediction. ``SystemConfig.require_converged`
 overrides that rule (``()``: never gate). Fault tolerance: 2 also while the IMU is missing or
 within ``ImuChecks.settle_s`` of an IMU fault, 3 while the aiding innovations say the estimate is
 inconsistent (``estimation.aiding_monitor.health``), counted per reason in
-``counters["unhealthy"]``; the identifier is not fed on the estimates of an IMU fault.
+``counters["unhealthy"]``; these two outrank 1 "not converged" (a disconnected IMU shows as 2
+also while the identification is still converging); the identifier is not fed on the estimates of an IMU fault.
 
 File replay (``vdps replay``, the batch tasks) is the application around this node:
 ``vdps_hil.app.replay.replay_file``.
@@ -406,7 +407,8 @@ class VdpsSystem:
                 conv = self.identifier.converged
                 if not all(conv.get(n, False) for n in self.require_converged):
                     status = WarningStatus.NOT_CONVERGED
-            if status == WarningStatus.VALID and why is not None:
+            if status in (WarningStatus.VALID, WarningStatus.NOT_CONVERGED) and why is not None:
+                # a missing IMU or an inconsistent estimate outranks "not converged"
                 status = WarningStatus.SENSOR_MISSING if why.startswith("imu") else WarningStatus.FAULT
         elif self.pipeline.ekf.initialized:
             return  # between estimate instants: the chain runs at the estimate cadence
