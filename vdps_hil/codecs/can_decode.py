@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Mapping
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.can_dbc import TTR_NONE_RAW, MessageSpec, VdpsDbc, is_ttr, load_dbc
-from vdps_hil.codecs.can_e2e import WARNING_MAX_DELTA_COUNTER, SequenceState, e2e_crc
+from vdps_hil.codecs.can_e2e import WARNING_MAX_DELTA_COUNTER, SequenceState, e2e_crc, e2e_register
 
 if TYPE_CHECKING:
     import can
@@ -60,7 +60,7 @@ class _DecodePlan:
     every raw value). ``modulus``: of the rolling counter."""
 
     __slots__ = ("spec", "compiled", "names", "crc", "counter", "counter_name", "status", "values",
-                 "checks", "modulus", "data_id", "closes", "max_age_ns")
+                 "checks", "modulus", "data_id", "crc_reg", "closes", "max_age_ns")
 
     def __init__(self, spec: MessageSpec):
         from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
@@ -90,6 +90,7 @@ class _DecodePlan:
         self.values = tuple(vals)
         self.checks = tuple(checks)
         self.data_id = spec.data_id
+        self.crc_reg = e2e_register(spec.data_id)  # the CRC register after the data ID
         self.closes = False  # the last message of its sample group (VdpsCanDecoder sets it)
         self.max_age_ns = int((spec.cycle_time_ms or 10) * 500_000)  # half the cycle
 
@@ -203,7 +204,7 @@ class VdpsCanDecoder:
             except Exception:  # cantools' DecodeError and friends: count, never raise
                 counts["undecodable"] += 1
                 return []
-        if plan.crc >= 0 and e2e_crc(payload, plan.data_id) != raw[plan.crc]:
+        if plan.crc >= 0 and e2e_crc(payload, plan.data_id, plan.crc_reg) != raw[plan.crc]:
             counts["crc_mismatch"] += 1
             return []
         c = raw[plan.counter]

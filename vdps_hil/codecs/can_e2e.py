@@ -74,13 +74,25 @@ def crc8_j1850(data: bytes | bytearray | memoryview) -> int:
     return reg ^ CRC8_XOROUT
 
 
-def e2e_crc(payload: bytes | bytearray | memoryview, data_id: int | None) -> int:
-    """The CRC of byte 0 of a protected frame: CRC-8/SAE-J1850 over ``data_id`` (low, high byte;
-    None: no data ID, VDPS_Warning) followed by ``payload[1:]`` (module docstring)."""
-    body = bytes(payload[1:])
+def e2e_register(data_id: int | None) -> int:
+    """The CRC register after the data ID (low, high byte) from the initial value; ``CRC8_INIT``
+    for None (no data ID). A receiver computes it once per message."""
+    reg = CRC8_INIT
     if data_id is not None:
-        body = bytes((data_id & 0xFF, (data_id >> 8) & 0xFF)) + body
-    return crc8_j1850(body)
+        for b in (data_id & 0xFF, (data_id >> 8) & 0xFF):
+            reg = _CRC8_TABLE[reg ^ b]
+    return reg
+
+
+def e2e_crc(payload: bytes | bytearray | memoryview, data_id: int | None, reg: int | None = None) -> int:
+    """The CRC of byte 0 of a protected frame: CRC-8/SAE-J1850 over ``data_id`` (low, high byte;
+    None: no data ID, VDPS_Warning) followed by ``payload[1:]`` (module docstring). ``reg``:
+    :func:`e2e_register` of ``data_id`` when the caller has it."""
+    table = _CRC8_TABLE
+    reg = e2e_register(data_id) if reg is None else reg
+    for b in bytes(payload[1:]):
+        reg = table[reg ^ b]
+    return reg ^ CRC8_XOROUT
 
 
 # ---------------------------------------------------------------------------------------------
