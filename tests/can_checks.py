@@ -17,35 +17,46 @@ LAYOUT = {
         "warning_peak_roll_rad": (32, 16, True, 0.0001, -3.1416, 3.1416, "rad"),
         "warning_ltr": (48, 16, True, 0.0001, -1, 1, ""),
     }),
-    "VDPS_WheelSpeedFront": (0x100, 5, 1, {
-        "wheel_speed_radps_1": (0, 16, True, 0.01, -327.68, 327.67, "rad/s"),
-        "wheel_speed_radps_2": (16, 16, True, 0.01, -327.68, 327.67, "rad/s"),
-        "seq_counter": (32, 8, False, 1, 0, 255, ""),
+    "VDPS_WheelSpeedFront": (0x100, 6, 1, {
+        "e2e_crc": (0, 8, False, 1, 0, 255, ""),
+        "seq_counter": (8, 4, False, 1, 0, 15, ""),
+        "wheel_speed_radps_1": (16, 16, True, 0.01, -327.68, 327.67, "rad/s"),
+        "wheel_speed_radps_2": (32, 16, True, 0.01, -327.68, 327.67, "rad/s"),
     }),
-    "VDPS_WheelSpeedRear": (0x101, 5, 1, {
-        "wheel_speed_radps_3": (0, 16, True, 0.01, -327.68, 327.67, "rad/s"),
-        "wheel_speed_radps_4": (16, 16, True, 0.01, -327.68, 327.67, "rad/s"),
-        "seq_counter": (32, 8, False, 1, 0, 255, ""),
+    "VDPS_WheelSpeedRear": (0x101, 6, 1, {
+        "e2e_crc": (0, 8, False, 1, 0, 255, ""),
+        "seq_counter": (8, 4, False, 1, 0, 15, ""),
+        "wheel_speed_radps_3": (16, 16, True, 0.01, -327.68, 327.67, "rad/s"),
+        "wheel_speed_radps_4": (32, 16, True, 0.01, -327.68, 327.67, "rad/s"),
     }),
     "VDPS_Suspension": (0x110, 8, 1, {
-        **{f"susp_deflection_m_{i + 1}": (14 * i, 14, True, 2e-5, -0.16384, 0.16382, "m")
+        "e2e_crc": (0, 8, False, 1, 0, 255, ""),
+        "seq_counter": (8, 4, False, 1, 0, 15, ""),
+        **{f"susp_deflection_m_{i + 1}": (12 + 13 * i, 13, True, 4e-5, -0.16384, 0.1638, "m")
            for i in range(4)},
-        "seq_counter": (56, 8, False, 1, 0, 255, ""),
     }),
-    "VDPS_WheelTorque": (0x120, 8, 10, {
-        **{f"wheel_torque_nm_{i + 1}": (14 * i, 14, True, 1, -8192, 8191, "N m") for i in range(4)},
-        "seq_counter": (56, 8, False, 1, 0, 255, ""),
+    "VDPS_WheelTorqueFront": (0x120, 5, 10, {
+        "e2e_crc": (0, 8, False, 1, 0, 255, ""),
+        "seq_counter": (8, 4, False, 1, 0, 15, ""),
+        **{f"wheel_torque_nm_{i + 1}": (12 + 14 * i, 14, True, 1, -8192, 8191, "N m") for i in range(2)},
     }),
-    "VDPS_SteerAngle": (0x130, 3, 10, {
-        "steer_wheel_angle_rad": (0, 16, True, 0.001, -12.567, 12.567, "rad"),
-        "seq_counter": (16, 8, False, 1, 0, 255, ""),
+    "VDPS_WheelTorqueRear": (0x121, 5, 10, {
+        "e2e_crc": (0, 8, False, 1, 0, 255, ""),
+        "seq_counter": (8, 4, False, 1, 0, 15, ""),
+        **{f"wheel_torque_nm_{i + 3}": (12 + 14 * i, 14, True, 1, -8192, 8191, "N m") for i in range(2)},
+    }),
+    "VDPS_SteerAngle": (0x130, 4, 10, {
+        "e2e_crc": (0, 8, False, 1, 0, 255, ""),
+        "seq_counter": (8, 4, False, 1, 0, 15, ""),
+        "steer_wheel_angle_rad": (16, 16, True, 0.001, -12.567, 12.567, "rad"),
     }),
 }
 
 
 KINDS = {"VDPS_Warning": "warning", "VDPS_WheelSpeedFront": "wheel_speed",
          "VDPS_WheelSpeedRear": "wheel_speed", "VDPS_Suspension": "suspension",
-         "VDPS_WheelTorque": "wheel_torque", "VDPS_SteerAngle": "steer"}
+         "VDPS_WheelTorqueFront": "wheel_torque", "VDPS_WheelTorqueRear": "wheel_torque",
+         "VDPS_SteerAngle": "steer"}
 
 
 COUNTER_NAMES = ("seq_counter", "warning_counter")
@@ -77,4 +88,10 @@ def crc8_bitwise(data: bytes) -> int:
 
 
 def value_fields(name):
-    return [s for s in LAYOUT[name][3] if s not in COUNTER_NAMES and s != "warning_crc"]
+    return [s for s in LAYOUT[name][3] if s not in COUNTER_NAMES and not s.endswith("_crc")]
+
+
+def e2e_crc_bitwise(frame_id: int, data: bytes) -> int:
+    """The E2E CRC of a layout-2 sensor frame from its definition: CRC-8/SAE-J1850 (bit by bit)
+    over the data ID = CAN ID (low, high byte) and bytes 1..DLC-1."""
+    return crc8_bitwise(bytes((frame_id & 0xFF, frame_id >> 8)) + bytes(data[1:]))

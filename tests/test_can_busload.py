@@ -36,9 +36,10 @@ def test_exact_stuffing_within_bounds(aid, data):
 
 def test_bus_load_at_table1_rates_well_below_capacity():
     worst = {p: bus_load(r)["total"] for p, r in RATE_PROFILES.items()}
-    # independent sum with the published frame lengths (n=8: 135, n=5: 105, n=3: 85 bits)
-    c = {"VDPS_Warning": 135, "VDPS_WheelSpeedFront": 105, "VDPS_WheelSpeedRear": 105,
-         "VDPS_Suspension": 135, "VDPS_WheelTorque": 135, "VDPS_SteerAngle": 85}
+    # independent sum with the published frame lengths (n=8: 135, n=6: 115, n=5: 105, n=4: 95 bits)
+    c = {"VDPS_Warning": 135, "VDPS_WheelSpeedFront": 115, "VDPS_WheelSpeedRear": 115,
+         "VDPS_Suspension": 135, "VDPS_WheelTorqueFront": 105, "VDPS_WheelTorqueRear": 105,
+         "VDPS_SteerAngle": 95}
     for p, rates in RATE_PROFILES.items():
         assert worst[p] == pytest.approx(sum(rates[n] * c[n] for n in c) / 1e6, rel=1e-12)
     assert worst["table1-susp1k"] < 0.5 and worst["table1"] < worst["table1-susp1k"]

@@ -31,7 +31,7 @@ def test_dbc_layout_matches_claimed_table():
             assert (s.minimum, s.maximum) == pytest.approx((lo, hi), rel=1e-12)
             assert (s.unit or "") == unit
             assert s.comment, f"{name}.{s.name} has no CM_"
-            if s.name not in COUNTER_NAMES and s.name != "warning_crc":
+            if s.name not in COUNTER_NAMES and not s.name.endswith("_crc"):
                 assert s.name in FIELDS
     assert dbc.bitrate_bps == 1_000_000
 
@@ -50,10 +50,27 @@ def test_dbc_meets_the_requirements_of_the_issue():
     assert s.resolution <= 1e-3 and s.minimum <= -4 * math.pi and s.maximum >= 4 * math.pi
     warning_id = dbc.messages["VDPS_Warning"].frame_id
     assert all(warning_id < m.frame_id for n, m in dbc.messages.items() if n != "VDPS_Warning")
-    # every sensor frame has an 8-bit counter, the warning a 4-bit counter and a CRC at byte 0
+    # issue 20: every frame has a 4-bit counter and a CRC at byte 0; a sensor frame's CRC covers
+    # its CAN ID as the data ID, the warning's none (its layout is unchanged)
     for name, spec in dbc.messages.items():
-        assert spec.counter.length_bits == (4 if name == "VDPS_Warning" else 8)
-    assert dbc.messages["VDPS_Warning"].crc.start_bit == 0
+        assert spec.counter.length_bits == 4 and spec.crc.start_bit == 0 and spec.crc.length_bits == 8
+        assert spec.data_id == (None if name == "VDPS_Warning" else spec.frame_id)
+    # the two torque frames form one sample group
+    assert {n for n, s in dbc.messages.items() if s.group} == {"VDPS_WheelTorqueFront", "VDPS_WheelTorqueRear"}
+
+
+def test_legacy_layout_1_is_kept_and_found_by_a_recordings_hash():
+    """Layout 1 (no sensor CRC, 8-bit counters, one torque frame) still loads, and the DBC hash a
+    recording names selects it; the current layout's hash (or none) selects nothing."""
+    from vdps_hil.codecs.can_dbc import LEGACY_DBC_PATHS, recorded_vdps_dbc
+    from vdps_hil.record.schemas import content_hash
+
+    v1 = VdpsDbc(LEGACY_DBC_PATHS[0])
+    assert v1.messages["VDPS_WheelTorque"].dlc == 8 and v1.messages["VDPS_WheelTorque"].crc is None
+    assert v1.messages["VDPS_SteerAngle"].counter.length_bits == 8
+    assert recorded_vdps_dbc({"hash.dbc.vdps": content_hash(LEGACY_DBC_PATHS[0])}) == LEGACY_DBC_PATHS[0]
+    assert recorded_vdps_dbc({"hash.dbc.vdps": content_hash(DEFAULT_DBC_PATH)}) is None
+    assert recorded_vdps_dbc({}) is None
 
 
 def test_bad_dbc_gives_one_line_error(tmp_path):
@@ -69,9 +86,9 @@ def test_bad_dbc_gives_one_line_error(tmp_path):
 
 
 @pytest.mark.parametrize("edit,msg", [
-    (("wheel_speed_radps_1 : 0|16@1- (0.01,0)", "wheel_speed_radps_1 : 0|16@1- (0,0)"), "scale 0 "),
-    (("BO_ 304 VDPS_SteerAngle: 3 SAS", "BO_ 304 VDPS_SteerAngle: 255 SAS"), "length 255"),
-    (("BO_ 304 VDPS_SteerAngle: 3 SAS", "BO_ 304 VDPS_SteerAngle: 12 SAS"), "1-8 data bytes"),
+    (("wheel_speed_radps_1 : 16|16@1- (0.01,0)", "wheel_speed_radps_1 : 16|16@1- (0,0)"), "scale 0 "),
+    (("BO_ 304 VDPS_SteerAngle: 4 SAS", "BO_ 304 VDPS_SteerAngle: 255 SAS"), "length 255"),
+    (("BO_ 304 VDPS_SteerAngle: 4 SAS", "BO_ 304 VDPS_SteerAngle: 12 SAS"), "1-8 data bytes"),
 ], ids=["scale-0", "dlc-255", "dlc-12"])
 def test_absurd_numbers_in_the_dbc_give_one_line_error(tmp_path, edit, msg):
     """Issue 20, finding 6: a scale of 0 was a ZeroDivisionError, DLC 255 was accepted."""

@@ -19,7 +19,7 @@ from vdps_hil.codecs.can_encode import (
     encode_fields, encode_steer, encode_warning, encode_wheel_speed_front, quantize,
 )
 
-from can_checks import FP_EPS, KINDS, LAYOUT, crc8_bitwise, unpack_independent, value_fields
+from can_checks import FP_EPS, KINDS, LAYOUT, crc8_bitwise, e2e_crc_bitwise, unpack_independent, value_fields
 
 
 # ---------------------------------------------------------------------------------------------
@@ -50,14 +50,12 @@ def test_round_trip_every_signal_over_its_range(name):
         assert msg.arbitration_id == LAYOUT[name][0] and not msg.is_extended_id
         assert msg.dlc == len(msg.data) == LAYOUT[name][1]
         assert msg.timestamp == pytest.approx(t_ns / 1e9, rel=1e-15)
-        dec = VdpsCanDecoder()
-        out = dec.decode(t_ns, msg.arbitration_id, bytes(msg.data))
-        assert len(out) == 1, dec.counters[name]
-        s = out[0]
+        s = _decode_alone(name, bytes(msg.data), t_ns)
         assert s.t_ns == t_ns and s.kind == KINDS[name]
         assert s.valid == (fields.get("warning_status", 0) == 0)
         ctr_name = "warning_counter" if name == "VDPS_Warning" else "seq_counter"
-        assert s.fields[ctr_name] == counter % (16 if name == "VDPS_Warning" else 256)
+        if name != "VDPS_WheelTorqueFront":  # a torque sample carries the rear frame's counter
+            assert s.fields[ctr_name] == counter % 16
         for f, x in fields.items():
             scale = LAYOUT[name][3][f][3]
             got = s.fields[f]
@@ -78,7 +76,7 @@ def test_sensor_values_clamped_outside_range_and_quantize_matches(field, x):
     fields = {f: 0.0 for f in spec.field_names}
     fields[field] = x
     msg = encode_fields(spec.name, fields, 0)
-    got = VdpsCanDecoder().decode(0, msg.arbitration_id, bytes(msg.data))[0].fields[field]
+    got = _decode_alone(spec.name, bytes(msg.data)).fields[field]
     lo, hi = sig.raw_min * sig.scale, sig.raw_max * sig.scale
     if x <= sig.minimum:
         assert got == pytest.approx(lo, abs=1e-12)
@@ -131,7 +129,7 @@ def test_independent_parsers_agree(name, rng):
         raw = unpack_independent(name, data)
         by_cantools = dbc.db.decode_message(fid, data, decode_choices=False, scaling=False)
         assert by_cantools == raw
-        sample = VdpsCanDecoder().decode(0, fid, data)[0]
+        sample = _decode_alone(name, data)
         for f in value_fields(name):
             phys = raw[f] * sigs[f][3]
             if f == "warning_time_to_rollover_s" and raw[f] == 65535:
@@ -139,12 +137,34 @@ def test_independent_parsers_agree(name, rng):
             assert sample.fields[f] == pytest.approx(phys, rel=1e-12, abs=1e-15)
         if name == "VDPS_Warning":
             assert raw["warning_crc"] == crc8_bitwise(data[1:])
+        else:
+            assert raw["e2e_crc"] == e2e_crc_bitwise(fid, data)
+
+
+def _decode_alone(name, data, t_ns=0):
+    """The decoded sample of one frame (exactly one); a torque frame with its partner of the
+    same instant (zeros) so that the decoder emits the group's sample."""
+    dec = VdpsCanDecoder()
+    fid = LAYOUT[name][0]
+    if name == "VDPS_WheelTorqueFront":
+        assert dec.decode(t_ns, fid, data) == []
+        out = dec.decode(t_ns, 0x121, bytes(encode_fields("VDPS_WheelTorqueRear", {
+            "wheel_torque_nm_3": 0.0, "wheel_torque_nm_4": 0.0}, 0).data))
+    else:
+        if name == "VDPS_WheelTorqueRear":
+            assert dec.decode(t_ns, 0x120, bytes(encode_fields("VDPS_WheelTorqueFront", {
+                "wheel_torque_nm_1": 0.0, "wheel_torque_nm_2": 0.0}, 0).data)) == []
+        out = dec.decode(t_ns, fid, data)
+    assert len(out) == 1, dec.counters[name]
+    return out[0]
 
 
 def test_struct_view_of_two_frames():
-    # wheel speeds: two little-endian int16 at 0.01 rad/s and a uint8 counter
+    # wheel speeds: E2E CRC u8, 4-bit counter in a u8, two little-endian int16 at 0.01 rad/s
     m = encode_wheel_speed_front(83.33, -1.5, 300)
-    assert struct.unpack("<hhB", bytes(m.data)) == (8333, -150, 300 % 256)
+    crc, cnt, w1, w2 = struct.unpack("<BBhh", bytes(m.data))
+    assert (cnt, w1, w2) == (300 % 16, 8333, -150)
+    assert crc == crc8_bitwise(bytes((0x00, 0x01)) + bytes(m.data)[1:])  # data ID 0x0100
     # warning: crc u8, counter|level<<4|status<<6 u8, ttr u16 (ms), roll i16, ltr i16 (1e-4)
     w = encode_warning(level=2, time_to_rollover_s=0.75, peak_roll_rad=-0.25, ltr=0.9,
                        status=1, counter=9)
@@ -152,4 +172,5 @@ def test_struct_view_of_two_frames():
     assert (b1 & 0xF, (b1 >> 4) & 3, b1 >> 6) == (9, 2, 1)
     assert (ttr, roll, ltr) == (750, -2500, 9000)
     assert crc == crc8_bitwise(bytes(w.data)[1:])
-    assert struct.pack("<hB", 1234, 7) == bytes(encode_steer(1.234, 7).data)
+    steer = bytes(encode_steer(1.234, 7).data)
+    assert struct.pack("<Bh", 7, 1234) == steer[1:] and steer[0] == crc8_bitwise(b"\x30\x01" + steer[1:])

@@ -87,7 +87,8 @@ def test_changes_are_counted_and_unknown_ids_shown_as_hex():
     db = cantools.database.load_file(DEFAULT_DBC_PATH)
     mon = CanMonitor({"vdps": None})
     for i, v in enumerate((1.0, 1.0, 2.0)):
-        data = db.get_message_by_name("VDPS_SteerAngle").encode({"steer_wheel_angle_rad": v, "seq_counter": 0})
+        data = db.get_message_by_name("VDPS_SteerAngle").encode({"steer_wheel_angle_rad": v, "seq_counter": 0,
+                                                                 "e2e_crc": 0})
         mon.feed("x", i * 10_000_000, 0x130, False, data)
     st, = mon.messages.values()
     assert st.name is None and st.count == 3 and st.signals["data"].changes == 1  # no DBC for bus x: hex
@@ -96,20 +97,16 @@ def test_changes_are_counted_and_unknown_ids_shown_as_hex():
 
 _SENDER = r"""
 import sys, threading, time
-import can, cantools
-from vdps_hil.codecs.can_dbc import DEFAULT_DBC_PATH
+import can
+from vdps_hil.codecs.can_encode import encode_steer, encode_wheel_speed_front
 from vdps_hil.cli.main import main
 
 def send():
-    db = cantools.database.load_file(DEFAULT_DBC_PATH)
-    steer, ws = db.get_message_by_name("VDPS_SteerAngle"), db.get_message_by_name("VDPS_WheelSpeedFront")
     bus = can.Bus(interface="virtual", channel="monitor-test")
     for i in range(100000):
         ang = (i % 1000) * 0.001
-        bus.send(can.Message(arbitration_id=0x130, is_extended_id=False,
-                             data=steer.encode({"steer_wheel_angle_rad": ang, "seq_counter": i % 256})))
-        bus.send(can.Message(arbitration_id=0x100, is_extended_id=False,
-                             data=ws.encode({"wheel_speed_radps_1": 12.34, "wheel_speed_radps_2": 5.0, "seq_counter": 7})))
+        bus.send(encode_steer(ang, i))
+        bus.send(encode_wheel_speed_front(12.34, 5.0, 7))
         bus.send(can.Message(arbitration_id=0x7FF, is_extended_id=False, data=bytes([0xAB, 0xCD])))
         time.sleep(0.01)
 

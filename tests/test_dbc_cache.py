@@ -211,7 +211,7 @@ def test_corrupt_or_stale_cache_file_is_ignored_and_replaced(cache, corrupt):
     f.write_bytes(bad if isinstance(bad, bytes) else bad.encode())
     before = dict(dbc_cache.STATS)
     desc = dbc_cache.load_description(DEFAULT_DBC_PATH)
-    assert not desc.from_cache and len(desc.messages) == 6
+    assert not desc.from_cache and len(desc.messages) == 7
     assert dbc_cache.STATS["rejected"] == before["rejected"] + 1
     assert dbc_cache.STATS["miss"] == before["miss"] + 1
     assert json.loads(f.read_text()) == json.loads(text)  # rewritten
@@ -240,7 +240,8 @@ def test_edited_dbc_misses_the_cache(cache, tmp_path):
     p.write_text(p.read_text().replace("(0.001,0) [-12.567|12.567]", "(0.002,0) [-12.567|12.567]"))
     desc = dbc_cache.load_description(p, strict=True)
     assert not desc.from_cache
-    steer = next(m for m in desc.messages if m.name == "VDPS_SteerAngle").signals[0]
+    steer = next(s for m in desc.messages if m.name == "VDPS_SteerAngle" for s in m.signals
+                 if s.name == "steer_wheel_angle_rad")
     assert steer.scale == 0.002 and steer.conversion.raw_to_scaled(1000, False) == 2.0
     assert len(list((cache / "dbc").glob("*.json"))) == 2
     assert not dbc_cache.load_description(p, strict=False).from_cache  # strictness is in the key
@@ -252,7 +253,7 @@ def test_unwritable_cache_directory_is_not_an_error(tmp_path, monkeypatch):
     monkeypatch.setenv(dbc_cache.ENV_CACHE_DIR, str(blocker / "cache"))
     before = dbc_cache.STATS["store_failed"]
     desc = dbc_cache.load_description(DEFAULT_DBC_PATH)
-    assert not desc.from_cache and len(desc.messages) == 6
+    assert not desc.from_cache and len(desc.messages) == 7
     assert dbc_cache.STATS["store_failed"] == before + 1
     assert not dbc_cache.load_description(DEFAULT_DBC_PATH).from_cache
 
@@ -270,9 +271,9 @@ def test_cache_location(monkeypatch, tmp_path):
 
 
 @pytest.mark.parametrize("edit,msg", [
-    (("wheel_speed_radps_1 : 0|16@1- (0.01,0)", "wheel_speed_radps_1 : 0|16@1- (0,0)"),
+    (("wheel_speed_radps_1 : 16|16@1- (0.01,0)", "wheel_speed_radps_1 : 16|16@1- (0,0)"),
      "VDPS_WheelSpeedFront.wheel_speed_radps_1: scale 0 "),
-    (("BO_ 304 VDPS_SteerAngle: 3 SAS", "BO_ 304 VDPS_SteerAngle: 255 SAS"),
+    (("BO_ 304 VDPS_SteerAngle: 4 SAS", "BO_ 304 VDPS_SteerAngle: 255 SAS"),
      "VDPS_SteerAngle: length 255 bytes"),
 ], ids=["scale-0", "dlc-255"])
 def test_dbc_numbers_no_decoder_can_use_are_refused(cache, tmp_path, edit, msg):

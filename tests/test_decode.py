@@ -31,6 +31,13 @@ def drive(tmp_path_factory):
     return _drive(tmp_path_factory.mktemp("dec"))
 
 
+def _steer(counter: int) -> bytes:
+    """A valid VDPS_SteerAngle payload (0 rad) with ``counter``."""
+    from vdps_hil.codecs.can_encode import encode_steer
+
+    return bytes(encode_steer(0.0, counter).data)
+
+
 def _imu_time_errors(samples):
     """t_ns - measurement instant (packet k is sampled at k ms in the simulator) [ns]."""
     return [s.t_ns - int(s.fields["seq_counter"]) * MS for s in samples if s.kind == "imu"]
@@ -144,11 +151,11 @@ def test_garbage_is_counted_and_good_data_around_it_is_kept():
     chunks = [(1_200 * MS, lines[0]), (1_400 * MS, b"\x00\xff$GPGGA,garbage*00\r\n" + lines[1]),
               (1_600 * MS, lines[2][:20]), (1_650 * MS, lines[2][20:] + b"\xfe\xfe"), (1_800 * MS, lines[3])]
     good = {"t_ns": 0, "arbitration_id": 0x130, "is_extended_id": False, "is_fd": False, "is_remote_frame": False,
-            "is_error_frame": False, "dlc": 3, "data_hex": "000000", "direction": "rx"}
+            "is_error_frame": False, "dlc": 4, "data_hex": _steer(0).hex(), "direction": "rx"}
     bad_len = dict(good, dlc=2, data_hex="0000")
     err = dict(good, is_error_frame=True)
     can = [(1_000 * MS, dict(good, t_ns=1_000 * MS)), (1_010 * MS, dict(bad_len, t_ns=1_010 * MS)),
-           (1_020 * MS, dict(err, t_ns=1_020 * MS)), (1_030 * MS, dict(good, t_ns=1_030 * MS, data_hex="000001"))]
+           (1_020 * MS, dict(err, t_ns=1_020 * MS)), (1_030 * MS, dict(good, t_ns=1_030 * MS, data_hex=_steer(1).hex()))]
     d = decode_recording(_serial_recording(chunks, can=can))
     samples = list(d)
     gnss = [s for s in samples if s.kind == "gnss_pos"]
@@ -167,11 +174,11 @@ def test_garbage_is_counted_and_good_data_around_it_is_kept():
 def test_remote_and_fd_frames_with_a_valid_id_are_counted_rejects_not_samples():
     """Issue 20, finding 7: a remote frame was recorded but counted by no decoder counter; a CAN
     FD frame with a valid ID and length decoded as the classic message."""
-    good = S.raw_can_doc(0, 0x130, bytes(3))
-    remote = S.raw_can_doc(0, 0x130, b"", is_remote_frame=True, dlc=3)
-    fd = S.raw_can_doc(0, 0x130, bytes([0, 0, 1]), is_fd=True)
+    good = S.raw_can_doc(0, 0x130, _steer(0))
+    remote = S.raw_can_doc(0, 0x130, b"", is_remote_frame=True, dlc=4)
+    fd = S.raw_can_doc(0, 0x130, _steer(1), is_fd=True)
     frames = [(1_000 * MS, good), (1_010 * MS, remote), (1_020 * MS, fd),
-              (1_030 * MS, dict(good, data_hex="000002"))]
+              (1_030 * MS, dict(good, data_hex=_steer(2).hex()))]
     d = decode_recording(_serial_recording([], can=[(t, dict(f, t_ns=t)) for t, f in frames]))
     steer = [s for s in d if s.kind == "steer"]
     assert [s.fields["seq_counter"] for s in steer] == [0.0, 2.0]  # the FD frame's counter 1 unused
@@ -194,7 +201,7 @@ def test_unknown_serial_format_and_undecoded_bus_are_counted_not_fatal():
 
 def test_bus_map_renames_a_recording_bus_to_a_signal_map_bus(tmp_path):
     buf = io.BytesIO()
-    doc = {"arbitration_id": 0x130, "data": bytes(3)}
+    doc = {"arbitration_id": 0x130, "data": _steer(0)}
     with RecordingWriter(buf) as w:
         w.write_can("chassis", 5, doc)
     buf.seek(0)
@@ -212,3 +219,22 @@ def test_bad_options_are_one_line_errors(tmp_path):
     (tmp_path / "x.mcap").write_bytes(b"not an mcap")
     with pytest.raises(DecodeError, match="not an MCAP"):
         decode_recording(tmp_path / "x.mcap")
+
+
+def test_a_layout_1_recording_decodes_with_the_dbc_it_names(tmp_path):
+    """Issue 20: layout 2 of the chassis bus (E2E CRC in every sensor frame, two torque frames)
+    must not orphan recordings made with layout 1. A drive simulated on dbc/vdps_v1.dbc names that
+    DBC by hash and decodes with it: the same samples as a layout-2 drive, nothing rejected."""
+    from vdps_hil.codecs.can_dbc import LEGACY_DBC_PATHS
+
+    p = tmp_path / "v1.mcap"
+    Drive("paper", profile=ZERO, seed=1, duration_s=1.0, dbc=LEGACY_DBC_PATHS[0]).run(p)
+    d = decode_recording(p)
+    kinds = {}
+    for s in d:
+        kinds[s.kind] = kinds.get(s.kind, 0) + 1
+        if s.kind == "wheel_torque":
+            assert all(f"wheel_torque_nm_{i}" in s.fields for i in range(1, 5))
+    assert d.decoding["can.vdps"]["signalmap"] == "vdps_v1"
+    assert d.rejected()["can.vdps"] == 0
+    assert (kinds["wheel_speed"], kinds["wheel_torque"], kinds["steer"]) == (2002, 101, 101)

@@ -64,9 +64,11 @@ def test_candump_lines_on_standard_input(tmp_path):
     on a real pipe are imported (every frame on /raw/can/vdps, in order, decoded with their rolling
     counters); two sources on standard input are one line, exit 2."""
 
+    from vdps_hil.codecs.can_encode import encode_wheel_speed_front
+
     lines = []
     for k in range(200):  # 1 kHz front wheel speeds, counter k, 80.00 rad/s both wheels (0.01 rad/s)
-        data = (8000).to_bytes(2, "little") * 2 + bytes([k % 256])
+        data = bytes(encode_wheel_speed_front(80.0, 80.0, k).data)
         lines.append(f"({1.0 + k * 1e-3:.6f}) can0 100#{data.hex().upper()}")
     text = "\n".join(lines) + "\n"
     out = tmp_path / "stdin.mcap"
@@ -76,7 +78,7 @@ def test_candump_lines_on_standard_input(tmp_path):
         raw = [doc for _, _, doc in r.iter_messages(topics=["/raw/can/vdps"])]
         ws = [s for s in r.iter_samples() if s.kind == "wheel_speed"]
     assert [d["data_hex"] for d in raw] == [ln.split("#")[1].lower() for ln in lines]
-    assert [int(s.fields["seq_counter"]) for s in ws] == list(range(200))
+    assert [int(s.fields["seq_counter"]) for s in ws] == [k % 16 for k in range(200)]
     assert all(abs(s.fields["wheel_speed_radps_1"] - 80.0) < 1e-9 for s in ws)
     p = vdps("import", "--can", "a=-", "--can", "b=-", "-o", tmp_path / "x.mcap", input="")
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1

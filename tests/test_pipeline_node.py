@@ -273,6 +273,23 @@ def test_imu_disconnect_is_bridged_honestly_and_recovered_within_2_s():
     assert s[(t > 4.8) & (t < 5.0), 3].max() > 10.0 * s[(t > 2.0) & (t < 3.0), 3].mean()
 
 
+def test_imu_disconnect_shows_sensor_missing_also_before_the_identification_converged():
+    """close/20.md: while the identifier (started from the model file's priors) had not
+    converged, an IMU disconnect left the frames at 1 "not converged", hiding 2 "sensor missing".
+    Here (seed 7) the identification status is 1 from 1.61 s; the IMU is cut at 1.65 s for 0.25 s.
+    Specification: every frame from 30 ms after the cut to its end says 2 (old code: 1)."""
+    buf = io.BytesIO()
+    Drive("paper", seed=7, duration_s=3.0, faults=["serial_disconnect:device=imu,t_s=1.65,duration_s=0.25"]).run(buf)
+    buf.seek(0)
+    _, out = VdpsSystem.replay(MODEL, SystemConfig.for_profile(1000.0, 0.001), list(decode_recording(buf)))
+    dec = VdpsCanDecoder()
+    rows = [(d.t_ns * 1e-9, int(d.fields["warning_status"]))
+            for o in out if isinstance(o, CanFrame) for d in dec.decode(o.t_ns, o.arbitration_id, o.data)]
+    assert [st for t, st in rows if 1.6 < t < 1.65] and {st for t, st in rows if 1.6 < t < 1.65} == {1}
+    during = [st for t, st in rows if 1.68 < t < 1.9]
+    assert len(during) >= 8 and set(during) == {2}, sorted(set(during))
+
+
 def test_gyro_spike_is_rejected_and_no_valid_warning_is_sent():
     """Issue 20 finding 3: a 50 ms, 200 deg/s yaw-rate spike at 5 s on the paper's drive (no
     rollover). Specification: no VDPS_Warning of level >= 2 with status valid; the frames during

@@ -43,6 +43,9 @@ def test_shipped_maps_load_and_name_only_catalogue_fields():
     ("[bus.a]\n[[bus.a.message]]\nframe_id = 1\nkind='k'\n"
      "signals=[{signal='S', field='steer_wheel_angle_rad', unit='deg', sign=2}]\n",
      "sign must be 1 or -1"),
+    ("[bus.a]\n[[bus.a.message]]\nframe_id = 1\nkind='k'\n"
+     "signals=[{signal='S', field='steer_wheel_angle_rad', unit='deg', scale=0}]\n",
+     "scale must not be 0"),  # close/20.md: accepted, every value decoded as the offset
 ])
 def test_bad_maps_give_one_line_errors(tmp_path, text, needle):
     p = write_map(tmp_path, text)

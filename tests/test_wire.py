@@ -23,7 +23,7 @@ values = st.floats(-1e4, 1e4, allow_nan=False)
 
 
 def test_packers_cover_every_sensor_message_and_refuse_the_warning():
-    assert set(PACKERS) == {n for n, s in DBC.messages.items() if s.crc is None}
+    assert set(PACKERS) == {n for n in DBC.messages if n != "VDPS_Warning"}
     with pytest.raises(ValueError):
         CanPacker(DBC.messages["VDPS_Warning"])
 

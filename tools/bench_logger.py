@@ -8,7 +8,7 @@ pseudo-terminals and acts as the devices on their far side:
 * ``can``: an slcan (Lawicel) USB-CAN adapter. It answers the adapter commands python-can
   sends (``C``, ``S6``, ``O`` ... -> CR) and emits received frames as ``tIIILDD..\\r`` lines:
   the chassis frames of ``dbc/vdps.dbc`` at the sensor profile's rates (Table 1: wheel speeds
-  2 x 1 kHz, torque 100 Hz, steering 100 Hz, suspension 1 Hz), each with its 8-bit counter,
+  2 x 1 kHz, torque 100 Hz, steering 100 Hz, suspension 1 Hz), each with its rolling counter and E2E CRC,
   plus ``--extra-fps`` filler frames (ID 0x7E0, a 32-bit sequence number) for load tests;
 * ``imu``: the Xsens MTi at ``--imu-hz`` (1 kHz), packet counter 0, 1, 2 ...;
 * ``gnss``: NMEA at ``--gnss-hz`` (5 Hz): GGA + PASHR per epoch.
@@ -178,7 +178,7 @@ def emulate(args) -> int:
         if name == "wheel_speed":
             return can_send(name, encode_wheel_speeds(rng.uniform(20, 30, 4), k % 256))
         if name == "wheel_torque":
-            return can_send(name, [encode_wheel_torques(rng.uniform(-100, 300, 4), k % 256)])
+            return can_send(name, encode_wheel_torques(rng.uniform(-100, 300, 4), k % 256))
         if name == "steer":
             return can_send(name, [encode_steer(float(rng.uniform(-1, 1)), k % 256)])
         if name == "suspension":

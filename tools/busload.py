@@ -20,7 +20,8 @@ import numpy as np
 
 from vdps_hil.codecs.can_busload import RATE_PROFILES, bus_load, frame_bits, frame_bits_stuffed
 from vdps_hil.codecs.can_dbc import (
-    STEER, SUSPENSION, WARNING, WHEEL_SPEED_FRONT, WHEEL_SPEED_REAR, WHEEL_TORQUE, load_dbc,
+    STEER, SUSPENSION, WARNING, WHEEL_SPEED_FRONT, WHEEL_SPEED_REAR, WHEEL_TORQUE_FRONT, WHEEL_TORQUE_REAR,
+    load_dbc,
 )
 from vdps_hil.codecs.can_encode import (
     encode_steer, encode_suspension, encode_warning, encode_wheel_speeds, encode_wheel_torques,
@@ -49,9 +50,10 @@ def representative_frames(seconds: float, seed: int = 0) -> dict[str, list]:
             elif name == SUSPENSION:
                 h = 0.01 * s1[k] * np.array([-1, 1, 1, -1]) + rng.normal(0.0, 0.001, 4)  # 1 mm
                 out[name].append(encode_suspension(h, k, t_ns=t_ns))
-            elif name == WHEEL_TORQUE:
+            elif name in (WHEEL_TORQUE_FRONT, WHEEL_TORQUE_REAR):
                 tq = 300.0 + 200.0 * s1[k] + rng.normal(0.0, 5.0, 4)
-                out[name].append(encode_wheel_torques(tq, k, t_ns=t_ns))
+                front, rear = encode_wheel_torques(tq, k, t_ns=t_ns)
+                out[name].append(front if name == WHEEL_TORQUE_FRONT else rear)
             elif name == STEER:
                 out[name].append(encode_steer(0.5 * s1[k] + rng.normal(0, 0.002), k, t_ns=t_ns))
             elif name == WARNING:

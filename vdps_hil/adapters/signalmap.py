@@ -163,9 +163,18 @@ def _vdps_crc8(frame_id: int, data: bytes) -> bool:
     return len(data) >= 2 and crc8_j1850(data[1:]) == data[0]
 
 
+def _vdps_e2e(frame_id: int, data: bytes) -> bool:
+    """dbc/vdps.dbc sensor frames (layout 2): byte 0 = CRC-8/SAE-J1850 of the data ID (the CAN
+    ID, low byte then high byte) and bytes 1..DLC-1 (``codecs.can_e2e.e2e_crc``)."""
+    from vdps_hil.codecs.can_e2e import e2e_crc
+
+    return len(data) >= 2 and e2e_crc(data, frame_id) == data[0]
+
+
 CHECKSUMS: dict[str, Callable[[int, bytes], bool]] = {
     "toyota": _toyota_checksum,
     "vdps_crc8": _vdps_crc8,
+    "vdps_e2e": _vdps_e2e,
 }
 """Named checksum rules: ``(frame_id, data) -> ok``."""
 
@@ -283,6 +292,8 @@ def _signal_rule(where: str, d: Mapping, radius: float | None) -> SignalRule:
     if not isinstance(unit, str):
         raise SignalMapError(f"{where}: unit must be text")
     scale = _num(where, d.get("scale", 1.0), "scale")
+    if scale == 0.0:  # every value would map to the offset: a constant, not a measurement
+        raise SignalMapError(f"{where}: scale must not be 0")
     offset = _num(where, d.get("offset", 0.0), "offset")
     sign = _num(where, d.get("sign", 1), "sign")
     if sign not in (1.0, -1.0):

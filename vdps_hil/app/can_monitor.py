@@ -220,7 +220,7 @@ def _dbc(path, strict: bool = True):
 def recording_source(path, dbc=None, signalmap=None) -> tuple[dict, Iterator[Frame]]:
     """(bus -> DBC, frames) of a recording's ``/raw/can/`` topics (module docstring)."""
     from vdps_hil.adapters.signalmap import SignalMapError, load_signalmap
-    from vdps_hil.codecs.can_dbc import DEFAULT_DBC_PATH
+    from vdps_hil.codecs.can_dbc import DEFAULT_DBC_PATH, recorded_vdps_dbc
     from vdps_hil.record import schemas as S
     from vdps_hil.record.reader import RecordingError, RecordingReader
     from vdps_hil.record.recorded_decoding import RecordedDecodingError, find_recorded_decoding
@@ -235,11 +235,12 @@ def recording_source(path, dbc=None, signalmap=None) -> tuple[dict, Iterator[Fra
             raise MonitorError(f"{os.fspath(path)}: no /raw/can/ topics to monitor")
         rd = find_recorded_decoding(reader, path, dbc=dbc, signalmap=signalmap)
         sigmap = None if rd.signalmap is None else load_signalmap(rd.signalmap)
+        vdps_dbc = recorded_vdps_dbc(reader.metadata().get(S.METADATA_NAME, {})) or DEFAULT_DBC_PATH
         dbs = {}
         for bus in buses:
             bm = None if sigmap is None else sigmap.bus(bus)
             p = rd.dbc if rd.dbc is not None and (bm is not None or sigmap is None) else \
-                (bm.dbc if bm is not None else (DEFAULT_DBC_PATH if bus == "vdps" else None))
+                (bm.dbc if bm is not None else (vdps_dbc if bus == "vdps" else None))
             dbs[bus] = None if p is None else _dbc(p, bm.dbc_strict if bm is not None else True)
     except (RecordedDecodingError, SignalMapError) as e:
         reader.close()

@@ -11,34 +11,44 @@ quantisation exactly (``codecs.can_encode``). The other modules of the codec:
 ``codecs.can_decode`` (the counting decoder) and ``codecs.can_busload`` (frame lengths, bus
 load).
 
-Messages (classic CAN 2.0A, 11-bit IDs, Intel byte order, 1 Mbit/s)
--------------------------------------------------------------------
+Messages (layout version 2; classic CAN 2.0A, 11-bit IDs, Intel byte order, 1 Mbit/s)
+------------------------------------------------------------------------------------
+Every sensor frame: byte 0 ``e2e_crc`` (CRC-8/SAE-J1850 over the data ID = CAN ID, then bytes
+1..DLC-1; ``codecs.can_e2e``), bits 8..11 ``seq_counter`` (4 bits), the values after it.
+
 =====  ======================  ========================  ===  ==========================================
-ID     name                    rate                      DLC  signals (start|length, scale, range)
+ID     name                    rate                      DLC  value signals (start|length, scale, range)
 =====  ======================  ========================  ===  ==========================================
-0x080  VDPS_Warning            50 Hz + on level change   8    war  ning_crc 0|8; warning_counter 8|4;
+0x080  VDPS_Warning            50 Hz + on level change   8    warning_crc 0|8; warning_counter 8|4;
                                                               warning_level 12|2 (0..3);
                                                               warning_status 14|2 (0..3);
                                                               warning_time_to_rollover_s 16|16 u
                                                               0.001 s, 0..65.534, raw 65535 = none;
                                                               warning_peak_roll_rad 32|16 s 1e-4,
                                                               +-3.1416; warning_ltr 48|16 s 1e-4, +-1
-0x100  VDPS_WheelSpeedFront    1 kHz (Table 1)           5    whe  el_speed_radps_1,2 0|16, 16|16 s 0.01
-                                                              rad/s, -327.68..327.67; seq_counter 32|8
-0x101  VDPS_WheelSpeedRear     1 kHz (Table 1)           5    whe  el_speed_radps_3,4 (as front)
-0x110  VDPS_Suspension         1 Hz (Table 1) or 1 kHz   8    sus  p_deflection_m_1..4 0|14, 14|14,
-                               (profile table1-susp1k)        28|14, 42|14 s 2e-5 m, -0.16384..0.16382;
-                                                              seq_counter 56|8
-0x120  VDPS_WheelTorque        100 Hz (our choice)       8    whe  el_torque_nm_1..4 0|14 .. 42|14 s
-                                                              1 N m, -8192..8191; seq_counter 56|8
-0x130  VDPS_SteerAngle         100 Hz (our choice)       3    ste  er_wheel_angle_rad 0|16 s 0.001 rad,
-                                                              -12.567..12.567 (+-4 pi); seq_counter 16|8
+0x100  VDPS_WheelSpeedFront    1 kHz (Table 1)           6    wheel_speed_radps_1,2 16|16, 32|16 s
+                                                              0.01 rad/s, -327.68..327.67
+0x101  VDPS_WheelSpeedRear     1 kHz (Table 1)           6    wheel_speed_radps_3,4 (as front)
+0x110  VDPS_Suspension         1 Hz (Table 1) or 1 kHz   8    susp_deflection_m_1..4 12|13, 25|13,
+                               (profile table1-susp1k)        38|13, 51|13 s 4e-5 m, -0.16384..0.1638
+0x120  VDPS_WheelTorqueFront   100 Hz (our choice)       5    wheel_torque_nm_1,2 12|14, 26|14 s 1 N m,
+                                                              -8192..8191
+0x121  VDPS_WheelTorqueRear    100 Hz (our choice)       5    wheel_torque_nm_3,4 (as front)
+0x130  VDPS_SteerAngle         100 Hz (our choice)       4    steer_wheel_angle_rad 16|16 s 0.001 rad,
+                                                              -12.567..12.567 (+-4 pi)
 =====  ======================  ========================  ===  ==========================================
 
 Resolutions against Table 1 noise: wheel speed 0.01 rad/s = 0.57 deg/s (noise 2 deg/s; the
 quantisation error's standard deviation 0.01/sqrt(12) = 0.0029 rad/s adds 0.7 % to the noise
-variance); suspension 0.02 mm (noise 1 mm). Wheel speeds are split over two frames so each
-frame has room for the 8-bit counter at 0.01 rad/s.
+variance); suspension 0.04 mm (noise 1 mm: adds 0.01 % to the variance); torque 1 N m over
++-8192 N m. Wheel speeds and torques are split over two frames each so that every frame has room
+for the CRC and the counter at these resolutions; the two torque frames carry the DBC attribute
+``VdpsSampleGroup`` and decode into one sample of four torques (``codecs.can_decode``).
+
+Versions: ``dbc/vdps.dbc`` is layout 2; ``dbc/vdps_v1.dbc`` (no sensor CRC, 8-bit counters, one
+torque frame, suspension 2e-5 m) still decodes the recordings made with it: a recording names
+the DBC it was made with by content hash (``hash.dbc.vdps``), and :func:`recorded_vdps_dbc` maps
+that hash to the shipped version.
 """
 
 from __future__ import annotations
@@ -54,14 +64,19 @@ from vdps_hil.bus.samples import FIELDS
 from vdps_hil.codecs.dbc_cache import DbcDescription, load_description
 
 DEFAULT_DBC_PATH = Path(__file__).resolve().parents[2] / "dbc" / "vdps.dbc"
-"""The repository's chassis DBC (``dbc/vdps.dbc``)."""
+"""The repository's chassis DBC (``dbc/vdps.dbc``, layout version 2)."""
+LEGACY_DBC_PATHS = (DEFAULT_DBC_PATH.with_name("vdps_v1.dbc"),)
+"""Earlier layouts of the chassis bus, kept so that their recordings still decode."""
 
 # --- message names and IDs (checked against the DBC at load time) ---
 WARNING = "VDPS_Warning"
 WHEEL_SPEED_FRONT = "VDPS_WheelSpeedFront"
 WHEEL_SPEED_REAR = "VDPS_WheelSpeedRear"
 SUSPENSION = "VDPS_Suspension"
+WHEEL_TORQUE_FRONT = "VDPS_WheelTorqueFront"
+WHEEL_TORQUE_REAR = "VDPS_WheelTorqueRear"
 WHEEL_TORQUE = "VDPS_WheelTorque"
+"""The single torque frame of layout 1 (``dbc/vdps_v1.dbc``)."""
 STEER = "VDPS_SteerAngle"
 
 SEQ_COUNTER = "seq_counter"
@@ -110,7 +125,10 @@ def is_ttr(sig: SignalSpec) -> bool:
 
 @dataclass(frozen=True, slots=True)
 class MessageSpec:
-    """One DBC message: ID, DLC, Sample kind, rate and its value/counter/CRC signals."""
+    """One DBC message: ID, DLC, Sample kind, rate and its value/counter/CRC signals;
+    ``data_id``: the E2E data ID its CRC covers first (the CAN ID for sensor frames with a CRC,
+    None for VDPS_Warning and frames without a CRC); ``group``: its ``VdpsSampleGroup`` (the
+    messages of one group decode into one sample; "" none)."""
 
     name: str
     frame_id: int
@@ -121,6 +139,13 @@ class MessageSpec:
     counter: SignalSpec
     crc: SignalSpec | None
     message: object  # the codecs.dbc_cache MessageDescription (encode/decode: cantools')
+    data_id: int | None = None
+    group: str = ""
+
+    @property
+    def is_sensor(self) -> bool:
+        """A frame the simulator sends (every message but VDPS_Warning)."""
+        return self.kind != "warning"
 
     @property
     def field_names(self) -> tuple[str, ...]:
@@ -204,8 +229,27 @@ class VdpsDbc:
         for s in values:
             if s.name not in FIELDS:
                 self._fail(f"{m.name}.{s.name}: not a bus field catalogue name")
+        data_id = m.frame_id if crc is not None and kind != "warning" else None
         return MessageSpec(m.name, m.frame_id, m.length, str(kind), m.cycle_time, values,
-                           counters[0], crc, m)
+                           counters[0], crc, m, data_id, str(m.attributes.get("VdpsSampleGroup", "")))
+
+
+def recorded_vdps_dbc(metadata: Mapping[str, str]) -> Path | None:
+    """The shipped chassis DBC a recording was made with, from its ``vdps.recording`` metadata
+    (``hash.dbc.vdps`` = ``sha256:<hex>`` of the DBC's bytes): a legacy layout's path when the
+    hash is one of ``LEGACY_DBC_PATHS``, else None (decode with the current layout)."""
+    want = str(metadata.get("hash.dbc.vdps", ""))
+    if not want.startswith("sha256:"):
+        return None
+    import hashlib
+
+    for p in LEGACY_DBC_PATHS:
+        try:
+            if "sha256:" + hashlib.sha256(p.read_bytes()).hexdigest() == want:
+                return p
+        except OSError:
+            continue
+    return None
 
 
 @lru_cache(maxsize=8)

@@ -3,9 +3,18 @@ SI plus the frame's counter) or ``[]`` with the reject counted, never raising on
 
 Per message the decoding is planned once (``_DecodePlan``: the compiled layout of
 ``codecs.dbc_compile``, or cantools when it does not compile; signal indexes; scale and offset;
-which ranges need a check); per frame the checks run in this order: DLC, CRC (VDPS_Warning),
-rolling counter (``codecs.can_e2e``), raw range; then ``x = raw * scale + offset``
-(``codecs.can_encode`` module docstring; the TTR sentinel raw 65535 decodes to +inf).
+which ranges need a check); per frame the checks run in this order: DLC, CRC (every protected
+frame; over the data ID first for sensor frames), rolling counter (``codecs.can_e2e``), raw range;
+then ``x = raw * scale + offset`` (``codecs.can_encode`` module docstring; the TTR sentinel raw
+65535 decodes to +inf).
+
+Sample groups: the messages sharing a DBC ``VdpsSampleGroup`` (the front and rear torque frames)
+decode into one sample. An accepted frame of the group is held; the group's last message (the
+highest ID, sent last at an instant) emits one sample with the fields of all members at its own
+time and counter when every other member was accepted at most half its cycle time before it
+(the same instant); otherwise nothing is emitted and its ``group_incomplete`` counts (the frames
+themselves were accepted; a lost member is already in ``lost_frames``). Samples above the codec
+therefore look as in layout 1 (four torques in one ``wheel_torque`` sample).
 
 Rejects, each counted per message (``REJECT_REASONS``): ``dlc_mismatch`` (payload length != DBC
 DLC), ``undecodable`` (cantools could not decode), ``crc_mismatch``, ``counter_repeat``,
@@ -25,7 +34,7 @@ from typing import TYPE_CHECKING, Mapping
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.can_dbc import TTR_NONE_RAW, MessageSpec, VdpsDbc, is_ttr, load_dbc
-from vdps_hil.codecs.can_e2e import WARNING_MAX_DELTA_COUNTER, SequenceState, crc8_j1850
+from vdps_hil.codecs.can_e2e import WARNING_MAX_DELTA_COUNTER, SequenceState, e2e_crc, e2e_register
 
 if TYPE_CHECKING:
     import can
@@ -51,7 +60,7 @@ class _DecodePlan:
     every raw value). ``modulus``: of the rolling counter."""
 
     __slots__ = ("spec", "compiled", "names", "crc", "counter", "counter_name", "status", "values",
-                 "checks", "modulus")
+                 "checks", "modulus", "data_id", "crc_reg", "closes", "max_age_ns")
 
     def __init__(self, spec: MessageSpec):
         from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
@@ -80,6 +89,10 @@ class _DecodePlan:
                 checks.append((idx[sig.name], sig.raw_min, sig.raw_max))
         self.values = tuple(vals)
         self.checks = tuple(checks)
+        self.data_id = spec.data_id
+        self.crc_reg = e2e_register(spec.data_id)  # the CRC register after the data ID
+        self.closes = False  # the last message of its sample group (VdpsCanDecoder sets it)
+        self.max_age_ns = int((spec.cycle_time_ms or 10) * 500_000)  # half the cycle
 
 
 class VdpsCanDecoder:
@@ -104,6 +117,17 @@ class VdpsCanDecoder:
                         for name in self._dbc.messages}
         self._seq = {name: SequenceState() for name in self._dbc.messages}
         self._plan = {aid: _DecodePlan(spec) for aid, spec in self._by_id.items()}
+        self._held: dict[str, dict[str, tuple[int, dict, bool]]] = {}  # group -> name -> frame
+        self._members: dict[str, tuple[str, ...]] = {}
+        for aid in sorted(self._plan):
+            g = self._plan[aid].spec.group
+            if g:
+                self._members[g] = self._members.get(g, ()) + (self._plan[aid].spec.name,)
+                self._held[g] = {}
+        for g, names in self._members.items():
+            last = max(self._dbc.messages[n].frame_id for n in names)
+            self._plan[last].closes = True
+            self._counts[names[-1]]["group_incomplete"] = 0
 
     @property
     def dbc(self) -> VdpsDbc:
@@ -114,10 +138,16 @@ class VdpsCanDecoder:
         """Read-only snapshot: ``{"bus": {unknown_id, unknown_id_extended, malformed,
         remote_frame, fd_frame},
         <message name>: {accepted, lost_frames, dlc_mismatch, undecodable, out_of_range,
-        crc_mismatch, counter_repeat, counter_jump}}``."""
+        crc_mismatch, counter_repeat, counter_jump} (+ group_incomplete on the last message of a
+        sample group)}``."""
         snap = {"bus": MappingProxyType(dict(self._bus))}
         snap.update({k: MappingProxyType(dict(v)) for k, v in self._counts.items()})
         return MappingProxyType(snap)
+
+    @property
+    def crc_errors(self) -> int:
+        """Frames rejected for a wrong CRC, over all messages (``crc_mismatch`` summed)."""
+        return sum(c["crc_mismatch"] for c in self._counts.values())
 
     @property
     def total_rejected(self) -> int:
@@ -174,11 +204,11 @@ class VdpsCanDecoder:
             except Exception:  # cantools' DecodeError and friends: count, never raise
                 counts["undecodable"] += 1
                 return []
-        if plan.crc >= 0 and crc8_j1850(payload[1:]) != raw[plan.crc]:
+        if plan.crc >= 0 and e2e_crc(payload, plan.data_id, plan.crc_reg) != raw[plan.crc]:
             counts["crc_mismatch"] += 1
             return []
         c = raw[plan.counter]
-        reason = self._seq[spec.name].check(c, t_ns, plan.modulus, plan.crc >= 0, self._max_delta,
+        reason = self._seq[spec.name].check(c, t_ns, plan.modulus, not spec.is_sensor, self._max_delta,
                                             counts)
         if reason is not None:
             counts[reason] += 1
@@ -194,4 +224,25 @@ class VdpsCanDecoder:
         fields[plan.counter_name] = float(c)
         counts["accepted"] += 1
         valid = plan.status < 0 or raw[plan.status] == 0
+        if spec.group:
+            return self._grouped(plan, t_ns, fields, valid)
         return [Sample(t_ns, self._source, spec.kind, fields, 0, valid)]  # positional: the hot path
+
+    def _grouped(self, plan: _DecodePlan, t_ns: int, fields: dict, valid: bool) -> list[Sample]:
+        """An accepted frame of a sample group: held, or the group's sample (module docstring)."""
+        spec = plan.spec
+        held = self._held[spec.group]
+        if not plan.closes:
+            held[spec.name] = (t_ns, fields, valid)
+            return []
+        merged: dict[str, float] = {}
+        for name in self._members[spec.group][:-1]:
+            got = held.pop(name, None)
+            if got is None or not 0 <= t_ns - got[0] <= plan.max_age_ns:
+                self._counts[spec.name]["group_incomplete"] += 1
+                held.clear()
+                return []
+            merged.update(got[1])
+            valid = valid and got[2]
+        merged.update(fields)
+        return [Sample(t_ns, self._source, spec.kind, merged, 0, valid)]

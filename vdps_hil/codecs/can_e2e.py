@@ -1,11 +1,22 @@
 """End-to-end protection of the vdps chassis bus: the rolling counters of every frame and the
-CRC-8/SAE-J1850 of VDPS_Warning (the receiver's rules; ``codecs.can_decode`` applies them per
-frame, ``codecs.can_encode`` writes the CRC).
+CRC-8/SAE-J1850 of every protected frame (the receiver's rules; ``codecs.can_decode`` applies
+them per frame, ``codecs.can_encode`` and ``sim.wire`` write the CRC).
 
-Sequence counters and VDPS_Warning protection
----------------------------------------------
-Every frame carries a rolling counter (8 bits ``seq_counter`` on sensor frames, 4 bits
-``warning_counter`` on the warning), +1 per frame. Per message the decoder computes
+CRC and counter of each frame (layout 2, ``dbc/vdps.dbc``)
+---------------------------------------------------------
+In the spirit of AUTOSAR E2E profile 1 (CRC-8/SAE-J1850 in byte 0, 4-bit counter, a data ID
+per protected message): a sensor frame's ``e2e_crc`` is the CRC of the data ID (its 11-bit CAN
+ID; low byte, then high byte: profile 1's "both bytes" mode) followed by bytes 1..DLC-1
+(:func:`e2e_crc`), so a payload under another ID fails too; ``VDPS_Warning``'s ``warning_crc``
+covers bytes 1..7 only (no data ID, its layout is unchanged since version 1). The CRC is checked
+first: a corrupted frame is rejected (``crc_mismatch``) before its counter is read, so it leaves
+the counter history as it was and the next valid frame is accepted. Layout 1 (``dbc/vdps_v1.dbc``)
+has no sensor CRC and 8-bit sensor counters; the rules below take the counter width from the DBC.
+
+Sequence counters
+-----------------
+Every frame carries a rolling counter (``seq_counter`` on sensor frames, ``warning_counter`` on
+the warning: 4 bits each in layout 2), +1 per frame. Per message the decoder computes
 ``delta = (c - c_last) mod 2^bits``:
 
 * sensor frames: ``delta = 0`` -> reject (``counter_repeat``: duplicated or stale frame);
@@ -62,6 +73,26 @@ def crc8_j1850(data: bytes | bytearray | memoryview) -> int:
         reg = _CRC8_TABLE[reg ^ b]
     return reg ^ CRC8_XOROUT
 
+
+def e2e_register(data_id: int | None) -> int:
+    """The CRC register after the data ID (low, high byte) from the initial value; ``CRC8_INIT``
+    for None (no data ID). A receiver computes it once per message."""
+    reg = CRC8_INIT
+    if data_id is not None:
+        for b in (data_id & 0xFF, (data_id >> 8) & 0xFF):
+            reg = _CRC8_TABLE[reg ^ b]
+    return reg
+
+
+def e2e_crc(payload: bytes | bytearray | memoryview, data_id: int | None, reg: int | None = None) -> int:
+    """The CRC of byte 0 of a protected frame: CRC-8/SAE-J1850 over ``data_id`` (low, high byte;
+    None: no data ID, VDPS_Warning) followed by ``payload[1:]`` (module docstring). ``reg``:
+    :func:`e2e_register` of ``data_id`` when the caller has it."""
+    table = _CRC8_TABLE
+    reg = e2e_register(data_id) if reg is None else reg
+    for b in bytes(payload[1:]):
+        reg = table[reg ^ b]
+    return reg ^ CRC8_XOROUT
 
 
 # ---------------------------------------------------------------------------------------------

@@ -39,9 +39,9 @@ import numpy as np
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.can_dbc import (
     STEER, SUSPENSION, TTR_FIELD, TTR_NONE_RAW, WARNING, WHEEL_SPEED_FRONT, WHEEL_SPEED_REAR,
-    WHEEL_TORQUE, SignalSpec, VdpsDbc, is_ttr, load_dbc,
+    WHEEL_TORQUE_FRONT, WHEEL_TORQUE_REAR, SignalSpec, VdpsDbc, is_ttr, load_dbc,
 )
-from vdps_hil.codecs.can_e2e import crc8_j1850
+from vdps_hil.codecs.can_e2e import e2e_crc
 
 if TYPE_CHECKING:
     import can
@@ -129,7 +129,7 @@ def encode_fields(message_name: str, fields: Mapping[str, float], counter: int, 
         raw[spec.crc.name] = 0
     data = bytearray(spec.message.encode(raw, scaling=False, strict=True))
     if spec.crc is not None:
-        data[0] = crc8_j1850(data[1:])
+        data[0] = e2e_crc(data, spec.data_id)
     import can
 
     return can.Message(timestamp=t_ns / 1e9, arbitration_id=spec.frame_id, is_extended_id=False,
@@ -165,9 +165,12 @@ def encode_wheel_speeds(wheel_speed_radps: Sequence[float], counter: int, *, t_n
 
 
 def encode_wheel_torques(wheel_torque_nm: Sequence[float], counter: int, *, t_ns: int = 0
-                         ) -> can.Message:
-    """Four wheel torques [N m] (FL, FR, RR, RL, positive driving) -> VDPS_WheelTorque."""
-    return encode_fields(WHEEL_TORQUE, _four("wheel_torque_nm", wheel_torque_nm), counter, t_ns=t_ns)
+                         ) -> tuple[can.Message, can.Message]:
+    """Four wheel torques [N m] (FL, FR, RR, RL, positive driving) -> (VDPS_WheelTorqueFront,
+    VDPS_WheelTorqueRear)."""
+    f = _four("wheel_torque_nm", wheel_torque_nm)
+    return (encode_fields(WHEEL_TORQUE_FRONT, f, counter, t_ns=t_ns),
+            encode_fields(WHEEL_TORQUE_REAR, f, counter, t_ns=t_ns))
 
 
 def encode_suspension(susp_deflection_m: Sequence[float], counter: int, *, t_ns: int = 0
@@ -217,7 +220,7 @@ class VdpsCanEncoder:
     def frames(self, sample: Sample) -> list[can.Message]:
         out = []
         for name, spec in self._dbc.messages.items():
-            if spec.crc is None and all(f in sample.fields for f in spec.field_names):
+            if spec.is_sensor and all(f in sample.fields for f in spec.field_names):
                 out.append(encode_fields(name, sample.fields, self._next[name], t_ns=sample.t_ns,
                                          dbc=self._dbc))
                 self._next[name] += 1

@@ -256,7 +256,7 @@ class PipelineNode:
         self.view = None if writer is None else FoxgloveView(lambda: system.pipeline.origin,
                                                              epoch_ns=getattr(writer, "sim_epoch_ns", None))
         self.sequencer = InputSequencer(sequence_s) if sequence_s else None
-        self._dbc_by_id = {aid: sp for aid, sp in self.can.decoder.dbc.by_id.items() if sp.crc is None}
+        self._dbc_by_id = {aid: sp for aid, sp in self.can.decoder.dbc.by_id.items() if sp.is_sensor}
         self._counters_seen: dict[int, int] = {}
         self.counter_breaks = 0
         self.poll_s = poll_s

@@ -54,7 +54,8 @@ itself sends 3 "fault" for a stale prediction. ``SystemConfig.require_converged`
 overrides that rule (``()``: never gate). Fault tolerance: 2 also while the IMU is missing or
 within ``ImuChecks.settle_s`` of an IMU fault, 3 while the aiding innovations say the estimate is
 inconsistent (``estimation.aiding_monitor.health``), counted per reason in
-``counters["unhealthy"]``; the identifier is not fed on the estimates of an IMU fault.
+``counters["unhealthy"]``; these two outrank 1 "not converged" (a disconnected IMU shows as 2
+also while the identification is still converging); the identifier is not fed on the estimates of an IMU fault.
 
 Predictions off the sample path (``prediction.offpath``): the chain's prediction at t0 runs on
 a snapshot (parameters, initial state) in ``prediction_worker`` ("inline" by default; "process"
@@ -454,7 +455,8 @@ class VdpsSystem:
                 conv = self.identifier.converged
                 if not all(conv.get(n, False) for n in self.require_converged):
                     status = WarningStatus.NOT_CONVERGED
-            if status == WarningStatus.VALID and why is not None:
+            if status in (WarningStatus.VALID, WarningStatus.NOT_CONVERGED) and why is not None:
+                # a missing IMU or an inconsistent estimate outranks "not converged"
                 status = WarningStatus.SENSOR_MISSING if why.startswith("imu") else WarningStatus.FAULT
         params = self._params()
         if init is not None and params is not self._chain_params:

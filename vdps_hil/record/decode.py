@@ -10,7 +10,8 @@ Decoders (the project's codecs, the same the live adapters use)
 ----------------------------------------------------------------
 =====================  =====================================================================
 ``/raw/can/<bus>``     default: bus ``vdps`` with ``dbc/vdps.dbc`` (``VdpsCanDecoder``: counters,
-                       CRC and range checks); other buses are counted ``undecoded``.
+                       CRC and range checks; ``dbc/vdps_v1.dbc`` when the recording names that
+                       layout's hash); other buses are counted ``undecoded``.
                        ``signalmap``: every bus the map names (``bus_map`` renames recording
                        buses to map buses) with the map's DBC or ``dbc`` (``build_decoder``).
 ``/raw/serial/<dev>``  by the channel's ``format``: ``nmea`` -> ``LineFramer`` +
@@ -140,7 +141,7 @@ class DecodedRecording:
         map_bus = self._bus_map.get(bus, bus)
         try:
             if sigmap is None and map_bus == "vdps":
-                sigmap = load_signalmap("vdps")
+                sigmap = load_signalmap(self._vdps_map_name())
             if sigmap is None:
                 dec, info = None, {"decoded": False, "reason": "no signal map for this bus"}
             else:
@@ -155,6 +156,14 @@ class DecodedRecording:
         st = CanStream(bus, dec, info) if dec is not None else None
         self._can[bus] = st
         return st
+
+    def _vdps_map_name(self) -> str:
+        """``vdps``, or ``vdps_v1`` for a recording made with layout 1 of the chassis bus (the DBC
+        hash it names, ``codecs.can_dbc.recorded_vdps_dbc``)."""
+        from vdps_hil.codecs.can_dbc import recorded_vdps_dbc
+
+        legacy = self._dbc is None and recorded_vdps_dbc(self.reader.metadata().get(S.METADATA_NAME, {}))
+        return "vdps_v1" if legacy else "vdps"
 
     def _serial_stream(self, device: str):
         if device in self._serial:

@@ -230,7 +230,7 @@ class FrozenCanSignal(Fault):
     def bind(self, rng, dbc=None) -> None:
         self._held: float | None = None
         if dbc is not None and self.signal not in dbc.field_signal:
-            known = ", ".join(sorted(f for f, (m, _) in dbc.field_signal.items() if m.crc is None))
+            known = ", ".join(sorted(f for f, (m, _) in dbc.field_signal.items() if m.is_sensor))
             raise FaultError(f"fault {self.name!r}: signal {self.signal!r} is not carried by a "
                              f"sensor message of {dbc.path.name} (known: {known})")
 
@@ -261,8 +261,8 @@ class DroppedFrames(Fault):
     def bind(self, rng, dbc=None) -> None:
         self._rng = rng
         if (dbc is not None and self.message
-                and (self.message not in dbc.messages or dbc.messages[self.message].crc is not None)):
-            known = ", ".join(n for n, s in dbc.messages.items() if s.crc is None)
+                and (self.message not in dbc.messages or not dbc.messages[self.message].is_sensor)):
+            known = ", ".join(n for n, s in dbc.messages.items() if s.is_sensor)
             raise FaultError(f"fault {self.name!r}: unknown message {self.message!r} (known: {known})")
 
     def can_keep(self, message, t_ns) -> np.ndarray | None:

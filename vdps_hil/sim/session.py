@@ -151,7 +151,7 @@ class DriveSession:
         self._imu = ImuModel(p.imu, m, meas, seed, dt)
         self._gnss = GnssModel(p.gnss, m, seed, dt)
         packers = can_packers(d.dbc)
-        res = {f: s.resolution for name, spec in d.dbc.messages.items() if spec.crc is None
+        res = {f: s.resolution for name, spec in d.dbc.messages.items() if spec.is_sensor
                for f, s in zip(spec.field_names, spec.values)}
         self._chassis = chassis_sensors(p, seed, dt, res, meas)
         # messages fed by each chassis sensor (all of a message's fields from that sensor)

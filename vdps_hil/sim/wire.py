@@ -16,8 +16,9 @@ CAN packing (DBC linear conversion, Intel byte order)
 
 ``lo/hi`` = the raw range widened by one step (keeps the division finite, changes no clamped
 result), the same arithmetic as ``can_encode.quantize``. The rolling counter enters as
-``(counter mod 2^len) << start``. Messages with a CRC (VDPS_Warning) are not simulated sensors and
-are refused here.
+``(counter mod 2^len) << start``; a protected frame then gets byte 0 = ``codecs.can_e2e.e2e_crc``
+(CRC-8/SAE-J1850 over the data ID and bytes 1..DLC-1, a table look-up per byte for all rows at
+once). VDPS_Warning is not a simulated sensor and is refused here.
 
 CAN timing
 ----------
@@ -59,6 +60,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from vdps_hil.codecs import can_e2e
 from vdps_hil.codecs import imu_mtdata2 as imu_codec
 from vdps_hil.codecs.can_busload import frame_bits
 from vdps_hil.codecs.can_dbc import MessageSpec, SignalSpec, VdpsDbc, load_dbc
@@ -86,15 +88,15 @@ def raw_values(sig: SignalSpec, values: np.ndarray) -> np.ndarray:
 
 
 class CanPacker:
-    """Vectorised encoder of one DBC sensor message (Intel byte order, no CRC).
+    """Vectorised encoder of one DBC sensor message (Intel byte order, E2E CRC if it has one).
 
     ``pack(values, counters)``: values (N, k) in the order of ``field_names``, counters (N,)
     -> (N, DLC) uint8 payloads, byte-identical to ``can_encode.encode_fields``.
     ``quantize(values)`` -> what a decoder reads back (same shape)."""
 
     def __init__(self, spec: MessageSpec):
-        if spec.crc is not None:
-            raise ValueError(f"{spec.name}: messages with a CRC are not sensor messages")
+        if not spec.is_sensor:
+            raise ValueError(f"{spec.name}: not a sensor message")
         for s in (*spec.values, spec.counter):
             if getattr(s.signal, "byte_order", "little_endian") != "little_endian":
                 raise ValueError(f"{spec.name}.{s.name}: only Intel (little endian) signals")
@@ -124,13 +126,31 @@ class CanPacker:
         c = self.spec.counter
         cnt = np.asarray(counters, dtype=np.int64) & np.int64((1 << c.length_bits) - 1)
         word |= cnt.astype(np.uint64) << np.uint64(c.start_bit)
-        return word.astype("<u8").view(np.uint8).reshape(-1, 8)[:, :self.dlc]
+        data = word.astype("<u8").view(np.uint8).reshape(-1, 8)[:, :self.dlc]
+        if self.spec.crc is not None:
+            data = np.ascontiguousarray(data)
+            data[:, 0] = _e2e_crc_rows(data, self.spec.data_id)
+        return data
+
+
+_CRC8_TABLE = np.array(can_e2e._CRC8_TABLE, dtype=np.uint8)
+
+
+def _e2e_crc_rows(data: np.ndarray, data_id: int | None) -> np.ndarray:
+    """``can_e2e.e2e_crc`` of every row of ``data`` (N, DLC) uint8 (byte 0 is not covered)."""
+    reg = np.full(data.shape[0], can_e2e.CRC8_INIT, dtype=np.uint8)
+    if data_id is not None:
+        for b in (data_id & 0xFF, (data_id >> 8) & 0xFF):
+            reg = _CRC8_TABLE[reg ^ np.uint8(b)]
+    for j in range(1, data.shape[1]):
+        reg = _CRC8_TABLE[reg ^ data[:, j]]
+    return reg ^ np.uint8(can_e2e.CRC8_XOROUT)
 
 
 def can_packers(dbc: VdpsDbc | None = None) -> dict[str, CanPacker]:
-    """A packer for every sensor message (no CRC) of the DBC, by message name."""
+    """A packer for every sensor message of the DBC, by message name."""
     dbc = dbc or load_dbc()
-    return {name: CanPacker(spec) for name, spec in dbc.messages.items() if spec.crc is None}
+    return {name: CanPacker(spec) for name, spec in dbc.messages.items() if spec.is_sensor}
 
 
 def frame_time_ns(dlc: int, bitrate_bps: int) -> int:
