@@ -121,13 +121,16 @@ class FoxgloveView:
                 self._sample(s, writer)
             return
         runs: dict[str, tuple[dict, list, list, list]] = {}
-        check = S.check_time_ns
+        check, top = S.check_time_ns, S.MAX_TIME_NS
         for s in samples:
             how = self._topic(s)
-            stamp = self.stamp(s.t_ns)
+            t = s.t_ns
+            stamp = self.stamp(t)
             try:
-                check("t_ns", s.t_ns)
-                check("wall_time_ns", stamp)
+                if not (type(t) is int and 0 <= t <= top and 0 <= stamp <= top):
+                    check("t_ns", t)
+                    if stamp:
+                        check("wall_time_ns", stamp)
                 payload = sample_payload(s)
             except (ValueError, TypeError, KeyError, OverflowError):
                 self.refused += 1

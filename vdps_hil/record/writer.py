@@ -322,26 +322,31 @@ class RecordingWriter:
         self._write(topic, schema_name, t_ns, payload, wall_time_ns, channel_metadata or {})
 
     def write_encoded_run(self, topic: str, schema_name: str, t_ns: Sequence[int], payloads: Sequence[bytes],
-                          wall_time_ns: Sequence[int], channel_metadata: Mapping[str, str] | None = None) -> None:
+                          wall_time_ns: Sequence[int | None], channel_metadata: Mapping[str, str] | None = None
+                          ) -> None:
         """``write_encoded(topic, schema_name, t_ns[k], payloads[k], wall_time_ns=wall_time_ns[k],
         channel_metadata=...)`` for k = 0..n-1 (the same messages, statistics and checks, each
         raised before anything is written), appended as one run of the channel (one pack and
         one write, ``MessageAppender.add_run``): a replay's Foxglove view writes its decoded
-        samples so. ``wall_time_ns``: each message's log time (> 0)."""
+        samples so."""
         S.check_topic(topic)
         if schema_name not in S.SCHEMAS:
             raise KeyError(f"unknown schema {schema_name!r}")
-        if not len(t_ns) == len(payloads) == len(wall_time_ns):
+        n = len(payloads)
+        if not len(t_ns) == n == len(wall_time_ns):
             raise ValueError("t_ns, payloads and wall_time_ns differ in length")
-        for t, p, w in zip(t_ns, payloads, wall_time_ns):
-            S.check_time_ns("t_ns", t)
-            if not w:
-                raise ValueError("write_encoded_run needs each message's log time")
-            S.check_time_ns("wall_time_ns", w)
-            if not isinstance(p, bytes):
-                raise TypeError(f"payload must be bytes, got {type(p).__name__}")
-        if not payloads:
+        if not n:
             return
+        t_ns, payloads = tuple(t_ns), tuple(payloads)
+        if not (all(type(t) is int for t in t_ns) and 0 <= min(t_ns) and max(t_ns) <= S.MAX_TIME_NS):
+            for t in t_ns:  # raises the one-by-one error
+                S.check_time_ns("t_ns", t)
+        if not all(type(p) is bytes for p in payloads):
+            bad = next(p for p in payloads if not isinstance(p, bytes))
+            raise TypeError(f"payload must be bytes, got {type(bad).__name__}")
+        walls = tuple(wall_time_ns)
+        if not (all(type(w) is int for w in walls) and 0 < min(walls) and max(walls) <= S.MAX_TIME_NS):
+            walls = tuple(self._log_time(t, w) for t, w in zip(t_ns, walls))  # the rule of write_encoded
         md = channel_metadata or {}
         with self._lock:
             if self._closed:
@@ -351,9 +356,9 @@ class RecordingWriter:
                 ch = self._channel(topic, schema_name, md)  # raises on mismatch
             if self._copies.get(topic):
                 self._write_copies()  # the topic's queued copies go first: per-topic order
-            self._append_run(topic, ch, tuple(t_ns), tuple(wall_time_ns), tuple(payloads))
+            self._append_run(topic, ch, t_ns, walls, payloads)
         if self.mirror is not None:
-            for t, p, w in zip(t_ns, payloads, wall_time_ns):
+            for t, p, w in zip(t_ns, payloads, walls):
                 self.mirror(topic, schema_name, t, p, w, md)
 
     # --- typed helpers --------------------------------------------------------------------------
