@@ -342,7 +342,8 @@ def test_encoded_run_writes_what_write_encoded_writes(tmp_path):
     before it written first; a bad time anywhere in the run raises before anything is written."""
     ts = [5, 7, 6, 9, 9]  # one step back: counted
     payloads = [json_payload("/decoded/a/b", S.SAMPLE, t, Sample(t, "a", "b", {"x": t / 3}).to_json()) for t in ts]
-    walls = [S.DEFAULT_SIM_EPOCH_NS + t for t in ts]
+    walls = [S.DEFAULT_SIM_EPOCH_NS + 2 * t for t in ts]
+    walls[3] = 0  # none: the writer's rule (sim epoch + t_ns)
     md = {"source": "a", "kind": "b"}
     files, stats = [], []
     for run in (True, False):
@@ -361,5 +362,6 @@ def test_encoded_run_writes_what_write_encoded_writes(tmp_path):
             stats.append((dict(w.stats.messages), dict(w.stats.time_backwards)))
         files.append(_mcap_messages(path))
     assert files[0] == files[1] and len(files[0]) == 6
+    assert [m[2] - S.DEFAULT_SIM_EPOCH_NS for m in files[0]] == [10, 10, 14, 12, 9, 18]
     assert stats[0] == stats[1] == ({"/decoded/a/b": 6}, {"/decoded/a/b": 1})
     assert RecordingReader(tmp_path / "True.mcap").channel_metadata("/decoded/a/b") == md

@@ -13,7 +13,7 @@ from typing import Any, Mapping
 
 from vdps_hil.record import schemas as S
 
-__all__ = ["estimate_payload", "estimate_topic", "json_payload", "sample_payload"]
+__all__ = ["check_run", "estimate_payload", "estimate_topic", "json_payload", "sample_payload"]
 
 _JSON_KEYS: dict[str, str] = {}
 _SAMPLE_HEADS: dict[tuple[str, str], str] = {}
@@ -103,3 +103,25 @@ def sample_payload(s) -> bytes:
             _SAMPLE_HEADS.clear()
         head = _SAMPLE_HEADS[key] = f',"source":{json.dumps(key[0])},"kind":{json.dumps(key[1])},"valid":'
     return (f'{{"t_ns":{t},"wall_time_ns":{w}{head}{"true" if valid else "false"},"fields":{fields}}}').encode()
+
+
+def check_run(topic: str, schema_name: str, t_ns, payloads, wall_time_ns) -> tuple[tuple, tuple, tuple]:
+    """The checks ``write_encoded`` makes of each message, of a run of one topic (times at once,
+    each one's own error where one fails): (t_ns, payloads, log times) as tuples; a log time
+    0 or None stays for the writer's rule."""
+    S.check_topic(topic)
+    if schema_name not in S.SCHEMAS:
+        raise KeyError(f"unknown schema {schema_name!r}")
+    t_ns, payloads, walls = tuple(t_ns), tuple(payloads), tuple(wall_time_ns)
+    if not len(t_ns) == len(payloads) == len(walls):
+        raise ValueError("t_ns, payloads and wall_time_ns differ in length")
+    if not t_ns:
+        return t_ns, payloads, walls
+    for what, ts in (("t_ns", t_ns), ("wall_time_ns", [w for w in walls if w])):
+        if ts and not (all(type(t) is int for t in ts) and 0 <= min(ts) and max(ts) <= S.MAX_TIME_NS):
+            for t in ts:  # raises the one-by-one error
+                S.check_time_ns(what, t)
+    if not all(type(p) is bytes for p in payloads):
+        bad = next(p for p in payloads if not isinstance(p, bytes))
+        raise TypeError(f"payload must be bytes, got {type(bad).__name__}")
+    return t_ns, payloads, walls

@@ -41,7 +41,7 @@ from mcap.writer import LIBRARY_IDENTIFIER as _MCAP_LIBRARY
 from vdps_hil import __version__ as _TOOL_VERSION
 from vdps_hil.record import schemas as S
 from vdps_hil.record.mcap_append import MessageAppender
-from vdps_hil.record.payloads import estimate_payload, estimate_topic, json_payload
+from vdps_hil.record.payloads import check_run, estimate_payload, estimate_topic, json_payload
 
 __all__ = ["RecordingWriter", "WriterStats"]
 
@@ -329,24 +329,11 @@ class RecordingWriter:
         raised before anything is written), appended as one run of the channel (one pack and
         one write, ``MessageAppender.add_run``): a replay's Foxglove view writes its decoded
         samples so."""
-        S.check_topic(topic)
-        if schema_name not in S.SCHEMAS:
-            raise KeyError(f"unknown schema {schema_name!r}")
-        n = len(payloads)
-        if not len(t_ns) == n == len(wall_time_ns):
-            raise ValueError("t_ns, payloads and wall_time_ns differ in length")
-        if not n:
+        t_ns, payloads, walls = check_run(topic, schema_name, t_ns, payloads, wall_time_ns)
+        if not payloads:
             return
-        t_ns, payloads = tuple(t_ns), tuple(payloads)
-        if not (all(type(t) is int for t in t_ns) and 0 <= min(t_ns) and max(t_ns) <= S.MAX_TIME_NS):
-            for t in t_ns:  # raises the one-by-one error
-                S.check_time_ns("t_ns", t)
-        if not all(type(p) is bytes for p in payloads):
-            bad = next(p for p in payloads if not isinstance(p, bytes))
-            raise TypeError(f"payload must be bytes, got {type(bad).__name__}")
-        walls = tuple(wall_time_ns)
-        if not (all(type(w) is int for w in walls) and 0 < min(walls) and max(walls) <= S.MAX_TIME_NS):
-            walls = tuple(self._log_time(t, w) for t, w in zip(t_ns, walls))  # the rule of write_encoded
+        if not all(walls):  # none given: the rule of write_encoded
+            walls = tuple(w if w else self._log_time(t, None) for t, w in zip(t_ns, walls))
         md = channel_metadata or {}
         with self._lock:
             if self._closed:
