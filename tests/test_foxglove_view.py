@@ -119,3 +119,36 @@ def test_sample_payload_is_write_sample_s(tmp_path):
     s = Sample(7, "can.vdps", "steer", {"steer_wheel_angle_rad": 0.25, "seq_counter": math.inf}, 9, False)
     assert sample_payload(s) == json.dumps(s.to_json(), separators=(",", ":"), allow_nan=False).encode()
     assert json.loads(sample_payload(s))["fields"]["seq_counter"] is None
+
+
+def test_samples_into_a_recording_writer_are_those_written_one_by_one(tmp_path):
+    """The view writes a batch of samples into a RecordingWriter as one run per topic
+    (``write_encoded_run``): per topic the same messages as one write_encoded per sample (a
+    writer without runs: the live server's); a sample with a time out of range refused and
+    counted, the others written."""
+    rng = np.random.default_rng(5)
+    samples = []
+    for k in range(300):
+        kind = ("imu", "steer", "gnss_pos")[k % 3]
+        f = {"gnss_lat_deg": 24.0 + rng.normal(0, 1e-4), "gnss_lon_deg": 121.0, "gnss_alt_m": 10.0} \
+            if kind == "gnss_pos" else {"v": float(rng.normal()), "w": math.nan}
+        samples.append(Sample(k * 1_000_000, "src", kind, f, 0, bool(k % 7)))
+    samples.append(Sample(-5, "src", "imu", {"v": 1.0}, 0, True))
+    got, refused = [], []
+    for runs in (True, False):
+        view = FoxgloveView(epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
+        path = tmp_path / f"{runs}.mcap"
+        with RecordingWriter(path, sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS) as w:
+            view.samples(samples, w if runs else _OneByOne(w))
+        got.append(_read(path))
+        refused.append(view.refused)
+    assert got[0] == got[1]
+    assert len(got[0]["/decoded/src/imu"]) == 100 and len(got[0][S.GNSS_FIX_TOPIC]) == 100
+    assert refused == [1, 1]
+
+
+class _OneByOne:
+    """A writer without write_encoded_run (the view then writes sample by sample)."""
+
+    def __init__(self, w):
+        self.write_encoded, self.write_json = w.write_encoded, w.write_json

@@ -157,3 +157,22 @@ def test_sigmas_include_the_uncertainty_of_upstream_estimates(rng):
     assert np.all(np.diag(total) >= np.diag(own))
     assert np.any(np.diag(total) > np.diag(own))
     assert ident.sigmas["inertia_z_kgm2"] == pytest.approx(math.sqrt(total[2, 2]))
+
+
+def test_status_read_at_every_update_equals_status_read_once(rng):
+    # covariances and problem_status are computed once per update (the chain reads them at every
+    # estimate): read after every update, they must equal those of an identical identifier read
+    # only at the end, bit for bit; and a caller changing the returned arrays changes nothing
+    inputs = [forward(rng, k) for k in range(260)]
+    every, once = Identifier(MODEL), Identifier(MODEL)
+    for inp in inputs:
+        every.update(inp)
+        once.update(inp)
+        every.converged, every.sigmas
+        every.covariances["mass"][...] = 0.0
+    assert every.problem_status == once.problem_status
+    assert every.sigmas == once.sigmas
+    assert all(np.array_equal(every.covariances[n], once.covariances[n]) for n in PROBLEM_NAMES)
+    assert every.converged["mass"] and every.sigmas["mass_kg"] > 0.0
+    every.reset("mass")
+    assert not every.converged["mass"]

@@ -67,3 +67,24 @@ def test_too_few_rows_are_not_tested_and_the_test_can_be_switched_off():
     assert not mon.mismatch and mon.variance_scale == 1.0
     off = MismatchMonitor("cornering", StatusConfig(mismatch_test=False), (2.0, 2.0))
     assert not off.mismatch
+
+
+def test_tests_read_between_observations_follow_every_new_residual():
+    # tests() is computed once per change of the residuals: read after every observation it must
+    # equal the tests of a monitor read only at the end (a stale cache would keep old counts)
+    rng = np.random.default_rng(11)
+    q = (1.0 / NOISE, 1.0 / NOISE)
+    a_mon, b_mon = MismatchMonitor("cornering", STRICT, q), MismatchMonitor("cornering", STRICT, q)
+    x, c = np.array([1.0, 1.0]), np.eye(2)
+    seen = []
+    for k in range(400):
+        a = rng.normal(0.0, 1.0, (2, 2))
+        reg = Regressor(a, a @ x + rng.normal(0.0, NOISE + k / 100.0, 2), np.array([True, k % 3 != 0]))
+        for mon in (a_mon, b_mon):
+            mon.observe(k * 10_000_000, reg, x, c)
+        seen.append(a_mon.tests()[1].n)
+        a_mon.variance_scale, a_mon.failed_rows
+    assert a_mon.tests() == b_mon.tests()
+    assert seen[-1] == 266 and seen[:3] == [0, 1, 2]  # row 1 used when k % 3 != 0
+    a_mon.reset()
+    assert a_mon.tests()[0].n == 0

@@ -49,3 +49,18 @@ def test_direct_estimate_encoding_equals_json_dumps(vals, sig, t_ns):
     v, s = _float_object(vals), "" if sig is None else _float_object(sig)
     got = f'{{"t_ns":{t_ns},"values":{v}' + (f',"sigmas":{s}}}' if sig is not None else "}")
     assert got == ref
+
+
+@settings(max_examples=200, deadline=None)
+@given(t=st.integers(0, S.MAX_TIME_NS), w=st.integers(0, S.MAX_TIME_NS), valid=st.sampled_from([True, False, 1]),
+       name=st.text(min_size=1, max_size=6),
+       fields=st.dictionaries(st.text(max_size=5), st.floats(allow_nan=True, allow_infinity=True)
+                              | st.integers(-5, 5) | st.booleans(), max_size=5))
+def test_sample_payload_equals_json_dumps_of_to_json(t, w, valid, name, fields):
+    """The direct encoding of a bus sample (floats written as float.__repr__, non-finite -> null,
+    any other value or a non-bool ``valid`` through json.dumps) = json.dumps(Sample.to_json())."""
+    from vdps_hil.bus.samples import Sample
+    from vdps_hil.record.payloads import sample_payload
+
+    s = Sample(t, name, name[::-1], fields, w, valid)
+    assert sample_payload(s) == json.dumps(s.to_json(), separators=(",", ":"), allow_nan=False).encode()

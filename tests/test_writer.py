@@ -334,3 +334,34 @@ def test_messages_encoded_elsewhere_are_written_as_write_json_and_write_estimate
 
     assert data(tmp_path / "direct.mcap") == data(tmp_path / "encoded.mcap")  # byte for byte
     assert json.loads(estimate_payload(1_000, vals, sig))["values"]["b"] is None
+
+
+def test_encoded_run_writes_what_write_encoded_writes(tmp_path):
+    """write_encoded_run = write_encoded once per message (log and publish times, sequence numbers,
+    time-order counts, statistics, channel metadata), with copied messages of the topic queued
+    before it written first; a bad time anywhere in the run raises before anything is written."""
+    ts = [5, 7, 6, 9, 9]  # one step back: counted
+    payloads = [json_payload("/decoded/a/b", S.SAMPLE, t, Sample(t, "a", "b", {"x": t / 3}).to_json()) for t in ts]
+    walls = [S.DEFAULT_SIM_EPOCH_NS + 2 * t for t in ts]
+    walls[3] = 0  # none: the writer's rule (sim epoch + t_ns)
+    md = {"source": "a", "kind": "b"}
+    files, stats = [], []
+    for run in (True, False):
+        path = tmp_path / f"{run}.mcap"
+        with RecordingWriter(path, sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS) as w:
+            w.write_encoded("/decoded/a/b", S.SAMPLE, 1, payloads[0], wall_time_ns=walls[0], channel_metadata=md)
+            if run:
+                w.write_encoded_run("/decoded/a/b", S.SAMPLE, ts, payloads, walls, md)
+                with pytest.raises(ValueError):
+                    w.write_encoded_run("/decoded/a/b", S.SAMPLE, [10, -1], payloads[:2], walls[:2], md)
+                with pytest.raises(TypeError):
+                    w.write_encoded_run("/decoded/a/b", S.SAMPLE, [10, 11], [payloads[0], "x"], walls[:2], md)
+            else:
+                for t, p, wt in zip(ts, payloads, walls):
+                    w.write_encoded("/decoded/a/b", S.SAMPLE, t, p, wall_time_ns=wt, channel_metadata=md)
+            stats.append((dict(w.stats.messages), dict(w.stats.time_backwards)))
+        files.append(_mcap_messages(path))
+    assert files[0] == files[1] and len(files[0]) == 6
+    assert [m[2] - S.DEFAULT_SIM_EPOCH_NS for m in files[0]] == [10, 10, 14, 12, 9, 18]
+    assert stats[0] == stats[1] == ({"/decoded/a/b": 6}, {"/decoded/a/b": 1})
+    assert RecordingReader(tmp_path / "True.mcap").channel_metadata("/decoded/a/b") == md

@@ -31,7 +31,6 @@ at the write for a live run (``epoch_ns=None``).
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from typing import Callable
@@ -40,6 +39,7 @@ from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation.estimates import Estimate
 from vdps_hil.pipeline.outputs import CanFrame
 from vdps_hil.record import schemas as S
+from vdps_hil.record.payloads import sample_payload as _sample_payload
 
 __all__ = ["FoxgloveView", "WARNING_TOPIC", "sample_payload", "vehicle_quaternion"]
 
@@ -59,8 +59,8 @@ def vehicle_quaternion(phi_rad: float, theta_rad: float, psi_rad: float) -> tupl
 
 def sample_payload(s: Sample) -> bytes:
     """The bytes ``RecordingWriter.write_sample`` writes for ``s`` (``json.dumps`` of
-    ``Sample.to_json``, compact; non-finite values as null)."""
-    return json.dumps(s.to_json(), separators=(",", ":"), allow_nan=False).encode()
+    ``Sample.to_json``, compact; non-finite values as null; ``record.payloads.sample_payload``)."""
+    return _sample_payload(s)
 
 
 class FoxgloveView:
@@ -112,23 +112,70 @@ class FoxgloveView:
         return ViewedSummary()
 
     def samples(self, samples, writer) -> None:
-        """``/decoded/<source>/<kind>`` and ``/gnss/fix`` of input samples."""
-        topics = self._sample_topics
+        """``/decoded/<source>/<kind>`` and ``/gnss/fix`` of input samples; into a writer with
+        ``write_encoded_run`` (a ``RecordingWriter``) one run per topic of the batch (the same
+        messages per topic)."""
+        run = getattr(writer, "write_encoded_run", None)
+        if run is None:
+            for s in samples:
+                self._sample(s, writer)
+            return
+        runs: dict[str, tuple[dict, list, list, list]] = {}
+        check, top = S.check_time_ns, S.MAX_TIME_NS
         for s in samples:
-            key = (s.source, s.kind)
-            how = topics.get(key)
-            if how is None:
-                how = topics[key] = (S.sample_topic(s.source, s.kind), {"source": s.source, "kind": s.kind})
-            stamp = self.stamp(s.t_ns)
+            how = self._topic(s)
+            t = s.t_ns
+            stamp = self.stamp(t)
             try:
-                writer.write_encoded(how[0], S.SAMPLE, s.t_ns, sample_payload(s), wall_time_ns=stamp,
-                                     channel_metadata=how[1])
-                if s.kind == "gnss_pos":
-                    doc = S.location_fix_doc(s, stamp_ns=stamp)
-                    if doc is not None:
-                        writer.write_json(S.GNSS_FIX_TOPIC, S.LOCATION_FIX, s.t_ns, doc, wall_time_ns=stamp)
+                if not (type(t) is int and 0 <= t <= top and 0 <= stamp <= top):
+                    check("t_ns", t)
+                    if stamp:
+                        check("wall_time_ns", stamp)
+                payload = sample_payload(s)
             except (ValueError, TypeError, KeyError, OverflowError):
                 self.refused += 1
+                continue
+            r = runs.get(how[0])
+            if r is None:
+                r = runs[how[0]] = (how[1], [], [], [])
+            r[1].append(s.t_ns)
+            r[2].append(payload)
+            r[3].append(stamp)
+            if s.kind == "gnss_pos":
+                self._fix(s, stamp, writer)
+        for topic, (md, t, p, w) in runs.items():
+            try:
+                run(topic, S.SAMPLE, t, p, w, md)
+            except (ValueError, TypeError, KeyError, OverflowError):
+                self.refused += len(p)
+
+    def _topic(self, s: Sample) -> tuple[str, dict]:
+        """(topic, channel metadata) of a sample's ``/decoded/`` channel."""
+        key = (s.source, s.kind)
+        how = self._sample_topics.get(key)
+        if how is None:
+            how = self._sample_topics[key] = (S.sample_topic(s.source, s.kind), {"source": s.source, "kind": s.kind})
+        return how
+
+    def _sample(self, s: Sample, writer) -> None:
+        how = self._topic(s)
+        stamp = self.stamp(s.t_ns)
+        try:
+            writer.write_encoded(how[0], S.SAMPLE, s.t_ns, sample_payload(s), wall_time_ns=stamp,
+                                 channel_metadata=how[1])
+        except (ValueError, TypeError, KeyError, OverflowError):
+            self.refused += 1
+            return
+        if s.kind == "gnss_pos":
+            self._fix(s, stamp, writer)
+
+    def _fix(self, s: Sample, stamp: int, writer) -> None:
+        try:
+            doc = S.location_fix_doc(s, stamp_ns=stamp)
+            if doc is not None:
+                writer.write_json(S.GNSS_FIX_TOPIC, S.LOCATION_FIX, s.t_ns, doc, wall_time_ns=stamp)
+        except (ValueError, TypeError, KeyError, OverflowError):
+            self.refused += 1
 
     def outputs(self, outs, writer) -> None:
         """``/est/fix``, ``/est/tf``, ``/est/pose`` of estimates, ``/est/warning`` of sent frames."""

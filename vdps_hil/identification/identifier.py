@@ -52,6 +52,7 @@ class Identifier:
         self._inputs_rejected = 0
         self._last_t_ns: int | None = None
         self._params = self._collect()
+        self._derived: dict[str, object] = {}  # covariances, problem_status: until the next update/reset
 
     def _make(self, name: str) -> WeightedRLS:
         pc = self.config.problem(name)
@@ -79,6 +80,7 @@ class Identifier:
         cornering, inertia, in that order, each with the newest estimates of the others)."""
         if not isinstance(inputs, IdentInputs):
             raise TypeError(f"Identifier.update needs IdentInputs, got {type(inputs).__name__}")
+        self._derived.clear()
         if self._last_t_ns is not None and inputs.t_ns <= self._last_t_ns:
             self._inputs_rejected += 1  # duplicate or out of order: would count data twice
             return
@@ -123,6 +125,7 @@ class Identifier:
         """Back to the starting values (or ``start``) for one problem or all."""
         if start is not None:
             self._start = start
+        self._derived.clear()
         for name in PROBLEM_NAMES if problem is None else (problem,):
             if name not in self._rls:
                 raise KeyError(f"unknown problem {name!r}; one of {PROBLEM_NAMES}")
@@ -158,7 +161,14 @@ class Identifier:
         (``parameter_covariance``, AR(1) inflation f_j included) scaled by max(1, tau / f_j) where
         the residuals' long-run variance ratio tau (``MismatchMonitor.variance_scale``) exceeds
         the AR(1) factor (residuals correlated over the maneuver, not just the samples), plus the consider covariance of the upstream estimates it
-        used (block-diagonal over the upstream problems, cascaded in update order)."""
+        used (block-diagonal over the upstream problems, cascaded in update order). Computed
+        once per update (the chain reads it at every estimate); each call returns copies."""
+        cov = self._derived.get("covariances")
+        if cov is None:
+            cov = self._derived["covariances"] = self._covariances()
+        return {k: v.copy() for k, v in cov.items()}
+
+    def _covariances(self) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {}
         for name in PROBLEM_NAMES:
             rls = self._rls[name]
@@ -212,7 +222,14 @@ class Identifier:
 
     @property
     def problem_status(self) -> dict[str, ProblemStatus]:
-        """Problem -> its ``status.ProblemStatus`` (per parameter: identified or why not)."""
+        """Problem -> its ``status.ProblemStatus`` (per parameter: identified or why not); computed
+        once per update."""
+        st = self._derived.get("problem_status")
+        if st is None:
+            st = self._derived["problem_status"] = self._problem_status()
+        return dict(st)
+
+    def _problem_status(self) -> dict[str, ProblemStatus]:
         sig = self.sigmas
         failed = {name: m.failed_rows for name, m in self._mismatch.items()}
         for name, checks in CROSS_CHECKS.items():  # downstream rows that test this problem too

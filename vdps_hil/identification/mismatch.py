@@ -146,6 +146,7 @@ class MismatchMonitor:
 
     def reset(self) -> None:
         self._rows = [_Row() for _ in self.names]
+        self._tests: tuple[RowTest, ...] | None = None  # ``tests()`` until the next observe/reset
 
     def observe(self, t_ns: int, reg, x_prior: np.ndarray, c_prior: np.ndarray) -> None:
         """The normalised a priori residuals of the rows ``reg`` used (module docstring)."""
@@ -157,10 +158,18 @@ class MismatchMonitor:
         k_bin = t_ns // self._bin_ns
         v = b - a @ x_prior
         s = 1.0 / self._q ** 2 + np.einsum("ij,jk,ik->i", a, c_prior, a)
+        self._tests = None
         for i in np.flatnonzero(use):
             self._rows[i].add(k_bin, float(v[i] / math.sqrt(s[i])))
 
     def tests(self) -> tuple[RowTest, ...]:
+        """The rows' tests, computed once per change of the residuals (the identifier reads them
+        several times per estimate: ``failed_rows``, ``variance_scale``)."""
+        if self._tests is None:
+            self._tests = self._compute_tests()
+        return self._tests
+
+    def _compute_tests(self) -> tuple[RowTest, ...]:
         cfg = self.config
         out = []
         for name, row in zip(self.names, self._rows):

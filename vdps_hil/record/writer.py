@@ -33,7 +33,7 @@ import os
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import IO, Any, Callable, Mapping
+from typing import IO, Any, Callable, Mapping, Sequence
 
 from mcap.writer import CompressionType, IndexType, Writer
 from mcap.writer import LIBRARY_IDENTIFIER as _MCAP_LIBRARY
@@ -41,7 +41,7 @@ from mcap.writer import LIBRARY_IDENTIFIER as _MCAP_LIBRARY
 from vdps_hil import __version__ as _TOOL_VERSION
 from vdps_hil.record import schemas as S
 from vdps_hil.record.mcap_append import MessageAppender
-from vdps_hil.record.payloads import estimate_payload, estimate_topic, json_payload
+from vdps_hil.record.payloads import check_run, estimate_payload, estimate_topic, json_payload
 
 __all__ = ["RecordingWriter", "WriterStats"]
 
@@ -271,25 +271,30 @@ class RecordingWriter:
         for topic, run in self._copies.items():
             if run is None or not run.queue:
                 continue
-            ch, n = run.channel, len(run.queue)
             _, t_ns, log_time, _, payload = zip(*run.queue)
             run.queue.clear()
-            if ch.last_t_ns <= t_ns[0] and all(map(operator.le, t_ns, t_ns[1:])):
-                ch.last_t_ns = t_ns[-1]  # in order: the common case
-            else:
-                for t in t_ns:
-                    if t < ch.last_t_ns:
-                        self.stats.time_backwards[topic] = self.stats.time_backwards.get(topic, 0) + 1
-                    else:
-                        ch.last_t_ns = t
-            self.stats.messages[topic] = self.stats.messages.get(topic, 0) + n
-            if self._appender is not None and ch.seq + n <= 1 << 32:
-                self._appender.add_run(ch.id, ch.seq, log_time, payload, t_ns)
-            else:  # the library's add_message, or sequence numbers wrapping inside the run
-                for k in range(n):
-                    self._add_message(ch.id, log_time[k], payload[k], t_ns[k], (ch.seq + k) & 0xFFFFFFFF)
-            ch.seq = (ch.seq + n) & 0xFFFFFFFF
+            self._append_run(topic, run.channel, t_ns, log_time, payload)
         self._copies_queued = 0
+
+    def _append_run(self, topic: str, ch: "_Channel", t_ns, log_time, payload) -> None:
+        """Messages of one channel in this order, as ``_write`` once each gives them (lock held;
+        times checked): statistics, sequence numbers, time-order counts."""
+        n = len(payload)
+        if ch.last_t_ns <= t_ns[0] and all(map(operator.le, t_ns, t_ns[1:])):
+            ch.last_t_ns = t_ns[-1]  # in order: the common case
+        else:
+            for t in t_ns:
+                if t < ch.last_t_ns:
+                    self.stats.time_backwards[topic] = self.stats.time_backwards.get(topic, 0) + 1
+                else:
+                    ch.last_t_ns = t
+        self.stats.messages[topic] = self.stats.messages.get(topic, 0) + n
+        if self._appender is not None and ch.seq + n <= 1 << 32:
+            self._appender.add_run(ch.id, ch.seq, log_time, payload, t_ns)
+        else:  # the library's add_message, or sequence numbers wrapping inside the run
+            for k in range(n):
+                self._add_message(ch.id, log_time[k], payload[k], t_ns[k], (ch.seq + k) & 0xFFFFFFFF)
+        ch.seq = (ch.seq + n) & 0xFFFFFFFF
 
     def write_json(self, topic: str, schema_name: str, t_ns: int, doc: Mapping[str, Any], *,
                    wall_time_ns: int | None = None,
@@ -315,6 +320,33 @@ class RecordingWriter:
         if not isinstance(payload, bytes):
             raise TypeError(f"payload must be bytes, got {type(payload).__name__}")
         self._write(topic, schema_name, t_ns, payload, wall_time_ns, channel_metadata or {})
+
+    def write_encoded_run(self, topic: str, schema_name: str, t_ns: Sequence[int], payloads: Sequence[bytes],
+                          wall_time_ns: Sequence[int | None], channel_metadata: Mapping[str, str] | None = None
+                          ) -> None:
+        """``write_encoded(topic, schema_name, t_ns[k], payloads[k], wall_time_ns=wall_time_ns[k],
+        channel_metadata=...)`` for k = 0..n-1 (the same messages, statistics and checks, each
+        raised before anything is written), appended as one run of the channel (one pack and
+        one write, ``MessageAppender.add_run``): a replay's Foxglove view writes its decoded
+        samples so."""
+        t_ns, payloads, walls = check_run(topic, schema_name, t_ns, payloads, wall_time_ns)
+        if not payloads:
+            return
+        if not all(walls):  # none given: the rule of write_encoded
+            walls = tuple(w if w else self._log_time(t, None) for t, w in zip(t_ns, walls))
+        md = channel_metadata or {}
+        with self._lock:
+            if self._closed:
+                raise ValueError("recording is closed")
+            ch = self._channels.get(topic)
+            if ch is None or ch.schema != schema_name:
+                ch = self._channel(topic, schema_name, md)  # raises on mismatch
+            if self._copies.get(topic):
+                self._write_copies()  # the topic's queued copies go first: per-topic order
+            self._append_run(topic, ch, t_ns, walls, payloads)
+        if self.mirror is not None:
+            for t, p, w in zip(t_ns, payloads, walls):
+                self.mirror(topic, schema_name, t, p, w, md)
 
     # --- typed helpers --------------------------------------------------------------------------
 
