@@ -51,7 +51,7 @@ __all__ = ["CROSS_CHECKS", "ROW_NAMES", "MismatchMonitor", "RowTest"]
 ROW_NAMES: dict[str, tuple[str, ...]] = {
     "mass": ("vertical",),
     "tracking": ("wheel_1", "wheel_2", "wheel_3", "wheel_4"),
-    "cornering": ("longitudinal", "lateral"),
+    "cornering": ("longitudinal", "lateral", "yaw"),  # yaw: only with the yaw row (problems)
     "inertia": ("roll", "pitch", "yaw"),
 }
 """The rows of each problem's regressor (eq 20-23) by name."""
@@ -139,8 +139,8 @@ class MismatchMonitor:
     def __init__(self, problem: str, status_config, q):
         self.problem = problem
         self.config = status_config
-        self.names = ROW_NAMES[problem]
         self._q = np.asarray(q, dtype=float)
+        self.names = ROW_NAMES[problem][:len(self._q)]
         self._bin_ns = max(int(round(status_config.mismatch_lag_s * 1e9)), 1)
         self.reset()
 
