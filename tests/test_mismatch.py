@@ -67,3 +67,27 @@ def test_too_few_rows_are_not_tested_and_the_test_can_be_switched_off():
     assert not mon.mismatch and mon.variance_scale == 1.0
     off = MismatchMonitor("cornering", StatusConfig(mismatch_test=False), (2.0, 2.0))
     assert not off.mismatch
+
+
+def test_integrated_autocorrelation_time_counts_the_effective_samples():
+    """``_Row.tau_int`` (Sokal's window over the lagged sums kept in a ring): ~1 for white
+    residuals, ~20 for a 20-sample moving average of white noise (N / N_eff of its mean), the
+    lagged sums equal to the direct ones; None below 4 MAX_LAG residuals."""
+    import numpy as np
+
+    from vdps_hil.identification.mismatch import MAX_LAG, _Row
+    rng = np.random.default_rng(11)
+    white, ma = _Row(), _Row()
+    x = rng.normal(size=4000)
+    y = np.convolve(rng.normal(size=4019), np.ones(20) / 20.0, mode="valid")
+    for a, b in zip(x, y):
+        white.add(0, float(a))
+        ma.add(0, float(b))
+    direct = np.array([x[k:] @ x[:-k] for k in range(1, MAX_LAG + 1)])
+    assert np.allclose(white.lag_sums[1:], direct, rtol=1e-12, atol=1e-9)
+    assert 0.8 < white.tau_int() < 1.3
+    assert 15.0 < ma.tau_int() < 25.0
+    short = _Row()
+    for a in x[:4 * MAX_LAG - 1]:
+        short.add(0, float(a))
+    assert short.tau_int() is None
