@@ -58,7 +58,8 @@ def test_vehicle_file_chassis_table_is_optional_checked_and_one_line():
     assert v.chassis.has_anti_roll_bars and not v.chassis.has_roll_centres and not v.chassis.is_paper
     for bad, why in (("anti_roll_stiffness_front_nmprad = -1", "must not be negative"),
                      ("roll_centre_height_front_m = 'high'", "finite number"),
-                     ("bar = 1", "unknown key 'bar'"), ("ackermann_fraction = 5", "within [-1, 2]")):
+                     ("bar = 1", "unknown key 'bar'"), ("ackermann_fraction = 5", "within [-1, 2]"),
+                     ("wheel_roll_coupling = 1.5", "within [0, 1]")):
         with pytest.raises(VehicleFileError, match=re.escape(why)) as e:
             parse_vehicle(text + f"\n[chassis]\n{bad}\n")
         assert "\n" not in str(e.value)
@@ -70,6 +71,7 @@ def test_cr_model_files_carry_the_packages_roll_stiffness_and_parallel_steer():
     assert c3.anti_roll_stiffness_front_nmprad == pytest.approx(33948.22, abs=0.01)
     assert c3.anti_roll_stiffness_rear_nmprad == pytest.approx(7731.374, abs=0.001)
     assert c1.ackermann_fraction == c3.ackermann_fraction == 0.0 and not (c1.has_roll_centres or c3.has_roll_centres)
+    assert c1.wheel_roll_coupling == c3.wheel_roll_coupling == 0.0  # its slip uses the sprung CG's v
 
 
 def _rolled_state(model, phi):

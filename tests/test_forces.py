@@ -112,3 +112,32 @@ def test_measured_moment_form_matches_the_core_with_the_body_tilted_over_the_roa
                            moments_from_inputs(veh, TRUE, inp1, "measured")[:2], rtol=0, atol=1e-9)
         assert not np.allclose(moments_from_inputs(veh, TRUE, inp2, "stiffness")[:2],
                                moments_from_inputs(veh, TRUE, inp1, "stiffness")[:2], rtol=0, atol=1.0)
+
+
+def test_wheel_roll_coupling_removes_the_body_roll_rate_from_the_slip_angles():
+    """``slip_angles_rad``: with c_r = 0 the slip angles of a state rolling at p equal the core's
+    rigid-wheel slip angles of the same state without the roll rate (to first order: 2e-5 rad
+    for p = 0.3 rad/s at 20 m/s, where the roll term itself is 3.5e-3 rad); c_r = 1 (the paper's
+    model) returns the inputs' angles unchanged."""
+    import dataclasses
+
+    from vdps_hil.identification.forces import slip_angles_rad
+    from vdps_hil.model.core import Env, Inputs, Model
+    model = Model(MODEL, unsprung_dof=False)
+    u = Inputs(steer_wheel_angle_rad=0.6)
+
+    def slips(p):
+        x = model.design_state(speed_mps=20.0)
+        x[7], x[9], x[11] = 0.4, p, 0.2
+        _, d = model.evaluate(x, u, Env())
+        return tuple(d[f"slip_angle_rad_{i}"] for i in range(1, 5)), tuple(d[f"road_wheel_angle_rad_{i}"] for i in range(1, 5))
+    (rolled, delta), (still, _) = slips(0.3), slips(0.0)
+    inp = IdentInputs(t_ns=1, xdd_a_mps2=0.0, ydd_a_mps2=0.0, zdd_a_mps2=0.0, xd_a_mps=20.0, yd_a_mps=0.4,
+                      psi_v_dot_radps=0.2, gravity_aux_mps2=(0.0, 0.0, -G), omega_radps=(0.3, 0.0, 0.2),
+                      omega_dot_radps2=(0.0, 0.0, 0.0), susp_deflection_m=(0.0,) * 4, susp_rate_mps=(0.0,) * 4,
+                      wheel_speed_radps=(60.0,) * 4, wheel_accel_radps2=(0.0,) * 4, wheel_torque_nm=(0.0,) * 4,
+                      slip_ratio=(0.0,) * 4, slip_angle_rad=rolled, wheel_angle_rad=delta)
+    assert np.max(np.abs(np.subtract(rolled, still))) > 3e-3  # the rigid model's roll term
+    assert np.array_equal(slip_angles_rad(MODEL, inp), np.asarray(rolled))  # c_r = 1
+    free = dataclasses.replace(MODEL, chassis=dataclasses.replace(MODEL.chassis, wheel_roll_coupling=0.0))
+    assert np.allclose(slip_angles_rad(free, inp), still, atol=2e-5, rtol=0.0)

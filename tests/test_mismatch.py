@@ -88,3 +88,27 @@ def test_tests_read_between_observations_follow_every_new_residual():
     assert seen[-1] == 266 and seen[:3] == [0, 1, 2]  # row 1 used when k % 3 != 0
     a_mon.reset()
     assert a_mon.tests()[0].n == 0
+
+
+def test_integrated_autocorrelation_time_counts_the_effective_samples():
+    """``_Row.tau_int`` (Sokal's window over the lagged sums kept in a ring): ~1 for white
+    residuals, ~20 for a 20-sample moving average of white noise (N / N_eff of its mean), the
+    lagged sums equal to the direct ones; None below 4 MAX_LAG residuals."""
+    import numpy as np
+
+    from vdps_hil.identification.mismatch import MAX_LAG, _Row
+    rng = np.random.default_rng(11)
+    white, ma = _Row(), _Row()
+    x = rng.normal(size=4000)
+    y = np.convolve(rng.normal(size=4019), np.ones(20) / 20.0, mode="valid")
+    for a, b in zip(x, y):
+        white.add(0, float(a))
+        ma.add(0, float(b))
+    direct = np.array([x[k:] @ x[:-k] for k in range(1, MAX_LAG + 1)])
+    assert np.allclose(white.lag_sums[1:], direct, rtol=1e-12, atol=1e-9)
+    assert 0.8 < white.tau_int() < 1.3
+    assert 15.0 < ma.tau_int() < 25.0
+    short = _Row()
+    for a in x[:4 * MAX_LAG - 1]:
+        short.add(0, float(a))
+    assert short.tau_int() is None

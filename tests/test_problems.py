@@ -71,6 +71,24 @@ def _core_inputs(rng, k):
     return inp, veh, np.array([d[f"moment_b_nm_{a}"] for a in "xyz"])
 
 
+def test_the_cornering_yaw_row_is_the_core_yaw_balance_and_weighs_the_axles(rng):
+    """The optional third row of eq 22 (``yaw_row_config``): exact on physics-core states with the
+    true parameters; a split of the same axle-force sum (C_f + C_r kept) leaves it unbalanced;
+    a config with two q entries has no yaw row."""
+    from vdps_hil.experiments.ident_study import yaw_row_config
+    from vdps_hil.identification.problems import cornering_regressor
+    cfg = yaw_row_config()
+    x = np.array([TRUE.cornering_stiffness_front_nprad, TRUE.cornering_stiffness_rear_nprad])
+    for k in range(5):
+        inp, veh, _ = _core_inputs(rng, k)
+        r = cornering_regressor(inp, veh, TRUE, cfg)
+        assert r.a.shape == (3, 2) and r.db_dup.shape == (3, 5)
+        assert np.allclose(r.b - r.a @ x, 0.0, atol=1e-8 * max(1.0, np.max(np.abs(r.b))))
+        moved = x + np.array([0.1, -0.1]) * x[0]
+        assert abs(r.b[2] - r.a[2] @ moved) > 1e-3 * abs(r.a[2] @ x) > 0.0
+        assert cornering_regressor(inp, veh, TRUE, load_ident_config()).a.shape == (2, 2)
+
+
 def test_moments_and_all_four_equations_agree_with_the_physics_core(rng):
     from vdps_hil.identification.forces import moments_from_inputs
     from vdps_hil.identification.problems import REGRESSORS

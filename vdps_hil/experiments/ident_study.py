@@ -25,7 +25,8 @@ from dataclasses import dataclass
 
 from vdps_hil.experiments.ident_drives import DriveKey, drive_inputs
 
-__all__ = ["CR_SCENARIOS", "STUDY_SEEDS", "TUNING_SEEDS", "ParamResult", "evaluate", "truth_params"]
+__all__ = ["CR_SCENARIOS", "STUDY_SEEDS", "TUNING_SEEDS", "YAW_ROW", "ParamResult", "evaluate", "truth_params",
+           "yaw_row_config"]
 
 TUNING_SEEDS = (1, 2, 101)
 """Seeds the identification thresholds were chosen on (module docstring)."""
@@ -33,6 +34,23 @@ STUDY_SEEDS = tuple(range(102, 112))
 """The acceptance study's seeds (disjoint from ``TUNING_SEEDS``)."""
 CR_SCENARIOS = ("cr-circle-ramp", "cr-lane-change", "cr-sine-accel", "cr-straight-pulses")
 """The four maneuvers of issue 17 (flat road: CommonRoad has no bank or grade)."""
+
+
+YAW_ROW = (0.01, 0.003)
+"""(q, excitation_min) of the cornering problem's optional yaw row: the inertia problem's yaw-row
+design noise (100 N m) and the lateral row's slip threshold x 1 m (``default.toml`` [cornering])."""
+
+
+def yaw_row_config(config=None):
+    """The identification config (default: ``configs/identification/default.toml``) with the
+    cornering problem's yaw row (``problems._cornering_yaw_row``) switched on."""
+    import dataclasses
+
+    from vdps_hil.identification.config import load_ident_config
+    cfg = config if config is not None else load_ident_config()
+    c = cfg.cornering
+    return dataclasses.replace(cfg, cornering=dataclasses.replace(
+        c, q=(*c.q[:2], YAW_ROW[0]), excitation_min=(*c.excitation_min[:2], YAW_ROW[1])))
 
 
 @dataclass(frozen=True)

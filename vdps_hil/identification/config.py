@@ -36,6 +36,9 @@ PROBLEM_PARAMS: dict[str, tuple[str, ...]] = {
     "inertia": ("inertia_x_kgm2", "inertia_y_kgm2", "inertia_z_kgm2"),
 }
 PROBLEM_ROWS = {"mass": 1, "tracking": 4, "cornering": 2, "inertia": 3}
+OPTIONAL_ROWS = {"cornering": 1}
+"""Rows a problem may add after its PROBLEM_ROWS: a ``[cornering]`` table whose ``q`` and
+``excitation_min`` have 3 entries uses eq 22's yaw row (``problems.cornering_regressor``)."""
 UPSTREAM: dict[str, tuple[str, ...]] = {"mass": (), "tracking": (), "cornering": ("mass", "tracking"),
                                         "inertia": ("tracking", "cornering")}
 """Problems whose estimates enter a problem's b (eq 22: m, C_lambda; eq 23's moments: C_lambda,
@@ -186,6 +189,8 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
         if name != "cornering" and set(t) & _CORNERING_ONLY:
             raise IdentConfigError(f"{where}: {sorted(set(t) & _CORNERING_ONLY)[0]!r} applies to [cornering] only")
         m, n = PROBLEM_ROWS[name], len(PROBLEM_PARAMS[name])
+        if isinstance(t.get("q"), list) and len(t["q"]) == m + OPTIONAL_ROWS.get(name, 0):
+            m = len(t["q"])
         w = t["w"]
         if w == "prior":
             w_t = None

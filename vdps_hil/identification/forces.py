@@ -63,8 +63,28 @@ import math
 import numpy as np
 
 from vdps_hil.identification.inputs import IdentInputs
+from vdps_hil.model.core import SLIP_SPEED_FLOOR_MPS
 from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.model.params import Geometry, IdentifiedParams, Vehicle
+
+
+def slip_angles_rad(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
+    """The slip angles the model's wheels see: ``inp.slip_angle_rad`` (the rigid kinematics of
+    ``model.core``) with the body roll rate's share 1 - c_r removed (``model.chassis``, wheel
+    roll coupling): alpha_i + (1 - c_r) p (h_cg - r) cos d_i / max(|v_l,i|, v_floor) [rad] with
+    the wheel's rolling speed v_l,i = (xd_a - psid y_i) cos d_i + (yd_a + psid x_i) sin d_i. The
+    same array when c_r = 1 (the paper's model) or the roll rate is not measured."""
+    al = np.asarray(inp.slip_angle_rad, dtype=float)
+    share = 1.0 - vehicle.chassis.wheel_roll_coupling
+    p = inp.omega_radps[0]
+    if share == 0.0 or not math.isfinite(p):
+        return al
+    lever = vehicle.geometry.h_cg_m - vehicle.tire.rolling_radius_m
+    xy = np.array(vehicle.geometry.corner_xy_m())
+    d = np.asarray(inp.wheel_angle_rad, dtype=float)
+    r = inp.omega_radps[2] if math.isfinite(inp.omega_radps[2]) else 0.0
+    v_l = (inp.xd_a_mps - r * xy[:, 1]) * np.cos(d) + (inp.yd_a_mps + r * xy[:, 0]) * np.sin(d)
+    return al + share * p * lever * np.cos(d) / np.maximum(np.abs(v_l), SLIP_SPEED_FLOOR_MPS)
 
 
 def tire_forces_wheel_n(slip_ratio, slip_angle_rad, params: IdentifiedParams) -> tuple[np.ndarray, np.ndarray]:
@@ -116,7 +136,7 @@ def moments_from_inputs(vehicle: Vehicle, params: IdentifiedParams, inp: IdentIn
     if inp.moments_nm is not None:
         return np.array(inp.moments_nm)
     fs = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
-    fa, fb = tire_forces_wheel_n(inp.slip_ratio, inp.slip_angle_rad, params)
+    fa, fb = tire_forces_wheel_n(inp.slip_ratio, slip_angles_rad(vehicle, inp), params)
     fx, fy = tire_forces_body_n(fa, fb, inp.wheel_angle_rad)
     m = body_moments_nm(vehicle.geometry, fs, fx, fy) + unsprung_inertia_moments_nm(vehicle, inp)
     ch = vehicle.chassis

@@ -28,6 +28,15 @@ against its predicted variance and correlated over the maneuver's time scale. Pe
   rows; where tau exceeds the RLS's own AR(1) inflation f_j the identifier scales the
   parameter's variance by tau / f_j (``Identifier.covariances``): the sigmas stay honest when
   the residuals are correlated over the maneuver, not only from sample to sample.
+* **integrated autocorrelation time** (issue 17, second session): tau_int = 1 + 2 sum_k rho_k
+  of the residual sequence itself (Sokal's automatic window, lags up to ``MAX_LAG``), the
+  factor N / N_eff between the residuals counted and the effectively independent ones
+  (Priestley 1981, the variance of a mean of correlated samples; Sokal 1997 for the window).
+  The variance scale is max(1, tau, tau_int): the bins of the batch means see correlation over
+  more than a bin only coarsely (on a CommonRoad circle whose speed ramps over 55 s the lateral
+  row had tau 49 and tau_int 675). What neither can see: a model error proportional to the
+  regressor (a camber force growing with a_y, a spring figure off by a factor) is absorbed by
+  the estimate and leaves white residuals; that bias stays outside the sigma.
 
 A row is tested once it has ``mismatch_min_rows`` residuals; the problem is a **model
 mismatch** when any of its rows fails, and the report names those rows (``ROW_NAMES``), so the
@@ -51,7 +60,7 @@ __all__ = ["CROSS_CHECKS", "ROW_NAMES", "MismatchMonitor", "RowTest"]
 ROW_NAMES: dict[str, tuple[str, ...]] = {
     "mass": ("vertical",),
     "tracking": ("wheel_1", "wheel_2", "wheel_3", "wheel_4"),
-    "cornering": ("longitudinal", "lateral"),
+    "cornering": ("longitudinal", "lateral", "yaw"),  # yaw: only with the yaw row (problems)
     "inertia": ("roll", "pitch", "yaw"),
 }
 """The rows of each problem's regressor (eq 20-23) by name."""
@@ -83,16 +92,28 @@ class RowTest:
                 "whiteness": self.whiteness, "long_run": self.long_run, "failed": self.failed}
 
 
+MAX_LAG = 400
+"""Longest lag of the integrated autocorrelation time (``_Row.tau_int``), in residuals (4 s at
+the identifier's 100 Hz): a few cycles of the slowest maneuver (the 1 Hz sine)."""
+
+
 class _Row:
-    __slots__ = ("n", "s1", "s2", "bin", "bin_sum", "bin_n", "means", "counts")
+    __slots__ = ("n", "s1", "s2", "bin", "bin_sum", "bin_n", "means", "counts", "ring", "lag_sums")
 
     def __init__(self):
         self.n, self.s1, self.s2 = 0, 0.0, 0.0
         self.bin, self.bin_sum, self.bin_n = None, 0.0, 0
         self.means: list[float] = []
         self.counts: list[int] = []
+        self.ring = np.zeros(MAX_LAG)  # the last MAX_LAG residuals, newest at index (n - 1) % MAX_LAG
+        self.lag_sums = np.zeros(MAX_LAG + 1)  # lag_sums[k] = sum_t r_t r_(t-k), k = 1..MAX_LAG
 
     def add(self, k_bin: int, r: float) -> None:
+        j = self.n % MAX_LAG
+        if self.n:  # lags 1..min(n, MAX_LAG): ring[(j - k) % MAX_LAG] is r_(t-k)
+            past = np.roll(self.ring[::-1], j)[:min(self.n, MAX_LAG)]
+            self.lag_sums[1:1 + len(past)] += r * past
+        self.ring[j] = r
         self.n += 1
         self.s1 += r
         self.s2 += r * r
@@ -121,6 +142,23 @@ class _Row:
         den = float(a @ a)
         return float(a[1:] @ a[:-1]) / den if den > 0.0 else 0.0
 
+    def tau_int(self) -> float | None:
+        """The integrated autocorrelation time tau = 1 + 2 sum_(k=1..M) rho_k of the residuals,
+        rho_k = (lag_sums[k] / (n - k) - rbar^2) / var, summed up to the first M >= 5 tau
+        (Sokal's window; at most ``MAX_LAG``); None below 4 MAX_LAG residuals."""
+        n = self.n
+        if n < 4 * MAX_LAG:
+            return None
+        rbar = self.s1 / n
+        var = self.s2 / n - rbar * rbar
+        if not var > 0.0:
+            return None
+        k = np.arange(1, MAX_LAG + 1)
+        rho = (self.lag_sums[1:] / (n - k) - rbar * rbar) / var
+        tau = 1.0 + 2.0 * np.cumsum(rho)
+        stop = np.flatnonzero(k >= 5.0 * tau)
+        return float(max(tau[stop[0]] if len(stop) else tau[-1], 1.0))
+
     def long_run(self) -> float | None:
         m, c = self._bins()
         if len(m) < 4 or self.n < 2:
@@ -139,8 +177,8 @@ class MismatchMonitor:
     def __init__(self, problem: str, status_config, q):
         self.problem = problem
         self.config = status_config
-        self.names = ROW_NAMES[problem]
         self._q = np.asarray(q, dtype=float)
+        self.names = ROW_NAMES[problem][:len(self._q)]
         self._bin_ns = max(int(round(status_config.mismatch_lag_s * 1e9)), 1)
         self.reset()
 
@@ -185,8 +223,10 @@ class MismatchMonitor:
 
     @property
     def variance_scale(self) -> float:
-        """max(1, tau) over the rows with ``mismatch_min_rows`` residuals (module docstring)."""
+        """max(1, tau, tau_int) over the rows with ``mismatch_min_rows`` residuals (module
+        docstring)."""
         taus = [t.long_run for t in self.tests() if t.long_run is not None and t.n >= self.config.mismatch_min_rows]
+        taus += [v for v in (r.tau_int() for r in self._rows) if v is not None]
         return max([1.0, *taus])
 
     @property

@@ -116,7 +116,7 @@ from typing import Callable
 import numpy as np
 
 from vdps_hil.identification.config import IdentConfig
-from vdps_hil.identification.forces import moments_from_inputs
+from vdps_hil.identification.forces import moments_from_inputs, slip_angles_rad, unsprung_inertia_moments_nm
 from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.identification.inputs import IdentInputs
 from vdps_hil.model.params import IdentifiedParams, Vehicle
@@ -171,7 +171,7 @@ def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig) -> 
 def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams,
                         cfg: IdentConfig) -> Regressor:
     """Eq 22 with the current mass and tracking stiffness estimates in ``params``."""
-    al = np.asarray(inp.slip_angle_rad)
+    al = slip_angles_rad(vehicle, inp)
     d = np.asarray(inp.wheel_angle_rad)
     if cfg.steer_form == "per_wheel":
         s, c = al * np.sin(d), al * np.cos(d)
@@ -187,11 +187,49 @@ def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPa
     b = m * acc - np.array([np.sum(fa * np.cos(d)), np.sum(fa * np.sin(d))])
     lam = np.asarray(inp.slip_ratio)
     db = np.column_stack([acc, -np.vstack([lam * np.cos(d), lam * np.sin(d)])])  # d/d[m, C_lambda,1..4]
+    if len(cfg.cornering.q) == 3:  # the yaw row
+        a_z, b_z, db_z = _cornering_yaw_row(inp, vehicle, params, fa)
+        # its b uses I_z: weight sd_row / sqrt(sd_row^2 + (sigma_Iz wd_z)^2), sigma_Iz the prior's
+        s_iz = cfg.inertia.prior_rel_sigma * vehicle.params.inertia_z_kgm2 * cfg.cornering.q[2]
+        k = 1.0 / math.sqrt(1.0 + (s_iz * inp.omega_dot_radps2[2]) ** 2)
+        a, b, db = np.vstack([a, k * a_z]), np.append(b, k * b_z), np.vstack([db, k * db_z])
     rows = _gate(a, cfg.cornering.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps)
     gated = lateral_gate(inp, al, float(acc[1]), cfg.cornering)
     if gated is not None:
-        rows = np.zeros(2, dtype=bool)
+        rows = np.zeros(len(rows), dtype=bool)
     return Regressor(a, b, rows, db, gated)
+
+
+def _cornering_yaw_row(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams, fa):
+    """Eq 22's optional third row: eq 13's yaw balance (eq 23's third row) with the eq 15 lateral
+    forces F_b,i = C_alpha,axle / 2 alpha_i as the unknowns (``forces``' moment, corner i at
+    (x_i, y_i))::
+
+        A_3 = [sum_{i=1,2} (x_i cos d_i + y_i sin d_i) alpha_i / 2,  sum_{i=3,4} (...) / 2]
+        b_3 = I_z wd_z - (I_x - I_y) w_x w_y - sum_i (x_i F_a,i sin d_i - y_i F_a,i cos d_i) - M_z,u
+
+    (F_a,i = C_lambda,i lambda_i, M_z,u the unsprung masses' term of ``forces``; I from the current
+    estimates, Gauss-Seidel as m in rows 1-2). Why: rows 1-2 weigh the two axles almost only
+    through F_f + F_r = m a_y, whose columns alpha_f and alpha_r are nearly collinear (on a steady
+    circle both follow a_y), so the split is left to small transient differences, and a slip
+    estimate a few percent off moved C_alpha,f by +58 % and C_alpha,r by -3 % on a CommonRoad sine
+    (issue 17, second session); the yaw balance weighs them by their levers, l_f F_f - l_r F_r =
+    I_z wd_z + ..., and at a steady state (wd_z ~ 0) it needs no inertia at all. The caller
+    weights the row by 1 / sqrt(1 + (q_3 sigma_Iz wd_z)^2) (sigma_Iz the inertia problem's prior
+    sigma, q_3 = 1 / the row's design noise): the row's variance with the inertia's uncertainty
+    added, so rows at a large yaw acceleration, where a wrong I_z would bias the split, count
+    little (Gauss-Seidel with the prior I_z early in a drive). Returns
+    (A_3 [m rad], b_3 [N m], db_3/d[m, C_lambda,1..4])."""
+    xy = np.array(vehicle.geometry.corner_xy_m())
+    al = slip_angles_rad(vehicle, inp)
+    d, lam = (np.asarray(v, dtype=float) for v in (inp.wheel_angle_rad, inp.slip_ratio))
+    lever = (xy[:, 0] * np.cos(d) + xy[:, 1] * np.sin(d)) * al / 2.0
+    lon = xy[:, 0] * np.sin(d) - xy[:, 1] * np.cos(d)  # M_z per unit F_a,i
+    wx, wy = (float(v) if math.isfinite(v) else 0.0 for v in inp.omega_radps[:2])  # ESC: no w_x, w_y (as the EKF)
+    m_u = unsprung_inertia_moments_nm(vehicle, inp)[2]
+    b = (params.inertia_z_kgm2 * inp.omega_dot_radps2[2] - (params.inertia_x_kgm2 - params.inertia_y_kgm2) * wx * wy
+         - float(np.sum(lon * fa)) - m_u)
+    return (np.array([lever[0] + lever[1], lever[2] + lever[3]]), b, np.concatenate([[0.0], -lon * lam]))
 
 
 def lateral_gate(inp: IdentInputs, slip_angle_rad, lateral_accel_mps2: float, pc) -> str | None:
@@ -248,7 +286,7 @@ def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
     h = geometry.h_cg_m
     h_rc = np.array([vehicle.chassis.roll_centre_height_m(i) for i in range(4)])
     d = np.asarray(inp.wheel_angle_rad)
-    lam, al = np.asarray(inp.slip_ratio), np.asarray(inp.slip_angle_rad)
+    lam, al = np.asarray(inp.slip_ratio), slip_angles_rad(vehicle, inp)
     dm_dfx = np.stack([np.zeros(4), np.full(4, -h), -xy[:, 1]])  # 3 x 4
     dm_dfy = np.stack([h - h_rc, np.zeros(4), xy[:, 0]])
     c, s = np.cos(d), np.sin(d)

@@ -48,6 +48,20 @@ Ackermann steering (Gillespie 1992, ch. 6 "Low-speed turning": tan delta_o,i = L
 angle delta_m = delta_sw / steering ratio, full Ackermann is
 tan delta_1,2 = L tan delta_m / (L -+ (T_f / 2) tan delta_m) (``stages.ackermann_angles``); a
 fraction e_A blends it with parallel steer: delta_i = delta_m + e_A (delta_i,Ackermann - delta_m).
+
+Wheel roll coupling c_r (the slip kinematics): the paper's rigid model moves each wheel centre
+with the body, so a body roll rate p adds p (h_cg - r) to the wheels' lateral velocity (and to
+the slip angle, ``model.core``'s v_w = v_b + omega x r_w). A real wheel is carried by its
+linkage, which moves laterally with the roll centre (Gillespie 1992, ch. 8: the body rolls
+about the roll axis; the wheels do not roll with it), and CommonRoad's multibody model computes
+its slip angles from the sprung CG's lateral velocity (its v + a r, not its unsprung masses'
+motion): no roll term at all. c_r in [0, 1] keeps that share of the rigid roll term::
+
+    alpha_i' = alpha_i + (1 - c_r) p (h_cg - r) cos d_i / max(|v_l,i|, v_floor)   [rad]
+
+(v_l,i the wheel's rolling speed; first order in the roll term;
+``identification.forces.slip_angles_rad``). c_r = 1: the
+paper's model.
 """
 
 from __future__ import annotations
@@ -67,11 +81,14 @@ class Chassis:
     roll_centre_height_front_m: float = 0.0  # h_rc,f above the ground at design ride height [m]
     roll_centre_height_rear_m: float = 0.0  # h_rc,r [m]
     ackermann_fraction: float = 1.0  # e_A: 1 full Ackermann, 0 parallel steer [-]
+    wheel_roll_coupling: float = 1.0  # c_r: share of the body's roll rate in the wheels' slip velocity [-]
 
     def __post_init__(self):
         for name in ("anti_roll_stiffness_front_nmprad", "anti_roll_stiffness_rear_nmprad"):
             if getattr(self, name) < 0.0:
                 raise ValueError(f"{name} must not be negative (it is a stiffness resisting roll)")
+        if not 0.0 <= self.wheel_roll_coupling <= 1.0:
+            raise ValueError(f"wheel_roll_coupling must be within [0, 1], got {self.wheel_roll_coupling!r}")
         if not -1.0 <= self.ackermann_fraction <= 2.0:
             raise ValueError(f"ackermann_fraction must be within [-1, 2], got {self.ackermann_fraction!r}")
 

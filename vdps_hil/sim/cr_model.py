@@ -93,11 +93,18 @@ out). Derivations, with the package's symbols:
   lateral load transfer; at the static load C_alpha,f = |p_ky1| 2 F_z0,front.
 * tracking (longitudinal slip) stiffness per tire: K_x = p_kx1 F_z (B C D of the longitudinal
   formula), at the static load.
-* inertias: I_x = I_Phi_s (sprung mass, roll, about the sprung CG), I_y = I_y_s; the package's
-  I_z is the only yaw inertia in its equations, so it is the whole vehicle's; this project's
-  model carries the unsprung masses at the wheel centres, so the sprung-body yaw inertia that
-  reproduces the package's yaw is I_z - sum m_u,i (x_i^2 + y_i^2) (``inertia_z_kgm2``; the
-  package's figure is ``inertia_z_total_kgm2``).
+* inertias: I_x = I_Phi_s (sprung mass, roll, about the sprung CG), I_y = I_y_s, and
+  I_z = the package's I_z (``inertia_z_kgm2``). The package's yaw equation is
+  I_z dr/dt = sum_i (x_i F_y,i - y_i F_x,i) (its sumN: the tire forces' moment about the sprung
+  CG; I_xz_s = 0 in both sets), which is eq 23's yaw row with this project's moments
+  (``identification.forces``): its unsprung masses translate with the body (the core's
+  d'Alembert force m_u,i (g - a) at the wheel centre uses the CG acceleration, no dr/dt x r_i
+  term), so they add no yaw inertia of their own, and the parameter eq 23 identifies is the
+  package's I_z itself. (Until issue 17's second session the figure was
+  I_z - sum m_u,i (x_i^2 + y_i^2), 17 % (set 1) below it; fitted on the truth of a drive,
+  tire-force moment about the sprung CG against dr/dt, cr-sine-accel set 1 seed 102 gave
+  1541 kg m^2 for the package's 1538.9: ``tests/test_cr_model.py`` checks the balance.)
+  ``inertia_z_unsprung_kgm2`` = sum m_u,i (x_i^2 + y_i^2) stays as a further figure.
 * static ride: tire deflections F_z0 / K_zt, the sprung CG at h_s - z_s,0 above the road with
   z_s,0 = (b z_uf,0 + a z_ur,0) / (a + b) (springs at their preload, the body pitched by
   (z_ur,0 - z_uf,0) / (a + b)).
@@ -310,7 +317,7 @@ def truth_figures(set_id: int) -> dict[str, float]:
         "mass_kg": p.m,
         "inertia_x_kgm2": p.I_Phi_s,
         "inertia_y_kgm2": p.I_y_s,
-        "inertia_z_kgm2": p.I_z - iz_unsprung,
+        "inertia_z_kgm2": p.I_z,
         **{f"tracking_stiffness_{i + 1}_n": kx * loads[i] for i in range(4)},
         "cornering_stiffness_front_nprad": ky * 2.0 * ride.tire_load_front_n,
         "cornering_stiffness_rear_nprad": ky * 2.0 * ride.tire_load_rear_n,
