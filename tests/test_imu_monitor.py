@@ -31,11 +31,12 @@ def test_a_car_manoeuvre_passes_every_check():
     assert mon.counters["spike"] == 0 and mon.counters["outages"] == 0
 
 
-@pytest.mark.parametrize("amp_degps, n_ms", [(200.0, 50), (200.0, 2), (150.0, 200), (200.0, 200)])
+@pytest.mark.parametrize("amp_degps, n_ms", [(200.0, 50), (200.0, 2), (150.0, 200), (200.0, 200), (20.0, 200),
+                                             (100.0, 50)])
 def test_gyro_spike_is_rejected_sample_by_sample(amp_degps, n_ms):
     """A spike on a yaw rate that moves (0.5 rad/s^2, a steady steer) and on noise: every spike
     sample rejected, every other one taken (issue 20: 2-200 ms, up to 200 deg/s; spikes above the
-    jump limit, ``ImuChecks.rate_jump_radps`` = 2 rad/s = 115 deg/s)."""
+    jump floor, ``ImuChecks.rate_jump_radps`` = 0.15 rad/s = 8.6 deg/s, on a clean IMU)."""
     rng = np.random.default_rng(5)
     mon = ImuMonitor()
     amp = math.radians(amp_degps)
@@ -52,6 +53,20 @@ def test_small_spike_within_the_jump_allowance_is_taken():
     mon = ImuMonitor()
     ok = _stream(mon, 200, lambda k: (0.0, 0.0, math.radians(5.0) if 50 <= k < 100 else 0.0))
     assert all(ok)
+
+
+def test_a_noisy_imu_raises_its_own_jump_and_keeps_every_sample():
+    """A MEMS gyro as noisy as the real RTKLIB drive's (100 Hz, pitch-rate noise whose steps
+    average ~0.09 rad/s, heavy-tailed: Student t with 3 degrees of freedom) is not rejected for
+    its noise (the jump grows with the running mean step), and a 200 deg/s spike on it still is."""
+    rng = np.random.default_rng(17)
+    mon = ImuMonitor()
+    noise = rng.standard_t(3, size=3000) * 0.045
+    ok = [mon.check(k * 10 * MS, G, (0.0, noise[k], 0.0)) for k in range(3000)]
+    assert all(ok) and mon.counters["spike"] == 0
+    t = 3000 * 10 * MS
+    assert not mon.check(t, G, (0.0, noise[0] + math.radians(200.0), 0.0))
+    assert mon.counters["spike"] == 1
 
 
 def test_a_persistent_step_is_reanchored_so_the_imu_is_not_locked_out():

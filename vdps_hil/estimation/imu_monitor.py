@@ -14,10 +14,16 @@ time            t not more than the timeout before the newest sample (a clock th
 plausible       |w_i| < ``max_rate_radps`` and |f_i| < ``max_specific_force_mps2`` per axis:
                 above the sensor's range (saturation, the value is clipped) or above what a
                 car body does (openpilot's locationd uses 10 rad/s and 100 m/s^2)
-spike           |w_i - w_ref,i| > ``rate_jump_radps`` + min(``max_rate_accel_radps2`` dt,
+spike           |w_i - w_ref,i| > J_i + min(``max_rate_accel_radps2`` dt,
                 ``rate_slew_cap_radps``), w_ref: the last accepted sample, dt its age (and
-                the same for f with ``force_jump_mps2``, ``max_jerk_mps3``,
-                ``force_slew_cap_mps2``): a change no car body makes between two samples.
+                the same for f with ``max_jerk_mps3``, ``force_slew_cap_mps2``): a change
+                no car body makes between two samples. The jump J_i = max(floor_i,
+                ``jump_noise_factor`` s_i) grows with the sensor's own sample-to-sample
+                noise: floor ``rate_jump_radps`` (``force_jump_mps2`` for f), s_i the
+                mean |step| of consecutive accepted samples (EWMA, weight
+                ``jump_scale_weight`` per sample), so a clean IMU catches a 20 deg/s spike
+                and a noisy one (the real RTKLIB MEMS at 100 Hz: pitch-rate steps up to
+                1.7 rad/s at a mean step of 0.09) is not rejected for its noise.
                 It starts a run of rejected samples, which ends when a sample steps back by
                 the run's offset (the spike ends) or is within the jump of w_ref again. A
                 run that lasts ``reanchor_s`` is taken as real (re-anchored, counted): the
@@ -60,14 +66,17 @@ class ImuChecks:
     timeout_s: float = 0.02
     max_rate_radps: float = 10.0
     max_specific_force_mps2: float = 100.0
-    rate_jump_radps: float = 2.0  # a real car IMU (RTKLIB drive, 100 Hz) steps its pitch rate by
-    # > 0.5 rad/s between samples: 0.15 rejected 5 % of its samples (2726, all pitch rate) and
-    # doubled its dead-reckoning error; 2.0 takes every one and still catches issue 20's 200 deg/s
+    rate_jump_radps: float = 0.15  # the floor of the jump (module docstring): a fixed 0.15 alone
+    # rejected 5 % of the real RTKLIB drive's samples (pitch-rate steps > 0.5 rad/s at 100 Hz) and
+    # doubled its dead-reckoning error; a fixed 2.0 let spikes below 115 deg/s through
     max_rate_accel_radps2: float = 20.0
     rate_slew_cap_radps: float = 0.3
     force_jump_mps2: float = 30.0  # a pothole's vertical step stays a measurement
     max_jerk_mps3: float = 500.0
     force_slew_cap_mps2: float = 10.0
+    jump_noise_factor: float = 20.0  # the RTKLIB drive's largest step is 11.7-15.9 times its running
+    # mean step (weight 0.01) on the three gyro axes: 20 keeps every one of its samples
+    jump_scale_weight: float = 0.01
     reanchor_s: float = 0.3
     outage_accel_sigma_mps2: float = 2.0
     outage_vert_sigma_mps2: float = 1.0
@@ -101,7 +110,9 @@ class ImuMonitor:
         self._last_t = _NEVER  # last sample seen (any verdict)
         self._ref: tuple[int, tuple, tuple] | None = None  # (t, f, w) of the last accepted sample
         self._run: tuple | None = None  # spike run: (start, offset of (f, w) to the reference, last sample)
-        self._jumps = (c.force_jump_mps2,) * 3 + (c.rate_jump_radps,) * 3
+        self._floors = (c.force_jump_mps2,) * 3 + (c.rate_jump_radps,) * 3
+        self._jumps = self._floors  # J_i (module docstring), from the running mean step
+        self._step = None  # the running mean |step| s_i of consecutive accepted samples
         self._period_ns = 0.0  # learned sample period (EWMA of accepted intervals)
         self.t_good = _NEVER  # last accepted sample
         self.gap = (_NEVER, _NEVER)  # (last good before, first good after) of the latest outage
@@ -174,8 +185,23 @@ class ImuMonitor:
             elif dt > 0:
                 self._period_ns = dt if self._period_ns == 0.0 else self._period_ns + 0.05 * (dt - self._period_ns)
         self.t_good = max(prev, t_ns)
+        ref = self._ref
+        if ref is not None and 0 < t_ns - ref[0] <= self.timeout_ns:
+            self._learn_steps((*f, *w), (*ref[1], *ref[2]))
         self._ref = (t_ns, tuple(f), tuple(w))
         self.counters["accepted"] += 1
+
+    def _learn_steps(self, v, r) -> None:
+        """s_i += a (|v_i - r_i| - s_i) and J_i = max(floor_i, k s_i) (module docstring)."""
+        steps = [abs(a - b) for a, b in zip(v, r)]
+        s = self._step
+        if s is None:
+            self._step = s = steps
+        else:
+            a = self.checks.jump_scale_weight
+            self._step = s = [x + a * (y - x) for x, y in zip(s, steps)]
+        k = self.checks.jump_noise_factor
+        self._jumps = tuple(max(fl, k * x) for fl, x in zip(self._floors, s))
 
     def covered(self, t0_ns: int, t1_ns: int) -> bool:
         """True when accepted samples cover the predict span (t0, t1]: no outage in it and
