@@ -256,7 +256,7 @@ def _judge(s: _Search, ev: _Excitation, name: str, theta) -> tuple[bool, float, 
     passes every selection test: (ok, EF, joint fit), None when it cannot be fitted."""
     cfg, c = s.cfg, s.by_name[name]
     if c.linear:
-        j = linear_joint_fit(s.d, s.always, c, theta, s.point, cfg, s.vehicle, s.ratio)
+        j = linear_joint_fit(s.d, s.always, c, theta, s.point, cfg, s.vehicle, s.ratio, s.selected)
     else:
         j = joint_fit(s.table, s.states, s.inn, s.vehicle, s.point, s.selected, c, theta, cfg, s.ratio, s.sse_cur,
                       s.cv_cur)
