@@ -25,15 +25,7 @@ from vdps_hil.experiments.workbench_study import HIDDEN, TWO_HIDDEN, run_job
 
 SEEDS = (21, 22)
 NULL_MANEUVERS = ("accel-coast", "coast-down", "step-steer", "lane-change", "sine-sweep")
-KNOWN_WEAK: dict[str, str] = {
-    "imu_bias": ("since the workbench runs the estimator as `vdps replay` does (issue 18, pipeline/configure.py): "
-                 "seed 22 (circle-straight) recommends nothing, the IMU bias explains 3.5 % of the held-out "
-                 "residual (plausible) behind a low-pressure tire at 9.2 %; seed 21 is a hit"),
-    "load_dependent_cornering_stiffness": (
-        "since the same change: seed 21 (sine-sweep) recommends magic_formula_tire (20 % explained) and "
-        "names the load-dependent stiffness only as 'also consistent with this drive', not as its "
-        "equivalence group (the test stops there: seed 22 not judged)"),
-}
+KNOWN_WEAK: dict[str, str] = {}
 """Effect -> reason (measured, see the module docstring)."""
 
 

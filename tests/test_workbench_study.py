@@ -23,6 +23,20 @@ def test_every_maneuver_parses_and_every_effect_is_known():
         REGISTRY[n](**params)  # magnitudes are valid
 
 
+def test_shipped_scenarios_keep_their_truth():
+    """A shipped scenario is a maneuver of the study as shipped: its own truth vehicle and the
+    Magic Formula tire (issue 18's 'own scenarios'), its own duration; an unknown name says so."""
+    for name in ("sine-sweep", "lane-change-iso3888", "coast-down"):
+        sc = S.scenario(S.SHIPPED + name)
+        assert sc.name == name and "magic_formula_tire" in sc.effect_names and sc.vehicle.kind == "truth"
+    assert S.scenario("sine-sweep").effect_names == ()  # the study's own maneuver of that name
+    with pytest.raises(ValueError, match="own duration"):
+        S.scenario(S.SHIPPED + "coast-down", duration_s=10.0)
+    for bad in ("no-such-maneuver", "shipped:no-such", "lane-change-iso3888"):
+        with pytest.raises(KeyError, match="neither"):
+            S.maneuver_text(bad)
+
+
 def test_issue_magnitudes():
     assert S.HIDDEN["aero_drag"][1].endswith("cda_m2=0.7")
     assert "coefficient=0.012" in S.HIDDEN["rolling_resistance"][1]

@@ -15,6 +15,7 @@ Usage::
     .venv/bin/python tools/workbench_study.py --magnitude aero_drag:cda_m2=0.1,0.2,0.35,0.7 --seeds 10
     .venv/bin/python tools/workbench_study.py --add --seeds 5     # --add reductions per effect
     .venv/bin/python tools/workbench_study.py --seeds 20 --jobs 1 --runs study.jsonl   # resumable
+    .venv/bin/python tools/workbench_study.py --effects imu_bias --scenario shipped:sine-sweep --scenario shipped:lane-change-iso3888
 
 ``--runs FILE.jsonl`` makes the study incremental: every finished drive is appended to the file
 as one JSON line, and a later call with the same file skips the drives already there (same kind,
@@ -51,6 +52,10 @@ def main(argv=None) -> int:
     ap.add_argument("--magnitude", action="append", default=[],
                     help="EFFECT:param=v1,v2,...: detection probability against magnitude")
     ap.add_argument("--add", action="store_true", help="also run --add on hidden and null drives")
+    ap.add_argument("--scenario", action="append", default=[],
+                    help="shipped:NAME, a scenario of configs/scenarios with its own truth (e.g. shipped:sine-sweep, Magic "
+                         "Formula tire): the --effects hidden on it instead of on their study maneuvers, and its "
+                         "nothing-hidden drives; repeatable")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--json", default=None)
     ap.add_argument("--runs", default=None, help="JSON-lines file of finished runs: append, skip what is there")
@@ -61,10 +66,14 @@ def main(argv=None) -> int:
     jobs = []
     for eff in effects:
         man, spec = HIDDEN[eff]
-        for s in seeds:
-            jobs.append({"kind": "hidden", "effect": eff, "maneuver": man, "specs": [spec], "seed": s,
-                         "add": eff if a.add else None})
-    if not a.no_null:
+        for m in a.scenario or [man]:
+            for s in seeds:
+                jobs.append({"kind": "hidden", "effect": eff, "maneuver": m, "specs": [spec], "seed": s,
+                             "add": eff if a.add else None})
+    if a.scenario and not a.no_null:
+        jobs += [{"kind": "null", "effect": None, "maneuver": m, "specs": [], "seed": s, "add": None}
+                 for m in a.scenario for s in seeds]
+    elif not a.no_null:
         mans = sorted({HIDDEN[e][0] for e in effects}) if a.effects != ",".join(HIDDEN) else sorted(MANEUVERS)
         for m in mans:
             for s in seeds:
@@ -128,14 +137,19 @@ def _load_runs(path: str) -> dict[str, dict]:
     return out
 
 
+def _label(r: dict) -> str:
+    """A hidden run's row in the summary: the effect, with ``@maneuver`` when not on its study maneuver."""
+    return r["effect"] if r["maneuver"] == HIDDEN[r["effect"]][0] else f"{r['effect']}@{r['maneuver']}"
+
+
 def summarize(results: list[dict]) -> dict:
     out = {"hit_rate": {}, "null": {}, "magnitude": {}, "add": {}}
-    for eff in sorted({r["effect"] for r in results if r["kind"] == "hidden"}):
-        rs = [r for r in results if r["kind"] == "hidden" and r["effect"] == eff]
+    for eff in sorted({_label(r) for r in results if r["kind"] == "hidden"}):
+        rs = [r for r in results if r["kind"] == "hidden" and _label(r) == eff]
         k = sum(1 for r in rs if r.get("hit"))
         lo, hi = wilson_interval(k, len(rs))
         out["hit_rate"][eff] = {"hits": k, "n": len(rs), "rate": k / len(rs), "wilson95": [lo, hi],
-                                "recommended": sum(1 for r in rs if r.get("recommendation") == eff)}
+                                "recommended": sum(1 for r in rs if r.get("recommendation") == rs[0]["effect"])}
     nulls = [r for r in results if r["kind"] == "null"]
     if nulls:
         k = sum(1 for r in nulls if r.get("recommendation") is None)

@@ -43,7 +43,7 @@ from typing import Sequence
 from vdps_hil.sim.profiles import SensorProfile, load_profile
 from vdps_hil.sim.scenarios import Scenario, parse_scenario
 
-__all__ = ["MANEUVERS", "HIDDEN", "TWO_HIDDEN", "cached_drive", "run_job", "scenario", "study_profile", "hidden_drive", "NULL_MANEUVERS", "is_hit",
+__all__ = ["MANEUVERS", "HIDDEN", "TWO_HIDDEN", "cached_drive", "run_job", "scenario", "maneuver_text", "SHIPPED", "study_profile", "hidden_drive", "NULL_MANEUVERS", "is_hit",
            "wilson_interval"]
 
 MANEUVERS: dict[str, str] = {
@@ -157,8 +157,30 @@ TWO_HIDDEN: dict[tuple[str, str], str] = {
 NULL_MANEUVERS: tuple[str, ...] = tuple(MANEUVERS)
 
 
+SHIPPED = "shipped:"
+"""Prefix of a maneuver that is a scenario shipped in ``configs/scenarios`` (``shipped:sine-sweep``;
+the study's own ``sine-sweep`` is a different, linear-tire maneuver)."""
+
+
+def maneuver_text(name: str) -> str:
+    """The TOML text of a study maneuver (:data:`MANEUVERS`) or of a shipped scenario
+    (``shipped:NAME``: its own truth vehicle and effects, e.g. the Magic Formula tire)."""
+    if name in MANEUVERS:
+        return MANEUVERS[name]
+    from vdps_hil.sim.scenarios import SCENARIO_DIR, scenario_names
+
+    if not name.startswith(SHIPPED) or name[len(SHIPPED):] not in scenario_names():
+        raise KeyError(f"unknown maneuver {name!r}: neither a study maneuver nor shipped:<scenario>")
+    return (SCENARIO_DIR / f"{name[len(SHIPPED):]}.toml").read_text(encoding="utf-8")
+
+
 def scenario(name: str, duration_s: float | None = None) -> Scenario:
-    """The maneuver as a parsed scenario (linear-tire truth; effects come from the drive)."""
+    """The maneuver as a parsed scenario (a study maneuver: linear-tire truth, effects come from
+    the drive; a shipped scenario: as shipped, plus the drive's effects)."""
+    if name not in MANEUVERS:
+        if duration_s is not None:
+            raise ValueError(f"{name}: a shipped scenario keeps its own duration")
+        return parse_scenario(maneuver_text(name), f"<{name}>")
     text = MANEUVERS[name]
     if duration_s is not None:
         text = text.replace(text.split("\n")[1], f"duration_s = {float(duration_s)}")
@@ -209,7 +231,7 @@ def cached_drive(directory: str | os.PathLike, maneuver: str, effects: Sequence[
     seed, the content is deterministic for them)."""
     import hashlib
 
-    key = hashlib.sha256(repr((MANEUVERS[maneuver], tuple(effects), int(seed), duration_s)).encode()).hexdigest()[:16]
+    key = hashlib.sha256(repr((maneuver_text(maneuver), tuple(effects), int(seed), duration_s)).encode()).hexdigest()[:16]
     os.makedirs(directory, exist_ok=True)
     path = os.path.join(directory, f"{maneuver}-{key}.mcap")
     if not os.path.exists(path):

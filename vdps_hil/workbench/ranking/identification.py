@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -299,18 +299,31 @@ def joint_fit(table, states, inn, ref, point: Point, selected: dict, c: Candidat
 
 
 def linear_joint_fit(d: Design, always, c: Candidate, theta, point: Point, cfg: RankingConfig, ref: Vehicle,
-                  ratio: float) -> Joint:
+                  ratio: float, selected: Mapping[str, Candidate] | None = None) -> Joint:
     """A candidate whose columns do not depend on its parameters: the screening design already
-    is its joint fit (the ten parameters enter linearly)."""
+    is its joint fit (the ten parameters enter linearly). The already ``selected`` linear effects
+    are refitted with it (their change columns are among ``always``): their changes move the
+    point too, so drag selected alone and rolling resistance added later share the coast-down's
+    resistance instead of counting it twice."""
     cols = always + d.blocks[c.name]
     th, obj = d.objective(cols)
     phi = theta_of(d, c.name, cols, th)
     s2 = obj / max(len(d.y) - len(cols), 1)
     sig = sigma_of(d, c.name, cols, s2, ratio)
     base = apply_base(point, d, cols, th, cfg, ref)
+    phis = dict(point.phis)
+    eff = point.effects
+    for name, sc in (selected or {}).items():
+        if sc.linear and name in phis and name in d.blocks:
+            moved = np.asarray(phis[name], dtype=float) + theta_of(d, name, cols, th)
+            try:
+                eff = effects_with(eff, sc.phi_effect(moved))
+                phis[name] = moved
+            except ValueError:
+                pass
     try:
-        eff = effects_with(point.effects, c.phi_effect(phi))
+        eff = effects_with(eff, c.phi_effect(phi))
     except ValueError:
-        eff = point.effects
-    pt = Point(base, eff, {**point.phis, c.name: phi})
+        pass
+    pt = Point(base, eff, {**phis, c.name: phi})
     return Joint(c.name, phi, sig, pt, obj, d.cv(cols), d, cols)

@@ -32,8 +32,10 @@ the always-on base columns b reproduce::
     z_c = sqrt((v_c - v_b) n_eff / n),   v_c = theta_0^T G_cc theta_0,   v_b = g^T G_bb^+ g,  g = G_bc theta_0
 
 (G = X^T X of the whole drive). A candidate whose v_b / v_c (with b the ten parameters alone)
-reaches ``corr_threshold``^2 is the same as a re-identification on this drive: never a
-recommendation, reported as a group (:mod:`~vdps_hil.workbench.ranking.equivalence`).
+reaches ``corr_threshold``^2, and whose fitted contribution keeps no significant part the
+re-identification cannot reproduce (``_base_equivalent``), is the same as a re-identification
+on this drive: never a recommendation, reported as a group
+(:mod:`~vdps_hil.workbench.ranking.equivalence`).
 """
 
 from __future__ import annotations
@@ -137,13 +139,13 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     return rk
 
 
-def _prior_contribution(G: np.ndarray, base: list, d, name: str, c) -> tuple[float, float]:
-    """(v, v_base) of candidate ``name`` at its generic prior magnitude: v = th' G_cc th, its
-    weighted sum of squares over the drive, and v_base = g' G_bb^+ g (g = G_bc th), the part of
-    it the ``base`` columns reproduce (0 without base columns). th: theta_0 in scaled columns,
-    vv: v, gbv: g."""
+def _prior_contribution(G: np.ndarray, base: list, d, name: str, c, theta=None) -> tuple[float, float]:
+    """(v, v_base) of candidate ``name`` at its generic prior magnitude (or at ``theta``, its
+    own units): v = th' G_cc th, its weighted sum of squares over the drive, and v_base =
+    g' G_bb^+ g (g = G_bc th), the part of it the ``base`` columns reproduce (0 without base
+    columns). th: theta_0 in scaled columns, vv: v, gbv: g."""
     cols = d.blocks[name]
-    th = c.prior_theta() * np.array([d.scale[k] for k in cols])
+    th = (c.prior_theta() if theta is None else np.asarray(theta, dtype=float)) * np.array([d.scale[k] for k in cols])
     vv = float(th @ G[np.ix_(cols, cols)] @ th)
     if not len(base):
         return vv, 0.0
@@ -217,21 +219,29 @@ def _forward_selection(s: _Search, ev: _Excitation) -> None:
 
 def _shortlist(s: _Search, ev: _Excitation) -> list[tuple[float, str, np.ndarray]]:
     """(screening EF, name, theta) of the candidates to fit jointly this round: the best
-    ``shortlist`` with EF > 0, and every nonlinear one not yet found weak."""
+    ``shortlist`` with EF > 0, every sensor effect whose screening fit already explains
+    ``min_explained_innovations`` of the GNSS/IMU innovations (its evidence path, ``_evidence``:
+    ranked by the overall EF alone, a sensor error that hardly touches the force balance falls
+    behind balance effects that fit its side effects), and every nonlinear one not yet found weak."""
     d, cfg = s.d, s.cfg
-    screen = []
+    inn_g = np.array([GROUP_NAMES.index(g) for g in INNOVATION_GROUPS])
+    screen, sensor = [], set()
     for name, c in s.by_name.items():
         if name in s.selected or not d.has_signal(name) or ev.excitation[name] < cfg.excitation_z:
             continue
         cols = s.always + d.blocks[name]
-        ef = 1.0 - d.cv(cols).sum() / max(s.cv_cur.sum(), 1e-300)
+        cv = d.cv(cols)
+        ef = 1.0 - cv.sum() / max(s.cv_cur.sum(), 1e-300)
+        if c.family == "measurement" and _explained(cv, s.cv_cur, inn_g) >= cfg.min_explained_innovations:
+            sensor.add(name)
         th, _, _ = d.fit(cols)
         screen.append((ef, name, theta_of(d, name, cols, th)))
     screen.sort(key=lambda t: -t[0])
     short = [t for t in screen[:cfg.shortlist] if t[0] > 0.0]
+    short += [t for t in screen[cfg.shortlist:] if t[1] in sensor and t[0] > 0.0]
     # nonlinear candidates are judged by their joint fit in any case: at a linearisation
     # point far from the truth their screening column can hide them
-    short += [t for t in screen[cfg.shortlist:] if not s.by_name[t[1]].linear
+    short += [t for t in screen[cfg.shortlist:] if not s.by_name[t[1]].linear and t[1] not in sensor
               and (t[1] not in s.steps or s.steps[t[1]]["ef"] > 0.5 * cfg.min_explained)]
     return short
 
@@ -246,7 +256,7 @@ def _judge(s: _Search, ev: _Excitation, name: str, theta) -> tuple[bool, float, 
     passes every selection test: (ok, EF, joint fit), None when it cannot be fitted."""
     cfg, c = s.cfg, s.by_name[name]
     if c.linear:
-        j = linear_joint_fit(s.d, s.always, c, theta, s.point, cfg, s.vehicle, s.ratio)
+        j = linear_joint_fit(s.d, s.always, c, theta, s.point, cfg, s.vehicle, s.ratio, s.selected)
     else:
         j = joint_fit(s.table, s.states, s.inn, s.vehicle, s.point, s.selected, c, theta, cfg, s.ratio, s.sse_cur,
                       s.cv_cur)
@@ -274,14 +284,42 @@ def _judge(s: _Search, ev: _Excitation, name: str, theta) -> tuple[bool, float, 
     balance_only = own is not None and own.any() and not own[len(DYNAMIC_EQUATIONS):].any()
     evidence = _evidence(c, cfg, ef, ef_inn, ef_dyn, balance_only)
     if os.environ.get("VDPS_WB_DEBUG"):
-        print(f"[ranking] {name}: ef_dyn {ef_dyn:.3f} balance_only {balance_only}")
-    if ev.base_equiv.get(name, 0.0) >= cfg.corr_threshold ** 2:
+        print(f"[ranking] {name}: ef_dyn {ef_dyn:.3f} balance_only {balance_only} evidence {evidence} "
+              f"base_equiv {ev.base_equiv.get(name, 0.0):.3f}")
+    if _base_equivalent(s, ev, name, c, j.phi):
         evidence = False  # the same as re-identifying a parameter: reported as a group
     ok = (dbic < -cfg.bic_margin and ef_own >= cfg.min_explained and ef > 0.0 and evidence
           and c.phi_plausible(j.phi) and c.material(j.phi, cfg.material_fraction))
     if not s.selected:
         st["eligible_first"] = bool(ok)
     return ok, ef, j
+
+
+def _base_equivalent(s: _Search, ev: _Excitation, name: str, c: Candidate, phi) -> bool:
+    """Whether re-identifying the ten parameters does what the candidate does: its prior-size
+    contribution is reproduced by them (``base_equiv`` >= ``corr_threshold``^2) and, for a
+    candidate of several parameters (whose fit can leave the prior's direction), at its fitted
+    values the part of its contribution d = X_c phi that the always-on columns b (the
+    parameters and the nuisance) do not reproduce is not significant (BIC on n_eff, as for the
+    groups, :mod:`.equivalence`)::
+
+        n_eff ln(1 + (1 - R^2) v / SSE) <= bic_margin,   v = phi' G_cc phi,  R^2 = g' G_bb^+ g / v
+
+    R^2 alone is blind to size: a load-dependent stiffness on a 5 m/s^2 sine sweep is 95 % a
+    change of the axle stiffnesses, and the other 5 % of its large contribution still explain a
+    third of the held-out residual the re-identified model leaves."""
+    thr = s.cfg.corr_threshold ** 2
+    if ev.base_equiv.get(name, 0.0) < thr:
+        return False
+    if len(phi) != len(s.d.blocks[name]) or len(phi) < 2 or not s.always:
+        return True  # one parameter: its contribution's direction is that of its prior
+    v, vb = _prior_contribution(s.d.stats()[0].sum(axis=(0, 1)), s.always, s.d, name, c, phi)
+    if v <= 0:
+        return True
+    worse = s.n_eff * math.log1p(max(1.0 - vb / v, 0.0) * v / max(s.sse_cur, 1e-300))
+    if os.environ.get("VDPS_WB_DEBUG"):
+        print(f"[ranking] {name}: fitted R^2 on the base {vb / v:.3f}, unreproduced part dBIC {worse:.1f}")
+    return vb / v >= thr and worse <= s.cfg.bic_margin
 
 
 def _evidence(c: Candidate, cfg: RankingConfig, ef: float, ef_inn: float, ef_dyn: float, balance_only: bool) -> bool:
