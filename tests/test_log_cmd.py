@@ -129,7 +129,7 @@ def test_pipeline_tap_runs_the_system_live_and_reports_the_warning(tmp_path):
     simulated fishhook-suv drive in arrival order, it holds the first 3 s of data to size the
     system, then its frames (in data time) must carry a warning (level >= 2) more than 1 s
     before the point of no return (3.72 s), and decode without CRC rejects."""
-    from vdps_hil.cli.log_cmd import PipelineTap
+    from vdps_hil.app.pipeline_tap import PipelineTap
     from vdps_hil.codecs.can_decode import VdpsCanDecoder
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.record.decode import decode_recording
