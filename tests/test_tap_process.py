@@ -67,3 +67,28 @@ def test_a_failing_child_is_one_line_and_writes_nothing(tmp_path):
     assert not tp.summary()["input_order_recorded"]
     got, order = _est(tmp_path / "x.mcap")
     assert got == {"/est/state": [], "/est/can/vdps": []} and not order
+
+
+def test_at_the_end_it_skips_what_it_has_not_fed_and_records_the_order_of_what_it_fed(tmp_path):
+    """``wind_down`` (the recording ended; here with no time to catch up): the samples not yet
+    fed are skipped and counted, the input order is that of the samples fed (a prefix)."""
+    rec = tmp_path / "drive.mcap"
+    Drive("paper", seed=6, duration_s=1.5).run(str(rec))
+    samples = list(decode_recording(str(rec)))
+    half = len(samples) // 2
+    with RecordingWriter(str(tmp_path / "child.mcap")) as w:
+        tp = TapProcess("sedan-model", None, w, probe_s=0.5, wind_down_s=0.0)
+        tp(samples[:half])
+        t_end = time.monotonic() + 120
+        while tp._batches < 1 and time.monotonic() < t_end:
+            time.sleep(0.02)
+        tp.wind_down()
+        tp._hurry.join(30)  # SIGUSR1 sent
+        for k in range(half, len(samples), 50):
+            tp(samples[k:k + 50])
+        tp.finish()
+    s = tp.summary()
+    assert s["samples"] == half and s["input_unfed"] == len(samples) - half
+    assert s["input_order_recorded"]
+    with RecordingReader(str(tmp_path / "child.mcap")) as r:
+        assert int(r.metadata()[INPUT_ORDER_METADATA]["count"]) == half

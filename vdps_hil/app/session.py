@@ -15,9 +15,10 @@ Three stages, so that nothing downstream can make a device lose data:
    read before the loop began, that long after its start) is not decoded (``decoded_skipped``, its raw record is in the file, the decoder forgets its sequence state so the skip is not taken for data
    lost on the wire). When the disk (or the file-size limit of the process) leaves less than
    ``reserve_bytes``, decoded samples are no longer written (``decoded_skipped_disk``) and the
-   rest goes to the raw records. The ``tap`` (``vdps log --pipeline``) runs in a thread of its
-   own behind a bounded queue: when it falls behind by ``tap_queue`` samples it loses input
-   (``tap_dropped``), never the recording.
+   rest goes to the raw records. The ``tap`` (``vdps log --pipeline``) is called in a thread of
+   its own behind a bounded queue: when it falls behind by ``tap_queue`` samples it loses input
+   (``tap_dropped``), never the recording (``vdps log`` passes ``app.tap_process.TapProcess``:
+   the estimator itself runs in a process of its own at a lower priority).
 
 Health: ``/health/<source>`` every ``health_s`` and at the end (with the serial driver's own
 loss counters where the OS keeps them); the final health of every source also in the metadata
@@ -143,6 +144,9 @@ class _TapWorker:
         machine, and the recording is complete meanwhile."""
         self._closed = True
         self._wake.set()
+        wind_down = getattr(self.tap, "wind_down", None)  # a tap that bounds its own end
+        if wind_down is not None:
+            wind_down()
         seen, t_seen = self.waiting, time.monotonic()
         while self._thread.is_alive() and time.monotonic() - t_seen < timeout_s:
             self._thread.join(min(1.0, timeout_s))

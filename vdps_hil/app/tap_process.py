@@ -14,7 +14,8 @@ reserve is reached (``recording_allowed()`` false) they are counted, not written
 (``outputs_skipped_disk``).
 
 Messages on the pipes (pickled, between our own two processes only): to the child
-``("samples", list)``, ``("lost", n)``, ``("finish",)``; from it ``("out", calls, status)`` after
+``("samples", list)``, ``("lost", n)``, ``("finish",)`` (and SIGUSR1: skip the samples not fed
+yet, :meth:`TapProcess.wind_down`); from it ``("ready",)`` once SIGUSR1 is handled, ``("out", calls, status)`` after
 each batch, ``("done", calls, status, summary)`` after the finish, ``("error", text)`` when the
 tap raised (the child then ends).
 """
@@ -27,10 +28,15 @@ import signal
 import threading
 import time
 
-__all__ = ["TapProcess", "TAP_NICE"]
+__all__ = ["TapProcess", "TAP_NICE", "WIND_DOWN_S"]
 
 TAP_NICE = 10
 """Nice increment of the estimator's process: the readers (nice 0) win every contended core."""
+
+WIND_DOWN_S = 20.0
+"""At the end of the recording the estimator gets this long to work through what it was sent;
+then it skips the rest (``input_unfed``), writes its last outputs and the input order of what it
+was fed (a prefix of the input: a replay reproduces it)."""
 
 _WRITER_CALLS = ("write_json", "write_estimate", "add_metadata")
 
@@ -55,10 +61,13 @@ def _child(conn_in, conn_out, vehicle: str, params: str | None, options: dict, n
     """The child's loop (module docstring). Ctrl-C reaches the whole process group: the logger
     decides when the estimator stops."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    hurry = []
+    signal.signal(signal.SIGUSR1, lambda signum, frame: hurry.append(1))  # TapProcess.wind_down
     try:
         os.nice(nice)
     except OSError:
         pass
+    conn_out.send(("ready",))  # SIGUSR1 handled from now on
     from vdps_hil.app.pipeline_tap import PipelineTap
     from vdps_hil.model.params import load_vehicle
 
@@ -71,16 +80,21 @@ def _child(conn_in, conn_out, vehicle: str, params: str | None, options: dict, n
 
             start = load_params(params, model).params
         tap = PipelineTap(model, writer, start, **options)
+        unfed = 0
         while True:
             msg = conn_in.recv()
             if msg[0] == "samples":
-                tap(msg[1])
+                if hurry:
+                    unfed += len(msg[1])
+                else:
+                    tap(msg[1])
                 conn_out.send(("out", writer.take(), tap.status_line()))
             elif msg[0] == "lost":
                 tap.input_lost(msg[1])
             else:
                 tap.finish()
-                conn_out.send(("done", writer.take(), tap.status_line(), tap.summary()))
+                conn_out.send(("done", writer.take(), tap.status_line(),
+                               dict(tap.summary(), input_unfed=unfed)))
                 return
     except EOFError:  # the logger is gone
         return
@@ -95,7 +109,7 @@ class TapProcess:
     ``probe_s``)."""
 
     def __init__(self, vehicle: str, params: str | None, writer, *, nice: int = TAP_NICE,
-                 **options):
+                 wind_down_s: float = WIND_DOWN_S, **options):
         from vdps_hil.app.children import isolate_spawned_children
 
         isolate_spawned_children()
@@ -103,6 +117,8 @@ class TapProcess:
         self._in_r, self._in_w = ctx.Pipe(duplex=False)
         self._out_r, self._out_w = ctx.Pipe(duplex=False)
         self.writer = writer
+        self.wind_down_s = wind_down_s
+        self._hurry: threading.Timer | None = None
         self.recording_allowed = lambda: True
         self.proc = ctx.Process(target=_child, name="vdps-pipeline", daemon=True,
                                 args=(self._in_r, self._out_w, vehicle, params, options, nice))
@@ -114,6 +130,7 @@ class TapProcess:
         self._summary: dict | None = None
         self.input_dropped = self.outputs_skipped = 0
         self._done = threading.Event()
+        self._ready = threading.Event()
         self._batches = 0  # batches the child reported done
         self._receiver = threading.Thread(target=self._receive, name="tap-receiver", daemon=True)
         self._receiver.start()
@@ -130,6 +147,24 @@ class TapProcess:
         where it means "no input order")."""
         self.input_dropped += n
 
+    def wind_down(self) -> None:
+        """The recording ends: in ``wind_down_s`` the child skips what it has not fed yet
+        (``WIND_DOWN_S``; the session calls this when it stops feeding)."""
+        def hurry():
+            if not self._ready.is_set():  # not handled yet (still starting): its default kills
+                return self._later(1.0, hurry)
+            try:
+                os.kill(self.proc.pid, signal.SIGUSR1)
+            except OSError:
+                pass
+
+        self._later(self.wind_down_s, hurry)
+
+    def _later(self, delay_s: float, fn) -> None:
+        self._hurry = threading.Timer(delay_s, fn)
+        self._hurry.daemon = True
+        self._hurry.start()
+
     def finish(self, timeout_s: float = 60.0) -> None:
         """Let the child work through what it was sent, write its last outputs and the input
         order; RuntimeError when it failed or did no batch in ``timeout_s``."""
@@ -145,6 +180,8 @@ class TapProcess:
                 if self._batches != seen:  # getting on (slowly, at its priority)
                     seen, t_seen = self._batches, time.monotonic()
         self._in_w.close()
+        if self._hurry is not None:
+            self._hurry.cancel()
         if self._summary is None:
             self.proc.kill()
         self.proc.join(5.0)
@@ -170,6 +207,9 @@ class TapProcess:
         try:
             while True:
                 msg = self._out_r.recv()
+                if msg[0] == "ready":
+                    self._ready.set()
+                    continue
                 if msg[0] == "error":
                     self.error = f"pipeline process: {msg[1]}"
                     return
