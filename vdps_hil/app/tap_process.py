@@ -57,16 +57,34 @@ class _CallLog:
         return calls
 
 
+def _lower_priority(nice: int) -> None:
+    """This process at ``nice`` below the logger, in a scheduling group of its own: on Linux
+    with autogroups (``/proc/sys/kernel/sched_autogroup_enabled``) the processes of one session
+    share one group's CPU time, so an estimator in the logger's session -- at any nice value --
+    would spend the time its readers need; in a session of its own (``os.setsid``) whose group
+    is at ``nice`` too (``/proc/self/autogroup``) it only takes what no one else wants."""
+    try:
+        os.setsid()
+    except OSError:
+        pass
+    try:
+        with open("/proc/self/autogroup", "w") as f:
+            f.write(str(nice))
+    except OSError:
+        pass
+    try:
+        os.nice(nice)
+    except OSError:
+        pass
+
+
 def _child(conn_in, conn_out, vehicle: str, params: str | None, options: dict, nice: int) -> None:
     """The child's loop (module docstring). Ctrl-C reaches the whole process group: the logger
     decides when the estimator stops."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     hurry = []
     signal.signal(signal.SIGUSR1, lambda signum, frame: hurry.append(1))  # TapProcess.wind_down
-    try:
-        os.nice(nice)
-    except OSError:
-        pass
+    _lower_priority(nice)
     conn_out.send(("ready",))  # SIGUSR1 handled from now on
     from vdps_hil.app.pipeline_tap import PipelineTap
     from vdps_hil.model.params import load_vehicle
