@@ -41,8 +41,10 @@ def test_the_process_writes_what_the_tap_writes_in_process_at_a_lower_priority(t
         while tp._batches == 0 and time.monotonic() < t_end:
             time.sleep(0.05)
         nice_child = os.getpriority(os.PRIO_PROCESS, tp.proc.pid)
+        session_child = os.getsid(tp.proc.pid)
         tp.finish()
     assert nice_child == min(19, os.getpriority(os.PRIO_PROCESS, 0) + TAP_NICE)
+    assert session_child == tp.proc.pid != os.getsid(0)  # a scheduling group of its own
     want, want_order = _est(tmp_path / "here.mcap")
     got, got_order = _est(tmp_path / "child.mcap")
     assert len(want["/est/state"]) > 5 and len(want["/est/can/vdps"]) > 20

@@ -1,23 +1,25 @@
-"""``vdps log --pipeline``'s estimator in a process of its own, at a lower CPU priority, so that
-it can never take the CPU (or the GIL) the device readers and the recording need.
+"""``vdps log --pipeline``'s estimator in a process of its own, at a lower CPU priority and in a
+scheduling group of its own, so that it can never take the CPU (or the GIL) the device readers
+and the recording need.
 
 The logger's side, :class:`TapProcess`, is a tap as ``app.session.LogSession`` takes one: the
 session's tap thread calls it with the decoded samples (a blocking send on a pipe: when the
 estimator is behind the pipe fills, the session's bounded tap queue fills behind it and drops,
-counted -- never the recording; the input order is then not recorded). The child (``multiprocessing`` spawn, safe-path mode as every
-child of ours: ``app.children``) lowers its own priority by ``nice`` (``os.nice``, default
-``TAP_NICE``), builds :class:`~vdps_hil.app.pipeline_tap.PipelineTap` and feeds it. What the
-tap writes -- ``/est/`` messages and, at :meth:`TapProcess.finish`, the input order metadata --
-comes back as writer calls (``write_json``, ``write_estimate``, ``add_metadata``; nothing else
-is accepted), made on the recording's writer by a receiver thread of the logger; while the disk
-reserve is reached (``recording_allowed()`` false) they are counted, not written
-(``outputs_skipped_disk``).
+counted -- never the recording; the input order is then not recorded). The child
+(``multiprocessing`` spawn, safe-path mode as every child of ours: ``app.children``) moves to a
+session of its own at ``nice`` (default ``TAP_NICE``; :func:`_lower_priority`), builds
+:class:`~vdps_hil.app.pipeline_tap.PipelineTap` and feeds it. What the tap writes -- ``/est/``
+messages and, at :meth:`TapProcess.finish`, the input order metadata -- comes back as writer
+calls (``write_json``, ``write_estimate``, ``add_metadata``; nothing else is accepted), made on
+the recording's writer by a receiver thread of the logger; while the disk reserve is reached
+(``recording_allowed()`` false) they are counted, not written (``outputs_skipped_disk``). At
+the end it gets ``WIND_DOWN_S`` to catch up (:meth:`TapProcess.wind_down`).
 
 Messages on the pipes (pickled, between our own two processes only): to the child
 ``("samples", list)``, ``("lost", n)``, ``("finish",)`` (and SIGUSR1: skip the samples not fed
-yet, :meth:`TapProcess.wind_down`); from it ``("ready",)`` once SIGUSR1 is handled, ``("out", calls, status)`` after
-each batch, ``("done", calls, status, summary)`` after the finish, ``("error", text)`` when the
-tap raised (the child then ends).
+yet); from it ``("ready",)`` once SIGUSR1 is handled, ``("out", calls, status)`` after each
+batch, ``("done", calls, status, summary)`` after the finish, ``("error", text)`` when the tap
+raised (the child then ends).
 """
 
 from __future__ import annotations
