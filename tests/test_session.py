@@ -18,7 +18,7 @@ import pytest
 
 from vdps_hil.adapters.can_adapter import CanAdapter
 from vdps_hil.adapters.imu_adapter import ImuAdapter
-from vdps_hil.app.session import LogSession, room_bytes
+from vdps_hil.app.session import LogSession, room_bytes, start_readers
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.codecs.can_encode import encode_wheel_speeds
 from vdps_hil.codecs.imu_decoder import ImuDecoder
@@ -92,6 +92,35 @@ def test_session_records_everything_with_health_and_loss(tmp_path, rng):
     assert h["kinds"]["wheel_speed"]["count"] == 1000
     assert h["loss"]["read_by"] == "thread"  # virtual: python-can's blocking recv in a thread
     assert {h["loss"][k] for k in ("os", "reader", "sequence", "decoded_skipped")} == {0}
+
+
+def test_what_the_readers_took_before_the_loop_began_is_not_taken_for_decoding_lag(tmp_path, rng):
+    """``vdps log`` starts the readers as soon as the devices are open and its loop after the
+    file and the tap exist (seconds on a loaded machine): frames read 2.5 s before ``run`` with a
+    1 s lag limit are decoded, every one (the limit counts from the start of the loop for
+    them; it had skipped them all, and ``--pipeline`` then saw no sample)."""
+    chan = f"early_{rng.integers(1 << 30)}"
+    a = CanAdapter("vdps", f"virtual:{chan}", decoder=VdpsCanDecoder())
+    out = tmp_path / "early.mcap"
+    w = RecordingWriter(out, metadata={"mode": "test"})
+    sess = LogSession([a], w, decode_lag_s=1.0, health_s=0.1)
+    sess.open()
+    start_readers([a])
+    tx = can.Bus(interface="virtual", channel=chan)
+    try:
+        for k in range(200):
+            for m in encode_wheel_speeds([1.0, 2.0, 3.0, 4.0], k % 256):
+                tx.send(m)
+        time.sleep(2.5)  # the logger's start-up: the reader holds them meanwhile
+        res = _run(sess, lambda: _wait(lambda: a.health.records >= 400))
+    finally:
+        tx.shutdown()
+        w.close()
+    with RecordingReader(out) as r:
+        t = r.topics()
+        assert t["/raw/can/vdps"].count == 400
+        assert t["/decoded/can.vdps/wheel_speed"].count == 400
+    assert res["loss"]["can.vdps"]["decoded_skipped"] == 0
 
 
 def test_disk_reserve_stops_decoded_topics_and_keeps_every_raw_frame(tmp_path, rng):

@@ -261,3 +261,16 @@ def test_a_diverging_prediction_is_a_counted_fault_not_a_crash():
     dec = VdpsCanDecoder()
     decoded = [s for f in frames for s in dec.decode(0, f.arbitration_id, bytes(f.data))]
     assert decoded and all(s.fields["warning_status"] == WarningStatus.FAULT for s in decoded)
+
+
+def test_a_nan_prediction_is_sent_as_a_fault_not_a_crash():
+    """A prediction whose wheel loads went NaN (an estimate diverged on a starved live run) gave
+    a NaN LTR the encoder refuses: ``vdps log --pipeline``'s tap died on it. The frame goes out
+    with status 3 (fault), LTR and roll 0."""
+    nan = float("nan")
+    a = RolloverAssessment(0, None, None, nan, 0.0, nan, 1.0, "horizon")
+    frames = WarningNode().handle(0, a)
+    decoded = [s for f in frames for s in VdpsCanDecoder().decode(0, f.arbitration_id, bytes(f.data))]
+    assert len(decoded) == 1
+    assert decoded[0].fields["warning_status"] == WarningStatus.FAULT
+    assert decoded[0].fields["warning_ltr"] == 0.0 and decoded[0].fields["warning_peak_roll_rad"] == 0.0

@@ -224,13 +224,11 @@ def emulate(args) -> int:
         now = time.monotonic()
         max_gap = max(max_gap, now - last)
         last = now
-        if now >= t_end:
-            break
-        el = now - t0
+        el = min(now, t_end) - t0  # stalled past the end: the messages due until then, late
         for name, rate in streams.items():
-            due = int(el * rate) + (1 if rate > 0 else 0)  # the first at t0
+            due = min(int(el * rate) + (1 if rate > 0 else 0), int(args.seconds * rate))  # the first at t0
             while sent[name] < due:
-                late = el - sent[name] / rate > LATE_S
+                late = now - t0 - sent[name] / rate > LATE_S
                 late_msgs += late
                 make(name, sent[name])
                 sent[name] += 1
@@ -242,6 +240,8 @@ def emulate(args) -> int:
             prog.write(json.dumps({"t": now, "sent": sent, "dropped": dropped}) + "\n")
             prog.flush()
             next_progress += 0.1
+        if now >= t_end:
+            break
         time.sleep(0.0005)
     t_stop = time.monotonic()
     t_flush = t_stop + 2.0

@@ -11,13 +11,14 @@ Three stages, so that nothing downstream can make a device lose data:
 2. **Raw first**: the session loop takes what every reader holds and writes the raw records
    (``/raw/can/<bus>``, ``/raw/serial/<device>``) at once.
 3. **Decoding after**: the same records are decoded in arrival order in the time left (50 ms per
-   loop, then the readers are served again); a record read more than ``decode_lag_s`` ago is
-   not decoded (``decoded_skipped``, its raw record is in the file, the decoder forgets its sequence state so the skip is not taken for data
+   loop, then the readers are served again); a record read more than ``decode_lag_s`` ago (or,
+   read before the loop began, that long after its start) is not decoded (``decoded_skipped``, its raw record is in the file, the decoder forgets its sequence state so the skip is not taken for data
    lost on the wire). When the disk (or the file-size limit of the process) leaves less than
    ``reserve_bytes``, decoded samples are no longer written (``decoded_skipped_disk``) and the
-   rest goes to the raw records. The ``tap`` (``vdps log --pipeline``) runs in a thread of its
-   own behind a bounded queue: when it falls behind by ``tap_queue`` samples it loses input
-   (``tap_dropped``), never the recording.
+   rest goes to the raw records. The ``tap`` (``vdps log --pipeline``) is called in a thread of
+   its own behind a bounded queue: when it falls behind by ``tap_queue`` samples it loses input
+   (``tap_dropped``), never the recording (``vdps log`` passes ``app.tap_process.TapProcess``:
+   the estimator itself runs in a process of its own at a lower priority).
 
 Health: ``/health/<source>`` every ``health_s`` and at the end (with the serial driver's own
 loss counters where the OS keeps them); the final health of every source also in the metadata
@@ -138,10 +139,19 @@ class _TapWorker:
             self.waiting -= len(batch)
 
     def close(self, timeout_s: float) -> None:
-        """Let the tap finish what is queued (at most ``timeout_s``; the rest is dropped)."""
+        """Let the tap finish what is queued while it gets on (``timeout_s`` without a batch
+        done: the rest is dropped). A tap at a lower priority catches up slowly on a loaded
+        machine, and the recording is complete meanwhile."""
         self._closed = True
         self._wake.set()
-        self._thread.join(timeout_s)
+        wind_down = getattr(self.tap, "wind_down", None)  # a tap that bounds its own end
+        if wind_down is not None:
+            wind_down()
+        seen, t_seen = self.waiting, time.monotonic()
+        while self._thread.is_alive() and time.monotonic() - t_seen < timeout_s:
+            self._thread.join(min(1.0, timeout_s))
+            if self.waiting != seen:
+                seen, t_seen = self.waiting, time.monotonic()
         if self._thread.is_alive():
             self.failed = True  # stop feeding a tap still busy: its input is lost, counted
             self.dropped += self.waiting
@@ -185,6 +195,7 @@ class LogSession:
         self._tap_worker: _TapWorker | None = None
         self.raw_written = 0
         self.decode_backlog_max = 0
+        self._t_run_ns = 0  # monotonic time :meth:`run` began
 
     def open(self) -> None:
         open_all(self.adapters)
@@ -226,15 +237,17 @@ class LogSession:
 
     def _decode(self, budget_s: float) -> None:
         """Stage 3 for up to ``budget_s`` of time, in slices of ``DECODE_SLICE`` payloads;
-        payloads whose read time is more than ``decode_lag_s`` ago are not decoded."""
+        payloads whose read time is more than ``decode_lag_s`` ago are not decoded -- counted
+        from the start of :meth:`run` for what the readers took before it (the logger's own
+        start-up, tens of seconds on a loaded machine, is not the decoder falling behind)."""
         t_end = time.monotonic() + budget_s
         backlog = self._backlog
         lag_ns = int(self.decode_lag_s * 1e9)
         while backlog:
             a, stamped, i = backlog[0]
             j, n = i, len(stamped)
-            if not a.clock.replay:
-                old = time.monotonic_ns() - lag_ns
+            old = time.monotonic_ns() - lag_ns
+            if not a.clock.replay and old > self._t_run_ns:
                 while j < n and stamped[j][0] < old:
                     j += 1
                 if j > i:
@@ -299,6 +312,7 @@ class LogSession:
         if self.tap is not None:
             self._tap_worker = _TapWorker(self.tap, self.tap_queue, self.errors)
         t_start = time.monotonic()
+        self._t_run_ns = time.monotonic_ns()
         due = {"flush": t_start, "health": t_start, "status": t_start}
         try:
             while not stop.is_set():

@@ -3,6 +3,7 @@ or ``--duration``, with a live one-line status per source."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import signal
@@ -147,6 +148,9 @@ class _Status:
 @click.option("--reserve-mb", type=float, default=64.0, show_default=True, metavar="MB",
               help="When less than MB is left on the disk, decoded topics stop (counted) and the "
                    "rest is kept for the raw topics.")
+@click.option("--decode-lag-s", type=float, default=2.0, show_default=True, metavar="S",
+              help="Records read more than S seconds ago are recorded raw but not decoded "
+                   "(counted as decoded_skipped): how far decoding may fall behind the readers.")
 @click.option("--quiet", is_flag=True, help="No live status.")
 @click.option("--pipeline", is_flag=True,
               help="Run the estimator, identifier, predictor and warning live on the decoded "
@@ -162,7 +166,8 @@ class _Status:
 @json_option
 @serve_option
 def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rotate_mb,
-        rotate_s, flush_s, reserve_mb, quiet, pipeline, vehicle, params, json_out, serve_port):
+        rotate_s, flush_s, reserve_mb, decode_lag_s, quiet, pipeline, vehicle, params, json_out,
+        serve_port):
     """Record live CAN buses and serial devices losslessly into one MCAP.
 
     \b
@@ -179,57 +184,74 @@ def log(can_specs, serial_specs, formats, dbcs, signalmap, output, duration, rot
     """
     from vdps_hil.app.session import LogSession, start_readers
 
-    _check_options(can_specs, serial_specs, duration, flush_s, rotate_mb, rotate_s)
+    _check_options(can_specs, serial_specs, duration, flush_s, rotate_mb, rotate_s, decode_lag_s)
     if reserve_mb < 0:
         raise UserError("--reserve-mb must not be negative")
-    model, start = _pipeline_start(pipeline, vehicle, params)
+    _pipeline_start(pipeline, vehicle, params)  # the files checked before a device opens
     adapters, info, sigmap = build_live_adapters(can_specs, serial_specs, formats, signalmap,
                                                  dbcs)
     _open_adapters(adapters)  # devices first: a bad port fails before a file is created
     start_readers(adapters)  # and drained from now on
-    writer = _open_writer(output, rotate_mb, rotate_s, adapters,
-                          _recording_metadata(can_specs, serial_specs, adapters, info, sigmap),
-                          _content_hashes(info, sigmap))
-    stop = threading.Event()
+    with _stop_on_signals() as stop:  # before the file appears: from then on SIGTERM stops cleanly
+        writer = _open_writer(output, rotate_mb, rotate_s, adapters,
+                              _recording_metadata(can_specs, serial_specs, adapters, info, sigmap),
+                              _content_hashes(info, sigmap))
+        tap = None
+        if pipeline:  # a process of its own; a rotated recording gets no input order (PipelineTap)
+            from vdps_hil.app.tap_process import TapProcess
 
-    def on_signal(signum, frame):
-        stop.set()
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    tap = None
-    if pipeline:  # a rotated recording gets no input order (PipelineTap)
-        tap = PipelineTap(model, writer, start, record_order=not (rotate_mb or rotate_s),
-                          params_file=None if params is None else os.path.basename(params))
-    session = LogSession(adapters, writer, flush_s=flush_s, status=_Status(quiet), tap=tap,
-                         reserve_bytes=int(reserve_mb * 1e6))
-    if tap is not None:
-        tap.recording_allowed = lambda: session.decoded_ok
-    try:
-        with live_server(serve_port, wait=False) as live:
-            writer.mirror = None if live is None else live.mirror
-            summary = session.run(stop, duration)
-            writer.mirror = None
-        if tap is not None and session.tap is tap:  # a tap that failed wrote no order
-            _finish_tap(tap, session, summary)
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
-        writer.close()
+            tap = TapProcess(vehicle, params, writer, record_order=not (rotate_mb or rotate_s),
+                             params_file=None if params is None else os.path.basename(params))
+        session = LogSession(adapters, writer, flush_s=flush_s, status=_Status(quiet), tap=tap,
+                             reserve_bytes=int(reserve_mb * 1e6), decode_lag_s=decode_lag_s)
+        if tap is not None:
+            tap.recording_allowed = lambda: session.decoded_ok
+        try:
+            with live_server(serve_port, wait=False) as live:
+                writer.mirror = None if live is None else live.mirror
+                summary = session.run(stop, duration)
+                writer.mirror = None
+            if tap is not None and session.tap is tap:  # a tap that failed wrote no order
+                _finish_tap(tap, session, summary)
+        finally:
+            writer.close()
     _report(summary, getattr(writer, "files", [output]), session, tap, quiet, json_out)
     if summary.get("fatal"):
         raise RecordingStopped(summary["fatal"])
 
 
-def _check_options(can_specs, serial_specs, duration, flush_s, rotate_mb, rotate_s) -> None:
+@contextlib.contextmanager
+def _stop_on_signals():
+    """An event set by SIGINT or SIGTERM while in the block (the handlers before it restored
+    after)."""
+    stop = threading.Event()
+    old = {s: signal.signal(s, lambda signum, frame: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+MAX_DECODE_LAG_S = 600.0
+"""--decode-lag-s at most: the backlog it allows is held in memory."""
+
+
+def _check_options(can_specs, serial_specs, duration, flush_s, rotate_mb, rotate_s,
+                   decode_lag_s: float = 2.0) -> None:
     """UserError unless there is something to log and every given duration or size is a finite
-    positive number (``--rotate-mb 0`` would otherwise silently mean "no rotation")."""
+    positive number (``--rotate-mb 0`` would otherwise silently mean "no rotation"), the decode
+    lag limit at most ``MAX_DECODE_LAG_S``."""
     if not can_specs and not serial_specs:
         raise UserError("nothing to log: give --can BUS=INTERFACE:CHANNEL and/or "
                         "--serial NAME=PORT[@BAUD]")
     for name, v in (("--duration", duration), ("--flush-s", flush_s), ("--rotate-mb", rotate_mb),
-                    ("--rotate-s", rotate_s)):
+                    ("--rotate-s", rotate_s), ("--decode-lag-s", decode_lag_s)):
         if v is not None and not (math.isfinite(v) and v > 0):
             raise UserError(f"{name} must be a finite positive number, got {v:g}")
+    if decode_lag_s > MAX_DECODE_LAG_S:
+        raise UserError(f"--decode-lag-s must be at most {MAX_DECODE_LAG_S:g} s (the backlog is "
+                        f"held in memory), got {decode_lag_s:g}")
     if rotate_mb is not None and rotate_mb * 1e6 < 1000:
         raise UserError(f"--rotate-mb must be at least 0.001 (1 kB), got {rotate_mb:g}")
 
@@ -309,7 +331,7 @@ def _open_writer(output, rotate_mb, rotate_s, adapters, md: dict, hashes: dict):
         raise UserError(f"cannot write {output}: {getattr(e, 'strerror', None) or e}") from None
 
 
-def _finish_tap(tap: "PipelineTap", session, summary: dict) -> None:
+def _finish_tap(tap, session, summary: dict) -> None:
     """The pipeline's last outputs and input order (before the writer closes); a failure is one
     more reader error, the recording is closed properly whatever it does."""
     try:
@@ -334,165 +356,3 @@ def _report(summary: dict, files: list, session, tap, quiet: bool, json_out) -> 
     if tap is not None:
         summary["pipeline"] = tap.summary()
     write_json(summary, json_out)
-
-
-class PipelineTap:
-    """``vdps log --pipeline``: feeds every decoded sample the recording took, in arrival order,
-    to the paper's Figure 2 node (:class:`vdps_hil.pipeline.node.VdpsSystem`, the same node ``vdps
-    replay`` runs), records its estimates on ``/est/state`` (10 Hz) and its VDPS_Warning frames
-    on ``/est/can/<bus>`` in the layout of ``vdps replay``, and reports the latest warning for
-    the status line. It never sends on the bus (the bench does).
-
-    Configuration as ``vdps replay`` derives it (``app.replay.replay_config``): the samples of the
-    first ``probe_s`` (``PROBE_SECONDS``, 3 s) of data are held, the sensor set is inferred from
-    their fields and the suspension averaging sized from their rate (suspension sigma
-    ``DEFAULT_SUSP_SIGMA_M``), then they go to the system at once -- so the first estimates and
-    warnings come out after those seconds. ``record_order``: every sample fed is noted
-    (``record.input_order``) and :meth:`finish` writes the input order with the settings the
-    system was sized from, so ``vdps replay FILE --input-order recorded`` (same ``--vehicle``
-    and ``--params``) reproduces the run's ``/est/`` messages. ``vdps log`` records no order when
-    it rotates (``--rotate-mb/-s``): a replay of one file starts a fresh system where the live one
-    had run through the files before it, so only the first file could be reproduced."""
-
-    def __init__(self, model_vehicle, writer, start_params=None, *, record_order: bool = True,
-                 params_file: str | None = None, probe_s: float | None = None):
-        from vdps_hil.bus.samples import Sample
-        from vdps_hil.codecs.can_decode import VdpsCanDecoder
-        from vdps_hil.estimation.estimates import Estimate
-        from vdps_hil.record.input_order import InputOrder
-        from vdps_hil.app.replay import PROBE_SECONDS
-        from vdps_hil.pipeline.outputs import CanFrame
-
-        self._sample_type, self._frame_type, self._est_type = Sample, CanFrame, Estimate
-        self.model, self.start, self.params_file = model_vehicle, start_params, params_file
-        self.writer = writer
-        self.probe_s = PROBE_SECONDS if probe_s is None else probe_s
-        self.system = None
-        self.settings: dict | None = None  # what the system was sized from (recorded with the order)
-        self.kind_map: dict[str, str] = {}
-        self.error: str | None = None  # the system could not be configured (no IMU): not running
-        self.order = InputOrder() if record_order else None
-        self.order_written = False
-        self._pending: list = []
-        self._t0: int | None = None
-        self._fed_since_clear = 0
-        self._decoder = VdpsCanDecoder(source="pipeline")
-        self.samples = self.estimates = self.frames = 0
-        self.last_warning: dict | None = None
-        self.input_dropped = 0  # samples the session could not queue for us (we were behind)
-        self.est_skipped = 0  # outputs not written: the disk reserve was reached
-        self.recording_allowed = lambda: True
-
-    def input_lost(self, n: int) -> None:
-        """The session dropped ``n`` samples (this tap was behind): the run is no longer the
-        recording's input order, so none is recorded."""
-        self.input_dropped += n
-        self.order = None
-
-    def __call__(self, events) -> None:
-        for ev in events:
-            if not isinstance(ev, self._sample_type):
-                continue
-            if self.system is not None:
-                self._feed(ev)
-            elif self.error is None:
-                self._pending.append(ev)
-                if self._t0 is None:
-                    self._t0 = ev.t_ns
-                if ev.t_ns - self._t0 > self.probe_s * 1e9:  # sample_stats' end of the window
-                    self._configure()
-
-    def _configure(self) -> None:
-        """Size the system from the held samples as ``replay_file`` does, then feed them."""
-        from dataclasses import replace
-
-        from vdps_hil.app.replay import DEFAULT_SUSP_SIGMA_M, ReplayError, replay_config, sample_stats
-        from vdps_hil.pipeline.node import LIVE_PREDICTIONS, VdpsSystem
-
-        pending, self._pending = self._pending, []
-        _, rates, fields = sample_stats(iter(pending), self.probe_s)
-        try:
-            cfg, self.kind_map, _, _ = replay_config(rates, fields, self.model, DEFAULT_SUSP_SIGMA_M, None,
-                                                     identify=True, predict=True)
-        except ReplayError as e:
-            self.error = str(e)
-            return
-        if self.start is not None:
-            cfg = replace(cfg, start_params=self.start)
-        self.system = VdpsSystem(self.model, replace(cfg, **LIVE_PREDICTIONS))
-        self.system.ready(60.0)  # the prediction worker started before the first sample (prediction.offpath)
-        self.system.clear_input_log()
-        self.settings = {"vehicle": self.model.name, "vehicle_sha256": self.model.source_sha256,
-                         "start_params": None if self.start is None else self.start.as_dict(),
-                         "params_file": self.params_file, "susp_sigma_m": DEFAULT_SUSP_SIGMA_M,
-                         "probe_rates_hz": rates, "probe_fields": {k: sorted(v) for k, v in fields.items()}}
-        for s in pending:
-            self._feed(s)
-
-    def _feed(self, s) -> None:
-        if self.order is not None:
-            self.order.note(s)
-        self.samples += 1
-        if s.kind in self.kind_map:  # as replay_file
-            s = self._sample_type(s.t_ns, s.source, self.kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
-        self._outputs(self.system.handle(s))
-        self._fed_since_clear += 1
-        if self._fed_since_clear >= 4096:  # a live run keeps the file, not a copy in memory
-            self.system.clear_input_log()
-            self._fed_since_clear = 0
-
-    def _outputs(self, outs) -> None:
-        from vdps_hil.app.est_topics import write_output
-
-        if not self.recording_allowed():
-            self.est_skipped += len(outs)
-            return
-        for out in outs:
-            if isinstance(out, self._est_type):
-                self.estimates += 1
-                if self.estimates % 10 == 0:  # 10 Hz into the recording
-                    write_output(out, self.writer)
-            elif isinstance(out, self._frame_type):
-                self.frames += 1
-                write_output(out, self.writer)
-                for s in self._decoder.decode(out.t_ns, out.arbitration_id, out.data):
-                    if s.kind == "warning":
-                        self.last_warning = dict(s.fields, t_s=out.t_ns / 1e9)
-
-    def finish(self) -> None:
-        """End of the run (before the writer closes): a system still waiting for its probe
-        window is sized from what came, its last outputs are written (as a replay's end) and,
-        with ``record_order``, the input order with the settings (metadata
-        ``hil.input_order``)."""
-        if self.system is None and self._pending and self.error is None:
-            self._configure()
-        if self.system is None:
-            return
-        self._outputs(self.system.finish())
-        if self.order is not None:
-            from vdps_hil.record.input_order import INPUT_ORDER_METADATA
-
-            self.writer.add_metadata(INPUT_ORDER_METADATA, self.order.metadata(
-                system=self.settings, prediction=self.system.status()["prediction"]))
-            self.order_written = True
-
-    def status_line(self) -> str:
-        if self.system is None:
-            if self.error is not None:
-                return f"pipeline: not running ({self.error})"
-            return f"pipeline: sizing from the first {self.probe_s:g} s of data ({len(self._pending)} samples held)"
-        w = self.last_warning
-        if w is None:
-            return f"pipeline: {self.samples} samples, {self.estimates} estimates, no warning frame yet"
-        ttr = w.get("warning_time_to_rollover_s")
-        st = int(w["warning_status"])
-        words = {0: "valid", 1: "not valid: not converged", 2: "not valid: sensor missing", 3: "not valid: fault"}
-        return (f"pipeline: {self.samples} samples, {self.estimates} estimates; warning level "
-                f"{int(w['warning_level'])} ({words.get(st, f'status {st}')})"
-                + (f", time to rollover {ttr:.2f} s" if ttr is not None and ttr == ttr and ttr != float("inf") else ""))
-
-    def summary(self) -> dict:
-        return {"samples": self.samples, "estimates": self.estimates, "warning_frames": self.frames,
-                "last_warning": self.last_warning, "error": self.error,
-                "input_dropped": self.input_dropped, "outputs_skipped_disk": self.est_skipped,
-                "input_order_recorded": self.order_written}

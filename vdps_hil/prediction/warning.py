@@ -262,6 +262,8 @@ class WarningNode:
             if st == WarningStatus.VALID and t_ns - a.t0_ns > self._max_age_ns:
                 st = WarningStatus.FAULT
             ttr, roll, ltr = a.ttr_at(t_ns), a.peak_roll_rad, a.peak_ltr
+            if not (math.isfinite(roll) and math.isfinite(ltr)):  # a prediction gone NaN: a fault
+                st, roll, ltr = WarningStatus.FAULT, 0.0, 0.0
         msg = self._enc.warning(int(self._level), ttr, roll, ltr, int(st), t_ns=t_ns)
         self._last_sent_ns = t_ns
         self.frames_sent += 1
