@@ -78,7 +78,7 @@ class PipelineTap:
         from dataclasses import replace
 
         from vdps_hil.app.replay import DEFAULT_SUSP_SIGMA_M, ReplayError, replay_config, sample_stats
-        from vdps_hil.pipeline.node import LIVE_PREDICTIONS, VdpsSystem
+        from vdps_hil.pipeline.node import VdpsSystem
 
         pending, self._pending = self._pending, []
         _, rates, fields = sample_stats(iter(pending), self.probe_s)
@@ -90,8 +90,9 @@ class PipelineTap:
             return
         if self.start is not None:
             cfg = replace(cfg, start_params=self.start)
-        self.system = VdpsSystem(self.model, replace(cfg, **LIVE_PREDICTIONS))
-        self.system.ready(60.0)  # the prediction worker started before the first sample (prediction.offpath)
+        # predictions inline (prediction.offpath's wait rule): this tap runs in a process of its own
+        # (app.tap_process), off the readers' path, and a daemon process cannot start a worker
+        self.system = VdpsSystem(self.model, cfg)
         self.system.clear_input_log()
         self.settings = {"vehicle": self.model.name, "vehicle_sha256": self.model.source_sha256,
                          "start_params": None if self.start is None else self.start.as_dict(),
