@@ -46,7 +46,7 @@ def test_bench_prints_what_happened_and_writes_json_and_recording(short_run, spe
     text = cap.out
     assert "vdps bench: paper" in text and "ECU reaction off" in text
     assert "pipeline in its own process; CAN over TCP on 127.0.0.1" in text  # the default transport
-    assert f"  headroom: " in text and f"x at speed {float(speed):g}x (measured before the run" in text
+    assert "  headroom: " in text and f"x at speed {float(speed):g}x (measured before the run" in text
     assert "the pipeline received every one of them" in text
     assert "warning: none" in text and "stayed upright" in text
     assert f"recording: {out}" in text and out.stat().st_size > 0

@@ -15,7 +15,7 @@ from hypothesis import given, settings, strategies as st
 from vdps_hil.bus.samples import Sample
 from vdps_hil.codecs.can_dbc import load_dbc
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
-from vdps_hil.codecs.can_e2e import crc8_j1850, e2e_crc
+from vdps_hil.codecs.can_e2e import e2e_crc
 from vdps_hil.codecs.can_encode import VdpsCanEncoder, encode_steer, quantize
 
 from can_checks import LAYOUT
