@@ -13,6 +13,7 @@ from cantools.database.conversion import BaseConversion
 from hypothesis import given, settings, strategies as st
 
 from vdps_hil.codecs.can_dbc import TTR_NONE_RAW, load_dbc
+from vdps_hil.codecs.can_e2e import e2e_crc
 from vdps_hil.codecs.can_decode import VdpsCanDecoder, _DecodePlan
 from vdps_hil.codecs.can_encode import _from_raw, encode_warning
 from vdps_hil.codecs.dbc_compile import CompiledMessage, NotCompilable, compile_message
@@ -111,9 +112,14 @@ def _frames(seed: int, n: int) -> list[tuple[int, int, bytes]]:
         if aid == 0x080:
             data = bytes(encode_warning(rng.randrange(4), rng.choice([None, 1.5]), 0.1, 0.5,
                                         rng.randrange(2), ctr[aid]).data)
-        else:
-            data = bytearray(rng.randbytes(spec.dlc))
-            data[-1] = ctr[aid] & 0xFF
+        else:  # layout 2: the counter at its bits (Intel), the E2E CRC in byte 0
+            c = spec.counter
+            word = int.from_bytes(rng.randbytes(spec.dlc), "little")
+            mask = ((1 << c.length_bits) - 1) << c.start_bit
+            word = (word & ~mask) | ((ctr[aid] % (1 << c.length_bits)) << c.start_bit)
+            data = bytearray(word.to_bytes(spec.dlc, "little"))
+            if spec.crc is not None:
+                data[0] = e2e_crc(data, spec.data_id)
             data = bytes(data)
         ctr[aid] = (ctr[aid] + (1 if rng.random() < 0.95 else rng.randrange(0, 5))) & 0xFF
         r = rng.random()

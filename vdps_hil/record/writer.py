@@ -277,8 +277,7 @@ class RecordingWriter:
         self._copies_queued = 0
 
     def _append_run(self, topic: str, ch: "_Channel", t_ns, log_time, payload) -> None:
-        """Messages of one channel in this order, as ``_write`` once each gives them (lock held;
-        times checked): statistics, sequence numbers, time-order counts."""
+        """Messages of one channel in this order, as ``_write`` once each (lock held, times checked)."""
         n = len(payload)
         if ch.last_t_ns <= t_ns[0] and all(map(operator.le, t_ns, t_ns[1:])):
             ch.last_t_ns = t_ns[-1]  # in order: the common case
@@ -324,11 +323,8 @@ class RecordingWriter:
     def write_encoded_run(self, topic: str, schema_name: str, t_ns: Sequence[int], payloads: Sequence[bytes],
                           wall_time_ns: Sequence[int | None], channel_metadata: Mapping[str, str] | None = None
                           ) -> None:
-        """``write_encoded(topic, schema_name, t_ns[k], payloads[k], wall_time_ns=wall_time_ns[k],
-        channel_metadata=...)`` for k = 0..n-1 (the same messages, statistics and checks, each
-        raised before anything is written), appended as one run of the channel (one pack and
-        one write, ``MessageAppender.add_run``): a replay's Foxglove view writes its decoded
-        samples so."""
+        """``write_encoded`` of message k = 0..n-1 (the same messages, statistics and checks, all
+        raised before anything is written) as one run of the channel (``MessageAppender.add_run``)."""
         t_ns, payloads, walls = check_run(topic, schema_name, t_ns, payloads, wall_time_ns)
         if not payloads:
             return
@@ -367,18 +363,12 @@ class RecordingWriter:
         m = msg_or_fields
         if isinstance(m, Mapping):
             data = m.get("data")
-            if data is None:
-                data = bytes.fromhex(m.get("data_hex", ""))
-            if direction is None:
-                direction = m.get("direction", "rx")
-            doc = S.raw_can_doc(t_ns, m["arbitration_id"], data,
-                                is_extended_id=m.get("is_extended_id", False),
-                                is_fd=m.get("is_fd", False),
-                                is_remote_frame=m.get("is_remote_frame", False),
-                                is_error_frame=m.get("is_error_frame", False),
-                                dlc=m.get("dlc"), direction=direction,
-                                bitrate_switch=m.get("bitrate_switch", False),
-                                error_state_indicator=m.get("error_state_indicator", False))
+            data = bytes.fromhex(m.get("data_hex", "")) if data is None else data
+            direction = m.get("direction", "rx") if direction is None else direction
+            flags = ("is_extended_id", "is_fd", "is_remote_frame", "is_error_frame", "bitrate_switch",
+                     "error_state_indicator")
+            doc = S.raw_can_doc(t_ns, m["arbitration_id"], data, dlc=m.get("dlc"), direction=direction,
+                                **{k: m.get(k, False) for k in flags})
             payload = json.dumps(doc, separators=(",", ":")).encode()
         else:  # can.Message (duck-typed): fast path, same document as raw_can_doc
             if direction is None:
@@ -424,11 +414,9 @@ class RecordingWriter:
     def write_sample(self, sample, topic: str | None = None) -> None:
         """A bus Sample on ``/decoded/<source>/<kind>`` (or ``topic``); log_time from the
         sample's ``wall_time_ns`` when non-zero."""
-        topic = S.sample_topic(sample.source, sample.kind) if topic is None \
-            else S.check_topic(topic)
+        topic = S.sample_topic(sample.source, sample.kind) if topic is None else S.check_topic(topic)
         S.check_time_ns("t_ns", sample.t_ns)
-        payload = json.dumps(sample.to_json(), separators=(",", ":"),
-                             allow_nan=False).encode()
+        payload = json.dumps(sample.to_json(), separators=(",", ":"), allow_nan=False).encode()
         self._write(topic, S.SAMPLE, sample.t_ns, payload, sample.wall_time_ns or None,
                     {"source": sample.source, "kind": sample.kind})
 
