@@ -164,7 +164,9 @@ def test_vdps_log_serve_streams_the_decoded_topics_and_gnss_fix(tmp_path):
 
     from live_devices import Rig
 
-    rig = Rig(tmp_path, seconds=4.0, logger_args=("--serve", "0"))
+    # 8 s of data: a client that subscribes late on a loaded machine (the full suite beside it)
+    # still sees the stream running (with 4 s it once subscribed after the emulator had finished)
+    rig = Rig(tmp_path, seconds=8.0, logger_args=("--serve", "0"))
     try:
         url = None
         while url is None:
