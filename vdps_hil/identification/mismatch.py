@@ -105,15 +105,17 @@ class _Row:
         self.bin, self.bin_sum, self.bin_n = None, 0.0, 0
         self.means: list[float] = []
         self.counts: list[int] = []
-        self.ring = np.zeros(MAX_LAG)  # the last MAX_LAG residuals, newest at index (n - 1) % MAX_LAG
+        # the last MAX_LAG residuals, each at ring[i] and ring[i + MAX_LAG] (i = n % MAX_LAG when
+        # written), so the newest m are the contiguous ring[j + MAX_LAG - m : j + MAX_LAG]
+        self.ring = np.zeros(2 * MAX_LAG)
         self.lag_sums = np.zeros(MAX_LAG + 1)  # lag_sums[k] = sum_t r_t r_(t-k), k = 1..MAX_LAG
 
     def add(self, k_bin: int, r: float) -> None:
         j = self.n % MAX_LAG
-        if self.n:  # lags 1..min(n, MAX_LAG): ring[(j - k) % MAX_LAG] is r_(t-k)
-            past = np.roll(self.ring[::-1], j)[:min(self.n, MAX_LAG)]
-            self.lag_sums[1:1 + len(past)] += r * past
-        self.ring[j] = r
+        if self.n:  # lags 1..m, m = min(n, MAX_LAG): ring[j + MAX_LAG - k] is r_(t-k)
+            m = min(self.n, MAX_LAG)
+            self.lag_sums[1:1 + m] += r * self.ring[j + MAX_LAG - m:j + MAX_LAG][::-1]
+        self.ring[j] = self.ring[j + MAX_LAG] = r
         self.n += 1
         self.s1 += r
         self.s2 += r * r
