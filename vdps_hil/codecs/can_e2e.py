@@ -66,33 +66,33 @@ def _crc8_table(poly: int) -> tuple[int, ...]:
 _CRC8_TABLE = _crc8_table(CRC8_POLY)
 
 
+def _crc8_update(reg: int, data) -> int:
+    """The CRC-8/SAE-J1850 register after ``data`` (bytes or ints) from ``reg`` (no xorout)."""
+    table = _CRC8_TABLE
+    for b in bytes(data):
+        reg = table[reg ^ b]
+    return reg
+
+
 def crc8_j1850(data: bytes | bytearray | memoryview) -> int:
     """CRC-8/SAE-J1850 (poly 0x1D, init 0xFF, MSB first, xorout 0xFF); ``b"123456789"`` -> 0x4B."""
-    reg = CRC8_INIT
-    for b in bytes(data):
-        reg = _CRC8_TABLE[reg ^ b]
-    return reg ^ CRC8_XOROUT
+    return _crc8_update(CRC8_INIT, data) ^ CRC8_XOROUT
 
 
 def e2e_register(data_id: int | None) -> int:
     """The CRC register after the data ID (low, high byte) from the initial value; ``CRC8_INIT``
     for None (no data ID). A receiver computes it once per message."""
-    reg = CRC8_INIT
-    if data_id is not None:
-        for b in (data_id & 0xFF, (data_id >> 8) & 0xFF):
-            reg = _CRC8_TABLE[reg ^ b]
-    return reg
+    if data_id is None:
+        return CRC8_INIT
+    return _crc8_update(CRC8_INIT, (data_id & 0xFF, (data_id >> 8) & 0xFF))
 
 
 def e2e_crc(payload: bytes | bytearray | memoryview, data_id: int | None, reg: int | None = None) -> int:
     """The CRC of byte 0 of a protected frame: CRC-8/SAE-J1850 over ``data_id`` (low, high byte;
     None: no data ID, VDPS_Warning) followed by ``payload[1:]`` (module docstring). ``reg``:
     :func:`e2e_register` of ``data_id`` when the caller has it."""
-    table = _CRC8_TABLE
     reg = e2e_register(data_id) if reg is None else reg
-    for b in bytes(payload[1:]):
-        reg = table[reg ^ b]
-    return reg ^ CRC8_XOROUT
+    return _crc8_update(reg, payload[1:]) ^ CRC8_XOROUT
 
 
 # ---------------------------------------------------------------------------------------------

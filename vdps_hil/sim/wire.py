@@ -138,10 +138,7 @@ _CRC8_TABLE = np.array(can_e2e._CRC8_TABLE, dtype=np.uint8)
 
 def _e2e_crc_rows(data: np.ndarray, data_id: int | None) -> np.ndarray:
     """``can_e2e.e2e_crc`` of every row of ``data`` (N, DLC) uint8 (byte 0 is not covered)."""
-    reg = np.full(data.shape[0], can_e2e.CRC8_INIT, dtype=np.uint8)
-    if data_id is not None:
-        for b in (data_id & 0xFF, (data_id >> 8) & 0xFF):
-            reg = _CRC8_TABLE[reg ^ np.uint8(b)]
+    reg = np.full(data.shape[0], can_e2e.e2e_register(data_id), dtype=np.uint8)
     for j in range(1, data.shape[1]):
         reg = _CRC8_TABLE[reg ^ data[:, j]]
     return reg ^ np.uint8(can_e2e.CRC8_XOROUT)
