@@ -123,8 +123,9 @@ def _cost(marks: list[tuple[float, float, float]], warm_s: float) -> tuple[float
     return ((last[1] - first[1]) / dt, (last[2] - first[2]) / dt) if dt > 0 else (0.0, 0.0)
 
 
-def _pipeline_cost(bench, rec: Path, warm_s: float) -> float:
+def _pipeline_cost(bench, rec: Path, warm_s: float) -> tuple[float, float]:
     from vdps_hil.app.est_topics import est_docs
+    from vdps_hil.pipeline.outputs import CanFrame
     from vdps_hil.record.decode import decode_recording
 
     from .bench_config import make_system
@@ -139,7 +140,7 @@ def _pipeline_cost(bench, rec: Path, warm_s: float) -> float:
             if not marks and s.t_ns >= warm_ns:
                 marks.append((s.t_ns / 1e9, time.perf_counter(), time.process_time()))
             for o in system.handle(s):
-                if type(o).__name__ != "CanFrame":
+                if not isinstance(o, CanFrame):
                     for _ in est_docs(o):
                         pass
             t_last = s.t_ns

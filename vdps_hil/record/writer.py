@@ -41,7 +41,7 @@ from mcap.writer import LIBRARY_IDENTIFIER as _MCAP_LIBRARY
 from vdps_hil import __version__ as _TOOL_VERSION
 from vdps_hil.record import schemas as S
 from vdps_hil.record.mcap_append import MessageAppender
-from vdps_hil.record.payloads import check_run, estimate_payload, estimate_topic, json_payload
+from vdps_hil.record.payloads import check_run, estimate_payload, estimate_topic, json_payload, sample_payload
 
 __all__ = ["RecordingWriter", "WriterStats"]
 
@@ -416,8 +416,7 @@ class RecordingWriter:
         sample's ``wall_time_ns`` when non-zero."""
         topic = S.sample_topic(sample.source, sample.kind) if topic is None else S.check_topic(topic)
         S.check_time_ns("t_ns", sample.t_ns)
-        payload = json.dumps(sample.to_json(), separators=(",", ":"), allow_nan=False).encode()
-        self._write(topic, S.SAMPLE, sample.t_ns, payload, sample.wall_time_ns or None,
+        self._write(topic, S.SAMPLE, sample.t_ns, sample_payload(sample), sample.wall_time_ns or None,
                     {"source": sample.source, "kind": sample.kind})
 
     def write_location_fix(self, sample, topic: str = S.GNSS_FIX_TOPIC,
