@@ -188,7 +188,7 @@ def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPa
     lam = np.asarray(inp.slip_ratio)
     db = np.column_stack([acc, -np.vstack([lam * np.cos(d), lam * np.sin(d)])])  # d/d[m, C_lambda,1..4]
     if len(cfg.cornering.q) == 3:  # the yaw row
-        a_z, b_z, db_z = _cornering_yaw_row(inp, vehicle, params, fa)
+        a_z, b_z, db_z = _cornering_yaw_row(inp, vehicle, params, fa, al)
         # its b uses I_z: weight sd_row / sqrt(sd_row^2 + (sigma_Iz wd_z)^2), sigma_Iz the prior's
         s_iz = cfg.inertia.prior_rel_sigma * vehicle.params.inertia_z_kgm2 * cfg.cornering.q[2]
         k = 1.0 / math.sqrt(1.0 + (s_iz * inp.omega_dot_radps2[2]) ** 2)
@@ -200,7 +200,7 @@ def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPa
     return Regressor(a, b, rows, db, gated)
 
 
-def _cornering_yaw_row(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams, fa):
+def _cornering_yaw_row(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams, fa, al):
     """Eq 22's optional third row: eq 13's yaw balance (eq 23's third row) with the eq 15 lateral
     forces F_b,i = C_alpha,axle / 2 alpha_i as the unknowns (``forces``' moment, corner i at
     (x_i, y_i))::
@@ -218,10 +218,10 @@ def _cornering_yaw_row(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPar
     weights the row by 1 / sqrt(1 + (q_3 sigma_Iz wd_z)^2) (sigma_Iz the inertia problem's prior
     sigma, q_3 = 1 / the row's design noise): the row's variance with the inertia's uncertainty
     added, so rows at a large yaw acceleration, where a wrong I_z would bias the split, count
-    little (Gauss-Seidel with the prior I_z early in a drive). Returns
+    little (Gauss-Seidel with the prior I_z early in a drive). ``al``: the slip angles of rows
+    1-2 (``forces.slip_angles_rad``). Returns
     (A_3 [m rad], b_3 [N m], db_3/d[m, C_lambda,1..4])."""
     xy = np.array(vehicle.geometry.corner_xy_m())
-    al = slip_angles_rad(vehicle, inp)
     d, lam = (np.asarray(v, dtype=float) for v in (inp.wheel_angle_rad, inp.slip_ratio))
     lever = (xy[:, 0] * np.cos(d) + xy[:, 1] * np.sin(d)) * al / 2.0
     lon = xy[:, 0] * np.sin(d) - xy[:, 1] * np.cos(d)  # M_z per unit F_a,i
