@@ -239,17 +239,21 @@ def recorded_vdps_dbc(metadata: Mapping[str, str]) -> Path | None:
     (``hash.dbc.vdps`` = ``sha256:<hex>`` of the DBC's bytes): a legacy layout's path when the
     hash is one of ``LEGACY_DBC_PATHS``, else None (decode with the current layout)."""
     want = str(metadata.get("hash.dbc.vdps", ""))
-    if not want.startswith("sha256:"):
-        return None
+    return _legacy_by_hash().get(want) if want.startswith("sha256:") else None
+
+
+@lru_cache(maxsize=1)
+def _legacy_by_hash() -> dict[str, Path]:
+    """``sha256:<hex>`` of each readable ``LEGACY_DBC_PATHS`` file -> its path (hashed once)."""
     import hashlib
 
+    out = {}
     for p in LEGACY_DBC_PATHS:
         try:
-            if "sha256:" + hashlib.sha256(p.read_bytes()).hexdigest() == want:
-                return p
+            out["sha256:" + hashlib.sha256(p.read_bytes()).hexdigest()] = p
         except OSError:
             continue
-    return None
+    return out
 
 
 @lru_cache(maxsize=8)
