@@ -149,13 +149,9 @@ def warm_pipeline_kernels() -> None:
     them, more on a loaded machine), which on the clock is a deadline miss at the start of every
     run. The simulator's kernels are left out (the pipeline process never imports the
     simulator)."""
-    import importlib
-
     from vdps_hil import jit
 
-    for name in jit.KERNEL_MODULES:
-        if not name.startswith("vdps_hil.sim."):
-            getattr(importlib.import_module(name), "warm", lambda: None)()
+    jit.warm(skip=("vdps_hil.sim.",))
 
 
 def _saved_workbench_model(path: str):
