@@ -193,7 +193,10 @@ class PredictionRunner:
         return True
 
     def close(self) -> None:
-        """Stop the worker (jobs not started are cancelled)."""
+        """Stop the worker: jobs not started are cancelled, the running one (a few ms) finishes,
+        and the pool's threads are joined, so none writes to a closed pipe while the process
+        exits (``shutdown(wait=False)`` left a "Bad file descriptor" traceback on a bench
+        child's stderr)."""
         if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
