@@ -133,9 +133,8 @@ def test_live_estimates_are_bit_identical_to_a_replay_in_the_recorded_input_orde
                 for topic in ("/est/state", "/est/prediction", "/est/ident")}
     assert not any(s.source.startswith("/truth") or s.kind.startswith("truth") for s in samples)
     p = load_profile("table1-susp1k")
-    # the live pipeline's prediction settings are recorded (pipeline.node.LIVE_PREDICTIONS); the
-    # replay drops the predictions the live run dropped (none with the inline worker)
-    assert settings["prediction"]["worker"] == "inline" and settings["prediction"]["deadline"] == "wait"
+    # the live pipeline predicted in a worker and dropped late predictions; the replay drops the same
+    assert settings["prediction"]["worker"] == "process" and settings["prediction"]["deadline"] == "drop"
     system = make_system("suv-model", p.suspension.rate_hz, p.suspension.sigma_m, calibrated_params,
                          drops=recorded_drops(settings))
     replayed: dict = {k: [] for k in live}

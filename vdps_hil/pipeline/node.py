@@ -89,14 +89,10 @@ from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport
 
 __all__ = ["LIVE_PREDICTIONS", "SystemConfig", "VdpsSystem", "default_pipeline_config", "predictor_effects"]
 
-LIVE_PREDICTIONS = {"prediction_worker": "inline", "prediction_deadline": "wait"}
-"""How the bench's live system predicts (``SystemConfig`` fields, ``prediction.offpath``):
-inline for now. The worker process with the "drop" rule (``{"prediction_worker": "process",
-"prediction_deadline": "drop"}``, tested in ``tests/test_offpath.py``, measured by
-``tools/bench_offpath.py``) made the bench's real-time tests fail intermittently at integration
-(no valid warning on the fishhook in one of three full real-time runs on a quiet 2-core machine:
-a third process competing for the two cores with the simulator and the pipeline); it is not the
-live default until that is understood."""
+LIVE_PREDICTIONS = {"prediction_worker": "process", "prediction_deadline": "drop"}
+"""How a live system predicts (the bench, ``vdps log --pipeline``; ``SystemConfig`` fields,
+``prediction.offpath``): in a worker process (``tools/bench_offpath.py``: it keeps the
+prediction's Python off the sample path's GIL), a job late at its deadline dropped."""
 
 
 # ---------------------------------------------------------------------------- configuration
