@@ -2,7 +2,7 @@
 instead of accumulating lag (``hil.node`` asks :meth:`DeadlineGuard.skip` for every sample before
 it handles it).
 
-Rule (``deadline_s``, default 0.5 s wall): when an IMU sample (the 1 kHz input, stamped about
+Rule (``deadline_s``, default 0.1 s wall): when an IMU sample (the 1 kHz input, stamped about
 when it is read) reaches the pipeline loop more than ``deadline_s`` after its own time on the
 bench clock, every sample is skipped -- not handed to the system, not recorded under
 ``/decoded/``, no outputs -- until an IMU sample is within ``deadline_s / 2`` again. The deadline
@@ -22,12 +22,8 @@ from __future__ import annotations
 
 __all__ = ["DeadlineGuard", "DEFAULT_DEADLINE_S"]
 
-DEFAULT_DEADLINE_S = 0.5
-"""Wall seconds an IMU sample may be late before the pipeline skips work (module docstring).
-Was 0.1 s: on a quiet 2-core machine at a measured headroom of 2.3x the embedded bench still
-fell 0.1 s behind once or twice per 7 s fishhook (815 and 265 samples skipped in two of three
-runs, one of them at 2.85 s, just before the warning), so a run's only valid warning could fall
-into the "sensor missing" span; 0.5 s bounds the lag below a second and is not reached there."""
+DEFAULT_DEADLINE_S = 0.1
+"""Wall seconds an IMU sample may be late before the pipeline skips work (module docstring)."""
 
 
 class DeadlineGuard:

@@ -32,7 +32,7 @@ node also writes it to the recording as the metadata record ``hil.input_order`` 
 per sample written, in order; ``record.input_order``), so a replay can feed the recorded
 ``/decoded/`` samples in exactly the live order (``input_order_samples``).
 
-Deadline misses (``deadline_s``, default 0.5 s wall; ``hil.deadline``): a pipeline that falls
+Deadline misses (``deadline_s``, default 0.1 s wall; ``hil.deadline``): a pipeline that falls
 behind skips its own work until it is back, counted (``counters()["deadline_misses"]``), and its
 warnings say "sensor missing" meanwhile. ``deadline_s=None``: never skip.
 
