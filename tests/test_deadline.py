@@ -1,5 +1,5 @@
-"""hil.deadline: the pipeline skips every sample from an IMU sample later than the deadline
-until an IMU sample is within half of it, counts what it skipped, and scales the deadline with
+"""hil.deadline: the pipeline skips every sample from a wire-stamped sample (IMU, CAN) later than
+the deadline until one is within half of it (GNSS fixes are not judged), counts what it skipped, and scales the deadline with
 the bench speed (never below twice the sequencer's hold)."""
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def test_skips_from_a_late_imu_sample_until_one_is_within_half_the_deadline():
         seen.append((k, g.skip(_sample("imu", t)), g.skip(_sample("wheel_speed", t))))
     skipped = [k for k, a, b in seen if a]
     assert skipped == list(range(100, 250))  # 60 ms late is not back: above half the deadline
-    assert all(a == b for _, a, b in seen)  # the other kinds follow the IMU
+    assert all(a == b for _, a, b in seen)  # on time, the wheel speeds follow the IMU
     c = g.counts()
     assert c == {"samples": 300, "episodes": 1, "by_kind": {"imu": 150, "wheel_speed": 150},
                  "first_t_s": 0.1, "deadline_ms": 100.0}
@@ -40,3 +40,15 @@ def test_the_deadline_is_in_bench_time_and_none_never_skips():
     assert DeadlineGuard(BenchClock(0.25), 0.1, hold_s=0.05).deadline_ns == 100 * MS  # twice the hold
     never = DeadlineGuard(clock, None)
     assert not never.skip(_sample("imu", 0)) and never.counts()["samples"] == 0
+
+
+def test_a_burst_of_late_can_samples_is_skipped_before_the_next_imu_sample():
+    """CAN samples are stamped by the interface: a burst of them 150 ms late is skipped from its
+    first sample on, not handled until an IMU packet shows the lateness; a GNSS fix reported
+    150 ms after its time does not start skipping, and an on-time CAN sample ends the episode."""
+    now = [500 * MS]
+    g = DeadlineGuard(BenchClock(1.0, mono0_ns=0, monotonic_ns=lambda: now[0]), 0.1, hold_s=0.05)
+    assert not g.skip(_sample("gnss_pos", 350 * MS))  # fix time: not judged
+    assert [g.skip(_sample("suspension", t * MS)) for t in range(350, 360)] == [True] * 10
+    assert not g.skip(_sample("wheel_speed", 470 * MS))  # 30 ms late: within half, back
+    assert g.counts()["by_kind"] == {"suspension": 10} and g.counts()["episodes"] == 1
