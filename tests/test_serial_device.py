@@ -64,3 +64,21 @@ def test_send_log_finds_the_send_time_of_any_item():
     log.add(5, 300)  # items 5..9
     assert log.time_of([0, 2, 3, 4, 5, 9, 10, -1]).tolist() == [100, 100, 200, 200, 300, 300, -1, -1]
     assert log.total == 10
+
+
+def test_closing_twice_never_closes_a_descriptor_the_process_reused():
+    """The second close closes nothing: the numbers of the pty's ends are free after the first and
+    the next file opened takes them (here a pipe), which a second os.close would cut."""
+    import os
+
+    dev = PtySerialDevice("imu")
+    dev.close()
+    r, w = os.pipe()
+    try:
+        dev.close()
+        assert dev.read(0.01) == b""
+        os.write(w, b"x")
+        assert os.read(r, 1) == b"x"  # both ends still open
+    finally:
+        os.close(r)
+        os.close(w)

@@ -161,6 +161,8 @@ class PtySerialDevice:
 
     def read(self, timeout_s: float = 0.0) -> bytes:
         """What the pipeline wrote to the device (commands); waits up to ``timeout_s``."""
+        if self.master < 0:  # closed
+            return b""
         try:
             if timeout_s > 0:
                 r, _, _ = select.select([self.master], [], [], timeout_s)
@@ -173,7 +175,12 @@ class PtySerialDevice:
             return b""
 
     def close(self) -> None:
-        for fd in (self.master, self.slave):
+        """Close both ends, once: a second call closes nothing (the descriptor numbers may by
+        then belong to another file of the process)."""
+        fds, self.master, self.slave = (self.master, self.slave), -1, -1
+        for fd in fds:
+            if fd < 0:
+                continue
             try:
                 os.close(fd)
             except OSError:
