@@ -225,6 +225,7 @@ def test_cross_process_bench_over_slcan_on_a_pty(tmp_path, monkeypatch, ci_speed
     ({"faults": ("no_such_fault",)}, "unknown fault"),
     ({"vehicle": "sedan-model"}, "truth file is needed"),
     ({"params": "/nonexistent/p.json"}, "cannot read"),
+    ({"rt_priority": 100}, "--rt-priority must be an integer 0..99"),
 ])
 def test_bad_configurations_are_one_line_errors(kw, words):
     with pytest.raises(BenchError) as e:

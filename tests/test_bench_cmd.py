@@ -14,6 +14,8 @@ import pytest
 from vdps_hil.cli.bench_cmd import describe
 from vdps_hil.cli.main import main
 
+from test_scheduling import fifo_permitted
+
 KEYS = {"frames_sent": int, "frames_received": int, "lines_sent": int, "lines_received": int, "dropped": int,
         "warning_latency_ms": dict, "warning_lead_time_s": (float, type(None)),
         "warning_lead_to_tipup_s": (float, type(None)), "rolled_over": bool, "realtime_factor": float,
@@ -60,6 +62,12 @@ def test_bench_prints_what_happened_and_writes_json_and_recording(short_run, spe
     assert doc["dropped"] == 0 and doc["frames_received"] == doc["frames_sent"] > 0
     assert doc["rolled_over"] is False and doc["output"] == str(out)
     assert doc["transport"] == "tcp" and doc["headroom"]["headroom"] >= 1.0 and doc["headroom"]["speed"] == float(speed)
+    # SCHED_FIFO 10 by default where the machine permits it, else the default policy and why
+    sc = doc["scheduling"]
+    if fifo_permitted():
+        assert sc == {"policy": "fifo", "priority": 10} and "scheduling: SCHED_FIFO priority 10" in text
+    else:
+        assert sc["policy"] == "default" and "not permitted" in sc["reason"] and "default time sharing" in text
 
 
 def test_json_on_stdout_moves_the_words_to_stderr(tmp_path, monkeypatch, speed, capsys):

@@ -10,6 +10,7 @@ import sys
 import click
 
 from vdps_hil.cli.common import UserError, json_option, live_server, serve_option, write_json
+from vdps_hil.hil.scheduling import DEFAULT_PRIORITY as DEFAULT_RT_PRIORITY
 
 _EXAMPLE = """\b
 Examples:
@@ -76,10 +77,14 @@ missing" in its warnings rather than accumulating lag."""
 @click.option("--quiet", is_flag=True, help="No live status line.")
 @click.option("--headroom-check/--no-headroom-check", "headroom_check", default=True, show_default=True,
               help="Measure the headroom before the run and refuse a run below 1x (see below).")
+@click.option("--rt-priority", "rt_priority", type=click.IntRange(0, 99), default=DEFAULT_RT_PRIORITY,
+              show_default=True, metavar="N",
+              help="Run the simulator and the pipeline under SCHED_FIFO at priority N while the bench runs, "
+                   "when the system permits it (else the default policy, said in the summary); 0: off.")
 @json_option
 @serve_option
 def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec, sim_can, react, seed, profile,
-          output, params, calibrate_on, quiet, headroom_check, json_out, serve_port):
+          output, params, calibrate_on, quiet, headroom_check, rt_priority, json_out, serve_port):
     """Run the hardware-in-the-loop bench on one machine with nothing plugged in: the simulated
     vehicle on CAN and serial ports in real time, the live pipeline, its warning on CAN, a
     simulated ECU. Prints what happened: warning time, lead time, ECU action, upright or not."""
@@ -105,7 +110,8 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
     try:
         cfg = BenchConfig(scenario=scenario, vehicle=vehicle, model=model, effects=tuple(effects),
                           faults=tuple(faults), duration_s=duration_s, speed=speed, can=can_spec, sim_can=sim_can,
-                          react=react, output=output, seed=seed, profile=profile, params=params)
+                          react=react, output=output, seed=seed, profile=profile, params=params,
+                          rt_priority=rt_priority)
         b = Bench(cfg)
         if calibrate_on is not None:
             if not quiet:
@@ -263,6 +269,12 @@ def describe(d: dict) -> list[str]:
         lines.append(f"  headroom: {h['headroom']:.1f}x at speed {h['speed']:g}x (measured before the run: simulator "
                      f"{1e3 * h['simulator_cost_s_per_s']:.0f} ms + pipeline {1e3 * h['pipeline_cost_s_per_s']:.0f} ms "
                      f"of wall time per simulated second)")
+    sc = d.get("scheduling")
+    if sc and sc.get("policy") == "fifo":
+        lines.append(f"  scheduling: SCHED_FIFO priority {sc['priority']} (simulator and pipeline)")
+    elif sc and sc.get("reason") != "not asked":
+        lines.append(f"  scheduling: default time sharing ({sc.get('reason')}); a CPU-bound process beside the "
+                     f"bench then adds latency")
     if d["output"]:
         lines.append(f"  recording: {d['output']} (raw CAN/serial as the pipeline received them, /decoded, /est, "
                      f"/truth)")

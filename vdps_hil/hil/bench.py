@@ -68,7 +68,8 @@ The pipeline *keeps up* when nothing was lost, it missed no deadline (``deadline
 pipeline short of CPU skips its own work rather than falling behind, ``hil.node``) and its
 slowest output cycle was out within ``max_lag_s`` (default 0.25 s wall) of its input.
 ``headroom``: what ``hil.headroom`` measured before the run (``Bench.measure_headroom``), or
-None.
+None. ``scheduling``: the policy the run's threads and processes had (``rt_priority``,
+``hil.scheduling``: SCHED_FIFO when asked for and permitted, else the default and why).
 """
 
 from __future__ import annotations
@@ -93,6 +94,7 @@ from .bench_config import BenchConfig, BenchError, model_for, start_params
 from .ecu import Ecu
 from .latency import cycle_latencies, latency_summary, lead_times, reference_events
 from .pacing import BenchClock
+from . import scheduling
 from .pipelines import ChildPipeline, LocalPipeline
 from .serial_device import PtySerialDevice
 from .transports import parse_transport
@@ -141,6 +143,9 @@ class Bench:
         self.config = c = config or BenchConfig()
         if not (math.isfinite(c.speed) and c.speed > 0):
             raise BenchError(f"--speed must be a positive number, got {c.speed!r}")
+        if c.rt_priority is not None and (isinstance(c.rt_priority, bool) or not isinstance(c.rt_priority, int)
+                                          or not 0 <= c.rt_priority <= 99):
+            raise BenchError(f"--rt-priority must be an integer 0..99 (0: off), got {c.rt_priority!r}")
         try:
             self.transport = parse_transport(c.can, c.sim_can)
         except AdapterError as e:
@@ -165,9 +170,11 @@ class Bench:
         old_switch = sys.getswitchinterval()
         if c.switch_interval_s:
             sys.setswitchinterval(c.switch_interval_s)
+        self.scheduling, prev_sched = scheduling.request(c.rt_priority)  # inherited by what _run starts
         try:
             return self._run(status)
         finally:
+            scheduling.restore(prev_sched)
             sys.setswitchinterval(old_switch)
 
     def _make_writer(self):
@@ -408,6 +415,7 @@ class Bench:
             "pipeline_keeps_up": keeps_up, "max_lag_s": c.max_lag_s, "deadline_misses": misses,
             "warning_status": counters.get("warning_status", {}),
             "headroom": None if self.headroom is None else self.headroom.to_json(),
+            "scheduling": getattr(self, "scheduling", None),
             "ecu": ecu_sum, "pipeline": {"outputs": p["outputs"], "errors": p["errors"]},
             "stop_reason": ("interrupted" if getattr(self, "interrupted", False)
                             else side.session.sim.stop_reason or "duration"),

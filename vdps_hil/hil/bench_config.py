@@ -47,6 +47,7 @@ class BenchConfig:
     switch_interval_s: float | None = 0.001
     start_delay_s: float = 0.3
     params: str | None = None  # saved identified parameters the pipeline starts from (``hil.bench`` docstring)
+    rt_priority: int | None = None  # SCHED_FIFO priority of the run's threads (``hil.scheduling``); None: untouched
 
 
 def model_for(truth_name: str) -> str:
