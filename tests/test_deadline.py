@@ -42,13 +42,21 @@ def test_the_deadline_is_in_bench_time_and_none_never_skips():
     assert not never.skip(_sample("imu", 0)) and never.counts()["samples"] == 0
 
 
-def test_a_burst_of_late_can_samples_is_skipped_before_the_next_imu_sample():
+def test_a_burst_of_late_can_samples_is_skipped_with_half_a_deadline_of_imu_input():
     """CAN samples are stamped by the interface: a burst of them 150 ms late is skipped from its
-    first sample on, not handled until an IMU packet shows the lateness; a GNSS fix reported
-    150 ms after its time does not start skipping, and an on-time CAN sample ends the episode."""
+    first sample on, not handled until an IMU packet shows the lateness; an on-time CAN sample
+    does not end the episode, an on-time IMU sample ends it only once 50 ms of IMU input has
+    been skipped (an outage the estimator sees: "sensor missing"); a GNSS fix reported 150 ms
+    after its time does not start skipping."""
     now = [500 * MS]
     g = DeadlineGuard(BenchClock(1.0, mono0_ns=0, monotonic_ns=lambda: now[0]), 0.1, hold_s=0.05)
     assert not g.skip(_sample("gnss_pos", 350 * MS))  # fix time: not judged
     assert [g.skip(_sample("suspension", t * MS)) for t in range(350, 360)] == [True] * 10
-    assert not g.skip(_sample("wheel_speed", 470 * MS))  # 30 ms late: within half, back
-    assert g.counts()["by_kind"] == {"suspension": 10} and g.counts()["episodes"] == 1
+    assert g.skip(_sample("wheel_speed", 490 * MS))  # on time, but only the IMU ends an episode
+    imu = []
+    for k in range(100):  # the IMU on time (10 ms late) from 490 ms on, 1 kHz
+        now[0] = (500 + k) * MS
+        imu.append(g.skip(_sample("imu", (490 + k) * MS)))
+    assert imu == [True] * 50 + [False] * 50  # 50 ms of IMU input skipped, then handled
+    c = g.counts()
+    assert c["by_kind"] == {"suspension": 10, "wheel_speed": 1, "imu": 50} and c["episodes"] == 1
