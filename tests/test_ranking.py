@@ -6,8 +6,9 @@ Each drive is simulated with one effect hidden in the truth (maneuver and magnit
 stiffness, the IMU bias on one straight-then-circle drive; Table 1 sensors with the suspension
 at 100 Hz). The workbench reads only the recording's /raw/ topics and the model vehicle file.
 
-A *hit* is the hidden effect recommended, or inside the reported top equivalence group with an
-alternative named (``study.is_hit``). The goals of the issue (>= 90 % hits per effect, null in
+A *hit* is the hidden effect recommended, named by the recommendation as equivalent, or in the
+top equivalence group together with the recommendation (``study.is_hit``; a top group with
+nothing recommended, "no missing effect found", is not a hit). The goals of the issue (>= 90 % hits per effect, null in
 >= 95 %) are measured on >= 20 seeds by ``tools/workbench_study.py``; here every hidden drive of
 the two seeds must be a hit and every nothing-hidden drive must recommend nothing. Effects whose
 hit rate in the study is below the goal are marked ``xfail(strict=True)`` with the measured
@@ -25,7 +26,14 @@ from vdps_hil.experiments.workbench_study import HIDDEN, TWO_HIDDEN, run_job
 
 SEEDS = (21, 22)
 NULL_MANEUVERS = ("accel-coast", "coast-down", "step-steer", "lane-change", "sine-sweep")
-KNOWN_WEAK: dict[str, str] = {}
+KNOWN_WEAK: dict[str, str] = {
+    "steering_compliance": (
+        "measured with the hit rule tightened (2026-12-02): on seeds 21 and 22 the workbench recommends "
+        "nothing ('no candidate explains enough of the held-out residual with plausible values'); the "
+        "hidden compliance is only in the top equivalence group {front cornering stiffness, tire "
+        "saturation, steering compliance}, with a K&C measurement or a circle to the limit named as what "
+        "would separate them. The old rule counted the group without a recommendation as a hit"),
+}
 """Effect -> reason (measured, see the module docstring)."""
 
 

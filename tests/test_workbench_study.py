@@ -60,6 +60,9 @@ def test_hit_definition():
     assert not S.is_hit(_rk(None), "aero_drag")
     assert not S.is_hit(_rk(None, groups=[("mass", "imu_bias"), ("aero_drag", "imu_bias")]), "aero_drag")
     assert not S.is_hit(_rk("crosswind"), "aero_drag")
+    # a top group with nothing recommended is "no missing effect found", not a hit
+    assert not S.is_hit(_rk(None, groups=[("aero_drag", "rolling_resistance")]), "aero_drag")
+    assert not S.is_hit(_rk("imu_bias", groups=[("aero_drag", "rolling_resistance")]), "aero_drag")
 
 
 @pytest.mark.parametrize("k, n", [(0, 20), (18, 20), (20, 20), (7, 13)])

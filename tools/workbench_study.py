@@ -5,8 +5,10 @@ intervals, the null rate with nothing hidden, detection probability against magn
 
 Each drive is simulated (``vdps_hil.experiments.workbench_study``: maneuver and magnitude per effect),
 written to a temporary MCAP, and diagnosed from its /raw/ topics and the model vehicle file
-only (the truth file is never passed to the workbench). A *hit* is the hidden effect recommended
-or inside the reported top equivalence group with an alternative named (``study.is_hit``).
+only (the truth file is never passed to the workbench). A *hit* is the hidden effect recommended,
+named by the recommendation as equivalent, or in the top equivalence group together with the
+recommendation (``study.is_hit``; since 2026-12-02 a top group with nothing recommended is not a
+hit: the hit rates measured before counted it and are overstated where that happened).
 
 Usage::
 

@@ -203,15 +203,17 @@ def hidden_drive(path: str | os.PathLike, maneuver: str, effects: Sequence[str] 
 
 
 def is_hit(ranking, effect: str) -> bool:
-    """The issue's hit: the hidden effect is recommended, or it is in the reported top
-    equivalence group together with an alternative (named in the message), or the
-    recommendation names it as equivalent."""
-    if ranking.recommendation == effect:
-        return True
-    if ranking.recommendation and effect in ranking.equivalent_to:
+    """The issue's hit ("the effect, or a group containing it, recommended"): the hidden effect
+    is recommended, or the recommendation names it as equivalent, or the recommendation and the
+    hidden effect are in the top equivalence group. A top group without a recommendation is not
+    a hit (the tool said "no missing effect found"; counting it overstated the hit rates)."""
+    rec = ranking.recommendation
+    if rec is None:
+        return False
+    if rec == effect or effect in ranking.equivalent_to:
         return True
     groups = [g for g in ranking.groups if len(g["members"]) >= 2]
-    return bool(groups) and effect in groups[0]["members"]
+    return bool(groups) and rec in groups[0]["members"] and effect in groups[0]["members"]
 
 
 def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
