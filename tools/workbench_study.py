@@ -186,7 +186,7 @@ def summarize(results: list[dict]) -> dict:
 
 
 def print_summary(s: dict) -> None:
-    print("\nhit rate per effect (hidden effect recommended or in the top equivalence group):")
+    print("\nhit rate per effect (hidden effect recommended, named equivalent, or in the top group with the recommendation):")
     for eff, d in s["hit_rate"].items():
         print(f"  {eff:36s} {d['hits']:3d}/{d['n']:<3d} = {100 * d['rate']:5.1f} %  Wilson 95 % "
               f"[{100 * d['wilson95'][0]:5.1f}, {100 * d['wilson95'][1]:5.1f}]  (recommended {d['recommended']})")
