@@ -10,9 +10,11 @@ A *hit* is the hidden effect recommended, named by the recommendation as equival
 top equivalence group together with the recommendation (``study.is_hit``; a top group with
 nothing recommended, "no missing effect found", is not a hit). The goals of the issue (>= 90 % hits per effect, null in
 >= 95 %) are measured on >= 20 seeds by ``tools/workbench_study.py``; here every hidden drive of
-the two seeds must be a hit and every nothing-hidden drive must recommend nothing. Effects whose
-hit rate in the study is below the goal are marked ``xfail(strict=True)`` with the measured
-figure, so an improvement shows up as XPASS and fails the suite until the mark is removed.
+the two seeds must be a hit and every nothing-hidden drive must recommend nothing. Effects that
+miss on a test seed are marked ``xfail(strict=True)`` with the measured figure, so an improvement
+shows up as XPASS and fails the suite until the mark is removed. Effects below the goal in the
+study that still hit on both test seeds (tire saturation 12/20, load-dependent stiffness 16/20 in
+the 2026-12-02 study) stay plain tests: the study, not this module, measures the rate.
 """
 
 from __future__ import annotations
