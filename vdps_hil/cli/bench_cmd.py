@@ -10,7 +10,7 @@ import sys
 import click
 
 from vdps_hil.cli.common import UserError, json_option, live_server, serve_option, write_json
-from vdps_hil.hil.scheduling import DEFAULT_PRIORITY as DEFAULT_RT_PRIORITY
+from vdps_hil.hil.scheduling import DEFAULT_PRIORITY as DEFAULT_RT_PRIORITY, NOT_ASKED
 
 _EXAMPLE = """\b
 Examples:
@@ -272,7 +272,7 @@ def describe(d: dict) -> list[str]:
     sc = d.get("scheduling")
     if sc and sc.get("policy") == "fifo":
         lines.append(f"  scheduling: SCHED_FIFO priority {sc['priority']} (simulator and pipeline)")
-    elif sc and sc.get("reason") != "not asked":
+    elif sc and sc.get("reason") != NOT_ASKED:
         lines.append(f"  scheduling: default time sharing ({sc.get('reason')}); a CPU-bound process beside the "
                      f"bench then adds latency")
     if d["output"]:

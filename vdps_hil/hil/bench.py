@@ -94,8 +94,8 @@ from .bench_config import BenchConfig, BenchError, model_for, start_params
 from .ecu import Ecu
 from .latency import cycle_latencies, latency_summary, lead_times, reference_events
 from .pacing import BenchClock
-from . import scheduling
 from .pipelines import ChildPipeline, LocalPipeline
+from . import scheduling
 from .serial_device import PtySerialDevice
 from .transports import parse_transport
 
@@ -127,6 +127,7 @@ class Bench:
     mirror = None
     """``RecordingWriter.mirror`` of the ``-o`` recording (``vdps bench --serve``), or None."""
     headroom = None
+    scheduling = None  # what scheduling.request gave the last run
     """The :class:`~vdps_hil.hil.headroom.Headroom` measured before the run (``measure_headroom``),
     or None; it goes into the result."""
 
@@ -415,7 +416,7 @@ class Bench:
             "pipeline_keeps_up": keeps_up, "max_lag_s": c.max_lag_s, "deadline_misses": misses,
             "warning_status": counters.get("warning_status", {}),
             "headroom": None if self.headroom is None else self.headroom.to_json(),
-            "scheduling": getattr(self, "scheduling", None),
+            "scheduling": self.scheduling,
             "ecu": ecu_sum, "pipeline": {"outputs": p["outputs"], "errors": p["errors"]},
             "stop_reason": ("interrupted" if getattr(self, "interrupted", False)
                             else side.session.sim.stop_reason or "duration"),

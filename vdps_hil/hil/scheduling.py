@@ -21,11 +21,13 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["DEFAULT_PRIORITY", "request", "restore"]
+__all__ = ["DEFAULT_PRIORITY", "NOT_ASKED", "request", "restore"]
 
 DEFAULT_PRIORITY = 10
 """``vdps bench``'s SCHED_FIFO priority: low among real-time priorities (kernel threads that
 handle interrupts run at 50)."""
+NOT_ASKED = "not asked"
+"""The ``reason`` of a run that asked for no real-time policy (``priority`` None or 0)."""
 
 
 def request(priority: int | None) -> tuple[dict, tuple | None]:
@@ -34,7 +36,7 @@ def request(priority: int | None) -> tuple[dict, tuple | None]:
     "reason": ...}``; the previous (policy, priority) to :func:`restore`, or None when nothing
     changed). ``priority`` None or 0: leave the scheduling alone."""
     if not priority:
-        return {"policy": "default", "reason": "not asked"}, None
+        return {"policy": "default", "reason": NOT_ASKED}, None
     if not 1 <= int(priority) <= 99:
         raise ValueError(f"real-time priority must be 1..99 (0: off), got {priority}")
     if not hasattr(os, "SCHED_FIFO"):
