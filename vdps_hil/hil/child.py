@@ -99,6 +99,7 @@ def main(argv=None) -> int:
         _say({"received": node.received_counts()})
         runner.join(0.1)
     _say({"received": node.received_counts()})
+    system.close()  # its prediction worker: no executor left for the interpreter's exit to wake
     arr = node.cycles.arrays()
     np.savez(work / "cycles.npz", **arr)
     (work / "result.json").write_text(json.dumps({

@@ -75,6 +75,7 @@ class LocalPipeline:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=30.0)
+        self.node.system.close()  # its prediction worker (the system's owner closes it)
         if self._error:
             raise BenchError(f"pipeline failed: {self._error}")
 
