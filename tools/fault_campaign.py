@@ -23,7 +23,8 @@ fault handling alone.
 
 Usage::
 
-    .venv/bin/python tools/fault_campaign.py [--quick] [--scenario NAME] [--json FILE] [--seed 21]
+    .venv/bin/python tools/fault_campaign.py [--quick] [--scenario NAME] [--fault TEXT] [--per-state]
+                                             [--json FILE] [--seed 21]
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ from vdps_hil.sim.profiles import load_profile
 TRUTH_KEYS = ("pos_e_m", "pos_n_m", "pos_u_m", "vel_g_mps_e", "vel_g_mps_n", "vel_g_mps_u", "roll_g_rad",
               "pitch_g_rad", "yaw_g_rad")
 ERR_STATES = (0, 1, 3, 4, 6, 7, 8)
+ERR_NAMES = ("x", "y", "vx", "vy", "roll", "pitch", "yaw")
 SCENARIOS = {"paper": ("sedan-model", 10.0), "lane-change-iso3888": ("sedan-model", 10.0),
              "fishhook-suv": ("suv-model", None)}
 """Scenario -> (model vehicle file, duration [s]; None: the scenario's own)."""
@@ -112,8 +114,16 @@ def score(t, e, s, frames, events, t_f, t_b, system, scenario, spec) -> dict:
     """The campaign's figures of one run (module docstring)."""
     live = t >= t[0] + 0.8
     inside = float(np.mean([(e[live, i] <= 3.0 * s[live, i]) for i in ERR_STATES]))
-    before = (t >= max(t_f - 2.0, t[0] + 0.8)) & (t < t_f)
     late = t >= t_f
+    by_state = {}  # per state: share within 3 sigma, first/last epoch outside it, the worst epoch
+    for name, i in zip(ERR_NAMES, ERR_STATES):
+        el, sl, tl = e[live, i], s[live, i], t[live]
+        out = el > 3.0 * sl
+        k = int(np.argmax(el / np.maximum(sl, 1e-12)))
+        by_state[name] = {"inside_3sigma": float(np.mean(~out)),
+                          "outside_s": [float(tl[out][0]), float(tl[out][-1])] if out.any() else None,
+                          "worst": {"t_s": float(tl[k]), "error": float(el[k]), "sigma": float(sl[k])}}
+    before = (t >= max(t_f - 2.0, t[0] + 0.8)) & (t < t_f)
     worst_t = t_b
     for i in ERR_STATES:
         if before.sum() >= 20:
@@ -132,12 +142,29 @@ def score(t, e, s, frames, events, t_f, t_b, system, scenario, spec) -> dict:
     return {"scenario": scenario, "fault": spec,
             "peak_pos_m": float(np.hypot(e[late, 0], e[late, 1]).max()),
             "peak_vel_mps": float(np.hypot(e[late, 3], e[late, 4]).max()),
-            "peak_att_deg": float(np.degrees(e[late, 6:9].max())), "inside_3sigma": inside,
+            "peak_att_deg": float(np.degrees(e[late, 6:9].max())), "inside_3sigma": inside, "by_state": by_state,
             "recover_s": recover, "gated_gnss": sum(rej[f"ekf.{k}"] for k in ("gnss_pos", "gnss_vel", "gnss_att")),
             "imu_rejected": rej["imu"], "inflations": system.pipeline.counters["inflations"],
             "valid_warnings": len(lvl_valid),
             "rollover": not math.isnan(o.truth_point_of_no_return_t_s),
             "lead_time_s": None if o.lead_time_s is None or math.isnan(o.lead_time_s) else o.lead_time_s}
+
+
+def per_state(rows: list[dict]) -> str:
+    """Per run, the states that left their 3 sigma: share inside, when, and at the worst epoch
+    (largest error / sigma) the error against the filter's sigma (m, m/s, deg)."""
+    out = []
+    for r in rows:
+        bad = []
+        for n, d in r["by_state"].items():
+            if d["outside_s"] is None:
+                continue
+            w = d["worst"]
+            f = math.degrees if n in ("roll", "pitch", "yaw") else float
+            bad.append(f"{n} {100 * d['inside_3sigma']:.1f} % (t {d['outside_s'][0]:.2f}-{d['outside_s'][1]:.2f} s; "
+                       f"worst at {w['t_s']:.2f} s: error {f(w['error']):.3g}, sigma {f(w['sigma']):.3g})")
+        out.append(f"{r['scenario']} `{r['fault']}`: " + ("; ".join(bad) if bad else "every state within 3 sigma"))
+    return "\n".join(out)
 
 
 def table(rows: list[dict]) -> str:
@@ -157,6 +184,10 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="one onset per scenario (the first)")
     ap.add_argument("--seed", type=int, default=21)
     ap.add_argument("--scenario", action="append", default=None, help="only these scenarios")
+    ap.add_argument("--fault", action="append", default=None,
+                    help="only the grid's faults whose spec contains this text (repeatable)")
+    ap.add_argument("--per-state", action="store_true",
+                    help="also print, per run, which states left their 3 sigma, when, and by how much")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     onsets = {"paper": (3.0, 5.0), "lane-change-iso3888": (2.5, 4.0), "fishhook-suv": (0.4,)}
@@ -164,10 +195,14 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     for scen in a.scenario or SCENARIOS:
         for spec, absent in fault_grid():
+            if a.fault and not any(f in spec for f in a.fault):
+                continue
             for t_f in onsets[scen][:1] if a.quick else onsets[scen]:
                 rows.append(run_one(scen, spec, t_f, absent, a.seed))
                 print(table(rows[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
     print(table(rows))
+    if a.per_state:
+        print("\n" + per_state(rows))
     print(f"\n{len(rows)} runs, {time.perf_counter() - t0:.0f} s wall")
     if a.json:
         with open(a.json, "w") as fh:

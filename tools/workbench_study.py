@@ -51,6 +51,7 @@ def main(argv=None) -> int:
     ap.add_argument("--first-seed", type=int, default=1000)
     ap.add_argument("--effects", default=",".join(HIDDEN))
     ap.add_argument("--no-null", action="store_true", help="skip the nothing-hidden drives")
+    ap.add_argument("--null-only", action="store_true", help="only the nothing-hidden drives (every study maneuver)")
     ap.add_argument("--magnitude", action="append", default=[],
                     help="EFFECT:param=v1,v2,...: detection probability against magnitude")
     ap.add_argument("--add", action="store_true", help="also run --add on hidden and null drives")
@@ -63,7 +64,9 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", default=None, help="JSON-lines file of finished runs: append, skip what is there")
     ap.add_argument("--summary-only", action="store_true", help="summarize the --runs file, run nothing")
     a = ap.parse_args(argv)
-    effects = [e for e in a.effects.split(",") if e]
+    if a.null_only and a.no_null:
+        ap.error("--null-only and --no-null exclude each other")
+    effects = [] if a.null_only else [e for e in a.effects.split(",") if e]
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
     jobs = []
     for eff in effects:
@@ -76,7 +79,8 @@ def main(argv=None) -> int:
         jobs += [{"kind": "null", "effect": None, "maneuver": m, "specs": [], "seed": s, "add": None}
                  for m in a.scenario for s in seeds]
     elif not a.no_null:
-        mans = sorted({HIDDEN[e][0] for e in effects}) if a.effects != ",".join(HIDDEN) else sorted(MANEUVERS)
+        every = a.null_only or a.effects == ",".join(HIDDEN)
+        mans = sorted(MANEUVERS) if every else sorted({HIDDEN[e][0] for e in effects})
         for m in mans:
             for s in seeds:
                 null_eff = next((e for e in effects if HIDDEN[e][0] == m), None) if a.add else None
