@@ -5,7 +5,10 @@ a *model* vehicle file: the estimator (eq 7-12) and the identifier (eq 19-23) ru
 samples exactly as ``vdps replay`` runs them (``estimator_run``: the Figure 2 node configured by
 the replay's rule, the sensor set named or inferred from the recording), and the table puts the
 estimator's outputs next to the sensor signals on one uniform grid (default 50 Hz: the signals
-are low-passed at 10 Hz). The identifier's outcome is kept as ``table.rls``.
+are low-passed at 10 Hz). The identifier runs only with ``DatasetConfig(identify=True)``, its
+outcome then kept as ``table.rls``: the estimator does not read it (the same states either way)
+and the workbench identifies the parameters itself, so by default it is skipped (a third of the
+estimator pass's time).
 
 Columns (SI, names carry units; ``i`` = wheel 1..4 FL FR RR RL, axes body x fwd y left z up)
 ---------------------------------------------------------------------------------------------
@@ -94,7 +97,8 @@ class DatasetConfig:
     min_rate_for_derivative_hz: slower sensors give no derivative; sensorset: a named sensor set
     (``configs/sensorsets``; default inferred from the recording, as ``vdps replay``);
     susp_sigma_m: the suspension sensor's sigma (``vdps replay --susp-sigma``); pipeline: an
-    estimator config replacing the sensor set's."""
+    estimator config replacing the sensor set's; identify: also run ``vdps replay``'s identifier
+    (eq 19-23) and keep its outcome as ``table.rls`` (the estimate is the same without it)."""
 
     period_s: float = 0.02
     cutoff_hz: float = 10.0
@@ -104,6 +108,7 @@ class DatasetConfig:
     sensorset: str | None = None
     susp_sigma_m: float = DEFAULT_SUSP_SIGMA_M
     pipeline: PipelineConfig | None = None
+    identify: bool = False
 
     def __post_init__(self):
         for k in ("period_s", "cutoff_hz", "min_rate_for_derivative_hz"):
@@ -396,12 +401,12 @@ def _system_config(rates, fields, vehicle: Vehicle, cfg: DatasetConfig):
     description) as ``vdps replay`` configures itself from the first seconds."""
     try:
         system, kind_map, _, desc = system_config(rates, fields, vehicle, cfg.susp_sigma_m, None, cfg.sensorset,
-                                                  predict=False)
+                                                  predict=False, identify=cfg.identify)
     except SystemConfigError as e:
         raise DatasetError(str(e)) from None
     if cfg.pipeline is not None:
         system = SystemConfig.for_profile(rates.get("suspension", 1.0), cfg.susp_sigma_m, pipeline=cfg.pipeline,
-                                          predict=False)
+                                          predict=False, identify=cfg.identify)
 
     def make_nodes():
         if cfg.sensorset is None:

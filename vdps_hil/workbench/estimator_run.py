@@ -4,8 +4,9 @@ the identifier's RLS of eq 19-23; no predictor) configured by the replay's own r
 (``pipeline.configure``: sensor set named or inferred, suspension averaging from the measured
 rate), fed the decoded samples in time order (kinds renamed by the sensor set's kind map,
 through its calibration nodes). Its estimate is taken on a grid, its innovations per
-measurement kind kept as packed arrays, and the identifier's last report kept as the reference
-the workbench's own base fit is checked against (:func:`run_system`).
+measurement kind kept as packed arrays, and the identifier's last report kept when the config
+runs it (``SystemConfig.identify``; the workbench's ``DatasetConfig.identify``, off by default:
+the estimator does not read it) (:func:`run_system`).
 """
 
 from __future__ import annotations

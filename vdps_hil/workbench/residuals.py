@@ -49,7 +49,7 @@ from vdps_hil.model.params import Vehicle
 from vdps_hil.prediction.predictor import Predictor, PredictorConfig, PredictorInitialState
 
 from .dataset import DriveTable
-from .row_model import RowModel
+from .row_model import RowModel, RowQuantities
 
 __all__ = ["EQUATIONS", "DYNAMIC_EQUATIONS", "KINEMATIC_EQUATIONS", "EQUATION_LABELS", "EQUATION_UNITS",
            "EquationResiduals", "compute_residuals", "RowStates", "row_states", "parameter_columns",
@@ -169,14 +169,15 @@ class EquationResiduals:
 
     ``values`` (n, 14) in ``EQUATIONS`` order (NaN: not evaluated), ``t_s`` (n,), ``index`` rows
     of the table, ``sigma`` (14,) noise per equation, ``nuisance`` (n, 14, 6) (``NUISANCE_NAMES``)
-    or None, ``quantities`` per row (named quantities for the effects' regressors)."""
+    or None, ``quantities`` per row (named quantities for the effects' regressors; a
+    :class:`~vdps_hil.workbench.row_model.RowQuantities`, a dict per row on access)."""
 
     t_s: np.ndarray
     index: np.ndarray
     values: np.ndarray
     sigma: np.ndarray
     nuisance: np.ndarray | None
-    quantities: list
+    quantities: RowQuantities | list
     available: np.ndarray
     vehicle: Vehicle
     effects: EffectSet
@@ -212,7 +213,7 @@ def compute_residuals(table: DriveTable, vehicle: Vehicle, effects: EffectSet | 
     vals = np.full((n, 14), np.nan)
     nuis = np.zeros((n, 14, 6)) if with_nuisance else None
     lat = np.zeros((n, 14, 4)) if with_nuisance else None
-    quants = []
+    quants = RowQuantities()
     meas = st.meas.copy()
     meas = _remove_measurement_effects(table, st, effects, meas)
     ws = np.zeros((n, 8))
