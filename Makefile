@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml Makefile
 	touch $(STAMP)
 
 run: setup
-	$(VENV)/bin/vdps bench --react --calibrate paper -o bench.mcap
+	$(VENV)/bin/vdps bench --react --calibrate paper --speed auto -o bench.mcap
 
 # headless Chromium for the HTML report tests (Debian package; the tests fail under CI without it)
 browser:

@@ -124,7 +124,8 @@ def test_the_words_say_warning_time_lead_ecu_action_outcome_and_recording():
 @pytest.mark.parametrize("args, words", [
     (["--scenario", "no-such-scenario"], "unknown scenario"),
     (["--speed", "0"], "--speed must be a positive number"),
-    (["--speed", "x"], "Invalid value"),
+    (["--speed", "x"], "--speed must be a positive number or 'auto'"),
+    (["--speed", "auto", "--no-headroom-check"], "--speed auto needs the headroom measurement"),
     (["--can", "nonsense"], "is not INTERFACE:CHANNEL"),
     (["--can", "nosuchbus:0"], "unknown CAN interface"),
     (["--can", "pty", "--sim-can", "virtual:x"], "--sim-can applies"),
@@ -166,4 +167,24 @@ def test_calibrate_starts_the_pipeline_from_a_calibration_drive(tmp_path, speed,
     # "sensor missing" meanwhile, and still most are valid (from the priors none is)
     n, bad = doc["warning_frames_accepted"], doc["warning_frames_not_valid"]
     missed = doc["deadline_misses"]["samples"] > 0
-    assert doc["params"] is not None and 2 < n and bad <= 2 + (n // 2 if missed else 0), doc["deadline_misses"]
+    assert doc["params"] is not None and 2 < n and bad <= 2 + (n // 2 if missed else 0), (doc["deadline_misses"],
+                                                                                   doc["warning_status"])
+
+
+def test_speed_auto_runs_at_the_fastest_speed_with_twice_the_measured_headroom(tmp_path, capsys):
+    """``--speed auto`` (``make run``): the headroom measured at 1x, the run at the speed with
+    WARN_BELOW (2x) headroom, never faster than real time; the summary restates the headroom at
+    the speed run."""
+    from vdps_hil.hil.headroom import WARN_BELOW
+
+    js = tmp_path / "b.json"
+    assert main(["bench", "--scenario", "paper", "--duration", "1", "--speed", "auto", "--can", "virtual",
+                 "--json", str(js)]) == 0
+    cap = capsys.readouterr()
+    doc = json.loads(js.read_text())
+    h = doc["headroom"]
+    assert 0 < doc["speed"] <= 1.0 and h["speed"] == doc["speed"]
+    # the speed is rounded to two digits: 2x headroom within that rounding, or real time with more
+    assert h["headroom"] >= WARN_BELOW * 0.94 and (doc["speed"] == 1.0 or h["headroom"] <= WARN_BELOW * 1.06)
+    assert f"--speed auto: {doc['speed']:g}x" in cap.err
+    assert doc["duration_s"] == pytest.approx(1.0) and doc["dropped"] == 0

@@ -35,9 +35,10 @@ ECU reaction (--react): after the first valid VDPS_Warning with level >= 2, 100 
 drive torque cut, brake pressure 0 -> full in 300 ms, 2500 N m per wheel on all four wheels.
 
 \b
-Headroom: before the run the bench times a second of its own drive and pipeline on this
-machine (vdps_hil.hil.headroom); below 1x it refuses (exit 2), below 2x it warns; the summary
-states it. A pipeline that falls behind skips its own work, counts it and says "sensor
+Headroom: before the run the bench runs itself briefly at 0.5x and measures the CPU its
+simulator and pipeline spend per simulated second on this machine (vdps_hil.hil.headroom);
+below 1x it refuses (exit 2), below 2x it warns; the summary states it; --speed auto runs at
+the fastest speed with 2x headroom (at most 1x). A pipeline that falls behind skips its own work, counts it and says "sensor
 missing" in its warnings rather than accumulating lag."""
 
 
@@ -55,8 +56,10 @@ missing" in its warnings rather than accumulating lag."""
               help="Inject a sensor/wire fault (NAME or NAME:key=value,...); repeatable.")
 @click.option("--duration", "duration_s", type=float, default=None, metavar="S",
               help="Simulated seconds (default: the scenario's).")
-@click.option("--speed", type=float, default=1.0, show_default=True, metavar="X",
-              help="Simulated seconds per wall second.")
+@click.option("--speed", default="1", show_default=True,
+              metavar="X|auto",
+              help="Simulated seconds per wall second; auto: the fastest speed with 2x measured headroom on "
+                   "this machine, at most 1 (see Headroom below).")
 @click.option("--can", "can_spec", default=None, metavar="SPEC",
               help="CAN transport (see below) [default: tcp, with --serve virtual].")
 @click.option("--sim-can", "sim_can", default=None, metavar="SPEC",
@@ -103,13 +106,15 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
             raise UserError(f"-o {output}: directory {out.parent} does not exist")
     if calibrate_on is not None and params is not None:
         raise UserError("give --params or --calibrate, not both")
+    speed = _parse_speed(speed)
     if can_spec is None:
         can_spec = "virtual" if serve_port is not None else "tcp"
     cal = None
     tmp = tempfile.TemporaryDirectory(prefix="vdps-bench-cal-")
     try:
         cfg = BenchConfig(scenario=scenario, vehicle=vehicle, model=model, effects=tuple(effects),
-                          faults=tuple(faults), duration_s=duration_s, speed=speed, can=can_spec, sim_can=sim_can,
+                          faults=tuple(faults), duration_s=duration_s, speed=1.0 if speed == "auto" else speed,
+                          can=can_spec, sim_can=sim_can,
                           react=react, output=output, seed=seed, profile=profile, params=params,
                           rt_priority=rt_priority)
         b = Bench(cfg)
@@ -126,8 +131,19 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
     if serve_port is not None and (output is None or b.transport.cross_process):
         tmp.cleanup()
         raise UserError("--serve serves the -o recording of a pipeline in this process: give -o, --can virtual")
-    if headroom_check:
-        _check_headroom(b, tmp)
+    try:
+        if speed == "auto":
+            if not headroom_check:
+                raise UserError("--speed auto needs the headroom measurement: drop --no-headroom-check")
+            b = _auto_speed(b, replace(b.config), quiet)
+        if headroom_check:
+            _check_headroom(b)
+    except BenchError as e:
+        tmp.cleanup()
+        raise UserError(f"headroom measurement: {str(e).splitlines()[0]}") from None
+    except UserError:
+        tmp.cleanup()
+        raise
     status = None if quiet else _StatusLine(sys.stderr)
     try:
         with live_server(serve_port, wait=False) as live:
@@ -151,17 +167,46 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
     write_json(doc, json_out)
 
 
-def _check_headroom(b, tmp) -> None:
-    """Measure the bench's headroom (``hil.headroom``): refuse below REFUSE_BELOW (one line,
-    exit 2), warn below WARN_BELOW."""
-    from vdps_hil.hil.headroom import REFUSE_BELOW, WARN_BELOW
+def _parse_speed(value) -> float | str:
+    """``--speed``: a positive number or ``auto`` (one-line error otherwise)."""
+    text = str(value).strip().lower()
+    if text == "auto":
+        return "auto"
+    try:
+        x = float(text)
+    except ValueError:
+        x = math.nan
+    if not (math.isfinite(x) and x > 0):
+        raise UserError(f"--speed must be a positive number or 'auto', got {value!r}")
+    return x
+
+
+def _auto_speed(b, cfg, quiet: bool):
+    """``--speed auto``: measure the headroom at 1x and return the bench at the speed with
+    ``WARN_BELOW`` headroom, at most 1x (its measurement kept, restated at that speed)."""
+    from dataclasses import replace
+
+    from vdps_hil.hil.bench import Bench
 
     h = b.measure_headroom()
+    speed = float(f"{min(1.0, h.supported_speed):.2g}")
+    nb = Bench(replace(cfg, speed=speed))
+    nb.headroom = replace(h, speed=speed)
+    if not quiet:
+        click.echo(f"vdps bench: --speed auto: {speed:g}x ({nb.headroom.describe()})", err=True)
+    return nb
+
+
+def _check_headroom(b) -> None:
+    """Measure the bench's headroom (``hil.headroom``; unless ``--speed auto`` measured it):
+    refuse below REFUSE_BELOW (one line, exit 2), warn below WARN_BELOW."""
+    from vdps_hil.hil.headroom import REFUSE_BELOW, WARN_BELOW
+
+    h = b.headroom if b.headroom is not None else b.measure_headroom()
     verdict = h.verdict()
     if verdict == "refuse":
-        tmp.cleanup()
         raise UserError(f"{h.describe()}: below {REFUSE_BELOW:g}x the pipeline cannot keep up; run at "
-                        f"--speed {h.supported_speed:.2g} or give --no-headroom-check")
+                        f"--speed {h.supported_speed:.2g} (or --speed auto) or give --no-headroom-check")
     if verdict == "warn":
         click.echo(f"vdps bench: warning: {h.describe()}, below {WARN_BELOW:g}x: the pipeline may miss "
                    f"deadlines (skipped work is counted and its warnings say 'sensor missing')", err=True)
@@ -268,7 +313,7 @@ def describe(d: dict) -> list[str]:
     if h:
         lines.append(f"  headroom: {h['headroom']:.1f}x at speed {h['speed']:g}x (measured before the run: simulator "
                      f"{1e3 * h['simulator_cost_s_per_s']:.0f} ms + pipeline {1e3 * h['pipeline_cost_s_per_s']:.0f} ms "
-                     f"of wall time per simulated second)")
+                     f"of CPU per simulated second in a probe run of the bench)")
     sc = d.get("scheduling")
     if sc and sc.get("policy") == "fifo":
         lines.append(f"  scheduling: SCHED_FIFO priority {sc['priority']} (simulator and pipeline)")

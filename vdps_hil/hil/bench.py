@@ -122,7 +122,9 @@ class BenchResult:
 
 class Bench:
     """One bench run (module docstring). ``run(status)`` returns a :class:`BenchResult`;
-    ``status(doc)`` (optional) gets a live status dict about four times a second."""
+    ``status(doc)`` (optional) gets a live status dict every ``status_period_s`` (wall s)."""
+
+    status_period_s = 0.25
 
     mirror = None
     """``RecordingWriter.mirror`` of the ``-o`` recording (``vdps bench --serve``), or None."""
@@ -292,7 +294,7 @@ class Bench:
         self.interrupted = False
         try:
             while not side.done.wait(0.05):
-                if status is not None and time.monotonic() - t_status >= 0.25:
+                if status is not None and time.monotonic() - t_status >= self.status_period_s:
                     t_status = time.monotonic()
                     status(self._status(side, pipe, clock))
                 if pipe.failed():
