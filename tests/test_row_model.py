@@ -43,3 +43,19 @@ def test_a_returned_row_is_a_copy():
 def test_empty_is_falsy():
     q = RowQuantities()
     assert not q and len(q) == 0 and list(q) == []
+
+
+def test_numpy_float64_rows_are_packed_and_read_back_with_the_same_bits():
+    """The residuals compute their quantities as numpy float64 (a float subclass): those rows are
+    the ones packing exists for."""
+    import numpy as np
+
+    q = RowQuantities()
+    rows = [{"a": np.float64(0.1) * j, "b": np.float64(-1.0) / (j + 3)} for j in range(20)]
+    for r in rows:
+        q.append(r)
+    assert q.packed == 20
+    assert [q[j] for j in range(20)] == rows
+    assert all(float(q[j][k]).hex() == float(rows[j][k]).hex() for j in range(20) for k in "ab")
+    q.append({"a": np.float32(1.5), "b": 1.0})  # float32 is not a float: kept as its dict
+    assert q.packed == 20 and type(q[20]["a"]) is np.float32

@@ -3,7 +3,7 @@ on this machine as it is and with a CPU-bound process on the other core, and at 
 
 Usage::
 
-    .venv/bin/python tools/bench_make_run.py [--conditions quiet,hog,speed5] [--repeat 1] [--json FILE]
+    .venv/bin/python tools/bench_make_run.py [--conditions quiet,hog,auto,auto-hog,speed5] [--repeat 1] [--json FILE]
 
 Each condition runs exactly ``make run``'s command (``vdps bench --react --calibrate paper -o
 bench.mcap``, as a subprocess, with ``--json``), except that the calibration drive is done once
@@ -13,7 +13,10 @@ up front (``hil.bench_config.calibrate``, the same call ``--calibrate`` makes) a
 * ``quiet``: nothing started by this tool;
 * ``hog``: ``python3 -c 'while 1: pass'`` running for the whole run (the issue's CPU-bound
   process on the other core), stopped after it;
-* ``speed5``: ``--speed 5``, nothing beside.
+* ``speed5``: ``--speed 5``, nothing beside;
+* ``auto``, ``auto-hog``: ``--speed auto`` (what ``make run`` gives since the headroom probe runs
+  the bench itself: the fastest speed with 2x measured headroom, at most 1x), quiet and beside
+  the CPU-bound process.
 
 A run the headroom check refuses (measured headroom below 1x) is shown as refused and run again
 with ``--no-headroom-check`` (``<condition>-forced``) to show what the bench does then.
@@ -50,11 +53,11 @@ REPO = Path(__file__).resolve().parents[1]
 VDPS = str(Path(sys.executable).with_name("vdps"))
 
 
-def run_bench(params: str, work: Path, speed: float, hog: bool, check: bool = True) -> dict:
+def run_bench(params: str, work: Path, speed: float | str, hog: bool, check: bool = True) -> dict:
     js, out = work / "b.json", work / "bench.mcap"
     js.unlink(missing_ok=True)
     cmd = [VDPS, "bench", "--react", "--params", params, "-o", str(out), "--json", str(js), "--quiet",
-           "--speed", f"{speed:g}"] + ([] if check else ["--no-headroom-check"])
+           "--speed", speed if isinstance(speed, str) else f"{speed:g}"] + ([] if check else ["--no-headroom-check"])
     hog_p = subprocess.Popen([sys.executable, "-c", "while 1: pass"]) if hog else None
     load0 = os.getloadavg()[0]
     try:
@@ -98,7 +101,7 @@ def line(name: str, r: dict) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--conditions", default="quiet,hog,speed5")
+    ap.add_argument("--conditions", default="quiet,hog,auto,auto-hog,speed5")
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
@@ -116,7 +119,8 @@ def main(argv=None) -> int:
               f"(converged: {', '.join(k for k, v in cal['converged'].items() if v)})", flush=True)
         for i in range(a.repeat):
             for cond in a.conditions.split(","):
-                speed, hog = (5.0, False) if cond == "speed5" else (1.0, cond == "hog")
+                speed = 5.0 if cond == "speed5" else "auto" if cond.startswith("auto") else 1.0
+                hog = cond.endswith("hog")
                 r = run_bench(cal["params"], work, speed, hog)
                 r["condition"] = cond
                 out["runs"].append(r)

@@ -37,8 +37,9 @@ class RowQuantities:
     """The named quantities of every row (``EquationResiduals.quantities``) packed: the names
     once, the values as one float64 array (8 bytes a value instead of a dict per row, about 20
     times less); ``q[j]`` and iteration give each row as a fresh dict, equal to the one
-    appended. A row with other names than the first row's, or a value that is not a float, is
-    kept as its dict."""
+    appended (numpy float64 values come back as Python floats of the same bits). A row with
+    other names than the first row's, or a value that is not a float, is kept as its dict.
+    ``packed``: how many rows are packed."""
 
     def __init__(self):
         self._names: tuple | None = None
@@ -50,7 +51,9 @@ class RowQuantities:
         names = tuple(q)
         if self._names is None:
             self._names = names
-        if names == self._names and all(type(v) is float for v in q.values()):
+        # a float or a float subclass (numpy's float64, what the residuals compute): packed; read
+        # back as a float of the same value
+        if names == self._names and all(isinstance(v, float) for v in q.values()):
             self._rows.append(len(self._vals))
             self._vals.extend(q.values())
         else:
@@ -59,6 +62,10 @@ class RowQuantities:
 
     def __len__(self) -> int:
         return len(self._rows)
+
+    @property
+    def packed(self) -> int:
+        return sum(1 for o in self._rows if o >= 0)
 
     def __getitem__(self, j: int) -> dict:
         o = self._rows[j]
