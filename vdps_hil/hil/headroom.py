@@ -113,8 +113,6 @@ def measure_headroom(bench, probe_s: float = DEFAULT_PROBE_S, warm_s: float = 0.
     running it briefly (module docstring). The probe never shortens: a drive shorter than
     ``warm_s + probe_s`` is probed over its whole length after ``warm_s``. Raises the bench's
     own ``BenchError`` when the probe run cannot run."""
-    from .bench import Bench
-
     c = bench.config
     total_s = min(warm_s + probe_s, bench.drive.duration_s)
     warm_s = min(warm_s, 0.5 * total_s)
@@ -132,7 +130,7 @@ def measure_headroom(bench, probe_s: float = DEFAULT_PROBE_S, warm_s: float = 0.
             cross[0] = pids["pipeline"] != pids["simulator"]
             marks.append((s["t_s"], *_cpu_s(pids["pipeline"], cross[0], seen)))
 
-        probe = Bench(replace(c, speed=speed, duration_s=total_s, react=False, output=None))
+        probe = type(bench)(replace(c, speed=speed, duration_s=total_s, react=False, output=None))
         probe.status_period_s = min(0.25, 0.05 / speed)
         doc = probe.run(status).to_json()
         shed = doc["deadline_misses"]["samples"]
