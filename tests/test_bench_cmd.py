@@ -113,6 +113,11 @@ def test_the_words_say_warning_time_lead_ecu_action_outcome_and_recording():
                                                     "first_t_s": 1.25})))
     assert ("deadline misses: the pipeline fell more than 100 ms behind 3 time(s) and skipped 812 samples "
             "(first at 1.25 s); its warnings said 'sensor missing' meanwhile") in late
+    assert "predictions:" not in text
+    pred = "\n".join(describe(_doc(predictions={"worker": "process", "latency_s": 0.02, "started": 15, "used": 13,
+                                                "dropped": 2, "failed": 0})))
+    assert ("predictions: 2 of 15 dropped at their deadline (20 ms of bus time), 0 failed; the warning frames "
+            "said 'fault' until the next prediction was used") in pred
     rolled = "\n".join(describe(_doc(react=False, rolled_over=True, lead_reference="this_run", dropped=4,
                                      pipeline_keeps_up=False, output=None)))
     assert "ROLLED OVER" in rolled and "4 were LOST" in rolled and "listening only" in rolled
@@ -164,11 +169,15 @@ def test_calibrate_starts_the_pipeline_from_a_calibration_drive(tmp_path, speed,
     # valid from the first prediction on: only a frame sent before the estimator's first
     # estimate may say "sensor missing" (from the priors about 240 frames say "not converged")
     # -- unless the machine's load made the pipeline skip work (counted): then its frames say
-    # "sensor missing" meanwhile, and still most are valid (from the priors none is)
+    # "sensor missing" meanwhile, and still most are valid (from the priors none is); a prediction
+    # dropped at its deadline (counted) makes the frames say "fault" until the next one is used:
+    # one cadence period, 0.1 s = 5 frames at 50 Hz, +1 for where the period falls
     n, bad = doc["warning_frames_accepted"], doc["warning_frames_not_valid"]
     missed = doc["deadline_misses"]["samples"] > 0
-    assert doc["params"] is not None and 2 < n and bad <= 2 + (n // 2 if missed else 0), (doc["deadline_misses"],
-                                                                                   doc["warning_status"])
+    drops = doc["predictions"]["dropped"] + doc["predictions"]["failed"]
+    assert doc["predictions"]["used"] > 0 and not doc["warning_unhealthy"]["inconsistent"]
+    assert doc["params"] is not None and 2 < n and bad <= 2 + 6 * drops + (n // 2 if missed else 0), (
+        doc["deadline_misses"], doc["warning_status"], doc["predictions"], doc["warning_unhealthy"])
 
 
 def test_speed_auto_runs_at_the_fastest_speed_with_twice_the_measured_headroom(tmp_path, capsys):

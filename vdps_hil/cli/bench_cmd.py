@@ -309,6 +309,11 @@ def describe(d: dict) -> list[str]:
         lines.append(f"  deadline misses: the pipeline fell more than {m['deadline_ms']:g} ms behind "
                      f"{m['episodes']} time(s) and skipped {m['samples']} samples (first at {m['first_t_s']:.2f} s); "
                      f"its warnings said 'sensor missing' meanwhile")
+    pr = d.get("predictions") or {}
+    if pr.get("dropped") or pr.get("failed"):
+        lines.append(f"  predictions: {pr.get('dropped', 0)} of {pr.get('started', 0)} dropped at their deadline "
+                     f"({1e3 * pr.get('latency_s', 0.0):g} ms of bus time), {pr.get('failed', 0)} failed; "
+                     f"the warning frames said 'fault' until the next prediction was used")
     h = d.get("headroom")
     if h:
         lines.append(f"  headroom: {h['headroom']:.1f}x at speed {h['speed']:g}x (measured before the run: simulator "

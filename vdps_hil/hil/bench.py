@@ -417,6 +417,7 @@ class Bench:
             "send_lateness_ms": pace["lateness_ms"],
             "pipeline_keeps_up": keeps_up, "max_lag_s": c.max_lag_s, "deadline_misses": misses,
             "warning_status": counters.get("warning_status", {}),
+            "warning_unhealthy": counters.get("unhealthy", {}), "predictions": counters.get("predictions", {}),
             "headroom": None if self.headroom is None else self.headroom.to_json(),
             "scheduling": self.scheduling,
             "ecu": ecu_sum, "pipeline": {"outputs": p["outputs"], "errors": p["errors"]},

@@ -486,5 +486,12 @@ class PipelineNode:
                          "rejected": gnss_c.get("rejected", 0), "queue_overflow": gnss_c.get("queue_overflow", 0)},
                 "subscription_overflows": self.sub.overflows, "reader_errors": list(self.errors),
                 "deadline_misses": self.deadline.counts(),
-                "warning_status": dict(getattr(self.system, "counters", {}).get("status", {}))}
+                "warning_status": dict(getattr(self.system, "counters", {}).get("status", {})),
+                "unhealthy": dict(getattr(self.system, "counters", {}).get("unhealthy", {})),
+                "predictions": self._predictions()}
+
+    def _predictions(self) -> dict:
+        """The warning chain's predictions: started, used, dropped at their deadline, failed."""
+        pred = self.system.status().get("prediction") if hasattr(self.system, "status") else None
+        return {} if not pred else {k: pred[k] for k in ("worker", "latency_s", "started", "used", "dropped", "failed")}
 

@@ -41,7 +41,7 @@ from .ranking.identification import Point, apply_base, build_design, effects_wit
 from .residuals import EQUATIONS, row_states
 from .simulation_errors import HORIZONS_S, SimErrors, simulation_errors
 
-__all__ = ["FittedModel", "fit_model", "AddResult", "add_effects", "before_after", "cleaned_rms"]
+__all__ = ["FittedModel", "fit_model", "AddResult", "add_effects", "cleaned_residuals", "before_after", "cleaned_rms"]
 
 
 @dataclass
@@ -128,10 +128,11 @@ class AddResult:
         return {"added": list(self.added), "parameters": self.parameters, "before": self.before, "after": self.after}
 
 
-def cleaned_rms(table: DriveTable, model: FittedModel, vehicle: Vehicle, config: RankingConfig | None = None
-                ) -> dict[str, float | None]:
-    """RMS per equation of the residual the model leaves once the estimator's errors (the
-    nuisance directions) are taken out -- the residual the ranking works on, in equation units."""
+def cleaned_residuals(table: DriveTable, model: FittedModel, vehicle: Vehicle, config: RankingConfig | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray]:
+    """The residual the model leaves once the estimator's errors (the nuisance directions) are
+    taken out -- the residual the ranking works on, in equation units: (t_s (n,), table rows
+    (n,), equation names (the evaluated ones), values (n, len(names)))."""
     cfg = config or RankingConfig()
     states = row_states(table, model.vehicle)
     inn = compute_innovations(table)
@@ -141,8 +142,15 @@ def cleaned_rms(table: DriveTable, model: FittedModel, vehicle: Vehicle, config:
     ctx = d.ctx
     n, e = ctx.y_dyn.shape
     dyn = r[:d.n_dyn_rows].reshape(n, e) * ctx.sig[None, :]
-    out: dict[str, float | None] = {}
     names = [q for q, a in zip(EQUATIONS, ctx.avail) if a]
+    return ctx.res.t_s[ctx.rows], ctx.res.index[ctx.rows], names, dyn
+
+
+def cleaned_rms(table: DriveTable, model: FittedModel, vehicle: Vehicle, config: RankingConfig | None = None
+                ) -> dict[str, float | None]:
+    """RMS per equation of :func:`cleaned_residuals` (the before/after tables)."""
+    _, _, names, dyn = cleaned_residuals(table, model, vehicle, config)
+    out: dict[str, float | None] = {}
     for k, q in enumerate(names):
         v = dyn[:, k]
         out[q] = float(np.sqrt(np.mean(v * v))) if len(v) else None

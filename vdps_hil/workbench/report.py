@@ -1,55 +1,36 @@
 """The diagnosis as one self-contained HTML page (``--report DIR`` -> ``DIR/report.html``).
 
-Everything is inside the file: matplotlib figures as PNG ``data:`` URIs (base64), inline CSS, no
-script, no external URL. Sections: summary in vehicle-dynamics words; measured against model
-(the force and moment balances the ranking works on); residuals with the worst windows marked;
-residuals against the operating regime; the ranking with its equivalence groups and the
-identified parameters; before/after (``--add``).
+Everything is inside the file: the figures (``report_figures``) as SVG ``data:`` URIs (vector:
+zoom the page to read them), inline CSS, no script, no external URL. Sections: summary in
+vehicle-dynamics words; measured against model (the force and moment balances the ranking works
+on); the residual with the worst windows marked (the cleaned residual whose RMS the tables give,
+the raw one faint behind it, each labelled); the residual against the operating regime; the
+ranking with its equivalence groups and the identified parameters; the recommended effect's
+signed residual against its regressor with the fitted law drawn; before/after (``--add``): the
+cleaned residual RMS of every equation, every quantity of the held-out prediction error (position,
+yaw, roll, speed) per horizon, and its trace over the held-out starts.
 """
 
 from __future__ import annotations
 
-import base64
 import html
-import io
 import math
 from pathlib import Path
 
 import numpy as np
 
+from . import report_figures as F
 from .residuals import EQUATION_LABELS, EQUATION_UNITS, EQUATIONS
 
-__all__ = ["write_report", "render_report", "figure_png"]
+__all__ = ["write_report", "render_report"]
 
 _CSS = """
 body{font-family:sans-serif;margin:2em;max-width:70em;color:#222}
 h1{font-size:1.5em}h2{font-size:1.2em;border-bottom:1px solid #ccc;margin-top:2em}
 table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:2px 6px;font-size:0.9em}
-th{background:#f0f0f0}.sel{background:#e8f4e8}.msg{margin:0.2em 0}img{max-width:100%;display:block;margin:0.5em 0}
+th{background:#f0f0f0}.sel{background:#e8f4e8}.msg{margin:0.2em 0}img{width:100%;display:block;margin:0.5em 0}
 .small{color:#666;font-size:0.85em}
 """
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def figure_png(fig) -> str:
-    """A matplotlib figure as a base64 PNG data URI (the figure is closed)."""
-    plt = _plt()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80, bbox_inches="tight")
-    plt.close(fig)
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
-
-
-def _img(uri: str, alt: str) -> str:
-    return f'<img src="{uri}" alt="{html.escape(alt)}">'
 
 
 def _main_equations(dg, k: int = 3) -> list[str]:
@@ -90,122 +71,6 @@ def _measured(dg, eq: str) -> np.ndarray:
     return res.vehicle.tire.rolling_radius_m * m[:, k]
 
 
-def _fig_traces(dg, eqs):
-    plt = _plt()
-    res = dg.residuals
-    fig, axes = plt.subplots(len(eqs), 1, figsize=(9, 2.0 * len(eqs)), sharex=True, squeeze=False)
-    for ax, eq in zip(axes[:, 0], eqs):
-        k = EQUATIONS.index(eq)
-        meas = _measured(dg, eq)
-        ax.plot(res.t_s, meas, lw=1.0, label="measured")
-        ax.plot(res.t_s, meas - res.values[:, k], lw=1.0, label="model")
-        ax.set_ylabel(f"{eq} [{EQUATION_UNITS[eq]}]")
-        ax.grid(alpha=0.3)
-    axes[0, 0].legend(loc="upper right", fontsize=8)
-    axes[-1, 0].set_xlabel("time [s]")
-    fig.suptitle("measured against the identified model (estimator's signals, eq 13)")
-    return fig
-
-
-def _fig_residuals(dg, eqs):
-    plt = _plt()
-    res = dg.residuals
-    fig, axes = plt.subplots(len(eqs), 1, figsize=(9, 1.8 * len(eqs)), sharex=True, squeeze=False)
-    for ax, eq in zip(axes[:, 0], eqs):
-        k = EQUATIONS.index(eq)
-        ax.plot(res.t_s, res.values[:, k], lw=0.8, color="tab:red")
-        for w in dg.windows:
-            ax.axvspan(w.t_start_s, w.t_end_s, color="orange", alpha=0.25)
-        ax.set_ylabel(f"{eq} [{EQUATION_UNITS[eq]}]")
-        ax.grid(alpha=0.3)
-    axes[-1, 0].set_xlabel("time [s] (shaded: worst windows)")
-    fig.suptitle("residual = measured - model")
-    return fig
-
-
-def _fig_regimes(dg, eqs):
-    plt = _plt()
-    from .regimes import REGIME_LABELS
-
-    names = [n for n in ("speed_mps", "ay_mps2", "ax_mps2", "slip_angle_front_deg", "slip_angle_rear_deg",
-                         "roll_deg", "steer_deg", "susp_travel_mm", "slip_ratio_max") if n in dg.regimes][:6]
-    if not names:
-        return None
-    cols = 3
-    rows = int(math.ceil(len(names) / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(10, 2.6 * rows), squeeze=False)
-    sig = dg.residuals.sigma
-    for ax, n in zip(axes.ravel(), names):
-        rb = dg.regimes[n]
-        for eq in eqs:
-            k = EQUATIONS.index(eq)
-            if math.isfinite(sig[k]) and sig[k] > 0:
-                ax.plot(rb.centres, rb.rms[:, k] / sig[k], marker="o", ms=3, lw=1.0, label=eq)
-        ax.set_xlabel(REGIME_LABELS.get(n, n), fontsize=8)
-        ax.set_ylabel("RMS / noise", fontsize=8)
-        ax.grid(alpha=0.3)
-    for ax in axes.ravel()[len(names):]:
-        ax.axis("off")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle("residual over the operating regime (RMS in units of each equation's noise)")
-    fig.tight_layout()
-    return fig
-
-
-def _fig_ranking(dg):
-    plt = _plt()
-    from .words import EFFECT_LABELS
-
-    es = dg.ranking.entries
-    if not es:
-        return None
-    fig, ax = plt.subplots(figsize=(8, 0.35 * len(es) + 1.0))
-    y = np.arange(len(es))[::-1]
-    vals = [max(e.explained_fraction, 0.0) if math.isfinite(e.explained_fraction) else 0.0 for e in es]
-    colors = ["tab:green" if e.selected else ("tab:orange" if e.group else ("lightgray" if not e.excited else "tab:blue"))
-              for e in es]
-    ax.barh(y, vals, color=colors)
-    ax.set_yticks(y)
-    ax.set_yticklabels([EFFECT_LABELS.get(e.effect, e.effect) for e in es], fontsize=8)
-    ax.set_xlabel("explained fraction (held-out partial R^2)")
-    ax.set_xlim(0, 1)
-    ax.grid(axis="x", alpha=0.3)
-    ax.set_title("green: selected, orange: in an equivalence group, gray: not excited", fontsize=8)
-    return fig
-
-
-def _fig_before_after(dg):
-    if dg.add is None:
-        return None
-    plt = _plt()
-    b, a = dg.add.before, dg.add.after
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
-    rb, ra = b.get("residual_rms", {}), a.get("residual_rms", {})
-    eqs = [e for e in rb if rb.get(e) and ra.get(e) is not None]
-    x = np.arange(len(eqs))
-    axes[0].bar(x - 0.2, [1.0] * len(eqs), 0.4, label="before")
-    axes[0].bar(x + 0.2, [ra[e] / rb[e] for e in eqs], 0.4, label="after")
-    axes[0].set_xticks(x)
-    axes[0].set_xticklabels(eqs, rotation=60, fontsize=7)
-    axes[0].set_ylabel("residual RMS / before")
-    axes[0].legend(fontsize=8)
-    sb, sa = b.get("simulation_error", {}), a.get("simulation_error", {})
-    hs = [h for h in sb if h in sa]
-    if hs:
-        xb = np.arange(len(hs))
-        axes[1].bar(xb - 0.2, [sb[h]["position_m"] or 0.0 for h in hs], 0.4, label="before")
-        axes[1].bar(xb + 0.2, [sa[h]["position_m"] or 0.0 for h in hs], 0.4, label="after")
-        axes[1].set_xticks(xb)
-        axes[1].set_xticklabels([f"{h} s" for h in hs])
-        axes[1].set_ylabel("position error [m] (RMS over starts)")
-        axes[1].legend(fontsize=8)
-    else:
-        axes[1].text(0.5, 0.5, "no simulation error (drive too short)", ha="center")
-    fig.suptitle("before -> after adding " + ", ".join(dg.add.added))
-    fig.tight_layout()
-    return fig
-
-
 def _table(rows: list[list[str]], header: list[str], classes: list[str] | None = None) -> str:
     out = ["<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header) + "</tr>"]
     for i, r in enumerate(rows):
@@ -221,6 +86,45 @@ def _fmt(v, unit="", nd=4) -> str:
     return f"{v:.{nd}g}{(' ' + unit) if unit else ''}"
 
 
+def _img(uri: str, alt: str) -> str:
+    return f'<img src="{uri}" alt="{html.escape(alt)}">'
+
+
+def _fig(fig, alt: str) -> str:
+    return "" if fig is None else _img(F.figure_svg(fig), alt)
+
+
+def _base_cleaned(dg):
+    """(t_s, names, values) of the identified model's cleaned residual, or None."""
+    from .add import FittedModel, cleaned_residuals
+
+    try:
+        t, _, names, vals = cleaned_residuals(dg.table, FittedModel(dg.ranking.base_vehicle, dg.model_effects),
+                                              dg.vehicle)
+    except ValueError:
+        return None
+    return t, names, vals
+
+
+_SIM_COLUMNS = (("position_m", "m", "position"), ("yaw_deg", "deg", "yaw"), ("roll_deg", "deg", "roll"),
+                ("speed_mps", "m/s", "speed"))
+
+
+def _sim_table(sb: dict, sa: dict | None) -> str:
+    header = ["horizon"]
+    for _, _, label in _SIM_COLUMNS:
+        header += [f"{label} before", f"{label} after"] if sa is not None else [label]
+    rows = []
+    for h, d in sb.items():
+        row = [f"{h} s"]
+        for q, unit, _ in _SIM_COLUMNS:
+            row.append(_fmt(d.get(q), unit))
+            if sa is not None:
+                row.append(_fmt(sa.get(h, {}).get(q), unit))
+        rows.append(row)
+    return _table(rows, header)
+
+
 def render_report(dg) -> str:
     """The HTML text of the report for a :class:`~vdps_hil.workbench.diagnosis.Diagnosis`."""
     from .words import EFFECT_LABELS
@@ -231,25 +135,32 @@ def render_report(dg) -> str:
              f"<style>{_CSS}</style></head><body>",
              f"<h1>Model workbench: {html.escape(Path(dg.source).name)}</h1>",
              f"<p class=\"small\">{dg.table.duration_s:.1f} s of drive, {len(dg.residuals.t_s)} rows; model vehicle "
-             f"{html.escape(dg.vehicle.name)}; only the recording's /raw/ topics were read.</p>",
+             f"{html.escape(dg.vehicle.name)}; only the recording's /raw/ topics were read. The figures are vector "
+             f"graphics: zoom the page to read them.</p>",
              "<h2>Summary</h2>"]
     parts += [f"<p class=\"msg\">{html.escape(m)}</p>" for m in rk.messages]
     eqs = _main_equations(dg)
     parts.append("<h2>Measured against the model</h2>")
-    parts.append(_img(figure_png(_fig_traces(dg, eqs)), "measured vs model"))
+    parts.append("<p class=\"small\">Measured minus model is the raw residual (the estimator's errors included); "
+                 "the tables and the red curves below give the cleaned residual (those errors taken out), the one "
+                 "the ranking works on.</p>")
+    parts.append(_fig(F.fig_traces(dg, eqs, _measured), "measured vs model"))
     parts.append("<h2>Where it fails</h2>")
-    parts.append(_img(figure_png(_fig_residuals(dg, eqs)), "residuals with the worst windows"))
+    cleaned = _base_cleaned(dg)
+    parts.append(_fig(F.fig_residuals(dg, eqs, cleaned), "residuals with the worst windows"))
+    if cleaned is not None:
+        _, names, vals = cleaned
+        parts.append(_table([[EQUATION_LABELS.get(q, q), _fmt(float(np.sqrt(np.mean(vals[:, k] ** 2))),
+                                                                 EQUATION_UNITS.get(q, ""))]
+                             for k, q in enumerate(names) if len(vals)],
+                            ["equation", "cleaned residual RMS (estimator errors taken out)"]))
     if dg.windows:
         parts.append(_table([[f"{w.t_start_s:.2f}-{w.t_end_s:.2f} s", EQUATION_LABELS.get(w.equation, w.equation),
                               f"{w.misfit:.3g}"] for w in dg.windows],
-                            ["window", "dominant equation", "noise-weighted misfit"]))
-    fr = _fig_regimes(dg, eqs)
-    if fr is not None:
-        parts.append(_img(figure_png(fr), "residuals over the operating regime"))
+                            ["window", "dominant equation", "noise-weighted misfit of the raw residual"]))
+    parts.append(_fig(F.fig_regimes(dg, eqs), "residuals over the operating regime"))
     parts.append("<h2>Which effect is missing</h2>")
-    fk = _fig_ranking(dg)
-    if fk is not None:
-        parts.append(_img(figure_png(fk), "ranking"))
+    parts.append(_fig(F.fig_ranking(dg), "ranking"))
     rows, cls = [], []
     for e in rk.entries:
         params = ", ".join(f"{k} = {_fmt(v)} +- {_fmt(s, nd=2)}" for k, (v, s) in e.parameters.items())
@@ -265,27 +176,31 @@ def render_report(dg) -> str:
                             ["members", "explained fraction of the lead"]))
     parts.append("<h3>Identified parameters</h3>")
     parts.append(_table([[p.message] for p in rk.parameters], ["parameter"]))
+    law = F.effect_law(dg)
+    if law is not None:
+        parts.append(f"<h2>{html.escape(EFFECT_LABELS.get(law.effect, law.effect))} against its regressor</h2>")
+        parts.append(_fig(F.fig_effect_law(law), "the effect's law"))
+        parts.append(f"<p class=\"small\">The {html.escape(EQUATION_LABELS.get(law.equation, law.equation))} "
+                     f"residual the model leaves without the effect (its term plus the cleaned residual of the "
+                     f"model with it), against {html.escape(law.x_label)}; the line is the effect's term at its "
+                     f"fitted parameters. It explains {100 * law.explained:.0f} % of that residual's mean "
+                     f"square.</p>")
     if dg.add is not None:
         parts.append("<h2>Before and after</h2>")
-        fb = _fig_before_after(dg)
-        if fb is not None:
-            parts.append(_img(figure_png(fb), "before and after"))
+        parts.append(_fig(F.fig_before_after(dg), "before and after"))
         b, a = dg.add.before, dg.add.after
-        rows = [[eq, _fmt(v, EQUATION_UNITS.get(eq, "")), _fmt(a["residual_rms"].get(eq), EQUATION_UNITS.get(eq, ""))]
-                for eq, v in b["residual_rms"].items()]
-        parts.append(_table(rows, ["equation", "before", "after"]))
+        rows = [[EQUATION_LABELS.get(eq, eq), _fmt(v, EQUATION_UNITS.get(eq, "")),
+                 _fmt(a["residual_rms"].get(eq), EQUATION_UNITS.get(eq, ""))] for eq, v in b["residual_rms"].items()]
+        parts.append(_table(rows, ["equation", "cleaned residual RMS before", "after"]))
         sb, sa = b.get("simulation_error", {}), a.get("simulation_error", {})
         if sb:
-            rows = [[f"{h} s", _fmt(sb[h].get("position_m"), "m"), _fmt(sa.get(h, {}).get("position_m"), "m"),
-                     _fmt(sb[h].get("yaw_deg"), "deg"), _fmt(sa.get(h, {}).get("yaw_deg"), "deg")] for h in sb]
-            parts.append(_table(rows, ["horizon", "position before", "position after", "yaw before", "yaw after"]))
-            parts.append("<p class=\"small\">Each prediction uses a model fitted only on data before its start.</p>")
+            parts.append(_sim_table(sb, sa))
+            parts.append("<p class=\"small\">Held-out prediction error (RMS over the starts): each prediction "
+                         "uses a model fitted only on data before its start.</p>")
+            parts.append(_fig(F.fig_prediction_errors(dg), "prediction error before and after"))
     elif dg.before.get("simulation_error"):
         parts.append("<h2>Simulation error of the identified model</h2>")
-        sb = dg.before["simulation_error"]
-        parts.append(_table([[f"{h} s", _fmt(d.get("position_m"), "m"), _fmt(d.get("yaw_deg"), "deg"),
-                              _fmt(d.get("roll_deg"), "deg"), _fmt(d.get("speed_mps"), "m/s")] for h, d in sb.items()],
-                            ["horizon", "position", "yaw", "roll", "speed"]))
+        parts.append(_sim_table(dg.before["simulation_error"], None))
     parts += [f"<p class=\"msg\">{html.escape(m)}</p>" for m in dg.simulation_notes()]
     parts.append("</body></html>")
     return "\n".join(parts)
