@@ -21,3 +21,16 @@ def test_imu_bias_is_taken_out_of_the_readings():
     assert f["specific_force_mps2_x"] == pytest.approx(1.0)
     assert f["angular_rate_radps_z"] == pytest.approx(0.3)
     assert f["specific_force_mps2_z"] == pytest.approx(9.8)  # the default z bias 0.05 is in the effect
+
+
+def test_the_gyro_track_is_interpolated_exactly_as_numpy_interp():
+    """The per-sample interpolation of the smoothed gyro (``_Linear``) is np.interp's formula:
+    equal bit for bit at random times inside the track, clamped to the end values outside."""
+    import numpy as np
+
+    rng = np.random.default_rng(11)
+    x = np.arange(0.0, 5.0, 0.0025) + 0.0007
+    y = rng.normal(size=(len(x), 6))
+    at = IE._Linear(x, y)
+    for t in np.concatenate([rng.uniform(-0.5, 5.5, 3000), x[:3], x[-3:]]):
+        assert at(float(t)) == tuple(float(np.interp(t, x, y[:, k])) for k in range(6))

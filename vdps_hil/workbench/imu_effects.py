@@ -8,6 +8,7 @@ from the smoothed gyro. The workbench uses this to re-estimate with an identifie
 
 from __future__ import annotations
 
+import bisect
 from typing import Iterable, Iterator, Sequence
 
 import numpy as np
@@ -38,6 +39,26 @@ def gyro_track(samples: Iterable[Sample], cutoff_hz: float):
     return t_base, tg, ws, np.gradient(ws, 1.0 / rate, axis=0)
 
 
+class _Linear:
+    """np.interp of every column at one point (the same formula, clamped at both ends), without
+    numpy's per-call overhead: one IMU sample at a time."""
+
+    def __init__(self, x: np.ndarray, y: np.ndarray):
+        self.x = [float(v) for v in x]
+        self.y = [tuple(float(c) for c in row) for row in y]
+
+    def __call__(self, t: float) -> tuple:
+        x, y = self.x, self.y
+        j = bisect.bisect_right(x, t) - 1
+        if j < 0:
+            return y[0]
+        if j >= len(x) - 1:
+            return y[-1]
+        x0, y0, y1 = x[j], y[j], y[j + 1]
+        dx, d = x[j + 1] - x0, t - x0
+        return tuple((b - a) / dx * d + a for a, b in zip(y0, y1))
+
+
 def imu_corrected(samples: Iterable[Sample], effects: Sequence[MeasurementEffect], track) -> Iterator[Sample]:
     """The samples with the effects taken out of the IMU ones (``track``: :func:`gyro_track`)."""
     effects = [e for e in effects if isinstance(e, MeasurementEffect)]
@@ -45,13 +66,14 @@ def imu_corrected(samples: Iterable[Sample], effects: Sequence[MeasurementEffect
         yield from samples
         return
     t_base, tg, ws, wd = track
+    at = _Linear(tg, np.hstack([ws, wd]))
     for s in samples:
         if s.kind != "imu" or not s.valid:
             yield s
             continue
         ts = (s.t_ns - t_base) * 1e-9
-        om = tuple(float(np.interp(ts, tg, ws[:, k])) for k in range(3))
-        od = tuple(float(np.interp(ts, tg, wd[:, k])) for k in range(3))
+        v = at(ts)
+        om, od = v[:3], v[3:]
         f0 = dict(s.fields)
         kin = ImuKinematics(ts, tuple(f0.get(n, 0.0) for n in SPECIFIC_FORCE_FIELDS), om, od)
         corr = dict(f0)
