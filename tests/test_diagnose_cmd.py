@@ -55,3 +55,46 @@ def test_errors_are_one_line(drive, capsys, args, msg):
 def test_help_shows_an_example(capsys):
     assert main(["diagnose", "--help"]) == 0
     assert "vdps diagnose drive.mcap --add aero_drag" in capsys.readouterr().out
+
+
+def test_the_real_rav4_drive_is_diagnosed_with_its_own_sensor_set(tmp_path, capsys):
+    """Issue 18 item 4 on the real RAV4 (comma2k19, converted and imported as README "Real cars"
+    says): the car has wheel speeds, steering, the ESC's yaw rate and accelerations, a phone IMU
+    and u-blox GNSS, no wheel torques and no suspension. ``vdps diagnose`` exits 0, names both
+    missing signal groups and what they prevent, ranks the candidates the remaining equations
+    can judge, and prints no NaN and no implausible value as a recommendation."""
+    import importlib.util
+
+    from conftest import REAL_DATA, REPO
+    from vdps_hil.realdata.comma2k19 import COMMA_SEGMENT
+    from vdps_hil.record.importer import CanSource, SerialSource, import_logs
+
+    seg = REAL_DATA / COMMA_SEGMENT
+    if not seg.is_dir():
+        pytest.skip(f"real data not present: {seg}")
+    spec = importlib.util.spec_from_file_location("convert_comma2k19", REPO / "tools" / "convert_comma2k19.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    conv = tmp_path / "conv"
+    tool.convert(seg, conv)
+    rec = tmp_path / "rav4.mcap"
+    rep = import_logs(rec, [CanSource("pt", str(conv / "pt.candump.log"), "can0")],
+                      [SerialSource("gnss", str(conv / "gnss.nmea")), SerialSource("imu", str(conv / "imu.mti"), 115200)],
+                      signalmap="toyota_rav4_2017", dbc={"*": str(seg / "toyota_new_mc_pt_generated.dbc")})
+    assert rep["write_errors"] == 0
+    rc = main(["diagnose", str(rec), "--vehicle", "rav4-model", "--json", "-", "--quiet"])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert "NaN" not in out.out and "nan" not in out.err.lower().replace("nanoseconds", "")
+    doc = json.loads(out.out)
+    msgs = doc["workbench"]["messages"]
+    assert any(m.startswith("missing signals: wheel torques") and "cannot be judged" in m for m in msgs), msgs
+    assert any(m.startswith("missing signals: suspension deflections") and "held at the model file" in m
+               for m in msgs), msgs
+    ranked = doc["ranking"]
+    assert len(ranked) >= 5 and all(e["explained_fraction"] is not None for e in ranked[:3])
+    # what the partial set can judge is judged (the lateral and yaw balances, the GNSS innovations)
+    assert set(doc["before"]["residual_rms"]) >= {"lat", "yaw"}
+    if doc["recommendation"] is not None:
+        top = next(e for e in ranked if e["effect"] == doc["recommendation"])
+        assert top["plausible"] and top["excited"], top
