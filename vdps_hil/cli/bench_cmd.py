@@ -314,6 +314,11 @@ def describe(d: dict) -> list[str]:
         lines.append(f"  predictions: {pr.get('dropped', 0)} of {pr.get('started', 0)} dropped at their deadline "
                      f"({1e3 * pr.get('latency_s', 0.0):g} ms of bus time), {pr.get('failed', 0)} failed; "
                      f"the warning frames said 'fault' until the next prediction was used")
+    un = d.get("warning_unhealthy") or {}
+    if un.get("inconsistent"):
+        cycles = sum((d.get("warning_status") or {}).values())
+        lines.append(f"  estimate consistency: the innovation monitor found the estimate inconsistent with the fixes "
+                     f"in {un['inconsistent']} of {cycles} warning cycles; their frames said 'fault'")
     h = d.get("headroom")
     if h:
         lines.append(f"  headroom: {h['headroom']:.1f}x at speed {h['speed']:g}x (measured before the run: simulator "
