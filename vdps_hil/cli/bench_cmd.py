@@ -304,6 +304,22 @@ def describe(d: dict) -> list[str]:
     lines.append(f"  latency from sensor frame to pipeline output on the bus: p50 {w['p50']:.1f} ms, "
                  f"p99 {w['p99']:.1f} ms over {d['output_cycles']} pipeline cycles"
                  + ("" if d["pipeline_keeps_up"] else " -- the pipeline did NOT keep up at this speed"))
+    lines += _health_lines(d)
+    sc = d.get("scheduling")
+    if sc and sc.get("policy") == "fifo":
+        lines.append(f"  scheduling: SCHED_FIFO priority {sc['priority']} (simulator and pipeline)")
+    elif sc and sc.get("reason") != NOT_ASKED:
+        lines.append(f"  scheduling: default time sharing ({sc.get('reason')}); a CPU-bound process beside the "
+                     f"bench then adds latency")
+    if d["output"]:
+        lines.append(f"  recording: {d['output']} (raw CAN/serial as the pipeline received them, /decoded, /est, "
+                     f"/truth)")
+    return lines
+
+
+def _health_lines(d: dict) -> list[str]:
+    """What made work late or frames non-valid (each a counted mechanism) and the headroom."""
+    lines: list[str] = []
     m = d.get("deadline_misses") or {}
     if m.get("samples"):
         lines.append(f"  deadline misses: the pipeline fell more than {m['deadline_ms']:g} ms behind "
@@ -324,13 +340,4 @@ def describe(d: dict) -> list[str]:
         lines.append(f"  headroom: {h['headroom']:.1f}x at speed {h['speed']:g}x (measured before the run: simulator "
                      f"{1e3 * h['simulator_cost_s_per_s']:.0f} ms + pipeline {1e3 * h['pipeline_cost_s_per_s']:.0f} ms "
                      f"of CPU per simulated second in a probe run of the bench)")
-    sc = d.get("scheduling")
-    if sc and sc.get("policy") == "fifo":
-        lines.append(f"  scheduling: SCHED_FIFO priority {sc['priority']} (simulator and pipeline)")
-    elif sc and sc.get("reason") != NOT_ASKED:
-        lines.append(f"  scheduling: default time sharing ({sc.get('reason')}); a CPU-bound process beside the "
-                     f"bench then adds latency")
-    if d["output"]:
-        lines.append(f"  recording: {d['output']} (raw CAN/serial as the pipeline received them, /decoded, /est, "
-                     f"/truth)")
     return lines

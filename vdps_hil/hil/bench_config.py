@@ -162,11 +162,11 @@ def warm_pipeline_kernels() -> None:
 def _saved_workbench_model(path: str):
     """The parsed workbench model file at ``path``, or None when ``path`` is not one (a vehicle
     file or name)."""
-    from vdps_hil.workbench.model_file import ModelFileError, read_model
-
     p = Path(path)
     if p.suffix.lower() not in (".toml", ".json") or not p.is_file():
-        return None
+        return None  # a vehicle name: the workbench (scipy and all, ~1 s) is not imported
+    from vdps_hil.workbench.model_file import ModelFileError, read_model
+
     try:
         return read_model(p)
     except ModelFileError:

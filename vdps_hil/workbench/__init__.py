@@ -15,11 +15,20 @@ the operating regime; the effect candidates (``candidates`` picks the adapter pe
 (``identification``), forward selection on held-out data (``selection``), equivalence groups
 (``equivalence``) and the result with its words (``results``, ``words``); ``add`` re-identifies
 with the chosen effects and measures before/after on held-out time; ``model_file`` saves and
-loads the model and ``report`` writes one self-contained HTML page. ``diagnosis`` ties the steps
+loads the model and ``report`` writes one self-contained HTML page (its figures: ``report_figures``). ``diagnosis`` ties the steps
 together (``vdps diagnose``); ``user_effects`` loads the user's own effect classes from a named
 file or entry point. (The hidden-effect acceptance drives are ``experiments.workbench_study``.)
 """
 
-from vdps_hil.workbench.diagnosis import Diagnosis, diagnose
-
 __all__ = ["Diagnosis", "diagnose"]
+
+
+def __getattr__(name: str):
+    """``Diagnosis`` and ``diagnose`` on first use (PEP 562): importing a submodule such as
+    ``model_file`` (``vdps replay --model``, ``vdps bench --model``) does not import the whole
+    diagnosis and scipy with it (~1-3 s)."""
+    if name in __all__:
+        from vdps_hil.workbench import diagnosis
+
+        return getattr(diagnosis, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
