@@ -49,7 +49,10 @@ class CanDeviceSide:
         self.frames_received = 0
 
     def open(self) -> None:
-        pass
+        """Before the bench clock starts. python-can is imported here: its first import (0.5-1 s,
+        it loads its whole I/O package) would otherwise happen when the pipeline's first frame
+        comes back (``_message``), holding the interpreter lock mid-run (late sends)."""
+        import can  # noqa: F401
 
     def send_frames(self, ids: Sequence[int], dlcs: Sequence[int], data: np.ndarray,
                     stamps_s: Sequence[float] | None = None) -> int:
