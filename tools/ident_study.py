@@ -17,7 +17,11 @@ circle wrong and not flagged). ``--ours 3 4 5 6``: medians mass 0.09 %, inertias
 Second session (2026-12-02, load 10-16, 18 drives of seeds 102-104, ``--yaw-row``): cornering
 identified on 27 of 28 exciting (set, drive, axle) values, |error| median 4.3 % front / 10.1 %
 rear, worst 15.4 %; I_z median 19.3 %; coverage 33 of 72. ``--yaw-row``: the cornering problem
-with its yaw row (off in default.toml). Figures and what is not met: README, "When the
+with its yaw row (off in default.toml). First full run (2026-12-03, all 80 drives of seeds
+102-111, shipped config, 62 min on one core beside other work): 0 cornering updates on the 20
+straights; 0 of 130 identified on a bound; mass median 0.25 %, worst 0.38 %; cornering never
+identified (mismatch / at bound / not excited); tracking identified 27 times with 9.7-45 %
+median errors; 2-sigma coverage 49 of 130. Figures and what is not met: README, "When the
 identifier is wrong".
 """
 
