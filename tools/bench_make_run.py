@@ -28,7 +28,17 @@ not. Bars: real time, nothing dropped, nothing skipped, frame latency p99 <= 10 
 upright. The load average before and after each run is printed next to it: other work on the
 machine changes every figure.
 
-Last measured (2026-12-02, quiet 2-core machine, main after the SCHED_FIFO change)::
+Last measured (2026-12-03, 2-core machine, after the simulator side's python-can import moved
+before the clock; ``--conditions quiet,hog,auto,auto-hog``)::
+
+    quiet   refused: headroom 0.6x at 1x (simulator 720 + pipeline 996 ms CPU per simulated s)
+    quiet-forced  1.00x real time, dropped 0, skipped 471, p50 4.0 p99 35.8 ms, lead 2.48 s, upright
+    hog     refused: headroom 0.7x;  hog-forced: 1.00x, skipped 479, p99 28.3 ms, lead 2.48 s, upright
+    auto    0.27x, dropped 0, skipped 0, p50 5.3 p99 9.2 ms, lead 2.48 s, upright
+    auto-hog  0.30x, dropped 0, skipped 0, p50 5.2 p99 8.8 ms, lead 2.49 s, upright
+
+Measured before (2026-12-02, quiet 2-core machine, main after the SCHED_FIFO change, the old
+offline headroom probe)::
 
     quiet   headroom 5.1x, 1.00x real time, dropped 0, skipped 0, frame latency p50 3.2 p99 7.0 ms,
             lead 2.49 s, upright -> meets the bars
