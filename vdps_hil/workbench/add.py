@@ -41,7 +41,8 @@ from .ranking.identification import Point, apply_base, build_design, effects_wit
 from .residuals import EQUATIONS, row_states
 from .simulation_errors import HORIZONS_S, SimErrors, simulation_errors
 
-__all__ = ["FittedModel", "fit_model", "AddResult", "add_effects", "cleaned_residuals", "before_after", "cleaned_rms"]
+__all__ = ["FittedModel", "fit_model", "AddResult", "add_effects", "cleaned_residuals", "before_after", "cleaned_rms",
+           "rms_by_equation"]
 
 
 @dataclass
@@ -146,15 +147,16 @@ def cleaned_residuals(table: DriveTable, model: FittedModel, vehicle: Vehicle, c
     return ctx.res.t_s[ctx.rows], ctx.res.index[ctx.rows], names, dyn
 
 
+def rms_by_equation(names: Sequence[str], values: np.ndarray) -> dict[str, float | None]:
+    """RMS per equation of residual columns ``values`` (n, len(names)); None without rows."""
+    return {q: float(np.sqrt(np.mean(values[:, k] ** 2))) if len(values) else None for k, q in enumerate(names)}
+
+
 def cleaned_rms(table: DriveTable, model: FittedModel, vehicle: Vehicle, config: RankingConfig | None = None
                 ) -> dict[str, float | None]:
     """RMS per equation of :func:`cleaned_residuals` (the before/after tables)."""
     _, _, names, dyn = cleaned_residuals(table, model, vehicle, config)
-    out: dict[str, float | None] = {}
-    for k, q in enumerate(names):
-        v = dyn[:, k]
-        out[q] = float(np.sqrt(np.mean(v * v))) if len(v) else None
-    return out
+    return rms_by_equation(names, dyn)
 
 
 def _expanding_models(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequence[Candidate],

@@ -33,7 +33,7 @@ from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import Effect
 from vdps_hil.model.params import Vehicle
 
-from .add import AddResult, FittedModel, add_effects, cleaned_rms
+from .add import AddResult, FittedModel, add_effects, cleaned_residuals, rms_by_equation
 from .dataset import DatasetConfig, DriveTable, load_drive
 from .ranking.config import RankingConfig
 from .ranking.results import Ranking
@@ -62,6 +62,9 @@ class Diagnosis:
     add: AddResult | None = None
     timings: dict = field(default_factory=dict)
     saved_model: str | None = None
+    cleaned: tuple | None = field(repr=False, default=None)
+    """The identified model's cleaned residual (``add.cleaned_residuals``): (t_s, equation
+    names, values); ``before["residual_rms"]`` without ``--add`` is its RMS."""
 
     def to_json(self) -> dict:
         rk = self.ranking
@@ -210,7 +213,9 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
     res = compute_residuals(table, base.vehicle, base.effects)
     wins = worst_windows(res)
     regs = regime_bins(table, res)
-    before = {"residual_rms": cleaned_rms(table, base, vehicle, ranking_config)}
+    t_c, _, names_c, vals_c = cleaned_residuals(table, base, vehicle, ranking_config)
+    cleaned = (t_c, names_c, vals_c)
+    before = {"residual_rms": rms_by_equation(names_c, vals_c)}
     sim = None
     if with_simulation and not add:
         say("simulation error of the identified model")
@@ -244,4 +249,5 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
         src = f"vdps diagnose {Path(path).name}" + "".join(f" --add {a}" for a in add)
         saved = str(_save(save_model, fm.vehicle, fm.effects, sigmas=sig, effect_sigmas=fm.sigmas, source=src))
     tm["total"] = time.perf_counter() - t0
-    return Diagnosis(str(path), vehicle, model_effects, table, rk, res, wins, regs, sim, before, add_res, tm, saved)
+    return Diagnosis(str(path), vehicle, model_effects, table, rk, res, wins, regs, sim, before, add_res, tm, saved,
+                     cleaned)

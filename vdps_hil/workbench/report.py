@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from . import report_figures as F
+from .add import rms_by_equation
 from .residuals import EQUATION_LABELS, EQUATION_UNITS, EQUATIONS
 
 __all__ = ["write_report", "render_report"]
@@ -94,18 +95,6 @@ def _fig(fig, alt: str) -> str:
     return "" if fig is None else _img(F.figure_svg(fig), alt)
 
 
-def _base_cleaned(dg):
-    """(t_s, names, values) of the identified model's cleaned residual, or None."""
-    from .add import FittedModel, cleaned_residuals
-
-    try:
-        t, _, names, vals = cleaned_residuals(dg.table, FittedModel(dg.ranking.base_vehicle, dg.model_effects),
-                                              dg.vehicle)
-    except ValueError:
-        return None
-    return t, names, vals
-
-
 _SIM_COLUMNS = (("position_m", "m", "position"), ("yaw_deg", "deg", "yaw"), ("roll_deg", "deg", "roll"),
                 ("speed_mps", "m/s", "speed"))
 
@@ -146,13 +135,10 @@ def render_report(dg) -> str:
                  "the ranking works on.</p>")
     parts.append(_fig(F.fig_traces(dg, eqs, _measured), "measured vs model"))
     parts.append("<h2>Where it fails</h2>")
-    cleaned = _base_cleaned(dg)
-    parts.append(_fig(F.fig_residuals(dg, eqs, cleaned), "residuals with the worst windows"))
-    if cleaned is not None:
-        _, names, vals = cleaned
-        parts.append(_table([[EQUATION_LABELS.get(q, q), _fmt(float(np.sqrt(np.mean(vals[:, k] ** 2))),
-                                                                 EQUATION_UNITS.get(q, ""))]
-                             for k, q in enumerate(names) if len(vals)],
+    parts.append(_fig(F.fig_residuals(dg, eqs, dg.cleaned), "residuals with the worst windows"))
+    if dg.cleaned is not None:
+        parts.append(_table([[EQUATION_LABELS.get(q, q), _fmt(v, EQUATION_UNITS.get(q, ""))]
+                             for q, v in rms_by_equation(*dg.cleaned[1:]).items()],
                             ["equation", "cleaned residual RMS (estimator errors taken out)"]))
     if dg.windows:
         parts.append(_table([[f"{w.t_start_s:.2f}-{w.t_end_s:.2f} s", EQUATION_LABELS.get(w.equation, w.equation),

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .add import rms_by_equation
 from .residuals import EQUATION_LABELS, EQUATION_UNITS, EQUATIONS
 
 __all__ = ["figure_svg", "EffectLaw", "effect_law", "EFFECT_REGRESSOR", "MAX_POINTS", "fig_traces",
@@ -227,13 +228,14 @@ def fig_residuals(dg, eqs, cleaned):
     fig, axes = _column(len(eqs), 2.2)
     sl = _thin(len(res.t_s))
     t_c, names, vals = cleaned if cleaned is not None else (None, [], None)
+    rms_all = rms_by_equation(names, vals) if cleaned is not None else {}
     slc = _thin(len(t_c)) if t_c is not None else sl
     for ax, eq in zip(axes[:, 0], eqs):
         k = EQUATIONS.index(eq)
         ax.plot(res.t_s[sl], res.values[sl, k], lw=0.6, color="0.75", label="raw (estimator errors included)")
         if eq in names:
             v = vals[:, names.index(eq)]
-            rms = float(np.sqrt(np.mean(v * v))) if len(v) else math.nan
+            rms = rms_all[eq] if rms_all[eq] is not None else math.nan
             ax.plot(t_c[slc], v[slc], lw=0.9, color="tab:red", label=f"cleaned (RMS {rms:.3g} {EQUATION_UNITS[eq]}, "
                                                                      f"as in the tables)")
         for w in dg.windows:
