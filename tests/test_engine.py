@@ -176,11 +176,16 @@ def dask_cluster(tmp_path_factory):
                                "--dashboard-address", "127.0.0.1:0", "--scheduler-file",
                                os.fspath(sched_file)], env=env, stdout=log, stderr=log)]
     try:
+        # The scheduler creates its file before it writes it: poll until it parses (the
+        # race failed CI once with an empty file, JSONDecodeError at char 0).
         deadline = time.monotonic() + 30
-        while not sched_file.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert sched_file.exists(), (d / "cluster.log").read_text()
-        address = json.loads(sched_file.read_text())["address"]
+        address = None
+        while address is None and time.monotonic() < deadline:
+            try:
+                address = json.loads(sched_file.read_text())["address"]
+            except (FileNotFoundError, json.JSONDecodeError, KeyError):
+                time.sleep(0.1)
+        assert address, (d / "cluster.log").read_text()
         for _ in range(2):
             procs.append(subprocess.Popen(
                 [dask, "worker", "--scheduler-file", os.fspath(sched_file), "--nworkers", "1",
