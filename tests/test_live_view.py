@@ -164,9 +164,10 @@ def test_vdps_log_serve_streams_the_decoded_topics_and_gnss_fix(tmp_path):
 
     from live_devices import Rig
 
-    # 8 s of data: a client that subscribes late on a loaded machine (the full suite beside it)
-    # still sees the stream running (with 4 s it once subscribed after the emulator had finished)
-    rig = Rig(tmp_path, seconds=8.0, logger_args=("--serve", "0"))
+    # up to 120 s of data, ended as soon as the client has its messages: a client that
+    # subscribes late on a loaded machine still sees the stream running (with 4 s, and once
+    # with 8 s beside the full suite, it subscribed after the emulator had finished)
+    rig = Rig(tmp_path, seconds=120.0, logger_args=("--serve", "0"))
     try:
         url = None
         while url is None:
@@ -183,7 +184,8 @@ def test_vdps_log_serve_streams_the_decoded_topics_and_gnss_fix(tmp_path):
             _collect(ws, subs, got, 5, 30)
         assert all(S.validate(d, S.SCHEMAS[S.LOCATION_FIX]) == [] for d in got[S.GNSS_FIX_TOPIC])
         assert all("specific_force_mps2_z" in d["fields"] for d in got[imu])
-        rig.sent()
+        (tmp_path / "stop").touch()  # ends the emulator's stream early (tools/bench_logger.py)
+        assert rig.sent()["seconds"] < 120.0
         rig.logger.send_signal(signal.SIGTERM)
         assert rig.logger.wait(30) == 0
     finally:

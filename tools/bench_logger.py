@@ -19,7 +19,8 @@ so lost data shows up as sequence gaps in the recording, as it would on a real l
 Symlinks ``DIR/can``, ``DIR/imu``, ``DIR/gnss`` name the devices; ``DIR/ready.json`` says they
 exist; streaming starts when ``DIR/go`` appears; ``DIR/progress.jsonl`` gets a line every
 100 ms (monotonic time and counts sent so far, for crash tests); ``DIR/sent.json`` the totals;
-the ptys stay open until ``DIR/stop`` appears (or ``--linger`` s).
+the ptys stay open until ``DIR/stop`` appears (or ``--linger`` s); a ``DIR/stop`` that
+appears while streaming also ends the stream early (``sent.json`` then has what was sent).
 
 The emulator warms its encoders up before it says it is ready, and reports its own longest
 stall (``emulator_max_stall_s``): on a loaded machine the emulator itself can stop for a while
@@ -240,6 +241,8 @@ def emulate(args) -> int:
             prog.write(json.dumps({"t": now, "sent": sent, "dropped": dropped}) + "\n")
             prog.flush()
             next_progress += 0.1
+            if (d / "stop").exists():  # ended early by the caller (checked at 10 Hz)
+                break
         if now >= t_end:
             break
         time.sleep(0.0005)
