@@ -64,6 +64,12 @@ class Rig:
         assert wait_for(self.d / "sent.json", timeout), "emulator did not finish"
         return json.loads((self.d / "sent.json").read_text())
 
+    def end_stream(self, timeout: float = 60) -> dict:
+        """End the emulator's stream now (``DIR/stop`` while streaming, tools/bench_logger.py)
+        and return what it sent (``sent``)."""
+        (self.d / "stop").touch()
+        return self.sent(timeout)
+
     def progress(self) -> list[dict]:
         return [json.loads(ln) for ln in (self.d / "progress.jsonl").read_text().splitlines()]
 

@@ -184,8 +184,7 @@ def test_vdps_log_serve_streams_the_decoded_topics_and_gnss_fix(tmp_path):
             _collect(ws, subs, got, 5, 30)
         assert all(S.validate(d, S.SCHEMAS[S.LOCATION_FIX]) == [] for d in got[S.GNSS_FIX_TOPIC])
         assert all("specific_force_mps2_z" in d["fields"] for d in got[imu])
-        (tmp_path / "stop").touch()  # ends the emulator's stream early (tools/bench_logger.py)
-        assert rig.sent()["seconds"] < 120.0
+        assert rig.end_stream()["seconds"] < 120.0
         rig.logger.send_signal(signal.SIGTERM)
         assert rig.logger.wait(30) == 0
     finally:
