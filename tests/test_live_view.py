@@ -13,6 +13,7 @@ import struct
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -156,15 +157,45 @@ def test_vdps_replay_serve_waits_and_serves_the_output_s_messages(tmp_path):
         assert len(served) >= 0.5 * len(recorded[t])  # a slow client may drop some; most arrive
 
 
+def _collect_until(ws, sub_id: int, got: list, at_least: int, deadline: float) -> None:
+    """Parsed messages of subscription ``sub_id`` into ``got`` until it has ``at_least`` or the
+    monotonic ``deadline`` passes (text frames, e.g. later advertisements, are skipped)."""
+    while len(got) < at_least:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return
+        try:
+            frame = ws.recv(timeout=left)
+        except TimeoutError:
+            return
+        if isinstance(frame, bytes):
+            sub, _, payload = _message(frame)
+            if sub == sub_id:
+                got.append(json.loads(payload))
+
+
+def _summary(path: Path) -> str:
+    """The logger's --json summary for a failure message (its loss and health counters say
+    whether it read, decoded and wrote the two devices), or why it cannot be read."""
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        return f"no summary ({e})"
+    doc.pop("files", None)
+    return json.dumps(doc)[:4000]
+
+
 def test_vdps_log_serve_streams_the_decoded_topics_and_gnss_fix(tmp_path):
     """``vdps log --serve 0`` on an emulated slcan bus and two pseudo-terminals (tests/live_devices.py):
-    a client subscribed to /gnss/fix and the decoded IMU receives them while the logger runs; the
-    /raw/ topics are not served."""
+    a client subscribed to /gnss/fix and one subscribed to the decoded IMU receive them while the
+    logger runs; the /raw/ topics are not served. One client per topic: the server keeps a
+    bounded backlog per client and drops its oldest messages when a client reads slowly, so on a
+    loaded machine the 1 kHz IMU would crowd the 5 Hz fixes out of a shared client."""
     import signal
 
     from live_devices import Rig
 
-    # up to 120 s of data, ended as soon as the client has its messages: a client that
+    # up to 120 s of data, ended as soon as the clients have their messages: a client that
     # subscribes late on a loaded machine still sees the stream running (with 4 s, and once
     # with 8 s beside the full suite, it subscribed after the emulator had finished)
     rig = Rig(tmp_path, seconds=120.0, logger_args=("--serve", "0"))
@@ -177,14 +208,27 @@ def test_vdps_log_serve_streams_the_decoded_topics_and_gnss_fix(tmp_path):
             url = m and m.group(1)
         imu = "/decoded/imu/imu"
         got: dict[str, list] = {S.GNSS_FIX_TOPIC: [], imu: []}
-        with connect(url, subprotocols=PROTOCOLS) as ws:
-            chans = _advertised(ws, {S.GNSS_FIX_TOPIC, imu}, timeout_s=30)
+        # close_timeout: a client that stopped reading a 1 kHz stream has the server's close frame
+        # queued behind data it will not read; its close would wait the default 10 s
+        with connect(url, subprotocols=PROTOCOLS, close_timeout=2) as ws_fix, \
+                connect(url, subprotocols=PROTOCOLS, close_timeout=2) as ws_imu:
+            chans = _advertised(ws_fix, {S.GNSS_FIX_TOPIC, imu}, timeout_s=60)
             assert not any(t.startswith(S.RAW_PREFIX) for t in chans)
-            subs = _subscribe(ws, chans, [S.GNSS_FIX_TOPIC, imu])
-            _collect(ws, subs, got, 5, 30)
+            _advertised(ws_imu, {imu}, timeout_s=60)  # the same server: the same channel ids
+            _subscribe(ws_fix, chans, [S.GNSS_FIX_TOPIC])
+            _subscribe(ws_imu, chans, [imu])
+            deadline = time.monotonic() + 90.0  # the stream runs 120 s from the logger's start
+            _collect_until(ws_imu, 1, got[imu], 5, deadline)
+            _collect_until(ws_fix, 1, got[S.GNSS_FIX_TOPIC], 5, deadline)
+            sent = rig.end_stream()  # before the clients close: a close under a 1 kHz stream waits
+        if min(map(len, got.values())) < 5:
+            rig.logger.send_signal(signal.SIGTERM)
+            rig.logger.wait(60)
+            pytest.fail(f"served {[(t, len(v)) for t, v in got.items()]} of 5 each; emulator sent "
+                        f"{sent}; logger: {_summary(tmp_path / 'log.json')}")
         assert all(S.validate(d, S.SCHEMAS[S.LOCATION_FIX]) == [] for d in got[S.GNSS_FIX_TOPIC])
         assert all("specific_force_mps2_z" in d["fields"] for d in got[imu])
-        assert rig.end_stream()["seconds"] < 120.0
+        assert sent["seconds"] < 120.0  # ended by end_stream, not by running out
         rig.logger.send_signal(signal.SIGTERM)
         assert rig.logger.wait(30) == 0
     finally:
