@@ -21,11 +21,11 @@ with its yaw row (off in default.toml). First full run (2026-12-03, all 80 drive
 102-111, shipped config, 62 min on one core beside other work): 0 cornering updates on the 20
 straights; 0 of 130 identified on a bound; mass median 0.25 %, worst 0.38 %; cornering never
 identified (mismatch / at bound / not excited); tracking identified 27 times with 9.7-45 %
-median errors; 2-sigma coverage 49 of 130. Sigma session (2026-12-03, 22 cached drives of seeds
+median errors; 2-sigma coverage 49 of 130. Sigma session (2026-12-03, the 24 drives of seeds
 102-104): the reported sigma is the larger of the model-based and the block-jackknife variance
-(``identification.jackknife``); coverage before / after 15 / 15 of 36 (mass 6 / 6 of 22: a bias
+(``identification.jackknife``); coverage before / after 17 / 17 of 41 (mass 6 / 6 of 24: a bias
 the same on every seed), with the raw noise-model sigma (``sigma_raw``, JSON ``covered_raw``)
-5 of 36; ``coverage_by_param`` in the JSON. Figures and what is not met: README, "When the
+5 of 41; ``coverage_by_param`` in the JSON. Figures and what is not met: README, "When the
 identifier is wrong".
 """
 
