@@ -176,3 +176,26 @@ def test_status_read_at_every_update_equals_status_read_once(rng):
     assert every.converged["mass"] and every.sigmas["mass_kg"] > 0.0
     every.reset("mass")
     assert not every.converged["mass"]
+
+
+def test_reported_sigmas_are_the_corrected_ones_and_the_raw_ones_travel_beside_them(rng):
+    # the reported sigma: the larger of the model-based and the block-jackknife variance
+    # (Identifier._honest); sigma_raw: W P W alone (white residuals with the configured noise)
+    ident = Identifier(MODEL)
+    off = Identifier(MODEL, dataclasses.replace(ident.config, status=dataclasses.replace(
+        ident.config.status, sigma_blocks=0)))
+    for k in range(600):
+        inp = forward(rng, k)
+        ident.update(inp)
+        off.update(inp)
+    assert ident.params == off.params  # only the sigmas change
+    sig, raw, model = ident.sigmas, ident.sigmas_raw, off.sigmas
+    assert all(sig[p] >= model[p] * (1 - 1e-12) for p in PARAM_NAMES)
+    assert ident.problem("mass").jackknife_covariance is not None
+    assert off.problem("mass").jackknife_covariance is None
+    doc = json.loads(json.dumps(ident.status()))
+    assert set(doc["sigmas_raw"]) == set(PARAM_NAMES)
+    for name, st in ident.problem_status.items():
+        for p in st.params:
+            assert p.sigma == sig[p.name] and p.sigma_raw == raw[p.name]
+            assert doc["status"][name]["params"][p.name]["sigma_raw"] == pytest.approx(raw[p.name])

@@ -21,7 +21,11 @@ with its yaw row (off in default.toml). First full run (2026-12-03, all 80 drive
 102-111, shipped config, 62 min on one core beside other work): 0 cornering updates on the 20
 straights; 0 of 130 identified on a bound; mass median 0.25 %, worst 0.38 %; cornering never
 identified (mismatch / at bound / not excited); tracking identified 27 times with 9.7-45 %
-median errors; 2-sigma coverage 49 of 130. Figures and what is not met: README, "When the
+median errors; 2-sigma coverage 49 of 130. Sigma session (2026-12-03, the 24 drives of seeds
+102-104): the reported sigma is the larger of the model-based and the block-jackknife variance
+(``identification.jackknife``); coverage before / after 17 / 17 of 41 (mass 6 / 6 of 24: a bias
+the same on every seed), with the raw noise-model sigma (``sigma_raw``, JSON ``covered_raw``)
+5 of 41; ``coverage_by_param`` in the JSON. Figures and what is not met: README, "When the
 identifier is wrong".
 """
 
@@ -54,12 +58,21 @@ def _summary(results, statuses) -> dict:
                      "identified_worst_abs_err": float(max(errs)) if errs else None,
                      "all_median_abs_err": float(np.median([abs(r.rel_error) for r in rs]))})
     ident = [r for _, res in results for r in res if r.status == "identified"]
+    per_param = collections.defaultdict(lambda: [0, 0, 0])
+    for r in ident:
+        c = per_param[r.name]
+        c[0] += 1
+        c[1] += r.covered
+        c[2] += r.covered_raw
     straight = [st["counters"]["cornering"]["updates"] for (k, _), st in zip(results, statuses)
                 if k.scenario == "cr-straight-pulses"]
     return {"drives": len(results), "rows": rows,
             "identified": len(ident),
             "identified_on_bound": sum(r.on_bound for r in ident),
             "coverage_2sigma": (sum(r.covered for r in ident) / len(ident)) if ident else None,
+            "coverage_2sigma_raw": (sum(r.covered_raw for r in ident) / len(ident)) if ident else None,
+            "coverage_by_param": {n: {"identified": c[0], "covered": c[1], "covered_raw": c[2]}
+                                  for n, c in sorted(per_param.items())},
             "identified_within_15pct": (sum(abs(r.rel_error) <= 0.15 for r in ident) / len(ident)) if ident else None,
             "straight_cornering_updates": straight}
 

@@ -62,8 +62,9 @@ class ParamResult:
     status: str
     value: float
     truth: float
-    sigma: float
+    sigma: float  # the reported (corrected) sigma, ``Identifier.sigmas``
     on_bound: bool = False  # the value equals a bound of the RLS (clamped)
+    sigma_raw: float = math.nan  # the noise model's sigma, ``Identifier.sigmas_raw``
 
     @property
     def rel_error(self) -> float:
@@ -73,10 +74,14 @@ class ParamResult:
     def covered(self) -> bool:
         return abs(self.value - self.truth) <= 2.0 * self.sigma
 
+    @property
+    def covered_raw(self) -> bool:
+        return abs(self.value - self.truth) <= 2.0 * self.sigma_raw
+
     def to_json(self) -> dict:
         return {"drive": self.drive, "param": self.name, "status": self.status, "value": self.value,
                 "truth": self.truth, "sigma": self.sigma, "rel_error": self.rel_error, "covered": self.covered,
-                "on_bound": self.on_bound}
+                "sigma_raw": self.sigma_raw, "covered_raw": self.covered_raw, "on_bound": self.on_bound}
 
 
 def truth_params(key: DriveKey) -> dict[str, float]:
@@ -108,5 +113,5 @@ def evaluate(key: DriveKey, cache_dir=None, config=None) -> tuple[list[ParamResu
         for p, lo, hi in zip(st.params, rls.lower, rls.upper):
             sigma = p.sigma if math.isfinite(p.sigma) else math.inf
             on_bound = bool(p.value <= lo or p.value >= hi)
-            out.append(ParamResult(key.name, p.name, p.status, p.value, truth[p.name], sigma, on_bound))
+            out.append(ParamResult(key.name, p.name, p.status, p.value, truth[p.name], sigma, on_bound, p.sigma_raw))
     return out, ident.status()

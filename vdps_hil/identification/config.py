@@ -70,7 +70,8 @@ class StatusConfig:
     (a value within this fraction of its bound's distance is "at bound"), ``min_variance_ratio``
     (prior / posterior variance along the parameter, unit residual variance, below which the
     drive taught too little: "not identifiable"), and the model-mismatch test of each problem
-    (``identification.mismatch``: ``mismatch_*``)."""
+    (``identification.mismatch``: ``mismatch_*``), and the block jackknife behind the reported
+    sigmas (``identification.jackknife``: ``sigma_blocks``, ``sigma_block_updates``)."""
 
     bound_margin: float = 0.02
     min_variance_ratio: float = 4.0
@@ -79,6 +80,8 @@ class StatusConfig:
     mismatch_variance_max: float = 50.0
     mismatch_lag_s: float = 0.5
     mismatch_whiteness_max: float = 1.0
+    sigma_blocks: int = 10  # the jackknife's target block count K (``jackknife``); 0: model-based sigmas only
+    sigma_block_updates: int = 50  # updates in a first block (the span doubles as the drive grows)
 
 
 @dataclass(frozen=True)

@@ -67,7 +67,8 @@ class Identifier:
             x0, sigma0, pc.q, w,
             forgetting=pc.forgetting, lower=lo * prior, upper=hi * prior,
             bounds_mode=self.config.bounds_mode, form=self.config.form,
-            sigma_autocorr=self.config.sigma_autocorr, min_dof=self.config.min_dof, names=names)
+            sigma_autocorr=self.config.sigma_autocorr, min_dof=self.config.min_dof, names=names,
+            jackknife_blocks=self.config.status.sigma_blocks, jackknife_span=self.config.status.sigma_block_updates)
 
     def _collect(self) -> IdentifiedParams:
         vals = {}
@@ -157,23 +158,57 @@ class Identifier:
 
     @property
     def covariances(self) -> dict[str, np.ndarray]:
-        """Problem -> covariance of its parameters (physical units): the RLS's own
-        (``parameter_covariance``, AR(1) inflation f_j included) scaled by max(1, tau / f_j) where
-        the residuals' long-run variance ratio tau (``MismatchMonitor.variance_scale``) exceeds
-        the AR(1) factor (residuals correlated over the maneuver, not just the samples), plus the consider covariance of the upstream estimates it
-        used (block-diagonal over the upstream problems, cascaded in update order). Computed
-        once per update (the chain reads it at every estimate); each call returns copies."""
-        cov = self._derived.get("covariances")
+        """Problem -> covariance of its parameters (physical units), corrected so that it does not
+        rest on the noise model alone (``_honest``), plus the consider covariance of the upstream
+        estimates it used (block-diagonal over the upstream problems, cascaded in update order).
+        Computed once per update (the chain reads it at every estimate); each call returns
+        copies."""
+        return self._derived_covariances("covariances", honest=True)
+
+    @property
+    def covariances_raw(self) -> dict[str, np.ndarray]:
+        """As ``covariances`` with the RLS's covariance W P W alone: white residuals with the
+        configured noise 1 / Q (``rls``), upstream included the same way (raw upstream)."""
+        return self._derived_covariances("covariances_raw", honest=False)
+
+    def _derived_covariances(self, key: str, honest: bool) -> dict[str, np.ndarray]:
+        cov = self._derived.get(key)
         if cov is None:
-            cov = self._derived["covariances"] = self._covariances()
+            cov = self._derived[key] = self._covariances(honest)
         return {k: v.copy() for k, v in cov.items()}
 
-    def _covariances(self) -> dict[str, np.ndarray]:
+    def _honest(self, name: str) -> np.ndarray:
+        """One problem's own covariance, no upstream share. Two estimates of the variance of x_j,
+        the larger taken (each is consistent under its own assumptions, neither under the
+        other's):
+
+        * model-based: s^2 f_j (W P W)_jj (``WeightedRLS.parameter_covariance``: the a posteriori
+          residual variance against the design noise, the AR(1) factor of the scores), scaled by
+          max(1, tau / f_j) with the residuals' long-run variance ratio tau
+          (``MismatchMonitor.variance_scale``: batch means and integrated autocorrelation time);
+        * the delete-a-block jackknife V_J (``WeightedRLS.jackknife_covariance``, Kuensch 1989):
+          the spread of the solution over the drive, no noise model assumed; it sees what the
+          residual statistics cannot: a model error the fit absorbs differently in different
+          parts of the drive.
+
+        Each parameter's row and column are scaled by sqrt(max(1, V_J,jj / C_jj)), so the
+        correlations of the model-based covariance C are kept."""
+        rls = self._rls[name]
+        d = np.sqrt(np.maximum(self._mismatch[name].variance_scale / rls.autocorr_inflation, 1.0))
+        c = rls.parameter_covariance * np.outer(d, d)
+        vj = rls.jackknife_covariance
+        if vj is not None:
+            cd = np.diag(c)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                h = np.sqrt(np.where(cd > 0.0, np.maximum(np.diag(vj) / cd, 1.0), 1.0))
+            c = c * np.outer(h, h)
+        return c
+
+    def _covariances(self, honest: bool) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {}
         for name in PROBLEM_NAMES:
             rls = self._rls[name]
-            d = np.sqrt(np.maximum(self._mismatch[name].variance_scale / rls.autocorr_inflation, 1.0))
-            c = rls.parameter_covariance * np.outer(d, d)
+            c = self._honest(name) if honest else rls.covariance
             ups = UPSTREAM[name]
             if ups:
                 blocks = [out[u] for u in ups]
@@ -189,12 +224,16 @@ class Identifier:
 
     @property
     def sigmas(self) -> dict[str, float]:
-        """Parameter field name -> standard deviation (same unit as the parameter), including
-        the uncertainty inherited from the upstream problems (``covariances``)."""
-        out = {}
-        for name, c in self.covariances.items():
-            out.update(zip(PROBLEM_PARAMS[name], (math.sqrt(max(float(v), 0.0)) for v in np.diag(c))))
-        return out
+        """Parameter field name -> standard deviation (same unit as the parameter): the corrected
+        one (``covariances``), the uncertainty inherited from the upstream problems included. This
+        is the sigma every output carries (status, ``/est/ident``, ``--save-params``)."""
+        return _diag_sigmas(self.covariances)
+
+    @property
+    def sigmas_raw(self) -> dict[str, float]:
+        """As ``sigmas`` from ``covariances_raw`` (white residuals with the configured noise): kept
+        beside the corrected one to show how much the correction widened it."""
+        return _diag_sigmas(self.covariances_raw)
 
     @property
     def identifiability(self) -> dict[str, float]:
@@ -234,8 +273,9 @@ class Identifier:
         failed = {name: m.failed_rows for name, m in self._mismatch.items()}
         for name, checks in CROSS_CHECKS.items():  # downstream rows that test this problem too
             failed[name] += tuple(f"{p}.{row}" for p, row in checks if row in failed[p])
+        raw = self.sigmas_raw
         return {name: problem_status(name, PROBLEM_PARAMS[name], rls, self._sigma0[name], sig,
-                                     failed[name], self._gated[name], self.config)
+                                     failed[name], self._gated[name], self.config, sigmas_raw=raw)
                 for name, rls in self._rls.items()}
 
     @property
@@ -263,6 +303,7 @@ class Identifier:
         return {
             "params": self._params.as_dict(),
             "sigmas": self.sigmas,
+            "sigmas_raw": self.sigmas_raw,
             "identifiability": self.identifiability,
             "excited": self.excited,
             "converged": self.converged,
@@ -272,3 +313,10 @@ class Identifier:
             "waiting_upstream": self.waiting_upstream,
             "inputs_rejected": self._inputs_rejected,
         }
+
+
+def _diag_sigmas(cov: dict[str, np.ndarray]) -> dict[str, float]:
+    out = {}
+    for name, c in cov.items():
+        out.update(zip(PROBLEM_PARAMS[name], (math.sqrt(max(float(v), 0.0)) for v in np.diag(c))))
+    return out

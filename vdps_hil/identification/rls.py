@@ -51,6 +51,10 @@ Diagnostics
   with white noise give f ~ 1, and coloured noise with slowly varying regressors gives the
   classical (1 + rho)/(1 - rho). ``sigma_autocorr = False`` sets f = 1. Calibration is checked by
   Monte Carlo in ``tests/test_rls.py`` (fraction of seeds with |error| <= 2 sigma).
+* **Jackknife covariance** (``jackknife_blocks`` > 0): the delete-a-block jackknife of the
+  solution over consecutive blocks of updates (``jackknife``, Kuensch 1989), a covariance that
+  assumes no noise model; ``jackknife_covariance``. The ``Identifier`` reports the larger of it
+  and the model-based variance above.
 * **Consider covariance**: when b is built from other problems' estimates theta (eq 22 uses
   m and C_lambda, eq 23's moments use C_lambda and C_alpha), their errors move x by
   dx = J dtheta with J = W P sum_k A_Q^T Q db/dtheta (exact for least squares, accumulated with
@@ -85,6 +89,7 @@ import numpy as np
 
 from vdps_hil import jit
 from vdps_hil.identification import rls_kernels as RK
+from vdps_hil.identification.jackknife import BlockJackknife
 
 FORMS = ("covariance", "sqrt_information")
 BOUNDS_MODES = ("clamp", "reject")
@@ -124,7 +129,8 @@ class WeightedRLS:
 
     def __init__(self, x0, sigma0, q, w=None, *, forgetting: float = 1.0, lower=None, upper=None,
                  bounds_mode: str = "clamp", form: str = "covariance",
-                 sigma_autocorr: bool = True, min_dof: int = 5, names=None):
+                 sigma_autocorr: bool = True, min_dof: int = 5, names=None, jackknife_blocks: int = 0,
+                 jackknife_span: int = 50):
         self._x0 = _vector("x0", x0)
         n = self._x0.shape[0]
         self._sigma0 = _vector("sigma0", sigma0, n)
@@ -156,6 +162,8 @@ class WeightedRLS:
         self.names = tuple(names) if names is not None else tuple(f"x{i}" for i in range(n))
         if len(self.names) != n:
             raise ValueError("names must have one entry per parameter")
+        self._jack = BlockJackknife(n, jackknife_blocks, jackknife_span) if jackknife_blocks else None
+        """The block sums of ``jackknife_covariance`` (None: off)."""
         self._compiled = jit.ENABLED and form == "covariance"
         """Covariance-form updates through the compiled ``rls_kernels`` (numpy with VDPS_JIT=0)."""
         self._resets = -1
@@ -171,6 +179,9 @@ class WeightedRLS:
         p_diag = (self._sigma0 / self._w) ** 2
         self._p0_max = float(np.max(p_diag))
         self._xq = xq
+        self._xq0, self._p0_inv = xq.copy(), np.diag(1.0 / p_diag)  # the prior, for the jackknife
+        if self._jack is not None:
+            self._jack.reset()
         self._P = np.diag(p_diag)  # covariance form
         self._R = np.diag(1.0 / np.sqrt(p_diag))  # sqrt-information form
         self._z = self._R @ xq
@@ -237,6 +248,8 @@ class WeightedRLS:
         if self._g_prev is not None:
             self._g1 = lam * self._g1 + g * self._g_prev
         self._g_prev = g
+        if self._jack is not None:
+            self._jack.add(aq, y, lam)
         if db_dtheta is not None:
             self._add_sensitivity(db_dtheta, qv, sel, aq)
         return True
@@ -262,6 +275,8 @@ class WeightedRLS:
         g = np.zeros(n) if not has_prev else self._g_prev
         RK.accumulate(qa, aq, y, k, xq_new, lam, self._info, self._info_scaled, self._gg, self._g1, g, has_prev)
         self._g_prev = g
+        if self._jack is not None:
+            self._jack.add(aq[:k], y[:k], lam)
         if db_dtheta is not None:
             sel = sel & np.isfinite(a).all(axis=1) & np.isfinite(b)
             self._add_sensitivity(db_dtheta, qv, sel, aq[:k])
@@ -395,6 +410,16 @@ class WeightedRLS:
         """s^2 F^1/2 (W P W) F^1/2 with F = diag(f): the covariance behind ``sigma``."""
         sf = np.sqrt(self.residual_variance * self.autocorr_inflation)
         return self.covariance * np.outer(sf, sf)
+
+    @property
+    def jackknife_covariance(self) -> np.ndarray | None:
+        """W V_J W: the delete-a-block jackknife covariance of x (``jackknife``; physical units),
+        measured from the spread of the solution over the drive, no noise model assumed. None when
+        off (``jackknife_blocks = 0``) or below ``jackknife.MIN_BLOCKS`` blocks."""
+        if self._jack is None:
+            return None
+        v = self._jack.variance(self._p0_inv, self._xq0)
+        return None if v is None else v * np.outer(self._w, self._w)
 
     def consider_covariance(self, cov_theta) -> np.ndarray:
         """Covariance of x caused by the uncertainty ``cov_theta`` (p x p) of the consider

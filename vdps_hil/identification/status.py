@@ -38,14 +38,17 @@ CAUSES = ("not excited", "at bound", "model mismatch", "not identifiable", "not 
 
 @dataclass(frozen=True)
 class ParamStatus:
-    """One parameter: ``status`` (``IDENTIFIED`` or one of ``CAUSES``), its value and sigma,
-    and the variance ratio prior / posterior (unit residual variance)."""
+    """One parameter: ``status`` (``IDENTIFIED`` or one of ``CAUSES``), its value, its sigma
+    (the corrected one, ``Identifier.sigmas``), the variance ratio prior / posterior (unit residual
+    variance) and ``sigma_raw``, the sigma of white residuals with the configured noise
+    (``Identifier.sigmas_raw``; NaN when not given)."""
 
     name: str
     status: str
     value: float
     sigma: float
     variance_ratio: float
+    sigma_raw: float = math.nan
 
     @property
     def identified(self) -> bool:
@@ -53,6 +56,7 @@ class ParamStatus:
 
     def to_json(self) -> dict:
         return {"status": self.status, "value": self.value, "sigma": self.sigma,
+                "sigma_raw": self.sigma_raw if math.isfinite(self.sigma_raw) else None,
                 "variance_ratio": self.variance_ratio}
 
 
@@ -94,10 +98,12 @@ def _param_cause(x, lo, hi, ratio, rel, *, updates, mismatch, cfg) -> str:
     return IDENTIFIED
 
 
-def problem_status(problem: str, names, rls, sigma0, sigmas, mismatch_rows, gated, cfg) -> ProblemStatus:
+def problem_status(problem: str, names, rls, sigma0, sigmas, mismatch_rows, gated, cfg,
+                   sigmas_raw=None) -> ProblemStatus:
     """The status of one problem (module docstring). ``rls``: its ``WeightedRLS``; ``sigma0``:
     the prior sigmas (physical units); ``sigmas``: name -> reported sigma (upstream included);
-    ``mismatch_rows``: the rows its residual test failed; ``cfg``: the ``IdentConfig``."""
+    ``mismatch_rows``: the rows its residual test failed; ``cfg``: the ``IdentConfig``;
+    ``sigmas_raw``: name -> the noise model's sigma, carried beside it."""
     x = rls.x
     lo, hi = rls.lower, rls.upper
     var = np.diag(rls.covariance)
@@ -109,7 +115,8 @@ def problem_status(problem: str, names, rls, sigma0, sigmas, mismatch_rows, gate
         rel = sig / max(abs(float(x[j])), 1e-300)
         cause = _param_cause(float(x[j]), float(lo[j]), float(hi[j]), ratio, rel, updates=updates,
                              mismatch=bool(mismatch_rows), cfg=cfg)
-        params.append(ParamStatus(n, cause, float(x[j]), sig, ratio))
+        raw = float(sigmas_raw[n]) if sigmas_raw is not None else math.nan
+        params.append(ParamStatus(n, cause, float(x[j]), sig, ratio, raw))
     causes = [p.status for p in params if not p.identified]
     status = "converged" if not causes else min(causes, key=CAUSES.index)
     return ProblemStatus(problem, status, tuple(params), tuple(mismatch_rows), int(updates), dict(gated))
