@@ -37,6 +37,7 @@ from .dataset import DriveTable
 from .innovations import compute_innovations
 from .ranking.config import RankingConfig
 from .ranking.design import theta_of
+from .ranking.sensor_fit import held_at, sensor_fit
 from .ranking.identification import Point, apply_base, build_design, effects_with, identify
 from .residuals import EQUATIONS, row_states
 from .simulation_errors import HORIZONS_S, SimErrors, simulation_errors
@@ -82,20 +83,22 @@ def fit_model(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequ
     point, d, cols, _ = identify(tab, vehicle, eff, states, inn, cfg, reference=vehicle, phis=phis, selected=selected)
     sig: dict[str, dict[str, float]] = {}
     for _ in range(iterations if add else 0):
-        th, obj = d.objective(cols)
+        dh, ch, sensor = _held_sensors(d, cols, add)
+        th, obj = dh.objective(ch)
         new_phis = dict(point.phis)
         new_eff = point.effects
         for c in add:
-            dphi = theta_of(d, c.name, cols, th)
+            dphi = sensor[c.name].phi if c.name in sensor else theta_of(dh, c.name, ch, th)
             ph = c.clip_phi(point.phis[c.name] + dphi)
             try:
                 new_eff = effects_with(new_eff, c.phi_effect(ph))
                 new_phis[c.name] = ph
             except ValueError:
                 pass
-        base = apply_base(point, d, cols, th, cfg, vehicle)
+        base = apply_base(point, dh, ch, th, cfg, vehicle)
         point = Point(base, new_eff, new_phis)
         _, d, cols = build_design(tab, states, inn, vehicle, point, cfg, selected)
+    _, _, sensor = _held_sensors(d, cols, add)
     th, obj = d.objective(cols)
     s2 = obj / max(len(d.y) - len(cols), 1)
     G = d.stats()[0].sum(axis=(0, 1))
@@ -107,10 +110,28 @@ def fit_model(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequ
     pos = {k: j for j, k in enumerate(cols)}
     for c in add:
         ks = d.blocks[c.name]
-        s = np.array([math.sqrt(max(cov[pos[k], pos[k]] * s2, 0.0)) / d.scale[k] for k in ks])
+        s = sensor[c.name].sigma if c.name in sensor else \
+            np.array([math.sqrt(max(cov[pos[k], pos[k]] * s2, 0.0)) / d.scale[k] for k in ks])
         sig[c.name] = {k: v[1] for k, v in c.phi_report(point.phis[c.name], s).items()}
     t_end = float(tab.t_s[-1]) if len(tab.t_s) else math.inf
     return FittedModel(point.base, point.effects, sig, t_end)
+
+
+def _held_sensors(d, cols: list, add: Sequence[Candidate]):
+    """(design, columns, {name: SensorFit}): each added sensor effect fitted on the GNSS
+    innovations alone (``ranking.sensor_fit``: on all rows the balance equations' model error
+    pulls its parameters) and held there; the other columns are fitted with it held."""
+    sensor = {}
+    for c in add:
+        if c.family != "measurement" or c.name not in d.blocks:
+            continue
+        own = set(d.blocks[c.name])
+        rest = [k for k in cols if k not in own]
+        sf = sensor_fit(d, rest, c.name)
+        if sf is not None:
+            sensor[c.name] = sf
+            d, cols = held_at(d, c.name, sf.th), rest
+    return d, cols, sensor
 
 
 @dataclass

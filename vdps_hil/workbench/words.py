@@ -88,7 +88,9 @@ def _main_equation(e) -> tuple[str, float] | None:
 
 def _explains(e) -> str:
     main = _main_equation(e)
-    if main is None or not (e.explained_fraction > 0):
+    # a sensor effect is judged on its GNSS innovations (``ranking.sensor_fit``), where the
+    # overall fraction is the balance rows' model error
+    if main is None or not (e.explained_fraction > 0 or main[0].startswith("innov_")):
         return "explains nothing on held-out data"
     g, f = main
     return f"explains {100 * f:.0f} % of the {equation_phrase(g)} on held-out data"

@@ -74,8 +74,7 @@ class Design:
         self.prior_scale = 1.0  # n / n_eff: the data rows are correlated, the priors are not
         self._stats = None
         if len(inn):
-            nu = inn.nuisance / inn.sigma[:, None]
-            self.add_block("_nuisance", None, nu)
+            self.add_block("_nuisance", None, inn.nuisance)  # unwhitened: add_block divides by sigma
         sm, sm_sig = ctx.smooth_bands(config.nuisance_knot_s, config.velocity_sigma_floor_mps)
         if sm:
             self._add_band_block("_smooth", sm, sm_sig)

@@ -43,6 +43,7 @@ from ..residuals import EquationResiduals, RowStates, compute_residuals
 from .config import RankingConfig
 from .context import Context
 from .design import Design, effective_sample_size, sigma_of, theta_of
+from .sensor_fit import SensorFit, held_at, sensor_fit
 
 __all__ = ["Point", "Joint", "identify_base", "identify", "build_design", "structure_columns",
            "excited_parameters", "apply_base", "interp_base", "effects_with", "joint_fit", "linear_joint_fit"]
@@ -72,6 +73,7 @@ class Joint:
     cols: list
     sse_without: float = math.nan  # the same linearisation point without the candidate
     cv_without: np.ndarray | None = None
+    sensor: "SensorFit | None" = None  # a sensor effect fitted on its innovations (``sensor_fit``)
 
 
 def identify_base(table: DriveTable, vehicle: Vehicle, effects: EffectSet, states: RowStates,
@@ -305,11 +307,21 @@ def linear_joint_fit(d: Design, always, c: Candidate, theta, point: Point, cfg: 
     are refitted with it (their change columns are among ``always``): their changes move the
     point too, so drag selected alone and rolling resistance added later share the coast-down's
     resistance instead of counting it twice."""
-    cols = always + d.blocks[c.name]
-    th, obj = d.objective(cols)
-    phi = theta_of(d, c.name, cols, th)
-    s2 = obj / max(len(d.y) - len(cols), 1)
-    sig = sigma_of(d, c.name, cols, s2, ratio)
+    sf = sensor_fit(d, always, c.name) if c.family == "measurement" else None
+    if sf is not None:  # a sensor effect: from the innovations, judged at that value (``sensor_fit``)
+        d, cols = held_at(d, c.name, sf.th), list(always)
+        th, obj = d.objective(cols)
+        phi, sig = sf.phi, sf.sigma
+        cv = d.cv(cols)
+        inn = sf.cv_without > 0
+        cv[inn] = sf.cv_with[inn]  # the innovation groups held out from its own fit
+    else:
+        cols = always + d.blocks[c.name]
+        th, obj = d.objective(cols)
+        phi = theta_of(d, c.name, cols, th)
+        s2 = obj / max(len(d.y) - len(cols), 1)
+        sig = sigma_of(d, c.name, cols, s2, ratio)
+        cv = d.cv(cols)
     base = apply_base(point, d, cols, th, cfg, ref)
     phis = dict(point.phis)
     eff = point.effects
@@ -326,4 +338,4 @@ def linear_joint_fit(d: Design, always, c: Candidate, theta, point: Point, cfg: 
     except ValueError:
         pass
     pt = Point(base, eff, {**phis, c.name: phi})
-    return Joint(c.name, phi, sig, pt, obj, d.cv(cols), d, cols)
+    return Joint(c.name, phi, sig, pt, obj, cv, d, cols, sensor=sf)

@@ -63,6 +63,7 @@ from .equivalence import fill_groups, group_list, merge_rivals
 from .gram import take
 from .identification import Joint, Point, build_design, identify, joint_fit, linear_joint_fit
 from .results import RankEntry, Ranking, rk_message
+from .sensor_fit import sensor_fit
 
 __all__ = ["rank"]
 
@@ -234,11 +235,15 @@ def _shortlist(s: _Search, ev: _Excitation) -> list[tuple[float, str, np.ndarray
         ef = 1.0 - cv.sum() / max(s.cv_cur.sum(), 1e-300)
         if c.family == "measurement" and _explained(cv, s.cv_cur, inn_g) >= cfg.min_explained_innovations:
             sensor.add(name)
+        if c.family == "measurement":  # its own evidence: the innovations alone (``sensor_fit``)
+            sf = sensor_fit(d, s.always, name)
+            if sf is not None and sf.held_out_dbic() < -cfg.bic_margin:
+                sensor.add(name)
         th, _, _ = d.fit(cols)
         screen.append((ef, name, theta_of(d, name, cols, th)))
     screen.sort(key=lambda t: -t[0])
     short = [t for t in screen[:cfg.shortlist] if t[0] > 0.0]
-    short += [t for t in screen[cfg.shortlist:] if t[1] in sensor and t[0] > 0.0]
+    short += [t for t in screen if t[1] in sensor and t not in short]
     # nonlinear candidates are judged by their joint fit in any case: at a linearisation
     # point far from the truth their screening column can hide them
     short += [t for t in screen[cfg.shortlist:] if not s.by_name[t[1]].linear and t[1] not in sensor
@@ -283,13 +288,20 @@ def _judge(s: _Search, ev: _Excitation, name: str, theta) -> tuple[bool, float, 
     st["ef_dynamics"] = ef_dyn = _explained(j.cv, cv_before, np.arange(len(DYNAMIC_EQUATIONS)))
     balance_only = own is not None and own.any() and not own[len(DYNAMIC_EQUATIONS):].any()
     evidence = _evidence(c, cfg, ef, ef_inn, ef_dyn, balance_only)
+    if j.sensor is not None:  # fitted on its innovations: BIC of their held-out SSE (``sensor_fit``)
+        st["dbic_innovations"] = dbic_inn = j.sensor.held_out_dbic()
+        evidence = evidence or dbic_inn < -cfg.bic_margin
+        if dbic_inn < -cfg.bic_margin:  # its own rows are the innovations it was fitted on
+            ef_own = st["ef_own"] = 1.0 - j.sensor.cv_with.sum() / max(j.sensor.cv_without.sum(), 1e-300)
     if os.environ.get("VDPS_WB_DEBUG"):
         print(f"[ranking] {name}: ef_dyn {ef_dyn:.3f} balance_only {balance_only} evidence {evidence} "
               f"base_equiv {ev.base_equiv.get(name, 0.0):.3f}")
     if _base_equivalent(s, ev, name, c, j.phi):
         evidence = False  # the same as re-identifying a parameter: reported as a group
-    ok = (dbic < -cfg.bic_margin and ef_own >= cfg.min_explained and ef > 0.0 and evidence
-          and c.phi_plausible(j.phi) and c.material(j.phi, cfg.material_fraction))
+    # a sensor effect is fitted on its innovations and judged there (``sensor_fit``): the overall
+    # figure is then the balance rows' model error, which it was not fitted to absorb
+    ok = (dbic < -cfg.bic_margin and ef_own >= cfg.min_explained and (ef > 0.0 or c.family == "measurement")
+          and evidence and c.phi_plausible(j.phi) and c.material(j.phi, cfg.material_fraction))
     if not s.selected:
         st["eligible_first"] = bool(ok)
     return ok, ef, j
