@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from vdps_hil.estimation.measurements import ZrRateBuilder, suspension_measurement, y2_gps_measurement
+from vdps_hil.estimation.measurements import (ZrRateBuilder, suspension_body_rates, suspension_measurement,
+                                              y2_gps_measurement)
 from vdps_hil.model import frames as fr
 from vdps_hil.model.params import load_vehicle
 
@@ -52,3 +53,18 @@ def test_zr_rate_builder():
     assert b.push(10_000_000_000, 0.0, 1e-6) is None  # everything older than 3 s dropped
     with pytest.raises(ValueError):
         ZrRateBuilder(min_baseline_s=1.0, max_baseline_s=0.5)
+
+
+@pytest.mark.parametrize("hd", [(0.05, -0.02, 0.03, 0.01), (-0.1, 0.1, 0.1, -0.1), (0.0, 0.0, 0.2, 0.2)])
+def test_suspension_body_rates_are_the_time_derivative_of_eq_5(hd):
+    """The roll and pitch rates from the deflection rates equal the finite difference of eq 5's
+    angles over 1 ms at small angles (tolerance 1e-4 rad/s: eq 5's arcsine over 1 ms)."""
+    g = VEH.geometry
+    args = (g.l_f_m, g.l_r_m, g.track_half_front_m, g.track_half_rear_m, 0.001)
+    h0 = np.array([0.01, -0.005, 0.0, 0.004])
+    dt = 1e-3
+    a = suspension_measurement(h0, *args)
+    b = suspension_measurement(h0 + dt * np.array(hd), *args)
+    roll_rate, pitch_rate = suspension_body_rates(hd, *args[:4])
+    assert roll_rate == pytest.approx((b.phi_v_rad - a.phi_v_rad) / dt, abs=1e-4)
+    assert pitch_rate == pytest.approx((b.theta_v_rad - a.theta_v_rad) / dt, abs=1e-4)

@@ -312,3 +312,33 @@ def test_gyro_spike_is_rejected_and_no_valid_warning_is_sent():
     m = _nees_tool()
     r = m.run_chain("paper", 7, duration_s=8.0, faults=["gyro_spike:t_s=5,duration_s=0.05,amplitude_degps=200"])
     assert np.degrees(np.abs(r["err"][r["t_s"] > 4.0, 8])).max() < 1.0
+
+
+def test_a_5_s_imu_outage_in_the_lane_change_is_bridged_and_recovered_within_2_s():
+    """Issue 20's campaign: the IMU cut for 5 s (2.5-7.5 s) of the ISO 3888 lane change. With
+    the iterated update right after the IMU's return, one y1_sus update moved the yaw by 4.6 deg
+    and left a 0.15 deg roll/bank error against a 0.04 deg sigma for 2 s (96.5 % of the epochs
+    within 3 sigma on the campaign's seed 21). Specification: >= 99 % of the epochs within the
+    filter's own 3 sigma and every error back at its pre-fault level 2 s after the return (seed
+    13, not the campaign's)."""
+    r = _nees_tool().run_chain("lane-change-iso3888", 13, duration_s=10.0,
+                               faults=["serial_disconnect:device=imu,t_s=2.5,duration_s=5"])
+    d = _recovered(r, 7.5, 2.5)
+    assert d["inside_3sigma"] >= 0.99, d
+    assert d["recovered"], d
+
+
+def test_a_gnss_outage_over_the_fishhook_tip_up_keeps_the_attitude_honest():
+    """Issue 20's campaign: the GNSS out for 2 s (0.4-2.4 s) of the SUV fishhook, over its
+    two-wheel tip-up. The lifted wheels' suspension deflections were taken as the body's attitude
+    over the road: a 1.7 deg yaw error against a 0.25 deg sigma (90.5 % within 3 sigma on seed
+    21). Specification: the suspension updates stop while a wheel is unloaded (counted as
+    lift_off), >= 99 % of the epochs within 3 sigma and the yaw error below 1 deg (seed 14)."""
+    r = _nees_tool().run_chain("fishhook-suv", 14, vehicle="suv-model",
+                               faults=["gnss_outage:t_s=0.4,duration_s=2"])
+    t, e, s = r["t_s"], np.abs(r["err"]), r["sigma"]
+    live = t >= t[0] + 0.8
+    inside = np.mean([(e[live, i] <= 3.0 * s[live, i]) for i in _ERR_STATES])
+    assert inside >= 0.99, inside
+    assert np.degrees(e[live, 8]).max() < 1.0
+    assert r["pipeline_counters"]["lift_off"] > 0

@@ -12,7 +12,8 @@ Per run (fault window [t_f, t_b]: onset and the sensor's return)::
     recover_s         time after t_b until every one of those errors stays at its pre-fault
                       level (below max(2 x its 95th percentile over the 2 s before t_f, 3 x its
                       mean sigma then); a fault within 1 s of the start: below 3 x its own
-                      sigma) to the end of the drive; 0: never left it; inf: not by the end
+                      sigma) to the end of the drive; 0: never left it; inf: not by the end;
+                      "not back": the sensor returns after the drive ends
     rejected          gated GNSS updates (pos + vel + att) and rejected IMU samples
     valid warnings    VDPS_Warning frames of level >= 2 with status valid (0); on the rollover
                       drive the lead time of the first one to the truth point of no return
@@ -133,7 +134,10 @@ def score(t, e, s, frames, events, t_f, t_b, system, scenario, spec) -> dict:
         over = t[late & (e[:, i] > lim)]
         if len(over):
             worst_t = max(worst_t, float(over[-1]))
-    recover = worst_t - t_b if worst_t < t[-1] - 0.05 else math.inf
+    if t_b >= t[-1]:
+        recover = None  # the sensor is not back before the drive ends (nothing to recover from)
+    else:
+        recover = worst_t - t_b if worst_t < t[-1] - 0.05 else math.inf
     dec = VdpsCanDecoder()
     lvl_valid = [d.t_ns / 1e9 for m in frames for d in dec.decode(int(m.timestamp * 1e9), m.arbitration_id, m.data)
                  if int(d.fields["warning_level"]) >= 2 and int(d.fields["warning_status"]) == 0]
@@ -173,8 +177,9 @@ def table(rows: list[dict]) -> str:
     out = [head]
     for r in rows:
         w = str(r["valid_warnings"]) + (f" ({r['lead_time_s']:.2f})" if r["lead_time_s"] is not None else "")
+        rec = "not back" if r["recover_s"] is None else f"{r['recover_s']:.2f}"
         out.append(f"| {r['scenario']} | `{r['fault']}` | {r['peak_pos_m']:.2f} | {r['peak_vel_mps']:.2f} | "
-                   f"{r['peak_att_deg']:.2f} | {100 * r['inside_3sigma']:.1f} % | {r['recover_s']:.2f} | "
+                   f"{r['peak_att_deg']:.2f} | {100 * r['inside_3sigma']:.1f} % | {rec} | "
                    f"{r['gated_gnss']} | {r['imu_rejected']} | {w} |")
     return "\n".join(out)
 

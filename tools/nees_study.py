@@ -113,7 +113,7 @@ def run_chain(scenario: str, seed: int, *, profile="table1-susp1k", duration_s: 
             "err_vehicle_angles": np.array(rows_ev),
             "sigma": np.array(rows_sig), "n_states": len(idx) if idx is not None else 0,
             "state_index": None if idx is None else idx.tolist(), "counters": system.status()["counters"],
-            "rejected": system.pipeline.rejected()}
+            "pipeline_counters": system.pipeline.counters, "rejected": system.pipeline.rejected()}
 
 
 def nees_summary(runs: list[dict], t_min_s: float = 5.0) -> dict:

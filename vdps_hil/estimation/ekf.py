@@ -123,6 +123,7 @@ class MultiRateEKF:
         self._gate_array = np.array([self._gates.get(d, math.inf) for d in range(7)])
         self._yaw_pos = [i for i, s in enumerate(self._idx) if s in (States.PSI_G, States.PSI_V)]
         self._iterations = {k: self.config.update_iterations for k in NONLINEAR_KINDS}
+        self.plain_until_ns = -(1 << 62)  # updates before it are not iterated (set by imu_monitor after an outage)
         self._hist_ns = int(round(self.config.history_s * 1e9))
         self._max_step_ns = int(round(self.config.max_step_s * 1e9))
         self._f = np.array([0.0, 0.0, self.config.gravity_mps2])
@@ -339,10 +340,10 @@ class MultiRateEKF:
         if self._hist_ns > 0:
             self._record(False, t_m, (kind, z.copy(), R.copy(), aux))
         if self.compiled:
-            status, dof, nis, gate, innov, sig, x, P, H, R = self._update_compiled(kind, z, R, aux)
+            status, dof, nis, gate, innov, sig, x, P, H, R = self._update_compiled(kind, z, R, aux, t_m)
         else:
             status, dof, nis, gate, innov, sig, x, P, H, R = update_reference(
-                self._models[kind], self.layout, self._x, self._P, z, R, aux, self._iterations.get(kind, 1),
+                self._models[kind], self.layout, self._x, self._P, z, R, aux, self._iterations_at(kind, t_m),
                 self._gates, self._yaw_pos)
         if not dof:  # non-finite R or innovation, or a singular S
             return self._finish(UpdateResult(kind, t_m, "nan", delayed=delayed), count)
@@ -358,7 +359,11 @@ class MultiRateEKF:
         self._check_finite()
         return res
 
-    def _update_compiled(self, kind: ObsKind, z, R, aux) -> tuple:
+    def _iterations_at(self, kind: ObsKind, t_m: int) -> int:
+        """Iterations of an update of ``kind`` at ``t_m``: 1 before ``plain_until_ns``."""
+        return 1 if t_m < self.plain_until_ns else self._iterations.get(kind, 1)
+
+    def _update_compiled(self, kind: ObsKind, z, R, aux, t_m: int) -> tuple:
         """``update_reference``'s result from the compiled kernel (``ekf_update_kernels.update``)."""
         code = _KIND_CODE[kind]
         aux_arr, has_aux = _aux_array(code, aux)
@@ -368,7 +373,7 @@ class MultiRateEKF:
         idx, pos, flags, yaw = self._lay
         params, wheels = self._model_params
         st, dof, nis, gate, _ = UK.update(code, x, P, z, R, aux_arr, has_aux, idx, pos, flags, yaw, params, wheels,
-                                          self._iterations.get(kind, 1), self._gate_array, innov, sig, H, R_used)
+                                          self._iterations_at(kind, t_m), self._gate_array, innov, sig, H, R_used)
         inn, sg = tuple(innov[:dof].tolist()), tuple(sig[:dof].tolist())
         return (_KERNEL_STATUS[st], dof, nis, gate, inn, sg, x, P, H[:dof], R_used[:dof, :dof])
 

@@ -73,6 +73,17 @@ def suspension_measurement(h_m, l_f_m: float, l_r_m: float, t_f_half_m: float, t
     return SuspensionMeasurement(th, ph, z_r, np.array([s_th, s_ph_c_th]), r, var_zr)
 
 
+def suspension_body_rates(hd_mps, l_f_m: float, l_r_m: float, t_f_half_m: float,
+                          t_r_half_m: float) -> tuple[float, float]:
+    """(roll rate, pitch rate) [rad/s] of the body over the road from the deflection rates
+    Hd [m/s]: the time derivative of eq 5's rows at small angles, phi_dot = (-Hd1 + Hd2 + Hd3 -
+    Hd4) / (2 t_f + 2 t_r), theta_dot = (-Hd1 - Hd2 + Hd3 + Hd4) / (2 l_f + 2 l_r): what the
+    gyro's w_x, w_y read on a flat road. NaN when a rate is not finite."""
+    d1, d2, d3, d4 = (float(v) for v in hd_mps)
+    return ((-d1 + d2 + d3 - d4) / (2.0 * t_f_half_m + 2.0 * t_r_half_m),
+            (-d1 - d2 + d3 + d4) / (2.0 * l_f_m + 2.0 * l_r_m))
+
+
 def y2_gps_measurement(theta_g_rad: float, psi_g_rad: float, sigma_theta_rad: float,
                        sigma_psi_rad: float, floor: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """z = [C_g^v(1,1), C_g^v(1,2)] = [cos th cos psi, cos th sin psi] from the GNSS attitude and

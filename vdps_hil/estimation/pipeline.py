@@ -16,7 +16,7 @@ gnss_pos        lat/lon/alt (+ geoid separation) -> ENU (origin: given, or the f
 gnss_att        roll/pitch/yaw -> ``gnss_att`` (+ ``y2_gps`` when paper-faithful (b))
 gnss_vel        speed/course -> ``gnss_vel`` (course only above ``gnss_course_min_speed_mps``)
 suspension      deflections -> eq 5 -> ``y1_sus`` and ``y2_sus`` (plane or rate form, EKF
-                correction (c)); alpha-beta (suspension rates)
+                correction (c)), not while a wheel is off the road (``lift_off``); alpha-beta
 wheel_speed     alpha-beta (wheel speeds and accelerations); with ``EkfConfig.wheel_speed`` the
                 ``wheel_speed`` update (below)
 wheel_torque    latest values (for the identifier)
@@ -26,18 +26,16 @@ steer           latest steering wheel angle (for the identifier)
 Sensor mounting from the *model* vehicle file: the IMU rotation and lever arm (``imu_input``)
 and the GNSS antenna lever arm (EKF ``gnss_pos``/``gnss_vel``).
 
-Real-car extensions (``EkfConfig`` switches, all off for the paper's Table-1 set): a
-``wheel_speed`` update every ``wheel_speed_period_s`` from the wheel samples of the last
-``wheel_speed_window_s`` (``wheel_speed``); the non-holonomic constraint every ``nhc_period_s``
-(``measurements.nhc_measurement``); gyro rates for the observation models corrected with b_g;
-re-acquisition: after ``reacquire_after_gated`` consecutive gated ``gnss_pos`` updates (0, the
-default: never; real-car sets: 5) position, velocity and yaw are reset to the newest fix.
+Real-car extensions (``EkfConfig`` switches, stated in ``ekf_config``; all off for Table 1): the
+``wheel_speed`` update (``wheel_speed``), the non-holonomic constraint every ``nhc_period_s``, and
+re-acquisition at the newest fix after ``reacquire_after_gated`` gated ``gnss_pos`` updates.
 
 Fault tolerance (``imu_monitor``, ``aiding_monitor``): IMU samples failing the rate, continuity,
 spike or saturation checks are rejected; a predict over a span without accepted samples runs on
 the outage input and noise (the covariance grows with the outage); a run of gated aiding
 updates inflates the states they observe and re-applies the fix; ``aiding_monitor.health``
-says when the estimate is not fit to warn on. Latencies (``Latencies``): a fixed delay per sensor kind, late
+says when the estimate is not fit to warn on; after an outage the updates are not iterated while
+the IMU settles (``imu_monitor``); a wheel off the road stops the suspension updates (``lift_off``). Latencies (``Latencies``): a fixed delay per sensor kind, late
 measurements through the EKF history. Initialisation at a GNSS fix once a heading is known
 (``initialisation.initial_state``), again after a NaN reset. Sequencing (``imu_hold_s``, 50 ms):
 a measurement later than the newest IMU sample waits for it (``sequencing``); ``finish()``
@@ -62,6 +60,7 @@ from vdps_hil.estimation.estimates import Estimate, FilteredSignals, Innovation
 from vdps_hil.estimation.imu_input import ImuMounting, MeanInput
 from vdps_hil.estimation.imu_monitor import ImuMonitor
 from vdps_hil.estimation.initialisation import LatestAiding, initial_state, reacquisition_states
+from vdps_hil.estimation.lift_off import LiftOffDetector, lever_arm_rates
 from vdps_hil.estimation.measurements import (ZrRateBuilder, gnss_velocity_measurement, nhc_measurement,
                                               suspension_measurement, y2_gps_measurement)
 from vdps_hil.estimation.observability import ObservabilityReport, ObservabilityWindows
@@ -111,6 +110,7 @@ class EstimatorPipeline:
         self._ab_gyro = TimedAlphaBetaBank(3, bw.angular_rate_hz, bw.max_gap_s)
         self._ab_wheel = TimedAlphaBetaBank(4, bw.wheel_speed_hz, bw.max_gap_s)
         self._ab_susp = TimedAlphaBetaBank(4, bw.susp_deflection_hz, bw.max_gap_s)
+        self._lift = LiftOffDetector(model_vehicle, cfg.lift_off_load_fraction)
         self._torque = [_NAN] * 4
         self._steer = _NAN
         self._last_t = 0
@@ -123,9 +123,9 @@ class EstimatorPipeline:
         self.imu_monitor, self.aiding_monitor = ImuMonitor(cfg.imu_checks), AidingMonitor(cfg.aiding_checks)
         self._zr_rate = ZrRateBuilder(heave_rate_sigma_mps=cfg.heave_rate_sigma_mps)
         self._log: list[Sample] = []
-        self._counts = {"messages": 0, "ignored": 0, "truth_ignored": 0, "invalid": 0, "estimates": 0,
-                        "wheel_outliers": 0, "wheel_accel_skipped": 0, "wheel_too_few": 0, "reacquisitions": 0,
-                        "outage_predicts": 0, "inflations": 0}
+        self._counts = dict.fromkeys(("messages", "ignored", "truth_ignored", "invalid", "estimates", "wheel_outliers",
+                                      "wheel_accel_skipped", "wheel_too_few", "reacquisitions", "outage_predicts",
+                                      "inflations", "lift_off", "gnss_vel_no_rates"), 0)
         self._rejected = dict.fromkeys(KINDS, 0)
         self._per_kind = dict.fromkeys(KINDS, 0)
         self._obs = None
@@ -153,10 +153,8 @@ class EstimatorPipeline:
         kind = sample.kind
         fn = self._handlers.get(kind)
         if fn is None or sample.source[:6] == "/truth":
-            if kind.startswith("truth") or sample.source.startswith("/truth"):
-                self._counts["truth_ignored"] += 1
-            else:
-                self._counts["ignored"] += 1
+            truth = kind.startswith("truth") or sample.source.startswith("/truth")
+            self._counts["truth_ignored" if truth else "ignored"] += 1
             return []
         self._per_kind[kind] += 1
         if not sample.valid:
@@ -199,20 +197,13 @@ class EstimatorPipeline:
 
     @property
     def counters(self) -> dict:
-        d = dict(self._counts)
-        d.update(held=self._seq.held, hold_expired=self._seq.hold_expired)
-        d["holding"] = self._seq.holding  # held now (sequencing)
-        d["per_kind"] = dict(self._per_kind)
-        d["ekf"] = self.ekf.counters
-        return d
+        return dict(self._counts, held=self._seq.held, hold_expired=self._seq.hold_expired,
+                    holding=self._seq.holding, per_kind=dict(self._per_kind), ekf=self.ekf.counters)  # holding: now
 
     def rejected(self) -> dict[str, int]:
         """Rejected samples per sensor kind (bad fields, no fix, invalid) plus the EKF's
         gated/NaN/too-old updates per measurement kind."""
-        d = {k: v for k, v in self._rejected.items()}
-        for k, v in self.ekf.rejected().items():
-            d[f"ekf.{k}"] = v
-        return d
+        return dict(self._rejected, **{f"ekf.{k}": v for k, v in self.ekf.rejected().items()})
 
     @property
     def observability_reports(self) -> tuple[tuple[int, int, ObservabilityReport], ...]:
@@ -411,7 +402,11 @@ class EstimatorPipeline:
             self._try_initialize_from_pending(out)
             return
         z, R = gnss_velocity_measurement(speed, course, cfg.gnss_speed_sigma_mps, cfg.gnss_course_min_speed_mps)
-        w = list(self._ab_gyro.x)
+        w = lever_arm_rates(self._ab_gyro.x, self._ab_susp.v, self.vehicle.geometry, self.imu_monitor.missing(t),
+                            self._lift.active)
+        if w is None:  # no IMU and a wheel off the road: the antenna's rates are unknown (lift_off)
+            self._counts["gnss_vel_no_rates"] += 1
+            return
         aux = w if all(math.isfinite(v) for v in w) else None
         if self._predict_for(t):
             self._update(ObsKind.GNSS_VEL, z, R, t, out, aux=aux)
@@ -424,6 +419,9 @@ class EstimatorPipeline:
             self._rejected["suspension"] += 1
             return
         self._ab_susp.update(t, h)
+        if self._lift.unloaded(h, self._ab_susp.v):  # a wheel off the road: eq 5 does not hold (lift_off)
+            self._counts["lift_off"] += 1
+            return
         geo = self.vehicle.geometry
         sm = suspension_measurement(h, geo.l_f_m, geo.l_r_m, geo.track_half_front_m, geo.track_half_rear_m,
                                     self.config.susp_sigma_m)

@@ -57,6 +57,7 @@ class PipelineConfig:
     gnss_speed_sigma_mps: float = 0.1
     gnss_course_min_speed_mps: float = 3.0
     susp_sigma_m: float = 0.001
+    lift_off_load_fraction: float = 0.1  # no suspension update below this share of a corner's static load (lift_off)
     heave_rate_sigma_mps: float = 0.05  # y2_sus rate form (measurements.ZrRateBuilder)
     y2_gps_floor_rad: float | None = None  # faithful (b) only: isotropic R floor (None: the angle sigma)
     bandwidths: Bandwidths = field(default_factory=Bandwidths)
