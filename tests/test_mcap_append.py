@@ -56,3 +56,36 @@ def test_copy_runs_write_the_same_file_as_one_library_call_per_message(tmp_path)
         w.close()
         files.append(p.read_bytes())
     assert files[0] == files[1]
+
+
+def test_can_frame_runs_write_the_same_file_as_one_library_call_per_message(tmp_path):
+    """RecordingWriter.write_can_frames (records built with numpy, MessageAppender.add_rows, cut
+    at chunk boundaries) gives the bytes of write_can once per frame through the mcap library's
+    add_message: same records, statistics, message indexes and chunk boundaries (small chunks;
+    runs of 1..400 frames between serial messages)."""
+    import numpy as np
+
+    rng = np.random.default_rng(11)
+    blocks, t0 = [], 0
+    for _ in range(40):
+        n = int(rng.integers(1, 400))
+        t = t0 + np.cumsum(rng.integers(0, 2_000_000, n))
+        t0 = int(t[-1])
+        blocks.append((t, rng.integers(0, 0x800, n), rng.integers(0, 9, n), rng.integers(0, 256, (n, 8), dtype=np.uint8)))
+    files = []
+    for bulk in (True, False):
+        p = tmp_path / f"{bulk}.mcap"
+        w = RecordingWriter(p, chunk_size=3000, sim_epoch_ns=EPOCH)
+        if not bulk:
+            w._appender, w._add_message = None, w._mcap.add_message
+        for t, aid, dlc, data in blocks:
+            if bulk:
+                w.write_can_frames("vdps", t, aid, dlc, data)
+            else:
+                for k in range(len(t)):
+                    w.write_can("vdps", int(t[k]), {"arbitration_id": int(aid[k]), "dlc": int(dlc[k]),
+                                                    "data": bytes(data[k, :dlc[k]])})
+            w.write_serial("imu", t0, b"x")
+        w.close()
+        files.append(p.read_bytes())
+    assert files[0] == files[1]

@@ -64,3 +64,52 @@ def test_sample_payload_equals_json_dumps_of_to_json(t, w, valid, name, fields):
 
     s = Sample(t, name, name[::-1], fields, w, valid)
     assert sample_payload(s) == json.dumps(s.to_json(), separators=(",", ":"), allow_nan=False).encode()
+
+
+def test_raw_can_rows_equal_write_can_payloads():
+    """raw_can_rows (numpy, per (ID, DLC, digits of t_ns) group) gives, row by row, the bytes
+    write_can writes for each frame (raw_can_payload of a python-can Message), zero padding
+    after them; times from 0 to the int64 limit (every number of digits)."""
+    import can
+    import numpy as np
+
+    from vdps_hil.record.payloads import raw_can_payload, raw_can_rows
+
+    rng = np.random.default_rng(3)
+    t = np.concatenate([np.array([0, 1, 9, 10, 99, 100, 10**18 - 1, 10**18, S.MAX_TIME_NS], np.int64),
+                        (10 ** rng.uniform(0, 18.9, 3000)).astype(np.int64)])
+    aid, dlc = rng.integers(0, 0x800, t.size), rng.integers(0, 9, t.size)
+    data = rng.integers(0, 256, (t.size, 8), dtype=np.uint8)
+    rows, lengths = raw_can_rows(t, aid, dlc, data)
+    for k in range(t.size):
+        msg = can.Message(arbitration_id=int(aid[k]), is_extended_id=False, dlc=int(dlc[k]),
+                          data=bytes(data[k, :dlc[k]]))
+        assert rows[k, :lengths[k]].tobytes() == raw_can_payload(int(t[k]), msg)
+        assert not rows[k, lengths[k]:].any()
+
+
+def test_raw_can_rows_refuse_frames_write_can_refuses():
+    import numpy as np
+    import pytest
+
+    from vdps_hil.record.payloads import raw_can_rows
+
+    d = np.zeros((1, 8), np.uint8)
+    for t, aid, dlc in ((-1, 1, 8), (0, 0x800, 8), (0, -1, 8), (0, 1, 9), (0, 1, -1)):
+        with pytest.raises(ValueError):
+            raw_can_rows(np.array([t]), np.array([aid]), np.array([dlc]), d)
+    assert raw_can_rows(np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros((0, 8), np.uint8))[1].size == 0
+
+
+@settings(max_examples=300, deadline=None)
+@given(vals=st.dictionaries(st.text(max_size=6), st.floats(allow_nan=True, allow_infinity=True) | st.integers()
+                            | st.booleans() | st.none() | st.text(max_size=3) | st.lists(st.floats(), max_size=2),
+                            max_size=8),
+       t_ns=st.integers(0, S.MAX_TIME_NS))
+def test_truth_payload_equals_the_generic_json_path(vals, t_ns):
+    """truth_payload (json.dumps of the flat snapshot as it is) = json_payload of truth_doc for
+    any flat or nested values, NaN/inf included."""
+    from vdps_hil.record.payloads import json_payload, truth_payload
+
+    assert truth_payload("/truth/state", t_ns, vals) == json_payload("/truth/state", S.TRUTH, t_ns,
+                                                                     S.truth_doc(t_ns, vals))

@@ -365,3 +365,30 @@ def test_encoded_run_writes_what_write_encoded_writes(tmp_path):
     assert [m[2] - S.DEFAULT_SIM_EPOCH_NS for m in files[0]] == [10, 10, 14, 12, 9, 18]
     assert stats[0] == stats[1] == ({"/decoded/a/b": 6}, {"/decoded/a/b": 1})
     assert RecordingReader(tmp_path / "True.mcap").channel_metadata("/decoded/a/b") == md
+
+
+def test_write_can_frames_in_the_uncommon_cases_writes_what_write_can_writes(tmp_path):
+    """write_can_frames falls back to one message at a time (live log times, a mirror, times
+    going back) and then writes the messages, statistics and time-order counts of write_can."""
+    import numpy as np
+
+    t = np.array([50, 40, 40, 60], np.int64)
+    aid, dlc = np.array([1, 2, 3, 0x7FF]), np.array([8, 0, 3, 1])
+    data = np.arange(32, dtype=np.uint8).reshape(4, 8)
+    out = []
+    for bulk in (True, False):
+        for epoch in (EPOCH, None):
+            buf, seen = io.BytesIO(), []
+            w = RecordingWriter(buf, sim_epoch_ns=epoch)
+            w.mirror = lambda *a: seen.append(a[:4])
+            if bulk:
+                w.write_can_frames("c", t, aid, dlc, data)
+            else:
+                for k in range(4):
+                    w.write_can("c", int(t[k]), {"arbitration_id": int(aid[k]), "data": bytes(data[k, :dlc[k]])})
+            stats = (dict(w.stats.messages), dict(w.stats.time_backwards))
+            w.close()
+            msgs = [m[:2] + m[3:] for m in _mcap_messages(buf.getvalue())]  # log time: live when no epoch
+            out.append((epoch, msgs, seen, stats))
+    assert out[:2] == out[2:]
+    assert out[0][3] == ({"/raw/can/c": 4}, {"/raw/can/c": 2})

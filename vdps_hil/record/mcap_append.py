@@ -12,8 +12,9 @@ import bisect
 import io
 import struct
 from itertools import accumulate, chain, repeat
-from typing import Sequence
+from typing import Callable, Sequence
 
+import numpy as np
 from mcap.opcode import Opcode
 from mcap.records import MessageIndex
 
@@ -21,6 +22,8 @@ __all__ = ["MessageAppender"]
 
 _MESSAGE_RECORD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log_time, publish_time
 _MESSAGE_RECORD_BYTES = _MESSAGE_RECORD.size  # 31: record header (9) + message header (22)
+_MESSAGE_RECORD_DTYPE = np.dtype([("opcode", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
+                                  ("log_time", "<u8"), ("publish_time", "<u8")])  # packed, as _MESSAGE_RECORD
 
 
 class MessageAppender:
@@ -32,7 +35,8 @@ class MessageAppender:
 
     ``add`` writes one message; ``add_run`` a run of messages of one channel with one pack and
     one write per run piece: the run is cut where the library would close the chunk (after the
-    message that takes the chunk past ``chunk_size``)."""
+    message that takes the chunk past ``chunk_size``); ``add_rows`` the same for payloads given
+    as rows of a numpy array (records built with numpy, no Python object per message)."""
 
     def __init__(self, stats, chunk_builder, record_writer, maybe_finalize, chunk_size: int):
         self._st, self._cb, self._rw = stats, chunk_builder, record_writer
@@ -94,6 +98,41 @@ class MessageAppender:
         ends = list(accumulate(map(_MESSAGE_RECORD_BYTES.__add__, map(len, payloads))))  # run offsets
         headers = list(map(_MESSAGE_RECORD.pack, repeat(0x05), map((22).__add__, map(len, payloads)),
                            repeat(channel_id), range(sequence, sequence + n), log_times, publish_times))
+
+        def write(i: int, k: int, base: int) -> None:
+            self._rw._buffer.writelines(chain.from_iterable(zip(headers[i:k], payloads[i:k])))
+
+        self._write_cut(channel_id, log_times, ends, write)
+
+    def add_rows(self, channel_id: int, sequence: int, log_times: np.ndarray, publish_times: np.ndarray,
+                 rows: np.ndarray, lengths: np.ndarray) -> None:
+        """``add_run`` of the payloads ``rows[k, :lengths[k]]`` (rows (N, W) uint8; times int64
+        arrays): the records (header and payload) are laid out in one array."""
+        n = len(lengths)
+        if n == 0:
+            return
+        size = _MESSAGE_RECORD_BYTES + np.asarray(lengths, dtype=np.int64)
+        head = np.zeros(n, dtype=_MESSAGE_RECORD_DTYPE)
+        head["opcode"], head["length"], head["channel"] = 0x05, size - 9, channel_id
+        head["sequence"] = np.arange(sequence, sequence + n, dtype=np.int64)
+        head["log_time"], head["publish_time"] = log_times, publish_times
+        full = np.empty((n, _MESSAGE_RECORD_BYTES + rows.shape[1]), dtype=np.uint8)
+        full[:, :_MESSAGE_RECORD_BYTES] = head.view(np.uint8).reshape(n, _MESSAGE_RECORD_BYTES)
+        full[:, _MESSAGE_RECORD_BYTES:] = rows
+        blob = full[np.arange(full.shape[1])[None, :] < size[:, None]]  # the records back to back
+
+        def write(i: int, k: int, base: int) -> None:
+            self._rw._buffer.write(blob[base:ends[k - 1]].data)
+
+        ends = np.cumsum(size).tolist()
+        self._write_cut(channel_id, np.asarray(log_times).tolist(), ends, write)
+
+    def _write_cut(self, channel_id: int, log_times: Sequence[int], ends: list[int],
+                   write: Callable[[int, int, int], None]) -> None:
+        """Records k = 0..n-1 of one channel ending at run offsets ``ends``, cut where the library
+        would close the chunk; ``write(i, k, base)`` writes records i..k-1 (base: run offset of
+        record i)."""
+        n = len(ends)
         i = 0
         while i < n:
             base = ends[i - 1] if i else 0  # run offset of message i
@@ -103,7 +142,7 @@ class MessageAppender:
             piece = log_times[i:k]
             index = self._account(channel_id, k - i, min(piece), max(piece))
             index.extend(zip(piece, map((start - base).__add__, chain((base,), ends[i:k - 1]))))
-            self._rw._buffer.writelines(chain.from_iterable(zip(headers[i:k], payloads[i:k])))
+            write(i, k, base)
             self._finalize()
             i = k
 

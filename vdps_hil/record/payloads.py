@@ -4,6 +4,8 @@
 ``estimate_payload`` what ``write_estimate`` writes (directly when every value is a plain float);
 ``sample_payload`` what ``write_sample`` writes; ``vdps replay --jobs 2`` encodes with them in
 one process and writes the bytes in the other (``RecordingWriter.write_encoded``).
+``raw_can_rows`` is what ``write_can`` writes for many received classic frames at once (numpy, the
+simulator's CAN recording: thousands of frames per simulated second).
 """
 
 from __future__ import annotations
@@ -11,9 +13,12 @@ from __future__ import annotations
 import json
 from typing import Any, Mapping
 
+import numpy as np
+
 from vdps_hil.record import schemas as S
 
-__all__ = ["check_run", "estimate_payload", "estimate_topic", "json_payload", "sample_payload"]
+__all__ = ["check_run", "estimate_payload", "estimate_topic", "json_payload", "raw_can_payload", "raw_can_rows",
+           "sample_payload", "truth_payload"]
 
 _JSON_KEYS: dict[str, str] = {}
 _SAMPLE_HEADS: dict[tuple[str, str], str] = {}
@@ -62,6 +67,25 @@ def json_payload(topic: str, schema_name: str, t_ns: int, doc: Mapping[str, Any]
     return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
 
 
+_PLAIN_JSON = frozenset((float, int, str, bool, type(None)))
+"""Value types that ``schemas.clean_json`` leaves as they are, but for a non-finite float."""
+
+
+def truth_payload(topic: str, t_ns: int, values: Mapping[str, Any]) -> bytes:
+    """The bytes ``RecordingWriter.write_truth`` writes (= ``json_payload`` of
+    ``schemas.truth_doc``): a flat dict of str keys to plain values (the simulator's snapshot,
+    100 per simulated second) goes to ``json.dumps`` as it is, without the cleaning copies;
+    a non-finite float (``json.dumps`` refuses it) or anything else takes the general path."""
+    if type(values) is dict and type(t_ns) is int and set(map(type, values)) <= {str} \
+            and set(map(type, values.values())) <= _PLAIN_JSON:
+        try:
+            return json.dumps({"t_ns": S.check_time_ns("t_ns", t_ns), "values": values}, separators=(",", ":"),
+                              allow_nan=False).encode()
+        except ValueError:
+            pass  # NaN or inf inside: null by the general path
+    return json_payload(topic, S.TRUTH, t_ns, S.truth_doc(t_ns, values))
+
+
 def estimate_topic(topic: str) -> str:
     """The absolute, checked topic of an estimate (``"ekf"`` -> ``/est/ekf``)."""
     if not topic.startswith("/"):
@@ -85,6 +109,42 @@ def estimate_payload(t_ns: int, values: Mapping[str, float], sigmas: Mapping[str
     if sigmas is not None:
         doc["sigmas"] = _clean_flat(sigmas)
     return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
+
+
+def raw_can_payload(t_ns: int, msg_or_fields: Any, direction: str | None = None) -> bytes:
+    """The bytes ``RecordingWriter.write_can`` writes for one frame (``t_ns`` checked by the caller)."""
+    m = msg_or_fields
+    if isinstance(m, Mapping):
+        data = m.get("data")
+        data = bytes.fromhex(m.get("data_hex", "")) if data is None else data
+        direction = m.get("direction", "rx") if direction is None else direction
+        flags = ("is_extended_id", "is_fd", "is_remote_frame", "is_error_frame", "bitrate_switch",
+                 "error_state_indicator")
+        doc = S.raw_can_doc(t_ns, m["arbitration_id"], data, dlc=m.get("dlc"), direction=direction,
+                            **{k: m.get(k, False) for k in flags})
+        payload = json.dumps(doc, separators=(",", ":")).encode()
+    else:  # can.Message (duck-typed): fast path, same document as raw_can_doc
+        if direction is None:
+            direction = "rx" if getattr(m, "is_rx", True) else "tx"
+        elif direction not in ("rx", "tx"):
+            raise ValueError(f"direction must be 'rx' or 'tx', got {direction!r}")
+        aid, ext, dlc, data = m.arbitration_id, m.is_extended_id, m.dlc, m.data or b""
+        if not 0 <= aid <= (0x1FFFFFFF if ext else 0x7FF) or not 0 <= dlc <= 64 \
+                or len(data) > 64:
+            raise ValueError(f"bad CAN frame: id 0x{aid:X} extended={ext} dlc={dlc} "
+                             f"len={len(data)}")
+        fd = m.is_fd
+        tail = (f',"bitrate_switch":{"true" if m.bitrate_switch else "false"},'
+                f'"error_state_indicator":{"true" if m.error_state_indicator else "false"}'
+                if fd else "")
+        payload = (f'{{"t_ns":{t_ns},"arbitration_id":{aid},'
+                   f'"is_extended_id":{"true" if ext else "false"},'
+                   f'"is_fd":{"true" if fd else "false"},'
+                   f'"is_remote_frame":{"true" if m.is_remote_frame else "false"},'
+                   f'"is_error_frame":{"true" if m.is_error_frame else "false"},'
+                   f'"dlc":{dlc},"data_hex":"{bytes(data).hex()}",'
+                   f'"direction":"{direction}"{tail}}}').encode()
+    return payload
 
 
 def sample_payload(s) -> bytes:
@@ -125,3 +185,63 @@ def check_run(topic: str, schema_name: str, t_ns, payloads, wall_time_ns) -> tup
         bad = next(p for p in payloads if not isinstance(p, bytes))
         raise TypeError(f"payload must be bytes, got {type(bad).__name__}")
     return t_ns, payloads, walls
+
+
+_HEX_PAIRS = np.frombuffer(b"".join(b"%02x" % b for b in range(256)), dtype=np.uint8).reshape(256, 2)
+_POW10 = 10 ** np.arange(18, -1, -1, dtype=np.int64)  # 10^18 .. 10^0: the 19 digits of an int64
+
+
+def _ascii(text: str) -> np.ndarray:
+    return np.frombuffer(text.encode(), dtype=np.uint8)
+
+
+def _can_middle(arbitration_id: int, dlc: int) -> np.ndarray:
+    """The text of a raw CAN payload between ``t_ns`` and the data's hex (``write_can``)."""
+    return _ascii(f',"arbitration_id":{arbitration_id},"is_extended_id":false,"is_fd":false,'
+                  f'"is_remote_frame":false,"is_error_frame":false,"dlc":{dlc},"data_hex":"')
+
+
+def raw_can_rows(t_ns: np.ndarray, arbitration_ids: np.ndarray, dlcs: np.ndarray, data: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The payloads ``RecordingWriter.write_can`` writes for N received (``rx``) classic frames
+    with standard IDs (not remote, not error frames): ``(rows, lengths)``, rows (N, W) uint8 with
+    payload k in ``rows[k, :lengths[k]]`` (zero padding after it). ``t_ns`` int64 >= 0,
+    ``arbitration_ids`` 0..0x7FF, ``dlcs`` 0..8, ``data`` (N, >= max DLC) uint8 (the first DLC
+    bytes of row k are frame k's); ValueError when one is out of range.
+
+    A payload is fixed text around three fields: the decimal ``t_ns``, the ID and DLC (fixed per
+    (ID, DLC)) and the data's hex; the rows are filled per (ID, DLC, number of digits of
+    ``t_ns``) group, each group's columns with one slice assignment."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    n = t.size
+    aid = np.asarray(arbitration_ids, dtype=np.int64)
+    dlc = np.asarray(dlcs, dtype=np.int64)
+    data = np.asarray(data, dtype=np.uint8).reshape(n, -1) if n else np.zeros((0, 8), np.uint8)
+    if n and (t.min() < 0 or aid.min() < 0 or aid.max() > 0x7FF or dlc.min() < 0 or dlc.max() > min(8, data.shape[1])
+              or aid.shape != t.shape or dlc.shape != t.shape):
+        raise ValueError("bad CAN frames: times must be >= 0, standard IDs 0..0x7FF, DLC 0..8 within the data")
+    digits = np.maximum(np.searchsorted(_POW10[::-1], t, side="right"), 1)  # decimal digits of t
+    key = (aid * 16 + dlc) * 32 + digits
+    head, tail = _ascii('{"t_ns":'), _ascii('","direction":"rx"}')
+    width = len(head) + 19 + len(_can_middle(0x7FF, 8)) + 16 + len(tail)
+    rows = np.zeros((n, width), dtype=np.uint8)
+    lengths = np.zeros(n, dtype=np.int64)
+    if n == 0:
+        return rows, lengths
+    chars = (t[:, None] // _POW10[None, :]) % 10 + 48  # (N, 19) decimal digits, leading zeros
+    for k in np.unique(key).tolist():
+        sel = np.flatnonzero(key == k)
+        a, d, nd = k // 512, (k // 32) % 16, k % 32
+        mid = _can_middle(a, d)
+        c = len(head)
+        block = np.empty((sel.size, c + nd + len(mid) + 2 * d + len(tail)), dtype=np.uint8)
+        block[:, :c] = head
+        block[:, c:c + nd] = chars[sel, 19 - nd:]
+        c += nd
+        block[:, c:c + len(mid)] = mid
+        c += len(mid)
+        block[:, c:c + 2 * d] = _HEX_PAIRS[data[sel, :d]].reshape(sel.size, 2 * d)
+        block[:, c + 2 * d:] = tail
+        rows[sel, :block.shape[1]] = block
+        lengths[sel] = block.shape[1]
+    return rows, lengths

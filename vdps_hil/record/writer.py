@@ -35,13 +35,15 @@ import time
 from dataclasses import dataclass, field
 from typing import IO, Any, Callable, Mapping, Sequence
 
+import numpy as np
 from mcap.writer import CompressionType, IndexType, Writer
 from mcap.writer import LIBRARY_IDENTIFIER as _MCAP_LIBRARY
 
 from vdps_hil import __version__ as _TOOL_VERSION
 from vdps_hil.record import schemas as S
 from vdps_hil.record.mcap_append import MessageAppender
-from vdps_hil.record.payloads import check_run, estimate_payload, estimate_topic, json_payload, sample_payload
+from vdps_hil.record.payloads import (check_run, estimate_payload, estimate_topic, json_payload, raw_can_payload,
+                                      raw_can_rows, sample_payload, truth_payload)
 
 __all__ = ["RecordingWriter", "WriterStats"]
 
@@ -360,38 +362,37 @@ class RecordingWriter:
         if topic is None:
             topic = self._can_topics[bus] = S.can_topic(bus)
         S.check_time_ns("t_ns", t_ns)
-        m = msg_or_fields
-        if isinstance(m, Mapping):
-            data = m.get("data")
-            data = bytes.fromhex(m.get("data_hex", "")) if data is None else data
-            direction = m.get("direction", "rx") if direction is None else direction
-            flags = ("is_extended_id", "is_fd", "is_remote_frame", "is_error_frame", "bitrate_switch",
-                     "error_state_indicator")
-            doc = S.raw_can_doc(t_ns, m["arbitration_id"], data, dlc=m.get("dlc"), direction=direction,
-                                **{k: m.get(k, False) for k in flags})
-            payload = json.dumps(doc, separators=(",", ":")).encode()
-        else:  # can.Message (duck-typed): fast path, same document as raw_can_doc
-            if direction is None:
-                direction = "rx" if getattr(m, "is_rx", True) else "tx"
-            elif direction not in ("rx", "tx"):
-                raise ValueError(f"direction must be 'rx' or 'tx', got {direction!r}")
-            aid, ext, dlc, data = m.arbitration_id, m.is_extended_id, m.dlc, m.data or b""
-            if not 0 <= aid <= (0x1FFFFFFF if ext else 0x7FF) or not 0 <= dlc <= 64 \
-                    or len(data) > 64:
-                raise ValueError(f"bad CAN frame: id 0x{aid:X} extended={ext} dlc={dlc} "
-                                 f"len={len(data)}")
-            fd = m.is_fd
-            tail = (f',"bitrate_switch":{"true" if m.bitrate_switch else "false"},'
-                    f'"error_state_indicator":{"true" if m.error_state_indicator else "false"}'
-                    if fd else "")
-            payload = (f'{{"t_ns":{t_ns},"arbitration_id":{aid},'
-                       f'"is_extended_id":{"true" if ext else "false"},'
-                       f'"is_fd":{"true" if fd else "false"},'
-                       f'"is_remote_frame":{"true" if m.is_remote_frame else "false"},'
-                       f'"is_error_frame":{"true" if m.is_error_frame else "false"},'
-                       f'"dlc":{dlc},"data_hex":"{bytes(data).hex()}",'
-                       f'"direction":"{direction}"{tail}}}').encode()
+        payload = raw_can_payload(t_ns, msg_or_fields, direction)
         self._write(topic, S.RAW_CAN, t_ns, payload, wall_time_ns, {"bus": bus})
+
+    def write_can_frames(self, bus: str, t_ns, arbitration_ids, dlcs, data) -> None:
+        """``write_can`` of N received classic standard-ID frames in this order (numpy arrays,
+        ``payloads.raw_can_rows``) as one run built with numpy: the same messages and file."""
+        topic = self._can_topics.get(bus)
+        if topic is None:
+            topic = self._can_topics[bus] = S.can_topic(bus)
+        t = np.asarray(t_ns, dtype=np.int64)
+        rows, lengths = raw_can_rows(t, arbitration_ids, dlcs, data)  # checks the frames
+        if t.size == 0:
+            return
+        with self._lock:
+            if self._closed:
+                raise ValueError("recording is closed")
+            ch = self._channels.get(topic)
+            if ch is None or ch.schema != S.RAW_CAN:
+                ch = self._channel(topic, S.RAW_CAN, {"bus": bus})  # raises on mismatch
+            epoch, n = self.sim_epoch_ns, t.size
+            slow = (self._appender is None or epoch is None or self.mirror is not None or self._copies.get(topic)
+                    or ch.seq + n > 1 << 32 or int(t.max()) > S.MAX_TIME_NS - epoch
+                    or ch.last_t_ns > t[0] or bool((t[1:] < t[:-1]).any()))  # uncommon: one at a time
+            if not slow:
+                ch.last_t_ns = int(t[-1])
+                self.stats.messages[topic] = self.stats.messages.get(topic, 0) + n
+                self._appender.add_rows(ch.id, ch.seq, t + epoch, t, rows, lengths)
+                ch.seq = (ch.seq + n) & 0xFFFFFFFF
+        if slow:
+            for k, tk in enumerate(t.tolist()):
+                self._write(topic, S.RAW_CAN, tk, rows[k, :lengths[k]].tobytes(), None, {"bus": bus})
 
     def write_serial(self, device: str, t_ns: int, data: bytes,
                      wall_time_ns: int | None = None, baud: int | None = None,
@@ -446,7 +447,7 @@ class RecordingWriter:
             topic = S.TRUTH_PREFIX + topic
         if not S.check_topic(topic).startswith(S.TRUTH_PREFIX):
             raise ValueError(f"truth topic must be under {S.TRUTH_PREFIX}: {topic}")
-        self.write_json(topic, S.TRUTH, t_ns, S.truth_doc(t_ns, values))
+        self._write(topic, S.TRUTH, t_ns, truth_payload(topic, t_ns, values), None, {})
 
     def write_estimate(self, topic: str, t_ns: int, values: Mapping[str, float],
                        sigmas: Mapping[str, float] | None = None) -> None:

@@ -73,10 +73,15 @@ class DriveSink:
 
 class RecordingSink(DriveSink):
     """A DriveSink writing the recording layout of the module docstring with a RecordingWriter,
-    plus ``/gnss/fix`` decoded from the NMEA stream (``record.gnss_fix``) for Foxglove's map."""
+    plus ``/gnss/fix`` decoded from the NMEA stream (``record.gnss_fix``) for Foxglove's map.
 
-    def __init__(self, writer: RecordingWriter):
+    ``bulk`` (default): a block's CAN frames go to the writer as arrays in one call
+    (``RecordingWriter.write_can_frames``); ``bulk=False`` is the reference path, one
+    ``write_can`` per frame (the same file, ``tests/test_sinks.py``)."""
+
+    def __init__(self, writer: RecordingWriter, bulk: bool = True):
         self.writer = writer
+        self.bulk = bool(bulk)
         self._frames: list[_Frame] = []
         self._fix_taps: dict[str, GnssFixTap] = {}
 
@@ -87,6 +92,11 @@ class RecordingSink(DriveSink):
         self.writer.write_truth(topic, t_ns, doc)
 
     def can_block(self, bus, t_ns, t_wire_ns, route, data, specs) -> None:
+        if self.bulk:
+            ids, dlcs = np.array(specs, dtype=np.int64).reshape(-1, 2).T
+            route = np.asarray(route, dtype=np.int64)
+            self.writer.write_can_frames(bus, t_ns, ids[route], dlcs[route], data)
+            return
         frames = self._frames
         if len(frames) != len(specs):
             frames[:] = [_Frame(fid, dlc) for fid, dlc in specs]
