@@ -10,6 +10,7 @@ simulator's CAN recording: thousands of frames per simulated second).
 
 from __future__ import annotations
 
+import base64
 import json
 from typing import Any, Mapping
 
@@ -18,7 +19,7 @@ import numpy as np
 from vdps_hil.record import schemas as S
 
 __all__ = ["check_run", "estimate_payload", "estimate_topic", "json_payload", "raw_can_payload", "raw_can_rows",
-           "sample_payload", "truth_payload"]
+           "raw_serial_payload", "sample_payload", "truth_payload"]
 
 _JSON_KEYS: dict[str, str] = {}
 _SAMPLE_HEADS: dict[tuple[str, str], str] = {}
@@ -145,6 +146,12 @@ def raw_can_payload(t_ns: int, msg_or_fields: Any, direction: str | None = None)
                    f'"dlc":{dlc},"data_hex":"{bytes(data).hex()}",'
                    f'"direction":"{direction}"{tail}}}').encode()
     return payload
+
+
+def raw_serial_payload(t_ns: int, data: bytes) -> bytes:
+    """The bytes ``RecordingWriter.write_serial`` writes for one read chunk (= ``json.dumps`` of
+    ``schemas.raw_serial_doc``: base64 needs no escaping; ``t_ns`` checked by the caller)."""
+    return b'{"t_ns":%d,"data_b64":"%s"}' % (t_ns, base64.b64encode(bytes(data)))
 
 
 def sample_payload(s) -> bytes:

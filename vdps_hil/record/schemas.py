@@ -319,6 +319,29 @@ def estimate_doc(t_ns: int, values: Mapping[str, float],
 
 # --- provenance -------------------------------------------------------------------------------
 
+_RESERVED_KEYS = ("layout_version", "tool", "tool_version", "mcap_library", "log_time",
+                  "publish_time", "sim_epoch_ns", "message_encoding")
+
+
+def provenance_record(metadata: Mapping[str, Any], hashes: Mapping[str, bytes | os.PathLike | str],
+                      sim_epoch_ns: int | None, tool_version: str, mcap_library: str) -> dict[str, str]:
+    """The ``vdps.recording`` metadata record of a recording (``record.writer``): the layout's
+    keys, then ``metadata`` (reserved keys refused; non-str values as JSON), then
+    ``hash.<role>`` of each content."""
+    md = {"layout_version": LAYOUT_VERSION, "tool": "vdps-hil",
+          "tool_version": tool_version, "mcap_library": mcap_library,
+          "message_encoding": MESSAGE_ENCODING, "publish_time": "t_ns",
+          "log_time": "sim_epoch_ns+t_ns" if sim_epoch_ns is not None else "wall_time_ns",
+          "sim_epoch_ns": "" if sim_epoch_ns is None else str(sim_epoch_ns)}
+    for k, v in metadata.items():
+        if k in _RESERVED_KEYS:
+            raise ValueError(f"metadata key {k!r} is reserved by the recording layout")
+        md[str(k)] = v if isinstance(v, str) else json.dumps(clean_json(v), sort_keys=True)
+    for role, content in hashes.items():
+        md[f"hash.{role}"] = content_hash(content)
+    return md
+
+
 def content_hash(content: bytes | os.PathLike | str) -> str:
     """``sha256:<hex>`` of bytes, or of a file's content when given a path."""
     if isinstance(content, (bytes, bytearray, memoryview)):

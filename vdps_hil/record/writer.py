@@ -43,13 +43,9 @@ from vdps_hil import __version__ as _TOOL_VERSION
 from vdps_hil.record import schemas as S
 from vdps_hil.record.mcap_append import MessageAppender
 from vdps_hil.record.payloads import (check_run, estimate_payload, estimate_topic, json_payload, raw_can_payload,
-                                      raw_can_rows, sample_payload, truth_payload)
+                                      raw_can_rows, raw_serial_payload, sample_payload, truth_payload)
 
 __all__ = ["RecordingWriter", "WriterStats"]
-
-_RESERVED_KEYS = ("layout_version", "tool", "tool_version", "mcap_library", "log_time",
-                  "publish_time", "sim_epoch_ns", "message_encoding")
-
 
 @dataclass
 class _Channel:
@@ -110,7 +106,8 @@ class RecordingWriter:
         self.chunk_size = int(chunk_size)
         self.sim_epoch_ns = (None if sim_epoch_ns is None
                              else S.check_time_ns("sim_epoch_ns", sim_epoch_ns))
-        self._metadata = self._provenance(metadata or {}, content_hashes or {})
+        self._metadata = S.provenance_record(metadata or {}, content_hashes or {}, self.sim_epoch_ns,
+                                             _TOOL_VERSION, _MCAP_LIBRARY)
         self._lock = threading.Lock()
         self.stats = WriterStats()
         self._serial_meta: dict[str, tuple[str, str]] = {}
@@ -123,23 +120,6 @@ class RecordingWriter:
         self._open_file(path)
 
     # --- per-file state (rotation re-runs these) ----------------------------------------------
-
-    def _provenance(self, metadata: Mapping[str, Any],
-                    hashes: Mapping[str, bytes | os.PathLike | str]) -> dict[str, str]:
-        md = {"layout_version": S.LAYOUT_VERSION, "tool": "vdps-hil",
-              "tool_version": _TOOL_VERSION, "mcap_library": _MCAP_LIBRARY,
-              "message_encoding": S.MESSAGE_ENCODING, "publish_time": "t_ns",
-              "log_time": ("sim_epoch_ns+t_ns" if self.sim_epoch_ns is not None
-                           else "wall_time_ns"),
-              "sim_epoch_ns": "" if self.sim_epoch_ns is None else str(self.sim_epoch_ns)}
-        for k, v in metadata.items():
-            if k in _RESERVED_KEYS:
-                raise ValueError(f"metadata key {k!r} is reserved by the recording layout")
-            md[str(k)] = v if isinstance(v, str) else json.dumps(S.clean_json(v),
-                                                                  sort_keys=True)
-        for role, content in hashes.items():
-            md[f"hash.{role}"] = S.content_hash(content)
-        return md
 
     def _open_file(self, path: str | os.PathLike | IO[bytes]) -> None:
         if hasattr(path, "write"):
@@ -400,6 +380,21 @@ class RecordingWriter:
         """One read chunk on ``/raw/serial/<device>``; ``baud`` and ``fmt`` go into the
         channel metadata at the first write (later calls may omit them; a different value is
         an error, since a channel's metadata is fixed)."""
+        topic, md = self._serial_channel(device, baud, fmt)
+        self._write(topic, S.RAW_SERIAL, S.check_time_ns("t_ns", t_ns), raw_serial_payload(t_ns, data), wall_time_ns,
+                    md)
+
+    def write_serial_chunks(self, device: str, chunks: Sequence[tuple[int, bytes]], baud: int | None = None,
+                            fmt: str | None = None) -> None:
+        """``write_serial`` of each read chunk ``(t_ns, bytes)`` in this order (no wall times), as
+        one run of the channel (``write_encoded_run``)."""
+        topic, md = self._serial_channel(device, baud, fmt)
+        t_ns = [c[0] for c in chunks]
+        self.write_encoded_run(topic, S.RAW_SERIAL, t_ns, [raw_serial_payload(t, d) for t, d in chunks],
+                               [None] * len(t_ns), md)
+
+    def _serial_channel(self, device: str, baud: int | None, fmt: str | None) -> tuple[str, dict[str, str]]:
+        """The topic and channel metadata of a serial device (fixed at its first write)."""
         topic = S.serial_topic(device)
         meta = self._serial_meta.get(topic)
         if meta is None:
@@ -407,10 +402,7 @@ class RecordingWriter:
             self._serial_meta[topic] = meta
         elif (baud is not None and str(int(baud)) != meta[0]) or (fmt and fmt != meta[1]):
             raise ValueError(f"{topic}: baud/format changed from {meta} to {(baud, fmt)}")
-        doc = S.raw_serial_doc(t_ns, data)
-        payload = json.dumps(doc, separators=(",", ":")).encode()
-        self._write(topic, S.RAW_SERIAL, t_ns, payload, wall_time_ns,
-                    {"device": device, "baud": meta[0], "format": meta[1]})
+        return topic, {"device": device, "baud": meta[0], "format": meta[1]}
 
     def write_sample(self, sample, topic: str | None = None) -> None:
         """A bus Sample on ``/decoded/<source>/<kind>`` (or ``topic``); log_time from the

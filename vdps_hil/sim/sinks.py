@@ -76,8 +76,9 @@ class RecordingSink(DriveSink):
     plus ``/gnss/fix`` decoded from the NMEA stream (``record.gnss_fix``) for Foxglove's map.
 
     ``bulk`` (default): a block's CAN frames go to the writer as arrays in one call
-    (``RecordingWriter.write_can_frames``); ``bulk=False`` is the reference path, one
-    ``write_can`` per frame (the same file, ``tests/test_sinks.py``)."""
+    (``RecordingWriter.write_can_frames``) and a block's read chunks of a device without a tap as
+    one run (``write_serial_chunks``); ``bulk=False`` is the reference path, one ``write_can`` /
+    ``write_serial`` per message (the same file, ``tests/test_sinks.py``)."""
 
     def __init__(self, writer: RecordingWriter, bulk: bool = True):
         self.writer = writer
@@ -109,6 +110,9 @@ class RecordingSink(DriveSink):
 
     def serial_chunks(self, device, baud, fmt, chunks) -> None:
         w = self.writer
+        if self.bulk and fmt != "nmea":
+            w.write_serial_chunks(device, chunks, baud=baud, fmt=fmt)
+            return
         tap = None
         if fmt == "nmea":  # /gnss/fix for Foxglove's map, decoded from the bytes written
             tap = self._fix_taps.get(device)
