@@ -5,7 +5,7 @@ GNSS 5 Hz) on one core, and where the time goes.
 Usage::
 
     .venv/bin/python tools/bench_sim_drive.py [--scenario paper] [--profile table1-susp1k]
-                                              [--repeat 3] [--json FILE]
+                                              [--repeat 3] [--json FILE] [--baseline REF [--rounds 3]]
 
 It measures, best of ``--repeat`` runs each:
 
@@ -16,6 +16,12 @@ It measures, best of ``--repeat`` runs each:
   split: physics and recorder, truth writing (/truth/state JSON), sensor models and encoding,
   CAN writing (one MCAP message per frame), serial writing (read chunks);
 * the CLI end to end (``vdps sim`` in a subprocess, Python start-up and imports included).
+
+``--baseline REF`` (a git ref, e.g. ``main``) adds a side-by-side comparison in the same run:
+the tree of REF (``git archive`` into a temporary directory, its own numba cache there) and
+this tree each run ``Drive.run`` in a fresh process (one warm-up drive, then ``--repeat``
+drives), alternating ``--rounds`` times; the figure is the least CPU time
+(``time.process_time``) of a drive per tree, and its real-time factor.
 
 The process is pinned to one CPU where the OS allows it. First bar: RTF >= 10; goal: 50.
 """
@@ -57,14 +63,65 @@ def best(fn, repeat: int) -> float:
     return min(times)
 
 
+_MEASURE = r"""
+import json, os, sys, tempfile, time
+sys.path.insert(0, sys.argv[1])
+from vdps_hil.sim.drive import Drive
+from vdps_hil.sim.scenarios import load_scenario
+sc = load_scenario(sys.argv[2])
+out = os.path.join(tempfile.mkdtemp(), "bench.mcap")
+runs = []
+for _ in range(int(sys.argv[4]) + 1):
+    c0, w0 = time.process_time(), time.perf_counter()
+    s = Drive(sc, profile=sys.argv[3], seed=0).run(out)
+    runs.append((time.process_time() - c0, time.perf_counter() - w0))
+os.remove(out)
+print(json.dumps({"duration_s": s.duration_s, "runs": runs[1:], "timing_s": s.timing_s}))
+"""
+
+
+def side_by_side(ref: str, scenario: str, profile: str, repeat: int, rounds: int) -> dict:
+    """CPU time of ``Drive.run`` with the tree of git ``ref`` and with this tree, in alternating
+    fresh processes (module docstring)."""
+    best: dict[str, list] = {ref: [], "this tree": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp) / "baseline"
+        base.mkdir()
+        archive = subprocess.run(["git", "-C", str(REPO), "archive", ref], capture_output=True, check=True)
+        subprocess.run(["tar", "-x", "-C", str(base)], input=archive.stdout, check=True)
+        trees = {ref: (base, dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "numba"))),
+                 "this tree": (REPO, dict(os.environ))}
+        for _ in range(rounds):
+            for name, (tree, env) in trees.items():
+                r = subprocess.run([sys.executable, "-c", _MEASURE, str(tree), scenario, profile, str(repeat)],
+                                   cwd=tmp, env=env, capture_output=True, text=True)
+                if r.returncode != 0:
+                    raise RuntimeError(f"{name}: {r.stderr.strip().splitlines()[-1:]}")
+                doc = json.loads(r.stdout.strip().splitlines()[-1])
+                best[name] += [(cpu, wall, doc["duration_s"]) for cpu, wall in doc["runs"]]
+    return {name: min(runs) for name, runs in best.items()}
+
+
+def print_side_by_side(res: dict) -> None:
+    print(f"  side by side (one run, alternating fresh processes; least CPU time of a drive):")
+    print(f"  {'tree':<14} {'CPU [s]':>8} {'wall [s]':>9} {'CPU ms per sim s':>17} {'RTF (CPU)':>10}")
+    for name, (cpu, wall, dur) in res.items():
+        print(f"  {name:<14} {cpu:8.3f} {wall:9.3f} {1000 * cpu / dur:17.1f} {dur / cpu:10.1f}")
+    (c0, _, _), (c1, _, _) = res.values()
+    print(f"  this tree / baseline CPU time: {c1 / c0:.3f} ({c0 / c1:.2f}x faster)")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="paper")
     ap.add_argument("--profile", default="table1-susp1k")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--json", default=None, help="write the figures to FILE")
+    ap.add_argument("--baseline", default=None, help="git ref to compare with, side by side (e.g. main)")
+    ap.add_argument("--rounds", type=int, default=3, help="alternations of baseline and this tree")
     a = ap.parse_args()
     pin = pin_one_core()
+    sbs = side_by_side(a.baseline, a.scenario, a.profile, a.repeat, a.rounds) if a.baseline else None
     sc = load_scenario(a.scenario)
     dur = sc.duration_s
 
@@ -119,11 +176,14 @@ def main() -> int:
     rtf = dur / s.wall_time_s
     print(f"  real-time factor {rtf:.1f}x: first bar 10x {'met' if rtf >= 10 else 'NOT met'}, "
           f"goal 50x {'met' if rtf >= 50 else 'not met'}")
+    if sbs:
+        print_side_by_side(sbs)
     if a.json:
         doc = {"scenario": a.scenario, "profile": a.profile, "duration_s": dur,
                "rtf": rtf, "rtf_cli": dur / t_cli, "physics_s": t_phys, "physics_recorder_s": t_rec,
                "drive_timing_s": tm, "drive_wall_s": s.wall_time_s, "messages": s.messages,
-               "file_bytes": size}
+               "file_bytes": size,
+               "side_by_side": {k: {"cpu_s": v[0], "wall_s": v[1], "duration_s": v[2]} for k, v in (sbs or {}).items()}}
         Path(a.json).write_text(json.dumps(doc, indent=2) + "\n")
     return 0
 
