@@ -76,3 +76,34 @@ def test_copied_messages_rotate_like_written_ones(tmp_path):
             counts.append([int(rec.data[5:-1]) for rec in r.iter_records()])
     assert [len(c) for c in counts] == [1001, 1001, 498]
     assert sum(counts, []) == list(range(2500))
+
+
+def test_bulk_can_and_serial_writes_rotate_per_message(tmp_path):
+    """write_can_frames and write_serial_chunks on a rotating writer go message by message, so
+    the segments are those of write_can / write_serial once each."""
+    import numpy as np
+    from mcap.reader import make_reader
+
+    from vdps_hil.record import schemas as S
+
+    t = np.arange(1, 401, dtype=np.int64) * 1_000_000
+    data = np.zeros((400, 8), np.uint8)
+    chunks = [(int(x), b"abc") for x in t]
+    names = []  # the messages of each segment
+    for bulk in (True, False):
+        w = RotatingRecordingWriter(tmp_path / f"{bulk}.mcap", max_s=0.1, sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
+        if bulk:
+            w.write_can_frames("c", t, np.full(400, 5), np.full(400, 8), data)
+            w.write_serial_chunks("imu", chunks, baud=9600, fmt="x")
+        else:
+            for k, tk in enumerate(t.tolist()):
+                w.write_can("c", tk, {"arbitration_id": 5, "data": bytes(8)})
+            for tk, d in chunks:
+                w.write_serial("imu", tk, d, baud=9600, fmt="x")
+        w.close()
+        segments = []
+        for f in w.files:
+            with open(f, "rb") as fh:
+                segments.append([(c.topic, m.log_time, m.data) for _, c, m in make_reader(fh).iter_messages()])
+        names.append(segments)
+    assert names[0] == names[1] and len(names[0]) >= 4
