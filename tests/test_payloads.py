@@ -113,3 +113,18 @@ def test_truth_payload_equals_the_generic_json_path(vals, t_ns):
 
     assert truth_payload("/truth/state", t_ns, vals) == json_payload("/truth/state", S.TRUTH, t_ns,
                                                                      S.truth_doc(t_ns, vals))
+
+
+@settings(max_examples=300, deadline=None)
+@given(vals=st.dictionaries(st.text(max_size=6), st.floats(allow_nan=False, allow_infinity=False)
+                            | st.integers(-2**70, 2**70), max_size=12)
+       | st.dictionaries(st.text(max_size=6), st.floats(), max_size=4),
+       t_ns=st.integers(0, S.MAX_TIME_NS))
+def test_direct_truth_encoding_equals_the_generic_json_path(vals, t_ns):
+    """The direct encoding of flat snapshots (finite floats and ints written as repr after cached
+    key heads; NaN/inf, huge ints through the general path) = json_payload of truth_doc, for any
+    keys (quotes, non-ASCII), twice in a row (the cache of key heads)."""
+    from vdps_hil.record.payloads import json_payload, truth_payload
+
+    ref = json_payload("/truth/state", S.TRUTH, t_ns, S.truth_doc(t_ns, vals))
+    assert truth_payload("/truth/state", t_ns, vals) == ref == truth_payload("/truth/state", t_ns, vals)

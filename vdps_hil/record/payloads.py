@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import base64
 import json
+import math
+import operator
 from typing import Any, Mapping
 
 import numpy as np
@@ -68,22 +70,29 @@ def json_payload(topic: str, schema_name: str, t_ns: int, doc: Mapping[str, Any]
     return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
 
 
-_PLAIN_JSON = frozenset((float, int, str, bool, type(None)))
-"""Value types that ``schemas.clean_json`` leaves as they are, but for a non-finite float."""
+_TRUTH_HEADS: dict[tuple, list[str]] = {}
 
 
 def truth_payload(topic: str, t_ns: int, values: Mapping[str, Any]) -> bytes:
     """The bytes ``RecordingWriter.write_truth`` writes (= ``json_payload`` of
-    ``schemas.truth_doc``): a flat dict of str keys to plain values (the simulator's snapshot,
-    100 per simulated second) goes to ``json.dumps`` as it is, without the cleaning copies;
-    a non-finite float (``json.dumps`` refuses it) or anything else takes the general path."""
-    if type(values) is dict and type(t_ns) is int and set(map(type, values)) <= {str} \
-            and set(map(type, values.values())) <= _PLAIN_JSON:
+    ``schemas.truth_doc``). The simulator's snapshot (a flat dict of str keys to finite floats
+    and ints, 100 per simulated second) is written directly: each value as ``repr`` (what json
+    writes for an int and a finite float) after its key's cached ``"key":``; a non-finite value
+    (the sum is not finite), another type or a non-str key takes the general path."""
+    if type(values) is dict and type(t_ns) is int and 0 <= t_ns <= S.MAX_TIME_NS:
+        vals = values.values()
         try:
-            return json.dumps({"t_ns": S.check_time_ns("t_ns", t_ns), "values": values}, separators=(",", ":"),
-                              allow_nan=False).encode()
-        except ValueError:
-            pass  # NaN or inf inside: null by the general path
+            plain = set(map(type, vals)) <= {float, int} and math.isfinite(sum(vals))
+        except OverflowError:  # an int too large for a float
+            plain = False
+        keys = tuple(values) if plain else ()
+        heads = _TRUTH_HEADS.get(keys)
+        if plain and heads is None and all(type(k) is str for k in keys):
+            if len(_TRUTH_HEADS) > 64:
+                _TRUTH_HEADS.clear()
+            heads = _TRUTH_HEADS[keys] = [("," if i else "") + json.dumps(k) + ":" for i, k in enumerate(keys)]
+        if plain and heads is not None:
+            return ('{"t_ns":%d,"values":{%s}}' % (t_ns, "".join(map(operator.add, heads, map(repr, vals))))).encode()
     return json_payload(topic, S.TRUTH, t_ns, S.truth_doc(t_ns, values))
 
 
