@@ -154,3 +154,19 @@ def test_serial_chunks_wait_for_their_window_and_keep_drops_bytes():
     dec = ImuDecoder()
     out = dec.feed(t, c)
     assert [int(s.fields["seq_counter"]) for s in out] == [0, 1, 3, 4]
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(name=st.sampled_from(sorted(PACKERS)), data=st.data())
+def test_can_raw_of_all_signals_at_once_equals_raw_values_per_signal(name, data):
+    """CanPacker.raw (every signal's column at once) = raw_values of each signal, the reference,
+    inside and far outside the signals' ranges."""
+    from vdps_hil.sim.wire import raw_values
+
+    pk = PACKERS[name]
+    n = data.draw(st.integers(1, 8))
+    vals = np.array([[data.draw(st.one_of(values, st.floats(-1e12, 1e12, allow_nan=False)))
+                      for _ in pk.field_names] for _ in range(n)])
+    ref = np.stack([raw_values(s, vals[:, i]) for i, s in enumerate(pk.spec.values)], axis=1)
+    got = pk.raw(vals)
+    assert got.dtype == ref.dtype and np.array_equal(got, ref)

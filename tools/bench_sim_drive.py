@@ -12,6 +12,9 @@ It measures, best of ``--repeat`` runs each:
 * ``physics``: the simulator alone (``Simulator(scenario).run()``, truth snapshots computed but
   not kept), the floor for any drive;
 * ``physics + recorder``: the same with the sensors' per-step truth recorder hooked in;
+* ``drive without recording``: the drive's session into a sink that keeps nothing
+  (``sim.sinks.DriveSink``): physics, sensor models and wire encoding (CAN frames, MTData2
+  packets, NMEA sentences, serial read chunks), no MCAP;
 * the full drive (``sim.drive.Drive.run`` to a file in a temporary directory), with its own
   split: physics and recorder, truth writing (/truth/state JSON), sensor models and encoding,
   CAN writing (one MCAP message per frame), serial writing (read chunks);
@@ -44,6 +47,7 @@ from vdps_hil.sim.drive import Drive  # noqa: E402
 from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
 from vdps_hil.sim.sampling import StepRecorder  # noqa: E402
 from vdps_hil.sim.simulator import Simulator  # noqa: E402
+from vdps_hil.sim.sinks import DriveSink  # noqa: E402
 
 
 def pin_one_core() -> str:
@@ -68,22 +72,30 @@ import json, os, sys, tempfile, time
 sys.path.insert(0, sys.argv[1])
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.scenarios import load_scenario
+from vdps_hil.sim.sinks import DriveSink
 sc = load_scenario(sys.argv[2])
 out = os.path.join(tempfile.mkdtemp(), "bench.mcap")
-runs = []
+runs, bare = [], []
 for _ in range(int(sys.argv[4]) + 1):
+    c0 = time.process_time()
+    session = Drive(sc, profile=sys.argv[3], seed=0).start(DriveSink())
+    while session.advance():
+        pass
+    bare.append(time.process_time() - c0)
     c0, w0 = time.process_time(), time.perf_counter()
     s = Drive(sc, profile=sys.argv[3], seed=0).run(out)
     runs.append((time.process_time() - c0, time.perf_counter() - w0))
 os.remove(out)
-print(json.dumps({"duration_s": s.duration_s, "runs": runs[1:], "timing_s": s.timing_s}))
+print(json.dumps({"duration_s": s.duration_s, "runs": runs[1:], "bare": bare[1:]}))
 """
 
 
 def side_by_side(ref: str, scenario: str, profile: str, repeat: int, rounds: int) -> dict:
-    """CPU time of ``Drive.run`` with the tree of git ``ref`` and with this tree, in alternating
-    fresh processes (module docstring)."""
-    best: dict[str, list] = {ref: [], "this tree": []}
+    """Least CPU time of ``Drive.run`` (and wall time of that run) and of the drive without
+    recording, with the tree of git ``ref`` and with this tree, in alternating fresh processes
+    (module docstring): {tree: (cpu_s, wall_s, bare_cpu_s, duration_s)}."""
+    runs: dict[str, list] = {ref: [], "this tree": []}
+    bare: dict[str, list] = {ref: [], "this tree": []}
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(tmp) / "baseline"
         base.mkdir()
@@ -98,17 +110,21 @@ def side_by_side(ref: str, scenario: str, profile: str, repeat: int, rounds: int
                 if r.returncode != 0:
                     raise RuntimeError(f"{name}: {r.stderr.strip().splitlines()[-1:]}")
                 doc = json.loads(r.stdout.strip().splitlines()[-1])
-                best[name] += [(cpu, wall, doc["duration_s"]) for cpu, wall in doc["runs"]]
-    return {name: min(runs) for name, runs in best.items()}
+                runs[name] += [(cpu, wall, doc["duration_s"]) for cpu, wall in doc["runs"]]
+                bare[name] += doc["bare"]
+    return {name: (*min(runs[name])[:2], min(bare[name]), runs[name][0][2]) for name in runs}
 
 
 def print_side_by_side(res: dict) -> None:
-    print(f"  side by side (one run, alternating fresh processes; least CPU time of a drive):")
-    print(f"  {'tree':<14} {'CPU [s]':>8} {'wall [s]':>9} {'CPU ms per sim s':>17} {'RTF (CPU)':>10}")
-    for name, (cpu, wall, dur) in res.items():
-        print(f"  {name:<14} {cpu:8.3f} {wall:9.3f} {1000 * cpu / dur:17.1f} {dur / cpu:10.1f}")
-    (c0, _, _), (c1, _, _) = res.values()
-    print(f"  this tree / baseline CPU time: {c1 / c0:.3f} ({c0 / c1:.2f}x faster)")
+    print("  side by side (one run, alternating fresh processes; least CPU time of a drive):")
+    print(f"  {'tree':<14} {'drive CPU [s]':>13} {'(wall [s])':>10} {'ms/sim s':>9} {'RTF':>6}   "
+          f"{'no recording CPU [s]':>20} {'ms/sim s':>9} {'RTF':>6}")
+    for name, (cpu, wall, bare, dur) in res.items():
+        print(f"  {name:<14} {cpu:13.3f} {wall:10.3f} {1000 * cpu / dur:9.1f} {dur / cpu:6.1f}   "
+              f"{bare:20.3f} {1000 * bare / dur:9.1f} {dur / bare:6.1f}")
+    (c0, _, b0, _), (c1, _, b1, _) = res.values()
+    print(f"  this tree / baseline CPU time: drive {c1 / c0:.3f} ({c0 / c1:.2f}x faster), "
+          f"no recording {b1 / b0:.3f} ({b0 / b1:.2f}x faster)")
 
 
 def main() -> int:
@@ -136,8 +152,14 @@ def main() -> int:
             if sim.n % 500 == 0:
                 rec.take()
 
+    def no_recording():
+        session = Drive(sc, profile=a.profile, seed=0).start(DriveSink())
+        while session.advance():
+            pass
+
     t_phys = best(physics, a.repeat)
     t_rec = best(physics_recorder, a.repeat)
+    t_norec = best(no_recording, a.repeat)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "bench.mcap"
         runs = []
@@ -158,6 +180,7 @@ def main() -> int:
     n_msgs = sum(s.messages.values())
     rows = [("physics alone (simulator)", t_phys),
             ("physics + per-step recorder", t_rec),
+            ("drive without recording (null sink)", t_norec),
             ("drive: physics + recorder", tm["physics_and_recorder"]),
             ("drive: /truth/state writing", tm["truth_write"]),
             ("drive: sensor models + encoding", tm["sensors"]),
@@ -180,10 +203,11 @@ def main() -> int:
         print_side_by_side(sbs)
     if a.json:
         doc = {"scenario": a.scenario, "profile": a.profile, "duration_s": dur,
-               "rtf": rtf, "rtf_cli": dur / t_cli, "physics_s": t_phys, "physics_recorder_s": t_rec,
+               "rtf": rtf, "rtf_cli": dur / t_cli, "physics_s": t_phys, "no_recording_s": t_norec, "physics_recorder_s": t_rec,
                "drive_timing_s": tm, "drive_wall_s": s.wall_time_s, "messages": s.messages,
                "file_bytes": size,
-               "side_by_side": {k: {"cpu_s": v[0], "wall_s": v[1], "duration_s": v[2]} for k, v in (sbs or {}).items()}}
+               "side_by_side": {k: {"cpu_s": v[0], "wall_s": v[1], "no_recording_cpu_s": v[2], "duration_s": v[3]}
+                                for k, v in (sbs or {}).items()}}
         Path(a.json).write_text(json.dumps(doc, indent=2) + "\n")
     return 0
 

@@ -79,12 +79,17 @@ def raw_values(sig: SignalSpec, values: np.ndarray) -> np.ndarray:
     v = np.asarray(values, dtype=float)
     if np.isnan(v).any():
         raise ValueError(f"{sig.name}: cannot encode NaN")
+    lo, hi = _physical_range(sig)
+    raw = np.floor((np.clip(v, lo, hi) - sig.offset) / sig.scale + 0.5)
+    return np.clip(raw, sig.raw_min, sig.raw_max).astype(np.int64)
+
+
+def _physical_range(sig: SignalSpec) -> tuple[float, float]:
+    """(lo, hi): the raw range in physical units widened by one step (module docstring)."""
     a = sig.raw_min * sig.scale + sig.offset
     b = sig.raw_max * sig.scale + sig.offset
     step = abs(sig.scale)
-    lo, hi = min(a, b) - step, max(a, b) + step
-    raw = np.floor((np.clip(v, lo, hi) - sig.offset) / sig.scale + 0.5)
-    return np.clip(raw, sig.raw_min, sig.raw_max).astype(np.int64)
+    return min(a, b) - step, max(a, b) + step
 
 
 class CanPacker:
@@ -108,10 +113,24 @@ class CanPacker:
         self.dlc = spec.dlc
         self.field_names: tuple[str, ...] = spec.field_names
         self.resolution = tuple(s.resolution for s in spec.values)
+        # per-signal constants as rows, so that all signals are converted at once (raw_values' arithmetic)
+        sigs = spec.values
+        self._lo, self._hi = (np.array(r, dtype=float) for r in zip(*map(_physical_range, sigs)))
+        self._offset = np.array([s.offset for s in sigs], dtype=float)
+        self._scale = np.array([s.scale for s in sigs], dtype=float)
+        self._raw_min = np.array([s.raw_min for s in sigs], dtype=float)
+        self._raw_max = np.array([s.raw_max for s in sigs], dtype=float)
+        self._masks = np.array([(1 << s.length_bits) - 1 for s in sigs], dtype=np.int64)
+        self._shifts = np.array([s.start_bit for s in sigs], dtype=np.uint64)
 
     def raw(self, values: np.ndarray) -> np.ndarray:
+        """(N, k) physical values -> raw integers, ``raw_values`` of every column at once."""
         values = np.asarray(values, dtype=float).reshape(-1, len(self.field_names))
-        return np.stack([raw_values(s, values[:, i]) for i, s in enumerate(self.spec.values)], axis=1)
+        nan = np.isnan(values).any(axis=0)
+        if nan.any():
+            raise ValueError(f"{self.spec.values[int(np.argmax(nan))].name}: cannot encode NaN")
+        raw = np.floor((np.clip(values, self._lo, self._hi) - self._offset) / self._scale + 0.5)
+        return np.clip(raw, self._raw_min, self._raw_max).astype(np.int64)
 
     def quantize(self, values: np.ndarray) -> np.ndarray:
         raw = self.raw(values)
@@ -119,10 +138,7 @@ class CanPacker:
 
     def pack(self, values: np.ndarray, counters: np.ndarray) -> np.ndarray:
         raw = self.raw(values)
-        word = np.zeros(raw.shape[0], dtype=np.uint64)
-        for i, s in enumerate(self.spec.values):
-            mask = np.int64((1 << s.length_bits) - 1)
-            word |= (raw[:, i] & mask).astype(np.uint64) << np.uint64(s.start_bit)
+        word = np.bitwise_or.reduce((raw & self._masks).astype(np.uint64) << self._shifts, axis=1)
         c = self.spec.counter
         cnt = np.asarray(counters, dtype=np.int64) & np.int64((1 << c.length_bits) - 1)
         word |= cnt.astype(np.uint64) << np.uint64(c.start_bit)
