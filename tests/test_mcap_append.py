@@ -44,18 +44,29 @@ def test_copy_runs_write_the_same_file_as_one_library_call_per_message(tmp_path)
     bytes of the mcap library's add_message once per message: same records, statistics,
     message indexes and chunk boundaries."""
     msgs = copy_messages(5, 3000)
-    files = []
-    for runs in (True, False):
-        p = tmp_path / f"{runs}.mcap"
-        w = RecordingWriter(p, chunk_size=1500, sim_epoch_ns=EPOCH)
-        if not runs:
-            w._appender, w._add_message = None, w._mcap.add_message
+
+    def write(w, runs):
         copy = w.copier(lambda topic: (S.RAW_SERIAL, {}))
         for topic, t, log, data in msgs:
             copy((topic, t, log, 7, data))
+
+    fast, library = _both_ways(tmp_path, 1500, write)
+    assert fast == library
+
+
+def _both_ways(tmp_path, chunk_size: int, write) -> list[bytes]:
+    """The files ``write(writer, fast)`` gives with the writer's appender (fast True) and with
+    the mcap library's add_message for each message (fast False)."""
+    files = []
+    for fast in (True, False):
+        p = tmp_path / f"{fast}.mcap"
+        w = RecordingWriter(p, chunk_size=chunk_size, sim_epoch_ns=EPOCH)
+        if not fast:
+            w._appender, w._add_message = None, w._mcap.add_message
+        write(w, fast)
         w.close()
         files.append(p.read_bytes())
-    assert files[0] == files[1]
+    return files
 
 
 def test_can_frame_runs_write_the_same_file_as_one_library_call_per_message(tmp_path):
@@ -72,12 +83,8 @@ def test_can_frame_runs_write_the_same_file_as_one_library_call_per_message(tmp_
         t = t0 + np.cumsum(rng.integers(0, 2_000_000, n))
         t0 = int(t[-1])
         blocks.append((t, rng.integers(0, 0x800, n), rng.integers(0, 9, n), rng.integers(0, 256, (n, 8), dtype=np.uint8)))
-    files = []
-    for bulk in (True, False):
-        p = tmp_path / f"{bulk}.mcap"
-        w = RecordingWriter(p, chunk_size=3000, sim_epoch_ns=EPOCH)
-        if not bulk:
-            w._appender, w._add_message = None, w._mcap.add_message
+
+    def write(w, bulk):
         for t, aid, dlc, data in blocks:
             if bulk:
                 w.write_can_frames("vdps", t, aid, dlc, data)
@@ -86,6 +93,6 @@ def test_can_frame_runs_write_the_same_file_as_one_library_call_per_message(tmp_
                     w.write_can("vdps", int(t[k]), {"arbitration_id": int(aid[k]), "dlc": int(dlc[k]),
                                                     "data": bytes(data[k, :dlc[k]])})
             w.write_serial("imu", t0, b"x")
-        w.close()
-        files.append(p.read_bytes())
-    assert files[0] == files[1]
+
+    fast, library = _both_ways(tmp_path, 3000, write)
+    assert fast == library
