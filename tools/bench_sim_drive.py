@@ -27,6 +27,10 @@ drives), alternating ``--rounds`` times; the figure is the least CPU time
 (``time.process_time``) of a drive per tree, and its real-time factor.
 
 The process is pinned to one CPU where the OS allows it. First bar: RTF >= 10; goal: 50.
+
+Last measured (``--baseline main --repeat 3 --rounds 3``, shared 2-core VM at load average 5-6,
+CPU time): ``Drive.run`` main 0.610 s (24.6x real time), this tree 0.433 s (34.6x, 1.41x
+faster); without recording 0.160 s / 0.158 s (94x).
 """
 
 from __future__ import annotations
