@@ -25,7 +25,7 @@ fault handling alone.
 Usage::
 
     .venv/bin/python tools/fault_campaign.py [--quick] [--scenario NAME] [--fault TEXT] [--per-state]
-                                             [--json FILE] [--seed 21]
+                                             [--truth commonroad-mb:1|3] [--json FILE] [--seed 21]
 """
 
 from __future__ import annotations
@@ -59,6 +59,11 @@ ERR_NAMES = ("x", "y", "vx", "vy", "roll", "pitch", "yaw")
 SCENARIOS = {"paper": ("sedan-model", 10.0), "lane-change-iso3888": ("sedan-model", 10.0),
              "fishhook-suv": ("suv-model", None)}
 """Scenario -> (model vehicle file, duration [s]; None: the scenario's own)."""
+CR_SCENARIOS = {"cr-lane-change": 12.0, "cr-sine-accel": 12.0}
+"""With ``--truth commonroad-mb:N`` (CommonRoad's multibody model, parameter set N; flat road):
+scenario -> duration [s]; the model vehicle file is ``crN-model``."""
+ONSETS = {"paper": (3.0, 5.0), "lane-change-iso3888": (2.5, 4.0), "fishhook-suv": (0.4,),
+          "cr-lane-change": (2.0, 4.0), "cr-sine-accel": (3.0, 5.0)}
 
 
 def fault_grid() -> list[tuple[str, float]]:
@@ -75,12 +80,15 @@ def fault_grid() -> list[tuple[str, float]]:
     return grid
 
 
-def run_one(scenario: str, spec: str, t_f: float, absent_s: float, seed: int) -> dict:
-    model_name, dur = SCENARIOS[scenario]
+def run_one(scenario: str, spec: str, t_f: float, absent_s: float, seed: int, truth: str | None = None) -> dict:
+    if truth is None:
+        model_name, dur = SCENARIOS[scenario]
+    else:  # CommonRoad's multibody truth: its own vehicle, the matching model file
+        model_name, dur = f"cr{truth.rsplit(':', 1)[1]}-model", CR_SCENARIOS[scenario]
     prof = load_profile("table1-susp1k")
     full = f"{spec},t_s={t_f:g}"
     buf = io.BytesIO()
-    Drive(scenario, profile=prof, seed=seed, duration_s=dur, faults=[full]).run(buf)
+    Drive(scenario, profile=prof, seed=seed, duration_s=dur, faults=[full], truth=truth).run(buf)
     buf.seek(0)
     reader = RecordingReader(buf)
     truth = {t: d["values"] for _, t, d in reader.iter_messages(["/truth/state"])}  # harness only
@@ -193,17 +201,18 @@ def main(argv=None) -> int:
                     help="only the grid's faults whose spec contains this text (repeatable)")
     ap.add_argument("--per-state", action="store_true",
                     help="also print, per run, which states left their 3 sigma, when, and by how much")
+    ap.add_argument("--truth", default=None, choices=("commonroad-mb:1", "commonroad-mb:3"),
+                    help="CommonRoad's multibody model as the truth (scenarios " + ", ".join(CR_SCENARIOS) + ")")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    onsets = {"paper": (3.0, 5.0), "lane-change-iso3888": (2.5, 4.0), "fishhook-suv": (0.4,)}
     rows = []
     t0 = time.perf_counter()
-    for scen in a.scenario or SCENARIOS:
+    for scen in a.scenario or (CR_SCENARIOS if a.truth else SCENARIOS):
         for spec, absent in fault_grid():
             if a.fault and not any(f in spec for f in a.fault):
                 continue
-            for t_f in onsets[scen][:1] if a.quick else onsets[scen]:
-                rows.append(run_one(scen, spec, t_f, absent, a.seed))
+            for t_f in ONSETS[scen][:1] if a.quick else ONSETS[scen]:
+                rows.append(run_one(scen, spec, t_f, absent, a.seed, a.truth))
                 print(table(rows[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
     print(table(rows))
     if a.per_state:
