@@ -70,3 +70,15 @@ def test_wilson_interval_matches_scipy(k, n):
     lo, hi = S.wilson_interval(k, n)
     ci = binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
     assert lo == pytest.approx(ci.low, abs=1e-9) and hi == pytest.approx(ci.high, abs=1e-9)
+
+
+def test_the_model_file_follows_the_truth_backend():
+    """A drive of CommonRoad's set N is diagnosed with ``crN-model``, ours with ``sedan-model``;
+    set 2 (the held-out acceptance set) and unknown backends are refused."""
+    from vdps_hil.experiments.workbench_study import model_file
+
+    assert model_file(None) == "sedan-model"
+    assert model_file("commonroad-mb:1") == "cr1-model" and model_file("commonroad-mb:3") == "cr3-model"
+    for bad in ("commonroad-mb:2", "commonroad-ks:1", "ours"):
+        with pytest.raises(ValueError, match="unknown study truth"):
+            model_file(bad)

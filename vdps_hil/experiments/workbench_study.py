@@ -194,12 +194,24 @@ def study_profile(suspension_rate_hz: float = 100.0) -> SensorProfile:
 
 
 def hidden_drive(path: str | os.PathLike, maneuver: str, effects: Sequence[str] = (), seed: int = 0,
-                 profile: SensorProfile | None = None, duration_s: float | None = None):
-    """Simulate one drive with the named effects hidden in the truth; returns the DriveSummary."""
+                 profile: SensorProfile | None = None, duration_s: float | None = None, truth: str | None = None):
+    """Simulate one drive with the named effects hidden in the truth (``truth``: a truth backend,
+    e.g. ``commonroad-mb:1``, which brings its own vehicle; None: ours); returns the DriveSummary."""
     from vdps_hil.sim.drive import Drive
 
     sc = scenario(maneuver, duration_s)
-    return Drive(sc, seed=seed, effects=list(effects), profile=profile or study_profile()).run(path)
+    return Drive(sc, seed=seed, effects=list(effects), profile=profile or study_profile(), truth=truth).run(path)
+
+
+def model_file(truth: str | None) -> str:
+    """The model vehicle file the workbench gets for a drive of ``truth``: ``sedan-model`` for
+    ours (the study maneuvers' sedan), ``crN-model`` for ``commonroad-mb:N``."""
+    if truth is None:
+        return "sedan-model"
+    name, _, set_id = truth.partition(":")
+    if name != "commonroad-mb" or set_id not in ("1", "3"):
+        raise ValueError(f"unknown study truth {truth!r} (commonroad-mb:1 or commonroad-mb:3)")
+    return f"cr{set_id}-model"
 
 
 def is_hit(ranking, effect: str) -> bool:
@@ -228,17 +240,18 @@ def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float
 
 
 def cached_drive(directory: str | os.PathLike, maneuver: str, effects: Sequence[str] = (), seed: int = 0,
-                 duration_s: float | None = None) -> str:
-    """The drive's MCAP in ``directory`` (simulated once; the name encodes maneuver, effects and
-    seed, the content is deterministic for them)."""
+                 duration_s: float | None = None, truth: str | None = None) -> str:
+    """The drive's MCAP in ``directory`` (simulated once; the name encodes maneuver, effects,
+    seed and truth backend, the content is deterministic for them)."""
     import hashlib
 
-    key = hashlib.sha256(repr((maneuver_text(maneuver), tuple(effects), int(seed), duration_s)).encode()).hexdigest()[:16]
+    ident = (maneuver_text(maneuver), tuple(effects), int(seed), duration_s) + ((truth,) if truth else ())
+    key = hashlib.sha256(repr(ident).encode()).hexdigest()[:16]
     os.makedirs(directory, exist_ok=True)
     path = os.path.join(directory, f"{maneuver}-{key}.mcap")
     if not os.path.exists(path):
         tmp = f"{path}.{os.getpid()}.tmp"
-        hidden_drive(tmp, maneuver, effects, seed=seed, duration_s=duration_s)
+        hidden_drive(tmp, maneuver, effects, seed=seed, duration_s=duration_s, truth=truth)
         os.replace(tmp, path)
     return path
 
@@ -248,7 +261,8 @@ def run_job(job: dict) -> dict:
     the drive, then diagnose it from its /raw/ topics and the model vehicle file only.
 
     ``job``: maneuver, specs (effect specs hidden in the truth), seed, optional effect (the hidden
-    one, for the hit), add (run ``--add`` of that effect), cache (directory of drives)."""
+    one, for the hit), add (run ``--add`` of that effect), cache (directory of drives), truth (a
+    truth backend, ``model_file`` names the model file; default ours)."""
     import tempfile
     import time
 
@@ -259,12 +273,12 @@ def run_job(job: dict) -> dict:
     from vdps_hil.workbench.dataset import load_drive
     from vdps_hil.workbench.ranking.selection import rank
 
-    veh = load_vehicle("sedan-model")
+    veh = load_vehicle(model_file(job.get("truth")))
     t0 = time.perf_counter()
     out = dict(job)
     with tempfile.TemporaryDirectory() as td:
         path = cached_drive(job.get("cache") or td, job["maneuver"], job.get("specs", ()), job["seed"],
-                            job.get("duration_s"))
+                            job.get("duration_s"), job.get("truth"))
         tab = load_drive(path, veh)
         try:
             rk = rank(tab, veh)
