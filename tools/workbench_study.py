@@ -63,6 +63,9 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     ap.add_argument("--runs", default=None, help="JSON-lines file of finished runs: append, skip what is there")
     ap.add_argument("--summary-only", action="store_true", help="summarize the --runs file, run nothing")
+    ap.add_argument("--cache", default=None,
+                    help="directory of simulated drives: kept and reused (a drive is deterministic in its maneuver, "
+                         "effects and seed), so a re-run after a workbench change only diagnoses")
     a = ap.parse_args(argv)
     if a.null_only and a.no_null:
         ap.error("--null-only and --no-null exclude each other")
@@ -99,6 +102,8 @@ def main(argv=None) -> int:
     results = [r for k, r in done.items() if k in wanted]
     # seed by seed, so a stopped study covers every effect and maneuver about equally
     todo = sorted((j for j in jobs if _job_key(j) not in done), key=lambda j: j["seed"])
+    for j in todo:
+        j["cache"] = a.cache
     if a.summary_only:
         todo = []
     if done:
