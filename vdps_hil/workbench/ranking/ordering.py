@@ -28,11 +28,12 @@ the forward selection's, only their order is decided here.
 
 from __future__ import annotations
 
+import os
 from typing import Mapping
 
-from vdps_hil.model.effects import EffectSet
-
 import numpy as np
+
+from vdps_hil.model.effects import EffectSet
 
 from ..candidate_base import Candidate
 from .config import GROUP_NAMES, INNOVATION_GROUPS
@@ -51,12 +52,14 @@ def unique_contributions(table, states, inn, reference, point: Point, cfg, selec
     out: dict[str, float] = {}
     for name, c in selected.items():
         rows = innovation if c.family == "measurement" else ~innovation  # E, the evidence rows
-        rest = {n: c for n, c in selected.items() if n != name}
+        rest = {n: other for n, other in selected.items() if n != name}
         effects = EffectSet([e for e in point.effects if e.name != name])
         phis = {n: p for n, p in point.phis.items() if n != name}
         _, d, always = build_design(table, states, inn, reference, Point(point.base, effects, phis), cfg, rest)
         without = float(d.cv(always)[rows].sum())
         out[name] = 1.0 - float(cv_all[rows].sum()) / without if without > 0.0 else 0.0
+    if os.environ.get("VDPS_WB_DEBUG"):
+        print(f"[ranking] unique contributions {out}")
     return out
 
 

@@ -362,9 +362,9 @@ def _result(s: _Search, ev: _Excitation) -> Ranking:
             entry, thetas[name] = _candidate_entry(s, ev, name, c, s2, sse_fin)
             entries.append(entry)
     unique = unique_contributions(s.table, s.states, s.inn, s.vehicle, point, cfg, s.selected, s.cv_cur)
-    if os.environ.get("VDPS_WB_DEBUG") and unique:
-        print(f"[ranking] unique contributions {unique}")
     order = order_selected(list(s.selected), unique)
+    for e in entries:
+        e.unique_fraction = unique.get(e.effect, math.nan)
     entries.sort(key=lambda e: (order.index(e.effect) if e.effect in order else len(order),
                                 -(e.explained_fraction if math.isfinite(e.explained_fraction) else -1)))
     params = _parameter_entries(d, s.vehicle, point.base, always, s.ratio, s2, cfg)
