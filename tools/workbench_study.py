@@ -18,6 +18,7 @@ Usage::
     .venv/bin/python tools/workbench_study.py --add --seeds 5     # --add reductions per effect
     .venv/bin/python tools/workbench_study.py --seeds 20 --jobs 1 --runs study.jsonl   # resumable
     .venv/bin/python tools/workbench_study.py --effects imu_bias --scenario shipped:sine-sweep --scenario shipped:lane-change-iso3888
+    .venv/bin/python tools/workbench_study.py ... --runs after.jsonl --cache /tmp/drives   # the same drives again
 
 ``--runs FILE.jsonl`` makes the study incremental: every finished drive is appended to the file
 as one JSON line, and a later call with the same file skips the drives already there (same kind,
