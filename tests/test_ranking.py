@@ -24,9 +24,10 @@ from concurrent.futures import ProcessPoolExecutor
 
 import pytest
 
-from vdps_hil.experiments.workbench_study import HIDDEN, TWO_HIDDEN, run_job
+from vdps_hil.experiments.workbench_study import HIDDEN, SHIPPED, STUDY_SEEDS, TUNING_SEEDS, TWO_HIDDEN, run_job
 
 SEEDS = (21, 22)
+"""Test seeds: neither the ranking's tuning seeds nor the study's (``test_seeds_are_disjoint``)."""
 NULL_MANEUVERS = ("accel-coast", "coast-down", "step-steer", "lane-change", "sine-sweep")
 KNOWN_WEAK: dict[str, str] = {
     "steering_compliance": (
@@ -140,3 +141,48 @@ def test_saturation_is_told_apart_from_load_dependent_stiffness_on_the_circle_ra
         r = runs[("hidden", "magic_formula_tire", s)]
         assert r["recommendation"] == "magic_formula_tire", (s, r["recommendation"], r["messages"])
         assert "load_dependent_cornering_stiffness" not in r["equivalent_to"], (s, r["equivalent_to"])
+
+
+LANE_CHANGE = SHIPPED + "lane-change-iso3888"
+LANE_CHANGE_EFFECTS = ("imu_bias", "crosswind", "low_pressure_tire")
+TRUTH_TIRE = {"magic_formula_tire", "load_dependent_cornering_stiffness"}
+"""The shipped lane change's own truth tire (Magic Formula) against the model's linear one, and the
+effect the workbench groups with it: the only recommendation a nothing-hidden drive may make."""
+
+
+def test_seeds_are_disjoint():
+    assert not set(SEEDS) & set(TUNING_SEEDS) and not set(STUDY_SEEDS) & set(TUNING_SEEDS)
+    assert not set(SEEDS) & set(STUDY_SEEDS)
+
+
+@pytest.fixture(scope="module")
+def lane_change_runs(tmp_path_factory):
+    """Issue 18 on the shipped ISO 3888 lane change (Magic Formula truth tire): each effect hidden
+    on the test seeds, and the nothing-hidden drives of the same seeds."""
+    cache = str(tmp_path_factory.getbasetemp() / "wb_lane_change")
+    jobs = [{"key": (eff, s), "maneuver": LANE_CHANGE, "specs": [HIDDEN[eff][1]], "seed": s, "effect": eff,
+             "cache": cache} for eff in LANE_CHANGE_EFFECTS for s in SEEDS]
+    jobs += [{"key": (None, s), "maneuver": LANE_CHANGE, "specs": [], "seed": s, "cache": cache} for s in SEEDS]
+    with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as ex:
+        out = list(ex.map(run_job, jobs))
+    return {r["key"]: r for r in out}
+
+
+@pytest.mark.parametrize("effect", LANE_CHANGE_EFFECTS)
+def test_lane_change_hidden_effect_is_recommended_beside_the_truth_tire(lane_change_runs, effect):
+    """The truth misses two effects against the model here (its Magic Formula tire and the hidden
+    one): the hidden one must be found (selected) and recommended first -- its unique contribution
+    in the final model is the larger (``ranking.ordering``), whichever the greedy first round took."""
+    for s in SEEDS:
+        r = lane_change_runs[(effect, s)]
+        assert "error" not in r, r.get("error")
+        assert effect in r["selected"], (effect, s, r["selected"], r["messages"])
+        assert r["hit"], (effect, s, r["recommendation"], r["selected"], r["messages"])
+
+
+def test_lane_change_with_nothing_hidden_recommends_only_the_truth_tire(lane_change_runs):
+    """No sensor, wind or tire-radius effect is selected on the nothing-hidden lane change; what is
+    recommended, if anything, is the truth's own tire law (or its group)."""
+    for s in SEEDS:
+        r = lane_change_runs[(None, s)]
+        assert set(r["selected"]) <= TRUTH_TIRE, (s, r["selected"], r["messages"])

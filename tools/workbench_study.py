@@ -18,6 +18,7 @@ Usage::
     .venv/bin/python tools/workbench_study.py --add --seeds 5     # --add reductions per effect
     .venv/bin/python tools/workbench_study.py --seeds 20 --jobs 1 --runs study.jsonl   # resumable
     .venv/bin/python tools/workbench_study.py --effects imu_bias --scenario shipped:sine-sweep --scenario shipped:lane-change-iso3888
+    .venv/bin/python tools/workbench_study.py ... --runs after.jsonl --cache /tmp/drives   # the same drives again
 
 ``--runs FILE.jsonl`` makes the study incremental: every finished drive is appended to the file
 as one JSON line, and a later call with the same file skips the drives already there (same kind,
@@ -63,6 +64,9 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     ap.add_argument("--runs", default=None, help="JSON-lines file of finished runs: append, skip what is there")
     ap.add_argument("--summary-only", action="store_true", help="summarize the --runs file, run nothing")
+    ap.add_argument("--cache", default=None,
+                    help="directory of simulated drives: kept and reused (a drive is deterministic in its maneuver, "
+                         "effects and seed), so a re-run after a workbench change only diagnoses")
     a = ap.parse_args(argv)
     if a.null_only and a.no_null:
         ap.error("--null-only and --no-null exclude each other")
@@ -99,6 +103,8 @@ def main(argv=None) -> int:
     results = [r for k, r in done.items() if k in wanted]
     # seed by seed, so a stopped study covers every effect and maneuver about equally
     todo = sorted((j for j in jobs if _job_key(j) not in done), key=lambda j: j["seed"])
+    for j in todo:
+        j["cache"] = a.cache
     if a.summary_only:
         todo = []
     if done:

@@ -43,8 +43,15 @@ from typing import Sequence
 from vdps_hil.sim.profiles import SensorProfile, load_profile
 from vdps_hil.sim.scenarios import Scenario, parse_scenario
 
-__all__ = ["MANEUVERS", "HIDDEN", "TWO_HIDDEN", "cached_drive", "run_job", "scenario", "maneuver_text", "SHIPPED", "study_profile", "hidden_drive", "NULL_MANEUVERS", "is_hit",
+__all__ = ["TUNING_SEEDS", "STUDY_SEEDS", "MANEUVERS", "HIDDEN", "TWO_HIDDEN", "cached_drive", "run_job", "scenario", "maneuver_text", "SHIPPED", "study_profile", "hidden_drive", "NULL_MANEUVERS", "is_hit",
            "wilson_interval"]
+
+TUNING_SEEDS = (100, 101, 102, 103)
+"""The seeds the ranking's thresholds (``workbench.ranking.config.RankingConfig``) were chosen on;
+no acceptance figure and no test uses them."""
+STUDY_SEEDS = tuple(range(1000, 1020))
+"""The acceptance study's seeds (``tools/workbench_study.py --seeds 20 --first-seed 1000``),
+disjoint from ``TUNING_SEEDS``."""
 
 MANEUVERS: dict[str, str] = {
     "accel-coast": """name = "accel-coast"

@@ -3,7 +3,7 @@
 
 JSON (``Ranking.to_json``): ``ranking`` (the entries: effect, kind, explained_fraction,
 explained_by_equation, parameters {name: {value, sigma}}, plausible, excited, excitation_z,
-group, selected, delta_bic, message), ``recommendation``, ``equivalent_to``, ``selected``,
+group, selected, delta_bic, message, unique_fraction of a selected effect beside others), ``recommendation``, ``equivalent_to``, ``selected``,
 ``groups``, ``identified_parameters``, ``messages``, ``n_eff``; non-finite numbers as null.
 The words (``message``, ``messages``) come from :mod:`~vdps_hil.workbench.words`.
 """
@@ -42,6 +42,7 @@ class RankEntry:
     explained_gain_by_equation: dict[str, float] = field(default_factory=dict)
     model_value: dict[str, float] = field(default_factory=dict)  # a parameter: the value the model uses
     plausible_range: dict[str, tuple[float, float]] = field(default_factory=dict)  # a parameter: its bounds
+    unique_fraction: float = math.nan  # a selected effect beside others: U_e, its order (``ordering``)
 
     def to_json(self) -> dict:
         num = json_number
@@ -51,6 +52,7 @@ class RankEntry:
                 "plausible": bool(self.plausible), "excited": bool(self.excited),
                 "excitation_z": num(self.excitation_z), "group": list(self.group), "selected": bool(self.selected),
                 "delta_bic": num(self.delta_bic), "message": self.message,
+                **({"unique_fraction": num(self.unique_fraction)} if math.isfinite(self.unique_fraction) else {}),
                 **({"model_value": {k: num(v) for k, v in self.model_value.items()}} if self.model_value else {}),
                 **({"plausible_range": {k: [num(a), num(b)] for k, (a, b) in self.plausible_range.items()}}
                    if self.plausible_range else {})}

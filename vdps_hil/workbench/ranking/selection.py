@@ -62,6 +62,7 @@ from .design import Design, effective_sample_size, sigma_of, theta_of
 from .equivalence import fill_groups, group_list, merge_rivals
 from .gram import take
 from .identification import Joint, Point, build_design, identify, joint_fit, linear_joint_fit
+from .ordering import order_selected, unique_contributions
 from .results import RankEntry, Ranking, rk_message
 from .sensor_fit import sensor_fit
 
@@ -360,7 +361,10 @@ def _result(s: _Search, ev: _Excitation) -> Ranking:
         else:
             entry, thetas[name] = _candidate_entry(s, ev, name, c, s2, sse_fin)
             entries.append(entry)
-    order = list(s.selected)
+    unique = unique_contributions(s.table, s.states, s.inn, s.vehicle, point, cfg, s.selected, s.cv_cur)
+    order = order_selected(list(s.selected), unique)
+    for e in entries:
+        e.unique_fraction = unique.get(e.effect, math.nan)
     entries.sort(key=lambda e: (order.index(e.effect) if e.effect in order else len(order),
                                 -(e.explained_fraction if math.isfinite(e.explained_fraction) else -1)))
     params = _parameter_entries(d, s.vehicle, point.base, always, s.ratio, s2, cfg)
