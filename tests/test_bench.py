@@ -40,11 +40,17 @@ def assert_nothing_lost(d: dict) -> None:
 
 
 @pytest.fixture(scope="module")
-def ci_speed() -> float:
-    """1x, or the speed with 2x measured headroom when this machine has less now."""
+def headroom():
+    """The bench's headroom on this machine now (``hil.headroom``), measured once per module."""
     h = Bench(BenchConfig(scenario="fishhook-suv")).measure_headroom()
     print(f"bench tests: {h.describe()}")
-    return min(1.0, h.supported_speed)
+    return h
+
+
+@pytest.fixture(scope="module")
+def ci_speed(headroom) -> float:
+    """1x, or the speed with 2x measured headroom when this machine has less now."""
+    return min(1.0, headroom.supported_speed)
 
 
 @pytest.fixture(scope="module")
@@ -241,13 +247,16 @@ def test_an_injected_fault_shows_in_the_sequence_counters_not_as_a_bench_loss(ci
     assert d["seq_counters"]["can_counter_breaks"] > 0  # the pipeline sees the frames the fault removed
 
 
-def test_a_pipeline_short_of_cpu_skips_its_own_work_counts_it_and_says_so(ci_speed, calibrated_params):
-    """At 8x the supported speed (a quarter of the CPU the pipeline needs) the embedded pipeline
-    misses its deadline: it skips samples (counted per kind), the cycles it handles stay within
-    a few deadlines of their input instead of falling seconds behind (the drive is 2.5 s), and
-    its warnings say "sensor missing" (the skipped IMU span is an outage to the estimator).
-    Started from identified parameters, so "not converged" does not hide the status."""
-    d = Bench(BenchConfig(scenario="fishhook-suv", duration_s=2.5, speed=8 * ci_speed,
+def test_a_pipeline_short_of_cpu_skips_its_own_work_counts_it_and_says_so(headroom, calibrated_params):
+    """At 8x the supported speed, and at least 8x real time (a quarter of the CPU the pipeline
+    needs, or less), the embedded pipeline misses its deadline: it skips samples (counted per
+    kind), the cycles it handles stay within a few deadlines of their input instead of falling
+    seconds behind (the drive is 2.5 s), and its warnings say "sensor missing" (the skipped IMU
+    span is an outage to the estimator). Started from identified parameters, so "not converged"
+    does not hide the status. (8 x the speed capped at 1x was no overload where the headroom at
+    1x is near 1: 4.2x on a machine with 1.1x then missed no deadline in one run of two.)"""
+    speed = 8.0 * max(1.0, headroom.supported_speed)
+    d = Bench(BenchConfig(scenario="fishhook-suv", duration_s=2.5, speed=speed,
                           params=calibrated_params)).run().to_json()
     m = d["deadline_misses"]
     assert m["samples"] > 0 and m["episodes"] >= 1 and m["by_kind"]["imu"] > 0 and m["deadline_ms"] == 100.0
