@@ -39,6 +39,7 @@ from vdps_hil.model.params import Vehicle
 from ..candidate_base import Candidate
 from ..dataset import DriveTable
 from ..innovations import Innovations
+from ..memory import release_freed_memory
 from ..residuals import EquationResiduals, RowStates, compute_residuals
 from .config import RankingConfig
 from .context import Context
@@ -135,6 +136,7 @@ def build_design(table, states, inn, ref: Vehicle, point: Point, cfg: RankingCon
                  screen: Sequence[Candidate] = ()):
     """Design at a linearisation point: nuisance, the ten parameters, the selected effects'
     change columns (always on) and the screening columns of ``screen``."""
+    release_freed_memory()  # the previous design's freed arrays (``memory``)
     res = compute_residuals(table, point.base, point.effects, states=states)
     ctx = Context(table, point.base, point.effects, states, res, inn, cfg.velocity_fast_sigma_mps)
     d = Design(ctx, cfg)
