@@ -16,6 +16,12 @@ minute (and the same for CPU); the peak of a process that only imports the workb
 first (the part that does not grow with the drive). Drives: ``vdps sim paper --duration 30
 --seed 3 -o d30.mcap`` (or ``tools/make_long_drive.py``); measure on a quiet machine, or say
 what ran beside it.
+
+Last measured (2026-12-04, ``nice -n 5``, 2-core machine at load 4-5 beside other work; paper
+drives seed 3 of 30 / 120 / 300 s; main ba5e4e3 then branch diagfast bcf0349 in one run):
+main peak RSS 367 / 556 / 1094 MiB, CPU 13.5 / 40.5 / 148 s; diagfast 328 / 406 / 1038 MiB,
+CPU 10.4 / 43.2 / 154.8 s (wall 16.4 / 58.8 / 236.7 s); imports alone 255 MiB. Growth 158 MiB
+per minute of drive, not linear: the 5-minute drive's ranking (138 s) dominates.
 """
 
 from __future__ import annotations
