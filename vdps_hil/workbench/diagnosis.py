@@ -35,6 +35,7 @@ from vdps_hil.model.params import Vehicle
 
 from .add import AddResult, FittedModel, add_effects, cleaned_residuals, rms_by_equation
 from .dataset import DatasetConfig, DriveTable, load_drive
+from .memory import release_freed_memory
 from .ranking.config import RankingConfig
 from .ranking.results import Ranking
 from .ranking.selection import rank
@@ -203,17 +204,21 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
         vehicle, model_effects, _ = load_model(model, vehicle, user_effects)
     say("decoding /raw/ topics and running the estimator")
     table = load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=dataset_config)
+    release_freed_memory()  # each stage's freed arrays back to the OS (``memory``): the peak is the largest stage's
     tm["decode_estimator"] = time.perf_counter() - t0
     say(f"{table.counters.get('samples', 0)} samples, {len(table)} rows")
     say("identifying the model and ranking the candidates")
     t1 = time.perf_counter()
     rk = rank(table, vehicle, model_effects, user_effects=user_effects, config=ranking_config)
+    release_freed_memory()
     tm["ranking"] = time.perf_counter() - t1
     base = FittedModel(rk.base_vehicle, model_effects)
     res = compute_residuals(table, base.vehicle, base.effects)
     wins = worst_windows(res)
     regs = regime_bins(table, res)
+    release_freed_memory()
     t_c, _, names_c, vals_c = cleaned_residuals(table, base, vehicle, ranking_config)
+    release_freed_memory()
     cleaned = (t_c, names_c, vals_c)
     before = {"residual_rms": rms_by_equation(names_c, vals_c)}
     sim = None

@@ -10,6 +10,7 @@ cube of its length).
 
 from __future__ import annotations
 
+import weakref
 from typing import Sequence
 
 import numpy as np
@@ -85,7 +86,8 @@ def gram(cols: Sequence, rows: np.ndarray) -> np.ndarray:
             g[k, dense_k] = gd
     seg.sort(key=lambda z: z[0])
     for a, (i0, i1, va, ka) in enumerate(seg):
-        for j0, j1, vb, kb in seg[a:]:
+        for b in range(a, len(seg)):  # by index: a slice seg[a:] per band copied O(bands^2)
+            j0, j1, vb, kb = seg[b]
             if j0 >= i1:
                 break
             lo, hi = max(i0, j0), min(i1, j1)
@@ -108,7 +110,9 @@ class BlockGram:
     einsum("bgpq,p,q->bg", G[:, :, cols][:, :, :, cols], th, th)."""
 
     def __init__(self, d, key: np.ndarray, blocks: np.ndarray | None = None, shared: dict | None = None):
-        self.d = d
+        # a weak reference: the design holds its statistics (``Design._stats``), so a strong one
+        # made a cycle and every drive-sized design lived until the cyclic collector ran
+        self.d = d if isinstance(d, weakref.ProxyType) else weakref.proxy(d)
         self.cols = list(d.cols)  # the columns when the statistics were taken (Design copies share the list)
         self.key = key
         self.ng = len(GROUP_NAMES)

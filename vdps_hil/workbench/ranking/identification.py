@@ -39,6 +39,7 @@ from vdps_hil.model.params import Vehicle
 from ..candidate_base import Candidate
 from ..dataset import DriveTable
 from ..innovations import Innovations
+from ..memory import release_freed_memory
 from ..residuals import EquationResiduals, RowStates, compute_residuals
 from .config import RankingConfig
 from .context import Context
@@ -95,10 +96,12 @@ def identify(table, vehicle, effects, states, inn, config, reference=None, phis=
     th, obj = d.objective(cols)
     for _ in range(config.base_iterations):
         new = apply_base(point, d, cols, th, config, ref)
+        d = d2 = None  # one design alive at a time: the next is built from the table
         step, accepted = 1.0, None
         for _h in range(3):
             nb = new if step == 1.0 else interp_base(point.base, new, step, config)
             pt = Point(nb, effects, dict(point.phis))
+            d2 = None
             _, d2, cols2 = build_design(table, states, inn, ref, pt, config, selected)
             th2, obj2 = d2.objective(cols2)
             if obj2 <= obj * 1.001 + 1e-9 or step < 0.3:
@@ -133,6 +136,7 @@ def build_design(table, states, inn, ref: Vehicle, point: Point, cfg: RankingCon
                  screen: Sequence[Candidate] = ()):
     """Design at a linearisation point: nuisance, the ten parameters, the selected effects'
     change columns (always on) and the screening columns of ``screen``."""
+    release_freed_memory()  # the previous design's freed arrays (``memory``)
     res = compute_residuals(table, point.base, point.effects, states=states)
     ctx = Context(table, point.base, point.effects, states, res, inn, cfg.velocity_fast_sigma_mps)
     d = Design(ctx, cfg)
@@ -251,7 +255,8 @@ def joint_fit(table, states, inn, ref, point: Point, selected: dict, c: Candidat
     with the ten parameters (and selected effects) re-fitted at every value (golden section in
     log phi over ``c.profile_range``); the design at the best value gives its evidence, compared
     with the current model (``obj0``, ``cv0``)."""
-    cache: dict[float, tuple] = {}
+    cache: dict[float, list] = {}
+    kept: list = []  # [the profile's best entry so far]: the only one holding its design
 
     def build(logphi: float):
         key = round(logphi, 6)
@@ -266,7 +271,11 @@ def joint_fit(table, states, inn, ref, point: Point, selected: dict, c: Candidat
         pt = Point(point.base, eff, {**point.phis, c.name: phi})
         _, d, always = build_design(table, states, inn, ref, pt, cfg, selected)
         th, obj = d.objective(always)
-        cache[key] = (obj, pt, d, always, phi)
+        if kept and obj < kept[0][0]:
+            kept[0][2] = None  # the profile keeps one design: the best so far (the first of equals)
+        cache[key] = [obj, pt, d if not kept or obj < kept[0][0] else None, always, phi]
+        if cache[key][2] is not None:
+            kept[:] = [cache[key]]
         return cache[key]
 
     def f(logphi):
@@ -290,6 +299,7 @@ def joint_fit(table, states, inn, ref, point: Point, selected: dict, c: Candidat
     best = min((v for v in cache.values() if v is not None), key=lambda v: v[0], default=None)
     if best is None:
         return None
+    assert best is kept[0], "the profile's best design was not kept"
     obj, pt, d, always, phi = best
     xd, xi = c.delta_columns(d.ctx, phi)
     d.add_block(c.name, xd, xi)

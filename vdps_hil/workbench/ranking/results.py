@@ -80,8 +80,8 @@ class Ranking:
     base_vehicle: Vehicle
     reference_vehicle: Vehicle
     effects: EffectSet
-    context: Context = field(repr=False, default=None)
-    design: Design = field(repr=False, default=None)
+    context: Context = field(repr=False, default=None)  # set while the entries are described; None once
+    design: Design = field(repr=False, default=None)    # ``rank`` returns (drive-sized: freed there)
     candidates: dict = field(repr=False, default_factory=dict)
     thetas: dict = field(repr=False, default_factory=dict)
 

@@ -138,6 +138,7 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     _forward_selection(s, ev)
     rk = _result(s, ev)
     rk.messages = coverage_messages(table, states.index) + rk.messages
+    rk.design = rk.context = None  # the drive-sized design is not read after the ranking: freed here
     return rk
 
 
@@ -207,7 +208,11 @@ def _forward_selection(s: _Search, ev: _Excitation) -> None:
                 continue
             ok, ef, j = judged
             if ok and (best is None or ef > best[1]):
+                if best is not None:
+                    best[2].design = None
                 best = (name, ef, j)
+            else:
+                j.design = None  # only a selected candidate's design is read again (``_selected_entry``)
         if best is None:
             break
         name, ef, j = best
