@@ -207,11 +207,9 @@ def _forward_selection(s: _Search, ev: _Excitation) -> None:
             if judged is None:
                 continue
             ok, ef, j = judged
-            if ok and (best is None or ef > best[1]):
-                if best is not None:
-                    best[2].design = None
-                best = (name, ef, j)
-            else:
+            if ok and (best is None or ef > best[1]):  # the design freed is the one no longer the best
+                best, j = (name, ef, j), (None if best is None else best[2])
+            if j is not None:
                 j.design = None  # only a selected candidate's design is read again (``_selected_entry``)
         if best is None:
             break
