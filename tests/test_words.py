@@ -60,3 +60,16 @@ def test_an_implausible_parameter_is_never_called_identified():
     assert "the model keeps 331 kg m^2" in head  # the lower bound, 0.2 x the model file's 1655
     ok = W.describe_entry(_rk(), _param_entry(1800.0, True))
     assert ok.startswith("yaw inertia: identified 1800") and "NOT" not in ok
+
+
+def test_undetermined_parameters_are_said_to_be_undetermined():
+    """A fit whose sigma is not below its value is no identified number: alone it is 'not
+    determined', two or more such (a collinear front/rear pair, as on CommonRoad's set-3 circle:
+    1.71e+04 +- 7.2e+08 each) 'cannot be told apart'; determined ones are printed plainly."""
+    pair = {"anti_roll_stiffness_front_nmprad": (1.71e4, 7.2e8), "anti_roll_stiffness_rear_nmprad": (1.71e4, 7.2e8)}
+    text = W._generic_words(pair)
+    assert "cannot be told apart on this drive" in text and "only a combination" in text
+    one = W._generic_words({"a": (2.0, 0.1), "b": (0.5, 3.0)})
+    assert one.count("not determined on this drive") == 1 and one.index("not determined") > one.index("b = ")
+    assert "not determined" not in W._generic_words({"a": (2.0, 0.1)})
+    assert "cannot be told apart" not in W._generic_words({"a": (2.0, 0.1), "b": (3.0, 0.5)})

@@ -213,8 +213,22 @@ def _effect_words(rk, e) -> str:
         xs = [_pv(e, f"lever_{a}_m") for a in "xyz"]
         return ("the IMU sits at (" + ", ".join(f"{v:+.2f}+-{s:.2f}" for v, s in xs)
                 + ") m from the CG, so its accelerometers see the body's rotation")
-    parts = [f"{k} = {v:.4g} +- {s:.2g}" for k, (v, s) in e.parameters.items()]
-    return ", ".join(parts) if parts else "fitted"
+    return _generic_words(e.parameters)
+
+
+def _generic_words(parameters) -> str:
+    """``name = v +- s`` per parameter; a parameter whose sigma is not below its size is said to
+    be undetermined, and two or more such say that only a combination of them is (a collinear
+    pair such as an axle's front and rear anti-roll stiffness: on CommonRoad's set-3 circle
+    1.71e+04 +- 7.2e+08 each, printed as if identified)."""
+    loose = [k for k, (v, s) in parameters.items() if not abs(v) > s]
+    parts = [f"{k} = {v:.4g} +- {s:.2g}" + (" (not determined on this drive)" if k in loose and len(loose) == 1 else "")
+             for k, (v, s) in parameters.items()]
+    text = ", ".join(parts) if parts else "fitted"
+    if len(loose) >= 2:
+        text += (f" ({' and '.join(loose)} cannot be told apart on this drive: each sigma exceeds its value, only a "
+                 "combination of them is determined)")
+    return text
 
 
 def _saturation_angle_deg(rk, mu: float, drop: float = 0.05) -> float:
