@@ -55,3 +55,10 @@ def test_lever_arm_rates_come_from_the_gyro_the_suspension_or_nowhere():
     w = lever_arm_rates(gyro, (-0.1, 0.1, 0.1, -0.1), geo, imu_missing=True, lifted=False)
     t = 2.0 * geo.track_half_front_m + 2.0 * geo.track_half_rear_m
     assert w[0] == pytest.approx(0.4 / t, rel=1e-12) and w[1] == 0.0 and w[2] == 0.3
+
+
+def test_without_suspension_rates_the_held_gyro_rates_stay():
+    """A car without suspension sensors (the alpha-beta rates NaN) keeps the held gyro's roll and
+    pitch rates for the lever arm during an outage, as before the suspension substitute."""
+    w = lever_arm_rates((0.1, 0.2, 0.3), (math.nan,) * 4, SUV.geometry, imu_missing=True, lifted=False)
+    assert w == [0.1, 0.2, 0.3]

@@ -21,8 +21,9 @@ the GNSS. Without an IMU (an outage) the pipeline takes the roll and pitch rates
 antenna's lever arm (omega x r of ``gnss_vel``) from the suspension rates
 (``measurements.suspension_body_rates``); with a wheel off the road as well those rates are
 unknown (a tip-up rolls at up to 2-3 rad/s, 2 m/s at a 0.85 m antenna height), so the GNSS
-velocity update is not made either (counted as ``gnss_vel_no_rates``). ``load_fraction`` (0.1) leaves a margin for the spring law's error in the model file and
-the rate's lag (a physical choice, not fitted: at 0 the wheel has already left the road).
+velocity update is not made either (counted as ``gnss_vel_no_rates``). ``load_fraction`` (0.1)
+leaves a margin for the spring law's error in the model file and the rate's lag (a physical
+choice, not fitted: at 0 the wheel has already left the road).
 
 Symbols: H [m] (compression positive), Hd [m/s], F [N].
 """
@@ -40,7 +41,8 @@ __all__ = ["LiftOffDetector", "lever_arm_rates"]
 def lever_arm_rates(gyro_radps, susp_rate_mps, geometry, imu_missing: bool, lifted: bool) -> list | None:
     """Body rates [rad/s] for the GNSS antenna's lever arm (omega x r): the gyro's (alpha-beta)
     ``gyro_radps``; while the IMU is missing, roll and pitch rates from the suspension rates
-    (``measurements.suspension_body_rates``) and the held yaw rate; None while the IMU is missing
+    (``measurements.suspension_body_rates``; the held ones where those are not finite, e.g. a car
+    without suspension sensors) and the held yaw rate; None while the IMU is missing
     and a wheel is off the road (``lifted``: the rates are unknown; module docstring)."""
     w = list(gyro_radps)
     if not imu_missing:
@@ -48,7 +50,9 @@ def lever_arm_rates(gyro_radps, susp_rate_mps, geometry, imu_missing: bool, lift
     if lifted:
         return None
     g = geometry
-    w[:2] = suspension_body_rates(susp_rate_mps, g.l_f_m, g.l_r_m, g.track_half_front_m, g.track_half_rear_m)
+    rates = suspension_body_rates(susp_rate_mps, g.l_f_m, g.l_r_m, g.track_half_front_m, g.track_half_rear_m)
+    if all(math.isfinite(r) for r in rates):  # a car without suspension sensors keeps the held gyro rates
+        w[:2] = rates
     return w
 
 
