@@ -134,8 +134,10 @@ def _job_key(job: dict) -> str:
                        job.get("add")])
 
 
-def _load_runs(path: str) -> dict[str, dict]:
-    """Finished runs of an earlier call (a torn last line, from a stopped run, is ignored)."""
+def _load_runs(path: str, key=None) -> dict[str, dict]:
+    """Finished runs of an earlier call by ``key(run)`` (default ``_job_key``; a torn last line,
+    from a stopped run, is ignored)."""
+    key = key or _job_key
     out: dict[str, dict] = {}
     if not os.path.exists(path):
         return out
@@ -145,7 +147,7 @@ def _load_runs(path: str) -> dict[str, dict]:
                 r = json.loads(line)
             except ValueError:
                 continue
-            out[_job_key(r)] = r
+            out[key(r)] = r
     return out
 
 

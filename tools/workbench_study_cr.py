@@ -38,6 +38,8 @@ from vdps_hil.experiments.workbench_study import run_job, wilson_interval  # noq
 from vdps_hil.model.effects.base import MeasurementEffect  # noqa: E402
 from vdps_hil.model.effects.registry import REGISTRY  # noqa: E402
 
+from workbench_study import _load_runs  # noqa: E402  (tools/ is this script's sys.path[0])
+
 SENSOR_EFFECTS = tuple(n for n in REGISTRY.names() if issubclass(REGISTRY[n], MeasurementEffect))
 INJECTED = {"imu_bias": ("shipped:cr-sine-accel", "imu_bias"),
             "imu_lever_arm": ("shipped:cr-lane-change", "imu_lever_arm:lever_x_m=0.5")}
@@ -94,15 +96,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     jobs = [j for seed in range(a.first_seed, a.first_seed + a.seeds) for s in a.sets for j in jobs_for(s, seed)]
-    done: dict[str, dict] = {}
-    if a.runs and os.path.exists(a.runs):
-        with open(a.runs) as fh:
-            for line in fh:
-                try:
-                    r = json.loads(line)
-                except ValueError:
-                    continue
-                done[_key(r)] = r
+    done = _load_runs(a.runs, _key) if a.runs else {}
     runs = [done[_key(j)] for j in jobs if _key(j) in done]
     todo = [j for j in jobs if _key(j) not in done]
     t0 = time.perf_counter()
