@@ -43,6 +43,7 @@ import numpy as np
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
 from vdps_hil.estimation.estimates import Estimate
 from vdps_hil.experiments.scoring import evaluate_warning_frames, truth_at
+from vdps_hil.experiments.workbench_study import model_file
 from vdps_hil.geodesy import DEFAULT_ORIGIN
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
@@ -84,7 +85,7 @@ def run_one(scenario: str, spec: str, t_f: float, absent_s: float, seed: int, tr
     if truth is None:
         model_name, dur = SCENARIOS[scenario]
     else:  # CommonRoad's multibody truth: its own vehicle, the matching model file
-        model_name, dur = f"cr{truth.rsplit(':', 1)[1]}-model", CR_SCENARIOS[scenario]
+        model_name, dur = model_file(truth), CR_SCENARIOS[scenario]
     prof = load_profile("table1-susp1k")
     full = f"{spec},t_s={t_f:g}"
     buf = io.BytesIO()

@@ -36,6 +36,7 @@ STATUS = {0: "valid", 1: "not converged", 2: "sensor missing", 3: "fault"}
 def run_drive(job: tuple[str, int, int]) -> dict:
     """One drive through the default chain: frames by (level, status), problem statuses."""
     from vdps_hil.codecs.can_decode import VdpsCanDecoder
+    from vdps_hil.experiments.workbench_study import model_file
     from vdps_hil.geodesy import DEFAULT_ORIGIN
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
@@ -47,9 +48,10 @@ def run_drive(job: tuple[str, int, int]) -> dict:
     scenario, set_id, seed = job
     t0 = time.process_time()
     buf = io.BytesIO()
-    Drive(scenario, profile="table1-susp1k", seed=seed, truth=f"commonroad-mb:{set_id}").run(buf)
+    truth = f"commonroad-mb:{set_id}"
+    Drive(scenario, profile="table1-susp1k", seed=seed, truth=truth).run(buf)
     buf.seek(0)
-    system = VdpsSystem(load_vehicle(f"cr{set_id}-model", "model"), SystemConfig.for_profile(1000.0, 0.001),
+    system = VdpsSystem(load_vehicle(model_file(truth), "model"), SystemConfig.for_profile(1000.0, 0.001),
                         origin=DEFAULT_ORIGIN)
     dec, frames = VdpsCanDecoder(), collections.Counter()
     for s in decode_recording(RecordingReader(buf)):  # /raw/ topics only, as vdps replay
