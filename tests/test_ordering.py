@@ -24,3 +24,13 @@ def test_one_selected_effect_needs_no_figure():
     # with fewer than two selected effects nothing is refitted (the arguments are never touched)
     assert unique_contributions(None, None, None, None, None, None, {"crosswind": object()}, None) == {}
     assert unique_contributions(None, None, None, None, None, None, {}, None) == {}
+
+
+def test_sensor_effects_lead_then_each_part_by_unique_contribution():
+    # a lever arm's U is a share of the innovations, an anti-roll stiffness's a share of the
+    # force balance: not comparable, and the sensor is corrected before the model is judged
+    order = order_selected(["roll_stiffness", "imu_lever_arm"], {"roll_stiffness": 0.16, "imu_lever_arm": -0.14},
+                           sensors={"imu_lever_arm"})
+    assert order == ["imu_lever_arm", "roll_stiffness"]
+    assert order_selected(["a", "s1", "b", "s2"], {"a": 0.1, "b": 0.5, "s1": 0.2, "s2": 0.3}, sensors=("s1", "s2")) == \
+        ["s2", "s1", "b", "a"]

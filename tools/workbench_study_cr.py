@@ -94,8 +94,14 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--runs", default=None, help="JSON-lines file of finished runs: append, skip what is there")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--kinds", nargs="+", default=["saturation", "null", "injected"],
+                    choices=["saturation", "null", "injected"], help="which runs of each seed (default all)")
+    ap.add_argument("--cache", default=None, help="directory of simulated drives: kept and reused, so a re-run "
+                    "after a workbench change diagnoses the same files")
     a = ap.parse_args(argv)
-    jobs = [j for seed in range(a.first_seed, a.first_seed + a.seeds) for s in a.sets for j in jobs_for(s, seed)]
+    jobs = [dict(j, **({"cache": a.cache} if a.cache else {}))
+            for seed in range(a.first_seed, a.first_seed + a.seeds) for s in a.sets for j in jobs_for(s, seed)
+            if j["kind"] in a.kinds]
     done = _load_runs(a.runs, _key) if a.runs else {}
     runs = [done[_key(j)] for j in jobs if _key(j) in done]
     todo = [j for j in jobs if _key(j) not in done]

@@ -24,12 +24,22 @@ of the held-out innovations and 0.015 of all rows, the truth's tire saturation 0
 The selected effects are ordered by U_e, largest first; the first is the recommendation. With
 one selected effect nothing changes. No threshold is involved: the set of selected effects is
 the forward selection's, only their order is decided here.
+
+Sensor effects come first, among themselves by U_e. Every residual the workbench judges the
+model on is computed from the sensors' readings, so an error of the sensors (a lever arm, a bias)
+is what an engineer corrects before trusting any comparison of the model with the drive; and its
+U_e is a share of the innovations while a dynamics effect's is a share of the force balance, two
+figures on different rows that say nothing about which is larger. Measured on CommonRoad set 1
+and 3 lane changes with a 0.5 m IMU lever arm injected (tuning seeds 100-101): the lever arm and
+an anti-roll stiffness were both selected, the anti-roll stiffness first by U_e (0.11-0.16 of the
+balance rows against the lever arm's -0.04 to -0.14 of the innovations in the joint design,
+where its own innovation fit takes 37 % off the velocity innovations).
 """
 
 from __future__ import annotations
 
 import os
-from typing import Mapping
+from typing import Collection, Mapping
 
 import numpy as np
 
@@ -63,9 +73,9 @@ def unique_contributions(table, states, inn, reference, point: Point, cfg, selec
     return out
 
 
-def order_selected(selected_order: list[str], unique: Mapping[str, float]) -> list[str]:
-    """The selected effects by decreasing unique contribution (ties and effects without a figure
-    keep their selection order)."""
-    if not unique:
-        return list(selected_order)
-    return sorted(selected_order, key=lambda n: (-unique.get(n, float("-inf")), selected_order.index(n)))
+def order_selected(selected_order: list[str], unique: Mapping[str, float],
+                   sensors: Collection[str] = ()) -> list[str]:
+    """The selected effects, those named in ``sensors`` first, each part by decreasing unique
+    contribution (ties and effects without a figure keep their selection order)."""
+    return sorted(selected_order, key=lambda n: (n not in sensors, -unique.get(n, float("-inf")),
+                                                 selected_order.index(n)))

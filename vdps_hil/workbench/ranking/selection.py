@@ -295,8 +295,9 @@ def _judge(s: _Search, ev: _Excitation, name: str, theta) -> tuple[bool, float, 
     if j.sensor is not None:  # fitted on its innovations: BIC of their held-out SSE (``sensor_fit``)
         st["dbic_innovations"] = dbic_inn = j.sensor.held_out_dbic()
         evidence = evidence or dbic_inn < -cfg.bic_margin
-        if dbic_inn < -cfg.bic_margin:  # its own rows are the innovations it was fitted on
-            ef_own = st["ef_own"] = 1.0 - j.sensor.cv_with.sum() / max(j.sensor.cv_without.sum(), 1e-300)
+        if dbic_inn < -cfg.bic_margin:  # its own rows are the innovations it was fitted on, where
+            ef_own = st["ef_own"] = j.sensor.own_fraction()  # its parameters were paid for
+            dbic = st["dbic"] = dbic - len(j.phi) * math.log(s.n_eff)
     if os.environ.get("VDPS_WB_DEBUG"):
         print(f"[ranking] {name}: ef_dyn {ef_dyn:.3f} balance_only {balance_only} evidence {evidence} "
               f"base_equiv {ev.base_equiv.get(name, 0.0):.3f}")
@@ -365,7 +366,7 @@ def _result(s: _Search, ev: _Excitation) -> Ranking:
             entry, thetas[name] = _candidate_entry(s, ev, name, c, s2, sse_fin)
             entries.append(entry)
     unique = unique_contributions(s.table, s.states, s.inn, s.vehicle, point, cfg, s.selected, s.cv_cur)
-    order = order_selected(list(s.selected), unique)
+    order = order_selected(list(s.selected), unique, [n for n, c in s.selected.items() if c.family == "measurement"])
     for e in entries:
         e.unique_fraction = unique.get(e.effect, math.nan)
     entries.sort(key=lambda e: (order.index(e.effect) if e.effect in order else len(order),
