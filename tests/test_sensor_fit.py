@@ -116,8 +116,14 @@ def test_the_innovation_bic_gives_each_kind_its_own_variance():
     assert sf.held_out_dbic() < -RankingConfig().bic_margin
     pooled = 432 * math.log((188.1 + 31.9 + 146.9) / (188.1 + 50.5 + 147.0)) + 3 * math.log(432)
     assert pooled > -RankingConfig().bic_margin
-    # its share is read on the kinds it reaches (velocity and position), not on the attitude
-    assert sf.own_fraction() == pytest.approx(1 - (31.9 + 146.9) / (50.5 + 147.0), rel=1e-12)
+    # its share is read on the kinds it reaches (velocity and position), each with its variance:
+    # Cox-Snell R^2 = 1 - exp((108 ln(31.9/50.5) + 162 ln(146.9/147.0)) / 270) = 0.17, where the
+    # pooled ratio over the two (0.095) lets the unchanged position rows dilute it
+    cs = 1 - math.exp((108 * math.log(31.9 / 50.5) + 162 * math.log(146.9 / 147.0)) / 270)
+    assert sf.own_fraction() == pytest.approx(cs, rel=1e-12)
+    assert 0.16 < sf.own_fraction() < 0.18
+    one = _fit([100.0, 40.0, 100.0], [100.0, 30.0, 100.0], [0, 108, 0])  # one group: the plain ratio
+    assert one.own_fraction() == pytest.approx(0.25, rel=1e-12)
 
 
 def test_a_candidate_that_worsens_a_kind_is_charged_for_it():

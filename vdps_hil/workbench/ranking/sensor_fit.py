@@ -27,7 +27,7 @@ end at different levels (a CommonRoad lane change: whitened held-out SSE per row
 the position) scored 4 % of the pooled sum and failed its BIC; with a variance per kind, the
 log-likelihood ratio is the sum of m_g ln(SSE_with,g / SSE_without,g) (each variance profiled
 out). The share it explains (:meth:`SensorFit.own_fraction`) is read on the kinds its columns
-reach.
+reach, in the same model (Cox-Snell R^2).
 
 Sigmas: sqrt(diag((A^T A)^-1) s^2) with s^2 the residual variance of the whitened rows, in the
 candidate's units.
@@ -84,9 +84,21 @@ class SensorFit:
         return ll + len(self.phi) * math.log(m)
 
     def own_fraction(self) -> float:
-        """1 - SSE_cv,with / SSE_cv,without over the innovation groups its columns reach."""
-        g = self.reaches if self.reaches is not None and self.reaches.any() else slice(None)
-        return 1.0 - float(self.cv_with[g].sum()) / max(float(self.cv_without[g].sum()), 1e-300)
+        """The share of the held-out innovations it explains on the groups its columns reach, in the
+        same per-group-variance model as :meth:`held_out_dbic` (Cox and Snell's R^2,
+        1 - (L_without / L_with)^(2/n)): 1 - exp(sum_g m_g ln(SSE_with,g / SSE_without,g) / sum_g m_g).
+        With one group it is 1 - SSE_with / SSE_without; a large group it leaves unchanged does
+        not dilute it the way a pooled ratio would."""
+        counts = self.group_rows
+        reach = self.reaches if self.reaches is not None and self.reaches.any() else None
+        if counts is None or reach is None:
+            return 1.0 - float(self.cv_with.sum()) / max(float(self.cv_without.sum()), 1e-300)
+        groups = np.flatnonzero(reach & (counts > 0))
+        n = float(counts[groups].sum())
+        if n <= 0 or np.any(self.cv_without[groups] <= 0.0) or np.any(self.cv_with[groups] <= 0.0):
+            return 0.0
+        ll = sum(counts[g] * math.log(self.cv_with[g] / self.cv_without[g]) for g in groups)
+        return 1.0 - math.exp(ll / n)
 
 
 def _innovation_columns(d, cols: Sequence[int]) -> tuple[list[int], np.ndarray]:
