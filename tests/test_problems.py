@@ -213,3 +213,19 @@ def test_the_load_gate_refuses_a_wheel_away_from_its_static_load_and_counts_it(r
     fz = suspension_forces_n(MODEL, tuple(h), (0.0,) * 4)
     assert fz[0] / fz0[0] - 1.0 < -0.1
     assert reg.rows.tolist() == [False, True, True, True] and reg.row_gates == {"load transfer": 1}
+
+
+def test_the_tracking_regressor_carries_the_load_transfer_term(rng):
+    # a load-proportional tire (Magic Formula K_x = p_kx1 F_z) puts A_ii C_i (F_z,i / F_z0,i - 1)
+    # more into b_i: exactly what b holds when the wheel's force is C_i F_z,i / F_z0,i lambda_i
+    from vdps_hil.identification.problems import load_ratio, tracking_regressor
+    from vdps_hil.model.spring_law import suspension_forces_n
+    h = np.array([-0.02, 0.01, 0.015, -0.005])
+    inp = forward(rng, 0, h=h, hd=np.zeros(4), slip=np.array([0.02, -0.01, 0.03, 0.015]), speed=20.0)
+    ratio = suspension_forces_n(MODEL, tuple(h), (0.0,) * 4) / suspension_forces_n(MODEL, (0.0,) * 4, (0.0,) * 4)
+    assert np.allclose(load_ratio(inp, MODEL), ratio, rtol=1e-12)
+    reg = tracking_regressor(inp, MODEL, load_ident_config(), TRUE)
+    c = np.array(TRUE.tracking_stiffness_n)
+    b_load = reg.b + np.diag(reg.a) * c * (ratio - 1.0)  # the same wheels with the load-scaled tire
+    assert np.allclose(b_load - np.diag(reg.a) * c, reg.structure, rtol=1e-9, atol=1e-9)
+    assert np.all(np.abs(reg.structure) > 0.0)

@@ -178,8 +178,13 @@ def mass_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
     return Regressor(a, b, _gate(a, cfg.mass.excitation_min), structure=structure)
 
 
-def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig) -> Regressor:
-    """Eq 21: A = diag(-r lambda_i), b_i = I_w wd_i - T_i, with the load gate (``load_gate``)."""
+def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
+                       params: IdentifiedParams | None = None) -> Regressor:
+    """Eq 21: A = diag(-r lambda_i), b_i = I_w wd_i - T_i, with the optional load gate
+    (``[tracking] load_band``: rows with |F_z,i / F_z0,i - 1| above it are refused, counted as
+    "load transfer"). ``structure`` (the load-transfer term, ``load_ratio``): a tire whose slope
+    grows with its load, C_lambda,i F_z,i / F_z0,i, puts A_ii C_lambda,i (F_z,i / F_z0,i - 1) more
+    into b_i; C_lambda,i the current estimate in ``params`` (default the prior)."""
     r, iw = vehicle.tire.rolling_radius_m, vehicle.tire.wheel_inertia_kgm2
     lam = np.asarray(inp.slip_ratio)
     a = np.diag(-r * lam)
@@ -188,28 +193,34 @@ def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig) -> 
         moving = ((abs(inp.xd_a_mps) >= cfg.min_speed_mps)
                   & (r * np.asarray(inp.wheel_speed_radps) >= cfg.min_speed_mps))
     rows = _gate(a, cfg.tracking.excitation_min, moving)
-    off = load_gate(inp, vehicle, cfg.tracking.load_band)
+    dev = load_ratio(inp, vehicle) - 1.0
+    structure = -r * lam * np.array((params or vehicle.params).tracking_stiffness_n) * dev
+    band = cfg.tracking.load_band
+    with np.errstate(invalid="ignore"):
+        off = np.abs(dev) > band if math.isfinite(band) else np.zeros(4, dtype=bool)
     refused = int(np.count_nonzero(rows & off))
-    return Regressor(a, b, rows & ~off, row_gates={"load transfer": refused} if refused else None)
+    return Regressor(a, b, rows & ~off, structure=structure,
+                     row_gates={"load transfer": refused} if refused else None)
 
 
-def load_gate(inp: IdentInputs, vehicle: Vehicle, band: float) -> np.ndarray:
-    """The tracking rows eq 21 cannot use: |F_z,i / F_z0,i - 1| > ``band`` (per wheel; False where
-    the load is not finite, so the NaN guard counts those). F_z,i = K_s H + D_s Hd + m_u g, the
-    eq 14 normal load from the estimated deflections (``model.spring_law``), F_z0,i its value at
-    the design ride height (the static load). Why: a tire's slip stiffness grows with its load
+def load_ratio(inp: IdentInputs, vehicle: Vehicle) -> np.ndarray:
+    """F_z,i / F_z0,i per wheel: F_z,i = K_s H + D_s Hd + m_u g, the eq 14 normal load from the
+    estimated deflections (``model.spring_law``), F_z0,i its value at the design ride height (the
+    static load); NaN where not finite.
+
+    Why it matters to eq 21 (issue 17, ident session): a tire's slip stiffness grows with its load
     (the Magic Formula's K_x = p_kx1 F_z, linear in it), so C_lambda,i is a figure at one load, the
     static one, while a wheel is excited exactly when it drives or brakes, i.e. under load
-    transfer of one sign: on a CommonRoad sine with in-phase acceleration the driven front wheel
-    of set 1 carried 0.75 of its static load on the rows it was excited on, its estimate came out
-    -42 % (the truth's F_x against kappa: -42 %; the pure-slip Magic Formula at those loads:
-    -41 %; combined slip and the estimated slip ratio: 1-3 %) (issue 17, ident session)."""
-    if not math.isfinite(band):
-        return np.zeros(4, dtype=bool)
+    transfer of one sign. On a CommonRoad sine with in-phase acceleration (set 1, tuning seed 101)
+    the driven front-left wheel carried 0.75 of its static load on the rows it was excited on and
+    its estimate came out -42 %: the truth's F_x against kappa -42 %, the pure-slip Magic Formula at
+    those loads -41 %; combined slip and the estimated slip ratio add 1-3 %. The model cannot tell
+    whether a car's tire scales so (ours, a linear tire, does not), so the term is reported in the
+    sigma (``identifier._structure_bias``); ``load_band`` would refuse the rows instead."""
     fz = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps)
     fz0 = suspension_forces_n(vehicle, (0.0,) * 4, (0.0,) * 4)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.abs(fz / fz0 - 1.0) > band
+        return fz / fz0
 
 
 def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams,
@@ -346,7 +357,7 @@ RegressorBuilder = Callable[[IdentInputs, Vehicle, IdentifiedParams, IdentConfig
 
 REGRESSORS: dict[str, RegressorBuilder] = {
     "mass": lambda inp, v, p, c: mass_regressor(inp, v, c, p),
-    "tracking": lambda inp, v, p, c: tracking_regressor(inp, v, c),
+    "tracking": lambda inp, v, p, c: tracking_regressor(inp, v, c, p),
     "cornering": cornering_regressor,
     "inertia": inertia_regressor,
 }
