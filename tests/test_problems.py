@@ -229,3 +229,18 @@ def test_the_tracking_regressor_carries_the_load_transfer_term(rng):
     b_load = reg.b + np.diag(reg.a) * c * (ratio - 1.0)  # the same wheels with the load-scaled tire
     assert np.allclose(b_load - np.diag(reg.a) * c, reg.structure, rtol=1e-9, atol=1e-9)
     assert np.all(np.abs(reg.structure) > 0.0)
+
+
+def test_the_roll_row_carries_the_normal_load_tilt_as_its_structure_term(rng):
+    # the measured moment form's r n_b,y sum F_z (the normal loads over a body rolled on its
+    # suspension): the term a roll-axis-joint model (CommonRoad's) does not have
+    from vdps_hil.identification.forces import road_normal_body
+    from vdps_hil.model.spring_law import suspension_forces_n
+    inp = forward(rng, 0)
+    assert inertia_regressor(inp, MODEL, TRUE, load_ident_config()).structure is None  # no f_b, no angles
+    inp = dataclasses.replace(inp, specific_force_b_mps2=(0.5, 4.0, 9.7), vehicle_angles_rad=(0.05, -0.01))
+    reg = inertia_regressor(inp, MODEL, TRUE, load_ident_config())
+    fz = float(np.sum(suspension_forces_n(MODEL, inp.susp_deflection_m, inp.susp_rate_mps)))
+    tilt = MODEL.tire.rolling_radius_m * road_normal_body(0.05, -0.01)[1] * fz
+    assert reg.structure[0] == pytest.approx(tilt, rel=1e-12) and abs(tilt) > 0.01 * MODEL.params.mass_kg * G * 0.344
+    assert reg.structure[1] == reg.structure[2] == 0.0

@@ -128,7 +128,8 @@ from typing import Callable
 import numpy as np
 
 from vdps_hil.identification.config import IdentConfig
-from vdps_hil.identification.forces import moments_from_inputs, slip_angles_rad, unsprung_inertia_moments_nm
+from vdps_hil.identification.forces import (moments_from_inputs, road_normal_body, slip_angles_rad,
+                                            unsprung_inertia_moments_nm)
 from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.identification.inputs import IdentInputs
 from vdps_hil.model.params import IdentifiedParams, Vehicle
@@ -318,7 +319,16 @@ def lateral_gate(inp: IdentInputs, slip_angle_rad, lateral_accel_mps2: float, pc
 
 def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams,
                       cfg: IdentConfig) -> Regressor:
-    """Eq 23 (A as printed, b_4 = [M_x, M_y, M_z]) with the moments of ``moments_from_inputs``."""
+    """Eq 23 (A as printed, b_4 = [M_x, M_y, M_z]) with the moments of ``moments_from_inputs``.
+
+    ``structure`` (``"measured"`` form): the roll row's normal-load tilt r n_b,y sum_i F_z,i, the
+    body-y share of the normal loads over a body rolled on its suspension, which reaches the body
+    in the physics core (its wheels slide along the body z axis) but not in a model whose
+    unsprung bodies roll on their own and pass the lateral force through a roll-axis joint
+    (CommonRoad's multibody). The model file cannot say which a car is: on the CommonRoad sine
+    of tuning seed 101 (set 1) dropping the term moved I_x from +28 % to -11 % (issue 17, ident
+    session), so its least-squares bias is reported in the sigma (``identifier``). The pitch
+    row's r n_b,x sum F_z is not charged: I_y was covered on every drive it was identified on."""
     wx, wy, wz = inp.omega_radps
     dx, dy, dz = inp.omega_dot_radps2
     a = np.array([[dx, -wy * wz, wy * wz],
@@ -329,7 +339,13 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
     if (cfg.moment_form == "measured" and inp.specific_force_b_mps2 is not None
             and inp.vehicle_angles_rad is not None):
         db[:2, :] = 0.0  # M_x, M_y no longer use the tire stiffnesses
-    return Regressor(a, b, _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps), db)
+        fz = float(np.sum(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps)))
+        tilt = vehicle.tire.rolling_radius_m * road_normal_body(*inp.vehicle_angles_rad)[1] * fz
+        structure = np.array([tilt, 0.0, 0.0])
+    else:
+        structure = None
+    rows = _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps)
+    return Regressor(a, b, rows, db, structure=structure)
 
 
 def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
