@@ -64,7 +64,8 @@ def forward(rng, k, true=TRUE, ackermann=True, pitch_scale=1.0, **override):
         k_s = ax.spring_c1_npm * math.exp(ax.spring_c2_per_m * (hs - ax.spring_c3_m))
         fz_body[i] = k_s * hs + ax.damper_nspm * hd[i]
         fz_total[i] = fz_body[i] + ax.unsprung_mass_kg * G
-    zdd = fz_total.sum() / m + g_aux[2]
+    # the struts carry the sprung mass (the physics core, eq 20's "sprung" form): m_s (zdd - G_z) = sum F_s
+    zdd = fz_body.sum() / (m - MODEL.unsprung_mass_total_kg) + g_aux[2]
     moment = np.zeros(3)
     a_minus_g = np.array([f_body[:, 0].sum() / m, f_body[:, 1].sum() / m, 0.0])  # horizontal
     for i, ((x, y), fb, fz) in enumerate(zip(geo.corner_xy_m(), f_body, fz_body)):

@@ -50,3 +50,12 @@ def test_moment_form_config_key_is_optional_and_checked():
     assert parse_ident_config(text.replace('moment_form = "measured"', "")).moment_form == "stiffness"
     with pytest.raises(IdentConfigError, match="moment_form"):
         parse_ident_config(text.replace('moment_form = "measured"', 'moment_form = "nope"'))
+
+
+def test_load_band_is_a_tracking_key_off_by_default():
+    text = DEFAULT_CONFIG_PATH.read_text()
+    assert load_ident_config().tracking.load_band == float("inf")
+    cfg = parse_ident_config(text.replace("# load_band = inf", "load_band = 0.1"))
+    assert cfg.tracking.load_band == 0.1
+    with pytest.raises(IdentConfigError, match="applies to \\[tracking\\] only"):
+        parse_ident_config(text.replace("[mass]                           # eq 20", "[mass]\nload_band = 0.1\n# eq 20"))

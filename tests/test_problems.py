@@ -3,6 +3,7 @@ sensitivities, all four equations and the moments against the physics core, and 
 weighting of Table 3 (synthetic inputs: ``ident_forward``)."""
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -101,7 +102,7 @@ def test_moments_and_all_four_equations_agree_with_the_physics_core(rng):
             x = np.array([getattr(TRUE, n) for n in PROBLEM_PARAMS[name]])
             assert np.allclose(reg.a @ x, reg.b, rtol=1e-10, atol=1e-8), name
         # eq 20 as printed books m_u g where the core's unsprung masses weigh m_u (zdd_a - G_z)
-        paper = REGRESSORS["mass"](inp, veh, TRUE, load_ident_config())
+        paper = REGRESSORS["mass"](inp, veh, TRUE, dataclasses.replace(load_ident_config(), mass_form="paper"))
         a = inp.zdd_a_mps2 - inp.gravity_aux_mps2[2]
         assert paper.a[0, 0] * TRUE.mass_kg - paper.b[0] == pytest.approx(
             veh.unsprung_mass_total_kg * (a - G), rel=1e-6, abs=1e-6)
@@ -154,3 +155,92 @@ def test_table3_convergence_time_grows_as_the_weighting_shrinks(rng):
         assert np.all(np.diff(finite) > 0), times[:, j]  # slower for smaller q
     assert np.all(np.isfinite(times[0])) and np.all(np.isinf(times[-1]))
     assert np.all(np.diff(lams) < 0)  # min eigenvalue falls with q, as Table 3
+
+
+# ------------------------------------------------------- issue 17: mass form, strut axis, load gate
+def test_the_shipped_mass_form_is_unbiased_when_the_rolled_body_brings_a_below_g():
+    # a corner: the body rolls by phi outwards, so the specific force along the struts is
+    # f_z = g cos(phi) - a_y sin(phi) < g; the struts carry m_s f_z (CommonRoad's multibody exactly)
+    from vdps_hil.identification.problems import mass_regressor
+    veh = MODEL
+    phi, a_y = 0.1, 7.5
+    f_z = G * math.cos(phi) - a_y * math.sin(phi)
+    m_u = veh.unsprung_mass_total_kg
+    m_s = TRUE.mass_kg - m_u
+    h = _deflection_for_strut_sum(veh, m_s * f_z)
+    inp = forward(np.random.default_rng(3), 0, h=h, hd=np.zeros(4))
+    inp = dataclasses.replace(inp, zdd_a_mps2=f_z + inp.gravity_aux_mps2[2])
+    cfg = load_ident_config()
+    assert cfg.mass_form == "sprung"
+    reg = mass_regressor(inp, veh, cfg)
+    assert reg.b[0] / reg.a[0, 0] == pytest.approx(TRUE.mass_kg, rel=1e-9)
+    paper = mass_regressor(inp, veh, dataclasses.replace(cfg, mass_form="paper"))
+    # eq 20 as printed: m_tot + m_u (g - f_z) / f_z, +0.8 % here (CommonRoad's circle: +0.37 %)
+    assert paper.b[0] / paper.a[0, 0] - TRUE.mass_kg == pytest.approx(m_u * (G - f_z) / f_z, rel=1e-6)
+
+
+def _deflection_for_strut_sum(veh, total_n):
+    """Equal deflections whose strut forces (K_s (static + H), no damping) sum to total_n."""
+    from vdps_hil.model.spring_law import suspension_forces_n
+    from scipy.optimize import brentq
+    return np.full(4, brentq(lambda x: float(np.sum(suspension_forces_n(veh, (x,) * 4, (0.0,) * 4,
+                                                                        include_unsprung_weight=False))) - total_n,
+                             -0.2, 0.2, xtol=1e-14))
+
+
+def test_the_mass_regressor_carries_the_strut_axis_term_m_s_theta_f_x(rng):
+    from vdps_hil.identification.problems import mass_regressor
+    inp = forward(rng, 0)
+    assert mass_regressor(inp, MODEL, load_ident_config()).structure is None  # no f_b, no angles
+    inp = dataclasses.replace(inp, specific_force_b_mps2=(3.0, 0.0, 9.8), vehicle_angles_rad=(0.0, 0.02))
+    reg = mass_regressor(inp, MODEL, load_ident_config(), TRUE)
+    m_s = TRUE.mass_kg - MODEL.unsprung_mass_total_kg
+    assert reg.structure[0] == pytest.approx(m_s * 0.02 * 3.0, rel=1e-12)
+
+
+def test_the_load_gate_refuses_a_wheel_away_from_its_static_load_and_counts_it(rng):
+    from vdps_hil.identification.problems import tracking_regressor
+    from vdps_hil.model.spring_law import suspension_forces_n
+    fz0 = suspension_forces_n(MODEL, (0.0,) * 4, (0.0,) * 4)
+    k_front = MODEL.front.spring_c1_npm  # linear spring of the model file near the design height
+    h = np.array([-0.3 * fz0[0] / k_front, 0.0, 0.0, 0.0])  # wheel 1 unloaded by ~30 %
+    inp = forward(rng, 0, h=h, hd=np.zeros(4), slip=np.full(4, 0.02), speed=20.0)
+    cfg = load_ident_config()
+    assert math.isinf(cfg.tracking.load_band)  # shipped: off (ident_study, tuning seed 101: see default.toml)
+    assert tracking_regressor(inp, MODEL, cfg).rows.all()
+    gated = dataclasses.replace(cfg, tracking=dataclasses.replace(cfg.tracking, load_band=0.1))
+    reg = tracking_regressor(inp, MODEL, gated)
+    fz = suspension_forces_n(MODEL, tuple(h), (0.0,) * 4)
+    assert fz[0] / fz0[0] - 1.0 < -0.1
+    assert reg.rows.tolist() == [False, True, True, True] and reg.row_gates == {"load transfer": 1}
+
+
+def test_the_tracking_regressor_carries_the_load_transfer_term(rng):
+    # a load-proportional tire (Magic Formula K_x = p_kx1 F_z) puts A_ii C_i (F_z,i / F_z0,i - 1)
+    # more into b_i: exactly what b holds when the wheel's force is C_i F_z,i / F_z0,i lambda_i
+    from vdps_hil.identification.problems import load_ratio, tracking_regressor
+    from vdps_hil.model.spring_law import suspension_forces_n
+    h = np.array([-0.02, 0.01, 0.015, -0.005])
+    inp = forward(rng, 0, h=h, hd=np.zeros(4), slip=np.array([0.02, -0.01, 0.03, 0.015]), speed=20.0)
+    ratio = suspension_forces_n(MODEL, tuple(h), (0.0,) * 4) / suspension_forces_n(MODEL, (0.0,) * 4, (0.0,) * 4)
+    assert np.allclose(load_ratio(inp, MODEL), ratio, rtol=1e-12)
+    reg = tracking_regressor(inp, MODEL, load_ident_config(), TRUE)
+    c = np.array(TRUE.tracking_stiffness_n)
+    b_load = reg.b + np.diag(reg.a) * c * (ratio - 1.0)  # the same wheels with the load-scaled tire
+    assert np.allclose(b_load - np.diag(reg.a) * c, reg.structure, rtol=1e-9, atol=1e-9)
+    assert np.all(np.abs(reg.structure) > 0.0)
+
+
+def test_the_roll_row_carries_the_normal_load_tilt_as_its_structure_term(rng):
+    # the measured moment form's r n_b,y sum F_z (the normal loads over a body rolled on its
+    # suspension): the term a roll-axis-joint model (CommonRoad's) does not have
+    from vdps_hil.identification.forces import road_normal_body
+    from vdps_hil.model.spring_law import suspension_forces_n
+    inp = forward(rng, 0)
+    assert inertia_regressor(inp, MODEL, TRUE, load_ident_config()).structure is None  # no f_b, no angles
+    inp = dataclasses.replace(inp, specific_force_b_mps2=(0.5, 4.0, 9.7), vehicle_angles_rad=(0.05, -0.01))
+    reg = inertia_regressor(inp, MODEL, TRUE, load_ident_config())
+    fz = float(np.sum(suspension_forces_n(MODEL, inp.susp_deflection_m, inp.susp_rate_mps)))
+    tilt = MODEL.tire.rolling_radius_m * road_normal_body(0.05, -0.01)[1] * fz
+    assert reg.structure[0] == pytest.approx(tilt, rel=1e-12) and abs(tilt) > 0.01 * MODEL.params.mass_kg * G * 0.344
+    assert reg.structure[1] == reg.structure[2] == 0.0

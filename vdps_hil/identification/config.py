@@ -62,6 +62,7 @@ class ProblemConfig:
     lateral_accel_min_mps2: float = 0.0  # cornering only: no row below this lateral excitation (``problems``)
     lateral_accel_max_mps2: float = math.inf  # cornering only: no row beyond eq 15's linear range
     slip_noise_factor: float = 0.0  # cornering only: |alpha_axle| >= factor x sigma_alpha
+    load_band: float = math.inf  # tracking only: a wheel's row needs |F_z,i / F_z0,i - 1| <= this (``problems``)
 
 
 @dataclass(frozen=True)
@@ -115,8 +116,9 @@ _GENERAL_KEYS = {"form", "bounds_mode", "bounds_factor", "min_speed_mps", "sigma
                  "upstream_max_wait"}
 _GENERAL_OPTIONAL = {"moment_form", "upstream_idle_inputs"}
 _PROBLEM_KEYS = {"q", "w", "forgetting", "prior_rel_sigma", "excitation_min"}
-_PROBLEM_OPTIONAL = {"p0_scaled", "lateral_accel_min_mps2", "lateral_accel_max_mps2", "slip_noise_factor"}
+_PROBLEM_OPTIONAL = {"p0_scaled", "lateral_accel_min_mps2", "lateral_accel_max_mps2", "slip_noise_factor", "load_band"}
 _CORNERING_ONLY = {"lateral_accel_min_mps2", "lateral_accel_max_mps2", "slip_noise_factor"}
+_TRACKING_ONLY = {"load_band"}
 
 
 def _num(v, where: str, positive: bool = False, nonneg: bool = False) -> float:
@@ -191,6 +193,8 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
                     _PROBLEM_KEYS, where)
         if name != "cornering" and set(t) & _CORNERING_ONLY:
             raise IdentConfigError(f"{where}: {sorted(set(t) & _CORNERING_ONLY)[0]!r} applies to [cornering] only")
+        if name != "tracking" and set(t) & _TRACKING_ONLY:
+            raise IdentConfigError(f"{where}: {sorted(set(t) & _TRACKING_ONLY)[0]!r} applies to [tracking] only")
         m, n = PROBLEM_ROWS[name], len(PROBLEM_PARAMS[name])
         if isinstance(t.get("q"), list) and len(t["q"]) == m + OPTIONAL_ROWS.get(name, 0):
             m = len(t["q"])
@@ -207,7 +211,7 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
             prior_rel_sigma=_num(t["prior_rel_sigma"], f"{where}.prior_rel_sigma", positive=True),
             excitation_min=_nums(t["excitation_min"], m, f"{where}.excitation_min", nonneg=True),
             p0_scaled=(_num(t["p0_scaled"], f"{where}.p0_scaled", positive=True) if "p0_scaled" in t else None),
-            **{k: _num(t[k], f"{where}.{k}", nonneg=True) for k in _CORNERING_ONLY if k in t})
+            **{k: _num(t[k], f"{where}.{k}", nonneg=True) for k in _CORNERING_ONLY | _TRACKING_ONLY if k in t})
     return IdentConfig(
         form=g["form"], bounds_mode=g["bounds_mode"], bounds_factor=(lo, hi),
         min_speed_mps=_num(g["min_speed_mps"], f"{origin}[general].min_speed_mps", nonneg=True),

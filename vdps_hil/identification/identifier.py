@@ -47,6 +47,7 @@ class Identifier:
         self._ready = {name: False for name in PROBLEM_NAMES}
         self._idle = {name: 0 for name in PROBLEM_NAMES}  # consecutive inputs without an update
         self._gated = {name: {} for name in PROBLEM_NAMES}  # excitation gate -> inputs it refused
+        self._structure = {name: np.zeros(len(PROBLEM_PARAMS[name])) for name in PROBLEM_NAMES}  # sum A^T Q^2 s
         self._mismatch = {name: MismatchMonitor(name, self.config.status, self.config.problem(name).q)
                           for name in PROBLEM_NAMES}
         self._inputs_rejected = 0
@@ -92,17 +93,41 @@ class Identifier:
                 self._excited[name] = False
                 continue
             reg = REGRESSORS[name](inputs, self._vehicle, self._params, self.config)
+            gated = self._gated[name]
             if reg.gated is not None:
-                self._gated[name][reg.gated] = self._gated[name].get(reg.gated, 0) + 1
+                gated[reg.gated] = gated.get(reg.gated, 0) + 1
+            for gate, n in (reg.row_gates or {}).items():
+                gated[gate] = gated.get(gate, 0) + int(n)
             rls = self._rls[name]
             x_prior, c_prior = rls.x, rls.covariance
             self._excited[name] = rls.update(reg.a, reg.b, reg.rows, db_dtheta=reg.db_dup)
             if self._excited[name]:
+                self._add_structure(name, reg)
                 self._mismatch[name].observe(inputs.t_ns, reg, x_prior, c_prior)
                 self._params = self._collect()
                 self._idle[name] = 0
             else:
                 self._idle[name] += 1
+
+    def _add_structure(self, name: str, reg) -> None:
+        """Accumulate g = sum_k A_k^T Q^2 s_k over the rows the update used (``Regressor.structure``
+        s_k: an unmodelled term of b), with the problem's forgetting factor; the least-squares bias
+        that term causes is C g (``_structure_bias``)."""
+        lam = self.config.problem(name).forgetting
+        self._structure[name] *= lam
+        if reg.structure is None:
+            return
+        a, b = np.asarray(reg.a, dtype=float), np.asarray(reg.b, dtype=float)
+        s = np.asarray(reg.structure, dtype=float)
+        used = np.asarray(reg.rows, dtype=bool) & np.isfinite(a).all(axis=1) & np.isfinite(b) & np.isfinite(s)
+        q2 = np.asarray(self.config.problem(name).q, dtype=float)[: len(b)] ** 2
+        self._structure[name] += (a[used] * (q2[used] * s[used])[:, None]).sum(axis=0)
+
+    def _structure_bias(self, name: str) -> np.ndarray:
+        """The least-squares bias C g of a problem's unmodelled term (``_add_structure``; C the
+        RLS covariance at unit residual variance, W P W): what the fit would move if the term were
+        there in full. Zero when the regressor carries none."""
+        return self._rls[name].covariance @ self._structure[name]
 
     def _upstream_ready(self, name: str) -> bool:
         """Ready when every upstream problem has ``upstream_min_updates`` updates or has been
@@ -134,6 +159,7 @@ class Identifier:
             self._excited[name] = False
             self._idle[name] = 0
             self._gated[name] = {}
+            self._structure[name] = np.zeros(len(PROBLEM_PARAMS[name]))
             self._mismatch[name].reset()
         self._ready = {name: False for name in PROBLEM_NAMES}  # dependants re-check their upstream
         self._waiting = {name: 0 for name in PROBLEM_NAMES}
@@ -192,7 +218,10 @@ class Identifier:
           parts of the drive.
 
         Each parameter's row and column are scaled by sqrt(max(1, V_J,jj / C_jj)), so the
-        correlations of the model-based covariance C are kept."""
+        correlations of the model-based covariance C are kept. A model-structure share is added:
+        beta beta^T with beta = ``_structure_bias`` (an unmodelled term of b whose presence the
+        model cannot decide, e.g. the mass problem's strut axis in pitch, ``problems``): the same
+        in every block of the drive, so neither estimate above can see it."""
         rls = self._rls[name]
         d = np.sqrt(np.maximum(self._mismatch[name].variance_scale / rls.autocorr_inflation, 1.0))
         c = rls.parameter_covariance * np.outer(d, d)
@@ -202,7 +231,8 @@ class Identifier:
             with np.errstate(divide="ignore", invalid="ignore"):
                 h = np.sqrt(np.where(cd > 0.0, np.maximum(np.diag(vj) / cd, 1.0), 1.0))
             c = c * np.outer(h, h)
-        return c
+        beta = self._structure_bias(name)
+        return c + np.outer(beta, beta)
 
     def _covariances(self, honest: bool) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {}

@@ -19,9 +19,21 @@ rotation::
 The four RLS problems ``Q A W W^-1 x = Q b`` (solved by :class:`~.rls.WeightedRLS`):
 
 * **mass** (eq 20): x = [m_tot], A = [zdd_a - G_z], b = sum_i F_z,spring,i (``mass_form =
-  "paper"``). ``"sprung"`` uses b = sum_i (K_s,i H_i + D_s,i Hd_i) + sum_i m_u,i (zdd_a - G_z):
-  exact for the truth simulator's model (struts carry the sprung mass, the unsprung masses ride
-  on the road); eq 20 instead books m_u g, which biases m_tot by about -m_u var(zdd_a)/g^2.
+  "paper"``). ``"sprung"`` (the default) uses b = sum_i (K_s,i H_i + D_s,i Hd_i) +
+  sum_i m_u,i (zdd_a - G_z): exact for the truth simulator's model (struts carry the sprung mass,
+  the unsprung masses ride on the road). Eq 20 instead books m_u g; with the feeder's
+  A = f_z (the specific force along the struts, body z: ``feeder``), which falls below g in a
+  corner (the body rolls outwards: f_z = g cos phi - a_y sin phi), it gives m_tot + m_u (g - A)/A:
+  on CommonRoad set 1's ramped circle +0.37 % (A 9.05 m/s^2 at 7.7 m/s^2 lateral), +0.09 % on its
+  lane change, against sigmas below 0.1 % (issue 17; ``"sprung"``: within 0.01 %).
+  The regressor also carries the strut-axis term (``Regressor.structure``): eq 20 balances the
+  struts along the body z axis, as the physics core does (its wheels move along the body z axis,
+  so a pitched body's struts take the tires' body-z share); a model whose struts stay normal to
+  the road in pitch (CommonRoad's multibody: its vertical balance has no pitch) needs
+  A + theta_v f_x instead, i.e. b carries m_s theta_v f_x more (+0.2..+0.3 % of m_tot on its
+  accelerate/brake drives; a real car's anti-dive/anti-squat linkage adds a term of this kind).
+  The identifier does not guess the axis: it reports the least-squares bias this term would
+  cause as a model-structure share of the mass sigma (``identifier``).
 * **tracking** (eq 21): x = [C_lambda,1..4], A = diag(-r_i lambda_i), b_i = I_w wd_i - T_i.
 * **cornering** (eq 22): x = [C_alpha,f, C_alpha,r], with the current estimates of m and
   C_lambda (Gauss-Seidel: the problems are updated in the order mass, tracking, cornering,
@@ -116,7 +128,8 @@ from typing import Callable
 import numpy as np
 
 from vdps_hil.identification.config import IdentConfig
-from vdps_hil.identification.forces import moments_from_inputs, slip_angles_rad, unsprung_inertia_moments_nm
+from vdps_hil.identification.forces import (moments_from_inputs, road_normal_body, slip_angles_rad,
+                                            unsprung_inertia_moments_nm)
 from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.identification.inputs import IdentInputs
 from vdps_hil.model.params import IdentifiedParams, Vehicle
@@ -133,6 +146,8 @@ class Regressor:
     rows: np.ndarray
     db_dup: np.ndarray | None = None
     gated: str | None = None  # the excitation gate that refused every row (counted by the identifier)
+    structure: np.ndarray | None = None  # per row: an unmodelled term of b the fit cannot tell (N; identifier)
+    row_gates: dict | None = None  # validity gate -> rows it refused in this input (counted by the identifier)
 
 
 def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
@@ -143,21 +158,34 @@ def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
         return ((mag >= np.asarray(thresholds)) | ~np.isfinite(mag)) & moving
 
 
-def mass_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig) -> Regressor:
+def mass_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
+                   params: IdentifiedParams | None = None) -> Regressor:
     """Eq 20: A = [zdd_a - G_z], b = sum_i F_z,spring,i (``mass_form = "paper"``), or
     b = sum_i (K_s H + D_s Hd) + sum_i m_u,i (zdd_a - G_z) (``"sprung"``: the struts carry the
-    sprung mass, the unsprung masses follow the road and weigh on the tires directly)."""
+    sprung mass, the unsprung masses follow the road and weigh on the tires directly).
+    ``structure`` = m_s theta_v f_x [N] (the strut-axis term, module docstring; m_s = the current
+    m_tot estimate of ``params`` (default the prior) less the unsprung masses), None without the
+    specific force or the vehicle angles."""
     a = np.array([[inp.zdd_a_mps2 - inp.gravity_aux_mps2[2]]])
     if cfg.mass_form == "paper":
         b = np.array([np.sum(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps))])
     else:
         struts = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
         b = np.array([np.sum(struts) + vehicle.unsprung_mass_total_kg * a[0, 0]])
-    return Regressor(a, b, _gate(a, cfg.mass.excitation_min))
+    structure = None
+    if inp.specific_force_b_mps2 is not None and inp.vehicle_angles_rad is not None:
+        m_s = (params or vehicle.params).mass_kg - vehicle.unsprung_mass_total_kg
+        structure = np.array([m_s * inp.vehicle_angles_rad[1] * inp.specific_force_b_mps2[0]])
+    return Regressor(a, b, _gate(a, cfg.mass.excitation_min), structure=structure)
 
 
-def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig) -> Regressor:
-    """Eq 21: A = diag(-r lambda_i), b_i = I_w wd_i - T_i."""
+def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
+                       params: IdentifiedParams | None = None) -> Regressor:
+    """Eq 21: A = diag(-r lambda_i), b_i = I_w wd_i - T_i, with the optional load gate
+    (``[tracking] load_band``: rows with |F_z,i / F_z0,i - 1| above it are refused, counted as
+    "load transfer"). ``structure`` (the load-transfer term, ``load_ratio``): a tire whose slope
+    grows with its load, C_lambda,i F_z,i / F_z0,i, puts A_ii C_lambda,i (F_z,i / F_z0,i - 1) more
+    into b_i; C_lambda,i the current estimate in ``params`` (default the prior)."""
     r, iw = vehicle.tire.rolling_radius_m, vehicle.tire.wheel_inertia_kgm2
     lam = np.asarray(inp.slip_ratio)
     a = np.diag(-r * lam)
@@ -165,7 +193,35 @@ def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig) -> 
     with np.errstate(invalid="ignore"):
         moving = ((abs(inp.xd_a_mps) >= cfg.min_speed_mps)
                   & (r * np.asarray(inp.wheel_speed_radps) >= cfg.min_speed_mps))
-    return Regressor(a, b, _gate(a, cfg.tracking.excitation_min, moving))
+    rows = _gate(a, cfg.tracking.excitation_min, moving)
+    dev = load_ratio(inp, vehicle) - 1.0
+    structure = -r * lam * np.array((params or vehicle.params).tracking_stiffness_n) * dev
+    band = cfg.tracking.load_band
+    with np.errstate(invalid="ignore"):
+        off = np.abs(dev) > band if math.isfinite(band) else np.zeros(4, dtype=bool)
+    refused = int(np.count_nonzero(rows & off))
+    return Regressor(a, b, rows & ~off, structure=structure,
+                     row_gates={"load transfer": refused} if refused else None)
+
+
+def load_ratio(inp: IdentInputs, vehicle: Vehicle) -> np.ndarray:
+    """F_z,i / F_z0,i per wheel: F_z,i = K_s H + D_s Hd + m_u g, the eq 14 normal load from the
+    estimated deflections (``model.spring_law``), F_z0,i its value at the design ride height (the
+    static load); NaN where not finite.
+
+    Why it matters to eq 21 (issue 17, ident session): a tire's slip stiffness grows with its load
+    (the Magic Formula's K_x = p_kx1 F_z, linear in it), so C_lambda,i is a figure at one load, the
+    static one, while a wheel is excited exactly when it drives or brakes, i.e. under load
+    transfer of one sign. On a CommonRoad sine with in-phase acceleration (set 1, tuning seed 101)
+    the driven front-left wheel carried 0.75 of its static load on the rows it was excited on and
+    its estimate came out -42 %: the truth's F_x against kappa -42 %, the pure-slip Magic Formula at
+    those loads -41 %; combined slip and the estimated slip ratio add 1-3 %. The model cannot tell
+    whether a car's tire scales so (ours, a linear tire, does not), so the term is reported in the
+    sigma (``identifier._structure_bias``); ``load_band`` would refuse the rows instead."""
+    fz = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps)
+    fz0 = suspension_forces_n(vehicle, (0.0,) * 4, (0.0,) * 4)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return fz / fz0
 
 
 def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams,
@@ -263,7 +319,16 @@ def lateral_gate(inp: IdentInputs, slip_angle_rad, lateral_accel_mps2: float, pc
 
 def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams,
                       cfg: IdentConfig) -> Regressor:
-    """Eq 23 (A as printed, b_4 = [M_x, M_y, M_z]) with the moments of ``moments_from_inputs``."""
+    """Eq 23 (A as printed, b_4 = [M_x, M_y, M_z]) with the moments of ``moments_from_inputs``.
+
+    ``structure`` (``"measured"`` form): the roll row's normal-load tilt r n_b,y sum_i F_z,i, the
+    body-y share of the normal loads over a body rolled on its suspension, which reaches the body
+    in the physics core (its wheels slide along the body z axis) but not in a model whose
+    unsprung bodies roll on their own and pass the lateral force through a roll-axis joint
+    (CommonRoad's multibody). The model file cannot say which a car is: on the CommonRoad sine
+    of tuning seed 101 (set 1) dropping the term moved I_x from +28 % to -11 % (issue 17, ident
+    session), so its least-squares bias is reported in the sigma (``identifier``). The pitch
+    row's r n_b,x sum F_z is not charged: I_y was covered on every drive it was identified on."""
     wx, wy, wz = inp.omega_radps
     dx, dy, dz = inp.omega_dot_radps2
     a = np.array([[dx, -wy * wz, wy * wz],
@@ -274,7 +339,13 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
     if (cfg.moment_form == "measured" and inp.specific_force_b_mps2 is not None
             and inp.vehicle_angles_rad is not None):
         db[:2, :] = 0.0  # M_x, M_y no longer use the tire stiffnesses
-    return Regressor(a, b, _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps), db)
+        fz = float(np.sum(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps)))
+        tilt = vehicle.tire.rolling_radius_m * road_normal_body(*inp.vehicle_angles_rad)[1] * fz
+        structure = np.array([tilt, 0.0, 0.0])
+    else:
+        structure = None
+    rows = _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps)
+    return Regressor(a, b, rows, db, structure=structure)
 
 
 def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
@@ -301,8 +372,8 @@ def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
 RegressorBuilder = Callable[[IdentInputs, Vehicle, IdentifiedParams, IdentConfig], Regressor]
 
 REGRESSORS: dict[str, RegressorBuilder] = {
-    "mass": lambda inp, v, p, c: mass_regressor(inp, v, c),
-    "tracking": lambda inp, v, p, c: tracking_regressor(inp, v, c),
+    "mass": lambda inp, v, p, c: mass_regressor(inp, v, c, p),
+    "tracking": lambda inp, v, p, c: tracking_regressor(inp, v, c, p),
     "cornering": cornering_regressor,
     "inertia": inertia_regressor,
 }
