@@ -285,10 +285,9 @@ def _judge(s: _Search, ev: _Excitation, name: str, theta) -> tuple[bool, float, 
     s.joints[name] = j
     inn_g = np.array([GROUP_NAMES.index(g) for g in INNOVATION_GROUPS])
     st["ef_innovations"] = ef_inn = _explained(j.cv, cv_before, inn_g)
-    # enough of the residual overall -- or, for a sensor effect, of the GNSS/IMU
-    # innovations, where a sensor error shows even when the force balance hardly sees it
-    # or, for an effect on the force balance alone (no kinematic rows among its own
-    # equations), of the ten balance equations of eq 13
+    # enough of the residual overall -- or, for a sensor effect, of the GNSS/IMU innovations, where a
+    # sensor error shows even when the force balance hardly sees it -- or, for an effect on the force
+    # balance alone (no kinematic rows among its own equations), of the ten balance equations of eq 13
     st["ef_dynamics"] = ef_dyn = _explained(j.cv, cv_before, np.arange(len(DYNAMIC_EQUATIONS)))
     balance_only = own is not None and own.any() and not own[len(DYNAMIC_EQUATIONS):].any()
     evidence = _evidence(c, cfg, ef, ef_inn, ef_dyn, balance_only)
