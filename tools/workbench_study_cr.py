@@ -20,6 +20,7 @@ Usage::
 
     .venv/bin/python tools/workbench_study_cr.py [--sets 1 3] [--seeds 3] [--first-seed 1000]
                                                   [--jobs 1] [--runs FILE.jsonl] [--json FILE]
+                                                  [--kinds saturation,null,injected]
 """
 
 from __future__ import annotations
@@ -94,8 +95,12 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--runs", default=None, help="JSON-lines file of finished runs: append, skip what is there")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--kinds", default="saturation,null,injected",
+                    help="which drives: saturation (the circle ramp), null, injected (comma-separated)")
     a = ap.parse_args(argv)
-    jobs = [j for seed in range(a.first_seed, a.first_seed + a.seeds) for s in a.sets for j in jobs_for(s, seed)]
+    kinds = set(a.kinds.split(","))
+    jobs = [j for seed in range(a.first_seed, a.first_seed + a.seeds) for s in a.sets for j in jobs_for(s, seed)
+            if j["kind"] in kinds]
     done = _load_runs(a.runs, _key) if a.runs else {}
     runs = [done[_key(j)] for j in jobs if _key(j) in done]
     todo = [j for j in jobs if _key(j) not in done]
