@@ -16,8 +16,9 @@ with step halving (steps 1, 1/2, 1/4 of the Gauss-Newton step: the first whose J
 current one by at most 0.1 %, else the quarter step), at most ``base_iterations`` steps, until J
 improves by less than 0.1 %; each parameter kept within
 ``base_bounds`` times its reference value. Sigmas sqrt(diag((X^T X + W)^-1)) in parameter units.
-The slow body-velocity nuisance is then checked against the estimator's own sigma: a knot fitted
-beyond ``nuisance_cap_sigma`` of it gets a tighter prior and the fit is repeated, at most
+The slow body-velocity nuisance is then checked against the estimator's own sigma: when it sits
+far beyond it along a direction (RMS over its knots > ``nuisance_rms_trigger``), the knots of that
+direction beyond ``nuisance_cap_sigma`` get a tighter prior and the fit is repeated, at most
 ``nuisance_cap_rounds`` times (:func:`cap_nuisance`).
 
 Candidate fits: a candidate whose columns do not depend on its parameters is fitted linearly
@@ -147,12 +148,15 @@ def _base_fit(table, states, inn, ref, point, config, selected):
 
 def cap_nuisance(d: Design, cols, th, states: RowStates, config: RankingConfig) -> bool:
     """Keep the slow body-velocity nuisance (``Context.smooth_bands``) within what the estimator's
-    errors can be: a knot fitted at z = |delta v| / sigma_est > ``nuisance_cap_sigma`` times its
-    own sigma is no estimator error but a model error the nuisance took up (on a slowly growing
-    circle the lateral velocity absorbed the tires' saturation, up to 0.7 m/s for sigma_est =
-    0.02 m/s, and the cornering stiffnesses went to 3 times their value to follow it). Its prior
-    weight is multiplied by (z / cap)^2 (kept per drive in ``states.band_weight``, which
-    :class:`~.design.Design` applies); returns True when a weight changed (fit again)."""
+    errors can be. Per direction (v_x, v_y), z_k = |delta v_k| / sigma_est,k over its knots: when
+    their RMS exceeds ``nuisance_rms_trigger`` the nuisance is taking up a model error, not the
+    estimator's (on CommonRoad's circle ramp the lateral velocity absorbed the tires' saturation:
+    RMS 14-17, up to 0.7 m/s for sigma_est = 0.02 m/s, and the cornering stiffnesses went to 3.4
+    times the truth; a biased IMU makes the estimator's own sigma optimistic, RMS 5-6 on the
+    lane change -- tuning seeds 100-103), and every knot of that direction beyond
+    ``nuisance_cap_sigma`` gets its prior weight multiplied by (z / cap)^2 (kept per drive in
+    ``states.band_weight``, which :class:`~.design.Design` applies; a direction once capped stays
+    capped). Returns True when a weight changed (fit again)."""
     idx = d.blocks.get("_smooth") or []
     pos = {k: j for j, k in enumerate(cols)}
     if not idx or any(k not in pos for k in idx):
@@ -162,12 +166,16 @@ def cap_nuisance(d: Design, cols, th, states: RowStates, config: RankingConfig) 
         boost = np.ones(len(idx))
     w = np.array([d.prior_w[k] for k in idx]) / boost  # 1 / (sigma_est scale)^2
     z = np.abs(np.array([th[pos[k]] for k in idx])) * np.sqrt(np.maximum(w, 0.0))
-    cap = config.nuisance_cap_sigma
-    if not np.any(z > 1.05 * cap):
+    cap, new = config.nuisance_cap_sigma, boost.copy()
+    for c in (0, 1):  # the bands alternate v_x, v_y per knot
+        zc = z[c::2]
+        capped = np.any(boost[c::2] > 1.0)
+        if len(zc) and (capped or math.sqrt(float(np.mean(zc * zc))) > config.nuisance_rms_trigger):
+            new[c::2] = boost[c::2] * np.where(zc > 1.05 * cap, (zc / cap) ** 2, 1.0)
+    if np.array_equal(new, boost):
         return False
-    states.band_weight = boost * np.maximum(1.0, (z / cap) ** 2)
+    states.band_weight = new
     return True
-
 
 def effects_with(effects: EffectSet, eff: Effect) -> EffectSet:
     return (effects.without(eff.name) if eff.name in effects else effects) + eff
