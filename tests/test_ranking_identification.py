@@ -62,3 +62,31 @@ def test_a_nuisance_far_beyond_its_sigma_is_capped_per_knot_and_stays_capped():
 
 def test_seed_is_disjoint():
     assert SEED not in TUNING_SEEDS and SEED not in STUDY_SEEDS
+
+
+@pytest.fixture(scope="module")
+def circle_set3(tmp_path_factory):
+    from vdps_hil.experiments.workbench_study import cached_drive, model_file
+    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.workbench.dataset import load_drive
+    from vdps_hil.workbench.ranking.selection import rank
+
+    veh = load_vehicle(model_file("commonroad-mb:3"))
+    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "shipped:cr-circle-ramp", (), SEED,
+                        truth="commonroad-mb:3")
+    return rank(load_drive(path, veh), veh)
+
+
+def test_circle_ramp_on_commonroad_set3_recommends_tire_saturation(circle_set3):
+    """CommonRoad set 3 (VW Vanagon), the circle ramped to 7.5 m/s^2: tire saturation is
+    recommended with a peak friction near the truth's Pacejka p_dy1 = 1.05 (0.84-0.93 on the
+    tuning seeds), not the anti-roll bars the model file has (``roll_stiffness``, 10/10 before the
+    measured loads kept them), and the front cornering stiffness is not driven to several times
+    the truth's 169 kN/rad (the nuisance took up the saturation: 553 kN/rad on set 1 seed 100)."""
+    rk = circle_set3
+    assert rk.recommendation == "magic_formula_tire", rk.messages
+    assert "roll_stiffness" not in rk.selected
+    mf = next(e for e in rk.entries if e.effect == "magic_formula_tire")
+    assert mf.plausible and 0.7 <= mf.parameters["peak_friction"][0] <= 1.3
+    cf = next(e for e in rk.parameters if e.effect == "cornering_stiffness_front")
+    assert 0.6 * 168762.5 <= cf.parameters["cornering_stiffness_front_nprad"][0] <= 1.6 * 168762.5
