@@ -20,6 +20,7 @@ Usage::
 
     .venv/bin/python tools/workbench_study_cr.py [--sets 1 3] [--seeds 3] [--first-seed 1000]
                                                   [--jobs 1] [--runs FILE.jsonl] [--json FILE]
+                                                  [--kinds saturation null injected] [--cache DIR]
 """
 
 from __future__ import annotations

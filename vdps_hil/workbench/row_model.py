@@ -24,6 +24,7 @@ from array import array
 
 import numpy as np
 
+from vdps_hil.model.chassis import anti_roll_forces_n, roll_centre_forces_n
 from vdps_hil.model.core import Model
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.params import Vehicle
@@ -92,6 +93,12 @@ class RowModel:
         self.axles = [vehicle.axle(i) for i in range(4)]
         self._spring = [(a.spring_c1_npm, a.spring_c2_per_m, a.spring_c3_m, a.static_compression_m, a.damper_nspm,
                          a.unsprung_mass_kg * GRAVITY_MPS2) for a in self.axles]
+        geo, ch = vehicle.geometry, vehicle.chassis
+        self._tracks = (2.0 * geo.track_half_front_m, 2.0 * geo.track_half_rear_m)
+        kf, kr = self.model.anti_roll_stiffness_nmprad  # the file's bars plus ``anti_roll_stiffness`` effects
+        self._arb = (kf, kr) if (kf != 0.0 or kr != 0.0) else None
+        self._roll_centre = ((ch.roll_centre_height_front_m, ch.roll_centre_height_rear_m)
+                             if ch.has_roll_centres else None)
         self.last_ws = [0.0] * 8
         self.last_slip_cols = None
         self._zw = self.model.wheel_centre_z_m
@@ -153,20 +160,32 @@ class RowModel:
     def _measured_loads(self, r, rec, n_b, meas) -> None:
         """Normal loads from the measured deflections and rates (eq 14, as eq 20 and 23 use them)
         instead of the rigid-tire pose: the difference dF_z,i acts along the road normal n at the
-        contact point r_c,i = r_w,i - h_w n, so r -= (n dF, r_c x n dF)."""
+        contact point r_c,i = r_w,i - h_w n. The chassis parts the core adds to the pose's load
+        are added to the measured one as well: the anti-roll bars' F_arb,i from the measured
+        deflections and the roll centres' J_i (``model.chassis``; in the reduced model both are
+        part of the corner's normal load, so replacing that load by the springs' alone dropped
+        them)."""
         nx, ny, nz = n_b
         zw = self.model.wheel_centre_z_m
         exp = math.exp
+        farb = None
+        if self._arb is not None:
+            farb = anti_roll_forces_n(self._arb[0], self._arb[1], self._tracks[0], self._tracks[1], meas[14:18])
+        jac = self._roll_centre_forces(rec, n_b) if self._roll_centre is not None else None
         for i in range(4):
             c1, c2, c3, sc, ds, mug = self._spring[i]
             hs = sc + meas[14 + i]
             fsp = c1 * exp(c2 * ((hs if hs < 10.0 else 10.0) - c3)) * hs
+            if farb is not None:
+                fsp += farb[i]
             if fsp + mug <= 0.0:
                 fz = 0.0
             else:
                 fz = fsp + ds * meas[18 + i] + mug
                 if fz < 0.0:
                     fz = 0.0
+            if jac is not None:
+                fz += jac[i]
             rc = rec[i]
             d = fz - rc[2]
             hw = rc[11]
@@ -179,6 +198,16 @@ class RowModel:
             r[3] -= rcy * fz_ - rcz * fy
             r[4] -= rcz * fx - rcx * fz_
             r[5] -= rcx * fy - rcy * fx
+
+    def _roll_centre_forces(self, rec, n_b) -> tuple[float, float, float, float]:
+        """J_i (``chassis.roll_centre_forces_n``) from the axles' lateral tire forces in body y
+        (F_a e_l + F_b e_t of the corners' records), as the core computes them."""
+        fy = [0.0, 0.0]
+        for i in range(4):
+            lx, ly, lz, tx, ty, tz = wheel_axes(rec[i][9], n_b)
+            fy[0 if i < 2 else 1] += rec[i][0] * ly + rec[i][1] * ty
+        return roll_centre_forces_n(self._roll_centre[0], self._roll_centre[1], self._tracks[0], self._tracks[1],
+                                    fy[0], fy[1])
 
     def _slip_for_force(self, i: int, rc, fa_target: float, k0: float) -> float:
         """The slip ratio at which the model's tire law gives the longitudinal force the spin

@@ -48,6 +48,9 @@ class RankingConfig:
     nuisance_knot_s: float = 2.0
     velocity_sigma_floor_mps: float = 0.02
     velocity_fast_sigma_mps: float = 0.003
+    nuisance_cap_sigma: float = 3.0
+    nuisance_rms_trigger: float = 10.0
+    nuisance_cap_rounds: int = 4
     excite_lat_mps2: float = 0.5
     excite_angacc_radps2: float = 0.05
     excite_torque_nm: float = 20.0

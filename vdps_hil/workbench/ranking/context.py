@@ -14,7 +14,8 @@ columns (v_x, v_y, F_a,1..4)):
   S = sigma_fast^2 I, i.e.
   a -> a - U_s diag(1 - 1/sqrt(1 + s^2)) U_s^T a with J sigma_fast = U_s diag(s) V^T;
 * the slow body-velocity errors are columns of their own (hat functions every
-  ``nuisance_knot_s``, :meth:`Context.smooth_bands`) with a prior of the estimator's own sigma.
+  ``nuisance_knot_s``, :meth:`Context.smooth_bands`) with a prior of the estimator's own sigma
+  (tightened where the base fit takes them far beyond it, ``identification.cap_nuisance``).
 """
 
 from __future__ import annotations

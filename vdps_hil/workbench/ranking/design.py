@@ -76,6 +76,9 @@ class Design:
         if len(inn):
             self.add_block("_nuisance", None, inn.nuisance)  # unwhitened: add_block divides by sigma
         sm, sm_sig = ctx.smooth_bands(config.nuisance_knot_s, config.velocity_sigma_floor_mps)
+        boost = getattr(ctx.states, "band_weight", None)  # ``identification.cap_nuisance``
+        if sm and boost is not None and len(boost) == len(sm_sig):
+            sm_sig = np.asarray(sm_sig) / np.sqrt(boost)
         if sm:
             self._add_band_block("_smooth", sm, sm_sig)
 

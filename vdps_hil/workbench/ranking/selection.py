@@ -223,9 +223,9 @@ def _forward_selection(s: _Search, ev: _Excitation) -> None:
 
 
 def _shortlist(s: _Search, ev: _Excitation) -> list[tuple[float, str, np.ndarray]]:
-    """(screening EF, name, theta) of the candidates to fit jointly this round: the best
-    ``shortlist`` with EF > 0, every sensor effect whose screening fit already explains
-    ``min_explained_innovations`` of the GNSS/IMU innovations (its evidence path, ``_evidence``:
+    """(screening EF, name, theta) of the candidates to fit jointly this round: the best ``shortlist``
+    with EF > 0 and a plausible screening fit (a linear one's joint fit; implausible ones hid others),
+    every sensor effect whose fit explains ``min_explained_innovations`` of the innovations (``_evidence``:
     ranked by the overall EF alone, a sensor error that hardly touches the force balance falls
     behind balance effects that fit its side effects), and every nonlinear one not yet found weak."""
     d, cfg = s.d, s.cfg
@@ -246,11 +246,11 @@ def _shortlist(s: _Search, ev: _Excitation) -> list[tuple[float, str, np.ndarray
         th, _, _ = d.fit(cols)
         screen.append((ef, name, theta_of(d, name, cols, th)))
     screen.sort(key=lambda t: -t[0])
-    short = [t for t in screen[:cfg.shortlist] if t[0] > 0.0]
+    short = [t for t in screen if t[0] > 0.0 and (not s.by_name[t[1]].linear or s.by_name[t[1]].plausible(t[2]))][:cfg.shortlist]
     short += [t for t in screen if t[1] in sensor and t not in short]
     # nonlinear candidates are judged by their joint fit in any case: at a linearisation
     # point far from the truth their screening column can hide them
-    short += [t for t in screen[cfg.shortlist:] if not s.by_name[t[1]].linear and t[1] not in sensor
+    short += [t for t in screen[cfg.shortlist:] if not s.by_name[t[1]].linear and t[1] not in sensor and t not in short
               and (t[1] not in s.steps or s.steps[t[1]]["ef"] > 0.5 * cfg.min_explained)]
     return short
 
