@@ -314,6 +314,7 @@ class LogSession:
         t_start = time.monotonic()
         self._t_run_ns = time.monotonic_ns()
         due = {"flush": t_start, "health": t_start, "status": t_start}
+        self._check_room()  # before the first decoded write, not at the first health tick
         try:
             while not stop.is_set():
                 now = time.monotonic()
