@@ -69,7 +69,7 @@ class SensorFit:
         (a residual variance per group, module docstring): below minus the ranking's
         ``bic_margin`` the candidate's held-out gain is worth its p parameters."""
         m = max(self.rows, 2)
-        counts = self.group_rows if self.group_rows is not None else None
+        counts = self.group_rows
         if counts is None:  # one pooled variance
             s0, s1 = float(self.cv_without.sum()), float(self.cv_with.sum())
             if s0 <= 0.0 or s1 <= 0.0:
