@@ -56,6 +56,7 @@ from vdps_hil.adapters.nmea_adapter import NmeaAdapter, NmeaProtocol
 from vdps_hil.adapters.serial_adapter import SerialAdapter
 from vdps_hil.app.est_topics import est_docs  # the /est/ layout of ``vdps replay``
 from vdps_hil.app.foxglove_view import FoxgloveView
+from vdps_hil.bus.clocks import wall_minus_monotonic_ns
 from vdps_hil.bus.raw import RawCan, RawSerial
 from vdps_hil.bus.samples import Sample
 from vdps_hil.bus.subscription import Subscription
@@ -88,12 +89,12 @@ class InterfaceTimeCanAdapter(CanAdapter):
     as a logger with hardware time stamps does. Without it a reader thread held up by the pipeline
     (Python's GIL) gives a whole burst of frames one late host time, and the estimator sees 20 ms of
     suspension samples at one instant. A stamp is never later than the host's reception nor earlier
-    than the previous frame's; interfaces that stamp at host reception (slcan in python-can) get
+    than the previous frame's nor the bench's start; interfaces that stamp at host reception (slcan in python-can) get
     about the host time, as before. ``device_time_backwards`` is still counted by CanAdapter."""
 
     def __init__(self, *a, **kw):
         super().__init__(*a, **kw)
-        self._wall_minus_mono_ns = time.time_ns() - time.monotonic_ns()
+        self._wall_minus_mono_ns = wall_minus_monotonic_ns()
         self._last_stamp = None
 
     def _read(self, timeout_s: float):
@@ -109,6 +110,8 @@ class InterfaceTimeCanAdapter(CanAdapter):
             t = clock.t_of(int(ts * 1e9) - self._wall_minus_mono_ns) if ts else now
             if t > now:
                 t = now
+            if t < 0:  # sent at the start, stamped a hair early by the two hosts' clock offsets
+                t = 0
             if last is not None and t < last:
                 t = last
             last = t

@@ -39,6 +39,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from vdps_hil.bus.clocks import wall_minus_monotonic_ns
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.sinks import DriveSink
 from vdps_hil.units import NS_PER_S
@@ -151,7 +152,7 @@ class SimulatorSide:
                        "lines_sent": 0, "serial_dropped": {}}
         self.wall_s = 0.0
         self.sim_s = 0.0
-        self._wall_minus_mono_ns = time.time_ns() - time.monotonic_ns()
+        self._wall_minus_mono_ns = wall_minus_monotonic_ns()
 
     # --- CAN receive thread ---------------------------------------------------------------------
     def _rx_loop(self) -> None:
