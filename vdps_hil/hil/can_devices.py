@@ -303,6 +303,7 @@ class SocketcandServer(CanDeviceSide):
         self._conn: socket.socket | None = None
         self._ready = threading.Event()
         self._closed = False
+        self._peer_closed = False
         self._pre = bytearray()
         self._fifo: DeviceFifo | None = None
         self._fifo_bytes = int(fifo_bytes)
@@ -377,9 +378,15 @@ class SocketcandServer(CanDeviceSide):
             if timeout_s > 0:
                 self._ready.wait(timeout_s)
             return []
+        if self._peer_closed:  # readable for ever after the client's close: never a busy loop
+            if timeout_s > 0:
+                time.sleep(timeout_s)
+            return []
         try:
             r, _, _ = select.select([conn], [], [], timeout_s)
-            data = conn.recv(65536) if r else b""
+            data = conn.recv(65536) if r else None
+            if data == b"":  # end of stream: the pipeline closed its side
+                self._peer_closed = True
         except (BlockingIOError, InterruptedError):
             data = b""
         except OSError:
