@@ -39,7 +39,7 @@ class BenchConfig:
     seed: int = 0
     profile: str | None = None
     actuator: ActuatorConfig = field(default_factory=ActuatorConfig)
-    block_s: float = 0.01
+    block_s: float = 0.02  # simulated per pass; + lookahead (20 ms) stays far below the ECU dead time (100 ms)
     lookahead_s: float = 0.02
     late_tolerance_s: float = DEFAULT_LATE_TOLERANCE_S
     drain_timeout_s: float = 3.0

@@ -38,6 +38,7 @@ d deadline [ns, monotonic].
 from __future__ import annotations
 
 import math
+import threading
 import time
 from typing import Callable
 
@@ -128,9 +129,12 @@ class Pacer:
         self.clock = clock
         self.sleep = sleep
         self.late_tolerance_ns = int(round(late_tolerance_s * NS_PER_S))
-        self.sends = 0
-        self.late_sends = 0
-        self.max_late_ns = 0
+        self._sends = 0
+        self._late_sends = 0
+        self._max_late_ns = 0
+        self._pending: list = []  # (m_sent_ns, t_items_ns) not yet folded into the counts
+        self._pending_n = 0
+        self._lock = threading.Lock()
         self._keep = int(keep)
         self._lateness: list[np.ndarray] = []
         self._kept = 0
@@ -145,21 +149,54 @@ class Pacer:
         return mono() >= d
 
     def sent(self, t_items_ns, m_sent_ns: int) -> None:
-        t = np.asarray(t_items_ns, dtype=np.int64)
-        if t.size == 0:
-            return
+        """Account items sent at ``m_sent_ns``; folded into the counts in batches (``_fold``): the
+        numpy of one send pass cost more than the pass's own work."""
+        with self._lock:
+            self._pending.append((m_sent_ns, t_items_ns))
+            self._pending_n += len(t_items_ns)
+            full = self._pending_n >= 512
+        if full:
+            self._fold()
+
+    def _fold(self) -> None:
+        """Fold the pending sends into the counts (the sending thread, or a reader's: locked)."""
+        with self._lock:
+            pending, self._pending, self._pending_n = self._pending, [], 0
+            if not pending:
+                return
+            m = np.concatenate([np.full(len(t), m_s, np.int64) for m_s, t in pending])
+            t = np.concatenate([np.asarray(t, dtype=np.int64) for _, t in pending])
+            self._fold_arrays(m, t)
+
+    def _fold_arrays(self, m: np.ndarray, t: np.ndarray) -> None:
         c = self.clock
-        late = m_sent_ns - (c.mono0_ns + np.rint(t / c.speed).astype(np.int64))
-        self.sends += int(t.size)
-        self.late_sends += int(np.count_nonzero(late > self.late_tolerance_ns))
+        late = m - (c.mono0_ns + np.rint(t / c.speed).astype(np.int64))
+        self._sends += int(t.size)
+        self._late_sends += int(np.count_nonzero(late > self.late_tolerance_ns))
         mx = int(late.max())
-        if mx > self.max_late_ns:
-            self.max_late_ns = mx
+        if mx > self._max_late_ns:
+            self._max_late_ns = mx
         if self._kept < self._keep:
             self._lateness.append(np.maximum(late, 0))
             self._kept += int(t.size)
 
+    @property
+    def sends(self) -> int:
+        self._fold()
+        return self._sends
+
+    @property
+    def late_sends(self) -> int:
+        self._fold()
+        return self._late_sends
+
+    @property
+    def max_late_ns(self) -> int:
+        self._fold()
+        return self._max_late_ns
+
     def stats(self) -> dict:
+        self._fold()
         lat = np.concatenate(self._lateness) if self._lateness else np.zeros(0)
         p = percentiles_ms(lat)
         return {"sends": self.sends, "late_sends": self.late_sends,
