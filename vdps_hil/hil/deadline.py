@@ -49,12 +49,13 @@ class DeadlineGuard:
         self._c = {"samples": 0, "episodes": 0, "by_kind": {}, "first_t_s": None,
                    "deadline_ms": None if deadline_s is None else 1e3 * deadline_s}
 
-    def skip(self, s) -> bool:
+    def skip(self, s, now_ns: int | None = None) -> bool:
+        """``now_ns``: the bench clock now, when the caller has just read it."""
         if self.deadline_ns is None:
             return False
         c = self._c
         if not s.kind.startswith("gnss"):  # stamped at the wire (module docstring)
-            late_ns = self.clock.now_ns() - s.t_ns
+            late_ns = (self.clock.now_ns() if now_ns is None else now_ns) - s.t_ns
             if not self.shedding:
                 if late_ns > self.deadline_ns:
                     self.shedding = True

@@ -259,7 +259,9 @@ class PipelineNode:
         self.view = None if writer is None else FoxgloveView(lambda: system.pipeline.origin,
                                                              epoch_ns=getattr(writer, "sim_epoch_ns", None))
         self.sequencer = InputSequencer(sequence_s) if sequence_s else None
-        self._dbc_by_id = {aid: sp for aid, sp in self.can.decoder.dbc.by_id.items() if sp.is_sensor}
+        # sensor frame id -> (dlc, counter start bit, counter mask): the rolling counter's place
+        self._counter_of = {aid: (sp.dlc, sp.counter.start_bit, (1 << sp.counter.length_bits) - 1)
+                            for aid, sp in self.can.decoder.dbc.by_id.items() if sp.is_sensor}
         self._counters_seen: dict[int, int] = {}
         self.counter_breaks = 0
         self.poll_s = poll_s
@@ -354,8 +356,9 @@ class PipelineNode:
                 if self.sequencer is None:
                     self._cycle(item)
                 else:
-                    for it in self.sequencer.push(item, ev.t_ns, ev.kind, self.clock.now_ns()):
-                        self._cycle(it)
+                    now = self.clock.now_ns()
+                    for it in self.sequencer.push(item, ev.t_ns, ev.kind, now):
+                        self._cycle(it, now)
             elif isinstance(ev, RawCan):
                 if rec is not None:
                     rec.write(ev)
@@ -376,16 +379,17 @@ class PipelineNode:
         +1 (mod 2^bits) is a break (a frame lost, repeated or reordered on the way). Exact, with
         no time-based guess (the decoder's ``lost_frames`` unwraps long silences by time, which a
         stall of the bench itself can fake)."""
-        spec = self._dbc_by_id.get(msg.arbitration_id)
-        if spec is None or msg.is_extended_id or len(msg.data) < spec.dlc:
+        aid = msg.arbitration_id
+        spec = self._counter_of.get(aid)
+        data = msg.data
+        if spec is None or msg.is_extended_id or len(data) < spec[0]:
             return
-        c = spec.counter
-        word = int.from_bytes(bytes(msg.data[:spec.dlc]), "little")
-        value = (word >> c.start_bit) & ((1 << c.length_bits) - 1)
-        prev = self._counters_seen.get(msg.arbitration_id)
-        if prev is not None and (value - prev) % (1 << c.length_bits) != 1:
+        dlc, start, mask = spec
+        value = (int.from_bytes(data[:dlc], "little") >> start) & mask
+        prev = self._counters_seen.get(aid)
+        if prev is not None and (value - prev) & mask != 1:
             self.counter_breaks += 1
-        self._counters_seen[msg.arbitration_id] = value
+        self._counters_seen[aid] = value
 
     def release_held(self) -> None:
         """Hand the system every sample the sequencer still holds (end of the input)."""
@@ -397,13 +401,13 @@ class PipelineNode:
             for it in items:
                 self._cycle(it)
 
-    def _cycle(self, item) -> None:
+    def _cycle(self, item, now_ns: int | None = None) -> None:
         """Hand one sample to the system (recording it and its place in the input order), send or
         record the outputs, log the cycle against the raw record that carried the sample; a
         sample past its deadline is skipped and counted instead (never recorded under
         ``/decoded/``, so the input order stays the system's)."""
         s, src, idx = item
-        if self.deadline.skip(s):
+        if self.deadline.skip(s, now_ns):
             return
         if self.recorder is not None and self.recorder.write(s):
             self.input_order.note(s)
