@@ -155,3 +155,27 @@ def test_frames_carry_their_time_on_the_bus_as_time_stamp(make):
         assert [m.timestamp for m in got] == pytest.approx(stamps, abs=2e-6)
     finally:
         dev.close()
+
+
+def test_tcp_server_waits_after_its_client_has_gone():
+    """A socket at end of stream is readable for ever: once the pipeline's client closed, each
+    poll waits its timeout instead of returning at once (the bench's receiver thread polled
+    46,000 times per simulated second there)."""
+    srv = SocketcandServer()
+    try:
+        bus = can.Bus(interface="socketcand", channel="vdps", host="127.0.0.1", port=srv.port)
+        assert srv.wait_client(10.0)
+        bus.send(can.Message(arbitration_id=0x080, data=b"\x01\x02", is_extended_id=False))
+        got = []
+        t_end = time.monotonic() + 5.0
+        while not got and time.monotonic() < t_end:
+            got += srv.poll(0.01)
+        assert [m.arbitration_id for _, m in got] == [0x080]
+        bus.shutdown()
+        polls, t0 = 0, time.monotonic()
+        while time.monotonic() - t0 < 0.2:
+            assert srv.poll(0.02) == []
+            polls += 1
+        assert polls <= 11  # 0.2 s of 20 ms waits (a busy loop makes thousands)
+    finally:
+        srv.close()

@@ -164,6 +164,7 @@ class SimulatorSide:
                        "lines_sent": 0, "serial_dropped": {}}
         self.wall_s = 0.0
         self.sim_s = 0.0
+        self.passes = 0  # of the send loop (at most one per send tick)
         self._wall_minus_mono_ns = wall_minus_monotonic_ns()
 
     # --- CAN receive thread ---------------------------------------------------------------------
@@ -205,6 +206,7 @@ class SimulatorSide:
         m_start = time.monotonic_ns()
         tick_ns = self.send_tick_ns * clock.speed  # bench time
         while not stop.is_set():
+            self.passes += 1
             now = clock.now_ns()
             while not session.done and session.t_ns < now + self.lookahead_ns:
                 session.advance((session.t_ns + block_ns) / NS_PER_S)
