@@ -37,13 +37,14 @@ __all__ = ["FitSubset", "fit_subset"]
 @dataclass
 class FitSubset:
     """The segments a long drive is fitted on: the joined table, its rows' indices in the whole
-    drive's table (-1 for the empty separator rows) and the segments' spans [s] in the drive's
-    time."""
+    drive's table (-1 for the empty separator rows), the segments' spans [s] in the drive's time,
+    the drive's duration [s] and its table's times [s]."""
 
     table: DriveTable
     rows: np.ndarray
     segments_s: list[tuple[float, float]]
     drive_s: float
+    table_t_s: np.ndarray  # the whole drive's t_s
 
     @property
     def fitted_s(self) -> float:
@@ -52,8 +53,6 @@ class FitSubset:
     def drive_times(self, rows: np.ndarray) -> np.ndarray:
         """The drive's times [s] of rows of the joined table (their times in the whole drive)."""
         return self.table_t_s[self.rows[np.asarray(rows, dtype=int)]]
-
-    table_t_s: np.ndarray = None  # the whole drive's t_s (set by :func:`fit_subset`)
 
     def message(self) -> str:
         return (f"row budget: the drive spans {self.drive_s / 60:.1f} min; the parameters and the ranking are "
@@ -122,4 +121,4 @@ def fit_subset(table: DriveTable, max_fit_s: float, segment_s: float) -> FitSubs
     sub = DriveTable(table.t0_ns, new_t, {k: take(v) for k, v in table.columns.items()},
                      {k: take(v) for k, v in table.sigma.items()}, records(table.gnss), records(table.innovations),
                      dict(table.rates_hz), table.vehicle, dict(table.counters), table.rls, dict(table.sensors))
-    return FitSubset(sub, rows, spans, table.duration_s, table_t_s=t)
+    return FitSubset(sub, rows, spans, table.duration_s, t)
