@@ -25,7 +25,10 @@ drive), 21 MiB and 10.8 CPU s per minute of drive from 5 to 10 min; main 304 / 3
 1207 MiB, CPU 9.3 / 34.9 / 139.1 s (ranking 1.7 / 7.4 / 64.6 s), 200 MiB per minute from 30 s to
 5 min. Commands: ``nice -n 5 .venv/bin/python tools/bench_diagnose.py d30.mcap d120.mcap d300.mcap
 d600.mcap`` in each tree (main's with ``PYTHONPATH`` set to its tree, before this tool inserted it).
-Imports alone 217 MiB. The 30 s and 2 min drives' JSON are identical (timings aside).
+Imports alone 217 MiB. The 30 s and 2 min drives' JSON are identical (timings aside). Then
+diagmem ``d600.mcap d1200.mcap`` (load 1.0-1.4): 607 / 911 MiB, CPU 120.5 / 238.9 s (ranking 14.3 /
+16.2 s, decode and estimator 81 / 179 s): 30.4 MiB and 11.8 CPU s per minute of drive from 10 to
+20 min (issue 19's 20 MiB per minute not met: what grows is outside the ranking).
 
 Earlier (2026-12-04, ``nice -n 5``, 2-core machine at load 4-5 beside other work; paper
 drives seed 3 of 30 / 120 / 300 s; main ba5e4e3 then branch diagfast bcf0349 in one run):
