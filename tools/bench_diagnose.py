@@ -17,7 +17,20 @@ first (the part that does not grow with the drive). Drives: ``vdps sim paper --d
 --seed 3 -o d30.mcap`` (or ``tools/make_long_drive.py``); measure on a quiet machine, or say
 what ran beside it.
 
-Last measured (2026-12-04, ``nice -n 5``, 2-core machine at load 4-5 beside other work; paper
+Last measured (2026-12-05, ``nice -n 5``, 2-core machine at load 0.8-1.2; paper drives seed 3 of 30 s /
+2 / 5 / 10 min; branch diagmem (row budget, ``workbench.fit_budget``) with this venv, then main
+c4b63d3 in a detached worktree run the same way, back to back): diagmem peak RSS 304 / 381 / 502 /
+608 MiB, CPU 9.4 / 35.4 / 76.3 / 130.3 s (ranking 1.9 / 7.4 / 14.9 / 15.3 s: fixed beyond 150 s of
+drive), 21 MiB and 10.8 CPU s per minute of drive from 5 to 10 min; main 304 / 382 /
+1207 MiB, CPU 9.3 / 34.9 / 139.1 s (ranking 1.7 / 7.4 / 64.6 s), 200 MiB per minute from 30 s to
+5 min. Commands: ``nice -n 5 .venv/bin/python tools/bench_diagnose.py d30.mcap d120.mcap d300.mcap
+d600.mcap`` in each tree (main's with ``PYTHONPATH`` set to its tree, before this tool inserted it).
+Imports alone 217 MiB. The 30 s and 2 min drives' JSON are identical (timings aside). Then
+diagmem ``d600.mcap d1200.mcap`` (load 1.0-1.4): 607 / 911 MiB, CPU 120.5 / 238.9 s (ranking 14.3 /
+16.2 s, decode and estimator 81 / 179 s): 30.4 MiB and 11.8 CPU s per minute of drive from 10 to
+20 min (issue 19's 20 MiB per minute not met: what grows is outside the ranking).
+
+Earlier (2026-12-04, ``nice -n 5``, 2-core machine at load 4-5 beside other work; paper
 drives seed 3 of 30 / 120 / 300 s; main ba5e4e3 then branch diagfast bcf0349 in one run):
 main peak RSS 367 / 556 / 1094 MiB, CPU 13.5 / 40.5 / 148 s; diagfast 328 / 406 / 1038 MiB,
 CPU 10.4 / 43.2 / 154.8 s (wall 16.4 / 58.8 / 236.7 s); imports alone 255 MiB. Growth 158 MiB
@@ -30,6 +43,11 @@ import argparse
 import json
 import subprocess
 import sys
+from pathlib import Path
+
+# the tree this tool is in, not the one the venv was installed from (the editable install of another
+# worktree would otherwise be measured: the before/after figures of 2026-12-05 were first both this tree's)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def child(path: str, vehicle: str, simulation: bool, add: list[str]) -> None:

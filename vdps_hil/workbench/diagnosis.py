@@ -35,6 +35,7 @@ from vdps_hil.model.params import Vehicle
 
 from .add import AddResult, FittedModel, add_effects, cleaned_residuals, rms_by_equation
 from .dataset import DatasetConfig, DriveTable, load_drive
+from .fit_budget import FitSubset, fit_subset
 from .memory import release_freed_memory
 from .ranking.config import RankingConfig
 from .ranking.results import Ranking
@@ -66,6 +67,8 @@ class Diagnosis:
     cleaned: tuple | None = field(repr=False, default=None)
     """The identified model's cleaned residual (``add.cleaned_residuals``): (t_s, equation
     names, values); ``before["residual_rms"]`` without ``--add`` is its RMS."""
+    fit_subset: FitSubset | None = field(repr=False, default=None)
+    """The segments a long drive was fitted on (``fit_budget``), None when fitted whole."""
 
     def to_json(self) -> dict:
         rk = self.ranking
@@ -87,6 +90,8 @@ class Diagnosis:
                  "simulation_notes": self.simulation_notes()}
         if self.add is not None:
             extra["added"] = self.add.to_json()
+        if self.fit_subset is not None:  # only a drive longer than the row budget has the key
+            extra["fit_subset"] = self.fit_subset.to_json()
         return {"ranking": ranking, "recommendation": rk.recommendation, "equivalent_to": list(rk.equivalent_to),
                 "before": self.before, "after": self.add.after if self.add is not None else None,
                 "workbench": extra}
@@ -209,7 +214,12 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
     say(f"{table.counters.get('samples', 0)} samples, {len(table)} rows")
     say("identifying the model and ranking the candidates")
     t1 = time.perf_counter()
-    rk = rank(table, vehicle, model_effects, user_effects=user_effects, config=ranking_config)
+    cfg = ranking_config or RankingConfig()
+    sub = fit_subset(table, cfg.max_fit_s, cfg.fit_segment_s) if not add else None
+    fit_table = sub.table if sub is not None else table
+    rk = rank(fit_table, vehicle, model_effects, user_effects=user_effects, config=ranking_config)
+    if sub is not None:
+        rk.messages = [sub.message()] + rk.messages
     release_freed_memory()
     tm["ranking"] = time.perf_counter() - t1
     base = FittedModel(rk.base_vehicle, model_effects)
@@ -217,7 +227,10 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
     wins = worst_windows(res)
     regs = regime_bins(table, res)
     release_freed_memory()
-    t_c, _, names_c, vals_c = cleaned_residuals(table, base, vehicle, ranking_config)
+    t_c, rows_c, names_c, vals_c = cleaned_residuals(fit_table, base, vehicle, ranking_config)
+    if sub is not None:
+        t_c = sub.drive_times(rows_c)  # the segments' rows at their times in the drive
+    del fit_table
     release_freed_memory()
     cleaned = (t_c, names_c, vals_c)
     before = {"residual_rms": rms_by_equation(names_c, vals_c)}
@@ -255,4 +268,4 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
         saved = str(_save(save_model, fm.vehicle, fm.effects, sigmas=sig, effect_sigmas=fm.sigmas, source=src))
     tm["total"] = time.perf_counter() - t0
     return Diagnosis(str(path), vehicle, model_effects, table, rk, res, wins, regs, sim, before, add_res, tm, saved,
-                     cleaned)
+                     cleaned, sub)

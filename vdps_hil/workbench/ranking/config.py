@@ -74,3 +74,7 @@ class RankingConfig:
     joint_iterations: int = 1
     profile_steps: int = 5
     identify: tuple[str, ...] = BASE_PARAMS
+    max_fit_s: float = 150.0
+    """Row budget [s of drive]: a longer drive is fitted on evenly spread segments (``fit_budget``)."""
+    fit_segment_s: float = 50.0
+    """Length [s] of each of those segments."""
