@@ -89,8 +89,7 @@ class InterfaceTimeCanAdapter(CanAdapter):
     as a logger with hardware time stamps does. Without it a reader thread held up by the pipeline
     (Python's GIL) gives a whole burst of frames one late host time, and the estimator sees 20 ms of
     suspension samples at one instant. A stamp is never later than the host's reception nor earlier
-    than the previous frame's nor the bench's start; interfaces that stamp at host reception (slcan in python-can) get
-    about the host time, as before. ``device_time_backwards`` is still counted by CanAdapter."""
+    than the previous frame's or the bench's start; slcan stamps at host reception."""
 
     def __init__(self, *a, **kw):
         super().__init__(*a, **kw)
@@ -108,10 +107,8 @@ class InterfaceTimeCanAdapter(CanAdapter):
         for _, msg in items:
             ts = msg.timestamp
             t = clock.t_of(int(ts * 1e9) - self._wall_minus_mono_ns) if ts else now
-            if t > now:
-                t = now
-            if t < 0:  # sent at the start, stamped a hair early by the two hosts' clock offsets
-                t = 0
+            t = now if t > now else t
+            t = t if t > 0 else 0  # sent at the start, stamped early by the two clock offsets
             if last is not None and t < last:
                 t = last
             last = t
@@ -259,8 +256,7 @@ class PipelineNode:
         self.view = None if writer is None else FoxgloveView(lambda: system.pipeline.origin,
                                                              epoch_ns=getattr(writer, "sim_epoch_ns", None))
         self.sequencer = InputSequencer(sequence_s) if sequence_s else None
-        # sensor frame id -> (dlc, counter start bit, counter mask): the rolling counter's place
-        self._counter_of = {aid: (sp.dlc, sp.counter.start_bit, (1 << sp.counter.length_bits) - 1)
+        self._counter_of = {aid: (sp.dlc, sp.counter.start_bit, (1 << sp.counter.length_bits) - 1)  # id -> counter
                             for aid, sp in self.can.decoder.dbc.by_id.items() if sp.is_sensor}
         self._counters_seen: dict[int, int] = {}
         self.counter_breaks = 0
