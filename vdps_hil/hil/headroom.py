@@ -10,9 +10,9 @@ skipped work -- a machine too slow for that speed -- is repeated at half the spe
 most), without recording and without the ECU's reaction. When that leaves less than
 ``WARN_BELOW`` headroom, a second probe runs at the speed it says has ``WARN_BELOW`` (where
 ``--speed auto`` will run) and its cost is the one kept: the bench costs more per simulated
-second at a lower speed (fewer items per send pass and per wake-up: 0.70 s of CPU per simulated
-second at 0.5x against 0.51 s at 1x over TCP, 2026-12-05), so a cost measured at one speed and applied at
-another must come from the slower one. The CPU time spent by each side between the simulated
+second at a lower speed (fewer items per send pass and per wake-up: 0.70 s of CPU per
+simulated second at 0.5x against 0.51 s at 1x over TCP, 2026-12-05), so a cost measured at one
+speed and applied at another must come from the slower one. The CPU time spent by each side between the simulated
 instants ``warm_s`` (the compiled kernels loaded, the filter initialised) and the end of the
 probe, per simulated second, is the cost::
 
@@ -31,7 +31,8 @@ CI at the speed the probe chose). CPU time, not wall time, because a probe below
 would otherwise count its own waiting. The second version probed at 0.5x always and applied
 that cost at 1x: 1.4x where the cost at 1x gives 2.0x. The sum is the cost when both sides
 share one core: the embedded bench's threads share one interpreter lock, and the two processes
-of ``--can tcp`` share a core when the other one is busy. The prediction worker (its own process, off the sample path) is not counted.
+of ``--can tcp`` share a core when the other one is busy. The prediction worker (its own
+process, off the sample path) is not counted.
 
 Policy (``check``): ``H < REFUSE_BELOW`` (1x: the pipeline would fall behind from the first
 second) refuses the run (one line, exit 2; ``vdps bench --no-headroom-check`` runs anyway);

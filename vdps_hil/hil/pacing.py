@@ -153,6 +153,8 @@ class Pacer:
     def sent(self, t_items_ns, m_sent_ns: int) -> None:
         """Account items sent at ``m_sent_ns``; folded into the counts in batches (``_fold``): the
         numpy of one send pass cost more than the pass's own work."""
+        if not len(t_items_ns):
+            return
         with self._lock:
             self._pending.append((m_sent_ns, t_items_ns))
             self._pending_n += len(t_items_ns)

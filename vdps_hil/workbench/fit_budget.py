@@ -73,7 +73,7 @@ def fit_subset(table: DriveTable, max_fit_s: float, segment_s: float) -> FitSubs
     n = max(1, int(max_fit_s // segment_s))
     starts = np.linspace(float(t[0]), float(t[-1]) - segment_s, n)
     period = table.period_s
-    pieces, spans, shifts = [], [], []
+    pieces, times, spans, shifts = [], [], [], []
     t_next = float(t[0])
     for s0 in starts:
         idx = np.flatnonzero((t >= s0) & (t < s0 + segment_s))
@@ -81,27 +81,24 @@ def fit_subset(table: DriveTable, max_fit_s: float, segment_s: float) -> FitSubs
             continue
         if pieces:
             pieces.append(np.array([-1]))  # the empty separator row
+            times.append(np.array([times[-1][-1] + period]))
             t_next += period
+        sh = t_next - float(t[idx[0]])
         pieces.append(idx)
-        shifts.append((float(t[idx[0]]), float(t[idx[-1]]), t_next - float(t[idx[0]])))
+        times.append(t[idx] + sh)
+        shifts.append((float(t[idx[0]]), float(t[idx[-1]]), sh))
         spans.append((float(t[idx[0]]), float(t[idx[-1]]) + period))
         t_next += float(t[idx[-1]] - t[idx[0]]) + period
     rows = np.concatenate(pieces)
+    new_t = np.concatenate(times)
     sep = rows < 0
-    new_t = np.empty(len(rows))
-    pos = 0
-    for k, (a, b, sh) in enumerate(shifts):
-        if k:
-            new_t[pos] = new_t[pos - 1] + period  # separator
-            pos += 1
-        m = int(np.sum((t >= a) & (t <= b)))
-        new_t[pos:pos + m] = t[(t >= a) & (t <= b)] + sh
-        pos += m
+    src = np.where(sep, 0, rows)
 
     def take(v: np.ndarray) -> np.ndarray:
-        out = v[np.where(sep, 0, rows)].astype(float, copy=True) if v.dtype.kind == "f" else v[np.where(sep, 0, rows)]
-        if v.dtype.kind == "f":
-            out[sep] = np.nan
+        if v.dtype.kind != "f":
+            return v[src]
+        out = v[src].astype(float, copy=True)
+        out[sep] = np.nan
         return out
 
     def records(d: dict) -> dict:
