@@ -149,6 +149,20 @@ def test_replay_of_the_input_log_is_bit_identical(paper_samples):
     assert outputs_digest(fewer) != outputs_digest(out)
 
 
+def test_live_system_holds_no_replay_log_and_gives_the_same_outputs(paper_samples, paper_run):
+    """keep_input_log=False (the live bench): neither the system nor its estimator keeps more
+    than 4096 samples (a long bench's memory stays flat), and the outputs are those of the
+    logging system (the log is only a record)."""
+    live = VdpsSystem(MODEL, SystemConfig.for_profile(1000.0, 0.001, keep_input_log=False))
+    out, held = [], 0
+    for s in paper_samples:
+        out += live.handle(s)
+        held = max(held, len(live.pipeline.input_log))
+    out += live.finish()
+    assert len(paper_samples) > 2 * 4096 and live.input_log == () and held <= 4096
+    assert outputs_digest(out) == outputs_digest(paper_run[1])
+
+
 def test_refuses_truth_and_ignores_truth_samples():
     with pytest.raises(ValueError, match="model vehicle"):
         VdpsSystem(load_vehicle("sedan-truth"))

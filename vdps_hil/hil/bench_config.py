@@ -97,9 +97,9 @@ def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: st
     suspension sensor's rate and noise (its data sheet, from the sensor profile; not truth),
     started from the priors or from a saved parameter file ``params``.
 
-    ``live`` (the bench's own pipeline): predictions in a worker process, dropped when late
-    (``pipeline.node.LIVE_PREDICTIONS``); the worker is started and warmed here, before
-    the run. Else (a replay of a bench recording) the replay rule, with ``drops`` the live run's
+    ``live`` (the bench's own pipeline): predictions in a worker process, dropped when late,
+    and no replay log held (``pipeline.node.LIVE_PREDICTIONS``); the worker is started and
+    warmed here, before the run. Else (a replay of a bench recording) the replay rule, with ``drops`` the live run's
     dropped predictions (``hil.input_order`` setting ``prediction``).
 
     ``model`` may also be a saved workbench model (``vdps diagnose --save-model``, schema

@@ -89,7 +89,7 @@ from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport
 
 __all__ = ["LIVE_PREDICTIONS", "SystemConfig", "VdpsSystem", "default_pipeline_config", "predictor_effects"]
 
-LIVE_PREDICTIONS = {"prediction_worker": "process", "prediction_deadline": "drop"}
+LIVE_PREDICTIONS = {"prediction_worker": "process", "prediction_deadline": "drop", "keep_input_log": False}
 """How a live system predicts (the bench, ``vdps log --pipeline``; ``SystemConfig`` fields,
 ``prediction.offpath``): in a worker process (``tools/bench_offpath.py``: it keeps the
 prediction's Python off the sample path's GIL), a job late at its deadline dropped."""
@@ -136,6 +136,7 @@ class SystemConfig:
     # IMU measurement effects are removed from the readings (estimation.imu_correction)
     prediction_worker: str = "inline"  # prediction.offpath.WORKERS: "inline", "thread", "process"
     prediction_deadline: str = "wait"  # "wait" (replay) or "drop" (live; prediction.offpath)
+    keep_input_log: bool = True  # False (live bench): no replay log held, a long run's memory stays flat
     prediction_drops_t0_ns: tuple[int, ...] = ()  # a live run's dropped predictions, dropped again
 
     def __post_init__(self):
@@ -268,7 +269,10 @@ class VdpsSystem:
     # ------------------------------------------------------------------ public
     def handle(self, sample: Sample) -> list:
         """Consume one bus sample; returns the outputs it caused (module docstring)."""
-        self._log.append(sample)
+        if self.config.keep_input_log:
+            self._log.append(sample)
+        elif not self.counters["samples"] & 4095:
+            self.pipeline.clear_input_log()  # the estimator's own log, every 4096 samples
         self.counters["samples"] += 1
         if self._imu_corr is not None:  # a saved model's IMU effects taken out (estimation.imu_correction)
             sample = self._imu_corr.process(sample)

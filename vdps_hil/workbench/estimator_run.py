@@ -82,7 +82,7 @@ def run_system(samples: Iterable[Sample], vehicle: Vehicle, config: SystemConfig
     p = VdpsSystem(vehicle, config)
     step = int(round(period_s * 1e9))
     nxt = None
-    ts, xs, ss, innov = [], [], [], InnovationLog()
+    ts, xs, ss, innov = array("q"), array("d"), array("d"), InnovationLog()  # packed: no array object per estimate
 
     def take(out):
         nonlocal nxt
@@ -94,8 +94,8 @@ def run_system(samples: Iterable[Sample], vehicle: Vehicle, config: SystemConfig
                     nxt = (o.t_ns // step + 1) * step
                     if not ts or o.t_ns > ts[-1]:
                         ts.append(o.t_ns)
-                        xs.append(o.x)
-                        ss.append(o.sigma)
+                        xs.frombytes(np.ascontiguousarray(o.x, dtype=float).tobytes())
+                        ss.frombytes(np.ascontiguousarray(o.sigma, dtype=float).tobytes())
 
     for i, s in enumerate(samples):
         take(p.handle(s))
@@ -105,7 +105,9 @@ def run_system(samples: Iterable[Sample], vehicle: Vehicle, config: SystemConfig
     if not ts:
         raise DatasetError("the estimator never initialised (no GNSS fix with a heading in the recording)")
     rls = _rls_result(p)
-    return EstimatorRun(np.array(ts, dtype=np.int64), np.array(xs), np.array(ss), innov, p.pipeline.origin,
+    n = len(ts)
+    return EstimatorRun(np.frombuffer(ts, dtype=np.int64).copy(), np.frombuffer(xs, dtype=float).reshape(n, -1).copy(),
+                        np.frombuffer(ss, dtype=float).reshape(n, -1).copy(), innov, p.pipeline.origin,
                         dict(p.pipeline.counters), rls)
 
 
