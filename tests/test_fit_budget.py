@@ -11,7 +11,7 @@ from vdps_hil.experiments.workbench_study import HIDDEN, cached_drive
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.workbench.dataset import load_drive
 from vdps_hil.workbench.diagnosis import diagnose
-from vdps_hil.workbench.fit_budget import fit_subset
+from vdps_hil.workbench.fit_budget import add_window, fit_subset
 from vdps_hil.workbench.ranking.config import RankingConfig
 
 
@@ -65,3 +65,28 @@ def test_diagnosis_fits_the_segments_and_says_so(drive):
         inside |= (t_c >= a - 1e-9) & (t_c <= b + 1e-9)
     assert inside.all()
     assert len(d.residuals.t_s) > fs["rows"]  # the residual traces stay on the whole drive
+
+
+def test_add_window_is_the_contiguous_middle_of_a_long_drive(table):
+    assert add_window(table, table.duration_s + 1.0) is None
+    w = add_window(table, 8.0)
+    cut = w.cut(table)
+    assert cut.duration_s == pytest.approx(8.0, abs=2 * table.period_s)
+    assert np.all(np.diff(cut.t_s) < 1.5 * table.period_s)  # contiguous: no junction to predict across
+    mid = 0.5 * (table.t_s[0] + table.t_s[-1])
+    assert 0.5 * (cut.t_s[0] + cut.t_s[-1]) == pytest.approx(mid, abs=2 * table.period_s)
+    np.testing.assert_array_equal(cut.columns["vel_b_mps_x"], table.columns["vel_b_mps_x"][(table.t_s >= cut.t_s[0])
+                                                                                          & (table.t_s <= cut.t_s[-1])])
+
+
+def test_diagnosis_with_add_on_a_long_drive_uses_the_window_and_says_so(drive):
+    """--add beyond the budget: the ranking on the segments, the before/after on the middle window
+    (both stated); the added drag is fitted there and lowers the longitudinal residual."""
+    cfg = RankingConfig(max_fit_s=10.0, fit_segment_s=5.0)
+    d = diagnose(drive, load_vehicle("sedan-model", "model"), ranking_config=cfg, with_simulation=False,
+                 add=("aero_drag",))
+    msgs = d.to_json()["workbench"]["messages"]
+    assert any("--add is fitted" in m and "middle 10 s" in m for m in msgs)
+    assert d.to_json()["workbench"]["fit_subset"]["n_segments"] == 2
+    rb, ra = d.add.before["residual_rms"], d.add.after["residual_rms"]
+    assert ra["long"] < rb["long"]

@@ -35,7 +35,7 @@ from vdps_hil.model.params import Vehicle
 
 from .add import AddResult, FittedModel, add_effects, cleaned_residuals, rms_by_equation
 from .dataset import DatasetConfig, DriveTable, load_drive
-from .fit_budget import FitSubset, fit_subset
+from .fit_budget import FitSubset, add_window, fit_subset
 from .memory import release_freed_memory
 from .ranking.config import RankingConfig
 from .ranking.results import Ranking
@@ -215,7 +215,7 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
     say("identifying the model and ranking the candidates")
     t1 = time.perf_counter()
     cfg = ranking_config or RankingConfig()
-    sub = fit_subset(table, cfg.max_fit_s, cfg.fit_segment_s) if not add else None
+    sub = fit_subset(table, cfg.max_fit_s, cfg.fit_segment_s)
     fit_table = sub.table if sub is not None else table
     rk = rank(fit_table, vehicle, model_effects, user_effects=user_effects, config=ranking_config)
     if sub is not None:
@@ -246,13 +246,18 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
     if add:
         say(f"adding {', '.join(add)} and re-identifying")
         t1 = time.perf_counter()
+        win = add_window(table, cfg.max_fit_s)
+        if win is not None:
+            rk.messages.append(win.message())
 
         def reestimate(meas_effects):
             say("re-running the estimator with the sensor effects taken out of the IMU readings")
-            return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=dataset_config,
-                              imu_effects=meas_effects)
+            tab = load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=dataset_config,
+                             imu_effects=meas_effects)
+            return win.cut(tab) if win is not None else tab
 
-        add_res = add_effects(table, vehicle, model_effects, list(add), user_effects=user_effects,
+        add_res = add_effects(win.cut(table) if win is not None else table, vehicle, model_effects, list(add),
+                              user_effects=user_effects,
                               reestimate=reestimate, config=ranking_config, with_simulation=with_simulation,
                               progress=say)
         before = add_res.before

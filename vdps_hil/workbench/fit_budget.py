@@ -20,6 +20,11 @@ row-wise (the residuals, the regimes, the worst windows, the simulation error) s
 whole drive at the identified model; the cleaned residual and its RMS (``before``) are the
 segments' (the design's rows). A drive of at most ``max_fit_s`` is used whole: its results are
 unchanged.
+
+``--add`` (:func:`add_window`): its before/after refits the model on every block before each
+prediction start, which the joined segments cannot carry (a prediction must not run across a
+junction); on a drive longer than ``max_fit_s`` it is fitted and measured on the drive's middle
+``max_fit_s`` seconds, one contiguous window, and says so.
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ import numpy as np
 
 from .dataset import DriveTable
 
-__all__ = ["FitSubset", "fit_subset"]
+__all__ = ["AddWindow", "FitSubset", "add_window", "fit_subset"]
 
 
 @dataclass
@@ -119,3 +124,34 @@ def fit_subset(table: DriveTable, max_fit_s: float, segment_s: float) -> FitSubs
                      {k: take(v) for k, v in table.sigma.items()}, records(table.gnss), records(table.innovations),
                      dict(table.rates_hz), table.vehicle, dict(table.counters), table.rls, dict(table.sensors))
     return FitSubset(sub, rows, spans, table.duration_s, t)
+
+
+@dataclass
+class AddWindow:
+    """The contiguous span ``--add`` is fitted and measured on (module docstring), in the
+    recording's time [ns], so a re-estimated table (another grid origin) is cut at the same
+    instants."""
+
+    start_ns: int
+    end_ns: int
+    drive_s: float
+    offset_s: float  # the window's start in the drive's table time
+
+    def cut(self, table: DriveTable) -> DriveTable:
+        t_ns = table.t0_ns + np.round(table.t_s * 1e9).astype(np.int64)
+        return table.slice((t_ns >= self.start_ns) & (t_ns <= self.end_ns))
+
+    def message(self) -> str:
+        span = (self.end_ns - self.start_ns) * 1e-9
+        return (f"row budget: --add is fitted and its before/after measured on the drive's middle {span:.0f} s "
+                f"({self.offset_s:.0f}-{self.offset_s + span:.0f} s of {self.drive_s / 60:.1f} min)")
+
+
+def add_window(table: DriveTable, max_fit_s: float) -> AddWindow | None:
+    """The middle ``max_fit_s`` seconds of a longer drive, or None when it is used whole."""
+    t = table.t_s
+    if not len(t) or table.duration_s <= max_fit_s or not math.isfinite(max_fit_s):
+        return None
+    a = 0.5 * (float(t[0]) + float(t[-1]) - max_fit_s)
+    start_ns = table.t0_ns + int(round(a * 1e9))
+    return AddWindow(start_ns, start_ns + int(round(max_fit_s * 1e9)), table.duration_s, a)
