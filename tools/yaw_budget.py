@@ -7,7 +7,8 @@
 Simulates the drive through the chain (``experiments.paper_chain.chain_run``, table1-susp1k),
 runs a fresh ``Identifier`` over its inputs up to ``--t-end``, prints the identified I_z and
 C_alpha against the truth and the budget; ``--truth-slip`` reruns the identifier with the
-truth's slip angles in the inputs (which share of the error the slip estimate makes).
+truth's slip angles in the inputs (which share of the error the slip estimate makes),
+``--truth-steer`` with the estimated ones moved by the road-wheel angle's error only.
 Use tuning seeds (``experiments.ident_study.TUNING_SEEDS``) to look for causes.
 """
 
@@ -32,11 +33,19 @@ def _identify(veh, cfg, inputs, t_end_s):
     return idf
 
 
-def _with_truth_slip(inputs, truth):
+def _with_truth(inputs, truth, part: str):
+    """The inputs with the truth's slip angles (``part`` "slip"), or with the estimated ones
+    moved by the truth's road-wheel angle error (``"steer"``: alpha + delta_true - delta_est,
+    alpha = delta - atan(...) of a steered wheel)."""
     t = np.array([s["t_ns"] for s in truth], dtype=float)
-    al = [np.array([s[f"slip_angle_rad_{i}"] for s in truth]) for i in (1, 2, 3, 4)]
-    return [dataclasses.replace(inp, slip_angle_rad=tuple(float(np.interp(inp.t_ns, t, a)) for a in al))
-            for inp in inputs]
+    key = "slip_angle_rad" if part == "slip" else "road_wheel_angle_rad"
+    tr = [np.array([s[f"{key}_{i}"] for s in truth]) for i in (1, 2, 3, 4)]
+    out = []
+    for inp in inputs:
+        v = [float(np.interp(inp.t_ns, t, a)) for a in tr]
+        al = v if part == "slip" else [a + d - e for a, d, e in zip(inp.slip_angle_rad, v, inp.wheel_angle_rad)]
+        out.append(dataclasses.replace(inp, slip_angle_rad=tuple(al)))
+    return out
 
 
 def main(argv=None) -> int:
@@ -49,6 +58,8 @@ def main(argv=None) -> int:
     ap.add_argument("--t-end", type=float, default=math.inf)
     ap.add_argument("--yaw-row", action="store_true", help="the cornering problem with its yaw row")
     ap.add_argument("--truth-slip", action="store_true", help="also identify with the truth's slip angles")
+    ap.add_argument("--truth-steer", action="store_true",
+                    help="also identify with the slip angles moved by the truth's road-wheel angle error")
     a = ap.parse_args(argv)
     from vdps_hil.experiments.ident_study import yaw_row_config
     from vdps_hil.experiments.paper_chain import chain_run
@@ -66,8 +77,9 @@ def main(argv=None) -> int:
     cfg = yaw_row_config() if a.yaw_row else load_ident_config()
     veh = load_vehicle(a.model)
     names = ("inertia_z_kgm2", "cornering_stiffness_front_nprad", "cornering_stiffness_rear_nprad")
-    runs = [("estimated slip", run["inputs"])] + ([("truth slip", _with_truth_slip(run["inputs"], run["truth"]))]
-                                                  if a.truth_slip else [])
+    runs = [("estimated slip", run["inputs"])]
+    runs += [(f"truth {part}", _with_truth(run["inputs"], run["truth"], part))
+             for part, on in (("slip", a.truth_slip), ("steer", a.truth_steer)) if on]
     for tag, inputs in runs:
         idf = _identify(veh, cfg, inputs, a.t_end)
         p = idf.params.as_dict()

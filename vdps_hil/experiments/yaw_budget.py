@@ -18,7 +18,11 @@ yaw acceleration by least squares, I_z = sum wd_z b_z / sum wd_z^2:
   estimated wd_z (what the RLS sees, unweighted);
 * ``shares``: iz_model - iz_truth_forces split into the least-squares projections of its
   parts on wd_z (kg m^2; their sum plus ``other`` is the difference): per axle the lateral
-  force's **slip** error (C_alpha / 2 (alpha_est - alpha_true) at the truth's lever) and its
+  force's slip error C_alpha / 2 (alpha_est - alpha_true) at the truth's lever, in two parts,
+  **slip_est** (alpha_est - alpha_kin: the estimation, alpha_kin = delta - atan2(v + x_i r,
+  u - y_i r) the rigid wheel kinematics of the truth's velocity, yaw rate and wheel angle) and
+  **slip_kin** (alpha_kin - alpha_true: what the truth's slip angle has beyond rigid wheel
+  kinematics, e.g. CommonRoad's axle roll rate), and its
   **law** error (C_alpha / 2 alpha_true - F_b,true: what a linear tire cannot follow), and the
   **longitudinal** forces' error (C_lambda lambda - F_a,true at the truth's lever, the track
   width's y_i F_x,i among it);
@@ -43,7 +47,7 @@ _WHEELS = (1, 2, 3, 4)
 
 
 def _truth_series(truth) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    keys = ["angular_accel_b_radps2_z"] + [f"{k}_{i}" for k in ("tire_force_long_n", "tire_force_lat_n",
+    keys = ["angular_accel_b_radps2_z", "vel_b_mps_x", "vel_b_mps_y", "rate_b_radps_z"] + [f"{k}_{i}" for k in ("tire_force_long_n", "tire_force_lat_n",
                                                                  "slip_angle_rad", "road_wheel_angle_rad")
                                            for i in _WHEELS]
     t = np.array([s["t_ns"] for s in truth], dtype=float)
@@ -73,6 +77,7 @@ def _rows(truth, inputs, vehicle, params, config, t_end_s: float) -> list[dict]:
                      "fa": np.array([at[f"tire_force_long_n_{i}"] for i in _WHEELS]),
                      "fb": np.array([at[f"tire_force_lat_n_{i}"] for i in _WHEELS]),
                      "al_true": np.array([at[f"slip_angle_rad_{i}"] for i in _WHEELS]),
+                     "v_true": (at["vel_b_mps_x"], at["vel_b_mps_y"], at["rate_b_radps_z"]),
                      "d_true": np.array([at[f"road_wheel_angle_rad_{i}"] for i in _WHEELS])})
     return rows
 
@@ -84,13 +89,17 @@ def _parts(row, vehicle, params) -> dict[str, float]:
     lat = xy[:, 0] * np.cos(d) + xy[:, 1] * np.sin(d)  # M_z per unit F_b,i
     lon = xy[:, 0] * np.sin(d) - xy[:, 1] * np.cos(d)  # M_z per unit F_a,i
     c_b = np.array([params.cornering_stiffness_front_nprad] * 2 + [params.cornering_stiffness_rear_nprad] * 2) / 2.0
-    slip = lat * c_b * (row["al"] - row["al_true"])
+    u, v, r = row["v_true"]
+    al_kin = d - np.arctan2(v + xy[:, 0] * r, u - xy[:, 1] * r)  # rigid wheel kinematics, the truth's v, r, delta
+    slip_est, slip_kin = lat * c_b * (row["al"] - al_kin), lat * c_b * (al_kin - row["al_true"])
     law = lat * (c_b * row["al_true"] - row["fb"])
     f_a = np.array(params.tracking_stiffness_n) * np.asarray(inp.slip_ratio, dtype=float)
     de = np.asarray(inp.wheel_angle_rad, dtype=float)  # the model's own levers: its b_z less its tire moment
     lat_e, lon_e = xy[:, 0] * np.cos(de) + xy[:, 1] * np.sin(de), xy[:, 0] * np.sin(de) - xy[:, 1] * np.cos(de)
     model_no_tires = row["b_z"] - float(np.sum(lat_e * c_b * row["al"] + lon_e * f_a))
-    return {"slip_front": slip[0] + slip[1], "slip_rear": slip[2] + slip[3], "law_front": law[0] + law[1],
+    return {"slip_est_front": slip_est[0] + slip_est[1], "slip_est_rear": slip_est[2] + slip_est[3],
+            "slip_kin_front": slip_kin[0] + slip_kin[1], "slip_kin_rear": slip_kin[2] + slip_kin[3],
+            "law_front": law[0] + law[1],
             "law_rear": law[2] + law[3], "longitudinal": float(np.sum(lon * (f_a - row["fa"]))),
             "b_z_truth_forces": model_no_tires + float(np.sum(lat * row["fb"] + lon * row["fa"])),
             "dm_dcf_nm": float(np.sum((lat * row["al"])[:2])) / 2.0,
@@ -112,7 +121,8 @@ def yaw_budget(truth, inputs, vehicle, params, config, t_end_s: float = math.inf
     col = lambda k: np.array([p[k] for p in parts])  # noqa: E731
     b_z = np.array([r["b_z"] for r in rows])
     iz_truth, iz_model = fit(col("b_z_truth_forces")), fit(b_z)
-    shares = {k: fit(col(k)) for k in ("slip_front", "slip_rear", "law_front", "law_rear", "longitudinal")}
+    shares = {k: fit(col(k)) for k in ("slip_est_front", "slip_est_rear", "slip_kin_front", "slip_kin_rear",
+                                       "law_front", "law_rear", "longitudinal")}
     sens = {"front": fit(col("dm_dcf_nm")) * params.cornering_stiffness_front_nprad / iz_model,
             "rear": fit(col("dm_dcr_nm")) * params.cornering_stiffness_rear_nprad / iz_model}
     return {"rows": len(rows), "iz_truth_forces": iz_truth, "iz_model": iz_model,
