@@ -40,7 +40,7 @@ def _drive(slip_error_per_accel=0.0, n=400, dt_s=0.01, truth_extra_per_rate=0.0)
         f_b = c_b * al_true
         wdz = float(np.sum(xy[:, 0] * f_b)) / IZ_TRUE_KGM2
         snap = {"t_ns": t_ns, "angular_accel_b_radps2_z": wdz, "vel_b_mps_x": u, "vel_b_mps_y": v,
-                "rate_b_radps_z": r}
+                "rate_b_radps_z": r, "rate_b_radps_x": 0.0}
         for i in range(4):
             snap[f"tire_force_long_n_{i + 1}"] = 0.0
             snap[f"tire_force_lat_n_{i + 1}"] = float(f_b[i])

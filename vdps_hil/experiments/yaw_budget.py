@@ -19,10 +19,11 @@ yaw acceleration by least squares, I_z = sum wd_z b_z / sum wd_z^2:
 * ``shares``: iz_model - iz_truth_forces split into the least-squares projections of its
   parts on wd_z (kg m^2; their sum plus ``other`` is the difference): per axle the lateral
   force's slip error C_alpha / 2 (alpha_est - alpha_true) at the truth's lever, in two parts,
-  **slip_est** (alpha_est - alpha_kin: the estimation, alpha_kin = delta - atan2(v + x_i r,
-  u - y_i r) the rigid wheel kinematics of the truth's velocity, yaw rate and wheel angle) and
-  **slip_kin** (alpha_kin - alpha_true: what the truth's slip angle has beyond rigid wheel
-  kinematics, e.g. CommonRoad's axle roll rate), and its
+  **slip_est** (alpha_est - alpha_kin: the estimation, alpha_kin = delta - atan2(v + x_i r +
+  c_r p (h_cg - r_w), u - y_i r) the model's wheel kinematics, ``forces.slip_angles_rad``, with
+  the truth's velocity, yaw and roll rates and wheel angle) and **slip_kin** (alpha_kin -
+  alpha_true: what the truth's slip angle has beyond the model's wheel kinematics, e.g.
+  CommonRoad's axle roll rate), and its
   **law** error (C_alpha / 2 alpha_true - F_b,true: what a linear tire cannot follow), and the
   **longitudinal** forces' error (C_lambda lambda - F_a,true at the truth's lever, the track
   width's y_i F_x,i among it);
@@ -47,7 +48,7 @@ _WHEELS = (1, 2, 3, 4)
 
 
 def _truth_series(truth) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    keys = ["angular_accel_b_radps2_z", "vel_b_mps_x", "vel_b_mps_y", "rate_b_radps_z"] + [f"{k}_{i}" for k in ("tire_force_long_n", "tire_force_lat_n",
+    keys = ["angular_accel_b_radps2_z", "vel_b_mps_x", "vel_b_mps_y", "rate_b_radps_z", "rate_b_radps_x"] + [f"{k}_{i}" for k in ("tire_force_long_n", "tire_force_lat_n",
                                                                  "slip_angle_rad", "road_wheel_angle_rad")
                                            for i in _WHEELS]
     t = np.array([s["t_ns"] for s in truth], dtype=float)
@@ -77,7 +78,7 @@ def _rows(truth, inputs, vehicle, params, config, t_end_s: float) -> list[dict]:
                      "fa": np.array([at[f"tire_force_long_n_{i}"] for i in _WHEELS]),
                      "fb": np.array([at[f"tire_force_lat_n_{i}"] for i in _WHEELS]),
                      "al_true": np.array([at[f"slip_angle_rad_{i}"] for i in _WHEELS]),
-                     "v_true": (at["vel_b_mps_x"], at["vel_b_mps_y"], at["rate_b_radps_z"]),
+                     "v_true": (at["vel_b_mps_x"], at["vel_b_mps_y"], at["rate_b_radps_z"], at["rate_b_radps_x"]),
                      "d_true": np.array([at[f"road_wheel_angle_rad_{i}"] for i in _WHEELS])})
     return rows
 
@@ -89,8 +90,9 @@ def _parts(row, vehicle, params) -> dict[str, float]:
     lat = xy[:, 0] * np.cos(d) + xy[:, 1] * np.sin(d)  # M_z per unit F_b,i
     lon = xy[:, 0] * np.sin(d) - xy[:, 1] * np.cos(d)  # M_z per unit F_a,i
     c_b = np.array([params.cornering_stiffness_front_nprad] * 2 + [params.cornering_stiffness_rear_nprad] * 2) / 2.0
-    u, v, r = row["v_true"]
-    al_kin = d - np.arctan2(v + xy[:, 0] * r, u - xy[:, 1] * r)  # rigid wheel kinematics, the truth's v, r, delta
+    u, v, r, p = row["v_true"]
+    roll = vehicle.chassis.wheel_roll_coupling * p * (vehicle.geometry.h_cg_m - vehicle.tire.rolling_radius_m)
+    al_kin = d - np.arctan2(v + xy[:, 0] * r + roll, u - xy[:, 1] * r)  # the model's wheel kinematics, truth motion
     slip_est, slip_kin = lat * c_b * (row["al"] - al_kin), lat * c_b * (al_kin - row["al_true"])
     law = lat * (c_b * row["al_true"] - row["fb"])
     f_a = np.array(params.tracking_stiffness_n) * np.asarray(inp.slip_ratio, dtype=float)
