@@ -311,3 +311,26 @@ def test_vdps_sim_on_the_commonroad_truth_replays_and_the_ekf_tracks_it(tmp_path
     assert rms["h"] < math.sqrt(2.0) * 1.0, rms
     for k in ("roll", "pitch", "yaw"):
         assert math.degrees(rms[k]) < 0.4, rms
+
+
+def test_steering_sensor_reads_the_rate_limited_road_wheels():
+    """A 1.5 Hz steering-wheel sine of 90 deg asks the road wheels for 0.6 rad/s at a ratio of
+    ~15, above the package's 0.4 rad/s limit: the angle the sensors read (current_inputs, the
+    truth's steer_wheel_angle_rad) is the road wheels' actual angle times the ratio, so it lags
+    the command (the truth keeps the command as steer_wheel_angle_cmd_rad) and never turns
+    faster than 0.4 rad/s at the road wheels."""
+    amp = math.radians(90)
+    sim = CommonRoadTruth(1, inputs=lambda t, x: Inputs(amp * math.sin(2 * math.pi * 1.5 * t)),
+                          initial_speed_mps=20.0)
+    ratio = sim.mapping.steer_ratio
+    seen = []
+    sim.add_step_hook(lambda s: seen.append((s.current_inputs().steer_wheel_angle_rad, -s.xc[2] * ratio)))
+    sim.run(2.0)
+    assert sim.steer_rate_limited_steps > 100
+    sensor = np.array([a for a, _ in seen])
+    np.testing.assert_allclose(sensor, [b for _, b in seen], rtol=0, atol=1e-12)
+    tr = sim.truth
+    lag = max(abs(s["steer_wheel_angle_rad"] - s["steer_wheel_angle_cmd_rad"]) for s in tr)
+    assert lag > math.radians(10)  # the command runs ahead of the wheels
+    rate = np.abs(np.diff([s["steer_wheel_angle_rad"] for s in tr])) / np.diff([s["t_s"] for s in tr])
+    assert rate.max() <= 0.4 * ratio * (1 + 1e-6)

@@ -98,8 +98,8 @@ Interface used by ``sim.drive`` and ``sim.sensors`` (as :class:`Simulator`): ``n
 the package's state), ``model`` (``layout``, ``vehicle``, ``static_load_n``,
 ``rolling_radius_m``: what the driver and the recorder read), ``env``, ``effects``, ``step()``,
 ``step_to``, ``run``, ``kinematics()``, ``current_inputs()`` (the inputs as applied to the
-wheels: the commanded steering-wheel angle and the package's per-wheel net torques, no
-separate brake), ``commanded_inputs()`` (schedule or driver, then the override),
+wheels: the steering-wheel angle of the road wheels' actual angle, the package's per-wheel net
+torques, no separate brake), ``commanded_inputs()`` (schedule or driver, then the override),
 ``set_input_override``, ``add_step_hook``, ``snapshot()``, ``truth``, ``stopped``,
 ``stop_reason``, ``events`` (empty).
 
@@ -249,14 +249,22 @@ class CommonRoadTruth(FixedStepTruth):
             self._ci = self.mapping.map(self.commanded_inputs(), xc[2], xc[3], spins, self.dt_s)
         return self._ci
 
+    def steer_wheel_angle_rad(self) -> float:
+        """The steering-wheel angle of the road wheels' angle now (our sense: the package's delta
+        is right-positive, ``cr_inputs.InputMapping``: delta_cmd = -angle / ratio)."""
+        return -float(self.xc[2]) * self.mapping.steer_ratio
+
     def current_inputs(self) -> Inputs:
-        """The inputs as applied over the step starting now: the commanded steering-wheel angle
-        and the package's net torque per wheel (brakes included, so no separate brake torque)."""
+        """The inputs as applied over the step starting now: the steering-wheel angle of the road
+        wheels' actual angle (delta times the steering ratio: the column is linked to the rack, so
+        when the package's steering-rate limit holds the road wheels back, the column's angle
+        sensor lags the command with them) and the package's net torque per wheel (brakes
+        included, so no separate brake torque)."""
         self._fresh()
         if self._applied is None:
             ci = self.cr_inputs()
             u = object.__new__(Inputs)
-            object.__setattr__(u, "steer_wheel_angle_rad", self.commanded_inputs().steer_wheel_angle_rad)
+            object.__setattr__(u, "steer_wheel_angle_rad", self.steer_wheel_angle_rad())
             object.__setattr__(u, "wheel_torque_nm", ci.wheel_torque_nm)
             object.__setattr__(u, "brake_torque_nm", (0.0, 0.0, 0.0, 0.0))
             self._applied = u
@@ -379,7 +387,8 @@ class CommonRoadTruth(FixedStepTruth):
             s[f"rolling_radius_m_{w}"] = p.R_w
             s[f"wheel_torque_nm_{w}"] = ci.wheel_torque_nm[i]
             s[f"brake_torque_nm_{w}"] = ci.brake_torque_nm[i]
-        s["steer_wheel_angle_rad"] = self.commanded_inputs().steer_wheel_angle_rad
+        s["steer_wheel_angle_rad"] = self.steer_wheel_angle_rad()
+        s["steer_wheel_angle_cmd_rad"] = self.commanded_inputs().steer_wheel_angle_rad
         s["road_wheel_angle_cmd_rad"] = -ci.road_wheel_angle_cmd_rad
         s["road_bank_rad"] = s["road_grade_rad"] = 0.0
         s["ltr"] = snapshot_ltr(s)
