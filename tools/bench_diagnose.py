@@ -17,7 +17,11 @@ first (the part that does not grow with the drive). Drives: ``vdps sim paper --d
 --seed 3 -o d30.mcap`` (or ``tools/make_long_drive.py``); measure on a quiet machine, or say
 what ran beside it.
 
-Last measured (2026-12-05, ``nice -n 5``, 2-core machine at load 0.8-1.2; paper drives seed 3 of 30 s /
+Latest (2026-12-05, after the streams went single precision and field by field; load 3-12):
+peak RSS 379 / 503 / 694 / 1333 MiB for 2 / 10 / 20 / 60 min drives, 16.6 MiB per minute from 10
+to 60 min, the hour in 770 CPU s (README, "Memory and speed").
+
+Before that (2026-12-05, ``nice -n 5``, 2-core machine at load 0.8-1.2; paper drives seed 3 of 30 s /
 2 / 5 / 10 min; branch diagmem (row budget, ``workbench.fit_budget``) with this venv, then main
 c4b63d3 in a detached worktree run the same way, back to back): diagmem peak RSS 304 / 381 / 502 /
 608 MiB, CPU 9.4 / 35.4 / 76.3 / 130.3 s (ranking 1.9 / 7.4 / 14.9 / 15.3 s: fixed beyond 150 s of
