@@ -80,7 +80,8 @@ def build_result(init: PredictorInitialState, xs, fzs, ts, env: Env, offset, mon
     left = fz[:, 0] + fz[:, 3]
     right = fz[:, 1] + fz[:, 2]
     tot = left + right
-    ltr = np.divide(right - left, tot, out=np.zeros_like(tot), where=tot > 0)
+    with np.errstate(invalid="ignore"):  # a diverged prediction's infinite loads (inf - inf): LTR left 0
+        ltr = np.divide(right - left, tot, out=np.zeros_like(tot), where=tot > 0)
     tu, pn = monitor.tip_up, monitor.point_of_no_return
     return PredictionResult(
         t0_ns=init.t_ns, t_s=t, pos_g_m=pos, euler_g_rad=eul, euler_v_rad=eul_v,
