@@ -244,7 +244,7 @@ class TireSaturationCandidate(Candidate):
         super().__init__(effect_cls, ("saturation_scale",))
         self.mu0 = float(self.defaults["peak_friction"])
         self.stiffness = "axle"
-        self.coefficient_per_rad = math.nan  # c of ``"common"`` at the last columns
+        self.coefficient_per_rad = math.nan  # c of ``"common"`` when screened (NaN: ``"axle"``)
 
     def prior_theta(self):
         return np.array([1.0])
@@ -266,9 +266,8 @@ class TireSaturationCandidate(Candidate):
         return x, None
 
     def delta_columns(self, ctx, phi):
-        """The stiffness chosen when the candidate was screened stays (its coefficient at this point)."""
-        if self.stiffness == "common":
-            self.coefficient_per_rad = cornering_coefficient(ctx.res)
+        """The stiffness chosen when the candidate was screened stays, with its coefficient (the
+        scale s was fitted on that column)."""
         return self._columns(ctx.res, self.coefficient_per_rad), None
 
     def _mu(self, s: float) -> float:
