@@ -151,3 +151,33 @@ def test_saturation_candidate_takes_the_stiffness_the_residual_follows(truth):
     assert ("cornering_coefficient_per_rad" in cand.report_params([1.0], [0.1])) == (truth == "common")
     # once selected, its change column keeps that normalisation (a residual of zero would pick "axle")
     assert np.array_equal(cand.delta_columns(_Ctx(res, 0.0 * y), [1.5625])[0], x)
+
+
+SEED = 21  # neither a tuning seed (100-103) nor a study seed (1000+)
+
+
+def test_seed_is_disjoint():
+    from vdps_hil.experiments.workbench_study import STUDY_SEEDS, TUNING_SEEDS
+
+    assert SEED not in TUNING_SEEDS and SEED not in STUDY_SEEDS
+
+
+def test_circle_ramp_on_commonroad_set1_recommends_saturation_with_one_cornering_coefficient(tmp_path_factory):
+    """CommonRoad set 1 (Ford Escort), the circle ramped to 7.5 m/s^2 (issue 18; a reduced, seeded
+    ``tools/workbench_study_cr.py``): tire saturation is recommended with the four tires' common
+    cornering coefficient (its rear axle is identified above the tires' slope, where the axle
+    normalisation missed 2 of the 4 tuning seeds) and a peak friction near the truth's Pacejka
+    p_dy1 = 1.05 (0.98-1.10 on the study seeds)."""
+    from vdps_hil.experiments.workbench_study import cached_drive, model_file
+    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.workbench.dataset import load_drive
+    from vdps_hil.workbench.ranking.selection import rank
+
+    veh = load_vehicle(model_file("commonroad-mb:1"))
+    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "shipped:cr-circle-ramp", (), SEED,
+                        truth="commonroad-mb:1")
+    rk = rank(load_drive(path, veh), veh)
+    assert rk.recommendation == "magic_formula_tire", rk.messages
+    mf = next(e for e in rk.entries if e.effect == "magic_formula_tire")
+    assert "cornering_coefficient_per_rad" in mf.parameters
+    assert mf.plausible and 0.8 <= mf.parameters["peak_friction"][0] <= 1.3
