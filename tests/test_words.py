@@ -24,6 +24,10 @@ def test_saturation_angle_is_where_the_magic_formula_drops_five_percent():
     f = MagicFormulaTire().tire_forces(fz, fz, 0.0, alpha, 80000.0, ca)[1]
     assert abs(f / (ca * alpha) - 0.95) < 0.01
     assert W._saturation_angle_deg(rk, 0.5) < a  # less friction saturates earlier
+    # one cornering coefficient c for the four tires: the front tire's stiffness is c F_z0
+    c = ca / fz
+    assert abs(W._saturation_angle_deg(rk, 1.0, c) - a) < 1e-9 * a
+    assert abs(W._saturation_angle_deg(rk, 1.0, 2.0 * c) - 0.5 * a) < 1e-9 * a
 
 
 def test_known_groups_have_their_maneuvers():

@@ -170,12 +170,15 @@ def _effect_words(rk, e) -> str:
         return f"f_r = {v:.4f} +- {s:.4f} ({v * veh.params.mass_kg * GRAVITY_MPS2:.0f} N on this car)"
     if name == "magic_formula_tire":
         mu, smu = _pv(e, "peak_friction")
-        a = _saturation_angle_deg(rk, mu)
+        cc = e.parameters.get("cornering_coefficient_per_rad")
+        a = _saturation_angle_deg(rk, mu, cc[0] if cc else math.nan)
         where = f"above {a:.1f} deg slip angle " if math.isfinite(a) else ""
         sat = e.parameters.get("saturation_scale")
         scale = (f"{sat[0]:.2f} +- {sat[1]:.2f} times the generic tire's saturation, i.e. " if sat else "")
+        common = (f"; the four tires' slip stiffness taken as one cornering coefficient, {cc[0]:.1f} per rad of "
+                  "static load, as the axles' identified stiffnesses fitted it worse" if cc else "")
         return (f"{where}the lateral force falls below the linear tire ({scale}peak friction mu = {mu:.2f} +- "
-                f"{smu:.2f} with the Magic Formula shape at its generic prior)")
+                f"{smu:.2f} with the Magic Formula shape at its generic prior{common})")
     if name == "load_dependent_cornering_stiffness":
         a, sa = _pv(e, "load_slope")
         b, sb = _pv(e, "load_degression")
@@ -231,9 +234,11 @@ def _generic_words(parameters) -> str:
     return text
 
 
-def _saturation_angle_deg(rk, mu: float, drop: float = 0.05) -> float:
+def _saturation_angle_deg(rk, mu: float, coefficient_per_rad: float = math.nan, drop: float = 0.05) -> float:
     """Slip angle where the Magic Formula lateral force of a front tire at its static load falls
-    ``drop`` below the linear tire (shape factors at the generic prior)."""
+    ``drop`` below the linear tire (shape factors at the generic prior); its slip stiffness is
+    half the front axle's, or ``coefficient_per_rad`` times its load when given (the saturation
+    candidate's ``"common"`` normalisation)."""
     from vdps_hil.model.effects import MagicFormulaTire
 
     if not (mu > 0 and math.isfinite(mu)):
@@ -249,7 +254,7 @@ def _saturation_angle_deg(rk, mu: float, drop: float = 0.05) -> float:
             hi = mid
     veh = rk.base_vehicle
     fz = veh.params.mass_kg * GRAVITY_MPS2 * veh.geometry.l_r_m / veh.geometry.wheelbase_m / 2.0
-    ca = veh.params.cornering_stiffness_front_nprad / 2.0
+    ca = coefficient_per_rad * fz if math.isfinite(coefficient_per_rad) else veh.params.cornering_stiffness_front_nprad / 2.0
     return math.degrees(lo * mu * fz / ca)
 
 
