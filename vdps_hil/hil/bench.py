@@ -34,8 +34,9 @@ batches and costs more per frame); the highest lossless speeds were alike (2-4x)
 the cross-process path the tests run; ``pty`` stays for what it models, a USB-CAN adapter
 speaking slcan (both are tested).
 
-Real time in one Python process: the simulator side, three adapter readers and the pipeline
-share one interpreter lock. The bench lowers the interpreter's switch interval to 1 ms (a
+Real time in one Python process: the simulator side and the pipeline (which reads its three
+adapters in its own loop, ``hil.node``; with ``readers="threads"`` a thread each) share one
+interpreter lock. The bench lowers the interpreter's switch interval to 1 ms (a
 thread waiting for the lock gets it within about a millisecond instead of 5 ms) and freezes the
 garbage collector's view of everything built before the start (no 50 ms collections mid-run);
 at 1x the embedded bench needs about 0.7 of a CPU core, so a loaded machine shows up as late

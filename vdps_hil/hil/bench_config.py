@@ -45,6 +45,7 @@ class BenchConfig:
     drain_timeout_s: float = 3.0
     max_lag_s: float = 0.25
     switch_interval_s: float | None = 0.001
+    readers: str = "inline"  # the pipeline reads its adapters in its own loop (``hil.node``), or "threads"
     start_delay_s: float = 0.3
     params: str | None = None  # saved identified parameters the pipeline starts from (``hil.bench`` docstring)
     rt_priority: int | None = None  # SCHED_FIFO priority of the run's threads (``hil.scheduling``); None: untouched

@@ -45,6 +45,7 @@ def main(argv=None) -> int:
     ap.add_argument("--output", default=None)
     ap.add_argument("--params", default=None)
     ap.add_argument("--switch-interval", type=float, default=None)
+    ap.add_argument("--readers", choices=("inline", "threads"), default="inline")
     a = ap.parse_args(argv)
     # python-can's socketcand client logs every TCP read that splits a frame ("Got incomplete
     # message"): normal on a stream, not an error; keep real errors only
@@ -68,7 +69,7 @@ def main(argv=None) -> int:
         if a.output:
             writer = RecordingWriter(a.output, metadata={"source": "vdps bench (pipeline process)"},
                                      sim_epoch_ns=S.DEFAULT_SIM_EPOCH_NS)
-        node = PipelineNode(system, a.can_spec, a.imu_port, a.gnss_port, clock, writer=writer)
+        node = PipelineNode(system, a.can_spec, a.imu_port, a.gnss_port, clock, writer=writer, readers=a.readers)
         node.open()
         warm_pipeline_kernels()
     except (AdapterError, ValueError, OSError) as e:

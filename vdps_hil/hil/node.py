@@ -1,8 +1,9 @@
 """The pipeline's side of the bench: the real adapters on the bench's wires, the VDPS system
 fed live, its warning frames sent back on CAN.
 
-What runs (threads: one reader per adapter, one pipeline loop)
---------------------------------------------------------------
+What runs (one loop reading the adapters and handling what they deliver, ``readers="inline"``,
+the bench's default; or a reader thread per adapter and the loop, ``readers="threads"``)
+--------------------------------------------------------------------------------------------
 * ``CanAdapter("vdps", SPEC)`` with the chassis decoder (``dbc/vdps.dbc``), stamping each frame
   with the interface's own time stamp (:class:`InterfaceTimeCanAdapter`); serial adapters on the
   IMU pty (921600 Bd, Xsens MTData2) and the GNSS pty (115200 Bd, NMEA), stamping each message
@@ -45,11 +46,12 @@ The node never opens truth: it has the model vehicle, the wires and the bench cl
 
 from __future__ import annotations
 
-import heapq
+import select
 import threading
 import time
 from typing import Any, Callable
 
+from vdps_hil.adapters.base import EndOfInput
 from vdps_hil.adapters.can_adapter import CanAdapter
 from vdps_hil.adapters.imu_adapter import ImuAdapter, ImuProtocol
 from vdps_hil.adapters.nmea_adapter import NmeaAdapter, NmeaProtocol
@@ -67,6 +69,7 @@ from vdps_hil.record.recorder import Recorder
 
 from .deadline import DEFAULT_DEADLINE_S, DeadlineGuard
 from .latency import CycleLog
+from .sequencer import InputSequencer
 
 __all__ = ["PipelineNode", "InputSequencer", "InterfaceTimeCanAdapter", "DeviceTimeProtocol",
            "INPUT_ORDER_METADATA", "input_order_samples", "IMU_BAUD", "GNSS_BAUD", "LIVE_CLOCK_JUMP_S"]
@@ -148,66 +151,6 @@ class DeviceTimeProtocol:
         return self.stream.clock_status()
 
 
-class InputSequencer:
-    """Hands samples to the system in the order its estimator needs: the IMU (the EKF's input)
-    ahead of the measurements (module docstring, "Sequencing").
-
-    ``push(item, t_ns, kind, now_ns)`` and ``expire(now_ns)`` return the items released, in
-    order; ``flush()`` releases the rest. A measurement with ``t_ns`` at or before the newest IMU
-    sample's time goes at once; a later one is held until an IMU sample at or after its time
-    arrives (held ones leave in ``t_ns`` order, before that IMU sample), or until it has waited
-    ``max_hold_s`` of bench time (the IMU lost: the measurement must not wait forever)."""
-
-    def __init__(self, max_hold_s: float = 0.05, input_kind: str = "imu"):
-        self.max_hold_ns = int(round(max_hold_s * 1e9))
-        self.input_kind = input_kind
-        self.watermark_ns: int | None = None
-        self._heap: list = []
-        self._n = 0
-        self.held_total = 0
-        self.expired = 0
-
-    def __len__(self) -> int:
-        return len(self._heap)
-
-    def push(self, item, t_ns: int, kind: str, now_ns: int) -> list:
-        heap = self._heap
-        if kind == self.input_kind:
-            out = []
-            while heap and heap[0][0] <= t_ns:
-                out.append(heapq.heappop(heap)[3])
-            out.append(item)
-            if self.watermark_ns is None or t_ns > self.watermark_ns:
-                self.watermark_ns = t_ns
-            return out
-        if self.watermark_ns is not None and t_ns <= self.watermark_ns:
-            return [item]  # every held item is later than the watermark: this one goes first
-        self._n += 1
-        self.held_total += 1
-        heapq.heappush(heap, (t_ns, self._n, now_ns, item))
-        return self._release_due()
-
-    def _release_due(self) -> list:
-        heap = self._heap
-        out = []
-        wm = self.watermark_ns
-        while heap and wm is not None and heap[0][0] <= wm:
-            out.append(heapq.heappop(heap)[3])
-        return out
-
-    def expire(self, now_ns: int) -> list:
-        heap = self._heap
-        out = self._release_due()
-        while heap and now_ns - heap[0][2] >= self.max_hold_ns:
-            out.append(heapq.heappop(heap)[3])
-            self.expired += 1
-        return out
-
-    def flush(self) -> list:
-        heap = self._heap
-        return [heapq.heappop(heap)[3] for _ in range(len(heap))]
-
-
 class PipelineNode:
     """The pipeline side (module docstring).
 
@@ -219,7 +162,10 @@ class PipelineNode:
     def __init__(self, system, can_spec: str, imu_port: str, gnss_port: str, clock, *, writer=None,
                  bus: str = "vdps", queue_size: int = 1_000_000, poll_s: float = 0.02, device_time: bool = True,
                  imu_rate_hz: float = 1000.0, sequence_s: float | None = 0.05,
-                 deadline_s: float | None = DEFAULT_DEADLINE_S):
+                 deadline_s: float | None = DEFAULT_DEADLINE_S, readers: str = "threads"):
+        if readers not in ("threads", "inline"):
+            raise ValueError(f"readers must be 'threads' or 'inline', not {readers!r}")
+        self.readers = readers
         self.system = system
         self.clock = clock
         self.deadline = DeadlineGuard(clock, deadline_s, sequence_s or 0.0)
@@ -300,6 +246,8 @@ class PipelineNode:
     def run(self, stop: threading.Event) -> None:
         """Handle events until ``stop`` is set and the queue is empty; then stop the readers and
         handle what they still delivered."""
+        if self.readers == "inline":
+            return self._run_inline(stop)
         if not self._threads:
             self.start_readers()
         sub = self.sub
@@ -319,6 +267,74 @@ class PipelineNode:
                 self._handle_events(sub.drain(100_000))
             self.release_held()
             self.can.close()
+
+    def _run_inline(self, stop: threading.Event, idle_s: float = 0.0005) -> None:
+        """``readers="inline"``: this thread reads the adapters itself and handles what they
+        delivered. The serial ports are read when ``select`` says they hold bytes, CAN at every
+        pass (python-can gives no descriptor for every interface); when nothing came, the next
+        ``select`` waits up to ``idle_s`` for serial bytes. No reader threads: no queue hand-over,
+        no wake-up per sample, no interpreter lock passed between threads every switch interval
+        (tools/bench_make_run.py measures both). The stamps do not depend on when a frame is read
+        (interface time on CAN, device time on serial)."""
+        sub = self.sub
+        live = list(self.adapters)
+        wait_s = 0.0
+        try:
+            while True:
+                n = self._poll_inline(self.can, live) if self.can in live else 0
+                for a in self._readable_serial(live, wait_s):
+                    n += self._poll_inline(a, live)
+                if len(sub):
+                    self._handle_events(sub.drain(2000))
+                    wait_s = 0.0
+                elif n == 0:
+                    if stop.is_set() or not live:
+                        break
+                    wait_s = idle_s
+                else:
+                    wait_s = 0.0
+                self._expire()
+        finally:
+            for a in (self.imu, self.gnss):
+                a.close()
+            self._flush_serial()
+            while len(sub):
+                self._handle_events(sub.drain(100_000))
+            self.release_held()
+            self.can.close()
+
+    def _readable_serial(self, live: list, wait_s: float) -> list:
+        """The serial adapters to read now: those whose port holds bytes (waiting up to
+        ``wait_s``), and any without a descriptor (closed and reconnecting, or a URL port)."""
+        fds, out = {}, []
+        for a in (self.imu, self.gnss):
+            if a in live:
+                fd = a.reader_fd() if a.is_open else None
+                if fd is None:
+                    out.append(a)
+                else:
+                    fds[fd] = a
+        if fds:
+            try:
+                ready, _, _ = select.select(list(fds), [], [], 0.0 if out else wait_s)
+            except (OSError, ValueError):  # a port closed under us: poll it, it reports the loss
+                ready = list(fds)
+            out += [fds[fd] for fd in ready]
+        elif wait_s and not out:
+            time.sleep(wait_s)
+        return out
+
+    def _poll_inline(self, a, live: list) -> int:
+        """One read of ``a`` without waiting; an adapter that fails is reported and left out."""
+        try:
+            return a.poll(0.0)
+        except EndOfInput:
+            live.remove(a)
+            return 0
+        except Exception as e:  # noqa: BLE001 - reported, never a silent thread death
+            self.errors.append(f"{a.name}: {type(e).__name__}: {e}")
+            live.remove(a)
+            return 0
 
     def _flush_serial(self) -> None:
         """At the end of the run release what the serial decoders hold: an IMU packet waits for

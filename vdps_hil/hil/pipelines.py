@@ -34,7 +34,7 @@ class LocalPipeline:
         except (ValueError, OSError) as e:
             raise BenchError(str(e).splitlines()[0]) from None
         self.node = PipelineNode(system, can_dev.pipeline_spec, serial["imu"].port, serial["gnss"].port, clock,
-                                 writer=writer)
+                                 writer=writer, readers=bench.config.readers)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._error = ""
@@ -108,6 +108,7 @@ class ChildPipeline:
             args += ["--params", str(c.params)]
         if c.switch_interval_s:
             args += ["--switch-interval", repr(c.switch_interval_s)]
+        args += ["--readers", c.readers]
         cmd = python_module_command("vdps_hil.hil.child", args)  # -P: nothing from the working directory
         env = child_environ()
         self._err_path = work / "child.err"
