@@ -28,7 +28,15 @@ not. Bars: real time, nothing dropped, nothing skipped, frame latency p99 <= 10 
 upright. The load average before and after each run is printed next to it: other work on the
 machine changes every figure.
 
-Last measured (2026-12-05, 2-core machine at load 2.5-3.4 from other work, the probe at 1x and
+Last measured (2026-12-05, later, the pipeline reading its adapters in its own loop; 2-core
+machine at load 2.2-3.2 from another study, ``--conditions quiet,hog,auto,auto-hog``)::
+
+    quiet     headroom 1.9x, 1.00x real time, dropped 0, skipped 0, p50 2.2 p99 9.7 ms, lead 2.54 s, upright: meets the bars
+    hog       headroom 2.0x, 1.00x real time, dropped 0, skipped 0, p50 2.3 p99 5.3 ms, lead 2.49 s, upright: meets the bars
+    auto      2.0x at 0.85x, dropped 0, skipped 0, p50 2.1 p99 4.4 ms, lead 2.49 s, upright
+    auto-hog  2.0x at 0.94x, dropped 0, skipped 0, p50 2.1 p99 5.3 ms, lead 2.49 s, upright
+
+Measured before (2026-12-05, 2-core machine at load 2.5-3.4 from other work, the probe at 1x and
 the bench's costs cut; ``--conditions quiet,hog,auto,auto-hog,speed5``)::
 
     quiet     headroom 1.9x, 1.00x real time, dropped 0, skipped 0, p50 2.3 p99 7.6 ms, lead 2.49 s, upright: meets the bars
