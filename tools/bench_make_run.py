@@ -28,8 +28,17 @@ not. Bars: real time, nothing dropped, nothing skipped, frame latency p99 <= 10 
 upright. The load average before and after each run is printed next to it: other work on the
 machine changes every figure.
 
-Last measured (2026-12-05, later, the pipeline reading its adapters in its own loop; 2-core
-machine at load 2.2-3.2 from another study, ``--conditions quiet,hog,auto,auto-hog``)::
+Last measured (2026-12-05, the pipeline reading its adapters in its own loop, idle wait 2 ms;
+2-core machine at load 1.0-1.7, ``--conditions quiet,hog,auto,auto-hog,speed5``)::
+
+    quiet     headroom 2.2x, 1.00x real time, dropped 0, skipped 0, p50 2.0 p99 4.1 ms, lead 2.49 s, upright: meets the bars
+    hog       headroom 2.4x, 1.00x real time, dropped 0, skipped 0, p50 2.1 p99 4.6 ms, lead 2.49 s, upright: meets the bars
+    auto      2.2x at 1.00x, dropped 0, skipped 0, p50 2.1 p99 4.4 ms, lead 2.49 s, upright: meets the bars
+    auto-hog  2.3x at 1.00x, dropped 0, skipped 0, p50 2.2 p99 6.5 ms, lead 2.49 s, upright: meets the bars
+    speed5    refused (0.4x); forced: 5.00x, skipped 5417, p99 75.6 ms, lead 2.15 s, rolled over
+
+Measured before (2026-12-05, the readers inline with a 0.5 ms idle wait; load 2.2-3.2 from
+another study, ``--conditions quiet,hog,auto,auto-hog``)::
 
     quiet     headroom 1.9x, 1.00x real time, dropped 0, skipped 0, p50 2.2 p99 9.7 ms, lead 2.54 s, upright: meets the bars
     hog       headroom 2.0x, 1.00x real time, dropped 0, skipped 0, p50 2.3 p99 5.3 ms, lead 2.49 s, upright: meets the bars
