@@ -37,6 +37,13 @@ Last measured (2026-12-05, the pipeline reading its adapters in its own loop, id
     auto-hog  2.3x at 1.00x, dropped 0, skipped 0, p50 2.2 p99 6.5 ms, lead 2.49 s, upright: meets the bars
     speed5    refused (0.4x); forced: 5.00x, skipped 5417, p99 75.6 ms, lead 2.15 s, rolled over
 
+Repeated (``--conditions auto,auto-hog --repeat 2``, load 1.0-2.3)::
+
+    auto      2.2x at 1.00x, dropped 0, skipped 0, p50 2.0 p99 4.7 ms, lead 2.49 s, upright: meets the bars
+    auto-hog  2.2x at 1.00x, dropped 0, skipped 0, p50 2.0 p99 10.7 ms, lead 2.49 s, upright (p99 over 10 ms)
+    auto      2.1x at 1.00x, dropped 0, skipped 0, p50 2.3 p99 10.6 ms, lead 2.49 s, upright (p99 over 10 ms)
+    auto-hog  2.3x at 1.00x, dropped 0, skipped 0, p50 2.0 p99 5.7 ms, lead 2.49 s, upright: meets the bars
+
 Measured before (2026-12-05, the readers inline with a 0.5 ms idle wait; load 2.2-3.2 from
 another study, ``--conditions quiet,hog,auto,auto-hog``)::
 
