@@ -32,21 +32,21 @@ def _say(doc: dict) -> None:
     sys.stdout.flush()
 
 
-def main(argv=None) -> int:
+def _parse(argv) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="python -m vdps_hil.hil.child")
-    ap.add_argument("--can-spec", required=True)
-    ap.add_argument("--imu-port", required=True)
-    ap.add_argument("--gnss-port", required=True)
-    ap.add_argument("--model", required=True)
-    ap.add_argument("--susp-rate-hz", type=float, required=True)
-    ap.add_argument("--susp-sigma-m", type=float, required=True)
-    ap.add_argument("--speed", type=float, required=True)
-    ap.add_argument("--work", required=True)
+    for name in ("--can-spec", "--imu-port", "--gnss-port", "--model", "--work"):
+        ap.add_argument(name, required=True)
+    for name in ("--susp-rate-hz", "--susp-sigma-m", "--speed"):
+        ap.add_argument(name, type=float, required=True)
     ap.add_argument("--output", default=None)
     ap.add_argument("--params", default=None)
     ap.add_argument("--switch-interval", type=float, default=None)
     ap.add_argument("--readers", choices=("inline", "threads"), default="inline")
-    a = ap.parse_args(argv)
+    return ap.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    a = _parse(argv)
     # python-can's socketcand client logs every TCP read that splits a frame ("Got incomplete
     # message"): normal on a stream, not an error; keep real errors only
     logging.getLogger("can").setLevel(logging.ERROR)

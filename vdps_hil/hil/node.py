@@ -52,13 +52,11 @@ import time
 from typing import Any, Callable
 
 from vdps_hil.adapters.base import EndOfInput
-from vdps_hil.adapters.can_adapter import CanAdapter
 from vdps_hil.adapters.imu_adapter import ImuAdapter, ImuProtocol
 from vdps_hil.adapters.nmea_adapter import NmeaAdapter, NmeaProtocol
 from vdps_hil.adapters.serial_adapter import SerialAdapter
 from vdps_hil.app.est_topics import est_docs  # the /est/ layout of ``vdps replay``
 from vdps_hil.app.foxglove_view import FoxgloveView
-from vdps_hil.bus.clocks import wall_minus_monotonic_ns
 from vdps_hil.bus.raw import RawCan, RawSerial
 from vdps_hil.bus.samples import Sample
 from vdps_hil.bus.subscription import Subscription
@@ -70,6 +68,7 @@ from vdps_hil.record.recorder import Recorder
 from .deadline import DEFAULT_DEADLINE_S, DeadlineGuard
 from .latency import CycleLog
 from .sequencer import InputSequencer
+from .stamping import DeviceTimeProtocol, InterfaceTimeCanAdapter
 
 __all__ = ["PipelineNode", "InputSequencer", "InterfaceTimeCanAdapter", "DeviceTimeProtocol",
            "INPUT_ORDER_METADATA", "input_order_samples", "IMU_BAUD", "GNSS_BAUD", "LIVE_CLOCK_JUMP_S"]
@@ -83,72 +82,6 @@ replay`` uses 20 ms for the IMU, 100 ms for GNSS: a file has no host stalls). A 
 stepping back by less than this is then not followed (stamps early by the step)."""
 
 _SRC_CODE = {"can": 0, "imu": 1, "gnss": 2}
-
-
-class InterfaceTimeCanAdapter(CanAdapter):
-    """A CanAdapter that stamps each frame with the interface's own time stamp (``msg.timestamp``:
-    when the frame was on the bus -- python-can's virtual bus stamps at send, the bench's
-    socketcand server at send, SocketCAN in the kernel at reception), mapped onto the bench clock,
-    as a logger with hardware time stamps does. Without it a reader thread held up by the pipeline
-    (Python's GIL) gives a whole burst of frames one late host time, and the estimator sees 20 ms of
-    suspension samples at one instant. A stamp is never later than the host's reception nor earlier
-    than the previous frame's or the bench's start; slcan stamps at host reception."""
-
-    def __init__(self, *a, **kw):
-        super().__init__(*a, **kw)
-        self._wall_minus_mono_ns = wall_minus_monotonic_ns()
-        self._last_stamp = None
-
-    def _read(self, timeout_s: float):
-        items = super()._read(timeout_s)
-        if not items:
-            return items
-        clock = self.clock
-        now = clock.now_ns()
-        last = self._last_stamp
-        out = []
-        for _, msg in items:
-            ts = msg.timestamp
-            t = clock.t_of(int(ts * 1e9) - self._wall_minus_mono_ns) if ts else now
-            t = now if t > now else t
-            t = t if t > 0 else 0  # sent at the start, stamped early by the two clock offsets
-            if last is not None and t < last:
-                t = last
-            last = t
-            out.append((t, msg))
-        self._last_stamp = last
-        return out
-
-
-class DeviceTimeProtocol:
-    """A serial protocol (``adapters.serial_adapter``) that stamps each message by the device's
-    own clock mapped onto the host's -- the IMU's SampleTimeFine, the GNSS sentences' UTC --
-    exactly as ``vdps replay`` does (``record.decode``: leaky running minimum of host minus
-    device time, clock steps confirmed before they are believed). The receive-time rule alone
-    makes a GNSS fix 6-20 ms late (the sentences' own wire time at 115200 Bd) and lets a late
-    read chunk compress the IMU's stamps; with the devices' clocks the live pipeline sees the
-    same times as a replay of the recording."""
-
-    def __init__(self, stream, fmt: str):
-        self.stream = stream
-        self.fmt = fmt
-
-    def feed(self, t_ns: int, chunk: bytes) -> list:
-        return self.stream.feed(t_ns, chunk)
-
-    def flush(self) -> list:
-        return self.stream.feed(0, None)
-
-    def reset(self) -> None:
-        framer = getattr(self.stream, "framer", None)
-        if framer is not None:
-            framer.flush()
-
-    def counters(self) -> dict:
-        return self.stream.counters()
-
-    def clock_status(self) -> dict:
-        return self.stream.clock_status()
 
 
 class PipelineNode:
