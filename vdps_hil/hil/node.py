@@ -242,7 +242,8 @@ class PipelineNode:
 
     def _readable_serial(self, live: list, wait_s: float) -> list:
         """The serial adapters to read now: those whose port holds bytes (waiting up to
-        ``wait_s``), and any without a descriptor (closed and reconnecting, or a URL port)."""
+        ``wait_s``), and any without a descriptor (closed and reconnecting, or a URL port),
+        read after the wait: a lost port must not turn the loop into a spin."""
         fds, out = {}, []
         for a in (self.imu, self.gnss):
             if a in live:
@@ -253,11 +254,11 @@ class PipelineNode:
                     fds[fd] = a
         if fds:
             try:
-                ready, _, _ = select.select(list(fds), [], [], 0.0 if out else wait_s)
+                ready, _, _ = select.select(list(fds), [], [], wait_s)
             except (OSError, ValueError):  # a port closed under us: poll it, it reports the loss
                 ready = list(fds)
             out += [fds[fd] for fd in ready]
-        elif wait_s and not out:
+        elif wait_s:
             time.sleep(wait_s)
         return out
 
