@@ -18,6 +18,7 @@ suspension sensor's rate and noise (a data sheet), the wires and the clock.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import logging
 import sys
@@ -75,8 +76,6 @@ def main(argv=None) -> int:
     except (AdapterError, ValueError, OSError) as e:
         _say({"error": str(e).splitlines()[0] if str(e) else type(e).__name__})
         return 2
-    import gc
-
     gc.collect()
     gc.freeze()  # as the bench's own process: what exists now is never scanned again mid-run
     _say({"ready": True})

@@ -195,11 +195,7 @@ class PipelineNode:
             self._stop_adapters.set()
             for th in self._threads:
                 th.join(timeout=5.0)
-            self._flush_serial()
-            while len(sub):
-                self._handle_events(sub.drain(100_000))
-            self.release_held()
-            self.can.close()
+            self._finish_input()
 
     def _run_inline(self, stop: threading.Event, idle_s: float = 0.002) -> None:
         """``readers="inline"``: this thread reads the adapters itself and handles what they
@@ -234,11 +230,16 @@ class PipelineNode:
         finally:
             for a in (self.imu, self.gnss):
                 a.close()
-            self._flush_serial()
-            while len(sub):
-                self._handle_events(sub.drain(100_000))
-            self.release_held()
-            self.can.close()
+            self._finish_input()
+
+    def _finish_input(self) -> None:
+        """After the reading stopped: what the serial decoders hold, what is still queued and
+        what the sequencer holds go to the system; then the CAN bus closes."""
+        self._flush_serial()
+        while len(self.sub):
+            self._handle_events(self.sub.drain(100_000))
+        self.release_held()
+        self.can.close()
 
     def _readable_serial(self, live: list, wait_s: float) -> list:
         """The serial adapters to read now: those whose port holds bytes (waiting up to

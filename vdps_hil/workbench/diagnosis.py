@@ -249,14 +249,14 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
         win = add_window(table, cfg.max_fit_s)
         if win is not None:
             rk.messages.append(win.message())
+        cut = win.cut if win is not None else (lambda tab: tab)
 
         def reestimate(meas_effects):
             say("re-running the estimator with the sensor effects taken out of the IMU readings")
-            tab = load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=dataset_config,
-                             imu_effects=meas_effects)
-            return win.cut(tab) if win is not None else tab
+            return cut(load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=dataset_config,
+                                  imu_effects=meas_effects))
 
-        add_res = add_effects(win.cut(table) if win is not None else table, vehicle, model_effects, list(add),
+        add_res = add_effects(cut(table), vehicle, model_effects, list(add),
                               user_effects=user_effects,
                               reestimate=reestimate, config=ranking_config, with_simulation=with_simulation,
                               progress=say)

@@ -106,7 +106,6 @@ class Streams:
         v = self._values(kind, len(t))
         return t, v[:, [have.index(n) for n in names]].astype(float)
 
-
     def view(self, kind: str, names: Sequence[str]) -> tuple[np.ndarray, list[np.ndarray]]:
         """(t_ns (n,), one strided view per name) of one kind, without copying: read them before
         the kind's next :meth:`add` (an exported buffer cannot grow)."""
@@ -139,13 +138,19 @@ def uniform(t_ns: np.ndarray, v: np.ndarray, t0_ns: int = 0) -> tuple[np.ndarray
     t_ns, v = t_ns[ok], v[ok]
     if len(t_ns) < 3:
         return (t_ns - t0_ns).astype(float) * 1e-9, v, 0.0
+    t, tg, rate = _uniform_grid(t_ns, t0_ns)
+    vg = np.column_stack([np.interp(tg, t, v[:, k]) for k in range(v.shape[1])])
+    return tg, vg, rate
+
+
+def _uniform_grid(t_ns: np.ndarray, t0_ns: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """(sample times, the uniform grid at the median step, its rate) of at least 3 stamps [s,
+    relative to ``t0_ns``]."""
     dt = float(np.median(np.diff(t_ns))) * 1e-9
     if dt <= 0:
         dt = 1e-3
     t = (t_ns - t0_ns).astype(float) * 1e-9
-    tg = np.arange(t[0], t[-1] + 0.5 * dt, dt)
-    vg = np.column_stack([np.interp(tg, t, v[:, k]) for k in range(v.shape[1])])
-    return tg, vg, 1.0 / dt
+    return t, np.arange(t[0], t[-1] + 0.5 * dt, dt), 1.0 / dt
 
 
 def on_grid(grid_s: np.ndarray, t_s: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -177,19 +182,13 @@ def smoothed(samples, kind, names, smoother, grid_s, t0_ns, min_rate_hz, want_ra
     t_ns = t_ns[ok]
     if len(t_ns) < 3:
         return val, der, 0.0
-    dt = float(np.median(np.diff(t_ns))) * 1e-9
-    dt = dt if dt > 0 else 1e-3
-    t = (t_ns - t0_ns).astype(float) * 1e-9
+    t, tg, rate = _uniform_grid(t_ns, t0_ns)
     del t_ns
-    tg = np.arange(t[0], t[-1] + 0.5 * dt, dt)
-    rate = 1.0 / dt
-    inside = (grid_s >= tg[0]) & (grid_s <= tg[-1]) if len(tg) >= 2 else np.zeros(len(grid_s), dtype=bool)
-    gi = grid_s[inside]
     for k, c in enumerate(cols):
         vs = smoother(np.interp(tg, t, c[ok]), rate)
-        val[inside, k] = np.interp(gi, tg, vs)
+        val[:, k] = on_grid(grid_s, tg, vs[:, None])[:, 0]
         if want_rate and rate >= min_rate_hz:
-            der[inside, k] = np.interp(gi, tg, np.gradient(vs, 1.0 / rate))
+            der[:, k] = on_grid(grid_s, tg, np.gradient(vs, 1.0 / rate)[:, None])[:, 0]
     return val, der, rate
 
 
