@@ -102,7 +102,8 @@ def test_warning_from_the_priors_is_valid_only_while_the_cornering_problem_has_c
     """The system's default validity rule (configs/prediction/default.toml [warning]
     require_converged = ["cornering"]): started from the model file's priors, every frame says
     "not converged" (1) while the identifier's cornering problem has not converged and "valid" (0)
-    while it has (both phases occur in this 2.5 s drive: it converges at ~1.2 s)."""
+    while it has (both phases occur in this 2.5 s drive: it converges at ~1.2 s); the flag as read
+    at the last ``convergence_period_s`` boundary, which the 50 Hz frames fall on."""
     system, rows = _live_status(SystemConfig.for_profile(1000.0, 0.001), paper_samples)
     assert system.require_converged == ("cornering",)
     # the flag did not flip within the sample; 2 and 3: the fault handling's (aiding_monitor.health)
@@ -110,6 +111,28 @@ def test_warning_from_the_priors_is_valid_only_while_the_cornering_problem_has_c
     assert len(settled) > 0.9 * len(rows)
     assert all(r[1] == (0 if r[3] else 1) for r in settled)
     assert sum(1 for r in settled if r[1] == 1) >= 10 and sum(1 for r in settled if r[1] == 0) >= 10
+
+
+def test_the_chain_reads_the_identifiers_convergence_once_per_convergence_period(paper_samples, monkeypatch):
+    """Judging convergence takes the problems' corrected covariances (about 0.4 ms), so the chain
+    re-reads it at the first estimate of each ``convergence_period_s`` (0.02 s, the warning
+    frames' period) of filter time instead of at every 10 ms estimate: at most one read per
+    period (plus the first), and at least one per period once the gate is read at all (the
+    frames' status lags the identifier by less than one frame). A non-positive period is refused."""
+    from vdps_hil.identification.identifier import Identifier
+
+    reads = []
+    orig = Identifier.converged
+    monkeypatch.setattr(Identifier, "converged", property(lambda self: reads.append(1) or orig.fget(self)))
+    _, out = VdpsSystem.replay(MODEL, SystemConfig.for_profile(1000.0, 0.001), paper_samples)
+    t = [e.t_ns for e in out if isinstance(e, Estimate)]
+    periods = (t[-1] - t[0]) / 20e6
+    assert 0.8 * periods <= len(reads) <= periods + 2, (len(reads), periods)
+    reads.clear()
+    VdpsSystem.replay(MODEL, SystemConfig.for_profile(1000.0, 0.001, convergence_period_s=0.01), paper_samples)
+    assert len(reads) > 1.6 * periods  # every estimate: twice as many
+    with pytest.raises(ValueError, match="convergence_period_s"):
+        SystemConfig(convergence_period_s=0.0)
 
 
 def test_warning_from_identified_parameters_is_valid_at_once(paper_samples):
