@@ -39,6 +39,7 @@ def test_full_run(drive, tmp_path, capsys):
 
 @pytest.mark.parametrize("args, msg", [
     (["nope.mcap"], "no such file"),
+    (["."], "is a directory, not a file"),
     (["{drive}", "--vehicle", "sedan-truth"], "only model files"),
     (["{drive}", "--save-model", "m.yaml"], ".toml or .json"),
     (["{drive}", "--effect-file", "missing.py"], "no such file"),

@@ -164,6 +164,12 @@ def test_bad_options_are_one_line_errors(drive, args, needle):
     assert code == 2 and needle in text and len(text.strip().splitlines()) == 1
 
 
+@pytest.mark.parametrize("where,needle", [("missing.mcap", "no such file"), (".", "is a directory, not a file")])
+def test_a_recording_that_is_not_a_file_is_one_line(tmp_path, where, needle):
+    code, text = run("replay", str(tmp_path / where), "--no-predict")
+    assert code == 2 and needle in text and len(text.strip().splitlines()) == 1
+
+
 @pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity on this system")
 def test_jobs_default_follows_the_cpus_this_process_may_use(drive, tmp_path):
     """Without --jobs the replay uses two processes when it may run on two or more CPUs, one when

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -30,6 +31,16 @@ def _clean(o):
     if hasattr(o, "item") and callable(o.item):  # numpy scalars
         return _clean(o.item())
     return o
+
+
+def require_file(path, what: str = "") -> None:
+    """A one-line :class:`UserError` unless ``path`` is an existing regular file (a directory is
+    said to be one). ``what``: a prefix naming the option, e.g. ``"--effect-file "``."""
+    p = os.fspath(path)
+    if os.path.isdir(p):
+        raise UserError(f"{what}{p}: is a directory, not a file")
+    if not os.path.isfile(p):
+        raise UserError(f"{what}{p}: no such file")
 
 
 def write_json(doc: dict, target: str | None) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from vdps_hil.cli.common import UserError, debug_enabled, recorded_decoding, write_json
+from vdps_hil.cli.common import UserError, debug_enabled, recorded_decoding, require_file, write_json
 
 _EXAMPLE = """\b
 Examples:
@@ -52,8 +52,7 @@ def diagnose(recording, vehicle, model_file, dbc, signalmap, report_dir, json_ou
     from vdps_hil.workbench.model_file import ModelFileError
     from vdps_hil.workbench.user_effects import UserEffectError, load_effect_file, load_entry_point_effects
 
-    if not Path(recording).is_file():
-        raise UserError(f"{recording}: no such file")
+    require_file(recording)
     if (dbc is None) != (signalmap is None) and dbc is not None:
         raise UserError("--dbc needs --signalmap (which frames feed which fields)")
     if save_model and Path(save_model).suffix.lower() not in (".toml", ".json"):

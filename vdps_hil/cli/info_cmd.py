@@ -9,7 +9,7 @@ import os
 
 import click
 
-from vdps_hil.cli.common import UserError, json_option, write_json
+from vdps_hil.cli.common import UserError, json_option, require_file, write_json
 
 __all__ = ["info", "summarize"]
 
@@ -195,8 +195,7 @@ def info(recording, json_out):
     """
     from vdps_hil.record.reader import RecordingError
 
-    if not os.path.isfile(recording):
-        raise UserError(f"no such file: {recording}")
+    require_file(recording)
     try:
         doc = summarize(recording)
     except RecordingError as e:

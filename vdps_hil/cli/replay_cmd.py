@@ -10,7 +10,7 @@ from pathlib import Path
 import click
 
 from vdps_hil.cli.common import (UserError, eprint, json_option, live_server, quiet_option, recording_span_s,
-                                serve_option, write_json)
+                                require_file, serve_option, write_json)
 
 _EXAMPLE = """\b
 Examples:
@@ -91,8 +91,7 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
     from vdps_hil.app.replay import ReplayError, replay_file
 
     src = Path(recording)
-    if not src.is_file():
-        raise UserError(f"{recording}: no such file")
+    require_file(recording)
     if output is not None:
         out = Path(output)
         if out.resolve() == src.resolve():
