@@ -112,3 +112,40 @@ def test_integrated_autocorrelation_time_counts_the_effective_samples():
     for a in x[:4 * MAX_LAG - 1]:
         short.add(0, float(a))
     assert short.tau_int() is None
+
+
+def test_bin_tests_read_the_growing_buffers_exactly_as_the_bin_lists():
+    """The whiteness and long-run tests read the bin means from buffers that grow by doubling (an
+    hour of 0.5 s bins is 7200 of them, read at every status): at every step they equal, bit for
+    bit, the same formulas on the means and counts kept as plain lists (open bin last), through
+    several doublings and with bins of unequal counts; None below 4 bins."""
+    import numpy as np
+
+    from vdps_hil.identification.mismatch import _Row
+    rng = np.random.default_rng(23)
+    row, means, counts = _Row(), [], []
+    k_bin, acc, n_in = 0, 0.0, 0
+    checked = 0
+    for step in range(3000):
+        if rng.random() < 0.3:  # a new bin starts with this residual
+            if n_in:
+                means.append(acc / n_in)
+                counts.append(n_in)
+            k_bin, acc, n_in = k_bin + 1, 0.0, 0
+        r = float(rng.normal(0.3, 1.0))
+        row.add(k_bin, r)
+        acc += r
+        n_in += 1
+        m = np.asarray(means + [acc / n_in], dtype=float)
+        c = np.asarray(counts + [n_in], dtype=float)
+        if len(m) < 4:
+            assert row.whiteness() is None and row.long_run() is None
+            continue
+        a = m - float(np.mean(m))
+        white = float(a[1:] @ a[:-1]) / float(a @ a)
+        rbar = row.s1 / row.n
+        var = (row.s2 - row.n * rbar * rbar) / (row.n - 1)
+        long_run = float(np.sum(c * (m - rbar) ** 2) / (len(m) - 1)) / var
+        assert row.whiteness() == white and row.long_run() == long_run
+        checked += 1
+    assert checked > 2900 and len(row.means) >= 1024  # the buffers doubled several times

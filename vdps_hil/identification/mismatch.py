@@ -98,13 +98,18 @@ the identifier's 100 Hz): a few cycles of the slowest maneuver (the 1 Hz sine)."
 
 
 class _Row:
-    __slots__ = ("n", "s1", "s2", "bin", "bin_sum", "bin_n", "means", "counts", "ring", "lag_sums")
+    __slots__ = ("n", "s1", "s2", "bin", "bin_sum", "bin_n", "means", "counts", "nb", "ring", "lag_sums")
 
     def __init__(self):
         self.n, self.s1, self.s2 = 0, 0.0, 0.0
         self.bin, self.bin_sum, self.bin_n = None, 0.0, 0
-        self.means: list[float] = []
-        self.counts: list[int] = []
+        # the closed bins' means and residual counts in means[:nb], counts[:nb]; the buffers keep
+        # one slot beyond them for the open bin (``_bins``) and double when full: the tests read
+        # them as views at every status (50-100 Hz), and lists turned into arrays there cost
+        # 0.5 ms per row after an hour of 0.5 s bins (7200 bins)
+        self.means = np.empty(64)
+        self.counts = np.empty(64)
+        self.nb = 0
         # the last MAX_LAG residuals, each at ring[i] and ring[i + MAX_LAG] (i = n % MAX_LAG when
         # written), so the newest m are the contiguous ring[j + MAX_LAG - m : j + MAX_LAG]
         self.ring = np.zeros(2 * MAX_LAG)
@@ -127,14 +132,24 @@ class _Row:
 
     def close(self) -> None:
         if self.bin_n:
-            self.means.append(self.bin_sum / self.bin_n)
-            self.counts.append(self.bin_n)
+            k = self.nb
+            if k + 1 >= len(self.means):  # keep the spare slot for the open bin
+                self.means = np.concatenate([self.means, np.empty(len(self.means))])
+                self.counts = np.concatenate([self.counts, np.empty(len(self.counts))])
+            self.means[k] = self.bin_sum / self.bin_n
+            self.counts[k] = self.bin_n
+            self.nb = k + 1
         self.bin_sum, self.bin_n = 0.0, 0
 
     def _bins(self) -> tuple[np.ndarray, np.ndarray]:
-        m = self.means + ([self.bin_sum / self.bin_n] if self.bin_n else [])
-        c = self.counts + ([self.bin_n] if self.bin_n else [])
-        return np.asarray(m, dtype=float), np.asarray(c, dtype=float)
+        """(bin means, residual counts), the open bin last: views of the buffers, valid until the
+        next ``add``."""
+        k = self.nb
+        if self.bin_n:
+            self.means[k] = self.bin_sum / self.bin_n
+            self.counts[k] = self.bin_n
+            k += 1
+        return self.means[:k], self.counts[:k]
 
     def whiteness(self) -> float | None:
         m, _ = self._bins()
