@@ -43,12 +43,21 @@ def drive(tmp_path_factory):
     return p
 
 
+@pytest.fixture(scope="module")
+def default_replay(drive, tmp_path_factory):
+    """``vdps replay drive -o out.mcap --json out.json`` (default options), run once for the tests
+    that read that same run: (exit code, terminal text, output, JSON)."""
+    d = tmp_path_factory.mktemp("default_replay")
+    code, text = run("replay", str(drive), "-o", str(d / "out.mcap"), "--json", str(d / "out.json"))
+    return code, text, d / "out.mcap", d / "out.json"
+
+
 def _est_messages(path):
     with RecordingReader(path) as r:
         return [(m.topic, m.t_ns, m.data) for m in r.iter_records(prefixes=("/est/",))]
 
 
-def test_replay_without_truth_equals_replay_with_truth(drive, tmp_path):
+def test_replay_without_truth_equals_replay_with_truth(drive, default_replay, tmp_path):
     """The raw-only copy has no /truth/ topics and no truth metadata, and the replay opens no
     truth vehicle file: its outputs are identical to the original's (no hidden dependency)."""
     global _OPENED
@@ -57,7 +66,7 @@ def test_replay_without_truth_equals_replay_with_truth(drive, tmp_path):
     with RecordingReader(raw_only) as r:
         assert not any(t.startswith("/truth") for t in r.topics())
         assert "truth.drive" not in r.metadata()
-    code, _ = run("replay", str(drive), "-o", str(tmp_path / "a.mcap"), "--json", str(tmp_path / "a.json"))
+    code, _, a_mcap, a_json = default_replay
     assert code == 0
     _OPENED = []
     try:
@@ -67,18 +76,17 @@ def test_replay_without_truth_equals_replay_with_truth(drive, tmp_path):
         opened, _OPENED = _OPENED, None
     assert code == 0
     assert not [p for p in opened if "truth" in p.rsplit("/", 1)[-1]], "a truth file was opened"
-    a, b = _est_messages(tmp_path / "a.mcap"), _est_messages(tmp_path / "b.mcap")
+    a, b = _est_messages(a_mcap), _est_messages(tmp_path / "b.mcap")
     assert len(a) > 300 and a == b
-    ja = json.loads((tmp_path / "a.json").read_text())
+    ja = json.loads(a_json.read_text())
     jb = json.loads((tmp_path / "b.json").read_text())
     for k in ("input", "output", "wall_time_s", "realtime_factor", "jobs"):
         ja.pop(k), jb.pop(k)
     assert ja == jb
 
 
-def test_json_summary_and_output_topics(drive, tmp_path):
-    out, js = tmp_path / "o.mcap", tmp_path / "o.json"
-    code, text = run("replay", str(drive), "-o", str(out), "--json", str(js))
+def test_json_summary_and_output_topics(drive, default_replay):
+    code, text, out, js = default_replay
     assert code == 0 and "estimates" in text
     doc = json.loads(js.read_text())
     for key in ("estimates_summary", "rejected", "messages_read", "observability", "wall_time_s",
