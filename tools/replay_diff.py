@@ -78,7 +78,11 @@ def main(argv=None) -> int:
     ap.add_argument("b")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
-    res = compare(args.a, args.b)
+    try:
+        res = compare(args.a, args.b)
+    except Exception as e:  # an unreadable or broken recording: one line, no traceback
+        print(f"replay_diff: error: {type(e).__name__}: {e}", file=sys.stderr)
+        return 2
     for topic, r in res.items():
         if r["differ"] or r["messages"][0] != r["messages"][1] or r["time_differs"]:
             print(f"{topic}: {r['messages'][0]} / {r['messages'][1]} messages, {r['differ']} differ, "

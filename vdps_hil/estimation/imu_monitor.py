@@ -112,7 +112,7 @@ class ImuMonitor:
         self._timeout_ns = int(round(c.timeout_s * 1e9))
         self._reanchor_ns = int(round(c.reanchor_s * 1e9))
         self._last_t = _NEVER  # last sample seen (any verdict)
-        self._ref: tuple[int, tuple, tuple] | None = None  # (t, f, w) of the last accepted sample
+        self._ref: tuple[int, tuple] | None = None  # (t, (f, w)) of the last accepted sample
         self._run: tuple | None = None  # spike run: (start, offset of (f, w) to the reference, last sample)
         self._floors = (c.force_jump_mps2,) * 3 + (c.rate_jump_radps,) * 3
         self._jumps = self._floors  # J_i (module docstring), from the running mean step
@@ -145,7 +145,7 @@ class ImuMonitor:
                 max(abs(f[0]), abs(f[1]), abs(f[2])) >= c.max_specific_force_mps2:
             return self._reject("implausible", t_ns)
         ref = self._ref
-        if ref is not None and not after_gap and self._spike(t_ns, (*f, *w), (*ref[1], *ref[2]), ref[0]):
+        if ref is not None and not after_gap and self._spike(t_ns, (*f, *w), ref[1], ref[0]):
             return self._reject("spike", t_ns)
         self._accept(t_ns, f, w)
         return True
@@ -159,9 +159,10 @@ class ImuMonitor:
             dt = max(0, t_ns - t_ref) * 1e-9
             sf, sw = min(c.max_jerk_mps3 * dt, c.force_slew_cap_mps2), min(c.max_rate_accel_radps2 * dt,
                                                                              c.rate_slew_cap_radps)
-            if any(abs(a - b) > j + (sf if i < 3 else sw) for i, (a, b, j) in enumerate(zip(v, r, jumps))):
-                self._run = (t_ns, tuple(a - b for a, b in zip(v, r)), v)
-                return True
+            for i in range(6):  # per sample at 1 kHz: a plain loop, not a generator
+                if abs(v[i] - r[i]) > jumps[i] + (sf if i < 3 else sw):
+                    self._run = (t_ns, tuple(a - b for a, b in zip(v, r)), v)
+                    return True
             return False
         start, off, prev = run
         back = all(abs(a - p + o) <= j for a, p, o, j in zip(v, prev, off, jumps))
@@ -191,22 +192,23 @@ class ImuMonitor:
                 self._period_ns = dt if self._period_ns == 0.0 else self._period_ns + 0.05 * (dt - self._period_ns)
         self.t_good = max(prev, t_ns)
         ref = self._ref
+        v = (*f, *w)
         if ref is not None and 0 < t_ns - ref[0] <= self.timeout_ns:
-            self._learn_steps((*f, *w), (*ref[1], *ref[2]))
-        self._ref = (t_ns, tuple(f), tuple(w))
+            self._learn_steps(v, ref[1])
+        self._ref = (t_ns, v)
         self.counters["accepted"] += 1
 
     def _learn_steps(self, v, r) -> None:
         """s_i += a (|v_i - r_i| - s_i) and J_i = max(floor_i, k s_i) (module docstring)."""
-        steps = [abs(a - b) for a, b in zip(v, r)]
         s = self._step
         if s is None:
-            self._step = s = steps
+            self._step = s = [abs(v[i] - r[i]) for i in range(6)]
         else:
             a = self.checks.jump_scale_weight
-            self._step = s = [x + a * (y - x) for x, y in zip(s, steps)]
-        k = self.checks.jump_noise_factor
-        self._jumps = tuple(max(fl, k * x) for fl, x in zip(self._floors, s))
+            self._step = s = [s[i] + a * (abs(v[i] - r[i]) - s[i]) for i in range(6)]
+        k, fl = self.checks.jump_noise_factor, self._floors
+        self._jumps = (max(fl[0], k * s[0]), max(fl[1], k * s[1]), max(fl[2], k * s[2]),
+                       max(fl[3], k * s[3]), max(fl[4], k * s[4]), max(fl[5], k * s[5]))
 
     def covered(self, t0_ns: int, t1_ns: int) -> bool:
         """True when accepted samples cover the predict span (t0, t1]: no outage in it and
