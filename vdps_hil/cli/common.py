@@ -33,14 +33,14 @@ def _clean(o):
     return o
 
 
-def require_file(path, what: str = "") -> None:
+def require_file(path) -> None:
     """A one-line :class:`UserError` unless ``path`` is an existing regular file (a directory is
-    said to be one). ``what``: a prefix naming the option, e.g. ``"--effect-file "``."""
+    said to be one)."""
     p = os.fspath(path)
     if os.path.isdir(p):
-        raise UserError(f"{what}{p}: is a directory, not a file")
+        raise UserError(f"{p}: is a directory, not a file")
     if not os.path.isfile(p):
-        raise UserError(f"{what}{p}: no such file")
+        raise UserError(f"{p}: no such file")
 
 
 def write_json(doc: dict, target: str | None) -> None:

@@ -144,10 +144,10 @@ class ImuMonitor:
         if max(abs(w[0]), abs(w[1]), abs(w[2])) >= c.max_rate_radps or \
                 max(abs(f[0]), abs(f[1]), abs(f[2])) >= c.max_specific_force_mps2:
             return self._reject("implausible", t_ns)
-        ref = self._ref
-        if ref is not None and not after_gap and self._spike(t_ns, (*f, *w), ref[1], ref[0]):
+        ref, v = self._ref, (*f, *w)
+        if ref is not None and not after_gap and self._spike(t_ns, v, ref[1], ref[0]):
             return self._reject("spike", t_ns)
-        self._accept(t_ns, f, w)
+        self._accept(t_ns, v)
         return True
 
     def _spike(self, t_ns: int, v, r, t_ref: int) -> bool:
@@ -179,7 +179,7 @@ class ImuMonitor:
         self.last_fault_ns = max(self.last_fault_ns, t_ns)
         return False
 
-    def _accept(self, t_ns: int, f, w) -> None:
+    def _accept(self, t_ns: int, v: tuple) -> None:
         self._run = None
         prev = self.t_good
         if prev != _NEVER:
@@ -192,7 +192,6 @@ class ImuMonitor:
                 self._period_ns = dt if self._period_ns == 0.0 else self._period_ns + 0.05 * (dt - self._period_ns)
         self.t_good = max(prev, t_ns)
         ref = self._ref
-        v = (*f, *w)
         if ref is not None and 0 < t_ns - ref[0] <= self.timeout_ns:
             self._learn_steps(v, ref[1])
         self._ref = (t_ns, v)

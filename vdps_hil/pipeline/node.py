@@ -49,8 +49,8 @@ Warning status sent with each frame: 1 "not converged" until the EKF is initiali
 the identifier started from the model file's priors (no ``start_params``, i.e. no ``--params``),
 until the identification problems named in the warning policy's ``require_converged``
 (``configs/prediction/default.toml``: ``["cornering"]``) have converged (the chain re-reads the
-identifier's convergence every ``convergence_period_s`` of filter time, 0.1 s: judging it takes the
-problems' corrected covariances, about 0.4 ms, and the predictions start at 10 Hz); 2 "sensor missing" when
+identifier's convergence every ``convergence_period_s`` of filter time, 0.02 s, the warning frames'
+period: judging it takes the problems' corrected covariances, about 0.6 ms); 2 "sensor missing" when
 the held inputs (steering, wheel torques) or a rate/wheel speed are missing, else 0; the node
 itself sends 3 "fault" for a stale prediction. ``SystemConfig.require_converged`` set to a tuple
 overrides that rule (``()``: never gate). Fault tolerance: 2 also while the IMU is missing or
