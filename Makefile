@@ -24,11 +24,14 @@ browser:
 	@command -v chromium >/dev/null 2>&1 || { (apt-get update -qq && apt-get install -y -qq chromium >/dev/null) || echo "make: could not install chromium (report tests will say so)"; }
 
 # Two phases, both always run, either failing fails the target (pytest's exit 5, no test run, too):
-# everything but the real-time tests on both cores (pytest-xdist, one worker per module), then
-# the real-time tests (tests/conftest.py REALTIME_MODULES) on their own.
+# everything but the real-time tests on all cores (pytest-xdist, a module to a worker; one worker
+# more than the cores this process may use, to fill the time tests wait on subprocesses, sockets
+# and the browser, and to hold the suite's share of the CPU beside other work), then the
+# real-time tests (tests/conftest.py REALTIME_MODULES) on their own.
 PYTEST := $(PY) -m pytest -q -p no:cacheprovider --timeout 600
+WORKERS := $(shell echo $$(( $$(nproc) + 1 )))
 test: setup browser
-	@$(PYTEST) -n 2 --dist loadfile --durations 15 -m "not realtime" tests; a=$$?; \
+	@$(PYTEST) -n $(WORKERS) --dist loadfile --durations 15 -m "not realtime" tests; a=$$?; \
 	$(PYTEST) --durations 5 -m realtime tests; b=$$?; \
 	echo "make test: other tests exit $$a, real-time tests exit $$b"; [ $$a -eq 0 ] && [ $$b -eq 0 ]
 
