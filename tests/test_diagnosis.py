@@ -73,6 +73,19 @@ def test_only_raw_topics_and_the_model_file(stripped, monkeypatch, tmp_path):
     assert "long" in doc["before"]["residual_rms"]
     text = "\n".join(dg.summary_lines())
     assert "aerodynamic drag" in text and "explains" in text
+    # every fitted parameter labelled by the identifier run on the same samples (rls_check);
+    # "identified" in the text only where the identifier identified it and agrees
+    ident = doc["workbench"]["identifier"]
+    assert ident["status"]["mass_kg"] == "identified"
+    assert ident["params"]["mass_kg"] == pytest.approx(1600.0, rel=0.01)  # issue 17's mass bar, truth 1600 kg
+    lines = {p.effect: ln for p, ln in zip(dg.ranking.parameters, text.split("checked against the identifier):\n")[1]
+                                           .splitlines())}
+    for e in doc["workbench"]["identified_parameters"]:
+        if not e["excited"] or not e["plausible"]:
+            continue
+        v = e["identifier"]["verdict"]
+        assert v in ("agrees", "disagrees", "unconfirmed")
+        assert ("identified" in lines[e["effect"]].split(" -- ")[0]) == (v == "agrees"), lines[e["effect"]]
     from vdps_hil.workbench.model_file import load_model
 
     v2, eff, _ = load_model(tmp_path / "m.toml", veh)

@@ -77,3 +77,21 @@ def test_undetermined_parameters_are_said_to_be_undetermined():
     assert one.count("not determined on this drive") == 1 and one.index("not determined") > one.index("b = ")
     assert "not determined" not in W._generic_words({"a": (2.0, 0.1)})
     assert "cannot be told apart" not in W._generic_words({"a": (2.0, 0.1), "b": (3.0, 0.5)})
+
+
+def test_a_fitted_parameter_is_called_identified_only_when_the_identifier_agrees():
+    """The identifier's verdict (``ranking.rls_check``) in the one-line form the summary prints:
+    'identified' only on agreement (or without the identifier); otherwise 'not confirmed' with the
+    identifier's value and z, or its status."""
+    e = _param_entry(1800.0, True)
+    e.identifier = {"param": "inertia_z_kgm2", "value": 1790.0, "sigma": 60.0, "status": "identified", "z": 0.13,
+                    "verdict": "agrees"}
+    head = W.describe_entry(_rk(), e).split(";")[0]
+    assert head.startswith("yaw inertia: identified 1800") and "the identifier agrees (1790 +- 60 kg m^2)" in head
+    e.identifier = dict(e.identifier, value=1500.0, z=3.9, verdict="disagrees")
+    head = W.describe_entry(_rk(), e).split(";")[0]
+    assert head.startswith("yaw inertia: not confirmed -- fitted 1800") and "the identifier 1500" in head
+    assert "z = 3.9" in head and "identified" not in head
+    e.identifier = dict(e.identifier, status="model mismatch", verdict="unconfirmed")
+    head = W.describe_entry(_rk(), e).split(";")[0]
+    assert head.startswith("yaw inertia: not confirmed") and 'the identifier says "model mismatch"' in head

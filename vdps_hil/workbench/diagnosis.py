@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -38,7 +38,8 @@ from .dataset import DatasetConfig, DriveTable, load_drive
 from .fit_budget import FitSubset, add_window, fit_subset
 from .memory import release_freed_memory
 from .ranking.config import RankingConfig
-from .ranking.results import Ranking
+from .ranking.results import Ranking, rk_message
+from .ranking.rls_check import cross_check
 from .ranking.selection import rank
 from .regimes import RegimeBins, Window, regime_bins, worst_windows
 from .residuals import EquationResiduals, compute_residuals
@@ -88,6 +89,8 @@ class Diagnosis:
                  "estimator_nis": _nis(self.table), "duration_s": self.table.duration_s,
                  "timings_s": dict(self.timings), "saved_model": self.saved_model,
                  "simulation_notes": self.simulation_notes()}
+        if self.table.rls is not None:  # the identifier's outcome on the drive (``ranking.rls_check``)
+            extra["identifier"] = self.table.rls.to_json()
         if self.add is not None:
             extra["added"] = self.add.to_json()
         if self.fit_subset is not None:  # only a drive longer than the row budget has the key
@@ -104,7 +107,7 @@ class Diagnosis:
         out = [f"{self.source}: {self.table.duration_s:.1f} s of drive, {len(self.residuals.t_s)} rows, "
                f"model {self.vehicle.name}" + (f" + {', '.join(self.model_effects.names)}" if len(self.model_effects) else "")]
         out += rk.messages
-        out.append("identified parameters:")
+        out.append("identified parameters (the workbench's fit, checked against the identifier):")
         for p in rk.parameters:
             out.append("  " + describe_entry(rk, p).split(";")[0])
         out.append("candidates (held-out explained fraction, noise-weighted):")
@@ -207,8 +210,9 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
         from .model_file import load_model
 
         vehicle, model_effects, _ = load_model(model, vehicle, user_effects)
-    say("decoding /raw/ topics and running the estimator")
-    table = load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=dataset_config)
+    say("decoding /raw/ topics and running the estimator and the identifier")
+    ds = dataset_config or DatasetConfig()
+    table = load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=replace(ds, identify=True))
     release_freed_memory()  # each stage's freed arrays back to the OS (``memory``): the peak is the largest stage's
     tm["decode_estimator"] = time.perf_counter() - t0
     say(f"{table.counters.get('samples', 0)} samples, {len(table)} rows")
@@ -220,6 +224,9 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
     rk = rank(fit_table, vehicle, model_effects, user_effects=user_effects, config=ranking_config)
     if sub is not None:
         rk.messages = [sub.message()] + rk.messages
+    cross_check(rk.parameters, table.rls)  # the base fit's values against the identifier's (rls_check)
+    for p in rk.parameters:
+        p.message = rk_message(rk, p)
     release_freed_memory()
     tm["ranking"] = time.perf_counter() - t1
     base = FittedModel(rk.base_vehicle, model_effects)
@@ -253,7 +260,7 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
 
         def reestimate(meas_effects):
             say("re-running the estimator with the sensor effects taken out of the IMU readings")
-            return cut(load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=dataset_config,
+            return cut(load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=ds,
                                   imu_effects=meas_effects))
 
         add_res = add_effects(cut(table), vehicle, model_effects, list(add),

@@ -40,12 +40,14 @@ class RlsResult:
     converged: dict[str, bool]
     excited: dict[str, bool] = field(default_factory=dict)
     rows_used: dict[str, int] = field(default_factory=dict)
+    status: dict[str, str] = field(default_factory=dict)  # per parameter (``identification.status``)
 
     def to_json(self) -> dict:
         fin = (lambda v: float(v) if v is not None and math.isfinite(v) else None)  # noqa: E731
         return {"params": {k: fin(v) for k, v in self.params.items()},
                 "sigmas": {k: fin(v) for k, v in self.sigmas.items()},
-                "converged": dict(self.converged), "excited": dict(self.excited), "rows_used": dict(self.rows_used)}
+                "converged": dict(self.converged), "excited": dict(self.excited), "rows_used": dict(self.rows_used),
+                "status": dict(self.status)}
 
 
 @dataclass
@@ -116,9 +118,11 @@ def _rls_result(system: VdpsSystem) -> RlsResult | None:
     if idf is None:
         return None
     st = idf.status()
+    per_param = {p: str(v.get("status", "")) for prob in st.get("status", {}).values()
+                 for p, v in prob.get("params", {}).items()}
     return RlsResult(dict(idf.params.as_dict()), dict(idf.sigmas), dict(idf.converged),
                      {k: bool(v) for k, v in st.get("excited", {}).items()},
-                     {k: int(c.get("rows_used", 0)) for k, c in st.get("counters", {}).items()})
+                     {k: int(c.get("rows_used", 0)) for k, c in st.get("counters", {}).items()}, per_param)
 
 
 class InnovationLog:

@@ -112,7 +112,7 @@ def describe_entry(rk, e) -> str:
             return f"{label}: not excited on this drive, held at the model file's {ref / k:.4g} {unit}"
         if not e.plausible:
             return _implausible_parameter(label, e, p, v, s, ref, unit, k)
-        msg = f"{label}: identified {v / k:.4g} +- {s / k:.2g} {unit} (model file {ref / k:.4g} {unit})"
+        msg = _checked_parameter(label, e.identifier, v, s, ref, unit, k)
         if e.group:
             alts = [g for g in e.group if g != e.effect]
             msg += ("; the same change would be explained by " + ", ".join(EFFECT_LABELS.get(a, a) for a in alts)
@@ -144,6 +144,24 @@ def _implausible_parameter(label, e, p, v, s, ref, unit, k) -> str:
     return (f"{label}: NOT identified -- implausible fit {v / k:.4g} +- {s / k:.2g} {unit}, {why} {rng} (model "
             f"file {ref / k:.4g} {unit}), the model keeps {used / k:.4g} {unit}; this drive does not determine "
             "it, or the base model misses an effect that it absorbs")
+
+
+def _checked_parameter(label, idf: dict, v, s, ref, unit, k) -> str:
+    """A plausible fitted value in the words of the identifier's verdict (``ranking.rls_check``):
+    "identified" only when the identifier identified it too and agrees (or did not run)."""
+    fit = f"{v / k:.4g} +- {s / k:.2g} {unit}"
+    model = f"model file {ref / k:.4g} {unit}"
+    verdict = idf.get("verdict")
+    if verdict is None:
+        return f"{label}: identified {fit} ({model})"
+    other = f"{idf['value'] / k:.4g} +- {idf['sigma'] / k:.2g} {unit}"
+    if verdict == "agrees":
+        return f"{label}: identified {fit} ({model}), the identifier agrees ({other})"
+    if verdict == "disagrees":
+        return (f"{label}: not confirmed -- fitted {fit}, the identifier {other} on the same drive "
+                f"(z = {idf['z']:.1f}): one of the two models does not fit this drive ({model})")
+    return (f"{label}: not confirmed -- fitted {fit}, the identifier says \"{idf['status']}\" on this "
+            f"drive ({model})")
 
 
 def _unit(p: str) -> tuple[str, float]:

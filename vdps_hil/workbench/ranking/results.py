@@ -43,6 +43,7 @@ class RankEntry:
     model_value: dict[str, float] = field(default_factory=dict)  # a parameter: the value the model uses
     plausible_range: dict[str, tuple[float, float]] = field(default_factory=dict)  # a parameter: its bounds
     unique_fraction: float = math.nan  # a selected effect beside others: U_e, its order (``ordering``)
+    identifier: dict = field(default_factory=dict)  # a parameter: the identifier's verdict (``rls_check``)
 
     def to_json(self) -> dict:
         num = json_number
@@ -55,7 +56,9 @@ class RankEntry:
                 **({"unique_fraction": num(self.unique_fraction)} if math.isfinite(self.unique_fraction) else {}),
                 **({"model_value": {k: num(v) for k, v in self.model_value.items()}} if self.model_value else {}),
                 **({"plausible_range": {k: [num(a), num(b)] for k, (a, b) in self.plausible_range.items()}}
-                   if self.plausible_range else {})}
+                   if self.plausible_range else {}),
+                **({"identifier": {k: (num(v) if isinstance(v, float) else v) for k, v in self.identifier.items()}}
+                   if self.identifier else {})}
 
 
 def json_number(v):
