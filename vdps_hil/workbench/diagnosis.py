@@ -197,6 +197,22 @@ def _diverged_phrase(d: dict, a: dict) -> str:
     return ("  (" + "; ".join(parts) + ", left out)") if parts else ""
 
 
+def _rank_checked(table: DriveTable, vehicle: Vehicle, model_effects: EffectSet, user_effects, ranking_config):
+    """The ranking on the drive (or on its row-budget segments, ``fit_budget``) with its fitted
+    parameters checked against the identifier's (``ranking.rls_check``): (ranking, config, the
+    fit subset or None, the table fitted)."""
+    cfg = ranking_config or RankingConfig()
+    sub = fit_subset(table, cfg.max_fit_s, cfg.fit_segment_s)
+    fit_table = sub.table if sub is not None else table
+    rk = rank(fit_table, vehicle, model_effects, user_effects=user_effects, config=ranking_config)
+    if sub is not None:
+        rk.messages = [sub.message()] + rk.messages
+    cross_check(rk.parameters, table.rls)
+    for p in rk.parameters:
+        p.message = rk_message(rk, p)
+    return rk, cfg, sub, fit_table
+
+
 def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = None, dbc=None, signalmap=None,
              add: Sequence[str] = (), user_effects: Sequence[type[Effect]] = (), save_model: str | Path | None = None,
              dataset_config: DatasetConfig | None = None, ranking_config: RankingConfig | None = None,
@@ -218,15 +234,7 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
     say(f"{table.counters.get('samples', 0)} samples, {len(table)} rows")
     say("identifying the model and ranking the candidates")
     t1 = time.perf_counter()
-    cfg = ranking_config or RankingConfig()
-    sub = fit_subset(table, cfg.max_fit_s, cfg.fit_segment_s)
-    fit_table = sub.table if sub is not None else table
-    rk = rank(fit_table, vehicle, model_effects, user_effects=user_effects, config=ranking_config)
-    if sub is not None:
-        rk.messages = [sub.message()] + rk.messages
-    cross_check(rk.parameters, table.rls)  # the base fit's values against the identifier's (rls_check)
-    for p in rk.parameters:
-        p.message = rk_message(rk, p)
+    rk, cfg, sub, fit_table = _rank_checked(table, vehicle, model_effects, user_effects, ranking_config)
     release_freed_memory()
     tm["ranking"] = time.perf_counter() - t1
     base = FittedModel(rk.base_vehicle, model_effects)
