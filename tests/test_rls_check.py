@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import math
 
+import pytest
+
 from vdps_hil.workbench.estimator_run import RlsResult
 from vdps_hil.workbench.ranking.results import RankEntry
 from vdps_hil.workbench.ranking.rls_check import AGREE_Z, VERDICTS, agreement_z, cross_check, verdict
@@ -65,3 +67,47 @@ def test_the_labels_are_in_the_entry_json_without_nan():
     assert doc["identifier"]["verdict"] == "unconfirmed" and doc["identifier"]["status"] == "not converged"
     assert doc["identifier"]["sigma"] is None and doc["identifier"]["param"] == "mass_kg"
     assert "identifier" not in _entry("mass_kg", 1.0, 1.0).to_json()
+
+
+CR_SEED = 41
+"""Test seed of the CommonRoad check below: no study's or tuning set's seed (asserted)."""
+
+
+def test_cr_seed_is_held_out():
+    from vdps_hil.experiments import ident_study, workbench_study
+
+    for mod in (ident_study, workbench_study):
+        assert CR_SEED not in mod.TUNING_SEEDS and CR_SEED not in mod.STUDY_SEEDS
+
+
+def test_on_commonroad_nothing_the_identifier_rejects_is_called_identified(tmp_path):
+    """On the independent truth (CommonRoad set 3, the 1 Hz sine with in-phase acceleration,
+    read from /raw/ and the model file only; the study drives' 100 Hz suspension): the identifier
+    runs in the estimator pass, a status for each of its ten parameters, its mass within 1 % of
+    the truth (issue 17's bar; on this seed it calls the mass a "model mismatch" through the
+    vertical row all the same, 0.05 % off: ``vdps replay`` says the same); every excited, plausible
+    parameter of the base fit carries the identifier's verdict, and the summary's words call a
+    value identified exactly when the identifier identified it too and agrees."""
+    from vdps_hil.experiments.workbench_study import cached_drive
+    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.sim.cr_model import truth_figures
+    from vdps_hil.workbench.dataset import DatasetConfig, load_drive
+    from vdps_hil.workbench.ranking.selection import rank
+    from vdps_hil.workbench.words import describe_entry
+
+    veh = load_vehicle("cr3-model")
+    path = cached_drive(tmp_path, "shipped:cr-sine-accel", (), CR_SEED, truth="commonroad-mb:3")
+    tab = load_drive(path, veh, config=DatasetConfig(identify=True))
+    assert tab.rls is not None and set(tab.rls.status) == set(tab.rls.params)
+    assert tab.rls.params["mass_kg"] == pytest.approx(truth_figures(3)["mass_kg"], rel=0.01)
+    rk = rank(tab, veh)
+    cross_check(rk.parameters, tab.rls)
+    checked = [e for e in rk.parameters if e.excited and e.plausible]
+    assert checked
+    for e in checked:
+        v = e.identifier["verdict"]
+        assert v in VERDICTS and e.identifier["status"] == tab.rls.status[e.identifier["param"]]
+        head = describe_entry(rk, e).split(";")[0]
+        assert ("identified" in head.split(" -- ")[0]) == (v == "agrees"), head
+        if e.identifier["status"] in ("model mismatch", "at bound", "not excited"):
+            assert "not confirmed" in head and e.identifier["status"] in head
