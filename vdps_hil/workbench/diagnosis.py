@@ -38,8 +38,7 @@ from .dataset import DatasetConfig, DriveTable, load_drive
 from .fit_budget import FitSubset, add_window, fit_subset
 from .memory import release_freed_memory
 from .ranking.config import RankingConfig
-from .ranking.results import Ranking, rk_message
-from .ranking.rls_check import cross_check
+from .ranking.results import Ranking
 from .ranking.selection import rank
 from .regimes import RegimeBins, Window, regime_bins, worst_windows
 from .residuals import EquationResiduals, compute_residuals
@@ -197,19 +196,16 @@ def _diverged_phrase(d: dict, a: dict) -> str:
     return ("  (" + "; ".join(parts) + ", left out)") if parts else ""
 
 
-def _rank_checked(table: DriveTable, vehicle: Vehicle, model_effects: EffectSet, user_effects, ranking_config):
-    """The ranking on the drive (or on its row-budget segments, ``fit_budget``) with its fitted
-    parameters checked against the identifier's (``ranking.rls_check``): (ranking, config, the
-    fit subset or None, the table fitted)."""
+def _rank_in_budget(table: DriveTable, vehicle: Vehicle, model_effects: EffectSet, user_effects, ranking_config):
+    """The ranking on the drive, or on its row-budget segments (``fit_budget``); its fitted
+    parameters carry the identifier's verdict (``table.rls``, ``ranking.rls_check``): (ranking,
+    config, the fit subset or None, the table fitted)."""
     cfg = ranking_config or RankingConfig()
     sub = fit_subset(table, cfg.max_fit_s, cfg.fit_segment_s)
     fit_table = sub.table if sub is not None else table
     rk = rank(fit_table, vehicle, model_effects, user_effects=user_effects, config=ranking_config)
     if sub is not None:
         rk.messages = [sub.message()] + rk.messages
-    cross_check(rk.parameters, table.rls)
-    for p in rk.parameters:
-        p.message = rk_message(rk, p)
     return rk, cfg, sub, fit_table
 
 
@@ -234,7 +230,7 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
     say(f"{table.counters.get('samples', 0)} samples, {len(table)} rows")
     say("identifying the model and ranking the candidates")
     t1 = time.perf_counter()
-    rk, cfg, sub, fit_table = _rank_checked(table, vehicle, model_effects, user_effects, ranking_config)
+    rk, cfg, sub, fit_table = _rank_in_budget(table, vehicle, model_effects, user_effects, ranking_config)
     release_freed_memory()
     tm["ranking"] = time.perf_counter() - t1
     base = FittedModel(rk.base_vehicle, model_effects)

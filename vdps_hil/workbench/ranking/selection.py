@@ -6,8 +6,7 @@ blocked cross-validation (:meth:`~vdps_hil.workbench.ranking.design.Design.cv`):
 
     EF_c = 1 - SSE_cv(S + c) / SSE_cv(S)
 
-S = the base model (N, B) plus the effects already selected. Per equation the same ratio over
-that equation's rows.
+S = the base model (N, B) plus the effects already selected; per equation the same ratio over its rows.
 
 Forward selection: the candidate with the largest EF is added when (a) its BIC on the effective
 sample size improves by more than ``bic_margin``::
@@ -34,8 +33,7 @@ the always-on base columns b reproduce::
 (G = X^T X of the whole drive). A candidate whose v_b / v_c (with b the ten parameters alone)
 reaches ``corr_threshold``^2, and whose fitted contribution keeps no significant part the
 re-identification cannot reproduce (``_base_equivalent``), is the same as a re-identification
-on this drive: never a recommendation, reported as a group
-(:mod:`~vdps_hil.workbench.ranking.equivalence`).
+on this drive: never a recommendation, reported as a group (:mod:`~vdps_hil.workbench.ranking.equivalence`).
 """
 
 from __future__ import annotations
@@ -64,6 +62,7 @@ from .gram import take
 from .identification import Joint, Point, build_design, identify, joint_fit, linear_joint_fit
 from .ordering import order_selected, unique_contributions
 from .results import RankEntry, Ranking, rk_message
+from .rls_check import cross_check
 from .sensor_fit import sensor_fit
 
 __all__ = ["rank"]
@@ -371,6 +370,7 @@ def _result(s: _Search, ev: _Excitation) -> Ranking:
     entries.sort(key=lambda e: (order.index(e.effect) if e.effect in order else len(order),
                                 -(e.explained_fraction if math.isfinite(e.explained_fraction) else -1)))
     params = _parameter_entries(d, s.vehicle, point.base, always, s.ratio, s2, cfg)
+    cross_check(params, s.table.rls)  # the identifier's verdict, when the table carries its result (rls_check)
     fill_groups(d, s.by_name, entries, params, always, thetas, cfg, s.n_eff, sse_fin, s.selected, point.phis)
     groups = group_list(entries, params)
     rec = order[0] if order else None
