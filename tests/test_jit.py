@@ -84,3 +84,22 @@ print(sum(sum(d.stats.cache_misses.values()) for d in ds), *sorted(d.__name__ fo
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     misses, *loaded = out.stdout.split()
     assert misses == "0" and loaded == ["core_rhs", "record_row", "reduced_loop", "rk_step", "truth_steps"]
+
+
+def test_kernel_groups_keep_each_module_with_the_kernel_modules_it_imports():
+    """``--warm`` compiles the groups in separate processes: a module that imports another kernel
+    module (its kernels call that module's kernels) must be in the same group, so no kernel's
+    cache index is written by two processes at once. Read from the modules' own import lines."""
+    import re
+    from pathlib import Path
+
+    root = Path(jit.__file__).resolve().parent.parent
+    group_of = {m: k for k, g in enumerate(jit.KERNEL_GROUPS) for m in g}
+    assert sorted(group_of) == sorted(jit.KERNEL_MODULES) and len(group_of) == len(jit.KERNEL_MODULES)
+    for mod, k in group_of.items():
+        src = (root / Path(*mod.split("."))).with_suffix(".py").read_text()
+        imported = set(re.findall(r"^\s*from (vdps_hil(?:\.\w+)+) import", src, re.M))
+        imported |= {f"{pkg}.{name}" for pkg, names in re.findall(r"^\s*from (vdps_hil(?:\.\w+)*) import ([\w, ]+)", src, re.M)
+                     for name in (n.strip() for n in names.split(","))}
+        for other in imported & set(group_of):
+            assert group_of[other] == k, (mod, other)

@@ -14,7 +14,8 @@ Compilation and its cache
   (``<sys.prefix>/var/cache/vdps-hil/numba``), never in the working directory; set
   ``NUMBA_CACHE_DIR`` to put it elsewhere.
 * ``make setup`` warms the cache (``python -m vdps_hil.jit --warm``: imports every module in
-  :data:`KERNEL_MODULES` and runs its ``warm()``), so no command a user runs pays the compile.
+  :data:`KERNEL_MODULES` and runs its ``warm()``, the groups of :data:`KERNEL_GROUPS` in two
+  processes on two or more cores), so no command a user runs pays the compile.
 * ``VDPS_JIT=0`` in the environment turns compilation off: every kernel runs as its Python
   reference (for debugging, and for the equality tests' reference side).
 * numba keys a cached kernel on its own source file only, not on the files of the functions it
@@ -39,19 +40,26 @@ import sys
 import time
 from typing import Callable
 
-__all__ = ["ENABLED", "KERNEL_MODULES", "KERNEL_SOURCES", "cache_key", "inline", "kernel", "warm"]
+__all__ = ["ENABLED", "KERNEL_GROUPS", "KERNEL_MODULES", "KERNEL_SOURCES", "cache_key", "inline", "kernel", "warm",
+           "warm_parallel"]
 
 ENABLED = os.environ.get("VDPS_JIT", "1").strip().lower() not in ("0", "false", "no", "off")
 """False when ``VDPS_JIT=0``: kernels run as plain Python."""
 
-KERNEL_MODULES: list[str] = [
-    "vdps_hil.model.reduced", "vdps_hil.model.core_kernel", "vdps_hil.prediction.integration_kernel",
-    "vdps_hil.sim.step_kernel", "vdps_hil.estimation.ekf_kernels", "vdps_hil.estimation.ekf_update_kernels",
-    "vdps_hil.identification.rls_kernels",
-]
+KERNEL_GROUPS: tuple[tuple[str, ...], ...] = (
+    ("vdps_hil.model.reduced", "vdps_hil.model.core_kernel", "vdps_hil.prediction.integration_kernel",
+     "vdps_hil.sim.step_kernel"),
+    ("vdps_hil.estimation.ekf_kernels", "vdps_hil.estimation.ekf_update_kernels",
+     "vdps_hil.identification.rls_kernels"),
+)
 """Modules that define kernels and a ``warm()`` that compiles them with representative
-arguments (``python -m vdps_hil.jit --warm``). A module adds itself here by name, in this
-file, when it gains kernels."""
+arguments (``python -m vdps_hil.jit --warm``), in groups: a module whose kernels call another
+module's kernels is in that module's group (the physics core's users; the estimator's), so
+``--warm`` can compile the groups in separate processes without two of them writing the same
+kernel's cache index. A module adds itself here by name, in this file, when it gains kernels."""
+
+KERNEL_MODULES: list[str] = [m for g in KERNEL_GROUPS for m in g]
+"""Every kernel module, the groups in order."""
 
 KERNEL_SOURCES: list[str] = [
     "vdps_hil.model.frames", "vdps_hil.model.stages", "vdps_hil.model.effects.tires",
@@ -127,11 +135,11 @@ def _prune_cache() -> None:
             shutil.rmtree(path, ignore_errors=True)
 
 
-def warm(verbose: bool = False, skip: tuple[str, ...] = ()) -> dict[str, float]:
-    """Import every kernel module (but those whose name starts with one of ``skip``) and run its
-    ``warm()``; returns seconds per module."""
+def warm(verbose: bool = False, skip: tuple[str, ...] = (), modules=None) -> dict[str, float]:
+    """Import every kernel module (or those of ``modules``) but those whose name starts with one
+    of ``skip`` and run its ``warm()``; returns seconds per module."""
     out = {}
-    for name in KERNEL_MODULES:
+    for name in (KERNEL_MODULES if modules is None else modules):
         if name.startswith(skip):
             continue
         t0 = time.perf_counter()
@@ -143,12 +151,45 @@ def warm(verbose: bool = False, skip: tuple[str, ...] = ()) -> dict[str, float]:
     return out
 
 
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def warm_parallel(verbose: bool = False) -> tuple[dict[str, float], float]:
+    """:func:`warm` with the groups of :data:`KERNEL_GROUPS` split over two processes when this
+    process may use two cores or more (the second a ``python -P -m vdps_hil.jit --warm-group N``
+    child): (seconds per module, wall seconds). A failing child fails the warm."""
+    import subprocess
+
+    t0 = time.perf_counter()
+    if _cores() < 2 or len(KERNEL_GROUPS) < 2 or not ENABLED:
+        return warm(verbose), time.perf_counter() - t0
+    children = [subprocess.Popen([sys.executable, "-P", "-m", "vdps_hil.jit", "--warm-group", str(k)],
+                                 stdout=subprocess.PIPE, text=True) for k in range(1, len(KERNEL_GROUPS))]
+    took = warm(verbose, modules=KERNEL_GROUPS[0])
+    for k, child in enumerate(children, start=1):
+        out, _ = child.communicate()
+        if child.returncode != 0:
+            raise RuntimeError(f"warming kernel group {k} failed (exit {child.returncode})")
+        for line in out.splitlines():
+            name, _, sec = line.rpartition(" ")
+            took[name] = float(sec)
+    return took, time.perf_counter() - t0
+
+
 if __name__ == "__main__":  # python -m vdps_hil.jit --warm
-    if "--warm" in sys.argv[1:]:
+    args = sys.argv[1:]
+    if "--warm" in args:
         _prune_cache()
-        took = warm(verbose=True)
+        took, wall = warm_parallel(verbose=True)
         print(f"compiled kernels of {len(took)} modules in {sum(took.values()):.1f} s"
-              f"{'' if ENABLED else ' (VDPS_JIT=0: nothing compiled)'}")
+              f"{'' if ENABLED else ' (VDPS_JIT=0: nothing compiled)'} ({wall:.1f} s wall)")
+    elif len(args) == 2 and args[0] == "--warm-group" and args[1].isdigit() and int(args[1]) < len(KERNEL_GROUPS):
+        for name, sec in warm(verbose=True, modules=KERNEL_GROUPS[int(args[1])]).items():
+            print(f"{name} {sec:.3f}")
     else:
         print("usage: python -m vdps_hil.jit --warm", file=sys.stderr)
         sys.exit(2)
