@@ -95,3 +95,22 @@ def e2e_crc_bitwise(frame_id: int, data: bytes) -> int:
     """The E2E CRC of a layout-2 sensor frame from its definition: CRC-8/SAE-J1850 (bit by bit)
     over the data ID = CAN ID (low, high byte) and bytes 1..DLC-1."""
     return crc8_bitwise(bytes((frame_id & 0xFF, frame_id >> 8)) + bytes(data[1:]))
+
+
+def sample_key(s) -> tuple:
+    """A decoded sample as comparable data, bit for bit: every field's value as its float hex (or
+    repr), in the sample's field order, with the types of the values."""
+    return (s.t_ns, s.source, s.kind, tuple((n, type(v).__name__, v.hex() if isinstance(v, float) else repr(v))
+                                            for n, v in s.fields.items()), s.wall_time_ns, s.valid)
+
+
+def recording_frames(path) -> list[tuple[int, int, bytes, bool]]:
+    """The typed frames ``(t_ns, id, payload, is_extended_id)`` of every ``/raw/can/`` record of a
+    recording, in the order a replay decodes them."""
+    import json
+
+    from vdps_hil.record.reader import RecordingReader
+
+    with RecordingReader(path) as r:
+        docs = [(rec.t_ns, json.loads(rec.data)) for rec in r.iter_records(prefixes=("/raw/can/",))]
+    return [(t, d["arbitration_id"], bytes.fromhex(d["data_hex"]), d["is_extended_id"]) for t, d in docs]

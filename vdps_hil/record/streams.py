@@ -139,6 +139,9 @@ read without building a dict; anything else goes through ``json.loads``."""
 
 
 class CanStream:
+    """One CAN bus: ``feed_raw`` (a raw record), ``feed`` (its JSON document) and ``feed_many``
+    (records decoded together when the decoder has ``decode_many``), the same samples and counts."""
+
     def __init__(self, bus: str, decoder, info: dict):
         self.bus = bus
         self.dec = decoder
@@ -164,17 +167,50 @@ class CanStream:
         return self.feed(t_ns, doc)
 
     def feed(self, t_ns: int, doc) -> list[Sample]:
+        got = self._from_doc(t_ns, doc, self.dec.decode)
+        return [] if got is None else got
+
+    def _from_doc(self, t_ns: int, doc, call):
+        """``call(t_ns, id, payload, is_extended_id, **flags)`` of a raw CAN document, or None
+        with a malformed document counted."""
         try:
             if doc["is_error_frame"]:
                 self.malformed += 1
-                return []
+                return None
             data = bytes.fromhex(doc["data_hex"])
             flags = {k: True for k in ("is_fd", "is_remote_frame") if doc[k]}  # counted rejects
-            return self.dec.decode(t_ns, doc["arbitration_id"], data, bool(doc["is_extended_id"]),
-                                   **flags)
+            return call(t_ns, doc["arbitration_id"], data, bool(doc["is_extended_id"]), **flags)
         except (KeyError, TypeError, ValueError):
             self.malformed += 1
-            return []
+            return None
+
+    def feed_many(self, records: list[tuple[int, bytes]]) -> list[list[Sample]]:
+        """``feed_raw`` of each ``(t_ns, data)`` in order, the frames decoded together
+        (``decode_many``) when the decoder can; the same samples and counters."""
+        many = getattr(self.dec, "decode_many", None)
+        if many is None:
+            return [self.feed_raw(t, d) for t, d in records]
+        frames, slots = [], []  # slots: per record, its frame's index or -1 (nothing to decode)
+        search, frame_of = _FAST_CAN.search, self.dec.frame_of
+        for t_ns, data in records:
+            fr = None
+            m = search(data)
+            if m is not None:
+                aid, ext, hx = m.groups()
+                try:
+                    fr = (t_ns, int(aid), unhexlify(hx), ext == b"true")
+                except ValueError:  # binascii.Error: odd length
+                    fr = None
+            if fr is None:
+                try:
+                    fr = self._from_doc(t_ns, json.loads(data), frame_of)
+                except ValueError:
+                    self.malformed += 1
+            slots.append(len(frames) if fr is not None else -1)
+            if fr is not None:
+                frames.append(fr)
+        done = many(frames)
+        return [done[i] if i >= 0 else [] for i in slots]
 
     def counters(self) -> dict:
         c = self.dec.counters
