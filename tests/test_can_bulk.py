@@ -39,7 +39,7 @@ def _bulk(frames, sizes, dbc=None):
     out, k, i = [], 0, 0
     while k < len(frames):
         n = sizes[i % len(sizes)]
-        out += [[sample_key(s) for s in got] for got in dec.decode_many(frames[k:k + n])]
+        out += [[] if s is None else [sample_key(s)] for s in dec.decode_many(frames[k:k + n])]
         k, i = k + n, i + 1
     return out, _state(dec)
 

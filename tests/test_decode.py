@@ -253,7 +253,8 @@ def _decode_all(source, monkeypatch, per_frame=False, batch=None, **kw):
 
     with monkeypatch.context() as m:
         if per_frame:
-            m.setattr(CanStream, "feed_many", lambda self, recs: [self.feed_raw(t, x) for t, x in recs])
+            m.setattr(CanStream, "bulk", False)  # every CAN record through feed_raw in the walk
+            m.setattr(CanStream, "feed_many", None)  # (and never in bulk)
         if batch is not None:
             m.setattr(D, "BATCH_RECORDS", batch)
         if isinstance(source, io.BytesIO):

@@ -254,11 +254,13 @@ class VdpsCanDecoder:
         counts["accepted"] += 1
         return fields, plan.status < 0 or raw[plan.status] == 0
 
-    def decode_many(self, frames: list[tuple[int, int, bytes, bool]]) -> list[list[Sample]]:
-        """:meth:`decode_frame` of each typed frame, in order: the same samples, counter states
-        and counts, decoded as one block per message (``codecs.can_bulk``) where a message has
-        ``BULK_MIN_FRAMES`` or more frames here. The sample groups are merged in frame order."""
-        out: list[list[Sample]] = [[] for _ in frames]
+    def decode_many(self, frames: list[tuple[int, int, bytes, bool]]) -> list[Sample | None]:
+        """:meth:`decode_frame` of each typed frame, in order: its sample or None (a frame gives
+        at most one), the same samples, counter states and counts, decoded as one block per
+        message (``codecs.can_bulk``) where a message has ``BULK_MIN_FRAMES`` or more frames here.
+        The sample groups are merged in frame order. (No list per frame: a replay decodes
+        thousands at once, and containers that live that long cost the garbage collector.)"""
+        out: list[Sample | None] = [None] * len(frames)
         plans = self._plan
         held = []  # accepted frames of sample groups: (frame index, plan, fields, valid)
         for aid, ks in self._by_message(frames).items():
@@ -274,10 +276,11 @@ class VdpsCanDecoder:
                 continue
             src, kind = self._source, plan.spec.kind
             for k, f, v in zip(ks, fields, valid):
-                out[k] = [Sample(frames[k][0], src, kind, f, 0, v)]
+                out[k] = Sample(frames[k][0], src, kind, f, 0, v)
         held.sort(key=lambda h: h[0])
         for k, plan, f, v in held:
-            out[k] = self._grouped(plan, frames[k][0], f, v)
+            got = self._grouped(plan, frames[k][0], f, v)
+            out[k] = got[0] if got else None
         return out
 
     def _by_message(self, frames) -> dict[int, list[int]]:

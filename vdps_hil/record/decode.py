@@ -74,6 +74,7 @@ NMEA_FORMATS = ("nmea",)
 DEFAULT_NMEA_BAUD = 115_200
 BATCH_RECORDS = 4096
 """Raw records read ahead and decoded together (the CAN frames of a bus in bulk per message)."""
+_PER_RECORD = object()  # a record not decoded in bulk: decoded in the walk
 
 
 class DecodeError(ValueError):
@@ -201,10 +202,10 @@ class DecodedRecording:
     def __next__(self) -> Sample:
         return next(self._it)
 
-    def _batches(self) -> Iterator[tuple[list[RawRecord], dict[int, list[Sample]]]]:
-        """The ``/raw/`` records in ``BATCH_RECORDS`` runs, each with the samples of its CAN
-        records decoded together per bus (``CanStream.feed_many``): record index -> samples. An
-        error of the reader is raised after the records read before it."""
+    def _batches(self) -> Iterator[tuple[list[RawRecord], list]]:
+        """The ``/raw/`` records in ``BATCH_RECORDS`` runs, each with what its CAN records of
+        buses decoded in bulk gave (``CanStream.feed_many``: a sample or None; ``_PER_RECORD``
+        for the other records). An error of the reader is raised after the records read before it."""
         it = self.reader.iter_records(prefixes=(S.RAW_PREFIX,))
         can_pre, ncan = S.RAW_CAN_PREFIX, len(S.RAW_CAN_PREFIX)
         while True:
@@ -220,11 +221,13 @@ class DecodedRecording:
             for i, rec in enumerate(batch):
                 if rec.topic.startswith(can_pre):
                     per_bus.setdefault(rec.topic, []).append(i)
-            decoded: dict[int, list[Sample]] = {}
+            decoded = [_PER_RECORD] * len(batch)
             for topic, idx in per_bus.items():
                 st = self._can_stream(topic[ncan:])
-                if st is not None:
-                    decoded.update(zip(idx, st.feed_many([(batch[i].t_ns, batch[i].data) for i in idx])))
+                if st is not None and st.bulk:
+                    got = st.feed_many([batch[i].t_ns for i in idx], [batch[i].data for i in idx])
+                    for i, s in zip(idx, got):
+                        decoded[i] = s
             if batch:
                 yield batch, decoded
             if error is not None:
@@ -241,7 +244,7 @@ class DecodedRecording:
         push, pop = heapq.heappush, heapq.heappop
         sink = self._raw_sink
         can_pre, ser_pre = S.RAW_CAN_PREFIX, S.RAW_SERIAL_PREFIX
-        nser = len(ser_pre)
+        ncan, nser = len(can_pre), len(ser_pre)
         try:
             for batch, decoded in self._batches():
                 for i, rec in enumerate(batch):
@@ -249,12 +252,19 @@ class DecodedRecording:
                     if sink is not None:
                         sink(rec)
                     topic, t = rec.topic, rec.t_ns
-                    out = decoded.get(i, ())
-                    if topic.startswith(can_pre):
-                        if i not in decoded:  # no decoder for this bus
+                    out = decoded[i]
+                    if out is not _PER_RECORD:  # a CAN frame decoded in bulk: its sample or None
+                        out = () if out is None else (out,)
+                    elif topic.startswith(can_pre):
+                        st = self._can_stream(topic[ncan:])
+                        if st is None:
                             self._undecoded[topic] = self._undecoded.get(topic, 0) + 1
+                            out = ()
+                        else:
+                            out = st.feed_raw(t, rec.data)
                     elif topic.startswith(ser_pre):
                         st = self._serial_stream(topic[nser:])
+                        out = ()
                         if st is None:
                             self._undecoded[topic] = self._undecoded.get(topic, 0) + 1
                         else:
@@ -266,6 +276,7 @@ class DecodedRecording:
                             out = st.feed(t, data)
                     else:
                         self._undecoded[topic] = self._undecoded.get(topic, 0) + 1
+                        out = ()
                     for s in out:
                         push(heap, (s.t_ns, seq, s))
                         seq += 1

@@ -184,33 +184,39 @@ class CanStream:
             self.malformed += 1
             return None
 
-    def feed_many(self, records: list[tuple[int, bytes]]) -> list[list[Sample]]:
-        """``feed_raw`` of each ``(t_ns, data)`` in order, the frames decoded together
-        (``decode_many``) when the decoder can; the same samples and counters."""
-        many = getattr(self.dec, "decode_many", None)
-        if many is None:
-            return [self.feed_raw(t, d) for t, d in records]
-        frames, slots = [], []  # slots: per record, its frame's index or -1 (nothing to decode)
+    @property
+    def bulk(self) -> bool:
+        """Whether the decoder decodes many frames at once (``decode_many``: :meth:`feed_many`)."""
+        return hasattr(self.dec, "decode_many")
+
+    def feed_many(self, ts: list[int], datas: list[bytes]) -> list[Sample | None]:
+        """``feed_raw(ts[k], datas[k])`` of each record in order, decoded together by the
+        decoder's ``decode_many`` (:attr:`bulk`): per record its sample or None, the same
+        samples and counters as record by record."""
+        frames, skipped = [], []  # skipped: positions of the records with nothing to decode
         search, frame_of = _FAST_CAN.search, self.dec.frame_of
-        for t_ns, data in records:
-            fr = None
+        for k, (t_ns, data) in enumerate(zip(ts, datas)):
             m = search(data)
             if m is not None:
                 aid, ext, hx = m.groups()
                 try:
-                    fr = (t_ns, int(aid), unhexlify(hx), ext == b"true")
+                    frames.append((t_ns, int(aid), unhexlify(hx), ext == b"true"))
+                    continue
                 except ValueError:  # binascii.Error: odd length
-                    fr = None
+                    pass
+            try:
+                fr = self._from_doc(t_ns, json.loads(data), frame_of)
+            except ValueError:
+                fr = None
+                self.malformed += 1
             if fr is None:
-                try:
-                    fr = self._from_doc(t_ns, json.loads(data), frame_of)
-                except ValueError:
-                    self.malformed += 1
-            slots.append(len(frames) if fr is not None else -1)
-            if fr is not None:
+                skipped.append(k)
+            else:
                 frames.append(fr)
-        done = many(frames)
-        return [done[i] if i >= 0 else [] for i in slots]
+        out = self.dec.decode_many(frames)
+        for k in skipped:
+            out.insert(k, None)
+        return out
 
     def counters(self) -> dict:
         c = self.dec.counters
