@@ -17,7 +17,7 @@ from vdps_hil.codecs.can_e2e import e2e_crc
 from vdps_hil.codecs.dbc_compile import compile_message
 from vdps_hil.sim.drive import Drive
 
-from can_checks import recording_frames, sample_key
+from can_checks import messages, recording_frames, sample_key
 
 
 
@@ -190,3 +190,13 @@ def test_block_kernels_equal_the_compiled_layout(rng):
     assert scaled_column(raw, 0.001, 0, 65535)[-1] == float("inf")
     big = np.array([(1 << 61) + 1, -(1 << 61) - 3])
     assert scaled_column(big, 3, 1, None) == [float(r * 3 + 1) for r in big.tolist()]
+
+
+@settings(max_examples=200, deadline=None)
+@given(m=messages(), data=st.data())
+def test_block_raw_values_equal_the_compiled_layout_on_random_layouts(m, data):
+    """Both byte orders, signed and unsigned signals of 1-32 bits anywhere in 1-8 bytes."""
+    comp = compile_message(m)
+    rows = data.draw(st.lists(st.binary(min_size=m.length, max_size=m.length), min_size=1, max_size=20))
+    cols = raw_columns(comp.extractors, len(comp.names), payload_block(rows, m.length))
+    assert [list(r) for r in zip(*(c.tolist() for c in cols))] == [comp.raw(d) for d in rows]
