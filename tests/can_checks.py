@@ -5,6 +5,10 @@ unpacker and a bit-by-bit CRC-8/SAE-J1850.
 
 from __future__ import annotations
 
+from cantools.database.can import Message, Signal
+from cantools.database.conversion import BaseConversion
+from hypothesis import strategies as st
+
 
 # name: (id, dlc, cycle ms, {signal: (start, length, signed, scale, minimum, maximum, unit)})
 LAYOUT = {
@@ -95,3 +99,54 @@ def e2e_crc_bitwise(frame_id: int, data: bytes) -> int:
     """The E2E CRC of a layout-2 sensor frame from its definition: CRC-8/SAE-J1850 (bit by bit)
     over the data ID = CAN ID (low, high byte) and bytes 1..DLC-1."""
     return crc8_bitwise(bytes((frame_id & 0xFF, frame_id >> 8)) + bytes(data[1:]))
+
+
+def sample_key(s) -> tuple:
+    """A decoded sample as comparable data, bit for bit: every field's value as its float hex (or
+    repr), in the sample's field order, with the types of the values."""
+    return (s.t_ns, s.source, s.kind, tuple((n, type(v).__name__, v.hex() if isinstance(v, float) else repr(v))
+                                            for n, v in s.fields.items()), s.wall_time_ns, s.valid)
+
+
+def recording_frames(path) -> list[tuple[int, int, bytes, bool]]:
+    """The typed frames ``(t_ns, id, payload, is_extended_id)`` of every ``/raw/can/`` record of a
+    recording, in the order a replay decodes them."""
+    import json
+
+    from vdps_hil.record.reader import RecordingReader
+
+    with RecordingReader(path) as r:
+        docs = [(rec.t_ns, json.loads(rec.data)) for rec in r.iter_records(prefixes=("/raw/can/",))]
+    return [(t, d["arbitration_id"], bytes.fromhex(d["data_hex"]), d["is_extended_id"]) for t, d in docs]
+
+
+def _layout(draw, length_bytes: int, big: bool) -> list[tuple[int, int, bool]]:
+    """Non-overlapping signals (sequential start bit, length, signed) filling part of a payload."""
+    total = 8 * length_bytes
+    pos, out = 0, []
+    while pos < total and len(out) < 6:
+        pos += draw(st.integers(0, 6))
+        if pos >= total:
+            break
+        n = draw(st.integers(1, min(32, total - pos)))
+        out.append((pos, n, draw(st.booleans())))
+        pos += n
+    return out
+
+
+@st.composite
+def messages(draw):
+    """A random compilable cantools message (1-8 bytes, one byte order, scale 0.5, offset -1)."""
+    length = draw(st.integers(1, 8))
+    big = draw(st.booleans())
+    sigs = []
+    for k, (pos, n, signed) in enumerate(_layout(draw, length, big)):
+        if big:  # pos = network bit of the MSB -> DBC (sawtooth) start bit of the MSB
+            start = 8 * (pos // 8) + 7 - pos % 8
+        else:
+            start = pos
+        sigs.append(Signal(f"s{k}", start, n, "big_endian" if big else "little_endian", signed,
+                           conversion=BaseConversion.factory(scale=0.5, offset=-1.0)))
+    if not sigs:
+        sigs.append(Signal("s0", 0 if not big else 7, 1, "big_endian" if big else "little_endian", False))
+    return Message(0x123, "M", length, sigs, strict=True)

@@ -23,3 +23,25 @@ def test_pickle_round_trip_keeps_every_attribute():
     assert Sample(1, "imu", "imu") == pickle.loads(pickle.dumps(Sample(1, "imu", "imu")))
     with pytest.raises(TypeError):
         Sample(1.5, "imu", "imu")  # float time refused
+
+
+def test_the_hand_written_constructor_keeps_the_dataclass_contract():
+    """``Sample.__init__`` sets the slots directly (speed); what the generated one gave holds:
+    positional and keyword calls, a new ``fields`` dict per sample by default, an explicit value
+    kept as given, t_ns checked, frozen, ``replace``, pickling, equality and the field list."""
+    import dataclasses
+
+    a, b = Sample(1, "can.vdps", "steer"), Sample(t_ns=1, source="can.vdps", kind="steer")
+    assert a == b and a.fields == {} and a.fields is not b.fields and (a.wall_time_ns, a.valid) == (0, True)
+    f = {"steer_wheel_angle_rad": 0.5}
+    c = Sample(2, "can.vdps", "steer", f, 7, False)
+    assert c.fields is f and (c.t_ns, c.source, c.kind, c.wall_time_ns, c.valid) == (2, "can.vdps", "steer", 7, False)
+    assert Sample(3, "x", "y", fields=None).fields is None
+    with pytest.raises(TypeError, match="t_ns must be int"):
+        Sample(1.0, "x", "y")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        c.t_ns = 5
+    assert dataclasses.replace(c, t_ns=9) == Sample(9, "can.vdps", "steer", f, 7, False)
+    assert pickle.loads(pickle.dumps(c)) == c
+    assert [x.name for x in dataclasses.fields(Sample)] == ["t_ns", "source", "kind", "fields", "wall_time_ns",
+                                                            "valid"]

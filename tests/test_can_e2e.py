@@ -131,3 +131,58 @@ def test_a_stalled_reader_is_not_a_loss_of_whole_counter_cycles():
     c = dec.counters["VDPS_SteerAngle"]
     assert c["lost_frames"] == 0 and c["stall_gaps"] == 1
     assert c["accepted"] == 850
+
+
+def _counters(steps, bits):
+    c, t, cs, ts = 0, 0, [], []
+    for dc, dt in steps:
+        c, t = c + dc, t + dt * 100_000
+        cs.append(c % (1 << bits))
+        ts.append(t)
+    return cs, ts
+
+
+def _check_many_against_check(cs, ts, cuts, bits, protected):
+    from vdps_hil.codecs.can_e2e import SequenceState
+
+    one, many = SequenceState(), SequenceState()
+    ca = {"lost_frames": 0}
+    cb = {"lost_frames": 0}
+    ref = [one.check(x, y, 1 << bits, protected, 3, ca) for x, y in zip(cs, ts)]
+    got, k = [], 0
+    for cut in sorted(cuts) + [len(cs)]:
+        got += many.check_many(cs[k:max(cut, k)], ts[k:max(cut, k)], 1 << bits, protected, 3, cb)
+        k = max(cut, k)
+    assert got == ref and ca == cb and list(ca) == list(cb)
+    assert (one.last, one.t_ns, one.pending) == (many.last, many.t_ns, many.pending)
+    assert (one.period_ns is None and many.period_ns is None) or one.period_ns.hex() == many.period_ns.hex()
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 40), st.sampled_from([0, 1, 1, 1, 2, 50, 400, 3000])), max_size=80),
+       st.lists(st.integers(0, 80), max_size=3), st.sampled_from([4, 8]), st.booleans())
+def test_check_many_equals_check_frame_by_frame(steps, cuts, bits, protected):
+    """``SequenceState.check_many`` (the bulk decoder's loop) against ``check`` per counter:
+    the same reasons, counts (lost frames, stall gaps) and state, across splits into calls;
+    steps of repeats, jumps, wraps, long silences and bursts."""
+    _check_many_against_check(*_counters(steps, bits), cuts, bits, protected)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from([1, 1, 1, 1, 1, 1, 1, 0, 2]),
+                          st.sampled_from([10, 10, 10, 9, 11, 12, 8, 3, 39, 41, 80, 170, 0])), max_size=300),
+       st.lists(st.integers(0, 300), max_size=6), st.sampled_from([4, 8]))
+def test_check_many_paced_runs_equal_check(steps, cuts, bits):
+    """Mostly paced streams (counter +1, a jittered period, now and then a repeat, a loss, a
+    burst or a gap near the 4-period and half-cycle limits) in many calls: the whole-run
+    shortcut of check_many is taken and leaves the same state as check frame by frame."""
+    _check_many_against_check(*_counters(steps, bits), cuts, bits, False)
+
+
+def test_check_many_takes_the_paced_shortcut():
+    from vdps_hil.codecs.can_e2e import SequenceState
+
+    s = SequenceState()
+    s.check_many([0, 1, 2], [0, 10, 20], 16, False, 3, {"lost_frames": 0})
+    assert s._paced([3, 4, 5], [31, 40, 50], 16) and s.last == 5 and s.t_ns == 50
+    assert not s._paced([7], [60], 16) and not s._paced([6], [50], 16) and not s._paced([6], [200], 16)

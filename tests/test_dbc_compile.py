@@ -18,6 +18,8 @@ from vdps_hil.codecs.can_decode import VdpsCanDecoder, _DecodePlan
 from vdps_hil.codecs.can_encode import _from_raw, encode_warning
 from vdps_hil.codecs.dbc_compile import CompiledMessage, NotCompilable, compile_message
 
+from can_checks import messages
+
 DB = load_dbc().db
 
 
@@ -28,37 +30,6 @@ def test_every_vdps_message_matches_cantools(message, data):
     payload = data.draw(st.binary(min_size=message.length, max_size=message.length))
     ref = message.decode(payload, decode_choices=False, scaling=False)
     assert compile_message(message).raw_dict(payload) == ref
-
-
-def _layout(draw, length_bytes: int, big: bool) -> list[tuple[int, int, bool]]:
-    """Non-overlapping signals (sequential start bit, length, signed) filling part of a payload."""
-    total = 8 * length_bytes
-    pos, out = 0, []
-    while pos < total and len(out) < 6:
-        pos += draw(st.integers(0, 6))
-        if pos >= total:
-            break
-        n = draw(st.integers(1, min(32, total - pos)))
-        out.append((pos, n, draw(st.booleans())))
-        pos += n
-    return out
-
-
-@st.composite
-def messages(draw):
-    length = draw(st.integers(1, 8))
-    big = draw(st.booleans())
-    sigs = []
-    for k, (pos, n, signed) in enumerate(_layout(draw, length, big)):
-        if big:  # pos = network bit of the MSB -> DBC (sawtooth) start bit of the MSB
-            start = 8 * (pos // 8) + 7 - pos % 8
-        else:
-            start = pos
-        sigs.append(Signal(f"s{k}", start, n, "big_endian" if big else "little_endian", signed,
-                           conversion=BaseConversion.factory(scale=0.5, offset=-1.0)))
-    if not sigs:
-        sigs.append(Signal("s0", 0 if not big else 7, 1, "big_endian" if big else "little_endian", False))
-    return Message(0x123, "M", length, sigs, strict=True)
 
 
 @settings(max_examples=400, deadline=None)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import io
 
+import numpy as np
 import pytest
 
 from vdps_hil.codecs.nmea.position import format_gga
@@ -238,3 +239,100 @@ def test_a_layout_1_recording_decodes_with_the_dbc_it_names(tmp_path):
     assert d.decoding["can.vdps"]["signalmap"] == "vdps_v1"
     assert d.rejected()["can.vdps"] == 0
     assert (kinds["wheel_speed"], kinds["wheel_torque"], kinds["steer"]) == (2002, 101, 101)
+
+
+# ---------------------------------------------------------------------------------------------
+# bulk CAN decoding (issue 19 item 2) against the per-frame reference
+# ---------------------------------------------------------------------------------------------
+def _decode_all(source, monkeypatch, per_frame=False, batch=None, **kw):
+    """(sample keys, counters, rejected) of ``decode_recording``; ``per_frame``: every CAN record
+    through ``CanStream.feed_raw`` one at a time (the reference); ``batch``: records per run."""
+    from can_checks import sample_key
+    from vdps_hil.record import decode as D
+    from vdps_hil.record.streams import CanStream
+
+    with monkeypatch.context() as m:
+        if per_frame:
+            m.setattr(CanStream, "bulk", False)  # every CAN record through feed_raw in the walk
+            m.setattr(CanStream, "feed_many", None)  # (and never in bulk)
+        if batch is not None:
+            m.setattr(D, "BATCH_RECORDS", batch)
+        if isinstance(source, io.BytesIO):
+            source.seek(0)
+        d = decode_recording(source, **kw)
+        keys = [sample_key(s) for s in d]
+        counters = d.counters
+    for c in counters.values():
+        if isinstance(c, dict) and "dbc" in c:
+            c.pop("dbc")
+    return keys, counters, d.rejected()
+
+
+def _assert_bulk_equals_per_frame(source, monkeypatch, batches=(None, 1, 333), **kw):
+    ref = _decode_all(source, monkeypatch, per_frame=True, **kw)
+    for b in batches:
+        got = _decode_all(source, monkeypatch, batch=b, **kw)
+        assert got[0] == ref[0], f"batch {b}"
+        assert got[1:] == ref[1:], f"batch {b}"
+    return ref
+
+
+@pytest.mark.parametrize("profile,faults", [
+    ("table1", ()), ("table1-susp1k", ()),
+    ("table1-susp1k", ("dropped_frames:fraction=0.03", "clock_jump:device=can,t_s=1,jump_s=-0.2",
+                       "serial_disconnect:device=imu,t_s=1.5,duration_s=0.2", "gyro_spike:t_s=0.5"))])
+def test_bulk_can_decoding_equals_the_per_frame_path_on_drives(tmp_path, monkeypatch, profile, faults):
+    p = _drive(tmp_path, faults=faults, duration_s=3.0, profile=profile, seed=5)
+    keys, counters, _ = _assert_bulk_equals_per_frame(p, monkeypatch)
+    assert len(keys) > 9_000
+    if faults:
+        assert sum(c["lost_frames"] for c in counters["can.vdps"].values() if isinstance(c, dict) and "lost_frames" in c) > 0
+
+
+def test_bulk_can_decoding_equals_the_per_frame_path_on_malformed_frames(monkeypatch):
+    rng = np.random.default_rng(3)
+    good = S.raw_can_doc(0, 0x130, _steer(0))
+    can, ctr = [], 0
+    for k in range(3000):
+        t = 1_000 * MS + k * MS
+        ctr += int(rng.choice([1, 1, 1, 0, 3, 16]))
+        doc = dict(good, t_ns=t, data_hex=_steer(ctr % 16).hex())
+        r = rng.random()
+        if r < 0.05:
+            doc["data_hex"] = doc["data_hex"][:2] + f"{int(doc['data_hex'][2:4], 16) ^ 0x40:02x}" + doc["data_hex"][4:]
+        elif r < 0.08:
+            doc.update(dlc=2, data_hex=doc["data_hex"][:4])
+        elif r < 0.09:
+            doc["is_error_frame"] = True
+        elif r < 0.10:
+            doc["arbitration_id"] = int(rng.integers(0, 0x800))
+        can.append((t, doc))
+    chunks = [(1_000 * MS + k * 200 * MS, format_gga(1.0 + 0.2 * k, 48.0, 11.0, 500.0, fix_quality=4))
+              for k in range(10)]
+    buf = _serial_recording(chunks, can=can)
+    _, counters, rejected = _assert_bulk_equals_per_frame(buf, monkeypatch, batches=(None, 1, 7, 64))
+    steer = counters["can.vdps"]["VDPS_SteerAngle"]
+    assert steer["crc_mismatch"] and steer["counter_repeat"] and steer["dlc_mismatch"] and steer["lost_frames"]
+    assert counters["can.vdps"]["raw_malformed"] > 0 and rejected["can.vdps"] > 0
+
+
+def test_bulk_walk_equals_the_per_frame_path_on_the_real_rav4_drive(tmp_path, monkeypatch):
+    """The RAV4's own bus through its signal map (``SignalMapDecoder``: frame by frame, inside the
+    batched walk) with the u-blox fixes: the same samples, order and counters."""
+    from click.testing import CliRunner
+
+    from conftest import REAL_DATA
+    from vdps_hil.cli.main import cli
+
+    seg = REAL_DATA / "comma2k19_rav4_2018-08-02_seg40"
+    if not seg.is_dir():
+        pytest.skip(f"real data not present: {seg}")
+    out = tmp_path / "rav4.mcap"
+    r = CliRunner().invoke(cli, ["import", "--can", f"pt={seg / 'rav4_seg40.candump.log'}@can0", "--signalmap",
+                                 "toyota_rav4_2017", "--dbc", str(seg / "toyota_new_mc_pt_generated.dbc"),
+                                 "-o", str(out)], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    keys, _, _ = _assert_bulk_equals_per_frame(out, monkeypatch, batches=(None, 100),
+                                              signalmap="toyota_rav4_2017",
+                                              dbc=str(seg / "toyota_new_mc_pt_generated.dbc"))
+    assert len(keys) > 10_000

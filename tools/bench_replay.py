@@ -55,6 +55,15 @@ identical to before on four reference replays (table1, table1-susp1k, the comple
 real RAV4 drive with its own DBC and signal map), with one and two processes, except the
 innovation messages' ``gate`` value, which moved by 1-2 ulp with the gate's own quantile.
 
+CAN in bulk (issue 19 item 2, README "Replay"): three rounds alternating a worktree of 65b564f
+(``git worktree add --detach ../wt-bulk-base 65b564f``, then
+``PYTHONPATH=../wt-bulk-base .venv/bin/python ../wt-bulk-base/tools/bench_replay.py``) and this tree, each
+``--duration 10 --repeat 3 --profiles table1-susp1k --no-micro``, load average 3.5-5::
+
+    RTF [x]            decode            replay_file estimator only    complete chain
+    65b564f            20.4  20.3  21.6  4.4  5.0  4.6                 2.6  2.4  2.4
+    bulk CAN decode    28.5  25.0  25.2  4.9  4.4  5.2                 2.5  2.5  2.3
+
 Where the time goes now (table1, one process): per-object Python work on ~64,000 samples from
 ~48,000 raw records per 20 s, spread in items of 5-40 ms each (decoding ~0.38 s per 20 s: CAN
 ~3 us per frame, IMU ~6 us per packet, 0.5 us of each for the Sample object; the system ~0.35 s: alpha-beta and handler bodies, EKF

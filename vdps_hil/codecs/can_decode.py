@@ -8,6 +8,10 @@ frame; over the data ID first for sensor frames), rolling counter (``codecs.can_
 then ``x = raw * scale + offset`` (``codecs.can_encode`` module docstring; the TTR sentinel raw
 65535 decodes to +inf).
 
+In bulk (``decode_many``, a replay's frames): the frames of each message are checked and scaled
+as one numpy block (``codecs.can_bulk``; the counter rule by ``SequenceState.check_many``), the
+sample groups merged afterwards in frame order: the same samples and counters as frame by frame.
+
 Sample groups: the messages sharing a DBC ``VdpsSampleGroup`` (the front and rear torque frames)
 decode into one sample. An accepted frame of the group is held; the group's last message (the
 highest ID, sent last at an instant) emits one sample with the fields of all members at its own
@@ -32,7 +36,10 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Mapping
 
+import numpy as np
+
 from vdps_hil.bus.samples import Sample
+from vdps_hil.codecs.can_bulk import bulk_layout, crc_column, payload_block, raw_columns, scaled_column
 from vdps_hil.codecs.can_dbc import TTR_NONE_RAW, MessageSpec, VdpsDbc, is_ttr, load_dbc
 from vdps_hil.codecs.can_e2e import WARNING_MAX_DELTA_COUNTER, SequenceState, e2e_crc, e2e_register
 
@@ -49,6 +56,10 @@ BUS_REJECTS = ("unknown_id", "unknown_id_extended", "malformed", "remote_frame",
 """Rejects of frames that are no message of the bus (module docstring)."""
 
 
+BULK_MIN_FRAMES = 16
+"""Fewest frames of one message in a ``decode_many`` call decoded as a block (fewer: per frame)."""
+
+
 class _DecodePlan:
     """A message's decoding precomputed (``codecs.dbc_compile``; cantools when the layout is not
     compilable): signal indexes of the CRC, counter and ``warning_status``, and per value signal
@@ -60,7 +71,7 @@ class _DecodePlan:
     every raw value). ``modulus``: of the rolling counter."""
 
     __slots__ = ("spec", "compiled", "names", "crc", "counter", "counter_name", "status", "values",
-                 "checks", "modulus", "data_id", "crc_reg", "closes", "max_age_ns")
+                 "checks", "modulus", "data_id", "crc_reg", "closes", "max_age_ns", "bulk", "field_names")
 
     def __init__(self, spec: MessageSpec):
         from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
@@ -88,7 +99,9 @@ class _DecodePlan:
             if self.compiled is None or (sig.raw_min, sig.raw_max) != full:
                 checks.append((idx[sig.name], sig.raw_min, sig.raw_max))
         self.values = tuple(vals)
+        self.field_names = tuple(v[0] for v in vals) + (self.counter_name,)  # a sample's fields, in order
         self.checks = tuple(checks)
+        self.bulk = bulk_layout(self.compiled, spec.dlc)  # codecs.can_bulk, None: frame by frame
         self.data_id = spec.data_id
         self.crc_reg = e2e_register(spec.data_id)  # the CRC register after the data ID
         self.closes = False  # the last message of its sample group (VdpsCanDecoder sets it)
@@ -171,17 +184,22 @@ class VdpsCanDecoder:
     def decode(self, t_ns: int, arbitration_id: int, data: bytes, is_extended_id: bool = False,
                *, is_fd: bool = False, is_remote_frame: bool = False) -> list[Sample]:
         """A frame -> ``[Sample]`` or ``[]`` (counted); remote and CAN FD frames are rejects."""
+        frame = self.frame_of(t_ns, arbitration_id, data, is_extended_id, is_fd=is_fd,
+                              is_remote_frame=is_remote_frame)
+        return [] if frame is None else self.decode_frame(*frame)
+
+    def frame_of(self, t_ns, arbitration_id, data, is_extended_id=False, *, is_fd: bool = False,
+                 is_remote_frame: bool = False) -> tuple[int, int, bytes, bool] | None:
+        """The typed fields ``(t_ns, id, payload, is_extended_id)`` that :meth:`decode` passes to
+        :meth:`decode_frame`, or None with the reject counted (remote, FD, malformed)."""
         if is_remote_frame or is_fd:
             self._bus["remote_frame" if is_remote_frame else "fd_frame"] += 1
-            return []
+            return None
         try:
-            t_ns = int(t_ns)
-            aid = int(arbitration_id)
-            payload = bytes(data)
+            return int(t_ns), int(arbitration_id), bytes(data), bool(is_extended_id)
         except (TypeError, ValueError, OverflowError):
             self._bus["malformed"] += 1
-            return []
-        return self.decode_frame(t_ns, aid, payload, bool(is_extended_id))
+            return None
 
     def decode_frame(self, t_ns: int, aid: int, payload: bytes, is_extended_id: bool) -> list[Sample]:
         """``decode`` of a frame whose fields already have their types (int, int, bytes, bool),
@@ -191,10 +209,21 @@ class VdpsCanDecoder:
             self._bus["unknown_id_extended" if is_extended_id else "unknown_id"] += 1
             return []
         spec = plan.spec
-        counts = self._counts[spec.name]
         if len(payload) != spec.dlc:
-            counts["dlc_mismatch"] += 1
+            self._counts[spec.name]["dlc_mismatch"] += 1
             return []
+        got = self._accept(plan, t_ns, payload)
+        if got is None:
+            return []
+        if spec.group:
+            return self._grouped(plan, t_ns, *got)
+        return [Sample(t_ns, self._source, spec.kind, got[0], 0, got[1])]  # positional: the hot path
+
+    def _accept(self, plan: _DecodePlan, t_ns: int, payload: bytes) -> tuple[dict, bool] | None:
+        """A frame of the message's length checked (CRC, counter, range) and scaled: (fields,
+        valid), or None with the reject counted (module docstring)."""
+        spec = plan.spec
+        counts = self._counts[spec.name]
         if plan.compiled is not None:
             raw = plan.compiled.raw(payload)
         else:
@@ -203,30 +232,114 @@ class VdpsCanDecoder:
                 raw = [d[n] for n in plan.names]
             except Exception:  # cantools' DecodeError and friends: count, never raise
                 counts["undecodable"] += 1
-                return []
+                return None
         if plan.crc >= 0 and e2e_crc(payload, plan.data_id, plan.crc_reg) != raw[plan.crc]:
             counts["crc_mismatch"] += 1
-            return []
+            return None
         c = raw[plan.counter]
         reason = self._seq[spec.name].check(c, t_ns, plan.modulus, not spec.is_sensor, self._max_delta,
                                             counts)
         if reason is not None:
             counts[reason] += 1
-            return []
+            return None
         for i, lo, hi in plan.checks:
             if not lo <= raw[i] <= hi:
                 counts["out_of_range"] += 1
-                return []
+                return None
         fields: dict[str, float] = {}
         for name, i, scale, offset, ttr in plan.values:
             r = raw[i]
             fields[name] = math.inf if ttr and r == TTR_NONE_RAW else float(r * scale + offset)
         fields[plan.counter_name] = float(c)
         counts["accepted"] += 1
-        valid = plan.status < 0 or raw[plan.status] == 0
-        if spec.group:
-            return self._grouped(plan, t_ns, fields, valid)
-        return [Sample(t_ns, self._source, spec.kind, fields, 0, valid)]  # positional: the hot path
+        return fields, plan.status < 0 or raw[plan.status] == 0
+
+    def decode_many(self, frames: list[tuple[int, int, bytes, bool]]) -> list[Sample | None]:
+        """:meth:`decode_frame` of each typed frame, in order: its sample or None (a frame gives
+        at most one), the same samples, counter states and counts, decoded as one block per
+        message (``codecs.can_bulk``) where a message has ``BULK_MIN_FRAMES`` or more frames here.
+        The sample groups are merged in frame order. (No list per frame: a replay decodes
+        thousands at once, and containers that live that long cost the garbage collector.)"""
+        out: list[Sample | None] = [None] * len(frames)
+        plans = self._plan
+        held = []  # accepted frames of sample groups: (frame index, plan, fields, valid)
+        for aid, ks in self._by_message(frames).items():
+            plan = plans[aid]
+            if plan.bulk is not None and len(ks) >= BULK_MIN_FRAMES:
+                ks, fields, valid = self._accept_block(plan, ks, frames)
+            else:
+                got = [(k, self._accept(plan, frames[k][0], frames[k][2])) for k in ks]
+                got = [(k, g) for k, g in got if g is not None]
+                ks, fields, valid = [k for k, _ in got], [g[0] for _, g in got], [g[1] for _, g in got]
+            if plan.spec.group:
+                held += zip(ks, (plan,) * len(ks), fields, valid)
+                continue
+            src, kind = self._source, plan.spec.kind
+            for k, f, v in zip(ks, fields, valid):
+                out[k] = Sample(frames[k][0], src, kind, f, 0, v)
+        held.sort(key=lambda h: h[0])
+        for k, plan, f, v in held:
+            got = self._grouped(plan, frames[k][0], f, v)
+            out[k] = got[0] if got else None
+        return out
+
+    def _by_message(self, frames) -> dict[int, list[int]]:
+        """The indexes of the frames of each message that have its DLC, in order; the others
+        counted (unknown IDs, extended IDs, ``dlc_mismatch``) as :meth:`decode_frame` counts them."""
+        try:
+            aid = np.array([f[1] for f in frames], dtype=np.int64)
+        except OverflowError:  # an ID beyond 64 bits: no message of ours, but count it in Python
+            aid = np.array([f[1] if -(1 << 63) <= f[1] < (1 << 63) else -1 for f in frames], dtype=np.int64)
+        ext = np.array([f[3] for f in frames], dtype=bool)
+        length = np.array([len(f[2]) for f in frames], dtype=np.int64)
+        ours = np.zeros(len(frames), dtype=bool)
+        by_id = {}
+        for a, plan in self._plan.items():
+            mine = (aid == a) & ~ext
+            ours |= mine
+            fits = length == plan.spec.dlc
+            self._counts[plan.spec.name]["dlc_mismatch"] += int(np.count_nonzero(mine & ~fits))
+            ks = np.flatnonzero(mine & fits)
+            if len(ks):
+                by_id[a] = ks.tolist()
+        self._bus["unknown_id_extended"] += int(np.count_nonzero(ext))
+        self._bus["unknown_id"] += int(np.count_nonzero(~ours & ~ext))
+        return by_id
+
+    def _accept_block(self, plan: _DecodePlan, ks: list[int], frames) -> tuple[list[int], list[dict], list[bool]]:
+        """:meth:`_accept` of the frames ``ks`` (all of the plan's message and length, in order)
+        as one block: (indexes, fields, valid) of the accepted frames, the rejects counted."""
+        spec = plan.spec
+        counts = self._counts[spec.name]
+        block = payload_block([frames[k][2] for k in ks], spec.dlc)
+        raw = raw_columns(plan.bulk, len(plan.names), block)
+        sel = np.arange(len(ks))
+        if plan.crc >= 0:
+            sel = np.flatnonzero(crc_column(block, plan.crc_reg) == raw[plan.crc])
+            counts["crc_mismatch"] += len(ks) - len(sel)
+        reasons = self._seq[spec.name].check_many(raw[plan.counter][sel].tolist(),
+                                                  [frames[ks[j]][0] for j in sel.tolist()], plan.modulus,
+                                                  not spec.is_sensor, self._max_delta, counts)
+        if any(r is not None for r in reasons):
+            for r in reasons:
+                if r is not None:
+                    counts[r] += 1
+            sel = sel[np.array([r is None for r in reasons], dtype=bool)]
+        if plan.checks:
+            bad = np.zeros(len(sel), dtype=bool)
+            for i, lo, hi in plan.checks:
+                col = raw[i][sel]
+                bad |= (col < lo) | (col > hi)
+            counts["out_of_range"] += int(bad.sum())
+            sel = sel[~bad]
+        counts["accepted"] += len(sel)
+        cols = [scaled_column(raw[i][sel], scale, offset, TTR_NONE_RAW if ttr else None)
+                for _, i, scale, offset, ttr in plan.values]
+        cols.append(raw[plan.counter][sel].astype(np.float64).tolist())
+        names = plan.field_names
+        fields = [dict(zip(names, row)) for row in zip(*cols)]
+        valid = (raw[plan.status][sel] == 0).tolist() if plan.status >= 0 else [True] * len(sel)
+        return [ks[j] for j in sel.tolist()], fields, valid
 
     def _grouped(self, plan: _DecodePlan, t_ns: int, fields: dict, valid: bool) -> list[Sample]:
         """An accepted frame of a sample group: held, or the group's sample (module docstring)."""

@@ -41,6 +41,8 @@ the warning: 4 bits each in layout 2), +1 per frame. Per message the decoder com
 
 from __future__ import annotations
 
+import numpy as np
+
 WARNING_MAX_DELTA_COUNTER = 3
 """Largest accepted warning counter step (2 frames lost); larger jumps are rejected."""
 
@@ -146,3 +148,74 @@ class SequenceState:
         self.pending = wrapped - (1 if delta == 0 else 0)
         self.last, self.t_ns = c, t_ns
         return None
+
+    def check_many(self, cs: list[int], ts: list[int], modulus: int, protected: bool, max_delta: int,
+                   counts: dict) -> list[str | None]:
+        """:meth:`check` of each counter ``cs[k]`` received at ``ts[k]``, in order: the same
+        reasons, state and counts (the sensor rule written out with local variables for the
+        bulk decoder; ``tests/test_can_e2e.py`` holds it equal to :meth:`check`)."""
+        if protected or not cs:
+            return [self.check(c, t, modulus, True, max_delta, counts) for c, t in zip(cs, ts)]
+        out: list[str | None] = []
+        k0 = 0
+        if self.last is None:
+            self.last, self.t_ns = cs[0], ts[0]
+            out.append(None)
+            k0 = 1
+        if self._paced(cs[k0:], ts[k0:], modulus):
+            return out + [None] * (len(cs) - k0)
+        last, t_last, p, pending = self.last, self.t_ns, self.period_ns, self.pending
+        lost, stalls, half = 0, 0, modulus / 2
+        for c, t in zip(cs[k0:], ts[k0:]):
+            delta = (c - last) % modulus
+            dt = t - t_last
+            wrapped = 0
+            if p and dt > 0 and dt / p > half:
+                wrapped = modulus * max(round((dt / p - delta) / modulus), 0)
+            if delta == 0 and not wrapped:
+                out.append("counter_repeat")
+                continue
+            if pending:
+                if p and dt * 4 >= p:
+                    lost += pending
+                else:
+                    stalls += 1
+                pending = 0
+            if delta == 1 and dt > 0 and (p is None or dt < 4 * p):
+                p = float(dt) if p is None else p + (dt - p) / 16
+            if delta > 1:
+                lost += delta - 1
+            pending = wrapped - (1 if delta == 0 else 0)
+            last, t_last = c, t
+            out.append(None)
+        self.last, self.t_ns, self.period_ns, self.pending = last, t_last, p, pending
+        counts["lost_frames"] += lost
+        if stalls:
+            counts["stall_gaps"] = counts.get("stall_gaps", 0) + stalls
+        return out
+
+    def _paced(self, cs: list[int], ts: list[int], modulus: int) -> bool:
+        """The common run of a sensor's frames taken at once when it is one: every counter +1,
+        every gap dt > 0, a learned period p and nothing pending. The period then stays between
+        its smallest and largest value so far (each step p + (dt - p) / 16 lies between p and
+        dt, also rounded), so when the largest gap is below 4 times that smallest value and at
+        most ``modulus / 2`` times it, every frame is accepted, none is lost, no wrap is
+        suspected and only the period runs on (the same float steps as :meth:`check`).
+        False, nothing changed: not such a run."""
+        p = self.period_ns
+        if not cs or not p or self.pending:
+            return False
+        try:
+            c = np.asarray([self.last] + cs, dtype=np.int64)
+            dts = np.diff(np.asarray([self.t_ns] + ts, dtype=np.int64))
+        except OverflowError:  # times beyond int64: the loop in check_many
+            return False
+        if not (np.all(np.diff(c) % modulus == 1) and dts.min() > 0):
+            return False
+        lo, hi = min(p, float(dts.min())), float(dts.max())
+        if not (hi < 4 * lo and hi / lo <= modulus / 2):
+            return False
+        for dt in dts.tolist():
+            p = p + (dt - p) / 16
+        self.last, self.t_ns, self.period_ns = cs[-1], ts[-1], p
+        return True

@@ -80,6 +80,13 @@ class CompiledMessage:
         self._le = tuple(le)
         self._be = tuple(be)
 
+    @property
+    def extractors(self) -> tuple[tuple, tuple]:
+        """(little-endian, big-endian) extractors: tuples of (signal index, shift, mask, sign bit
+        or 0), what ``raw`` applies (module docstring); ``codecs.can_bulk`` applies them to
+        blocks of payloads."""
+        return self._le, self._be
+
     def raw(self, data: bytes) -> list[int]:
         if not self._be:  # Intel only (the project's DBC): signals in order
             x = int.from_bytes(data, "little")

@@ -139,6 +139,9 @@ read without building a dict; anything else goes through ``json.loads``."""
 
 
 class CanStream:
+    """One CAN bus: ``feed_raw`` (a raw record), ``feed`` (its JSON document) and ``feed_many``
+    (records decoded together when the decoder has ``decode_many``), the same samples and counts."""
+
     def __init__(self, bus: str, decoder, info: dict):
         self.bus = bus
         self.dec = decoder
@@ -164,17 +167,56 @@ class CanStream:
         return self.feed(t_ns, doc)
 
     def feed(self, t_ns: int, doc) -> list[Sample]:
+        got = self._from_doc(t_ns, doc, self.dec.decode)
+        return [] if got is None else got
+
+    def _from_doc(self, t_ns: int, doc, call):
+        """``call(t_ns, id, payload, is_extended_id, **flags)`` of a raw CAN document, or None
+        with a malformed document counted."""
         try:
             if doc["is_error_frame"]:
                 self.malformed += 1
-                return []
+                return None
             data = bytes.fromhex(doc["data_hex"])
             flags = {k: True for k in ("is_fd", "is_remote_frame") if doc[k]}  # counted rejects
-            return self.dec.decode(t_ns, doc["arbitration_id"], data, bool(doc["is_extended_id"]),
-                                   **flags)
+            return call(t_ns, doc["arbitration_id"], data, bool(doc["is_extended_id"]), **flags)
         except (KeyError, TypeError, ValueError):
             self.malformed += 1
-            return []
+            return None
+
+    @property
+    def bulk(self) -> bool:
+        """Whether the decoder decodes many frames at once (``decode_many``: :meth:`feed_many`)."""
+        return hasattr(self.dec, "decode_many")
+
+    def feed_many(self, ts: list[int], datas: list[bytes]) -> list[Sample | None]:
+        """``feed_raw(ts[k], datas[k])`` of each record in order, decoded together by the
+        decoder's ``decode_many`` (:attr:`bulk`): per record its sample or None, the same
+        samples and counters as record by record."""
+        frames, skipped = [], []  # skipped: positions of the records with nothing to decode
+        search, frame_of = _FAST_CAN.search, self.dec.frame_of
+        for k, (t_ns, data) in enumerate(zip(ts, datas)):
+            m = search(data)
+            if m is not None:
+                aid, ext, hx = m.groups()
+                try:
+                    frames.append((t_ns, int(aid), unhexlify(hx), ext == b"true"))
+                    continue
+                except ValueError:  # binascii.Error: odd length
+                    pass
+            try:
+                fr = self._from_doc(t_ns, json.loads(data), frame_of)
+            except ValueError:
+                fr = None
+                self.malformed += 1
+            if fr is None:
+                skipped.append(k)
+            else:
+                frames.append(fr)
+        out = self.dec.decode_many(frames)
+        for k in skipped:
+            out.insert(k, None)
+        return out
 
     def counters(self) -> dict:
         c = self.dec.counters
