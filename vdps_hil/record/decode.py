@@ -245,6 +245,7 @@ class DecodedRecording:
         sink = self._raw_sink
         can_pre, ser_pre = S.RAW_CAN_PREFIX, S.RAW_SERIAL_PREFIX
         ncan, nser = len(can_pre), len(ser_pre)
+        can_feed: dict = {}  # topic -> the CAN stream's feed_raw (None: undecoded)
         try:
             for batch, decoded in self._batches():
                 for i, rec in enumerate(batch):
@@ -255,13 +256,16 @@ class DecodedRecording:
                     out = decoded[i]
                     if out is not _PER_RECORD:  # a CAN frame decoded in bulk: its sample or None
                         out = () if out is None else (out,)
-                    elif topic.startswith(can_pre):
-                        st = self._can_stream(topic[ncan:])
-                        if st is None:
+                    elif topic.startswith(can_pre):  # a bus decoded frame by frame (a signal map's)
+                        feed = can_feed.get(topic, False)
+                        if feed is False:
+                            st = self._can_stream(topic[ncan:])
+                            feed = can_feed[topic] = None if st is None else st.feed_raw
+                        if feed is None:
                             self._undecoded[topic] = self._undecoded.get(topic, 0) + 1
                             out = ()
                         else:
-                            out = st.feed_raw(t, rec.data)
+                            out = feed(t, rec.data)
                     elif topic.startswith(ser_pre):
                         st = self._serial_stream(topic[nser:])
                         out = ()
