@@ -178,6 +178,25 @@ def test_status_read_at_every_update_equals_status_read_once(rng):
     assert not every.converged["mass"]
 
 
+def test_converged_of_answers_as_converged_with_and_without_the_corrected_covariances(rng):
+    # the chain's convergence read (converged_of) decides a problem that another cause keeps from
+    # converging without the corrected covariances; read after every update, for every problem,
+    # it must give converged's answer, and both ways must be taken on this drive
+    from vdps_hil.identification.status import cause_without_sigma
+
+    ident = Identifier(MODEL)
+    ways = set()
+    for k in range(260):
+        ident.update(forward(rng, k))
+        fresh = Identifier.converged_of(ident, PROBLEM_NAMES)  # before converged fills the cache
+        assert fresh == ident.converged, k
+        for n in PROBLEM_NAMES:
+            ways.add(cause_without_sigma(ident.problem(n), ident._sigma0[n], ident._failed_rows(n),
+                                         ident.config) is None)
+    assert ways == {True, False}
+    assert ident.converged_of(("cornering",)) == {"cornering": ident.converged["cornering"]}
+
+
 def test_reported_sigmas_are_the_corrected_ones_and_the_raw_ones_travel_beside_them(rng):
     # the reported sigma: the larger of the model-based and the block-jackknife variance
     # (Identifier._honest); sigma_raw: W P W alone (white residuals with the configured noise)

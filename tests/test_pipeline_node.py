@@ -114,16 +114,17 @@ def test_warning_from_the_priors_is_valid_only_while_the_cornering_problem_has_c
 
 
 def test_the_chain_reads_the_identifiers_convergence_once_per_convergence_period(paper_samples, monkeypatch):
-    """Judging convergence takes the problems' corrected covariances (about 0.4 ms), so the chain
-    re-reads it at the first estimate of each ``convergence_period_s`` (0.02 s, the warning
-    frames' period) of filter time instead of at every 10 ms estimate: at most one read per
-    period (plus the first), and at least one per period once the gate is read at all (the
-    frames' status lags the identifier by less than one frame). A non-positive period is refused."""
+    """Judging convergence may take the problems' corrected covariances (about 0.4 ms), so the
+    chain re-reads it (``Identifier.converged_of`` its ``require_converged`` problems) at the
+    first estimate of each ``convergence_period_s`` (0.02 s, the warning frames' period) of
+    filter time instead of at every 10 ms estimate: at most one read per period (plus the
+    first), and at least one per period once the gate is read at all (the frames' status lags
+    the identifier by less than one frame). A non-positive period is refused."""
     from vdps_hil.identification.identifier import Identifier
 
     reads = []
-    orig = Identifier.converged
-    monkeypatch.setattr(Identifier, "converged", property(lambda self: reads.append(1) or orig.fget(self)))
+    orig = Identifier.converged_of
+    monkeypatch.setattr(Identifier, "converged_of", lambda self, names: reads.append(1) or orig(self, names))
     _, out = VdpsSystem.replay(MODEL, SystemConfig.for_profile(1000.0, 0.001), paper_samples)
     t = [e.t_ns for e in out if isinstance(e, Estimate)]
     periods = (t[-1] - t[0]) / 20e6

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["CAUSES", "IDENTIFIED", "ParamStatus", "ProblemStatus", "problem_status"]
+__all__ = ["CAUSES", "IDENTIFIED", "ParamStatus", "ProblemStatus", "problem_status", "cause_without_sigma"]
 
 IDENTIFIED = "identified"
 CAUSES = ("not excited", "at bound", "model mismatch", "not identifiable", "not converged")
@@ -110,7 +110,7 @@ def problem_status(problem: str, names, rls, sigma0, sigmas, mismatch_rows, gate
     updates = rls.counters.updates
     params = []
     for j, n in enumerate(names):
-        ratio = float(sigma0[j] ** 2 / var[j]) if var[j] > 0.0 else math.inf
+        ratio = _variance_ratio(sigma0[j], var[j])
         sig = float(sigmas[n])
         rel = sig / max(abs(float(x[j])), 1e-300)
         cause = _param_cause(float(x[j]), float(lo[j]), float(hi[j]), ratio, rel, updates=updates,
@@ -120,3 +120,26 @@ def problem_status(problem: str, names, rls, sigma0, sigmas, mismatch_rows, gate
     causes = [p.status for p in params if not p.identified]
     status = "converged" if not causes else min(causes, key=CAUSES.index)
     return ProblemStatus(problem, status, tuple(params), tuple(mismatch_rows), int(updates), dict(gated))
+
+
+def cause_without_sigma(rls, sigma0, mismatch_rows, cfg) -> str | None:
+    """The first cause (module docstring) of a problem's parameters that does not need the
+    reported sigma -- every cause but sigma_j / |x_j| >= ``converged_rel_sigma`` -- or None. A
+    problem with such a cause is not converged whatever its sigma, so its convergence is
+    decided without the corrected covariances (``Identifier.converged_of``); the tests are
+    ``problem_status``'s own, on the same numbers."""
+    x = rls.x
+    lo, hi = rls.lower, rls.upper
+    var = np.diag(rls.covariance)
+    updates = rls.counters.updates
+    for j in range(len(x)):
+        cause = _param_cause(float(x[j]), float(lo[j]), float(hi[j]), _variance_ratio(sigma0[j], var[j]), 0.0,
+                             updates=updates, mismatch=bool(mismatch_rows), cfg=cfg)
+        if cause != IDENTIFIED:
+            return cause
+    return None
+
+
+def _variance_ratio(sigma0_j, var_j) -> float:
+    """sigma0_j^2 / C_jj: what the drive taught over the prior (inf for a zero variance)."""
+    return float(sigma0_j ** 2 / var_j) if var_j > 0.0 else math.inf

@@ -50,7 +50,8 @@ the identifier started from the model file's priors (no ``start_params``, i.e. n
 until the identification problems named in the warning policy's ``require_converged``
 (``configs/prediction/default.toml``: ``["cornering"]``) have converged (the chain re-reads the
 identifier's convergence every ``convergence_period_s`` of filter time, 0.02 s, the warning frames'
-period: judging it takes the problems' corrected covariances, about 0.6 ms); 2 "sensor missing" when
+period: ``Identifier.converged_of`` those problems; a problem another cause holds back, e.g. a model
+mismatch, is answered at once, the others take the corrected covariances, about 0.5 ms); 2 "sensor missing" when
 the held inputs (steering, wheel torques) or a rate/wheel speed are missing, else 0; the node
 itself sends 3 "fault" for a stale prediction. ``SystemConfig.require_converged`` set to a tuple
 overrides that rule (``()``: never gate). Fault tolerance: 2 also while the IMU is missing or
@@ -450,7 +451,7 @@ class VdpsSystem:
         each ``convergence_period_s`` of filter time (module docstring), the same in a replay."""
         if self._next_conv is None or t_ns >= self._next_conv:
             self._next_conv = t_ns - t_ns % self._conv_ns + self._conv_ns
-            self._conv_view = self.identifier.converged
+            self._conv_view = self.identifier.converged_of(self.require_converged)
         return self._conv_view
 
     def _chain_tick(self, t_ns: int, ef, out: list, why: str | None = None) -> None:
