@@ -1,6 +1,7 @@
 """Tests of vdps_hil.prediction.predictor: the truth simulator is the truth source (through the
 test-only constructor ``experiments.truth_init.initial_state_from_truth``)."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -8,6 +9,7 @@ import pytest
 
 from vdps_hil.estimation.estimates import Estimate, FilteredSignals
 from vdps_hil.experiments.truth_init import initial_state_from_truth
+from vdps_hil.model.chassis import Chassis
 from vdps_hil.model.core import Inputs
 from vdps_hil.model.frames import decompose_vehicle
 from vdps_hil.model.params import load_vehicle
@@ -182,6 +184,18 @@ def test_fast_path_equals_the_generic_core_path(left_turn, paper_drive):
     a = Predictor(suv).predict(init3)
     assert a.stop_reason == "point_of_no_return"
     _assert_same_prediction(a, Predictor(suv, fast=False).predict(init3))
+    # vehicles with chassis parts (model.chassis) on the fast path too: the CommonRoad model
+    # file's anti-roll bar and parallel steer; every part at once on the SUV, into a rollover
+    # (wheels lifting, the roll centres' forces in the reported loads)
+    cr1 = load_vehicle("cr1-model").with_params(**true_vehicle.params.as_dict())
+    assert Predictor(cr1).reduced_core is not None
+    _assert_same_prediction(Predictor(cr1).predict(init), Predictor(cr1, fast=False).predict(init))
+    suv_ch = dataclasses.replace(suv, chassis=Chassis(
+        anti_roll_stiffness_front_nmprad=10000.0, anti_roll_stiffness_rear_nmprad=5000.0,
+        roll_centre_height_front_m=0.02, roll_centre_height_rear_m=0.05, ackermann_fraction=0.5))
+    b = Predictor(suv_ch).predict(init3)
+    assert b.stop_reason == "point_of_no_return"
+    _assert_same_prediction(b, Predictor(suv_ch, fast=False).predict(init3))
     # other effect sets take the generic path
     assert Predictor(true_vehicle, effects=sc.effect_set()).reduced_core is None
     assert Predictor(true_vehicle).with_params({}).reduced_core is not None

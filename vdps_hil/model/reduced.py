@@ -24,6 +24,13 @@ vehicle or on the (held) inputs is computed once:
 * per input (:meth:`ReducedLinearCore.inputs`): the Ackermann wheel angles' cos/sin, the drive
   and brake torques.
 
+The chassis parts of ``model.chassis`` are in the kernel too (as ``stages.corner_loads`` and
+``stages.corner_wrench`` have them): the anti-roll bars' F_arb,i = K_arb (H_i - H_j) / T^2 with
+H_i - H_j = h_w,j - h_w,i, added to the spring force before eq 14's clamp; the roll centres'
+J_i = -+ F_y,axle h_rc / T from each axle's body-y tire force (F_a e_l + F_b e_t), acting on the
+body along z at the struts and reported in the corner's normal load (``fz``; the tire itself
+keeps the load of eq 14, ``tire_fz``); the Ackermann fraction in the wheel angles.
+
 The equations are those of :mod:`vdps_hil.model.core` (read its docstring for the symbols);
 the only rearrangement is the unsprung masses' weight and inertia moment, summed over the
 corners with the first moments above (all wheel centres share z_w)::
@@ -56,13 +63,15 @@ from .effects import LinearTire
 from .frames import dcm_gv_elements
 from .stages import steer_angles
 
-STATIC_HOOKS = frozenset({"rolling_radius_factor"})
-"""Effect hooks the core resolves at construction (nothing to do per call)."""
+STATIC_HOOKS = frozenset({"rolling_radius_factor", "anti_roll_stiffness"})
+"""Effect hooks the core resolves at construction (nothing to do per call: the rolling radii, the
+auxiliary roll stiffness of ``anti_roll_stiffness`` effects)."""
 
 # model constants K[...]: 1/m_tot, g, (I_y - I_z)/I_x, (I_z - I_x)/I_y, (I_x - I_y)/I_z, 1/I_x,
-# 1/I_y, 1/I_z, 1/I_w, z_w, v_floor, brake hold speed, S_mux, S_muy, z_w S_mu
+# 1/I_y, 1/I_z, 1/I_w, z_w, v_floor, brake hold speed, S_mux, S_muy, z_w S_mu, K_arb,f / T_f^2,
+# K_arb,r / T_r^2, h_rc,f / T_f, h_rc,r / T_r
 (K_INV_M, K_G, K_IYZ, K_IZX, K_IXY, K_INV_IX, K_INV_IY, K_INV_IZ, K_IW_INV, K_ZW, K_VFLOOR, K_WB,
- K_S_MUX, K_S_MUY, K_ZS_MU) = range(15)
+ K_S_MUX, K_S_MUY, K_ZS_MU, K_ARB_F, K_ARB_R, K_RC_F, K_RC_R) = range(19)
 # corner constants C[i, ...]: x_i, y_i, C1, C2, C3, static compression + r, D_s, r_i, C_kappa,
 # C_alpha, m_u g
 C_X, C_Y, C_C1, C_C2, C_C3, C_SR, C_DS, C_R, C_CKAP, C_CALP, C_MUG = range(11)
@@ -70,21 +79,19 @@ C_X, C_Y, C_C1, C_C2, C_C3, C_SR, C_DS, C_R, C_CKAP, C_CALP, C_MUG = range(11)
 
 def supports(model: Model) -> bool:
     """True when ``model`` is the reduced model with the linear tire and no per-call effect
-    hooks (the paper's set; a static ``rolling_radius_factor`` is allowed) on a vehicle without
-    anti-roll bars or roll centres (``model.chassis``; its Ackermann fraction is supported)."""
+    hooks (the paper's set; a static ``rolling_radius_factor`` is allowed), with any chassis
+    parts (``model.chassis``: anti-roll bars, roll centres, Ackermann fraction)."""
     if model.unsprung_dof or type(model.effects.tire) is not LinearTire:
-        return False
-    ch = model.vehicle.chassis
-    if ch.has_anti_roll_bars or ch.has_roll_centres:  # the generic core has them (model.chassis)
         return False
     return all(e is model.effects.tire or set(e.HOOKS) <= STATIC_HOOKS for e in model.effects.dynamics)
 
 
 @kernel()
-def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens):
+def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens, tfzs):
     """The hand-specialised kernel of the reduced model's stages in one loop (module docstring):
-    writes x_dot (16) into ``xd``, F_z,i into ``fzs``, n_b into ``nb``, kappa_i into ``kaps``
-    and den_i into ``dens``. ``csd`` (4, 2): cos/sin of the road-wheel angles; ``ng``: road
+    writes x_dot (16) into ``xd``, the normal loads F_z,i (roll-centre forces included) into
+    ``fzs``, n_b into ``nb``, kappa_i into ``kaps``, den_i into ``dens`` and the tires' loads
+    (eq 14) into ``tfzs``. ``csd`` (4, 2): cos/sin of the road-wheel angles; ``ng``: road
     normal, ENU."""
     g, inv_m, zw, vfloor, wb, iw_inv = K[K_G], K[K_INV_M], K[K_ZW], K[K_VFLOOR], K[K_WB], K[K_IW_INV]
     pe, pn, pu, phi, theta, psi = x[0], x[1], x[2], x[3], x[4], x[5]
@@ -101,6 +108,8 @@ def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens):
     va = vx + wy * zw
     vb = vy - wx * zw
     Fx = Fy = Fz = Syz = Sxz = Sz = Hx = Hy = Hz = 0.0
+    arb = K[K_ARB_F] != 0.0 or K[K_ARB_R] != 0.0
+    fy_axle = np.zeros(2)  # body y of F_a e_l + F_b e_t per axle (the roll centres' J_i)
     for i in range(4):
         xi, yi, c1, c2, c3, sr = C[i, C_X], C[i, C_Y], C[i, C_C1], C[i, C_C2], C[i, C_C3], C[i, C_SR]
         ds, ri, ckap, calp, mug = C[i, C_DS], C[i, C_R], C[i, C_CKAP], C[i, C_CALP], C[i, C_MUG]
@@ -112,6 +121,9 @@ def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens):
         vn = nx * vwx + ny * vwy + nz * vwz
         hsp = sr - hw
         fsp = c1 * math.exp(c2 * (hsp - c3)) * hsp
+        if arb:  # F_arb,i = K_arb (H_i - H_j) / T^2, j the axle's other corner (i ^ 1)
+            o = i ^ 1
+            fsp += (K[K_ARB_F] if i < 2 else K[K_ARB_R]) * ((hc + nx * C[o, C_X] + ny * C[o, C_Y]) - hw)
         if fsp + mug <= 0.0:  # eq 14 clamp: lift-off
             fz = 0.0
         else:
@@ -134,6 +146,7 @@ def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens):
             s = om / wb
             tq -= b * (1.0 if s > 1.0 else (-1.0 if s < -1.0 else s))
         fzs[i] = fz
+        tfzs[i] = fz
         kaps[i] = kap
         dens[i] = den
         if fz <= 0.0:  # a wheel off the ground carries no force
@@ -152,6 +165,7 @@ def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens):
         Fx += ftx
         Fy += fty
         Fz += ftz
+        fy_axle[0 if i < 2 else 1] += fty - fz * ny
         # moment about the CG at the contact point r_w - h_w n: summed as
         # sum r_w x F_tire - n x sum h_w F_tire (all r_w share z_w)
         Syz += yi * ftz
@@ -161,6 +175,14 @@ def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens):
         Hy += hw * fty
         Hz += hw * ftz
         xd[12 + i] = (tq - ri * fa) * iw_inv
+    if K[K_RC_F] != 0.0 or K[K_RC_R] != 0.0:  # J_i along body z at the struts, in the reported load
+        jf, jr = fy_axle[0] * K[K_RC_F], fy_axle[1] * K[K_RC_R]
+        for i in range(4):
+            j = -jf if i == 0 else (jf if i == 1 else (jr if i == 2 else -jr))
+            Fz += j
+            Syz += C[i, C_Y] * j
+            Sxz += C[i, C_X] * j
+            fzs[i] += j
     ax_ = Fx * inv_m + gx
     ay_ = Fy * inv_m + gy
     az_ = Fz * inv_m + gz
@@ -187,8 +209,8 @@ def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens):
 
 @kernel()
 def wheel_spin_jacobian(x, brakes, fz, den, K, C, out):
-    """d omega_dot_i / d omega_i (i = 1..4) into ``out`` at ``x`` from the loads and slip
-    denominators of :func:`reduced_rhs` (module docstring)."""
+    """d omega_dot_i / d omega_i (i = 1..4) into ``out`` at ``x`` from the tires' loads
+    (``tfzs``) and slip denominators of :func:`reduced_rhs` (module docstring)."""
     iw_inv, wb = K[K_IW_INV], K[K_WB]
     for i in range(4):
         ri, ckap = C[i, C_R], C[i, C_CKAP]
@@ -207,11 +229,12 @@ def wheel_spin_jacobian(x, brakes, fz, den, K, C, out):
 
 class ReducedLinearCore:
     """``core = ReducedLinearCore(model)``; ``uc = core.inputs(u)``;
-    ``xd, fz, n_b, kappa, den = core.f(x, uc, env)``.
+    ``xd, fz, n_b, kappa, den, tire_fz = core.f(x, uc, env)``.
 
-    ``xd``: x_dot (16 values, as ``model.f``); ``fz``: the four normal loads F_z,i (eq 14) [N];
-    ``n_b``: the road normal in body axes; ``kappa``: slip ratios; ``den``: the slip denominators
-    max(|v_l,i|, v_floor) [m/s]. ``K`` and ``C``: the constants the kernels take (module
+    ``xd``: x_dot (16 values, as ``model.f``); ``fz``: the four normal loads F_z,i (eq 14, the
+    roll centres' J_i included, as ``Model.evaluate`` reports them) [N]; ``n_b``: the road normal
+    in body axes; ``kappa``: slip ratios; ``den``: the slip denominators max(|v_l,i|, v_floor)
+    [m/s]; ``tire_fz``: the tires' loads (eq 14 alone; ``wheel_spin_jacobian`` takes these). ``K`` and ``C``: the constants the kernels take (module
     docstring). Raises ValueError for a model :func:`supports` refuses."""
 
     def __init__(self, model: Model):
@@ -234,11 +257,16 @@ class ReducedLinearCore:
         Ix, Iy, Iz = p.inertia_x_kgm2, p.inertia_y_kgm2, p.inertia_z_kgm2
         zw = model.wheel_centre_z_m
         s_mu = sum(model.m_u)
+        ch = veh.chassis
+        kf, kr = model.anti_roll_stiffness_nmprad  # the file's bars (plus ``anti_roll_stiffness`` effects)
+        tf, tr = 2.0 * geo.track_half_front_m, 2.0 * geo.track_half_rear_m
         self.K = np.array([1.0 / model.m_tot, GRAVITY_MPS2, (Iy - Iz) / Ix, (Iz - Ix) / Iy, (Ix - Iy) / Iz,
                            1.0 / Ix, 1.0 / Iy, 1.0 / Iz, 1.0 / veh.tire.wheel_inertia_kgm2, zw,
                            model.slip_speed_floor_mps, BRAKE_HOLD_SPEED_RADPS,
                            sum(model.m_u[i] * model.corner_xy[i][0] for i in range(4)),
-                           sum(model.m_u[i] * model.corner_xy[i][1] for i in range(4)), zw * s_mu])
+                           sum(model.m_u[i] * model.corner_xy[i][1] for i in range(4)), zw * s_mu,
+                           kf / (tf * tf), kr / (tr * tr), ch.roll_centre_height_front_m / tf,
+                           ch.roll_centre_height_rear_m / tr])
         self.iw_inv = float(self.K[K_IW_INV])
 
     def inputs(self, u: Inputs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -249,16 +277,18 @@ class ReducedLinearCore:
         csd = np.array(((math.cos(d1), math.sin(d1)), (math.cos(d2), math.sin(d2)), (1.0, 0.0), (1.0, 0.0)))
         return csd, np.array(u.wheel_torque_nm, dtype=float), np.array(u.brake_torque_nm, dtype=float)
 
-    def f(self, x, uc, env) -> tuple[list, list, tuple, list, list]:
-        """(x_dot, F_z,i, n_b, kappa_i, den_i) at ``x`` (16 values) under ``uc`` (``inputs``)."""
-        xd, fz, nb, kap, den = np.empty(16), np.empty(4), np.empty(3), np.empty(4), np.empty(4)
+    def f(self, x, uc, env) -> tuple[list, list, tuple, list, list, list]:
+        """(x_dot, F_z,i, n_b, kappa_i, den_i, tire F_z,i) at ``x`` (16 values) under ``uc``
+        (``inputs``)."""
+        xd, fz, nb, kap, den, tfz = (np.empty(16), np.empty(4), np.empty(3), np.empty(4), np.empty(4),
+                                     np.empty(4))
         reduced_rhs(np.asarray(x, dtype=float), uc[0], uc[1], uc[2], np.asarray(env.normal_g), self.K, self.C,
-                    xd, fz, nb, kap, den)
-        return xd.tolist(), fz.tolist(), tuple(nb.tolist()), kap.tolist(), den.tolist()
+                    xd, fz, nb, kap, den, tfz)
+        return xd.tolist(), fz.tolist(), tuple(nb.tolist()), kap.tolist(), den.tolist(), tfz.tolist()
 
     def wheel_spin_jacobian(self, x, uc, fz, den) -> list[float]:
-        """d omega_dot_i / d omega_i (i = 1..4) at ``x`` from the loads and slip denominators of
-        ``f(x, uc, env)`` (module docstring)."""
+        """d omega_dot_i / d omega_i (i = 1..4) at ``x`` from the tires' loads and the slip
+        denominators of ``f(x, uc, env)`` (module docstring)."""
         out = np.empty(4)
         wheel_spin_jacobian(np.asarray(x, dtype=float), uc[2], np.asarray(fz, dtype=float),
                             np.asarray(den, dtype=float), self.K, self.C, out)
@@ -268,10 +298,10 @@ class ReducedLinearCore:
 def warm() -> None:
     """Compile (or load from the cache) the kernels of this module with representative
     arguments (``python -m vdps_hil.jit --warm``)."""
-    x, v4, K, C = np.zeros(16), np.zeros(4), np.ones(15), np.ones((4, 11))
+    x, v4, K, C = np.zeros(16), np.zeros(4), np.ones(19), np.ones((4, 11))
     x[4] = 0.0
     reduced_rhs(x, np.ones((4, 2)) * 0.5, v4, v4, np.array([0.0, 0.0, 1.0]), K, C, np.empty(16), np.empty(4),
-                np.empty(3), np.empty(4), np.empty(4))
+                np.empty(3), np.empty(4), np.empty(4), np.empty(4))
     wheel_spin_jacobian(x, v4, v4 + 1.0, v4 + 1.0, K, C, np.empty(4))
 
 

@@ -53,7 +53,7 @@ import numpy as np
 from vdps_hil.model.core import Env, Inputs, Model
 from vdps_hil.model.reduced import ReducedLinearCore
 from vdps_hil.model.rollover import TIP_UP_LOAD_FRACTION, RolloverMonitor
-from vdps_hil.model.stages import ackermann_angles
+from vdps_hil.model.stages import steer_angles
 
 from .config import PredictorConfig
 from .initial_state import InputSource
@@ -76,7 +76,8 @@ class _GenericWSolve:
 
     def __init__(self, model: Model, cfg: PredictorConfig):
         geo = model.vehicle.geometry
-        self.steer = (geo.steer_ratio, geo.wheelbase_m, geo.track_half_front_m)
+        self.steer = (geo.steer_ratio, geo.wheelbase_m, geo.track_half_front_m,
+                      model.vehicle.chassis.ackermann_fraction)
         self.radii, self.corner_xy = model.rolling_radius_m, model.corner_xy
         self.vfloor = model.slip_speed_floor_mps
         ws = model.layout.wheel_spin
@@ -101,8 +102,8 @@ class _GenericWSolve:
         coupling, gh = self.coupling, self.gh
         if coupling and (u is not self.u_c):
             self.u_c = u
-            ratio, wheelbase, t_f = self.steer
-            d1, d2 = ackermann_angles(u.steer_wheel_angle_rad / ratio, wheelbase, t_f)
+            ratio, wheelbase, t_f, e_a = self.steer  # the road-wheel angles of the core (Ackermann fraction)
+            d1, d2 = steer_angles(u.steer_wheel_angle_rad / ratio, wheelbase, t_f, e_a)
             self.cd = (math.cos(d1), math.cos(d2), 1.0, 1.0)
             self.sd = (math.sin(d1), math.sin(d2), 0.0, 0.0)
         cd, sd = self.cd, self.sd

@@ -96,8 +96,8 @@ def reduced_loop(x0, U_csd, U_tq, U_br, ng, K, C, h, n_steps, out_every, jac_eve
     vfloor = K[K_VFLOOR]
     held = U_csd.shape[0] == 1
     x = x0.copy()
-    k1, f1, xs, fz, nb, kap, den = (np.empty(16), np.empty(16), np.empty(16), np.empty(4), np.empty(3),
-                                    np.empty(4), np.empty(4))
+    k1, f1, xs, fz, nb, kap, den, tfz = (np.empty(16), np.empty(16), np.empty(16), np.empty(4), np.empty(3),
+                                         np.empty(4), np.empty(4), np.empty(4))
     jd, w, kc, cpl = np.empty(4), np.ones(4), np.zeros(12), np.zeros(12)
     n = n_eval = n_out = 0
     n_fed = 0
@@ -105,7 +105,7 @@ def reduced_loop(x0, U_csd, U_tq, U_br, ng, K, C, h, n_steps, out_every, jac_eve
     iu_c = -1
     while True:
         iu = 0 if held else n
-        reduced_rhs(x, U_csd[iu], U_tq[iu], U_br[iu], ng, K, C, k1, fz, nb, kap, den)
+        reduced_rhs(x, U_csd[iu], U_tq[iu], U_br[iu], ng, K, C, k1, fz, nb, kap, den, tfz)
         n_eval += 1
         record = n % out_every == 0 or n == n_steps
         phi_v, rate = _roll_v(nb, x)
@@ -127,7 +127,7 @@ def reduced_loop(x0, U_csd, U_tq, U_br, ng, K, C, h, n_steps, out_every, jac_eve
         if not ros2:  # Heun: x_n+1 = x_n + h/2 (f(x_n) + f(x_n + h f(x_n)))
             for j in range(16):
                 xs[j] = x[j] + h * k1[j]
-            reduced_rhs(xs, U_csd[iu], U_tq[iu], U_br[iu], ng, K, C, f1, fz, nb, kap, den)
+            reduced_rhs(xs, U_csd[iu], U_tq[iu], U_br[iu], ng, K, C, f1, fz, nb, kap, den, tfz)
             n_eval += 1
             for j in range(16):
                 x[j] = x[j] + h_k2 * (k1[j] + f1[j])
@@ -136,7 +136,7 @@ def reduced_loop(x0, U_csd, U_tq, U_br, ng, K, C, h, n_steps, out_every, jac_eve
                 if coupling and iu != iu_c:
                     iu_c = iu
                     _coupling_geometry(U_csd[iu], gh, C, kc)
-                wheel_spin_jacobian(x, U_br[iu], fz, den, K, C, jd)
+                wheel_spin_jacobian(x, U_br[iu], tfz, den, K, C, jd)
                 _w_factors(jd, x, kap, gh, vfloor, coupling, kc, w, cpl)
             # stage 1: k1 = W^-1 f(x_n) (W = I on the body rows)
             a6, a7, a11 = k1[6], k1[7], k1[11]
@@ -145,7 +145,7 @@ def reduced_loop(x0, U_csd, U_tq, U_br, ng, K, C, h, n_steps, out_every, jac_eve
             # stage 2: k2 = W^-1 (f(x_n + h k1) - 2 k1); x_n+1 = x_n + 3/2 h k1 + 1/2 h k2
             for j in range(16):
                 xs[j] = x[j] + h * k1[j]
-            reduced_rhs(xs, U_csd[iu], U_tq[iu], U_br[iu], ng, K, C, f1, fz, nb, kap, den)
+            reduced_rhs(xs, U_csd[iu], U_tq[iu], U_br[iu], ng, K, C, f1, fz, nb, kap, den, tfz)
             n_eval += 1
             a6, a7, a11 = f1[6] - 2.0 * k1[6], f1[7] - 2.0 * k1[7], f1[11] - 2.0 * k1[11]
             for j in range(12):
@@ -165,7 +165,7 @@ def warm() -> None:
     from vdps_hil.model import reduced
 
     reduced.warm()
-    x, K, C = np.zeros(16), np.ones(15), np.ones((4, 11))
+    x, K, C = np.zeros(16), np.ones(19), np.ones((4, 11))
     csd = np.full((1, 4, 2), 0.5)
     out = [np.empty((4, 16)), np.empty((4, 4)), np.empty(4), np.empty(4), np.empty(4)]
     for ros2 in (True, False):
