@@ -3,9 +3,12 @@ reference) bit for bit -- 0 ulp, stricter than the 1e-12 relative the compiled f
 the kernel mirrors the stages operation for operation and calls the same inline force laws, so
 compiled (LLVM, no fast-math) and CPython execute the same IEEE operations with the same libm.
 Checked for the truth model (unsprung DOF) and the reduced model, with each built-in dynamics
-effect alone and all together, on x_dot and on every diagnostic of ``Model.evaluate``; models
-whose effects have no compiled form run on the stages, and say so."""
+effect alone and all together, and with the chassis parts (``model.chassis``: anti-roll bars,
+roll centres, Ackermann fraction) each alone and all together, on x_dot and on every diagnostic
+of ``Model.evaluate``; models whose effects have no compiled form run on the stages, and say
+so."""
 
+import dataclasses
 import random
 
 import numpy as np
@@ -13,6 +16,7 @@ import pytest
 
 from vdps_hil import jit
 from vdps_hil.model import core_kernel
+from vdps_hil.model.chassis import PAPER_CHASSIS, Chassis
 from vdps_hil.model.core import Env, Inputs, Model
 from vdps_hil.model.effects import EffectSet, LinearTire, make_effect
 from vdps_hil.model.effects.aero import AeroDrag
@@ -23,18 +27,29 @@ from core_cases import random_case
 EFFECTS = ("magic_formula_tire", "aero_drag", "rolling_resistance", "load_dependent_cornering_stiffness",
            "low_pressure_tire", "crosswind", "steering_compliance")
 SUV = load_vehicle("suv-truth")
+BARS = dict(anti_roll_stiffness_front_nmprad=25000.0, anti_roll_stiffness_rear_nmprad=9000.0)
+CENTRES = dict(roll_centre_height_front_m=0.06, roll_centre_height_rear_m=0.14)
+CHASSIS = {"anti_roll_bars": Chassis(**BARS), "roll_centres": Chassis(**CENTRES),
+           "parallel_steer": Chassis(ackermann_fraction=0.0), "half_ackermann": Chassis(ackermann_fraction=0.5),
+           "all_chassis": Chassis(**BARS, **CENTRES, ackermann_fraction=0.5)}
+CASES = ([((), PAPER_CHASSIS)] + [((e,), PAPER_CHASSIS) for e in EFFECTS] + [(EFFECTS, PAPER_CHASSIS)]
+         + [(extra, ch) for ch in CHASSIS.values() for extra in ((), EFFECTS)]
+         + [(("roll_stiffness",), CHASSIS["all_chassis"]), (EFFECTS, "cr1-model")])
+CASE_IDS = (["linear_tire"] + list(EFFECTS) + ["all"] + [f"{name}-{e}" for name in CHASSIS for e in ("linear", "all")]
+            + ["all_chassis-roll_stiffness", "cr1-model-all"])
 
 
-def _model(extra, dof: bool) -> Model:
+def _model(extra, dof: bool, chassis=PAPER_CHASSIS) -> Model:
+    """``chassis``: a ``Chassis`` for the SUV, or the name of a vehicle file (its own chassis)."""
+    veh = load_vehicle(chassis) if isinstance(chassis, str) else dataclasses.replace(SUV, chassis=chassis)
     tire = [] if "magic_formula_tire" in extra else [LinearTire()]
-    return Model(SUV, EffectSet(tire + [make_effect(e) for e in extra]), unsprung_dof=dof)
+    return Model(veh, EffectSet(tire + [make_effect(e) for e in extra]), unsprung_dof=dof)
 
 
 @pytest.mark.parametrize("dof", [True, False], ids=["truth", "reduced"])
-@pytest.mark.parametrize("extra", [()] + [(e,) for e in EFFECTS] + [EFFECTS],
-                         ids=["linear_tire"] + list(EFFECTS) + ["all"])
-def test_compiled_core_equals_the_stages_bit_for_bit(extra, dof):
-    model = _model(extra, dof)
+@pytest.mark.parametrize("extra, chassis", CASES, ids=CASE_IDS)
+def test_compiled_core_equals_the_stages_bit_for_bit(extra, chassis, dof):
+    model = _model(extra, dof, chassis)
     assert model.compiled_status == ("compiled" if jit.ENABLED else "python (VDPS_JIT=0)")
     rng = random.Random(3)
     n_lifted = 0
@@ -51,11 +66,12 @@ def test_compiled_core_equals_the_stages_bit_for_bit(extra, dof):
     assert n_lifted >= 5  # the lift-off branches were exercised
 
 
-def test_the_kernel_equals_its_python_source_and_evaluate_from_equals_evaluate():
+@pytest.mark.parametrize("chassis", [PAPER_CHASSIS, CHASSIS["all_chassis"]], ids=["paper", "all_chassis"])
+def test_the_kernel_equals_its_python_source_and_evaluate_from_equals_evaluate(chassis):
     """``core_rhs`` as compiled equals ``core_rhs.py_func`` (the kernel's source run by CPython)
     bit for bit, and the named diagnostics rebuilt from its array (``Model.evaluate_from``, what
     the simulator's snapshots use) equal ``Model.evaluate``."""
-    model = _model(EFFECTS, True)
+    model = _model(EFFECTS, True, chassis)
     K, C, E = model.kernel_arrays
     rng = random.Random(5)
     for k in range(20):

@@ -62,7 +62,7 @@ KERNEL_MODULES: list[str] = [m for g in KERNEL_GROUPS for m in g]
 """Every kernel module, the groups in order."""
 
 KERNEL_SOURCES: list[str] = [
-    "vdps_hil.model.frames", "vdps_hil.model.stages", "vdps_hil.model.effects.tires",
+    "vdps_hil.model.frames", "vdps_hil.model.stages", "vdps_hil.model.chassis", "vdps_hil.model.effects.tires",
     "vdps_hil.model.effects.aero", "vdps_hil.model.effects.rolling",
 ]
 """Modules without kernels of their own whose :func:`inline` functions kernels call: part of

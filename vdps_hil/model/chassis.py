@@ -68,6 +68,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from vdps_hil.jit import inline
+
 __all__ = ["Chassis", "PAPER_CHASSIS", "anti_roll_forces_n", "blend_ackermann", "roll_centre_forces_n"]
 
 
@@ -119,6 +121,7 @@ PAPER_CHASSIS = Chassis()
 _OTHER = (1, 0, 3, 2)  # the other corner of the axle (FL <-> FR, RR <-> RL)
 
 
+@inline
 def anti_roll_forces_n(k_front_nmprad: float, k_rear_nmprad: float, track_front_m: float,
                        track_rear_m: float, deflection_m) -> tuple[float, float, float, float]:
     """F_arb,i = K_arb,axle (H_i - H_j) / T_axle^2 [N] per corner, upward on the body at the
@@ -129,6 +132,7 @@ def anti_roll_forces_n(k_front_nmprad: float, k_rear_nmprad: float, track_front_
     return (kf * (h[0] - h[1]), kf * (h[1] - h[0]), kr * (h[2] - h[3]), kr * (h[3] - h[2]))
 
 
+@inline
 def roll_centre_forces_n(h_front_m: float, h_rear_m: float, track_front_m: float, track_rear_m: float,
                          fy_front_n: float, fy_rear_n: float) -> tuple[float, float, float, float]:
     """J_i = -sgn(y_i) F_y,axle h_rc,axle / T_axle [N] per corner (FL and RL are on the left,
@@ -138,6 +142,7 @@ def roll_centre_forces_n(h_front_m: float, h_rear_m: float, track_front_m: float
     return (-jf, jf, jr, -jr)
 
 
+@inline
 def blend_ackermann(delta_mean_rad: float, delta_1_rad: float, delta_2_rad: float,
                     fraction: float) -> tuple[float, float]:
     """delta_i = delta_m + e_A (delta_i,Ackermann - delta_m) (module docstring)."""

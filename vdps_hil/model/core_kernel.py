@@ -1,23 +1,30 @@
 """The physics core compiled: :func:`core_rhs` is ``Model.f`` (the stages of
 :mod:`vdps_hil.model.stages` composed by ``derivative_function``) as one compiled function of
-arrays, for both variants (truth with unsprung DOF, the paper's reduced model) and every effect
-with a compiled form.
+arrays, for both variants (truth with unsprung DOF, the paper's reduced model), every effect
+with a compiled form and the vehicle's chassis parts (:mod:`vdps_hil.model.chassis`: anti-roll
+bars, roll centres, Ackermann fraction).
 
 Reference and equality
 ----------------------
 The stages stay the reference and the source of the equations. The stages that work on floats
 and tuples alone (``body_attitude``, ``ackermann_angles``, ``spring_force_n``, ``air_velocity_b``,
-``pose_rates``, ``wheel_axes``) and the effects' force laws are :func:`~vdps_hil.jit.inline` functions this
-kernel calls as they are; the stages that take the model's constants and effect hooks
-(``corner_loads``, ``tire_at_corner``, ``compliance_steer_angle``, ``corner_wrench``,
-``effect_wrench``, ``body_accelerations``, ``unsprung_accelerations``) are mirrored here one
-function each, operation for operation, so ``core_rhs`` equals ``derivative_function``'s ``f``
-bit for bit (``tests/test_core_kernel.py``, random states, inputs, roads, winds and effect
-sets). A new term in a stage goes into its mirror here too (the test fails until it does).
+``pose_rates``, ``wheel_axes``), the chassis laws (``chassis.blend_ackermann``,
+``anti_roll_forces_n``, ``roll_centre_forces_n``) and the effects' force laws are
+:func:`~vdps_hil.jit.inline` functions this kernel calls as they are; the stages that take the
+model's constants and effect hooks (``steer_angles``, ``corner_loads`` with ``_anti_roll``,
+``tire_at_corner``, ``compliance_steer_angle``, ``corner_wrench`` with ``_roll_centre``,
+``effect_wrench``, ``body_accelerations``, ``unsprung_accelerations``) are mirrored here, operation
+for operation, so ``core_rhs`` equals ``derivative_function``'s ``f`` bit for bit
+(``tests/test_core_kernel.py``, random states, inputs, roads, winds, effect sets and chassis
+parts). The one liberty: ``_roll_centre`` evaluates the tire law again at each corner, the mirror
+sums the axles' body-y forces from ``corner_wrench``'s own evaluation (same arguments, same
+values). A new term in a stage goes into its mirror here too (the test fails until it does).
 
 Arrays (built once per model by :func:`pack_model`)
 ---------------------------------------------------
-* ``K`` model constants, indices ``K_*`` (the fields of ``stages.CoreConstants``);
+* ``K`` model constants, indices ``K_*`` (the fields of ``stages.CoreConstants``; the chassis
+  parts as ``K_ACKERMANN`` e_A, ``K_ARB`` 1/0 and ``K_ARB_KF .. K_ARB_TR`` (K_arb,f, K_arb,r,
+  T_f, T_r), ``K_RC`` 1/0 and ``K_RC_HF .. K_RC_TR`` (h_rc,f, h_rc,r, T_f, T_r));
 * ``C`` (4, 14) corner constants, columns ``C_*`` (``CoreConstants.corners`` without i);
 * ``E`` (n, 8) effect terms ``[hook, code, p0 .. p5]``: row 0 the tire model, then the
   per-call hooks in the effects' order (``HOOK_*``; codes and parameters from each effect's
@@ -28,11 +35,12 @@ Per call: ``x`` (16 or 24), ``u`` (9: steering wheel angle, drive torques 1-4, b
 1-4), ``env`` (6: road normal n_g, ENU wind of the environment), output ``xd`` and the
 diagnostics ``D`` (``N_DIAG`` values, or an empty array for none): per corner i the 16 values
 of ``Model.evaluate``'s record at ``D[16 i:16 i + 16]`` (F_a, F_b, F_z, kappa, alpha, H, H_dot,
-T, T_eff, delta, r, h_w, F_s, F_tire,x, F_tire,y, F_tire,z), then ``D_ACC`` (a, 3), ``D_GB``
+T, T_eff, delta, r, h_w, F_s, F_tire,x, F_tire,y, F_tire,z; the reduced model's F_z includes the
+roll-centre force J_i, as the stages report it), then ``D_ACC`` (a, 3), ``D_GB``
 (g_b, 3), ``D_FORCE`` (3), ``D_MOMENT`` (3), ``D_NB`` (n_b, 3), ``D_HCG`` (1), ``D_AIR`` (3).
 
-A model whose effects lack a compiled form has no packed arrays (:func:`pack_model` returns the
-reason instead) and runs on the stages in Python.
+A model with an effect that lacks a compiled form has no packed arrays (:func:`pack_model`
+returns the reason instead) and runs on the stages in Python.
 """
 
 from __future__ import annotations
@@ -43,6 +51,7 @@ import numpy as np
 
 from vdps_hil.jit import inline, kernel
 
+from .chassis import anti_roll_forces_n, blend_ackermann, roll_centre_forces_n
 from .effects.aero import WRENCH_AERO_DRAG, WRENCH_CROSSWIND, crosswind_wrench, drag_wrench
 from .effects.base import STATIC_HOOKS
 from .effects.rolling import WHEEL_ROLLING_RESISTANCE, rolling_resistance_torque
@@ -55,8 +64,9 @@ HOOK_IDS = {"tire_forces": HOOK_TIRE, "cornering_stiffness_factor": HOOK_STIFFNE
             "body_wrench": HOOK_WRENCH, "wheel_torque": HOOK_WHEEL}
 (K_DOF, K_G, K_INV_M_TOT, K_INV_M_S, K_IYZ, K_IZX, K_IXY, K_INV_IX, K_INV_IY, K_INV_IZ, K_IW_INV, K_KT,
  K_WHEELBASE, K_TF, K_RATIO, K_ZW0, K_R_LOAD, K_VFLOOR, K_BRAKE_HOLD, K_KC, K_WIND_E, K_WIND_N, K_WIND_U,
- K_N_WRENCH) = range(24)
-N_K = 24
+ K_N_WRENCH, K_ACKERMANN, K_ARB, K_ARB_KF, K_ARB_KR, K_ARB_TF, K_ARB_TR, K_RC, K_RC_HF, K_RC_HR, K_RC_TF,
+ K_RC_TR) = range(35)
+N_K = 35
 (C_X, C_Y, C_MU, C_C1, C_C2, C_C3, C_SC, C_DS, C_R, C_RFREE, C_CKAP, C_CALP, C_FZ0, C_MUG) = range(14)
 (S_X, S_Y, S_Z, S_HW, S_FZ, S_FS, S_H, S_HD, S_VWX, S_VWY, S_VWZ, S_R, S_CKAP, S_CALP, S_FZ0) = range(15)
 D_ACC, D_GB, D_FORCE, D_MOMENT, D_NB, D_HCG, D_AIR = 64, 67, 70, 73, 76, 79, 80
@@ -79,8 +89,9 @@ def _corner_loads(K, C, E, x, h_cg, n_b, vel, rate, S):
     nx, ny, nz = n_b
     vx, vy, vz = vel
     wx, wy, wz = rate
-    dof = K[K_DOF] != 0.0
+    dof, arb = K[K_DOF] != 0.0, K[K_ARB] != 0.0
     zw0, kt, r_load = K[K_ZW0], K[K_KT], K[K_R_LOAD]
+    farb = _anti_roll(K, C, x, h_cg, n_b) if arb else (0.0, 0.0, 0.0, 0.0)
     for i in range(4):
         xi, yi, c1, c2, c3, sc, ds = C[i, C_X], C[i, C_Y], C[i, C_C1], C[i, C_C2], C[i, C_C3], C[i, C_SC], C[i, C_DS]
         calp, fz0, mug = C[i, C_CALP], C[i, C_FZ0], C[i, C_MUG]
@@ -92,6 +103,8 @@ def _corner_loads(K, C, E, x, h_cg, n_b, vel, rate, S):
             defl = C[i, C_RFREE] - hw
             fz = kt * defl if defl > 0.0 else 0.0
             fs = spring_force_n(sc + H, c1, c2, c3) + ds * Hd
+            if arb:
+                fs += farb[i]
             vwx = vx + wy * zi - wz * yi
             vwy = vy + wz * xi - wx * zi
             vwz = vz + wx * yi - wy * xi + Hd
@@ -104,6 +117,8 @@ def _corner_loads(K, C, E, x, h_cg, n_b, vel, rate, S):
             H = r_load - hw
             Hd = -(nx * vwx + ny * vwy + nz * vwz)
             fsp = spring_force_n(sc + H, c1, c2, c3)
+            if arb:
+                fsp += farb[i]
             if fsp + mug <= 0.0:  # eq 14 clamp: lift-off
                 fz = 0.0
             else:
@@ -117,6 +132,25 @@ def _corner_loads(K, C, E, x, h_cg, n_b, vel, rate, S):
         S[i, S_X], S[i, S_Y], S[i, S_Z], S[i, S_HW], S[i, S_FZ], S[i, S_FS] = xi, yi, zi, hw, fz, fs
         S[i, S_H], S[i, S_HD], S[i, S_VWX], S[i, S_VWY], S[i, S_VWZ] = H, Hd, vwx, vwy, vwz
         S[i, S_R], S[i, S_CKAP], S[i, S_CALP], S[i, S_FZ0] = C[i, C_R], C[i, C_CKAP], calp, fz0
+
+
+@inline
+def _pose_deflection(K, C, i, h_cg, n_b):
+    """H_i = r - h_w,i of the reduced model (``stages._anti_roll``)."""
+    nx, ny, nz = n_b
+    return K[K_R_LOAD] - (h_cg + nx * C[i, C_X] + ny * C[i, C_Y] + nz * K[K_ZW0])
+
+
+@inline
+def _anti_roll(K, C, x, h_cg, n_b):
+    """Mirror of ``stages._anti_roll``: F_arb,i (``chassis.anti_roll_forces_n``) from the four
+    deflections, the states (unsprung DOF) or H_i = r - h_w,i of the pose (reduced model)."""
+    if K[K_DOF] != 0.0:
+        h = (x[16], x[17], x[18], x[19])
+    else:
+        h = (_pose_deflection(K, C, 0, h_cg, n_b), _pose_deflection(K, C, 1, h_cg, n_b),
+             _pose_deflection(K, C, 2, h_cg, n_b), _pose_deflection(K, C, 3, h_cg, n_b))
+    return anti_roll_forces_n(K[K_ARB_KF], K[K_ARB_KR], K[K_ARB_TF], K[K_ARB_TR], h)
 
 
 @inline
@@ -149,17 +183,27 @@ def _compliance_steer_angle(k_c, S, d1, d2, n_b, x, v_floor, E):
 
 @inline
 def _corner_wrench(K, E, S, deltas, n_b, x, u, xd, fzt, D):
-    """Mirror of ``stages.corner_wrench``: the tires' wrench; omega_dot_i into ``xd[12:16]``, the
-    tires' body-z forces into ``fzt``, the per-corner records into ``D`` (when not empty)."""
+    """Mirror of ``stages.corner_wrench`` and ``stages._roll_centre``: the tires' wrench;
+    omega_dot_i into ``xd[12:16]``, the tires' body-z forces into ``fzt[0:4]``, the roll-centre
+    forces J_i into ``fzt[4:8]`` (with roll centres), the per-corner records into ``D`` (when not
+    empty). The axles' body-y tire forces are summed from this loop's tire forces: the stages
+    evaluate the tire law again at each corner, with the same arguments, to the same values."""
     dof, v_floor, iw_inv, wbrake = K[K_DOF] != 0.0, K[K_VFLOOR], K[K_IW_INV], K[K_BRAKE_HOLD]
+    rc = K[K_RC] != 0.0
     nx, ny, nz = n_b
     Fx = Fy = Fz = Mx = My = Mz = 0.0
+    fyf = fyr = 0.0
     for i in range(4):
         xi, yi, zi, hw, fz, fs, ri = S[i, S_X], S[i, S_Y], S[i, S_Z], S[i, S_HW], S[i, S_FZ], S[i, S_FS], S[i, S_R]
         fa, fb, kap, alp, lx, ly, lz, tx, ty, tz = _tire_at_corner(S, i, deltas[i], n_b, x, v_floor, E)
         ftx = fa * lx + fb * tx + fz * nx
         fty = fa * ly + fb * ty + fz * ny
         ftz = fa * lz + fb * tz + fz * nz
+        if rc:
+            if i < 2:
+                fyf += fa * ly + fb * ty
+            else:
+                fyr += fa * ly + fb * ty
         rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zi - hw * nz
         Mx += rcy * ftz - rcz * fty
         My += rcz * ftx - rcx * ftz
@@ -188,6 +232,16 @@ def _corner_wrench(K, E, S, deltas, n_b, x, u, xd, fzt, D):
             r = D[16 * i:16 * i + 16]
             r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7] = fa, fb, fz, kap, alp, S[i, S_H], S[i, S_HD], tq
             r[8], r[9], r[10], r[11], r[12], r[13], r[14], r[15] = teff, deltas[i], ri, hw, fs, ftx, fty, ftz
+    if rc:
+        jac = roll_centre_forces_n(K[K_RC_HF], K[K_RC_HR], K[K_RC_TF], K[K_RC_TR], fyf, fyr)
+        for i in range(4):
+            j = jac[i]
+            Fz += j
+            Mx += S[i, S_Y] * j
+            My -= S[i, S_X] * j
+            fzt[4 + i] = j
+            if D.size > 0 and not dof:
+                D[16 * i + 2] = D[16 * i + 2] + j
     return Fx, Fy, Fz, Mx, My, Mz
 
 
@@ -239,8 +293,9 @@ def _body_accelerations(K, C, S, wrench, g_b, rate):
 
 
 @inline
-def _unsprung_accelerations(C, S, fzt, acc, dw, rate, gz, xd):
-    """Mirror of ``stages.unsprung_accelerations``: H_ddot_i into ``xd[20:24]``."""
+def _unsprung_accelerations(C, S, fzt, rc, acc, dw, rate, gz, xd):
+    """Mirror of ``stages.unsprung_accelerations``: H_ddot_i into ``xd[20:24]`` (``rc``: with
+    the roll-centre forces J_i of ``fzt[4:8]``)."""
     wx, wy, wz = rate
     dwx, dwy, _ = dw
     az_ = acc[2]
@@ -248,7 +303,8 @@ def _unsprung_accelerations(C, S, fzt, acc, dw, rate, gz, xd):
     for i in range(4):
         xi, yi, mu, zi = C[i, C_X], C[i, C_Y], C[i, C_MU], S[i, S_Z]
         acc_z = az_ + (dwx * yi - dwy * xi) + (wz * (wx * xi + wy * yi + wz * zi) - zi * ww)
-        xd[20 + i] = (fzt[i] - S[i, S_FS]) / mu + gz - acc_z
+        f_link = S[i, S_FS] + fzt[4 + i] if rc else S[i, S_FS]
+        xd[20 + i] = (fzt[i] - f_link) / mu + gz - acc_z
 
 
 @kernel()
@@ -259,12 +315,14 @@ def core_rhs(x, u, env, K, C, E, S, xd, D):
     vel, rate = (x[6], x[7], x[8]), (x[9], x[10], x[11])
     trig, c, n_b, g_b, h_cg = body_attitude((x[0], x[1], x[2]), (x[3], x[4], x[5]), (env[0], env[1], env[2]),
                                             K[K_G])
-    d1, d2 = ackermann_angles(u[0] / K[K_RATIO], K[K_WHEELBASE], K[K_TF])
+    dm = u[0] / K[K_RATIO]
+    d1, d2 = ackermann_angles(dm, K[K_WHEELBASE], K[K_TF])
+    d1, d2 = blend_ackermann(dm, d1, d2, K[K_ACKERMANN])
     _corner_loads(K, C, E, x, h_cg, n_b, vel, rate, S)
     k_c, v_floor = K[K_KC], K[K_VFLOOR]
     dcomp = _compliance_steer_angle(k_c, S, d1, d2, n_b, x, v_floor, E) if k_c != 0.0 else 0.0
     deltas = (d1 + dcomp, d2 + dcomp, 0.0, 0.0)
-    fzt = np.zeros(4)
+    fzt = np.zeros(8)
     wrench = _corner_wrench(K, E, S, deltas, n_b, x, u, xd, fzt, D)
     wind_env, wind_eff = (env[3], env[4], env[5]), (K[K_WIND_E], K[K_WIND_N], K[K_WIND_U])
     if K[K_N_WRENCH] > 0.0:
@@ -281,7 +339,7 @@ def core_rhs(x, u, env, K, C, E, S, xd, D):
     if dof:
         for i in range(4):
             xd[16 + i] = x[20 + i]
-        _unsprung_accelerations(C, S, fzt, acc, dw, rate, g_b[2], xd)
+        _unsprung_accelerations(C, S, fzt, K[K_RC] != 0.0, acc, dw, rate, g_b[2], xd)
     if D.size > 0:
         air = air_velocity_b(vel, c, wind_env, wind_eff)
         for k in range(3):
@@ -306,8 +364,6 @@ def kernel_terms_of(effect) -> tuple | None:
 def pack_model(k, effects) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray] | None, str]:
     """((K, C, E), "compiled") from a model's ``stages.CoreConstants`` ``k`` and its dynamics
     effects (tire first), or (None, reason) when an effect has no compiled form."""
-    if k.arb is not None or k.roll_centre is not None or k.ackermann_fraction != 1.0:
-        return None, "the vehicle's chassis parts (model.chassis) have no compiled form"
     rows = []
     for e in effects:
         terms = kernel_terms_of(e)
@@ -328,9 +384,20 @@ def pack_model(k, effects) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray] | 
     Iyz, Izx, Ixy, inv_Ix, inv_Iy, inv_Iz = k.inertia
     K = np.array([1.0 if k.unsprung_dof else 0.0, k.g, k.inv_m_tot, k.inv_m_s, Iyz, Izx, Ixy, inv_Ix, inv_Iy,
                   inv_Iz, k.iw_inv, k.tire_radial_stiffness, k.wheelbase_m, k.track_half_front_m, k.steer_ratio,
-                  k.zw0, k.r_load, k.v_floor, k.brake_hold_radps, k.k_c, *k.wind_effects, float(n_wrench)])
+                  k.zw0, k.r_load, k.v_floor, k.brake_hold_radps, k.k_c, *k.wind_effects, float(n_wrench),
+                  *_chassis_terms(k)])
     C = np.array([c[1:] for c in k.corners], dtype=float)
     return (K, C, np.array(rows, dtype=float)), "compiled"
+
+
+def _chassis_terms(k) -> list[float]:
+    """K[K_ACKERMANN:N_K]: the Ackermann fraction, then a flag (1: present) and the four
+    constants of the anti-roll bars (``CoreConstants.arb``) and of the roll centres
+    (``CoreConstants.roll_centre``), zeros when absent."""
+    out = [float(k.ackermann_fraction)]
+    for part in (k.arb, k.roll_centre):
+        out += [0.0] * 5 if part is None else [1.0, *(float(v) for v in part)]
+    return out
 
 
 def warm() -> None:

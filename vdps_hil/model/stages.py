@@ -29,9 +29,10 @@ some 10^4-10^5 times per simulated drive. Tuples passed between the stages:
 * a **wrench** ``(F_x, F_y, F_z, M_x, M_y, M_z)`` in body axes about the sprung CG [N, N m].
 
 The stages on floats and tuples alone (``spring_force_n``, ``ackermann_angles``,
-``body_attitude``, ``wheel_axes``, ``air_velocity_b``, ``pose_rates``) are :func:`~vdps_hil.jit.inline`: the
-compiled core (:mod:`vdps_hil.model.core_kernel`) calls these very functions; the others it
-mirrors operation for operation (tested bit for bit equal to ``derivative_function``).
+``body_attitude``, ``wheel_axes``, ``air_velocity_b``, ``pose_rates``) and the chassis laws they
+call (``model.chassis``) are :func:`~vdps_hil.jit.inline`: the compiled core
+(:mod:`vdps_hil.model.core_kernel`) calls these very functions; the others it mirrors operation
+for operation (tested bit for bit equal to ``derivative_function``).
 """
 
 from __future__ import annotations
@@ -65,7 +66,7 @@ def ackermann_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front
 def steer_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front_m: float,
                  ackermann_fraction: float) -> tuple[float, float]:
     """``ackermann_angles`` blended with parallel steer by the vehicle's Ackermann fraction
-    (``chassis.blend_ackermann``; 1: full Ackermann, the compiled core's only case)."""
+    (``chassis.blend_ackermann``; 1: full Ackermann, the angles unchanged)."""
     return blend_ackermann(delta_mean_rad, *ackermann_angles(delta_mean_rad, wheelbase_m, track_half_front_m),
                            ackermann_fraction)
 
