@@ -59,7 +59,7 @@ Integration: the stiff wheel spin makes explicit RK2 need ~1 ms steps; the defau
 same accuracy: :mod:`vdps_hil.prediction.integration` (equations, measured errors).
 
 Evaluation of the core: with the paper's model and effect set (reduced model, ``linear_tire``
-alone or with static rolling-radius factors) the steps call
+alone or with static rolling-radius factors; any chassis parts of ``model.chassis``) the steps call
 :class:`vdps_hil.model.reduced.ReducedLinearCore` -- the same equations as ``Model.f``
 specialised once per model and per input value, with the wheel-spin Jacobian in closed form
 (equal to the forward difference of ``Model.f``) -- instead of the generic ``Model.f``. Same
