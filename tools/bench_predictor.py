@@ -61,13 +61,24 @@ from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
 from vdps_hil.sim.simulator import Simulator  # noqa: E402
 
 CASES = (
-    ("paper-left-turn", 10.25, "sedan-model", "left turn held (Fig 8)"),
-    ("paper-rollover", 10.25, "sedan-model", "T2 = T3 = 1000 N m (Fig 9)"),
-    ("fishhook-suv", 1.90, "suv-model", "fishhook, after the reversal"),
+    ("paper-left-turn", 10.25, "sedan-model", "left turn held (Fig 8)", None),
+    ("paper-rollover", 10.25, "sedan-model", "T2 = T3 = 1000 N m (Fig 9)", None),
+    ("fishhook-suv", 1.90, "suv-model", "fishhook, after the reversal", None),
+    ("cr-circle-ramp", 30.0, "cr1-model", "CommonRoad set 1 on the circle ramp, half way; its model file's "
+     "chassis parts (anti-roll bar, parallel steer)", 1),
 )
+"""(scenario, t0 [s], model file, label, CommonRoad parameter set of the truth or None: ours). Our
+cases run the model file with the truth's parameters; the CommonRoad case the model file as it is
+(its priors: the truth's parameters are not this project's schema)."""
 
 
-def truth_snapshot(name: str, t0: float):
+def truth_snapshot(name: str, t0: float, cr_set: int | None = None):
+    if cr_set is not None:
+        from vdps_hil.sim.truth_cr import CommonRoadTruth
+
+        truth = CommonRoadTruth(cr_set, load_scenario(name))
+        truth.step_to(t0 + 1e-9)
+        return truth.snapshot(), None
     sim = Simulator(scenario=load_scenario(name))
     sim.step_to(t0 + 1e-9)
     return sim.snapshot(), sim.scenario
@@ -114,11 +125,14 @@ def main(argv=None) -> int:
                        default))
     candidates.append(("configured, generic core path", default))
     report = {"horizon_s": default.horizon_s, "cases": []}
-    for name, t0, model, label in CASES:
-        snap, sc = truth_snapshot(name, t0)
-        vehicle = load_vehicle(model).with_params(**sc.vehicle.params.as_dict())
+    for name, t0, model, label, cr_set in CASES:
+        snap, sc = truth_snapshot(name, t0, cr_set)
+        vehicle = load_vehicle(model)
+        if sc is not None:
+            vehicle = vehicle.with_params(**sc.vehicle.params.as_dict())
         init = initial_state_from_truth(snap)
-        print(f"\n== {name} from t0 = {t0} s: {label}; true parameters, truth initial state, held inputs, "
+        params = "true parameters" if sc is not None else "the model file's priors"
+        print(f"\n== {name} from t0 = {t0} s: {label}; {params}, truth initial state, held inputs, "
               f"horizon {default.horizon_s} s")
         print(f"{'case':34s} {'median ms':>9s} {'best ms':>7s} {'f-evals':>7s} {'stop':>18s} {'max dpos m':>10s} "
               f"{'end dpos m':>10s} {'max dang deg':>12s} {'dPONR s':>8s}")
