@@ -234,9 +234,13 @@ class Identifier:
         beta = self._structure_bias(name)
         return c + np.outer(beta, beta)
 
-    def _covariances(self, honest: bool) -> dict[str, np.ndarray]:
+    def _covariances(self, honest: bool, only=None) -> dict[str, np.ndarray]:
+        """Problem -> covariance (``covariances``); ``only``: these problems alone (each with its
+        upstream problems: the same numbers, computed the same way)."""
         out: dict[str, np.ndarray] = {}
         for name in PROBLEM_NAMES:
+            if only is not None and name not in only:
+                continue
             rls = self._rls[name]
             c = self._honest(name) if honest else rls.covariance
             ups = UPSTREAM[name]
@@ -326,14 +330,25 @@ class Identifier:
         that a cause other than its sigma already keeps from converging (not excited, at bound,
         model mismatch, not identifiable, too few updates: ``status.cause_without_sigma``) is
         answered without the corrected covariances of every problem, which ``problem_status``
-        needs (about 0.5 ms, at the warning chain's 50 Hz); the others are read from it."""
-        out = {}
+        needs (about 0.5 ms, at the warning chain's 50 Hz). The others are judged by
+        ``problem_status``'s own rule on the corrected covariances of these problems and their
+        upstream problems alone (the same numbers; ``problem_status`` itself when this update
+        already computed it)."""
+        out, todo = {}, []
         for name in names:
-            if cause_without_sigma(self._rls[name], self._sigma0[name], self._failed_rows(name),
-                                   self.config) is not None:
+            failed = self._failed_rows(name)
+            if cause_without_sigma(self._rls[name], self._sigma0[name], failed, self.config) is not None:
                 out[name] = False
             else:
-                out[name] = self.problem_status[name].converged
+                todo.append((name, failed))
+        if todo:
+            full = self._derived.get("problem_status")
+            if full is None:
+                sig = _diag_sigmas(self._covariances(True, _with_upstream(n for n, _ in todo)))
+            for name, failed in todo:
+                out[name] = (full[name].converged if full is not None else
+                             problem_status(name, PROBLEM_PARAMS[name], self._rls[name], self._sigma0[name], sig,
+                                            failed, self._gated[name], self.config).converged)
         return out
 
     def mismatch_tests(self, name: str):
@@ -364,6 +379,17 @@ class Identifier:
             "waiting_upstream": self.waiting_upstream,
             "inputs_rejected": self._inputs_rejected,
         }
+
+
+def _with_upstream(names) -> set[str]:
+    """The named problems and every problem upstream of them (``UPSTREAM``, transitively)."""
+    out, stack = set(), list(names)
+    while stack:
+        n = stack.pop()
+        if n not in out:
+            out.add(n)
+            stack.extend(UPSTREAM[n])
+    return out
 
 
 def _diag_sigmas(cov: dict[str, np.ndarray]) -> dict[str, float]:
