@@ -334,6 +334,9 @@ class Identifier:
         ``problem_status``'s own rule on the corrected covariances of these problems and their
         upstream problems alone (the same numbers; ``problem_status`` itself when this update
         already computed it)."""
+        full = self._derived.get("problem_status")
+        if full is not None:
+            return {name: full[name].converged for name in names}
         out, todo = {}, []
         for name in names:
             failed = self._failed_rows(name)
@@ -342,13 +345,10 @@ class Identifier:
             else:
                 todo.append((name, failed))
         if todo:
-            full = self._derived.get("problem_status")
-            if full is None:
-                sig = _diag_sigmas(self._covariances(True, _with_upstream(n for n, _ in todo)))
+            sig = _diag_sigmas(self._covariances(True, _with_upstream(n for n, _ in todo)))
             for name, failed in todo:
-                out[name] = (full[name].converged if full is not None else
-                             problem_status(name, PROBLEM_PARAMS[name], self._rls[name], self._sigma0[name], sig,
-                                            failed, self._gated[name], self.config).converged)
+                out[name] = problem_status(name, PROBLEM_PARAMS[name], self._rls[name], self._sigma0[name], sig,
+                                           failed, self._gated[name], self.config).converged
         return out
 
     def mismatch_tests(self, name: str):

@@ -7,11 +7,11 @@ bars, roll centres, Ackermann fraction).
 Reference and equality
 ----------------------
 The stages stay the reference and the source of the equations. The stages that work on floats
-and tuples alone (``body_attitude``, ``ackermann_angles``, ``spring_force_n``, ``air_velocity_b``,
-``pose_rates``, ``wheel_axes``), the chassis laws (``chassis.blend_ackermann``,
-``anti_roll_forces_n``, ``roll_centre_forces_n``) and the effects' force laws are
-:func:`~vdps_hil.jit.inline` functions this kernel calls as they are; the stages that take the
-model's constants and effect hooks (``steer_angles``, ``corner_loads`` with ``_anti_roll``,
+and tuples alone (``body_attitude``, ``steer_angles`` with ``ackermann_angles``,
+``spring_force_n``, ``air_velocity_b``, ``pose_rates``, ``wheel_axes``), the chassis laws
+(``chassis.blend_ackermann``, ``anti_roll_forces_n``, ``roll_centre_forces_n``) and the effects'
+force laws are :func:`~vdps_hil.jit.inline` functions this kernel calls as they are; the stages
+that take the model's constants and effect hooks (``corner_loads`` with ``_anti_roll``,
 ``tire_at_corner``, ``compliance_steer_angle``, ``corner_wrench`` with ``_roll_centre``,
 ``effect_wrench``, ``body_accelerations``, ``unsprung_accelerations``) are mirrored here, operation
 for operation, so ``core_rhs`` equals ``derivative_function``'s ``f`` bit for bit
@@ -51,13 +51,13 @@ import numpy as np
 
 from vdps_hil.jit import inline, kernel
 
-from .chassis import anti_roll_forces_n, blend_ackermann, roll_centre_forces_n
+from .chassis import anti_roll_forces_n, roll_centre_forces_n
 from .effects.aero import WRENCH_AERO_DRAG, WRENCH_CROSSWIND, crosswind_wrench, drag_wrench
 from .effects.base import STATIC_HOOKS
 from .effects.rolling import WHEEL_ROLLING_RESISTANCE, rolling_resistance_torque
 from .effects.tires import (STIFFNESS_LOAD_DEPENDENT, TIRE_LINEAR, TIRE_MAGIC_FORMULA, linear_tire_forces,
                             load_dependent_stiffness_factor, magic_formula_forces)
-from .stages import ackermann_angles, air_velocity_b, body_attitude, pose_rates, spring_force_n, wheel_axes
+from .stages import air_velocity_b, body_attitude, pose_rates, spring_force_n, steer_angles, wheel_axes
 
 HOOK_TIRE, HOOK_STIFFNESS, HOOK_WRENCH, HOOK_WHEEL = 0.0, 1.0, 2.0, 3.0
 HOOK_IDS = {"tire_forces": HOOK_TIRE, "cornering_stiffness_factor": HOOK_STIFFNESS,
@@ -315,9 +315,7 @@ def core_rhs(x, u, env, K, C, E, S, xd, D):
     vel, rate = (x[6], x[7], x[8]), (x[9], x[10], x[11])
     trig, c, n_b, g_b, h_cg = body_attitude((x[0], x[1], x[2]), (x[3], x[4], x[5]), (env[0], env[1], env[2]),
                                             K[K_G])
-    dm = u[0] / K[K_RATIO]
-    d1, d2 = ackermann_angles(dm, K[K_WHEELBASE], K[K_TF])
-    d1, d2 = blend_ackermann(dm, d1, d2, K[K_ACKERMANN])
+    d1, d2 = steer_angles(u[0] / K[K_RATIO], K[K_WHEELBASE], K[K_TF], K[K_ACKERMANN])
     _corner_loads(K, C, E, x, h_cg, n_b, vel, rate, S)
     k_c, v_floor = K[K_KC], K[K_VFLOOR]
     dcomp = _compliance_steer_angle(k_c, S, d1, d2, n_b, x, v_floor, E) if k_c != 0.0 else 0.0

@@ -109,7 +109,7 @@ def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens, tfzs
     vb = vy - wx * zw
     Fx = Fy = Fz = Syz = Sxz = Sz = Hx = Hy = Hz = 0.0
     arb = K[K_ARB_F] != 0.0 or K[K_ARB_R] != 0.0
-    fy_axle = np.zeros(2)  # body y of F_a e_l + F_b e_t per axle (the roll centres' J_i)
+    fyf = fyr = 0.0  # body y of F_a e_l + F_b e_t per axle (the roll centres' J_i)
     for i in range(4):
         xi, yi, c1, c2, c3, sr = C[i, C_X], C[i, C_Y], C[i, C_C1], C[i, C_C2], C[i, C_C3], C[i, C_SR]
         ds, ri, ckap, calp, mug = C[i, C_DS], C[i, C_R], C[i, C_CKAP], C[i, C_CALP], C[i, C_MUG]
@@ -165,7 +165,10 @@ def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens, tfzs
         Fx += ftx
         Fy += fty
         Fz += ftz
-        fy_axle[0 if i < 2 else 1] += fty - fz * ny
+        if i < 2:
+            fyf += fty - fz * ny
+        else:
+            fyr += fty - fz * ny
         # moment about the CG at the contact point r_w - h_w n: summed as
         # sum r_w x F_tire - n x sum h_w F_tire (all r_w share z_w)
         Syz += yi * ftz
@@ -176,7 +179,7 @@ def reduced_rhs(x, csd, torques, brakes, ng, K, C, xd, fzs, nb, kaps, dens, tfzs
         Hz += hw * ftz
         xd[12 + i] = (tq - ri * fa) * iw_inv
     if K[K_RC_F] != 0.0 or K[K_RC_R] != 0.0:  # J_i along body z at the struts, in the reported load
-        jf, jr = fy_axle[0] * K[K_RC_F], fy_axle[1] * K[K_RC_R]
+        jf, jr = fyf * K[K_RC_F], fyr * K[K_RC_R]
         for i in range(4):
             j = -jf if i == 0 else (jf if i == 1 else (jr if i == 2 else -jr))
             Fz += j

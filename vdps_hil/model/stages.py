@@ -28,7 +28,7 @@ some 10^4-10^5 times per simulated drive. Tuples passed between the stages:
   h_w,i its height over the road along n, F_s,i the suspension force;
 * a **wrench** ``(F_x, F_y, F_z, M_x, M_y, M_z)`` in body axes about the sprung CG [N, N m].
 
-The stages on floats and tuples alone (``spring_force_n``, ``ackermann_angles``,
+The stages on floats and tuples alone (``spring_force_n``, ``ackermann_angles``, ``steer_angles``,
 ``body_attitude``, ``wheel_axes``, ``air_velocity_b``, ``pose_rates``) and the chassis laws they
 call (``model.chassis``) are :func:`~vdps_hil.jit.inline`: the compiled core
 (:mod:`vdps_hil.model.core_kernel`) calls these very functions; the others it mirrors operation
@@ -63,12 +63,13 @@ def ackermann_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front
             math.atan2(wheelbase_m * tm, wheelbase_m + track_half_front_m * tm))
 
 
+@inline
 def steer_angles(delta_mean_rad: float, wheelbase_m: float, track_half_front_m: float,
                  ackermann_fraction: float) -> tuple[float, float]:
     """``ackermann_angles`` blended with parallel steer by the vehicle's Ackermann fraction
     (``chassis.blend_ackermann``; 1: full Ackermann, the angles unchanged)."""
-    return blend_ackermann(delta_mean_rad, *ackermann_angles(delta_mean_rad, wheelbase_m, track_half_front_m),
-                           ackermann_fraction)
+    d1, d2 = ackermann_angles(delta_mean_rad, wheelbase_m, track_half_front_m)
+    return blend_ackermann(delta_mean_rad, d1, d2, ackermann_fraction)
 
 
 @dataclass(frozen=True, slots=True)
