@@ -140,3 +140,20 @@ def test_without_wheel_torques_only_the_equations_that_need_them_are_dropped(dri
         k = names.index(eq)
         assert r2.available[k] and np.isfinite(r2.values[:, k]).mean() > 0.9
     assert np.all(r2.nuisance[:, :, 2:6] == 0.0)
+
+
+def test_all_rows_compiled_equal_the_per_row_path_with_their_quantities(drive):
+    """``compute_residuals`` on the compiled rows (``row_kernel``) gives the per-row reference's
+    values, nuisance, slip columns, wheel-speed parts, noise and named quantities bit for bit, on
+    the drive and with the Magic Formula tire and aero drag; the quantities are made when first
+    read."""
+    tab, st, _ = drive
+    effects = EffectSet([make_effect("magic_formula_tire"), make_effect("aero_drag", cda_m2=0.7)])
+    a = R.compute_residuals(tab, TRUE, effects, states=st, compiled=False)
+    b = R.compute_residuals(tab, TRUE, effects, states=st)
+    assert type(b.quantities).__name__ == "LazyRowQuantities" and b.quantities._q is None
+    for x, y in ((a.values, b.values), (a.nuisance, b.nuisance), (a.lateral_unit, b.lateral_unit),
+                 (a.ws_parts, b.ws_parts), (a.sigma, b.sigma)):
+        assert np.array_equal(x, y, equal_nan=True)
+    assert len(b.quantities) == len(a.quantities) == len(st.index) > 100
+    assert list(b.quantities) == list(a.quantities)

@@ -48,7 +48,7 @@ ENABLED = os.environ.get("VDPS_JIT", "1").strip().lower() not in ("0", "false", 
 
 KERNEL_GROUPS: tuple[tuple[str, ...], ...] = (
     ("vdps_hil.model.reduced", "vdps_hil.model.core_kernel", "vdps_hil.prediction.integration_kernel",
-     "vdps_hil.sim.step_kernel"),
+     "vdps_hil.sim.step_kernel", "vdps_hil.workbench.row_kernel"),
     ("vdps_hil.estimation.ekf_kernels", "vdps_hil.estimation.ekf_update_kernels",
      "vdps_hil.identification.rls_kernels"),
 )

@@ -134,7 +134,8 @@ class _Child:
                 del self.pending[:n]
             except (BlockingIOError, InterruptedError):
                 pass
-            except OSError:
+            except OSError as e:
+                print(f"fdreader: send to the parent failed ({e}); stopping", file=sys.stderr)
                 return "gone"
         if not ev & (select.POLLIN | select.POLLHUP | select.POLLERR):
             return None
@@ -182,8 +183,9 @@ class _Child:
         try:
             self.sock.sendall(self.pending)
             self.sock.shutdown(socket.SHUT_WR)
-        except OSError:
-            pass
+        except OSError as e:
+            print(f"fdreader: the last {len(self.pending)} bytes were not sent ({e})",
+                  file=sys.stderr)
         return 0
 
 

@@ -42,6 +42,7 @@ import numpy as np
 from scipy.signal import butter, filtfilt
 
 from vdps_hil.model.core import Inputs, Model
+from vdps_hil.model.core_kernel import N_DIAG
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import EQUATIONS as DYNAMIC_EQUATIONS
 from vdps_hil.model.effects.base import ImuKinematics
@@ -49,7 +50,8 @@ from vdps_hil.model.params import Vehicle
 from vdps_hil.prediction.predictor import Predictor, PredictorConfig, PredictorInitialState
 
 from .dataset import DriveTable
-from .row_model import RowModel, RowQuantities
+from .row_kernel import NUISANCE_STEP_MPS, residual_rows
+from .row_model import LazyRowQuantities, RowModel, RowQuantities
 
 __all__ = ["EQUATIONS", "DYNAMIC_EQUATIONS", "KINEMATIC_EQUATIONS", "EQUATION_LABELS", "EQUATION_UNITS",
            "EquationResiduals", "compute_residuals", "RowStates", "row_states", "parameter_columns",
@@ -81,6 +83,20 @@ class RowStates:
     meas: np.ndarray  # (n, 22): f(3), omega_dot(3), wheel_accel(4), wheel speeds(4), H(4), H_dot(4)
     has_susp: bool
     has_torque: bool = True
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(X (n, 16), U (n, 9), ENV (n, 6)) of ``row_kernel.residual_rows``: the states, the
+        inputs (steering wheel angle, drive and brake torques) and the road normal with the wind,
+        made once per drive."""
+        a = self.__dict__.get("_arrays")
+        if a is None:
+            n = len(self.x)
+            X = np.array(self.x, dtype=float).reshape(n, -1)
+            U = np.array([(u.steer_wheel_angle_rad, *u.wheel_torque_nm, *u.brake_torque_nm) for u in self.u],
+                         dtype=float).reshape(n, 9)
+            E = np.array([(*e.normal_g, *e.wind_enu_mps) for e in self.env], dtype=float).reshape(n, 6)
+            a = self.__dict__["_arrays"] = (X, U, E)
+        return a
 
 
 def row_states(table: DriveTable, vehicle: Vehicle) -> RowStates:
@@ -177,7 +193,7 @@ class EquationResiduals:
     values: np.ndarray
     sigma: np.ndarray
     nuisance: np.ndarray | None
-    quantities: RowQuantities | list
+    quantities: RowQuantities | LazyRowQuantities | list
     available: np.ndarray
     vehicle: Vehicle
     effects: EffectSet
@@ -202,10 +218,12 @@ class EquationResiduals:
 
 def compute_residuals(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence = (), *,
                       states: RowStates | None = None, with_nuisance: bool = True,
-                      with_quantities: bool = True) -> EquationResiduals:
+                      with_quantities: bool = True, compiled: bool = True) -> EquationResiduals:
     """The residuals of every equation (module docstring) for a model = model vehicle (with its
     identified parameters) + effects (dynamics effects act in the core; measurement effects are
-    taken out of the measured specific force)."""
+    taken out of the measured specific force). All rows in one compiled call when the model's
+    core is compiled (``row_kernel``, bit for bit the per-row path); ``compiled=False`` takes
+    the per-row path (``RowModel.residual``, the reference)."""
     effects = effects if isinstance(effects, EffectSet) else EffectSet(effects)
     st = states if states is not None else row_states(table, vehicle)
     rm = RowModel(vehicle, effects)
@@ -217,23 +235,14 @@ def compute_residuals(table: DriveTable, vehicle: Vehicle, effects: EffectSet | 
     meas = st.meas.copy()
     meas = _remove_measurement_effects(table, st, effects, meas)
     ws = np.zeros((n, 8))
-    meas_rows = meas.tolist()
-    for j in range(n):
-        x, u, env = st.x[j], st.u[j], st.env[j]
-        r, named = rm.residual(x, u, env, meas_rows[j], want_named=with_quantities, want_slip=with_nuisance)
-        vals[j] = r
-        ws[j] = rm.last_ws
-        r = np.array(r)
-        slip = rm.last_slip_cols if with_nuisance else None
-        if with_quantities:
-            quants.append(effect_quantities(rm.model, named, x))
-        if with_nuisance:
-            for c, (slot, h) in enumerate(((6, 0.02), (7, 0.02))):
-                xp = list(x)
-                xp[slot] += h
-                nuis[j, :, c] = (np.array(rm.residual(xp, u, env, meas_rows[j])[0]) - r) / h
-            nuis[j, :, 2:6] = slip[:, 0:4]
-            lat[j] = slip[:, 4:8]
+    packed = rm.packed() if compiled and n else None
+    if packed is not None:
+        meas = np.ascontiguousarray(meas)
+        _compiled_rows(rm, packed, st, meas, vals, ws, nuis, lat, None)
+        if with_quantities:  # made when a candidate's regressors first read them
+            quants = LazyRowQuantities(lambda: _compiled_quantities(rm, packed, st, meas))
+    else:
+        _python_rows(rm, st, meas, vals, ws, nuis, lat, quants if with_quantities else None)
     avail = np.ones(14, bool)
     if not st.has_susp:
         avail[2:5] = False  # vert, roll, pitch need the suspension forces (eq 14)
@@ -250,6 +259,64 @@ def compute_residuals(table: DriveTable, vehicle: Vehicle, effects: EffectSet | 
     sigma = _noise_sigma(vals, table.period_s) if with_nuisance else np.full(14, np.nan)
     return EquationResiduals(table.t_s[st.index], st.index, vals, sigma, nuis, quants, avail, vehicle, effects, st,
                              ws, meas, lat)
+
+
+def _python_rows(rm: RowModel, st: RowStates, meas, vals, ws, nuis, lat, quants) -> None:
+    """The reference path: ``RowModel.residual`` row by row, twice more per row for the velocity
+    nuisance (forward differences of ``row_kernel.NUISANCE_STEP_MPS``)."""
+    meas_rows = meas.tolist()
+    h = NUISANCE_STEP_MPS
+    for j in range(len(st.index)):
+        x, u, env = st.x[j], st.u[j], st.env[j]
+        r, named = rm.residual(x, u, env, meas_rows[j], want_named=quants is not None, want_slip=nuis is not None)
+        vals[j] = r
+        ws[j] = rm.last_ws
+        r = np.array(r)
+        if quants is not None:
+            quants.append(effect_quantities(rm.model, named, x))
+        if nuis is not None:
+            slip = rm.last_slip_cols
+            for c, slot in enumerate((6, 7)):
+                xp = list(x)
+                xp[slot] += h
+                nuis[j, :, c] = (np.array(rm.residual(xp, u, env, meas_rows[j])[0]) - r) / h
+            nuis[j, :, 2:6] = slip[:, 0:4]
+            lat[j] = slip[:, 4:8]
+
+
+def _compiled_rows(rm: RowModel, packed: tuple, st: RowStates, meas: np.ndarray, vals, ws, nuis, lat, quants,
+                   chunk: int = 4096) -> None:
+    """All rows through ``row_kernel.residual_rows`` in chunks (its per-row outputs, the core's
+    diagnostics among them, are held for one chunk at a time); the named quantities from the
+    kernel's diagnostics (``Model.evaluate_from``, as the per-row path's ``Model._named``)."""
+    X, U, ENV = st.arrays()
+    n = len(X)
+    with_nuis = nuis is not None
+    m = min(chunk, n)
+    XD, DG = np.empty((m, X.shape[1])), np.empty((m, N_DIAG))
+    NU, SL = (np.empty((m, 14, 2)), np.empty((m, 14, 8))) if with_nuis else (np.empty((0, 14, 2)), np.empty((0, 14, 8)))
+    for j0 in range(0, n, chunk):
+        j1 = min(n, j0 + chunk)
+        k = j1 - j0
+        residual_rows(X[j0:j1], U[j0:j1], ENV[j0:j1], meas[j0:j1], *packed, with_nuis, XD[:k], DG[:k], vals[j0:j1],
+                      ws[j0:j1], NU[:k] if with_nuis else NU, SL[:k] if with_nuis else SL)
+        if with_nuis:
+            nuis[j0:j1, :, 0:2] = NU[:k]
+            nuis[j0:j1, :, 2:6] = SL[:k, :, 0:4]
+            lat[j0:j1] = SL[:k, :, 4:8]
+        if quants is not None:
+            xds = XD[:k].tolist()
+            for i in range(k):
+                x = st.x[j0 + i]
+                named = rm.model.evaluate_from(x, xds[i], DG[i], st.env[j0 + i])[1]
+                quants.append(effect_quantities(rm.model, named, x))
+
+
+def _compiled_quantities(rm: RowModel, packed: tuple, st: RowStates, meas: np.ndarray) -> RowQuantities:
+    n = len(st.index)
+    q = RowQuantities()
+    _compiled_rows(rm, packed, st, meas, np.empty((n, 14)), np.empty((n, 8)), None, None, q)
+    return q
 
 
 def parameter_columns(res: EquationResiduals, param: str, table: DriveTable | None = None) -> np.ndarray:

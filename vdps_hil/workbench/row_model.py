@@ -24,6 +24,7 @@ from array import array
 
 import numpy as np
 
+from vdps_hil import jit
 from vdps_hil.model.chassis import anti_roll_forces_n, roll_centre_forces_n
 from vdps_hil.model.core import Model
 from vdps_hil.model.effects import EffectSet
@@ -31,7 +32,7 @@ from vdps_hil.model.params import Vehicle
 from vdps_hil.model.stages import wheel_axes
 from vdps_hil.units import GRAVITY_MPS2
 
-__all__ = ["RowModel", "RowQuantities"]
+__all__ = ["LazyRowQuantities", "RowModel", "RowQuantities"]
 
 
 class RowQuantities:
@@ -79,6 +80,32 @@ class RowQuantities:
             yield self[j]
 
 
+class LazyRowQuantities:
+    """A :class:`RowQuantities` made by ``make()`` when first read (the ranking's base fits never
+    read the named quantities; the candidates' regressors do), read as the one it makes."""
+
+    def __init__(self, make):
+        self._make, self._q = make, None
+
+    def _get(self) -> RowQuantities:
+        if self._q is None:
+            self._q, self._make = self._make(), None
+        return self._q
+
+    def __len__(self) -> int:
+        return len(self._get())
+
+    def __getitem__(self, j: int) -> dict:
+        return self._get()[j]
+
+    def __iter__(self):
+        return iter(self._get())
+
+    @property
+    def packed(self) -> int:
+        return self._get().packed
+
+
 class RowModel:
     """Residual vector of one row for one model (vehicle + dynamics effects)."""
 
@@ -106,6 +133,28 @@ class RowModel:
         self._tire = None if tire is None or tire.name == "linear_tire" else tire
         self._fz0 = self.model.static_load_n
         self._calpha = self.model.c_alpha
+
+    def packed(self) -> tuple | None:
+        """The arrays of :func:`~vdps_hil.workbench.row_kernel.residual_rows` (K, C, E, P,
+        CORN, SPR) for this model, or None when its core is not compiled (then only
+        :meth:`residual` evaluates it)."""
+        from . import row_kernel as rk
+
+        if self.model.kernel_arrays is None or not jit.ENABLED:
+            return None
+        P = np.zeros(rk.N_P)
+        P[0:5] = (self.m, *self.inertia, self.iw)
+        P[rk.P_CK:rk.P_CK + 4] = self.c_kappa
+        P[rk.P_ZW] = self._zw
+        if self._arb is not None:
+            P[rk.P_ARB:rk.P_KR + 1] = (1.0, *self._arb)
+        P[rk.P_TF], P[rk.P_TR] = self._tracks
+        if self._roll_centre is not None:
+            P[rk.P_RC:rk.P_HR + 1] = (1.0, *self._roll_centre)
+        P[rk.P_NEWTON] = 0.0 if self._tire is None else 1.0
+        P[rk.P_FZ0:rk.P_FZ0 + 4] = self._fz0
+        P[rk.P_CA:rk.P_CA + 4] = self._calpha
+        return (*self.model.kernel_arrays, P, np.array(self.corners, dtype=float), np.array(self._spring, dtype=float))
 
     def residual(self, x, u, env, meas, want_named: bool = False, want_slip: bool = False):
         """(r (14,) list, named quantities or None) at one row; ``meas`` a sequence of 22
