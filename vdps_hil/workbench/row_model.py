@@ -55,7 +55,7 @@ class RowQuantities:
             self._names = names
         # a float or a float subclass (numpy's float64, what the residuals compute): packed; read
         # back as a float of the same value
-        if names == self._names and all(isinstance(v, float) for v in q.values()):
+        if names == self._names and all(issubclass(t, float) for t in set(map(type, q.values()))):
             self._rows.append(len(self._vals))
             self._vals.extend(q.values())
         else:
