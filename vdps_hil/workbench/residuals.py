@@ -84,19 +84,24 @@ class RowStates:
     has_susp: bool
     has_torque: bool = True
 
-    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def arrays(self, keep: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(X (n, 16), U (n, 9), ENV (n, 6)) of ``row_kernel.residual_rows``: the states, the
-        inputs (steering wheel angle, drive and brake torques) and the road normal with the wind,
-        made once per drive."""
+        inputs (steering wheel angle, drive and brake torques) and the road normal with the wind;
+        kept for the next call when ``keep`` (the ranking evaluates the same rows many times)."""
         a = self.__dict__.get("_arrays")
+        if a is None and not keep:
+            return self._make_arrays()
         if a is None:
-            n = len(self.x)
-            X = np.array(self.x, dtype=float).reshape(n, -1)
-            U = np.array([(u.steer_wheel_angle_rad, *u.wheel_torque_nm, *u.brake_torque_nm) for u in self.u],
-                         dtype=float).reshape(n, 9)
-            E = np.array([(*e.normal_g, *e.wind_enu_mps) for e in self.env], dtype=float).reshape(n, 6)
-            a = self.__dict__["_arrays"] = (X, U, E)
+            a = self.__dict__["_arrays"] = self._make_arrays()
         return a
+
+    def _make_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        n = len(self.x)
+        X = np.array(self.x, dtype=float).reshape(n, -1)
+        U = np.array([(u.steer_wheel_angle_rad, *u.wheel_torque_nm, *u.brake_torque_nm) for u in self.u],
+                     dtype=float).reshape(n, 9)
+        E = np.array([(*e.normal_g, *e.wind_enu_mps) for e in self.env], dtype=float).reshape(n, 6)
+        return X, U, E
 
 
 def row_states(table: DriveTable, vehicle: Vehicle) -> RowStates:
@@ -238,9 +243,10 @@ def compute_residuals(table: DriveTable, vehicle: Vehicle, effects: EffectSet | 
     packed = rm.packed() if compiled and n else None
     if packed is not None:
         meas = np.ascontiguousarray(meas)
-        _compiled_rows(rm, packed, st, meas, vals, ws, nuis, lat, None)
+        keep = states is not None  # rows the caller evaluates again (the ranking's)
+        _compiled_rows(rm, packed, st, meas, vals, ws, nuis, lat, None, keep)
         if with_quantities:  # made when a candidate's regressors first read them
-            quants = LazyRowQuantities(lambda: _compiled_quantities(rm, packed, st, meas))
+            quants = LazyRowQuantities(lambda: _compiled_quantities(rm, packed, st, meas, keep))
     else:
         _python_rows(rm, st, meas, vals, ws, nuis, lat, quants if with_quantities else None)
     avail = np.ones(14, bool)
@@ -285,11 +291,11 @@ def _python_rows(rm: RowModel, st: RowStates, meas, vals, ws, nuis, lat, quants)
 
 
 def _compiled_rows(rm: RowModel, packed: tuple, st: RowStates, meas: np.ndarray, vals, ws, nuis, lat, quants,
-                   chunk: int = 4096) -> None:
+                   keep: bool, chunk: int = 4096) -> None:
     """All rows through ``row_kernel.residual_rows`` in chunks (its per-row outputs, the core's
     diagnostics among them, are held for one chunk at a time); the named quantities from the
     kernel's diagnostics (``Model.evaluate_from``, as the per-row path's ``Model._named``)."""
-    X, U, ENV = st.arrays()
+    X, U, ENV = st.arrays(keep)
     n = len(X)
     with_nuis = nuis is not None
     m = min(chunk, n)
@@ -312,10 +318,10 @@ def _compiled_rows(rm: RowModel, packed: tuple, st: RowStates, meas: np.ndarray,
                 quants.append(effect_quantities(rm.model, named, x))
 
 
-def _compiled_quantities(rm: RowModel, packed: tuple, st: RowStates, meas: np.ndarray) -> RowQuantities:
+def _compiled_quantities(rm: RowModel, packed: tuple, st: RowStates, meas: np.ndarray, keep: bool) -> RowQuantities:
     n = len(st.index)
     q = RowQuantities()
-    _compiled_rows(rm, packed, st, meas, np.empty((n, 14)), np.empty((n, 8)), None, None, q)
+    _compiled_rows(rm, packed, st, meas, np.empty((n, 14)), np.empty((n, 8)), None, None, q, keep)
     return q
 
 
