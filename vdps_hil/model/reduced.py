@@ -72,9 +72,11 @@ auxiliary roll stiffness of ``anti_roll_stiffness`` effects)."""
 # K_arb,r / T_r^2, h_rc,f / T_f, h_rc,r / T_r
 (K_INV_M, K_G, K_IYZ, K_IZX, K_IXY, K_INV_IX, K_INV_IY, K_INV_IZ, K_IW_INV, K_ZW, K_VFLOOR, K_WB,
  K_S_MUX, K_S_MUY, K_ZS_MU, K_ARB_F, K_ARB_R, K_RC_F, K_RC_R) = range(19)
+N_K = 19
 # corner constants C[i, ...]: x_i, y_i, C1, C2, C3, static compression + r, D_s, r_i, C_kappa,
 # C_alpha, m_u g
 C_X, C_Y, C_C1, C_C2, C_C3, C_SR, C_DS, C_R, C_CKAP, C_CALP, C_MUG = range(11)
+N_C = 11
 
 
 def supports(model: Model) -> bool:
@@ -301,11 +303,11 @@ class ReducedLinearCore:
 def warm() -> None:
     """Compile (or load from the cache) the kernels of this module with representative
     arguments (``python -m vdps_hil.jit --warm``)."""
-    x, v4, K, C = np.zeros(16), np.zeros(4), np.ones(19), np.ones((4, 11))
+    x, v4, K, C = np.zeros(16), np.zeros(4), np.ones(N_K), np.ones((4, N_C))
     x[4] = 0.0
     reduced_rhs(x, np.ones((4, 2)) * 0.5, v4, v4, np.array([0.0, 0.0, 1.0]), K, C, np.empty(16), np.empty(4),
                 np.empty(3), np.empty(4), np.empty(4), np.empty(4))
     wheel_spin_jacobian(x, v4, v4 + 1.0, v4 + 1.0, K, C, np.empty(4))
 
 
-__all__ = ["ReducedLinearCore", "STATIC_HOOKS", "reduced_rhs", "supports", "wheel_spin_jacobian"]
+__all__ = ["N_C", "N_K", "ReducedLinearCore", "STATIC_HOOKS", "reduced_rhs", "supports", "wheel_spin_jacobian"]

@@ -165,7 +165,7 @@ def warm() -> None:
     from vdps_hil.model import reduced
 
     reduced.warm()
-    x, K, C = np.zeros(16), np.ones(19), np.ones((4, 11))
+    x, K, C = np.zeros(16), np.ones(reduced.N_K), np.ones((4, reduced.N_C))
     csd = np.full((1, 4, 2), 0.5)
     out = [np.empty((4, 16)), np.empty((4, 4)), np.empty(4), np.empty(4), np.empty(4)]
     for ros2 in (True, False):

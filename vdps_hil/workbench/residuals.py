@@ -319,6 +319,9 @@ def _compiled_rows(rm: RowModel, packed: tuple, st: RowStates, meas: np.ndarray,
 
 
 def _compiled_quantities(rm: RowModel, packed: tuple, st: RowStates, meas: np.ndarray, keep: bool) -> RowQuantities:
+    """The named quantities of every row, made when first read: the kernel runs once more
+    (without the nuisance) for its per-chunk diagnostics, which costs less than holding 99
+    values a row until a candidate reads them."""
     n = len(st.index)
     q = RowQuantities()
     _compiled_rows(rm, packed, st, meas, np.empty((n, 14)), np.empty((n, 8)), None, None, q, keep)
