@@ -141,3 +141,20 @@ def test_wheel_roll_coupling_removes_the_body_roll_rate_from_the_slip_angles():
     assert np.array_equal(slip_angles_rad(MODEL, inp), np.asarray(rolled))  # c_r = 1
     free = dataclasses.replace(MODEL, chassis=dataclasses.replace(MODEL.chassis, wheel_roll_coupling=0.0))
     assert np.allclose(slip_angles_rad(free, inp), still, atol=2e-5, rtol=0.0)
+    # the last result is kept per (inputs, vehicle): asked again, each vehicle gets its own angles,
+    # and a caller changing its copy changes nothing for the next regressor
+    kept = slip_angles_rad(free, inp)
+    kept[:] = 9.0
+    assert np.allclose(slip_angles_rad(free, inp), still, atol=2e-5, rtol=0.0)
+    assert np.array_equal(slip_angles_rad(MODEL, inp), np.asarray(rolled))
+
+
+def test_the_kept_corner_arrays_are_the_files_figures_and_read_only():
+    from vdps_hil.identification.forces import corner_xy_array, roll_centre_heights_m, unsprung_masses_kg
+
+    xy = corner_xy_array(MODEL.geometry)
+    assert xy.tolist() == [list(c) for c in MODEL.geometry.corner_xy_m()]
+    assert unsprung_masses_kg(MODEL).tolist() == [MODEL.axle(i).unsprung_mass_kg for i in range(4)]
+    assert roll_centre_heights_m(MODEL).tolist() == [MODEL.chassis.roll_centre_height_m(i) for i in range(4)]
+    with pytest.raises(ValueError):
+        xy[0, 0] = 1.0

@@ -68,19 +68,70 @@ from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.model.params import Geometry, IdentifiedParams, Vehicle
 
 
+_ARRAYS: dict[tuple, tuple] = {}  # (what, id(vehicle or geometry)) -> (the object, the array)
+
+
+def corner_xy_array(geometry: Geometry) -> np.ndarray:
+    """``np.array(geometry.corner_xy_m())`` (4 x 2) [m], made once per geometry (read-only)."""
+    hit = _ARRAYS.get(("xy", id(geometry)))
+    if hit is None or hit[0] is not geometry:
+        hit = _remember("xy", geometry, np.array(geometry.corner_xy_m()))
+    return hit[1]
+
+
+def unsprung_masses_kg(vehicle: Vehicle) -> np.ndarray:
+    """m_u,i per corner [kg], made once per vehicle (read-only)."""
+    hit = _ARRAYS.get(("m_u", id(vehicle)))
+    if hit is None or hit[0] is not vehicle:
+        hit = _remember("m_u", vehicle, np.array([vehicle.axle(i).unsprung_mass_kg for i in range(4)]))
+    return hit[1]
+
+
+def roll_centre_heights_m(vehicle: Vehicle) -> np.ndarray:
+    """h_rc,i per corner [m] (``model.chassis``; 0 in the paper's model), made once per vehicle
+    (read-only)."""
+    hit = _ARRAYS.get(("h_rc", id(vehicle)))
+    if hit is None or hit[0] is not vehicle:
+        hit = _remember("h_rc", vehicle, np.array([vehicle.chassis.roll_centre_height_m(i) for i in range(4)]))
+    return hit[1]
+
+
+def _remember(what: str, owner, arr: np.ndarray) -> tuple:
+    """Keep ``arr`` for ``owner`` (a frozen vehicle file or its geometry: per-input callers read
+    the same constants at 100 Hz)."""
+    if len(_ARRAYS) > 32:
+        _ARRAYS.clear()
+    arr.flags.writeable = False
+    hit = _ARRAYS[(what, id(owner))] = (owner, arr)
+    return hit
+
+
 def slip_angles_rad(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
     """The slip angles the model's wheels see: ``inp.slip_angle_rad`` (the rigid kinematics of
     ``model.core``) with the body roll rate's share 1 - c_r removed (``model.chassis``, wheel
     roll coupling): alpha_i + (1 - c_r) p (h_cg - r) cos d_i / max(|v_l,i|, v_floor) [rad] with
     the wheel's rolling speed v_l,i = (xd_a - psid y_i) cos d_i + (yd_a + psid x_i) sin d_i. The
-    same array when c_r = 1 (the paper's model) or the roll rate is not measured."""
+    same array when c_r = 1 (the paper's model) or the roll rate is not measured. (The last
+    result is kept: each regressor of one input asks for it.)"""
+    last = _LAST_SLIP
+    if last and last[0] is inp and last[1] is vehicle:
+        return last[2].copy()
+    al = _slip_angles(vehicle, inp)
+    _LAST_SLIP[:] = (inp, vehicle, al.copy())
+    return al
+
+
+_LAST_SLIP: list = []  # (inputs, vehicle, slip angles) of the last ``slip_angles_rad``
+
+
+def _slip_angles(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
     al = np.asarray(inp.slip_angle_rad, dtype=float)
     share = 1.0 - vehicle.chassis.wheel_roll_coupling
     p = inp.omega_radps[0]
     if share == 0.0 or not math.isfinite(p):
         return al
     lever = vehicle.geometry.h_cg_m - vehicle.tire.rolling_radius_m
-    xy = np.array(vehicle.geometry.corner_xy_m())
+    xy = corner_xy_array(vehicle.geometry)
     d = np.asarray(inp.wheel_angle_rad, dtype=float)
     r = inp.omega_radps[2] if math.isfinite(inp.omega_radps[2]) else 0.0
     v_l = (inp.xd_a_mps - r * xy[:, 1]) * np.cos(d) + (inp.yd_a_mps + r * xy[:, 0]) * np.sin(d)
@@ -107,10 +158,10 @@ def tire_forces_body_n(f_a_n, f_b_n, wheel_angle_rad) -> tuple[np.ndarray, np.nd
 def body_moments_nm(geometry: Geometry, f_susp_body_n, f_x_n, f_y_n) -> np.ndarray:
     """(M_x, M_y, M_z) about the CG, vehicle frame, of the strut and tire forces:
     sum_i r_i x F_i with r_i = (x_i, y_i, -h_cg) and F_i = (F_x,i, F_y,i, F_s,i)."""
-    xy = np.array(geometry.corner_xy_m())
+    xy = corner_xy_array(geometry)
     x, y, h = xy[:, 0], xy[:, 1], geometry.h_cg_m
     fs, fx, fy = (np.asarray(v, dtype=float) for v in (f_susp_body_n, f_x_n, f_y_n))
-    return np.array([np.sum(y * fs + h * fy), np.sum(-x * fs - h * fx), np.sum(x * fy - y * fx)])
+    return np.array([(y * fs + h * fy).sum(), (-x * fs - h * fx).sum(), (x * fy - y * fx).sum()])
 
 
 def unsprung_inertia_moments_nm(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
@@ -119,13 +170,13 @@ def unsprung_inertia_moments_nm(vehicle: Vehicle, inp: IdentInputs) -> np.ndarra
     core applies them to the sprung body. a - g in the aux frame is (xdd_a - yd_a psid_v - G_x,
     ydd_a + xd_a psid_v - G_y) (eq 13's left-hand sides over m)."""
     geo = vehicle.geometry
-    xy = np.array(geo.corner_xy_m())
-    mu = np.array([vehicle.axle(i).unsprung_mass_kg for i in range(4)])
+    xy = corner_xy_array(geo)
+    mu = unsprung_masses_kg(vehicle)
     zw = -(geo.h_cg_m - vehicle.tire.rolling_radius_m) + np.asarray(inp.susp_deflection_m, dtype=float)
     psid = inp.psi_v_dot_radps
     ux = -mu * (inp.xdd_a_mps2 - inp.yd_a_mps * psid - inp.gravity_aux_mps2[0])
     uy = -mu * (inp.ydd_a_mps2 + inp.xd_a_mps * psid - inp.gravity_aux_mps2[1])
-    return np.array([np.sum(-zw * uy), np.sum(zw * ux), np.sum(xy[:, 0] * uy - xy[:, 1] * ux)])
+    return np.array([(-zw * uy).sum(), (zw * ux).sum(), (xy[:, 0] * uy - xy[:, 1] * ux).sum()])
 
 
 def moments_from_inputs(vehicle: Vehicle, params: IdentifiedParams, inp: IdentInputs,
@@ -158,20 +209,20 @@ def measured_roll_pitch_moments_nm(vehicle: Vehicle, mass_kg: float, inp: IdentI
                                    ) -> tuple[float, float]:
     """(M_x, M_y) of the ``"measured"`` moment form (module docstring) [N m]."""
     geo = vehicle.geometry
-    xy = np.array(geo.corner_xy_m())
+    xy = corner_xy_array(geo)
     h, r = geo.h_cg_m, vehicle.tire.rolling_radius_m
     fs = (suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
           if strut_n is None else np.asarray(strut_n, dtype=float))
-    fz = float(np.sum(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps)))
+    fz = float(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps).sum())
     hh = np.asarray(inp.susp_deflection_m, dtype=float)
-    mu = np.array([vehicle.axle(i).unsprung_mass_kg for i in range(4)])
+    mu = unsprung_masses_kg(vehicle)
     zw = -(h - r) + hh
     n = road_normal_body(*inp.vehicle_angles_rad)
     f = inp.specific_force_b_mps2
-    lever = h - float(np.mean(hh))
+    lever = h - float(hh.mean())
     ch = vehicle.chassis
     if ch.has_roll_centres:
         lever -= (ch.roll_centre_height_front_m * geo.l_r_m + ch.roll_centre_height_rear_m * geo.l_f_m) / geo.wheelbase_m
-    mx = float(np.sum(xy[:, 1] * fs) + lever * mass_kg * f[1] - r * n[1] * fz + np.sum(zw * mu) * f[1])
-    my = float(-np.sum(xy[:, 0] * fs) - lever * mass_kg * f[0] + r * n[0] * fz - np.sum(zw * mu) * f[0])
+    mx = float((xy[:, 1] * fs).sum() + lever * mass_kg * f[1] - r * n[1] * fz + (zw * mu).sum() * f[1])
+    my = float(-(xy[:, 0] * fs).sum() - lever * mass_kg * f[0] + r * n[0] * fz - (zw * mu).sum() * f[0])
     return mx, my

@@ -10,7 +10,7 @@ taught more than the prior).
 from __future__ import annotations
 
 import math
-from dataclasses import fields, replace
+from dataclasses import fields
 
 import numpy as np
 
@@ -72,10 +72,12 @@ class Identifier:
             jackknife_blocks=self.config.status.sigma_blocks, jackknife_span=self.config.status.sigma_block_updates)
 
     def _collect(self) -> IdentifiedParams:
-        vals = {}
+        """The current estimates of every problem (``_values``: name -> value, kept for
+        ``update``, which changes one problem's at a time)."""
+        self._values = {}
         for name, rls in self._rls.items():
-            vals.update(zip(PROBLEM_PARAMS[name], (float(v) for v in rls.x)))
-        return replace(self._prior, **vals)
+            self._values.update(zip(PROBLEM_PARAMS[name], rls.x.tolist()))
+        return IdentifiedParams(**self._values)
 
     def update(self, inputs: IdentInputs) -> None:
         """Feed one set of estimates; each problem updates if excited (mass, tracking,
@@ -104,7 +106,8 @@ class Identifier:
             if self._excited[name]:
                 self._add_structure(name, reg)
                 self._mismatch[name].observe(inputs.t_ns, reg, x_prior, c_prior)
-                self._params = self._collect()
+                self._values.update(zip(PROBLEM_PARAMS[name], rls.x.tolist()))
+                self._params = IdentifiedParams(**self._values)
                 self._idle[name] = 0
             else:
                 self._idle[name] += 1
@@ -113,14 +116,15 @@ class Identifier:
         """Accumulate g = sum_k A_k^T Q^2 s_k over the rows the update used (``Regressor.structure``
         s_k: an unmodelled term of b), with the problem's forgetting factor; the least-squares bias
         that term causes is C g (``_structure_bias``)."""
-        lam = self.config.problem(name).forgetting
-        self._structure[name] *= lam
+        pc = self.config.problem(name)
+        if pc.forgetting != 1.0:
+            self._structure[name] *= pc.forgetting
         if reg.structure is None:
             return
         a, b = np.asarray(reg.a, dtype=float), np.asarray(reg.b, dtype=float)
         s = np.asarray(reg.structure, dtype=float)
         used = np.asarray(reg.rows, dtype=bool) & np.isfinite(a).all(axis=1) & np.isfinite(b) & np.isfinite(s)
-        q2 = np.asarray(self.config.problem(name).q, dtype=float)[: len(b)] ** 2
+        q2 = np.asarray(pc.q, dtype=float)[: len(b)] ** 2
         self._structure[name] += (a[used] * (q2[used] * s[used])[:, None]).sum(axis=0)
 
     def _structure_bias(self, name: str) -> np.ndarray:

@@ -195,6 +195,7 @@ class MismatchMonitor:
         self.problem = problem
         self.config = status_config
         self._q = np.asarray(q, dtype=float)
+        self._q_inv2 = 1.0 / self._q ** 2  # the design noise variance of each row
         self.names = ROW_NAMES[problem][:len(self._q)]
         self._bin_ns = max(int(round(status_config.mismatch_lag_s * 1e9)), 1)
         self.reset()
@@ -206,16 +207,17 @@ class MismatchMonitor:
     def observe(self, t_ns: int, reg, x_prior: np.ndarray, c_prior: np.ndarray) -> None:
         """The normalised a priori residuals of the rows ``reg`` used (module docstring)."""
         a, b = reg.a, reg.b
-        with np.errstate(invalid="ignore", over="ignore"):
-            use = np.asarray(reg.rows, dtype=bool) & np.isfinite(a).all(axis=1) & np.isfinite(b)
-        if not use.any():
+        use = (np.asarray(reg.rows, dtype=bool) & np.isfinite(a).all(axis=1) & np.isfinite(b)).tolist()
+        if True not in use:
             return
         k_bin = t_ns // self._bin_ns
-        v = b - a @ x_prior
-        s = 1.0 / self._q ** 2 + np.einsum("ij,jk,ik->i", a, c_prior, a)
+        v = (b - a @ x_prior).tolist()
+        s = (self._q_inv2 + np.einsum("ij,jk,ik->i", a, c_prior, a)).tolist()
         self._tests = None
-        for i in np.flatnonzero(use):
-            self._rows[i].add(k_bin, float(v[i] / math.sqrt(s[i])))
+        rows = self._rows
+        for i, u in enumerate(use):
+            if u:
+                rows[i].add(k_bin, v[i] / math.sqrt(s[i]))
 
     def tests(self) -> tuple[RowTest, ...]:
         """The rows' tests, computed once per change of the residuals (the identifier reads them

@@ -128,8 +128,8 @@ from typing import Callable
 import numpy as np
 
 from vdps_hil.identification.config import IdentConfig
-from vdps_hil.identification.forces import (moments_from_inputs, road_normal_body, slip_angles_rad,
-                                            unsprung_inertia_moments_nm)
+from vdps_hil.identification.forces import (corner_xy_array, moments_from_inputs, road_normal_body,
+                                            roll_centre_heights_m, slip_angles_rad, unsprung_inertia_moments_nm)
 from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.identification.inputs import IdentInputs
 from vdps_hil.model.params import IdentifiedParams, Vehicle
@@ -152,10 +152,20 @@ class Regressor:
 
 def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
     """Rows whose largest |entry| reaches the threshold. Non-finite rows pass, so the RLS NaN
-    guard leaves them out *and counts them*."""
-    with np.errstate(invalid="ignore"):
-        mag = np.max(np.abs(a), axis=1)
-        return ((mag >= np.asarray(thresholds)) | ~np.isfinite(mag)) & moving
+    guard leaves them out *and counts them*. (Per row in Python: these are 1-4 rows of 1-3
+    entries, where numpy's reductions cost more than the arithmetic.)"""
+    out = []
+    for row, thr in zip(a.tolist(), thresholds):
+        mag = 0.0
+        for v in row:
+            v = abs(v)
+            if not v <= math.inf:  # NaN: the row passes (np.max propagates it)
+                mag = math.inf
+                break
+            if v > mag:
+                mag = v
+        out.append(mag >= thr)
+    return np.array(out, dtype=bool) & moving
 
 
 def mass_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
@@ -168,10 +178,10 @@ def mass_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
     specific force or the vehicle angles."""
     a = np.array([[inp.zdd_a_mps2 - inp.gravity_aux_mps2[2]]])
     if cfg.mass_form == "paper":
-        b = np.array([np.sum(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps))])
+        b = np.array([suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps).sum()])
     else:
         struts = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
-        b = np.array([np.sum(struts) + vehicle.unsprung_mass_total_kg * a[0, 0]])
+        b = np.array([struts.sum() + vehicle.unsprung_mass_total_kg * a[0, 0]])
     structure = None
     if inp.specific_force_b_mps2 is not None and inp.vehicle_angles_rad is not None:
         m_s = (params or vehicle.params).mass_kg - vehicle.unsprung_mass_total_kg
@@ -240,7 +250,7 @@ def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPa
     m, g = params.mass_kg, inp.gravity_aux_mps2
     psid = inp.psi_v_dot_radps
     acc = np.array([inp.xdd_a_mps2 - inp.yd_a_mps * psid - g[0], inp.ydd_a_mps2 + inp.xd_a_mps * psid - g[1]])
-    b = m * acc - np.array([np.sum(fa * np.cos(d)), np.sum(fa * np.sin(d))])
+    b = m * acc - np.array([(fa * np.cos(d)).sum(), (fa * np.sin(d)).sum()])
     lam = np.asarray(inp.slip_ratio)
     db = np.column_stack([acc, -np.vstack([lam * np.cos(d), lam * np.sin(d)])])  # d/d[m, C_lambda,1..4]
     if len(cfg.cornering.q) == 3:  # the yaw row
@@ -277,14 +287,14 @@ def _cornering_yaw_row(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPar
     little (Gauss-Seidel with the prior I_z early in a drive). ``al``: the slip angles of rows
     1-2 (``forces.slip_angles_rad``). Returns
     (A_3 [m rad], b_3 [N m], db_3/d[m, C_lambda,1..4])."""
-    xy = np.array(vehicle.geometry.corner_xy_m())
+    xy = corner_xy_array(vehicle.geometry)
     d, lam = (np.asarray(v, dtype=float) for v in (inp.wheel_angle_rad, inp.slip_ratio))
     lever = (xy[:, 0] * np.cos(d) + xy[:, 1] * np.sin(d)) * al / 2.0
     lon = xy[:, 0] * np.sin(d) - xy[:, 1] * np.cos(d)  # M_z per unit F_a,i
     wx, wy = (float(v) if math.isfinite(v) else 0.0 for v in inp.omega_radps[:2])  # ESC: no w_x, w_y (as the EKF)
     m_u = unsprung_inertia_moments_nm(vehicle, inp)[2]
     b = (params.inertia_z_kgm2 * inp.omega_dot_radps2[2] - (params.inertia_x_kgm2 - params.inertia_y_kgm2) * wx * wy
-         - float(np.sum(lon * fa)) - m_u)
+         - float((lon * fa).sum()) - m_u)
     return (np.array([lever[0] + lever[1], lever[2] + lever[3]]), b, np.concatenate([[0.0], -lon * lam]))
 
 
@@ -339,7 +349,7 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
     if (cfg.moment_form == "measured" and inp.specific_force_b_mps2 is not None
             and inp.vehicle_angles_rad is not None):
         db[:2, :] = 0.0  # M_x, M_y no longer use the tire stiffnesses
-        fz = float(np.sum(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps)))
+        fz = float(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps).sum())
         tilt = vehicle.tire.rolling_radius_m * road_normal_body(*inp.vehicle_angles_rad)[1] * fz
         structure = np.array([tilt, 0.0, 0.0])
     else:
@@ -353,9 +363,9 @@ def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
     tire stiffnesses; dM/dF_x,i = (0, -h, -y_i), dM/dF_y,i = (h - h_rc,i, 0, x_i) (h_rc,i the
     roll-centre height of the corner's axle, ``model.chassis``; 0 in the paper's model)."""
     geometry = vehicle.geometry
-    xy = np.array(geometry.corner_xy_m())
+    xy = corner_xy_array(geometry)
     h = geometry.h_cg_m
-    h_rc = np.array([vehicle.chassis.roll_centre_height_m(i) for i in range(4)])
+    h_rc = roll_centre_heights_m(vehicle)
     d = np.asarray(inp.wheel_angle_rad)
     lam, al = np.asarray(inp.slip_ratio), slip_angles_rad(vehicle, inp)
     dm_dfx = np.stack([np.zeros(4), np.full(4, -h), -xy[:, 1]])  # 3 x 4
@@ -390,4 +400,4 @@ def balanced_weighting(row_rms, total: float | None = None) -> np.ndarray:
         raise ValueError("row rms values must be finite and positive")
     q = 1.0 / r
     tot = float(len(r)) if total is None else float(total)
-    return q * math.sqrt(tot / float(np.sum(q * q)))
+    return q * math.sqrt(tot / float((q * q).sum()))

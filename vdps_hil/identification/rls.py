@@ -83,6 +83,7 @@ the parameters' units, A row i in (unit of b_i)/(unit of x), Q_ii in 1/(unit of 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -289,12 +290,12 @@ class WeightedRLS:
 
     def _bounded(self, xq_new, drss: float, k: int):
         """The candidate x_Q within the bounds (clamped), or None: non-finite or rejected."""
-        if not (np.all(np.isfinite(xq_new)) and np.isfinite(drss)):
+        if not (np.isfinite(xq_new).all() and math.isfinite(drss)):
             self._c["nan_rows"] += k  # cannot happen with finite rows; never keep it
             self._g_prev = None
             return None
         x_new = xq_new * self._w
-        if np.any(x_new < self._lower) or np.any(x_new > self._upper):
+        if (x_new < self._lower).any() or (x_new > self._upper).any():
             if self.bounds_mode == "reject":
                 self._c["rejected"] += 1
                 self._g_prev = None
@@ -317,7 +318,8 @@ class WeightedRLS:
         d = np.asarray(db_dtheta, dtype=float)
         if d.ndim != 2 or d.shape[0] != self.m:
             raise ValueError(f"db_dtheta must be ({self.m}, p), got {d.shape}")
-        contrib = aq.T @ (qv[sel, None] * np.nan_to_num(d[sel], nan=0.0, posinf=0.0, neginf=0.0))
+        ds = d[sel]
+        contrib = aq.T @ (qv[sel, None] * np.where(np.isfinite(ds), ds, 0.0))
         if self._sens is None or self._sens.shape != contrib.shape:
             self._sens = np.zeros_like(contrib)
         self._sens = self.forgetting * self._sens + contrib

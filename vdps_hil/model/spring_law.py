@@ -37,6 +37,28 @@ def spring_compression_m(vehicle: Vehicle, susp_deflection_m) -> np.ndarray:
     return static + np.asarray(susp_deflection_m, dtype=float)
 
 
+_CONSTANTS: dict[int, tuple] = {}  # id(vehicle) -> (vehicle, its corners' constants)
+_MEMO: dict[tuple, np.ndarray] = {}  # the last results by (id(vehicle), deflections, rates, weight)
+
+
+def _corner_constants(vehicle: Vehicle) -> tuple:
+    """Per corner (static compression, C1, C2, C3, damper, m_u g) and the anti-roll bars'
+    (K_f, K_r, T_f, T_r) or None: read once per vehicle (a frozen file)."""
+    hit = _CONSTANTS.get(id(vehicle))
+    if hit is not None and hit[0] is vehicle:
+        return hit[1]
+    corners = tuple((ax.static_compression_m, ax.spring_c1_npm, ax.spring_c2_per_m, ax.spring_c3_m, ax.damper_nspm,
+                     ax.unsprung_mass_kg * GRAVITY_MPS2) for ax in (vehicle.axle(i) for i in range(4)))
+    ch, geo = vehicle.chassis, vehicle.geometry
+    arb = ((ch.anti_roll_stiffness_front_nmprad, ch.anti_roll_stiffness_rear_nmprad, 2.0 * geo.track_half_front_m,
+            2.0 * geo.track_half_rear_m) if ch.has_anti_roll_bars else None)
+    if len(_CONSTANTS) > 16:
+        _CONSTANTS.clear()
+    _MEMO.clear()  # results are kept by id: none may outlive its vehicle's entry
+    _CONSTANTS[id(vehicle)] = (vehicle, (corners, arb))
+    return corners, arb
+
+
 def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
                         include_unsprung_weight: bool = True) -> np.ndarray:
     """Per corner [N], the spring law of eq 14 (``model.stages.spring_force_n``):
@@ -45,29 +67,41 @@ def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
       paper's reduced model, with eq 14's clamp as the physics core applies it (lift-off when
       K_s H + m_u g <= 0, and never negative);
     * without: the strut force K_s H + D_s Hd acting on the sprung body (no clamp: tension past
-      the free length stands in for the rebound stop, as in the core)."""
-    h = spring_compression_m(vehicle, susp_deflection_m)
-    hd = np.asarray(susp_rate_mps, dtype=float)
-    ch = vehicle.chassis
-    farb = None
-    if ch.has_anti_roll_bars:
-        geo = vehicle.geometry
-        farb = anti_roll_forces_n(ch.anti_roll_stiffness_front_nmprad, ch.anti_roll_stiffness_rear_nmprad,
-                                  2.0 * geo.track_half_front_m, 2.0 * geo.track_half_rear_m,
-                                  np.asarray(susp_deflection_m, dtype=float))
+      the free length stands in for the rebound stop, as in the core).
+
+    The identifier asks for the same corners several times per input (its deflections and rates
+    are tuples): the last few results are kept and a copy returned."""
+    key = None
+    if type(susp_deflection_m) is tuple and type(susp_rate_mps) is tuple:
+        key = (id(vehicle), susp_deflection_m, susp_rate_mps, bool(include_unsprung_weight))
+        hit = _MEMO.get(key)
+        if hit is not None and _CONSTANTS.get(id(vehicle), (None,))[0] is vehicle:
+            return hit.copy()
+    out = _forces(vehicle, susp_deflection_m, susp_rate_mps, include_unsprung_weight)
+    if key is not None:
+        if len(_MEMO) > 8:
+            _MEMO.clear()
+        _MEMO[key] = out.copy()
+    return out
+
+
+def _forces(vehicle: Vehicle, susp_deflection_m, susp_rate_mps, include_unsprung_weight: bool) -> np.ndarray:
+    corners, arb = _corner_constants(vehicle)
+    defl = [float(v) for v in susp_deflection_m]
+    hd = [float(v) for v in susp_rate_mps]
+    farb = None if arb is None else anti_roll_forces_n(*arb, defl)
     out = np.empty(4)
     for i in range(4):
-        ax = vehicle.axle(i)
-        hs = float(h[i])
+        static, c1, c2, c3, damper, mug = corners[i]
+        hs = static + defl[i]
         if not (math.isfinite(hs) and math.isfinite(hd[i])):
             out[i] = math.nan
             continue
-        fsp = spring_force_n(min(hs, 10.0), ax.spring_c1_npm, ax.spring_c2_per_m, ax.spring_c3_m)
+        fsp = spring_force_n(min(hs, 10.0), c1, c2, c3)
         if farb is not None:
-            fsp += float(farb[i])
+            fsp += farb[i]
         if not include_unsprung_weight:
-            out[i] = fsp + ax.damper_nspm * hd[i]
+            out[i] = fsp + damper * hd[i]
             continue
-        mug = ax.unsprung_mass_kg * GRAVITY_MPS2
-        out[i] = 0.0 if fsp + mug <= 0.0 else max(fsp + ax.damper_nspm * hd[i] + mug, 0.0)
+        out[i] = 0.0 if fsp + mug <= 0.0 else max(fsp + damper * hd[i] + mug, 0.0)
     return out
