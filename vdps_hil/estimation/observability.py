@@ -108,6 +108,7 @@ class ObservabilityWindow:
         self.threshold = participation_threshold
         self._phi = np.eye(n)
         self._blocks: list[np.ndarray] = []
+        self._whiteners: dict[tuple, np.ndarray] = {}  # R (shape, dtype, bytes) -> chol(R^-1)
 
     @classmethod
     def for_layout(cls, layout: StateLayout, **kw) -> "ObservabilityWindow":
@@ -127,7 +128,13 @@ class ObservabilityWindow:
         self._phi = phi @ self._phi
 
     def on_update(self, H: np.ndarray, R: np.ndarray) -> None:
-        w = np.linalg.cholesky(np.linalg.inv(R))  # w w^T = R^-1 -> w^T H is whitened
+        key = (R.shape, R.dtype.str, R.tobytes())  # most updates repeat a few noise matrices: whiten once each
+        w = self._whiteners.get(key)
+        if w is None:
+            if len(self._whiteners) > 64:
+                self._whiteners.clear()
+            # w w^T = R^-1 -> w^T H is whitened
+            w = self._whiteners[key] = np.linalg.cholesky(np.linalg.inv(R))
         self._blocks.append(w.T @ H @ self._phi)
 
     @property
