@@ -223,3 +223,23 @@ def test_state_from_named_parts():
     x = m.state_from((1, 2, 3), (0.1, 0.0, 0.5), (20, 0, 0), (0, 0, 0.1), (64.5,) * 4)
     assert len(x) == m.layout.size == 16 and x[m.layout.euler_g][2] == 0.5
     assert len(Model(SEDAN).state_from((0,) * 3, (0,) * 3, (0,) * 3, (0,) * 3, (0,) * 4)) == 24
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_corner_kinematics_are_evaluates_named_slips_and_wheel_angles(compiled):
+    """``Model.corner_kinematics`` (the identifier's feeder) returns exactly ``evaluate``'s
+    ``slip_ratio_i``, ``slip_angle_rad_i`` and ``road_wheel_angle_rad_i``, compiled core or not,
+    on a cornering, braking state with the wheels spinning at different speeds."""
+    model = Model(load_vehicle("sedan-model", "model"), unsprung_dof=False)
+    if not compiled:
+        model.f = model.f_python
+    x = model.design_state(speed_mps=18.0)
+    x[7], x[9], x[11] = 0.3, 0.05, 0.25
+    x[12:16] = [55.0, 56.5, 57.5, 58.0]
+    u, env = Inputs(steer_wheel_angle_rad=0.9), Env(0.02, -0.01)
+    slip, alpha, delta = model.corner_kinematics(x, u, env)
+    _, d = model.evaluate(x, u, env)
+    assert slip == tuple(d[f"slip_ratio_{i}"] for i in range(1, 5))
+    assert alpha == tuple(d[f"slip_angle_rad_{i}"] for i in range(1, 5))
+    assert delta == tuple(d[f"road_wheel_angle_rad_{i}"] for i in range(1, 5))
+    assert delta[0] > delta[1] > 0.0 and delta[2:] == (0.0, 0.0) and min(abs(v) for v in slip) > 1e-3

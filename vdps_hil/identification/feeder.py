@@ -277,10 +277,7 @@ class IdentFeeder:
                  *(float(v) for v in filtered.wheel_speed_radps)]
         if steer is None:
             steer = float(filtered.steer_wheel_angle_rad)
-        _, d = self._model.evaluate(state, Inputs(steer_wheel_angle_rad=steer), env)
-        slip = tuple(d[f"slip_ratio_{i}"] for i in range(1, 5))
-        alpha = tuple(d[f"slip_angle_rad_{i}"] for i in range(1, 5))
-        delta = tuple(d[f"road_wheel_angle_rad_{i}"] for i in range(1, 5))
+        slip, alpha, delta = self._model.corner_kinematics(state, Inputs(steer_wheel_angle_rad=steer), env)
         if not np.isfinite(omega).all():  # the slips need the rates (v_w = v_b + w x r_w)
             slip = alpha = (_NAN,) * 4
         return slip, alpha, delta

@@ -366,6 +366,15 @@ class Model:
         return _named(xd, raw["_acc_b"], raw["_g_b"], raw["_force_b"], raw["_moment_b"], raw["_height_cg"],
                       raw["_air_b"], raw["_rec"])
 
+    def corner_kinematics(self, x, u: Inputs, env: Env) -> tuple[tuple, tuple, tuple]:
+        """(slip ratios, slip angles [rad], road-wheel angles [rad]) per corner at ``x``: the
+        ``slip_ratio_i``, ``slip_angle_rad_i`` and ``road_wheel_angle_rad_i`` of ``evaluate``
+        without its other named diagnostics (the identifier's feeder, at 100 Hz)."""
+        raw: dict = {"_want_air": False}
+        self.f(x, u, env, raw)
+        recs = raw["_rec"]
+        return (tuple(r[3] for r in recs), tuple(r[4] for r in recs), tuple(r[9] for r in recs))
+
     def evaluate_from(self, x, xd, diag, env: Env) -> tuple[list, dict]:
         """``evaluate``'s result from x_dot and the compiled core's diagnostics array ``diag``
         (:mod:`vdps_hil.model.core_kernel`) already computed at ``x``."""
