@@ -81,3 +81,22 @@ def test_yaw_unobservable_at_standstill_with_single_antenna():
         ekf.update(ObsKind.GNSS_POS, np.zeros(3), np.diag([1.0, 1.0, 9.0]))
     rep = win.report()
     assert rep.unobservable == ("psi_g_rad",) and rep.rank == 8
+
+
+def test_whitened_rows_are_chol_of_r_inverse_for_repeated_and_new_noise(rng):
+    """Each update's rows are chol(R^-1)^T H Phi: whether R repeats (the whitener is kept by the
+    matrix's bytes) or changes, in place or not, the blocks equal the formula to the last bit."""
+    win = ObservabilityWindow([f"s{i}" for i in range(4)])
+    r1 = np.diag([0.5, 2.0])
+    r2 = np.array([[1.0, 0.3], [0.3, 0.8]])
+    hs = [rng.normal(size=(2, 4)) for _ in range(5)]
+    rs = [r1, r2, r1.copy(), r2, r1]
+    for h, r in zip(hs, rs):
+        win.on_predict(np.eye(4) + 0.01 * rng.normal(size=(4, 4)))
+        phi = win._phi.copy()
+        win.on_update(h, r)
+        want = np.linalg.cholesky(np.linalg.inv(r)).T @ h @ phi
+        assert np.array_equal(win._blocks[-1], want)
+    r1[0, 0] = 5.0  # the caller reuses its array with new noise: a new whitener
+    win.on_update(hs[0], r1)
+    assert np.array_equal(win._blocks[-1], np.linalg.cholesky(np.linalg.inv(r1)).T @ hs[0] @ win._phi)

@@ -113,15 +113,15 @@ def slip_angles_rad(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
     the wheel's rolling speed v_l,i = (xd_a - psid y_i) cos d_i + (yd_a + psid x_i) sin d_i. The
     same array when c_r = 1 (the paper's model) or the roll rate is not measured. (The last
     result is kept: each regressor of one input asks for it.)"""
-    last = _LAST_SLIP
-    if last and last[0] is inp and last[1] is vehicle:
+    last = _LAST_SLIP[0]  # one tuple, read and replaced whole (threads may share the module)
+    if last[0] is inp and last[1] is vehicle:
         return last[2].copy()
     al = _slip_angles(vehicle, inp)
-    _LAST_SLIP[:] = (inp, vehicle, al.copy())
+    _LAST_SLIP[0] = (inp, vehicle, al.copy())
     return al
 
 
-_LAST_SLIP: list = []  # (inputs, vehicle, slip angles) of the last ``slip_angles_rad``
+_LAST_SLIP: list = [(None, None, None)]  # (inputs, vehicle, slip angles) of the last ``slip_angles_rad``
 
 
 def _slip_angles(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:

@@ -155,7 +155,7 @@ def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
     guard leaves them out *and counts them*. (Per row in Python: these are 1-4 rows of 1-3
     entries, where numpy's reductions cost more than the arithmetic.)"""
     out = []
-    for row, thr in zip(a.tolist(), thresholds):
+    for row, thr in zip(a.tolist(), thresholds, strict=True):
         mag = 0.0
         for v in row:
             v = abs(v)
