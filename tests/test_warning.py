@@ -274,3 +274,18 @@ def test_a_nan_prediction_is_sent_as_a_fault_not_a_crash():
     assert len(decoded) == 1
     assert decoded[0].fields["warning_status"] == WarningStatus.FAULT
     assert decoded[0].fields["warning_ltr"] == 0.0 and decoded[0].fields["warning_peak_roll_rad"] == 0.0
+
+
+def test_importing_the_chain_leaves_python_can_unimported():
+    """python-can imports asammdf and pandas (about 0.3 s of start-up); a replay without
+    predictions and the workbench never send a frame, so importing the warning module and the
+    system node must not import it (the frames' encoder imports it when it makes one)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import sys; import vdps_hil.prediction.warning, vdps_hil.pipeline.node, vdps_hil.workbench.dataset; "
+            "print('can' in sys.modules, 'pandas' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True,
+                         cwd=Path(__file__).resolve().parents[1])
+    assert out.stdout.split() == ["False", "False"], out.stdout + out.stderr

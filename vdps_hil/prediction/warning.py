@@ -67,9 +67,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Mapping, MutableSequence, Sequence
-
-import can
+from typing import TYPE_CHECKING, Iterable, Mapping, MutableSequence, Sequence
 
 from vdps_hil.codecs.can_dbc import WARNING
 from vdps_hil.codecs.can_decode import VdpsCanDecoder
@@ -82,6 +80,9 @@ from .assessment import RolloverAssessment, load_transfer_ratio, predictive_ltr,
 from .offpath import DEADLINES, PredictionRunner
 from .predictor import Cadence, Predictor
 from .result import PredictionResult
+
+if TYPE_CHECKING:  # the frames are python-can messages (made by codecs.can_encode, which imports it)
+    import can
 
 
 class WarningLevel(enum.IntEnum):
