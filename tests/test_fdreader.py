@@ -125,3 +125,26 @@ def test_reader_ends_when_the_parent_goes_away():
     assert rd.proc.returncode == 0
     os.close(m)
     os.close(s)
+
+
+def test_bytes_still_arriving_at_quit_are_read_before_the_reader_exits():
+    """At quit the reader drains the device until it has been quiet for DRAIN_QUIET_S (0.1 s):
+    bytes that reach it 20 ms after the quit (still on their way through the terminal layer
+    when it came) are kept, not lost with the process."""
+    import threading
+
+    m, s = _pty()
+    rd = FdReader("t")
+    try:
+        rd.give(s)
+        os.write(m, b"a" * 500)
+        _collect(rd, 500)
+        late = threading.Timer(0.02, os.write, (m, b"b" * 700))
+        late.start()
+        recs = rd.stop()
+        late.join()
+    finally:
+        os.close(m)
+        os.close(s)
+    got = b"".join(b for kind, _, b in recs if kind == DATA)
+    assert got == b"b" * 700

@@ -13,7 +13,8 @@ set-up commands) and hands the descriptor over a Unix socket (``SCM_RIGHTS``). T
     socket writable  -> send what the buffer holds
     read error / EOF -> one LOST record (the errno text); the fd is closed, the next one the
                         parent hands over is read
-    "Q" from parent  -> read what the device still holds, send everything, exit
+    "Q" from parent  -> read what the device still holds (until it has been quiet for 0.1 s,
+                        at most 1 s), send everything, exit
 
 so each chunk carries the monotonic time at which its read returned (the same clock as the
 parent's ``SystemClock``), and the only waits of the child are ``poll`` and the read itself. The
@@ -45,6 +46,10 @@ READ_SIZE = 65536
 SEND_SIZE = 1 << 20
 DEFAULT_BUFFER_BYTES = 256 << 20
 """Bytes a reader holds for a parent that is behind: minutes of a 921,600 baud link."""
+DRAIN_QUIET_S = 0.1
+"""At quit the device counts as drained once it has been this long without bytes."""
+DRAIN_MAX_S = 1.0
+"""At quit the drain ends after this long even if the device keeps sending."""
 
 
 # --- the child ------------------------------------------------------------------------------
@@ -155,6 +160,26 @@ class _Child:
             self.poller.register(newfd, select.POLLIN)
         return "quit" if b"Q" in msg else None
 
+    def drain(self) -> None:
+        """Read what the device still holds at quit: until it has been quiet for
+        ``DRAIN_QUIET_S`` (at most ``DRAIN_MAX_S``; only ``poll`` waits, never the read). Bytes
+        written before the quit can still be on their way through the kernel's terminal layer
+        when it arrives (a pty moves them to the reader in steps, each a scheduling of its
+        flush work away): a drain that stopped at the first empty poll lost whole writes on a
+        loaded machine."""
+        if self.dev < 0:
+            return
+        dev_poll = select.poll()
+        dev_poll.register(self.dev, select.POLLIN)
+        deadline = time.monotonic() + DRAIN_MAX_S
+        while self.dev >= 0:
+            left = deadline - time.monotonic()
+            if left <= 0.0:
+                break
+            ev = next((e for _, e in dev_poll.poll(int(1000 * min(DRAIN_QUIET_S, left)) + 1)), 0)
+            if not ev or not self.read_dev(bool(ev & _HANGUP)):
+                break
+
     def run(self) -> int:
         quitting = False
         while not quitting:
@@ -174,10 +199,7 @@ class _Child:
                     if what == "gone":
                         return 0
                     quitting = quitting or what == "quit"
-        while self.dev >= 0:  # what the device still holds (never waiting: the fd may block)
-            ev = next((e for fd, e in self.poller.poll(0) if fd == self.dev), 0)
-            if not ev or not self.read_dev(bool(ev & _HANGUP)):
-                break
+        self.drain()
         self.flush_drops()
         self.sock.setblocking(True)
         try:
