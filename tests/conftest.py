@@ -35,7 +35,7 @@ def pytest_unconfigure(config):
 
 
 REALTIME_MODULES = frozenset({"test_bench", "test_bench_cmd", "test_log_cmd", "test_recover_cmd", "test_node",
-                              "test_fdreader"})
+                              "test_fdreader", "test_live_view"})
 """Test modules whose behaviour depends on keeping up with the wall clock (the HIL bench, the
 logger at Table 1 rates, kill -9 while logging, the node reading real ptys and a CAN bus fed at
 the recording's pace). They carry the ``realtime`` marker: ``make test`` runs them in a phase of
@@ -46,7 +46,11 @@ the host's receive times, re-anchored under the delay and came out in another or
 recording's decoding, twice in one run; it passed in every run where it met less load.
 ``test_fdreader`` joined on 2026-12-06: its writers pace a pty by the wall clock against a reader
 process, and its full-buffer test lost whole writes twice beside the heaviest modules, through
-a drain at quit that did not wait for bytes still in the terminal layer, since fixed.)"""
+a drain at quit that did not wait for bytes still in the terminal layer, since fixed.
+``test_live_view`` joined the same day: its served logger and bench run live devices at Table 1
+rates; beside the heaviest modules the logger lost 22,496 CAN frames to sequence gaps and its
+two WebSocket clients received nothing in 90 s (keepalive ping timeout), while the same test
+alone passes in 6 s.)"""
 
 
 def pytest_collection_modifyitems(config, items):
