@@ -54,6 +54,35 @@ NUISANCE_STEP_MPS = 0.02
 
 
 @inline
+def measured_normal_load(c1, c2, c3, sc, ds, mug, h, hd, farb):
+    """Eq 14's normal load [N] from a measured deflection ``h`` and rate ``hd``: the spring
+    (K_s(H) H, H = static compression ``sc`` + h) plus the anti-roll bar's ``farb`` (0 without
+    one), the damper and the unsprung weight ``mug``, with the core's lift-off clamp. Shared by
+    ``RowModel._measured_loads`` and the kernel."""
+    hs = sc + h
+    fsp = c1 * math.exp(c2 * ((hs if hs < 10.0 else 10.0) - c3)) * hs + farb
+    if fsp + mug <= 0.0:
+        return 0.0
+    fz = fsp + ds * hd + mug
+    return 0.0 if fz < 0.0 else fz
+
+
+@inline
+def normal_load_change(r, d, hw, xi, yi, zw, nx, ny, nz):
+    """A corner's normal load changed by ``d`` [N] along the road normal n at its contact point
+    r_c = (x_i, y_i, z_w) - h_w n: its force and moment taken off the residual ``r`` (rows 0-5).
+    Shared by ``RowModel._measured_loads`` and the kernel."""
+    rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
+    fx, fy, fz = nx * d, ny * d, nz * d
+    r[0] -= fx
+    r[1] -= fy
+    r[2] -= fz
+    r[3] -= rcy * fz - rcz * fy
+    r[4] -= rcz * fx - rcx * fz
+    r[5] -= rcx * fy - rcy * fx
+
+
+@inline
 def _measured_loads(r, D, meas, P, CORN, SPR):
     """Mirror of ``RowModel._measured_loads``: the loads from the measured deflections (eq 14)
     in place of the rigid-tire pose's, acting along n at the contact points."""
@@ -74,30 +103,11 @@ def _measured_loads(r, D, meas, P, CORN, SPR):
                 fy1 += D[16 * i] * ly + D[16 * i + 1] * ty
         jac = roll_centre_forces_n(P[P_HF], P[P_HR], P[P_TF], P[P_TR], fy0, fy1)
     for i in range(4):
-        c1, c2, c3, sc, ds, mug = SPR[i, 0], SPR[i, 1], SPR[i, 2], SPR[i, 3], SPR[i, 4], SPR[i, 5]
-        hs = sc + meas[14 + i]
-        fsp = c1 * math.exp(c2 * ((hs if hs < 10.0 else 10.0) - c3)) * hs
-        if P[P_ARB] != 0.0:
-            fsp += farb[i]
-        if fsp + mug <= 0.0:
-            fz = 0.0
-        else:
-            fz = fsp + ds * meas[18 + i] + mug
-            if fz < 0.0:
-                fz = 0.0
+        fz = measured_normal_load(SPR[i, 0], SPR[i, 1], SPR[i, 2], SPR[i, 3], SPR[i, 4], SPR[i, 5], meas[14 + i],
+                                  meas[18 + i], farb[i])
         if P[P_RC] != 0.0:
             fz += jac[i]
-        d = fz - D[16 * i + 2]
-        hw = D[16 * i + 11]
-        xi, yi = CORN[i, 0], CORN[i, 1]
-        rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
-        fx, fy, fz_ = nx * d, ny * d, nz * d
-        r[0] -= fx
-        r[1] -= fy
-        r[2] -= fz_
-        r[3] -= rcy * fz_ - rcz * fy
-        r[4] -= rcz * fx - rcx * fz_
-        r[5] -= rcx * fy - rcy * fx
+        normal_load_change(r, fz - D[16 * i + 2], D[16 * i + 11], CORN[i, 0], CORN[i, 1], zw, nx, ny, nz)
 
 
 @inline
@@ -157,28 +167,35 @@ def _row(x, meas, xd, D, P, CORN, SPR, E, r, ws):
 
 
 @inline
+def corner_force_columns(out, i, delta, ri, hw, alp, xi, yi, zw, nx, ny, nz):
+    """Corner ``i``'s two columns of ``RowModel._slip_columns`` into ``out`` (14 x 8): d r / d F_a,i
+    (column i: along the wheel's heading e_l at the contact point r_c, force, moment r_c x e_l,
+    wheel spin -r_i) and d r / d F_b,i times alpha_i (column 4 + i: along e_t). Shared by the
+    reference and the kernel: one formula for both."""
+    lx, ly, lz, tx, ty, tz = wheel_axes(delta, (nx, ny, nz))
+    rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
+    out[0, i], out[1, i], out[2, i] = -lx, -ly, -lz
+    out[3, i] = -(rcy * lz - rcz * ly)
+    out[4, i] = -(rcz * lx - rcx * lz)
+    out[5, i] = -(rcx * ly - rcy * lx)
+    out[6 + i, i] = ri
+    k = 4 + i
+    out[0, k], out[1, k], out[2, k] = -tx * alp, -ty * alp, -tz * alp
+    out[3, k] = -(rcy * tz - rcz * ty) * alp
+    out[4, k] = -(rcz * tx - rcx * tz) * alp
+    out[5, k] = -(rcx * ty - rcy * tx) * alp
+
+
+@inline
 def _slip_columns(D, P, CORN, out):
     """Mirror of ``RowModel._slip_columns``: (14, 8) d r / d F_a,i (columns 0-3) and d r / d F_b,i
     times alpha_i (columns 4-7) into ``out`` (zeroed here)."""
     nx, ny, nz = D[D_NB], D[D_NB + 1], D[D_NB + 2]
-    zw = P[P_ZW]
     out[:, :] = 0.0
     for i in range(4):
         b = 16 * i
-        delta, ri, hw, alp = D[b + 9], D[b + 10], D[b + 11], D[b + 4]
-        lx, ly, lz, tx, ty, tz = wheel_axes(delta, (nx, ny, nz))
-        xi, yi = CORN[i, 0], CORN[i, 1]
-        rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
-        out[0, i], out[1, i], out[2, i] = -lx, -ly, -lz
-        out[3, i] = -(rcy * lz - rcz * ly)
-        out[4, i] = -(rcz * lx - rcx * lz)
-        out[5, i] = -(rcx * ly - rcy * lx)
-        out[6 + i, i] = ri
-        k = 4 + i
-        out[0, k], out[1, k], out[2, k] = -tx * alp, -ty * alp, -tz * alp
-        out[3, k] = -(rcy * tz - rcz * ty) * alp
-        out[4, k] = -(rcz * tx - rcx * tz) * alp
-        out[5, k] = -(rcx * ty - rcy * tx) * alp
+        corner_force_columns(out, i, D[b + 9], D[b + 10], D[b + 11], D[b + 4], CORN[i, 0], CORN[i, 1], P[P_ZW],
+                             nx, ny, nz)
 
 
 @kernel()

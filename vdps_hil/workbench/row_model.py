@@ -31,6 +31,7 @@ from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.params import Vehicle
 from vdps_hil.model.stages import wheel_axes
 from vdps_hil.units import GRAVITY_MPS2
+from vdps_hil.workbench import row_kernel as rk
 
 __all__ = ["LazyRowQuantities", "RowModel", "RowQuantities"]
 
@@ -138,8 +139,6 @@ class RowModel:
         """The arrays of :func:`~vdps_hil.workbench.row_kernel.residual_rows` (K, C, E, P,
         CORN, SPR) for this model, or None when its core is not compiled (then only
         :meth:`residual` evaluates it)."""
-        from . import row_kernel as rk
-
         if self.model.kernel_arrays is None or not jit.ENABLED:
             return None
         P = np.zeros(rk.N_P)
@@ -216,37 +215,17 @@ class RowModel:
         them)."""
         nx, ny, nz = n_b
         zw = self.model.wheel_centre_z_m
-        exp = math.exp
         farb = None
         if self._arb is not None:
             farb = anti_roll_forces_n(self._arb[0], self._arb[1], self._tracks[0], self._tracks[1], meas[14:18])
         jac = self._roll_centre_forces(rec, n_b) if self._roll_centre is not None else None
         for i in range(4):
-            c1, c2, c3, sc, ds, mug = self._spring[i]
-            hs = sc + meas[14 + i]
-            fsp = c1 * exp(c2 * ((hs if hs < 10.0 else 10.0) - c3)) * hs
-            if farb is not None:
-                fsp += farb[i]
-            if fsp + mug <= 0.0:
-                fz = 0.0
-            else:
-                fz = fsp + ds * meas[18 + i] + mug
-                if fz < 0.0:
-                    fz = 0.0
+            fz = rk.measured_normal_load(*self._spring[i], meas[14 + i], meas[18 + i],
+                                         0.0 if farb is None else farb[i])
             if jac is not None:
                 fz += jac[i]
-            rc = rec[i]
-            d = fz - rc[2]
-            hw = rc[11]
             xi, yi = self.corners[i]
-            rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
-            fx, fy, fz_ = nx * d, ny * d, nz * d
-            r[0] -= fx
-            r[1] -= fy
-            r[2] -= fz_
-            r[3] -= rcy * fz_ - rcz * fy
-            r[4] -= rcz * fx - rcx * fz_
-            r[5] -= rcx * fy - rcy * fx
+            rk.normal_load_change(r, fz - rec[i][2], rec[i][11], xi, yi, zw, nx, ny, nz)
 
     def _roll_centre_forces(self, rec, n_b) -> tuple[float, float, float, float]:
         """J_i (``chassis.roll_centre_forces_n``) from the axles' lateral tire forces in body y
@@ -284,18 +263,6 @@ class RowModel:
         zw = self.model.wheel_centre_z_m
         out = np.zeros((14, 8))
         for i in range(4):
-            delta, ri, hw, alp = rec[i][9], rec[i][10], rec[i][11], rec[i][4]
-            lx, ly, lz, tx, ty, tz = wheel_axes(delta, n_b)
             xi, yi = self.corners[i]
-            rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
-            out[0, i], out[1, i], out[2, i] = -lx, -ly, -lz
-            out[3, i] = -(rcy * lz - rcz * ly)
-            out[4, i] = -(rcz * lx - rcx * lz)
-            out[5, i] = -(rcx * ly - rcy * lx)
-            out[6 + i, i] = ri
-            k = 4 + i
-            out[0, k], out[1, k], out[2, k] = -tx * alp, -ty * alp, -tz * alp
-            out[3, k] = -(rcy * tz - rcz * ty) * alp
-            out[4, k] = -(rcz * tx - rcx * tz) * alp
-            out[5, k] = -(rcx * ty - rcy * tx) * alp
+            rk.corner_force_columns(out, i, rec[i][9], rec[i][10], rec[i][11], rec[i][4], xi, yi, zw, nx, ny, nz)
         return out
