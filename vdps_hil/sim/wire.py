@@ -220,12 +220,21 @@ def pack_imu_packets(t_device_ns: np.ndarray, counters: np.ndarray, specific_for
     tick = imu_codec.NS_PER_FINE_TICK
     a["stf"] = ((np.asarray(t_device_ns, dtype=np.int64) + tick // 2) // tick) & 0xFFFFFFFF
     a["xdi_a"], a["sz_a"] = imu_codec.XDI_ACCELERATION, 12
-    a["acc"] = np.asarray(specific_force_mps2, dtype=float) + 0.0  # -0.0 -> +0.0 as the codec
+    a["acc"] = _codec_axes(specific_force_mps2)
     a["xdi_w"], a["sz_w"] = imu_codec.XDI_RATE_OF_TURN, 12
-    a["gyr"] = np.asarray(angular_rate_radps, dtype=float) + 0.0
+    a["gyr"] = _codec_axes(angular_rate_radps)
     b = a.view(np.uint8).reshape(n, 47)
     b[:, 46] = (-b[:, 1:46].sum(axis=1, dtype=np.int64)) & 0xFF
     return b
+
+
+def _codec_axes(v) -> np.ndarray:
+    """(N, 3) values through the codec's own r^T v with its default ``SENSOR_TO_BODY`` (the
+    identity), term by term in its order: the same doubles, signed zeros included (1 (-0.0) +
+    0 (+0.0) is +0.0, while -0.0 with negative other components stays -0.0)."""
+    v = np.asarray(v, dtype=float).reshape(-1, 3)
+    r = imu_codec.SENSOR_TO_BODY
+    return np.stack([r[0][i] * v[:, 0] + r[1][i] * v[:, 1] + r[2][i] * v[:, 2] for i in range(3)], axis=1)
 
 
 # ---------------------------------------------------------------------------------------------
