@@ -174,3 +174,59 @@ def test_struct_view_of_two_frames():
     assert crc == crc8_bitwise(bytes(w.data)[1:])
     steer = bytes(encode_steer(1.234, 7).data)
     assert struct.pack("<Bh", 7, 1234) == steer[1:] and steer[0] == crc8_bitwise(b"\x30\x01" + steer[1:])
+
+
+# ---------------------------------------------------------------------------------------------
+# the compiled packing against cantools' encoder
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", sorted(LAYOUT))
+@settings(max_examples=150, deadline=None)
+@given(data=st.data())
+def test_packed_payload_is_cantools_encoding_byte_for_byte(name, data):
+    """pack_fields (compiled layout, no cantools) writes what cantools' Message.encode writes
+    for the same raw values, on every message with values over the whole range, clamped ones
+    and a wrapping counter; the CRC then covers the same bytes."""
+    from vdps_hil.codecs import can_encode as ce
+    from vdps_hil.codecs.can_e2e import e2e_crc
+
+    fields, counter = data.draw(_message_strategy(name))
+    dbc = load_dbc()
+    spec = dbc.messages[name]
+    raw = {sig.name: ce._to_raw(sig, fields[sig.name]) for sig in spec.values}
+    raw[spec.counter.name] = counter % (1 << spec.counter.length_bits)
+    if spec.crc is not None:
+        raw[spec.crc.name] = 0
+    ref = bytearray(dbc.db.get_message_by_name(name).encode(raw, scaling=False, strict=True))
+    if spec.crc is not None:
+        ref[0] = e2e_crc(ref, spec.data_id)
+    assert ce.pack_fields(name, fields, counter, dbc=dbc) == bytes(ref)
+    assert ce._compiled(spec.message) is not None  # the project's DBC takes the compiled path
+
+
+def test_a_value_outside_the_range_or_a_missing_signal_goes_to_cantools_and_its_error():
+    """What the compiled path cannot decide (a raw value out of the DBC range, which only a
+    value table could allow; a signal missing) is left to cantools' strict encoder: its error."""
+    import cantools
+
+    from vdps_hil.codecs import can_encode as ce
+
+    spec = load_dbc().messages["VDPS_SteerAngle"]
+    raw = {s.name: 0 for s in (*spec.values, spec.counter)} | {spec.crc.name: 0}
+    assert ce._pack(spec.message, raw) == bytes(spec.dlc)
+    with pytest.raises(cantools.database.EncodeError):
+        ce._pack(spec.message, raw | {spec.values[0].name: spec.values[0].raw_max + 10})
+    with pytest.raises(cantools.database.EncodeError):
+        ce._pack(spec.message, {k: v for k, v in raw.items() if k != spec.counter.name})
+
+
+def test_warning_frames_carry_python_can_attributes_and_convert():
+    from vdps_hil.codecs.can_encode import warning_frame
+
+    f = warning_frame(2, 1.25, 0.3, 0.8, 0, 5, t_ns=1_500_000_000)
+    m = encode_warning(2, 1.25, 0.3, 0.8, 0, 5, t_ns=1_500_000_000)
+    assert (f.timestamp, f.arbitration_id, f.dlc, f.data, f.is_extended_id) == \
+        (m.timestamp, m.arbitration_id, m.dlc, bytes(m.data), m.is_extended_id)
+    assert not (f.is_fd or f.is_remote_frame or f.is_error_frame)
+    assert f.to_message().equals(m)
+    got = VdpsCanDecoder().decode_message(f, t_ns=0)
+    assert got[0].fields["warning_level"] == 2 and got[0].fields["warning_time_to_rollover_s"] == 1.25

@@ -289,3 +289,26 @@ def test_importing_the_chain_leaves_python_can_unimported():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True,
                          cwd=Path(__file__).resolve().parents[1])
     assert out.stdout.split() == ["False", "False"], out.stdout + out.stderr
+
+
+def test_a_replay_that_sends_warnings_imports_neither_python_can_nor_cantools(tmp_path):
+    """The warning frames are packed by the DBC's compiled layout into ``Frame`` objects
+    (``codecs.can_encode``): a complete-chain replay writes its /est/can/vdps frames without
+    importing cantools or python-can (with asammdf and pandas, about 0.45 s of every replay's
+    start-up), in one process and with the decoding child."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from vdps_hil.sim.drive import Drive
+
+    rec = tmp_path / "d.mcap"
+    Drive("paper", profile="table1", seed=3, duration_s=1.0).run(str(rec))
+    for jobs in (1, 2):
+        code = ("import sys; from vdps_hil.app.replay import replay_file; "
+                f"doc = replay_file({str(rec)!r}, output={str(tmp_path / f'o{jobs}.mcap')!r}, jobs={jobs}); "
+                "print(doc['prediction']['frames_sent'], *(m in sys.modules for m in ('can', 'cantools', 'pandas')))")
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True,
+                             cwd=Path(__file__).resolve().parents[1])
+        sent, *imported = out.stdout.split()
+        assert int(sent) >= 40 and imported == ["False", "False", "False"], out.stdout + out.stderr

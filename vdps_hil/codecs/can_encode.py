@@ -113,27 +113,109 @@ def quantize(field_name: str, value, dbc: VdpsDbc | None = None):
 # ---------------------------------------------------------------------------------------------
 # Encoders
 # ---------------------------------------------------------------------------------------------
-def encode_fields(message_name: str, fields: Mapping[str, float], counter: int, *, t_ns: int = 0,
-                  dbc: VdpsDbc | None = None) -> can.Message:
-    """Encode catalogue ``fields`` (SI values) into message ``message_name`` as a ``can.Message``.
+class Frame:
+    """A CAN frame as the encoders make it without python-can (``can.Message``'s attribute names:
+    ``timestamp`` [s], ``arbitration_id``, ``is_extended_id``, ``dlc``, ``data``; a classic data
+    frame: ``is_fd``, ``is_remote_frame``, ``is_error_frame`` False). The warning
+    node returns these: a replay never imports python-can (with asammdf and pandas, about 0.4 s)
+    for frames it only writes; :meth:`to_message` makes the ``can.Message`` a bus sends."""
 
-    Every value field of the message must be present (``KeyError`` otherwise); values are
-    clamped to the DBC range (NaN -> ``ValueError``). ``counter`` is taken modulo 2^bits. The CRC
-    (if the message has one) is computed here. ``timestamp`` = ``t_ns`` / 1e9 s.
-    """
+    __slots__ = ("timestamp", "arbitration_id", "is_extended_id", "dlc", "data")
+    is_fd = is_remote_frame = is_error_frame = False
+
+    def __init__(self, timestamp: float, arbitration_id: int, dlc: int, data: bytes, is_extended_id: bool = False):
+        self.timestamp, self.arbitration_id, self.dlc = timestamp, arbitration_id, dlc
+        self.data, self.is_extended_id = data, is_extended_id
+
+    def __repr__(self) -> str:
+        return f"Frame(t={self.timestamp:.6f} id=0x{self.arbitration_id:X} data={self.data.hex()})"
+
+    def to_message(self) -> can.Message:
+        import can
+
+        return can.Message(timestamp=self.timestamp, arbitration_id=self.arbitration_id,
+                           is_extended_id=self.is_extended_id, dlc=self.dlc, data=self.data)
+
+
+_COMPILED: dict[int, tuple] = {}  # id(message description) -> (description, CompiledMessage or None)
+
+
+def _compiled(message):
+    """The compiled layout of a DBC message description, or None (``codecs.dbc_compile``); kept
+    with a reference to the description, so its id is never another's."""
+    hit = _COMPILED.get(id(message))
+    if hit is not None and hit[0] is message:
+        return hit[1]
+    from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
+
+    try:
+        comp = compile_message(message)
+    except NotCompilable:
+        comp = None
+    if len(_COMPILED) > 256:
+        _COMPILED.clear()
+    _COMPILED[id(message)] = (message, comp)
+    return comp
+
+
+def _pack(message, raw: Mapping[str, int]) -> bytes:
+    """``message.encode(raw, scaling=False, strict=True)``: by the compiled layout when the
+    message compiles, ``raw`` names exactly its signals and every value passes cantools' strict
+    range check (``minimum - |scale| 1e-6 <= raw * scale + offset <= maximum + |scale| 1e-6``);
+    otherwise by cantools, which then raises its own error (or accepts a value-table entry
+    outside the range, a check the cached description cannot make)."""
+    comp = _compiled(message)
+    if comp is not None and len(raw) == len(comp.names):
+        try:
+            vals = [raw[n] for n in comp.names]
+        except KeyError:
+            vals = None
+        if vals is not None and all(map(_in_range, message.signals, vals)):
+            return comp.pack(vals)
+    return bytes(message.encode(dict(raw), scaling=False, strict=True))
+
+
+def _in_range(signal, raw) -> bool:
+    conv = signal.conversion
+    x = conv.raw_to_scaled(raw, decode_choices=False)
+    tol = abs(conv.scale) * 1e-6
+    return ((signal.minimum is None or x >= signal.minimum - tol)
+            and (signal.maximum is None or x <= signal.maximum + tol))
+
+
+def pack_fields(message_name: str, fields: Mapping[str, float], counter: int, *,
+                dbc: VdpsDbc | None = None) -> bytes:
+    """The payload of message ``message_name`` for catalogue ``fields`` (SI values): every value
+    field of the message must be present (``KeyError`` otherwise); values are clamped to the
+    DBC range (NaN -> ``ValueError``); ``counter`` is taken modulo 2^bits; the CRC (if the
+    message has one) is computed here. Packed by the compiled layout (``codecs.dbc_compile``),
+    byte for byte what cantools' encoder writes (tested), without importing cantools."""
     dbc = dbc or load_dbc()
     spec = dbc.messages[message_name]
     raw = {sig.name: _to_raw(sig, fields[sig.name]) for sig in spec.values}
     raw[spec.counter.name] = int(counter) % (1 << spec.counter.length_bits)
     if spec.crc is not None:
         raw[spec.crc.name] = 0
-    data = bytearray(spec.message.encode(raw, scaling=False, strict=True))
+    data = _pack(spec.message, raw)
     if spec.crc is not None:
-        data[0] = e2e_crc(data, spec.data_id)
-    import can
+        data = bytes([e2e_crc(data, spec.data_id)]) + data[1:]
+    return data
 
-    return can.Message(timestamp=t_ns / 1e9, arbitration_id=spec.frame_id, is_extended_id=False,
-                       dlc=spec.dlc, data=bytes(data))
+
+def encode_frame(message_name: str, fields: Mapping[str, float], counter: int, *, t_ns: int = 0,
+                 dbc: VdpsDbc | None = None) -> Frame:
+    """:func:`pack_fields` as a :class:`Frame` (``timestamp`` = ``t_ns`` / 1e9 s)."""
+    dbc = dbc or load_dbc()
+    spec = dbc.messages[message_name]
+    return Frame(t_ns / 1e9, spec.frame_id, spec.dlc, pack_fields(message_name, fields, counter, dbc=dbc))
+
+
+def encode_fields(message_name: str, fields: Mapping[str, float], counter: int, *, t_ns: int = 0,
+                  dbc: VdpsDbc | None = None) -> can.Message:
+    """Encode catalogue ``fields`` (SI values) into message ``message_name`` as a ``can.Message``
+    (:func:`pack_fields`'s rules). ``timestamp`` = ``t_ns`` / 1e9 s.
+    """
+    return encode_frame(message_name, fields, counter, t_ns=t_ns, dbc=dbc).to_message()
 
 
 def encode_wheel_speed_front(wheel_speed_radps_1: float, wheel_speed_radps_2: float, counter: int,
@@ -185,9 +267,9 @@ def encode_steer(steer_wheel_angle_rad: float, counter: int, *, t_ns: int = 0) -
     return encode_fields(STEER, {"steer_wheel_angle_rad": steer_wheel_angle_rad}, counter, t_ns=t_ns)
 
 
-def encode_warning(level: int, time_to_rollover_s: float | None, peak_roll_rad: float, ltr: float,
-                   status: int, counter: int, *, t_ns: int = 0) -> can.Message:
-    """VDPS_Warning with CRC-8/SAE-J1850 over bytes 1..7.
+def warning_frame(level: int, time_to_rollover_s: float | None, peak_roll_rad: float, ltr: float,
+                  status: int, counter: int, *, t_ns: int = 0, dbc: VdpsDbc | None = None) -> Frame:
+    """VDPS_Warning as a :class:`Frame`, CRC-8/SAE-J1850 over bytes 1..7.
 
     ``level`` and ``status`` must be integers 0..3 (``ValueError`` otherwise);
     ``time_to_rollover_s`` None/inf (or >= 65.535 s) = no rollover predicted, negative ->
@@ -197,11 +279,17 @@ def encode_warning(level: int, time_to_rollover_s: float | None, peak_roll_rad: 
     for name, v in (("level", level), ("status", status)):
         if isinstance(v, bool) or int(v) != v or not 0 <= int(v) <= 3:
             raise ValueError(f"warning {name} must be an integer 0..3, got {v!r}")
-    return encode_fields(WARNING, {"warning_level": int(level),
-                                   TTR_FIELD: time_to_rollover_s,
-                                   "warning_peak_roll_rad": peak_roll_rad,
-                                   "warning_ltr": ltr,
-                                   "warning_status": int(status)}, counter, t_ns=t_ns)
+    return encode_frame(WARNING, {"warning_level": int(level),
+                                  TTR_FIELD: time_to_rollover_s,
+                                  "warning_peak_roll_rad": peak_roll_rad,
+                                  "warning_ltr": ltr,
+                                  "warning_status": int(status)}, counter, t_ns=t_ns, dbc=dbc)
+
+
+def encode_warning(level: int, time_to_rollover_s: float | None, peak_roll_rad: float, ltr: float,
+                   status: int, counter: int, *, t_ns: int = 0) -> can.Message:
+    """:func:`warning_frame` as a ``can.Message``."""
+    return warning_frame(level, time_to_rollover_s, peak_roll_rad, ltr, status, counter, t_ns=t_ns).to_message()
 
 
 class VdpsCanEncoder:
@@ -228,9 +316,14 @@ class VdpsCanEncoder:
             raise ValueError(f"sample of kind {sample.kind!r} fills no sensor message of the DBC")
         return out
 
+    def warning_frame(self, level: int, time_to_rollover_s: float | None, peak_roll_rad: float,
+                      ltr: float, status: int, *, t_ns: int = 0) -> Frame:
+        """VDPS_Warning with this encoder's counter, as a :class:`Frame` (:func:`warning_frame`)."""
+        f = warning_frame(level, time_to_rollover_s, peak_roll_rad, ltr, status, self._next[WARNING],
+                          t_ns=t_ns, dbc=self._dbc)
+        self._next[WARNING] += 1
+        return f
+
     def warning(self, level: int, time_to_rollover_s: float | None, peak_roll_rad: float,
                 ltr: float, status: int, *, t_ns: int = 0) -> can.Message:
-        msg = encode_warning(level, time_to_rollover_s, peak_roll_rad, ltr, status,
-                             self._next[WARNING], t_ns=t_ns)
-        self._next[WARNING] += 1
-        return msg
+        return self.warning_frame(level, time_to_rollover_s, peak_roll_rad, ltr, status, t_ns=t_ns).to_message()

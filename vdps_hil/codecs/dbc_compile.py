@@ -11,7 +11,11 @@ as an integer::
                               the DBC start bit, which is the signal's most significant bit)
     signed:                   raw = u - 2^len  if u >= 2^(len - 1)  else u
 
-(n the message length in bytes; ``start``/``len`` the DBC start bit and length). Nothing is
+(n the message length in bytes; ``start``/``len`` the DBC start bit and length). Packing
+(``CompiledMessage.pack``, the encoders) is the inverse: each raw value, taken modulo 2^len
+(two's complement for a signed one), shifted into its integer of the payload, the two byte
+orders' integers merged; bits no signal covers stay 0, as cantools' ``Message.encode`` leaves
+them. Nothing is
 generated or evaluated from the DBC's text: the layout becomes tuples of integers.
 :func:`compile_message` refuses (``NotCompilable``) what this does not cover -- float signals,
 multiplexed and container messages, signals outside the payload or overlapping each other (a
@@ -107,6 +111,25 @@ class CompiledMessage:
                 u = (x >> shift) & mask
                 out[i] = u - (sign << 1) if sign and u >= sign else u
         return out
+
+    def pack(self, raws) -> bytes:
+        """The payload (``length`` bytes) of the raw integers ``raws`` in ``names`` order, the
+        inverse of :meth:`raw`: what cantools' ``Message.encode(..., scaling=False)`` writes.
+        ``ValueError`` naming the signal when a raw value does not fit its bit field."""
+        x = y = 0
+        for group, big in ((self._le, False), (self._be, True)):
+            for i, shift, mask, sign in group:
+                r = raws[i]
+                lo, hi = (-sign, sign - 1) if sign else (0, mask)
+                if not lo <= r <= hi:
+                    raise ValueError(f"{self.name}.{self.names[i]}: raw {r!r} does not fit {lo}..{hi}")
+                if big:
+                    y |= (r & mask) << shift
+                else:
+                    x |= (r & mask) << shift
+        if y:
+            x |= int.from_bytes(y.to_bytes(self.length, "big"), "little")
+        return x.to_bytes(self.length, "little")
 
     def raw_dict(self, data: bytes) -> dict[str, int]:
         """``{signal: raw}`` as ``message.decode(data, decode_choices=False, scaling=False)``."""

@@ -151,13 +151,14 @@ def warm_pipeline_kernels() -> None:
     them, more on a loaded machine), which on the clock is a deadline miss at the start of every
     run. The simulator's kernels are left out (the pipeline process never imports the
     simulator). One VDPS_Warning frame is encoded and thrown away for the same reason: the first
-    encode imports cantools and parses the DBC (0.1-0.25 s quiet), which in the first output
-    cycle made every bench run start 90-150 ms late and skip its first 250-1100 samples."""
+    encode once imported cantools and parsed the DBC (0.1-0.25 s quiet), which in the first
+    output cycle made every bench run start 90-150 ms late and skip its first 250-1100 samples;
+    it now compiles the message's layout (``codecs.can_encode``), a smaller first cost."""
     from vdps_hil import jit
-    from vdps_hil.codecs.can_encode import encode_warning
+    from vdps_hil.codecs.can_encode import warning_frame
 
     jit.warm(skip=("vdps_hil.sim.",))
-    encode_warning(0, None, 0.0, 0.0, 0, 0)
+    warning_frame(0, None, 0.0, 0.0, 0, 0)
 
 
 def _saved_workbench_model(path: str):

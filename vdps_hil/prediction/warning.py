@@ -29,13 +29,14 @@ With T_w = reaction_time_s + margin_s::
 A level may rise at once; it may fall only after it has been held ``hold_s`` without the
 raw level reaching it again (no chatter while the steering crosses zero in a fishhook).
 
-The node (``WarningNode.handle(t_ns, assessment_or_prediction, status) -> [can.Message]``)
--------------------------------------------------------------------------------------------
+The node (``WarningNode.handle(t_ns, assessment_or_prediction, status) -> [Frame]``)
+------------------------------------------------------------------------------------
 Pure (time only from ``t_ns``): sends VDPS_Warning every ``period_s`` (50 Hz) and at once when the
 level changes; fields: ``warning_level``, ``warning_time_to_rollover_s`` (TTR, None when no
 rollover is predicted), ``warning_peak_roll_rad`` (the predicted road-relative roll of largest
 magnitude, signed), ``warning_ltr`` (PLTR, signed), ``warning_status`` (0 valid, 1 not converged,
-2 sensor missing, 3 fault), rolling counter and CRC-8 via :class:`VdpsCanEncoder`. Status: the
+2 sensor missing, 3 fault), rolling counter and CRC-8 via :class:`VdpsCanEncoder`, as
+``codecs.can_encode.Frame`` (python-can's attribute names, ``to_message()``). Status: the
 caller's (estimator/identifier not converged, a sensor missing); 3 (fault) when the latest
 prediction is older than ``max_prediction_age_s``; 1 until the first prediction arrives. The
 level is sent whatever the status: a receiver acts on it only when the status is 0.
@@ -81,8 +82,8 @@ from .offpath import DEADLINES, PredictionRunner
 from .predictor import Cadence, Predictor
 from .result import PredictionResult
 
-if TYPE_CHECKING:  # the frames are python-can messages (made by codecs.can_encode, which imports it)
-    import can
+if TYPE_CHECKING:
+    from vdps_hil.codecs.can_encode import Frame
 
 
 class WarningLevel(enum.IntEnum):
@@ -203,7 +204,7 @@ def load_warning_config(path: str | Path | None = None) -> tuple[WarningPolicy, 
 # the node
 # ---------------------------------------------------------------------------------------------
 class WarningNode:
-    """Pure node: ``handle(t_ns, prediction, status) -> list[can.Message]`` (module docstring).
+    """Pure node: ``handle(t_ns, prediction, status) -> list[Frame]`` (module docstring).
 
     ``prediction``: a new :class:`PredictionResult` or :class:`RolloverAssessment` that is
     usable from ``t_ns`` on, or None (nothing new). Call it at least every ``period_s``."""
@@ -244,7 +245,7 @@ class WarningNode:
         return False
 
     def handle(self, t_ns: int, prediction: PredictionResult | RolloverAssessment | None = None,
-               status: int = WarningStatus.VALID) -> list[can.Message]:
+               status: int = WarningStatus.VALID) -> list[Frame]:
         t_ns = int(t_ns)
         if prediction is not None:
             self._assessment = (prediction if isinstance(prediction, RolloverAssessment)
@@ -265,7 +266,7 @@ class WarningNode:
             ttr, roll, ltr = a.ttr_at(t_ns), a.peak_roll_rad, a.peak_ltr
             if not (math.isfinite(roll) and math.isfinite(ltr)):  # a prediction gone NaN: a fault
                 st, roll, ltr = WarningStatus.FAULT, 0.0, 0.0
-        msg = self._enc.warning(int(self._level), ttr, roll, ltr, int(st), t_ns=t_ns)
+        msg = self._enc.warning_frame(int(self._level), ttr, roll, ltr, int(st), t_ns=t_ns)
         self._last_sent_ns = t_ns
         self.frames_sent += 1
         return [msg]
@@ -316,7 +317,7 @@ class WarningChain:
         """The status of the last ``handle`` after the chain's own rule (a drop or a failure:
         "fault"); the node may still send "fault" for an old prediction."""
         self.keep = keep
-        self.frames: MutableSequence[can.Message] = [] if keep is None else deque(maxlen=keep)
+        self.frames: MutableSequence[Frame] = [] if keep is None else deque(maxlen=keep)
         self.assessments: MutableSequence[RolloverAssessment] = [] if keep is None else deque(maxlen=keep)
         self.frames_total = 0
         self.assessments_total = 0
@@ -336,7 +337,7 @@ class WarningChain:
         self.params = None if params is None else dict(params)
 
     def handle(self, t_ns: int, initial_state: PredictorInitialState | None,
-               status: int = WarningStatus.VALID) -> list[can.Message]:
+               status: int = WarningStatus.VALID) -> list[Frame]:
         t_ns = int(t_ns)
         if initial_state is not None and self.cadence.due(t_ns):
             self.started += 1
@@ -385,7 +386,7 @@ class WarningChain:
 
 
 def replay_assessments(assessments: Sequence[RolloverAssessment], times_ns: Iterable[int],
-                       policy: WarningPolicy, node_config: WarningNodeConfig | None = None) -> list[can.Message]:
+                       policy: WarningPolicy, node_config: WarningNodeConfig | None = None) -> list[Frame]:
     """Re-run a node with another policy over stored assessments (each usable from its t0 +
     ``prediction_latency_s``), called at ``times_ns``: the frames it would have sent. Used for
     lead-time vs false-alarm curves without re-predicting."""
@@ -393,7 +394,7 @@ def replay_assessments(assessments: Sequence[RolloverAssessment], times_ns: Iter
     lat = int(round(node.config.prediction_latency_s * NS_PER_S))
     queue = sorted(assessments, key=lambda a: a.t0_ns)
     k = 0
-    frames: list[can.Message] = []
+    frames: list[Frame] = []
     for t in times_ns:
         ready = None
         while k < len(queue) and queue[k].t0_ns + lat <= t:
