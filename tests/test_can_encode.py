@@ -217,6 +217,13 @@ def test_a_value_outside_the_range_or_a_missing_signal_goes_to_cantools_and_its_
         ce._pack(spec.message, raw | {spec.values[0].name: spec.values[0].raw_max + 10})
     with pytest.raises(cantools.database.EncodeError):
         ce._pack(spec.message, {k: v for k, v in raw.items() if k != spec.counter.name})
+    # a range wider than the bit field (a DBC VdpsDbc refuses): in range, cantools' own error
+    from cantools.database.can import Message, Signal
+
+    narrow = Message(1, "M", 1, [Signal("s", 0, 4, "little_endian", False, minimum=0, maximum=100)], strict=False)
+    assert ce._pack(narrow, {"s": 7}) == b"\x07"
+    with pytest.raises(OverflowError):
+        ce._pack(narrow, {"s": 20})
 
 
 def test_warning_frames_carry_python_can_attributes_and_convert():

@@ -162,8 +162,9 @@ def _pack(message, raw: Mapping[str, int]) -> bytes:
     """``message.encode(raw, scaling=False, strict=True)``: by the compiled layout when the
     message compiles, ``raw`` names exactly its signals and every value passes cantools' strict
     range check (``minimum - |scale| 1e-6 <= raw * scale + offset <= maximum + |scale| 1e-6``);
-    otherwise by cantools, which then raises its own error (or accepts a value-table entry
-    outside the range, a check the cached description cannot make)."""
+    otherwise (or when a value passes the range but not its bit field) by cantools, which then
+    raises its own error (or accepts a value-table entry outside the range, a check the cached
+    description cannot make)."""
     comp = _compiled(message)
     if comp is not None and len(raw) == len(comp.names):
         try:
@@ -171,7 +172,10 @@ def _pack(message, raw: Mapping[str, int]) -> bytes:
         except KeyError:
             vals = None
         if vals is not None and all(map(_in_range, message.signals, vals)):
-            return comp.pack(vals)
+            try:
+                return comp.pack(vals)
+            except ValueError:  # a range wider than the bit field: cantools' own error
+                pass
     return bytes(message.encode(dict(raw), scaling=False, strict=True))
 
 
