@@ -1,6 +1,9 @@
-"""Encoders of the vdps chassis bus (catalogue fields in SI -> ``can.Message``, one rolling
-counter per message in ``VdpsCanEncoder``) and the DBC quantisation they share with the
-simulator (``quantize``: exactly what ``decode(encode(x))`` returns).
+"""Encoders of the vdps chassis bus (catalogue fields in SI -> payload bytes, :class:`Frame` or
+``can.Message``, one rolling counter per message in ``VdpsCanEncoder``) and the DBC quantisation
+they share with the simulator (``quantize``: exactly what ``decode(encode(x))`` returns).
+Payloads are packed by the message's compiled layout (``codecs.dbc_compile``: cantools'
+encoding byte for byte, without importing cantools); python-can is imported only to make a
+``can.Message``.
 
 Signal scaling (DBC linear conversion)
 --------------------------------------
