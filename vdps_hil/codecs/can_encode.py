@@ -34,6 +34,7 @@ raw               integer on the wire                    1
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import TYPE_CHECKING, Mapping, Sequence
 
@@ -140,25 +141,16 @@ class Frame:
                            is_extended_id=self.is_extended_id, dlc=self.dlc, data=self.data)
 
 
-_COMPILED: dict[int, tuple] = {}  # id(message description) -> (description, CompiledMessage or None)
-
-
+@functools.lru_cache(maxsize=256)
 def _compiled(message):
-    """The compiled layout of a DBC message description, or None (``codecs.dbc_compile``); kept
-    with a reference to the description, so its id is never another's."""
-    hit = _COMPILED.get(id(message))
-    if hit is not None and hit[0] is message:
-        return hit[1]
+    """The compiled layout of a DBC message description, or None (``codecs.dbc_compile``). The
+    descriptions hash by identity; the cache holds them, so an id is never another's."""
     from vdps_hil.codecs.dbc_compile import NotCompilable, compile_message
 
     try:
-        comp = compile_message(message)
+        return compile_message(message)
     except NotCompilable:
-        comp = None
-    if len(_COMPILED) > 256:
-        _COMPILED.clear()
-    _COMPILED[id(message)] = (message, comp)
-    return comp
+        return None
 
 
 def _pack(message, raw: Mapping[str, int]) -> bytes:

@@ -149,8 +149,9 @@ def _apply(r, v) -> tuple[float, float, float]:
     return (a * x + b * y + c * z, d * x + e * y + f * z, g * x + h * y + i * z)
 
 
-def _apply_t(r, v) -> tuple[float, float, float]:
-    """r^T @ v."""
+def apply_transpose(r, v) -> tuple:
+    """r^T @ v, term by term (floats, or numpy arrays element-wise: ``sim.wire`` packs whole
+    columns with it, so its signed zeros are the encoder's)."""
     x, y, z = (r[0][i] * v[0] + r[1][i] * v[1] + r[2][i] * v[2] for i in range(3))
     return (x, y, z)
 
@@ -171,7 +172,7 @@ def encode_imu_packet(t_ns: int, specific_force_mps2: Sequence[float],
     if len(f) != 3 or len(w) != 3:
         raise ValueError("specific force and angular rate must have 3 components")
     r = check_rotation(sensor_to_body)
-    f_s, w_s = _apply_t(r, f), _apply_t(r, w)
+    f_s, w_s = apply_transpose(r, f), apply_transpose(r, w)
     data = b"".join((
         struct.pack(">HBH", XDI_PACKET_COUNTER, 2, int(seq) & 0xFFFF),
         struct.pack(">HBI", XDI_SAMPLE_TIME_FINE, 4, t_ns_to_sample_time_fine(t_ns)),

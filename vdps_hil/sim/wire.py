@@ -229,12 +229,11 @@ def pack_imu_packets(t_device_ns: np.ndarray, counters: np.ndarray, specific_for
 
 
 def _codec_axes(v) -> np.ndarray:
-    """(N, 3) values through the codec's own r^T v with its default ``SENSOR_TO_BODY`` (the
-    identity), term by term in its order: the same doubles, signed zeros included (1 (-0.0) +
-    0 (+0.0) is +0.0, while -0.0 with negative other components stays -0.0)."""
+    """(N, 3) values through the codec's own r^T v (``imu_mtdata2.apply_transpose``) with its
+    default ``SENSOR_TO_BODY`` (the identity): the same doubles, signed zeros included (1 (-0.0)
+    + 0 (+0.0) is +0.0, while -0.0 with negative other components stays -0.0)."""
     v = np.asarray(v, dtype=float).reshape(-1, 3)
-    r = imu_codec.SENSOR_TO_BODY
-    return np.stack([r[0][i] * v[:, 0] + r[1][i] * v[:, 1] + r[2][i] * v[:, 2] for i in range(3)], axis=1)
+    return np.stack(imu_codec.apply_transpose(imu_codec.SENSOR_TO_BODY, v.T), axis=1)
 
 
 # ---------------------------------------------------------------------------------------------
