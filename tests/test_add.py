@@ -19,7 +19,7 @@ from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.scenarios import load_scenario
 from vdps_hil.workbench.add import add_effects, before_after, fit_model
 from vdps_hil.workbench.candidates import candidate_for
-from vdps_hil.workbench.dataset import load_drive
+from vdps_hil.workbench.dataset import load_drive, reestimator
 from vdps_hil.workbench.simulation_errors import _initial_state
 
 VEH = load_vehicle("sedan-model")
@@ -144,7 +144,7 @@ def test_add_imu_bias_reestimates_and_removes_half_the_attributable_error(tmp_pa
     path = cached_drive(cache, man, [spec], seed=3000)
     tab = load_drive(path, VEH)
     res = add_effects(tab, VEH, EffectSet(), ["imu_bias"], refit_every_s=4.0,
-                      reestimate=lambda meas: load_drive(path, VEH, imu_effects=meas))
+                      reestimate=reestimator(path, VEH))
     null_tab = load_drive(cached_drive(cache, man, [], seed=3000), VEH)
     null = before_after(null_tab, VEH, EffectSet(), [], refit_every_s=4.0).before["simulation_error"]["2"]["position_m"]
     before = res.before["simulation_error"]["2"]["position_m"]

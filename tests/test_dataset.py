@@ -108,3 +108,32 @@ def test_slice_keeps_gnss_in_span(drive):
     assert len(half) == len(tab) // 2
     assert half.gnss["att"]["t_s"].max() <= half.t_s[-1] + 1e-9
     assert math.isclose(half.t_s[0], tab.t_s[0])
+
+
+def _same_tables(a, b):
+    assert a.t0_ns == b.t0_ns and np.array_equal(a.t_s, b.t_s)
+    assert a.columns.keys() == b.columns.keys()
+    for k in a.columns:
+        assert np.array_equal(a.columns[k], b.columns[k], equal_nan=True), k
+    for k in a.sigma:
+        assert np.array_equal(a.sigma[k], b.sigma[k], equal_nan=True), k
+    assert a.innovations.keys() == b.innovations.keys()
+
+
+def test_reestimator_gives_load_drive_s_tables_and_decodes_once_per_call_after_the_first(drive, monkeypatch):
+    """``reestimator`` (``vdps diagnose --add`` of a sensor effect): for two different sets of
+    IMU effects and for none, the tables equal ``load_drive(..., imu_effects=...)`` exactly; the
+    gyro track is made once, so the first call decodes the recording twice and every later one
+    once (``load_drive`` itself decodes twice per call with effects)."""
+    path, _, _ = drive
+    effect_sets = ([make_effect("imu_bias", accel_bias_z_mps2=0.05, gyro_bias_z_radps=0.002)],
+                   [make_effect("imu_bias", accel_bias_x_mps2=-0.1)], [])
+    expected = [D.load_drive(path, VEH, imu_effects=e) for e in effect_sets]
+    decodes = []
+    real = D.iter_raw
+    monkeypatch.setattr(D, "iter_raw", lambda *a, **k: (decodes.append(a[0]), real(*a, **k))[1])
+    again = D.reestimator(path, VEH)
+    for e, want in zip(effect_sets, expected):
+        _same_tables(again(e), want)
+    assert len(decodes) == 2 + 1 + 1
+    assert not np.array_equal(expected[0].columns["vel_g_mps_u"], expected[1].columns["vel_g_mps_u"])

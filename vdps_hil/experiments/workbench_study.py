@@ -277,7 +277,7 @@ def run_job(job: dict) -> dict:
     from vdps_hil.model.params import load_vehicle
 
     from vdps_hil.workbench.add import add_effects
-    from vdps_hil.workbench.dataset import load_drive
+    from vdps_hil.workbench.dataset import load_drive, reestimator
     from vdps_hil.workbench.ranking.selection import rank
 
     veh = load_vehicle(model_file(job.get("truth")))
@@ -303,7 +303,7 @@ def run_job(job: dict) -> dict:
             out["hit"] = is_hit(rk, job["effect"])
         if job.get("add"):
             r = add_effects(tab, veh, EffectSet(), [job["add"]],
-                            reestimate=lambda meas: load_drive(path, veh, imu_effects=meas))
+                            reestimate=reestimator(path, veh))
             out["add_before"] = r.before.get("simulation_error")
             out["add_after"] = r.after.get("simulation_error")
             out["add_parameters"] = r.parameters

@@ -79,7 +79,7 @@ from .streams import (ANGULAR_RATE_FIELDS, GNSS_ATT_FIELDS, GNSS_POS_FIELDS, GNS
                       SUSPENSION_FIELDS, WHEEL_SPEED_FIELDS, WHEEL_TORQUE_FIELDS, DatasetError, Smoother, Streams,
                       iter_raw, on_grid, smoothed, stream)
 
-__all__ = ["DatasetConfig", "DatasetError", "DriveTable", "load_drive", "build_table",
+__all__ = ["DatasetConfig", "DatasetError", "DriveTable", "load_drive", "reestimator", "build_table",
            "table_from_samples", "column_names", "STATE_COLUMNS"]
 
 STATE_COLUMNS = ("pos_g_m_e", "pos_g_m_n", "pos_g_m_u", "vel_g_mps_e", "vel_g_mps_n", "vel_g_mps_u",
@@ -362,14 +362,16 @@ def _gnss_tables(samples, origin, rel) -> dict[str, dict[str, np.ndarray]]:
 
 def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap=None,
                config: DatasetConfig | None = None, imu_effects: Sequence[MeasurementEffect] = (),
-               samples: Iterable[Sample] | None = None) -> DriveTable:
+               samples: Iterable[Sample] | None = None, gyro=None) -> DriveTable:
     """Recording (``/raw/`` only) + model vehicle -> :class:`DriveTable`.
 
     ``samples``: already decoded samples (skips decoding); ``imu_effects``: measurement effects
     taken out of the IMU readings before the estimator runs (module docstring). The samples
     stream through the estimator while the table's signals are collected as packed arrays
     (:class:`Streams`); with ``imu_effects`` the recording is decoded twice (the gyro track
-    first, then the corrected samples), so no list of samples is ever held."""
+    first, then the corrected samples), so no list of samples is ever held; ``gyro``: that
+    track (``imu_effects.gyro_track``) already made from the same recording, arguments and
+    sensor set (:func:`reestimator`), to decode once."""
     if getattr(vehicle, "kind", None) != "model":
         raise DatasetError("the workbench reads only a model vehicle file (kind = \"model\")")
     cfg = config or DatasetConfig()
@@ -385,8 +387,10 @@ def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap
         raise DatasetError(f"{path}: no decodable /raw/ samples")
     system, kind_map, make_nodes, desc = _system_config(rates, fields, vehicle, cfg)
     if imu_effects:
-        track = gyro_track(renamed(itertools.chain(head, it), kind_map, make_nodes()), cfg.cutoff_hz)
-        feed = imu_corrected(renamed(source(), kind_map, make_nodes()), imu_effects, track)
+        track = gyro_track(renamed(itertools.chain(head, it), kind_map, make_nodes()), cfg.cutoff_hz) \
+            if gyro is None else gyro
+        feed = imu_corrected(renamed(source() if gyro is None else itertools.chain(head, it), kind_map,
+                                     make_nodes()), imu_effects, track)
     else:
         feed = renamed(itertools.chain(head, it), kind_map, make_nodes())
     streams = Streams()
@@ -394,6 +398,35 @@ def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap
     table = build_table(streams, run, vehicle, cfg)
     table.sensors = desc
     return table
+
+
+def reestimator(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap=None,
+                config: DatasetConfig | None = None) -> Callable[[Sequence[MeasurementEffect]], DriveTable]:
+    """``effects -> load_drive(path, vehicle, ..., imu_effects=effects)`` for re-estimating one
+    drive with several sets of sensor effects (``vdps diagnose --add``): the gyro track does not
+    depend on the effects, so it is made on the first call and reused, and each later call
+    decodes the recording once instead of twice (the same tables)."""
+    kept: list = []  # [the track] once made
+
+    def run(effects: Sequence[MeasurementEffect]) -> DriveTable:
+        if not effects:
+            return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=config)
+        if not kept:
+            kept.append(_drive_gyro_track(path, vehicle, dbc=dbc, signalmap=signalmap, config=config))
+        return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=config, imu_effects=effects,
+                          gyro=kept[0])
+    return run
+
+
+def _drive_gyro_track(path, vehicle: Vehicle, *, dbc, signalmap, config: DatasetConfig | None):
+    """The recording's gyro track as :func:`load_drive` makes it with ``imu_effects``."""
+    cfg = config or DatasetConfig()
+    it = iter(iter_raw(path, dbc=dbc, signalmap=signalmap))
+    head, rates, fields = sample_stats(it)
+    if not head:
+        raise DatasetError(f"{path}: no decodable /raw/ samples")
+    _, kind_map, make_nodes, _ = _system_config(rates, fields, vehicle, cfg)
+    return gyro_track(renamed(itertools.chain(head, it), kind_map, make_nodes()), cfg.cutoff_hz)
 
 
 def _system_config(rates, fields, vehicle: Vehicle, cfg: DatasetConfig):

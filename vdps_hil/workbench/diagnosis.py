@@ -34,7 +34,7 @@ from vdps_hil.model.effects.base import Effect
 from vdps_hil.model.params import Vehicle
 
 from .add import AddResult, FittedModel, add_effects, cleaned_residuals, rms_by_equation
-from .dataset import DatasetConfig, DriveTable, load_drive
+from .dataset import DatasetConfig, DriveTable, load_drive, reestimator
 from .fit_budget import FitSubset, add_window, fit_subset
 from .memory import release_freed_memory
 from .ranking.config import RankingConfig
@@ -262,10 +262,11 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
             rk.messages.append(win.message())
         cut = win.cut if win is not None else (lambda tab: tab)
 
+        again = reestimator(path, vehicle, dbc=dbc, signalmap=signalmap, config=ds)
+
         def reestimate(meas_effects):
             say("re-running the estimator with the sensor effects taken out of the IMU readings")
-            return cut(load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=ds,
-                                  imu_effects=meas_effects))
+            return cut(again(meas_effects))
 
         add_res = add_effects(cut(table), vehicle, model_effects, list(add),
                               user_effects=user_effects,
