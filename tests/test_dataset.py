@@ -117,7 +117,12 @@ def _same_tables(a, b):
         assert np.array_equal(a.columns[k], b.columns[k], equal_nan=True), k
     for k in a.sigma:
         assert np.array_equal(a.sigma[k], b.sigma[k], equal_nan=True), k
-    assert a.innovations.keys() == b.innovations.keys()
+    for tabs_a, tabs_b in ((a.innovations, b.innovations), (a.gnss, b.gnss)):
+        assert tabs_a.keys() == tabs_b.keys()
+        for k in tabs_a:
+            assert tabs_a[k].keys() == tabs_b[k].keys()
+            for c in tabs_a[k]:
+                assert np.array_equal(tabs_a[k][c], tabs_b[k][c], equal_nan=True), (k, c)
 
 
 def test_reestimator_gives_load_drive_s_tables_and_decodes_once_per_call_after_the_first(drive, monkeypatch):

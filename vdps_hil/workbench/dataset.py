@@ -381,18 +381,15 @@ def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap
 
     if samples is not None and imu_effects and iter(samples) is samples:
         samples = list(samples)  # a one-shot iterator cannot be read twice
-    it = iter(source())
-    head, rates, fields = sample_stats(it)
-    if not head:
-        raise DatasetError(f"{path}: no decodable /raw/ samples")
-    system, kind_map, make_nodes, desc = _system_config(rates, fields, vehicle, cfg)
+    feed, system, kind_map, make_nodes, desc = _configured(source(), path, vehicle, cfg)
     if imu_effects:
-        track = gyro_track(renamed(itertools.chain(head, it), kind_map, make_nodes()), cfg.cutoff_hz) \
-            if gyro is None else gyro
-        feed = imu_corrected(renamed(source() if gyro is None else itertools.chain(head, it), kind_map,
-                                     make_nodes()), imu_effects, track)
+        track = gyro
+        if track is None:  # one pass for the track, then the samples again
+            track = gyro_track(renamed(feed, kind_map, make_nodes()), cfg.cutoff_hz)
+            feed = source()
+        feed = imu_corrected(renamed(feed, kind_map, make_nodes()), imu_effects, track)
     else:
-        feed = renamed(itertools.chain(head, it), kind_map, make_nodes())
+        feed = renamed(feed, kind_map, make_nodes())
     streams = Streams()
     run = run_system(streams.tap(feed), vehicle, system, cfg.period_s)
     table = build_table(streams, run, vehicle, cfg)
@@ -405,28 +402,32 @@ def reestimator(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalma
     """``effects -> load_drive(path, vehicle, ..., imu_effects=effects)`` for re-estimating one
     drive with several sets of sensor effects (``vdps diagnose --add``): the gyro track does not
     depend on the effects, so it is made on the first call and reused, and each later call
-    decodes the recording once instead of twice (the same tables)."""
+    decodes the recording once instead of twice (the same tables; a drive without a gyro has no
+    track, and each call then makes its own)."""
+    cfg = config or DatasetConfig()
     kept: list = []  # [the track] once made
 
     def run(effects: Sequence[MeasurementEffect]) -> DriveTable:
         if not effects:
-            return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=config)
+            return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=cfg)
         if not kept:
-            kept.append(_drive_gyro_track(path, vehicle, dbc=dbc, signalmap=signalmap, config=config))
-        return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=config, imu_effects=effects,
+            feed, _, kind_map, make_nodes, _ = _configured(iter_raw(path, dbc=dbc, signalmap=signalmap), path,
+                                                           vehicle, cfg)
+            kept.append(gyro_track(renamed(feed, kind_map, make_nodes()), cfg.cutoff_hz))
+        return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=cfg, imu_effects=effects,
                           gyro=kept[0])
     return run
 
 
-def _drive_gyro_track(path, vehicle: Vehicle, *, dbc, signalmap, config: DatasetConfig | None):
-    """The recording's gyro track as :func:`load_drive` makes it with ``imu_effects``."""
-    cfg = config or DatasetConfig()
-    it = iter(iter_raw(path, dbc=dbc, signalmap=signalmap))
+def _configured(samples: Iterable[Sample], path, vehicle: Vehicle, cfg: DatasetConfig):
+    """(the samples from their start, SystemConfig, kind map, calibration-node factory, sensor-set
+    description): the node configured from the first seconds of ``samples`` (``sample_stats``)."""
+    it = iter(samples)
     head, rates, fields = sample_stats(it)
     if not head:
         raise DatasetError(f"{path}: no decodable /raw/ samples")
-    _, kind_map, make_nodes, _ = _system_config(rates, fields, vehicle, cfg)
-    return gyro_track(renamed(itertools.chain(head, it), kind_map, make_nodes()), cfg.cutoff_hz)
+    system, kind_map, make_nodes, desc = _system_config(rates, fields, vehicle, cfg)
+    return itertools.chain(head, it), system, kind_map, make_nodes, desc
 
 
 def _system_config(rates, fields, vehicle: Vehicle, cfg: DatasetConfig):
