@@ -385,7 +385,7 @@ def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap
     if imu_effects:
         track = gyro
         if track is None:  # one pass for the track, then the samples again
-            track = gyro_track(renamed(feed, kind_map, make_nodes()), cfg.cutoff_hz)
+            track = _gyro_track(feed, kind_map, make_nodes, cfg)
             feed = source()
         feed = imu_corrected(renamed(feed, kind_map, make_nodes()), imu_effects, track)
     else:
@@ -413,10 +413,17 @@ def reestimator(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalma
         if not kept:
             feed, _, kind_map, make_nodes, _ = _configured(iter_raw(path, dbc=dbc, signalmap=signalmap), path,
                                                            vehicle, cfg)
-            kept.append(gyro_track(renamed(feed, kind_map, make_nodes()), cfg.cutoff_hz))
+            kept.append(_gyro_track(feed, kind_map, make_nodes, cfg))
         return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=cfg, imu_effects=effects,
                           gyro=kept[0])
     return run
+
+
+def _gyro_track(samples: Iterable[Sample], kind_map, make_nodes, cfg: DatasetConfig):
+    """The IMU corrections' gyro track (``imu_effects.gyro_track``) of the samples as the estimator
+    sees them (kind map, fresh calibration nodes): one definition for :func:`load_drive` and the
+    track :func:`reestimator` keeps, which must be the same."""
+    return gyro_track(renamed(samples, kind_map, make_nodes()), cfg.cutoff_hz)
 
 
 def _configured(samples: Iterable[Sample], path, vehicle: Vehicle, cfg: DatasetConfig):
