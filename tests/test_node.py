@@ -290,3 +290,43 @@ def test_a_lost_serial_port_leaves_the_inline_loop_waiting_not_spinning():
             os.close(sl)
     assert not runner.is_alive() and not node.errors
     assert cpu_s < 0.15 * wall_s
+
+
+def test_a_reader_thread_told_to_stop_still_reads_what_the_port_holds(drive_recording):
+    """``readers="threads"``: a reader thread held up on a busy machine lags the wire, so when the
+    adapters are told to stop the IMU's pty may still hold seconds of bytes (a CI run beside a
+    CPU hog received 16 KB of 56 KB). The thread reads what the port holds before it
+    closes: here every byte written before the stop is received and decoded (the thread is run
+    with the stop already set, so it reads nothing before it)."""
+    with RecordingReader(io.BytesIO(drive_recording)) as r:
+        chunks = [d for dev, _, d in r.iter_raw_serial() if dev == "imu"]
+    blob = b"".join(chunks)
+    ptys = {dev: pty.openpty() for dev in ("imu", "gnss")}
+    for _, sl in ptys.values():
+        tty.setraw(sl)
+    clock = BenchClock(1.0)
+    node = PipelineNode(make_system("sedan-model", 1000.0, 0.001), "virtual:test-node-drain",
+                        os.ttyname(ptys["imu"][1]), os.ttyname(ptys["gnss"][1]), clock, readers="threads")
+    try:
+        node.open()
+        clock.start()
+        os.set_blocking(ptys["imu"][0], False)
+        written = 0
+        try:  # as much as the pty holds without a reader (4-20 KB here)
+            while written < len(blob):
+                written += os.write(ptys["imu"][0], blob[written:written + 512])
+        except BlockingIOError:
+            pass
+        time.sleep(0.1)  # through the pty
+        node._stop_adapters.set()
+        node._reader(node.imu)
+        node._handle_events(node.sub.drain(100_000))
+    finally:
+        node.can.close()
+        for m, sl in ptys.values():
+            os.close(m)
+            os.close(sl)
+    assert not node.errors
+    assert written >= 3000
+    assert node.received_counts()["imu_bytes"] == written
+    assert node.received_counts()["samples"] >= written // 200  # an MTData2 packet is under 100 bytes

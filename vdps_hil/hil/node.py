@@ -159,14 +159,24 @@ class PipelineNode:
 
         open_all(self.adapters, errors=(Exception,))
 
-    def _reader(self, a) -> None:
+    def _reader(self, a, drain_s: float = 2.0) -> None:
+        """A reader thread: poll ``a`` until the adapters are told to stop, then read what the
+        device already holds (at most ``drain_s``): a reader thread held up on a busy machine
+        lags the wire by seconds, and a pty holds up to 64 KiB; the inline loop reads until the
+        ports are empty too. The CAN bus stays open after reading stops: the last frames go out."""
+        stop = self._stop_adapters
         try:
-            if a is self.can:  # the bus stays open after reading stops: the last frames go out
-                stop = self._stop_adapters
+            try:
                 while not stop.is_set():
                     a.poll(self.poll_s)
-            else:
-                a.run(self._stop_adapters, self.poll_s)
+                end = time.monotonic() + drain_s
+                while a.poll(0.0) and time.monotonic() < end:
+                    pass
+            except EndOfInput:
+                pass
+            finally:
+                if a is not self.can:
+                    a.close()
         except Exception as e:  # noqa: BLE001 - reported, never a silent thread death
             self.errors.append(f"{a.name}: {type(e).__name__}: {e}")
 
