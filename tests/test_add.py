@@ -17,7 +17,7 @@ from vdps_hil.prediction.predictor import Predictor
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.scenarios import load_scenario
-from vdps_hil.workbench.add import add_effects, before_after, fit_model
+from vdps_hil.workbench.add import WORSE_FRACTION, add_effects, before_after, fit_model, residual_change, worse_equations
 from vdps_hil.workbench.candidates import candidate_for
 from vdps_hil.workbench.dataset import load_drive, reestimator
 from vdps_hil.workbench.simulation_errors import _initial_state
@@ -154,3 +154,16 @@ def test_add_imu_bias_reestimates_and_removes_half_the_attributable_error(tmp_pa
     assert before - after >= 0.5 * attributable, (before, after, null)
     bz = res.parameters["imu_bias"]["accel_bias_z_mps2"]["value"]
     assert bz == pytest.approx(0.05, abs=0.015)  # the hidden truth (ImuBias default); the fit alone gave ~0.12
+
+
+def test_an_equation_the_added_effect_makes_worse_is_named():
+    """The relative change per equation, and the equations whose residual rose by more than
+    WORSE_FRACTION (10 %): on the real RAV4 drive an IMU bias added against the ranking's
+    verdict halved the yaw residual and raised the lateral one 46 % (819 -> 1196 N)."""
+    before = {"residual_rms": {"lat": 819.1, "yaw": 800.8, "long": 0.0, "roll": 10.0}}
+    after = {"residual_rms": {"lat": 1196.4, "yaw": 398.3, "long": 5.0, "roll": 10.0 * (1 + WORSE_FRACTION)}}
+    ch = residual_change(before, after)
+    assert ch["lat"] == pytest.approx(0.4606, abs=1e-3) and ch["yaw"] == pytest.approx(-0.5026, abs=1e-3)
+    assert ch["long"] is None  # nothing to compare with
+    assert set(worse_equations(before, after)) == {"lat"}  # a rise of exactly 10 % is not "worse"
+    assert worse_equations(before, None) == {}

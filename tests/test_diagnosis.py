@@ -101,6 +101,15 @@ def test_add_through_the_diagnosis_fills_after(stripped, monkeypatch, tmp_path):
     dg = diagnose(path, veh, add=["aero_drag"], save_model=tmp_path / "m.json", with_simulation=False)
     doc = dg.to_json()
     assert doc["after"]["residual_rms"]["long"] < 0.2 * doc["before"]["residual_rms"]["long"]
+    # the change per equation, in the JSON and in the text; drag makes no balance worse
+    change = doc["workbench"]["added"]["residual_change"]["long"]
+    assert change < -0.8 and doc["workbench"]["added"]["worse"] == []
+    line = next(ln for ln in dg.summary_lines() if ln.lstrip().startswith("long "))
+    assert f"({100 * change:+.0f} %)" in line
+    assert not any(ln.startswith("worse with") for ln in dg.summary_lines())
+    dg.add.after["residual_rms"]["lat"] = 1.5 * doc["before"]["residual_rms"]["lat"]
+    assert ("worse with aerodynamic drag: the lat residual rose 50 %; the added effect does not explain this "
+            "balance on this drive") in dg.summary_lines()
     from vdps_hil.workbench.model_file import load_model
 
     _, eff, _ = load_model(tmp_path / "m.json", veh)

@@ -144,6 +144,7 @@ def test_report_words_and_tables(report):
     path, dg = report
     text = path.read_text()
     assert "aerodynamic drag" in text and "Before and after" in text
+    assert "<th>change</th>" in text and " (worse)" not in text  # drag makes no balance worse
     assert "held-out" in text
     assert render_report(dg) == text
     # the same residual in plots and tables, each labelled

@@ -36,6 +36,20 @@ def test_strict_dbc_failure_suggests_the_map_switch(real_data):
     assert "dbc_strict = false" in str(e.value)
 
 
+def test_a_lax_dbc_is_announced_once_per_file(real_data, caplog):
+    """``strict=False`` is logged, once per file and process (a diagnosis with ``--add`` loaded
+    the RAV4's DBC five times and said so five times)."""
+    from vdps_hil.adapters import signalmap_decoder as SD
+
+    p = real_data / RAV4 / "toyota_new_mc_pt_generated.dbc"
+    SD._LAX_LOGGED.discard(p.resolve())
+    with caplog.at_level("WARNING", logger=SD.__name__):
+        for _ in range(3):
+            load_dbc(p, strict=False)
+    said = [r for r in caplog.records if "strict=False" in r.getMessage()]
+    assert len(said) == 1 and str(p.resolve()) in said[0].getMessage()
+
+
 def test_unreadable_dbc(tmp_path):
     bad = tmp_path / "bad.dbc"
     bad.write_bytes(b"BO_ this is not a dbc \xff\xfe")

@@ -51,9 +51,13 @@ def load_dbc(path: str | os.PathLike, *, strict: bool = True) -> DbcDescription:
                                      "dbc_strict = false in the signal map to load it anyway") \
                     from None
         raise SignalMapError(f"DBC {p}: cannot load: {msg}") from None
-    if not strict:
+    if not strict and p not in _LAX_LOGGED:  # once per file: a diagnosis loads it for every pass
+        _LAX_LOGGED.add(p)
         log.warning("DBC %s loaded with strict=False (the signal map allows it)", p)
     return db
+
+
+_LAX_LOGGED: set[Path] = set()
 
 
 # --- the decoder ----------------------------------------------------------------------------

@@ -147,7 +147,31 @@ class AddResult:
     parameters: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
-        return {"added": list(self.added), "parameters": self.parameters, "before": self.before, "after": self.after}
+        return {"added": list(self.added), "parameters": self.parameters, "before": self.before, "after": self.after,
+                "residual_change": residual_change(self.before, self.after),
+                "worse": sorted(worse_equations(self.before, self.after))}
+
+
+WORSE_FRACTION = 0.10
+"""An equation whose cleaned residual RMS rises by more than this fraction when effects are added
+is reported as made worse (text, JSON, HTML): the effect does not explain that balance on this
+drive, and the user asked for it anyway or the re-estimation moved the states against it."""
+
+
+def residual_change(before: dict, after: dict | None) -> dict[str, float | None]:
+    """Relative change of each equation's residual RMS, (after - before) / before (None where
+    either is missing or the before is zero)."""
+    rb, ra = before.get("residual_rms", {}), (after or {}).get("residual_rms", {})
+    out = {}
+    for eq, b in rb.items():
+        a = ra.get(eq)
+        out[eq] = (a - b) / b if a is not None and b is not None and b > 0 else None
+    return out
+
+
+def worse_equations(before: dict, after: dict | None) -> dict[str, float]:
+    """Equation -> relative rise, for the equations made worse (:data:`WORSE_FRACTION`)."""
+    return {eq: c for eq, c in residual_change(before, after).items() if c is not None and c > WORSE_FRACTION}
 
 
 def cleaned_residuals(table: DriveTable, model: FittedModel, vehicle: Vehicle, config: RankingConfig | None = None

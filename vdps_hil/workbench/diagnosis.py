@@ -33,7 +33,7 @@ from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import Effect
 from vdps_hil.model.params import Vehicle
 
-from .add import AddResult, FittedModel, add_effects, cleaned_residuals, rms_by_equation
+from .add import AddResult, FittedModel, add_effects, cleaned_residuals, rms_by_equation, worse_equations
 from .dataset import DatasetConfig, DriveTable, load_drive, reestimator
 from .fit_budget import FitSubset, add_window, fit_subset
 from .memory import release_freed_memory
@@ -119,6 +119,8 @@ class Diagnosis:
             out.append("worst windows: " + "; ".join(f"{w.t_start_s:.1f}-{w.t_end_s:.1f} s ({w.equation})"
                                                       for w in self.windows))
         out += _before_after_lines(self.before, self.add.after if self.add else None)
+        if self.add is not None:
+            out += _worse_lines(self.add)
         out += self.simulation_notes()
         if self.saved_model:
             out.append(f"model written to {self.saved_model}")
@@ -165,7 +167,8 @@ def _before_after_lines(before: dict, after: dict | None) -> list[str]:
                 continue
             unit = EQUATION_UNITS.get(eq, "")
             a = ra.get(eq)
-            out.append(f"  {eq:14s} {v:10.4g}" + (f" -> {a:10.4g}" if a is not None else "") + f" {unit}")
+            change = f"  ({100 * (a - v) / v:+.0f} %)" if a is not None and v > 0 else ""
+            out.append(f"  {eq:14s} {v:10.4g}" + (f" -> {a:10.4g}" if a is not None else "") + f" {unit}" + change)
     sb = before.get("simulation_error", {})
     sa = (after or {}).get("simulation_error", {})
     if sb:
@@ -180,6 +183,15 @@ def _before_after_lines(before: dict, after: dict | None) -> list[str]:
                 parts.append(s)
             out.append(f"  {h:>4s} s  " + ", ".join(parts) + _diverged_phrase(d, a))
     return out
+
+
+def _worse_lines(add) -> list[str]:
+    """A line per equation the added effects made worse (``add.worse_equations``)."""
+    from .words import EFFECT_LABELS
+
+    names = ", ".join(EFFECT_LABELS.get(a, a) for a in add.added)
+    return [f"worse with {names}: the {eq} residual rose {100 * c:.0f} %; the added effect does not explain "
+            f"this balance on this drive" for eq, c in worse_equations(add.before, add.after).items()]
 
 
 def _sim_value(d: dict, k: str, unit: str) -> str:
