@@ -35,18 +35,19 @@ browser:
 # and the browser, and to hold the suite's share of the CPU beside other work), then the
 # real-time tests (tests/conftest.py REALTIME_MODULES) on their own, collecting only their modules
 # (collecting the whole suite took 10 s; the full tree if the list cannot be read), a module to a
-# worker, one worker per core: they wait on the wall clock more than they compute (one at a time
-# they used 0.73 of one core: 117 s of CPU in 161 s), they must hold on a loaded machine anyway,
-# and two at a time took 87 s (2026-12-06).
+# worker, one worker per core the machine leaves idle at that moment (tools/realtime_workers.py:
+# one at a time they use 0.73 of a core and took 161 s, two at a time 87 s on a quiet machine;
+# beside one CPU-bound process they run one at a time, as they always did).
 PYTEST := $(PY) -m pytest -q -p no:cacheprovider --timeout 600
 WORKERS := $(shell echo $$(( $$(nproc) + 1 )))
-RT_WORKERS := $(shell nproc)
 RT_MODULES = $(PY) -P -c "import sys; sys.path.insert(0, 'tests'); import conftest; \
 	print(' '.join(f'tests/{m}.py' for m in sorted(conftest.REALTIME_MODULES)))"
 test: setup browser
 	@$(PYTEST) -n $(WORKERS) --dist loadfile --durations 15 -m "not realtime" tests; a=$$?; \
 	rt=$$($(RT_MODULES)) || rt=tests; \
-	$(PYTEST) -n $(RT_WORKERS) --dist loadfile --durations 5 -m realtime $${rt:-tests}; b=$$?; \
+	n=$$($(PY) tools/realtime_workers.py) || n=1; \
+	if [ "$${n:-1}" -gt 1 ] 2>/dev/null; then par="-n $$n --dist loadfile"; else par=""; fi; \
+	$(PYTEST) $$par --durations 5 -m realtime $${rt:-tests}; b=$$?; \
 	echo "make test: other tests exit $$a, real-time tests exit $$b"; [ $$a -eq 0 ] && [ $$b -eq 0 ]
 
 clean:
