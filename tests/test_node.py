@@ -181,6 +181,18 @@ def _paced_feed(recording: bytes, clock, channel: str, masters: dict, stop_after
         stop_after.set()
 
 
+def _pty_node(channel: str, readers: str, **kw):
+    """Raw pseudo-terminals for the IMU and the GNSS and a node of the sedan's system reading them
+    and python-can's virtual bus ``channel``: (ptys {device: (master, slave)}, clock, node)."""
+    ptys = {dev: pty.openpty() for dev in ("imu", "gnss")}
+    for _, sl in ptys.values():
+        tty.setraw(sl)
+    clock = BenchClock(1.0)
+    node = PipelineNode(make_system("sedan-model", 1000.0, 0.001), f"virtual:{channel}", os.ttyname(ptys["imu"][1]),
+                        os.ttyname(ptys["gnss"][1]), clock, readers=readers, **kw)
+    return ptys, clock, node
+
+
 @pytest.mark.parametrize("readers", ["inline", "threads"])
 def test_the_node_reads_real_ptys_and_a_can_bus_and_hands_over_every_sample(drive_recording, readers):
     """The node run live on python-can's virtual bus and real pseudo-terminals, the drive fed at
@@ -192,14 +204,10 @@ def test_the_node_reads_real_ptys_and_a_can_bus_and_hands_over_every_sample(driv
     earlier than the wire time, and as late as the host's read delays)."""
     from vdps_hil.record.decode import decode_recording
 
-    ptys = {dev: pty.openpty() for dev in ("imu", "gnss")}
-    for _, sl in ptys.values():
-        tty.setraw(sl)
-    clock = BenchClock(1.0)
-    system = make_system("sedan-model", 1000.0, 0.001)
     channel = f"test-node-live-{readers}"
-    node = PipelineNode(system, f"virtual:{channel}", os.ttyname(ptys["imu"][1]), os.ttyname(ptys["gnss"][1]),
-                        clock, readers=readers, deadline_s=None)  # every sample, however loaded the machine
+    # deadline_s=None: every sample, however loaded the machine
+    ptys, clock, node = _pty_node(channel, readers, deadline_s=None)
+    system = node.system
     node.open()
     fed, stop = threading.Event(), threading.Event()
     clock.start()
@@ -260,12 +268,7 @@ def test_a_lost_serial_port_leaves_the_inline_loop_waiting_not_spinning():
     trying to reconnect at its own pace, and the inline loop still waits for input between
     passes: over 1 s of the outage the loop's thread uses under 0.15 s of CPU (the process used
     0.02-0.03 s, the thread 0.02 s; the loop that polled the lost port without waiting, 0.29-0.35 s)."""
-    ptys = {dev: pty.openpty() for dev in ("imu", "gnss")}
-    for _, sl in ptys.values():
-        tty.setraw(sl)
-    clock = BenchClock(1.0)
-    node = PipelineNode(make_system("sedan-model", 1000.0, 0.001), "virtual:test-node-lost",
-                        os.ttyname(ptys["imu"][1]), os.ttyname(ptys["gnss"][1]), clock, readers="inline")
+    ptys, clock, node = _pty_node("test-node-lost", "inline")
     node.open()
     clock.start()
     stop = threading.Event()
@@ -301,12 +304,7 @@ def test_a_reader_thread_told_to_stop_still_reads_what_the_port_holds(drive_reco
     with RecordingReader(io.BytesIO(drive_recording)) as r:
         chunks = [d for dev, _, d in r.iter_raw_serial() if dev == "imu"]
     blob = b"".join(chunks)
-    ptys = {dev: pty.openpty() for dev in ("imu", "gnss")}
-    for _, sl in ptys.values():
-        tty.setraw(sl)
-    clock = BenchClock(1.0)
-    node = PipelineNode(make_system("sedan-model", 1000.0, 0.001), "virtual:test-node-drain",
-                        os.ttyname(ptys["imu"][1]), os.ttyname(ptys["gnss"][1]), clock, readers="threads")
+    ptys, clock, node = _pty_node("test-node-drain", "threads")
     try:
         node.open()
         clock.start()
