@@ -105,6 +105,37 @@ def test_device_vanishes_and_returns_reconnects_and_counts_outage(tmp_path):
     assert b"".join(e.data for e in sub.drain()) == b"before\r\nafter\r\n"
 
 
+def test_a_port_has_one_reader_and_a_reconnect_cannot_steal_another_s(tmp_path):
+    """A device path is opened exclusively: a second adapter on the same pty is refused in one
+    line, and an adapter reconnecting by path to a pty now held by another reader stays lost
+    instead of sharing (and halving) its bytes; once the holder closes, it reconnects."""
+    p = Pty(str(tmp_path / "imu"))
+    first = SerialAdapter("imu", p.link, 921600)
+    second = SerialAdapter("imu2", p.link, 921600, reconnect_s=0.02)
+    first.open()
+    try:
+        with pytest.raises(AdapterError) as e:
+            second.open()
+        assert "cannot open" in str(e.value) and "lock" in str(e.value) and "\n" not in str(e.value)
+        second.health.state = "lost"  # as after an outage: retrying by path
+        t_end = time.monotonic() + 0.3
+        while time.monotonic() < t_end:
+            second.poll(0.01)
+        p.write(b"only for the first\r\n")
+        pump(first, lambda: first.health.bytes >= 20)
+        assert first.health.bytes == 20 and second.health.bytes == 0 and second.health.state == "lost"
+        first.close()
+        pump(second, lambda: second.health.state == "open")
+        assert second.health.state == "open"
+        shared = SerialAdapter("imu3", p.link, 921600, serial_kwargs={"exclusive": False})
+        shared.open()  # asked for: no lock taken
+        shared.close()
+    finally:
+        first.close()
+        second.close()
+        p.down()
+
+
 def test_file_adapter_stamps_by_wire_time(tmp_path):
     f = tmp_path / "cap.bin"
     f.write_bytes(b"x" * 10_000)

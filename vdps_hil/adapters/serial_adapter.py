@@ -94,6 +94,12 @@ class SerialAdapter(_SerialBase):
     a USB adapter delivering a burst) can make that earlier than the previous message of the
     same stream, which cannot be: such a time is raised to the previous one (counted
     ``time_clamped``, not an error), so live samples of a device never go backwards.
+
+    A device path is opened for exclusive access (pyserial's ``exclusive``: an advisory lock
+    that every other exclusive opener respects), so two readers never share a port and each
+    silently lose the bytes the other read -- e.g. an adapter reconnecting by path to a
+    pseudo-terminal whose number the kernel has since given to another device (seen in a test
+    run: 80 % of a pty's bytes went elsewhere). ``serial_kwargs={"exclusive": False}`` shares it.
     """
 
     def __init__(self, name: str, port: str, baud: int = DEFAULT_BAUD, protocol=None, *,
@@ -122,9 +128,11 @@ class SerialAdapter(_SerialBase):
     def _open(self) -> None:
         import serial
 
+        kw = dict(self.serial_kwargs)
+        if "://" not in self.port:  # a device path: this adapter is its only reader (docstring)
+            kw.setdefault("exclusive", True)
         try:
-            self.ser = serial.serial_for_url(self.port, baudrate=self.baud, timeout=0.05,
-                                             **self.serial_kwargs)
+            self.ser = serial.serial_for_url(self.port, baudrate=self.baud, timeout=0.05, **kw)
         except (serial.SerialException, OSError, ValueError) as e:
             msg = str(e).splitlines()[0] if str(e) else type(e).__name__
             if self.health.state == "closed":
