@@ -17,7 +17,7 @@ from vdps_hil.prediction.predictor import Predictor
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.scenarios import load_scenario
-from vdps_hil.workbench.add import WORSE_FRACTION, add_effects, before_after, fit_model, residual_change, worse_equations
+from vdps_hil.workbench.add import WORSE_FRACTION, WORSE_NOISE, add_effects, before_after, fit_model, residual_change, worse_equations
 from vdps_hil.workbench.candidates import candidate_for
 from vdps_hil.workbench.dataset import load_drive, reestimator
 from vdps_hil.workbench.simulation_errors import _initial_state
@@ -158,7 +158,7 @@ def test_add_imu_bias_reestimates_and_removes_half_the_attributable_error(tmp_pa
 
 def test_an_equation_the_added_effect_makes_worse_is_named():
     """The relative change per equation, and the equations whose residual rose by more than
-    WORSE_FRACTION (10 %): on the real RAV4 drive an IMU bias added against the ranking's
+    WORSE_FRACTION (10 %) and WORSE_NOISE (half) of its noise sigma: on the real RAV4 drive an IMU bias added against the ranking's
     verdict halved the yaw residual and raised the lateral one 46 % (819 -> 1196 N)."""
     before = {"residual_rms": {"lat": 819.1, "yaw": 800.8, "long": 0.0, "roll": 10.0}}
     after = {"residual_rms": {"lat": 1196.4, "yaw": 398.3, "long": 5.0, "roll": 10.0 * (1 + WORSE_FRACTION)}}
@@ -167,3 +167,6 @@ def test_an_equation_the_added_effect_makes_worse_is_named():
     assert ch["long"] is None  # nothing to compare with
     assert set(worse_equations(before, after)) == {"lat"}  # a rise of exactly 10 % is not "worse"
     assert worse_equations(before, None) == {}
+    # a rise within half the equation's noise sigma is the noise of re-estimating, not "worse"
+    assert worse_equations(before, after, {"lat": 377.2 / WORSE_NOISE + 1.0}) == {}
+    assert set(worse_equations(before, after, {"lat": 377.2 / WORSE_NOISE - 1.0})) == {"lat"}

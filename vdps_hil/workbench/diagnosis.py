@@ -33,7 +33,7 @@ from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import Effect
 from vdps_hil.model.params import Vehicle
 
-from .add import AddResult, FittedModel, add_effects, cleaned_residuals, rms_by_equation, worse_equations
+from .add import AddResult, FittedModel, add_effects, cleaned_residuals, rms_by_equation
 from .dataset import DatasetConfig, DriveTable, load_drive, reestimator
 from .fit_budget import FitSubset, add_window, fit_subset
 from .memory import release_freed_memory
@@ -186,12 +186,15 @@ def _before_after_lines(before: dict, after: dict | None) -> list[str]:
 
 
 def _worse_lines(add) -> list[str]:
-    """A line per equation the added effects made worse (``add.worse_equations``)."""
+    """A line per equation the added effects made worse (``AddResult.worse``)."""
     from .words import EFFECT_LABELS
 
+    from .residuals import EQUATION_UNITS
+
     names = ", ".join(EFFECT_LABELS.get(a, a) for a in add.added)
-    return [f"worse with {names}: the {eq} residual rose {100 * c:.0f} %; the added effect does not explain "
-            f"this balance on this drive" for eq, c in worse_equations(add.before, add.after).items()]
+    rb, ra = add.before["residual_rms"], add.after["residual_rms"]
+    return [f"worse with {names}: the {eq} residual rose {100 * c:.0f} % ({rb[eq]:.4g} -> {ra[eq]:.4g} "
+            f"{EQUATION_UNITS.get(eq, '')})" for eq, c in add.worse().items()]
 
 
 def _sim_value(d: dict, k: str, unit: str) -> str:

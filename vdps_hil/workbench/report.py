@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from . import report_figures as F
-from .add import WORSE_FRACTION, residual_change, rms_by_equation
+from .add import residual_change, rms_by_equation
 from .residuals import EQUATION_LABELS, EQUATION_UNITS, EQUATIONS
 
 __all__ = ["write_report", "render_report"]
@@ -87,11 +87,11 @@ def _fmt(v, unit="", nd=4) -> str:
     return f"{v:.{nd}g}{(' ' + unit) if unit else ''}"
 
 
-def _change(c: float | None) -> str:
-    """A relative change of a residual, labelled "worse" above :data:`add.WORSE_FRACTION`."""
+def _change(c: float | None, worse: bool) -> str:
+    """A relative change of a residual, labelled when it is worse (``AddResult.worse``)."""
     if c is None:
         return "-"
-    return f"{100 * c:+.0f} %" + (" (worse)" if c > WORSE_FRACTION else "")
+    return f"{100 * c:+.0f} %" + (" (worse)" if worse else "")
 
 
 def _img(uri: str, alt: str) -> str:
@@ -182,9 +182,9 @@ def render_report(dg) -> str:
         parts.append("<h2>Before and after</h2>")
         parts.append(_fig(F.fig_before_after(dg), "before and after"))
         b, a = dg.add.before, dg.add.after
-        change = residual_change(b, a)
+        change, worse = residual_change(b, a), dg.add.worse()
         rows = [[EQUATION_LABELS.get(eq, eq), _fmt(v, EQUATION_UNITS.get(eq, "")),
-                 _fmt(a["residual_rms"].get(eq), EQUATION_UNITS.get(eq, "")), _change(change.get(eq))]
+                 _fmt(a["residual_rms"].get(eq), EQUATION_UNITS.get(eq, "")), _change(change.get(eq), eq in worse)]
                 for eq, v in b["residual_rms"].items()]
         parts.append(_table(rows, ["equation", "cleaned residual RMS before", "after", "change"]))
         sb, sa = b.get("simulation_error", {}), a.get("simulation_error", {})
