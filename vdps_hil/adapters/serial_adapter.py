@@ -98,8 +98,9 @@ class SerialAdapter(_SerialBase):
     A device path is opened for exclusive access (pyserial's ``exclusive``: an advisory lock
     that every other exclusive opener respects), so two readers never share a port and each
     silently lose the bytes the other read -- e.g. an adapter reconnecting by path to a
-    pseudo-terminal whose number the kernel has since given to another device (seen in a test
-    run: 80 % of a pty's bytes went elsewhere). ``serial_kwargs={"exclusive": False}`` shares it.
+    pseudo-terminal whose number the kernel has since given to another device (the likely cause,
+    not proven, of a test run that lost 80 % of a pty's bytes). ``serial_kwargs={"exclusive":
+    False}`` shares it.
     """
 
     def __init__(self, name: str, port: str, baud: int = DEFAULT_BAUD, protocol=None, *,
