@@ -162,8 +162,8 @@ class PipelineNode:
     def _reader(self, a, drain_s: float = 2.0) -> None:
         """A reader thread: poll ``a`` until the adapters are told to stop, then read what the
         device already holds (at most ``drain_s``): a reader thread held up on a busy machine
-        lags the wire by seconds, and a pty holds up to 64 KiB; the inline loop reads until the
-        ports are empty too. The CAN bus stays open after reading stops: the last frames go out."""
+        lags the wire, and a pty holds kilobytes unread (20 KiB here); the inline loop reads until
+        the ports are empty too. The CAN bus stays open after reading stops: the last frames go out."""
         stop = self._stop_adapters
         try:
             try:
