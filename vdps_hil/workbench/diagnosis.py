@@ -33,7 +33,7 @@ from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import Effect
 from vdps_hil.model.params import Vehicle
 
-from .add import AddResult, FittedModel, add_effects, cleaned_residuals, rms_by_equation
+from .add import AddResult, FittedModel, add_effects, cleaned_residuals, residual_change, rms_by_equation
 from .dataset import DatasetConfig, DriveTable, load_drive, reestimator
 from .fit_budget import FitSubset, add_window, fit_subset
 from .memory import release_freed_memory
@@ -41,7 +41,7 @@ from .ranking.config import RankingConfig
 from .ranking.results import Ranking
 from .ranking.selection import rank
 from .regimes import RegimeBins, Window, regime_bins, worst_windows
-from .residuals import EquationResiduals, compute_residuals
+from .residuals import EQUATION_UNITS, EquationResiduals, compute_residuals
 from .simulation_errors import SimErrors, simulation_errors
 
 __all__ = ["Diagnosis", "diagnose"]
@@ -155,11 +155,10 @@ def _nis(table: DriveTable) -> dict:
 
 
 def _before_after_lines(before: dict, after: dict | None) -> list[str]:
-    from .residuals import EQUATION_UNITS
-
     out = []
     rb = before.get("residual_rms", {})
     ra = (after or {}).get("residual_rms", {})
+    changes = residual_change(before, after)
     if rb:
         out.append("residual RMS per equation" + (" (before -> after)" if after else "") + ":")
         for eq, v in rb.items():
@@ -167,7 +166,8 @@ def _before_after_lines(before: dict, after: dict | None) -> list[str]:
                 continue
             unit = EQUATION_UNITS.get(eq, "")
             a = ra.get(eq)
-            change = f"  ({100 * (a - v) / v:+.0f} %)" if a is not None and v > 0 else ""
+            c = changes.get(eq)
+            change = f"  ({100 * c:+.0f} %)" if c is not None else ""
             out.append(f"  {eq:14s} {v:10.4g}" + (f" -> {a:10.4g}" if a is not None else "") + f" {unit}" + change)
     sb = before.get("simulation_error", {})
     sa = (after or {}).get("simulation_error", {})
@@ -188,8 +188,6 @@ def _before_after_lines(before: dict, after: dict | None) -> list[str]:
 def _worse_lines(add) -> list[str]:
     """A line per equation the added effects made worse (``AddResult.worse``)."""
     from .words import EFFECT_LABELS
-
-    from .residuals import EQUATION_UNITS
 
     names = ", ".join(EFFECT_LABELS.get(a, a) for a in add.added)
     rb, ra = add.before["residual_rms"], add.after["residual_rms"]
