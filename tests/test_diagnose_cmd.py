@@ -45,6 +45,7 @@ def test_full_run(drive, tmp_path, capsys):
     (["{drive}", "--effect-file", "missing.py"], "no such file"),
     (["{drive}", "--dbc", "x.dbc"], "--signalmap"),
     (["{drive}", "--model", "bad.toml"], "cannot read model file"),
+    (["{drive}", "--sensorset", "nosuch"], "cannot read sensor set"),
 ])
 def test_errors_are_one_line(drive, capsys, args, msg):
     rc = main(["diagnose", *[a.replace("{drive}", str(drive)) for a in args], "--quiet", "--no-simulation"])
@@ -96,6 +97,9 @@ def test_the_real_rav4_drive_is_diagnosed_with_its_own_sensor_set(tmp_path, caps
     assert len(ranked) >= 5 and all(e["explained_fraction"] is not None for e in ranked[:3])
     # what the partial set can judge is judged (the lateral and yaw balances, the GNSS innovations)
     assert set(doc["before"]["residual_rms"]) >= {"lat", "yaw"}
+    # the set it ran with, inferred (no --sensorset): single antenna, so the real-car rows (test_configure)
+    sset = doc["workbench"]["sensor_set"]
+    assert sset["source"] == "inferred from the recording" and sset["gnss"] == "single_antenna", sset
     if doc["recommendation"] is not None:
         top = next(e for e in ranked if e["effect"] == doc["recommendation"])
         assert top["plausible"] and top["excited"], top

@@ -16,7 +16,7 @@ Examples:
   vdps diagnose drive.mcap --add aero_drag --save-model sedan-drag.toml
   vdps diagnose drive.mcap --effect-file my_effect.py
   vdps diagnose rav4.mcap --vehicle configs/vehicles/rav4-model.toml \\
-      --dbc toyota.dbc --signalmap configs/signalmaps/toyota_rav4_2017.toml
+      --dbc toyota.dbc --signalmap configs/signalmaps/toyota_rav4_2017.toml --sensorset rav4-can-ublox
 
 \b
 Only the recording's /raw/ topics and the model vehicle file are read. --effect-file and
@@ -31,6 +31,9 @@ Only the recording's /raw/ topics and the model vehicle file are read. --effect-
               help="A model written by --save-model (identified parameters and effects, .toml or .json).")
 @click.option("--dbc", default=None, metavar="FILE", help="DBC of a foreign CAN bus (with --signalmap).")
 @click.option("--signalmap", default=None, metavar="FILE", help="Signal map of the CAN frames to bus fields.")
+@click.option("--sensorset", default=None, metavar="NAME",
+              help="Sensor set (configs/sensorsets/NAME or a .toml path) [default: inferred from the recording's "
+                   "fields, as vdps replay].")
 @click.option("--report", "report_dir", default=None, metavar="DIR", help="Write DIR/report.html (self-contained).")
 @click.option("--json", "json_out", default=None, metavar="FILE", help="Write the JSON result to FILE ('-' stdout).")
 @click.option("--add", "add", multiple=True, metavar="NAME",
@@ -42,8 +45,8 @@ Only the recording's /raw/ topics and the model vehicle file are read. --effect-
               help="Load the named entry point of group vdps_hil.effects; repeatable.")
 @click.option("--no-simulation", is_flag=True, help="Skip the predictor runs (simulation error).")
 @click.option("--quiet", is_flag=True, help="No progress bar on the terminal.")
-def diagnose(recording, vehicle, model_file, dbc, signalmap, report_dir, json_out, add, save_model, effect_files,
-             effect_entries, no_simulation, quiet):
+def diagnose(recording, vehicle, model_file, dbc, signalmap, sensorset, report_dir, json_out, add, save_model,
+             effect_files, effect_entries, no_simulation, quiet):
     """Diagnose the model on RECORDING: residual of every equation of eq 13, where it fails,
     which effect is missing (ranked by held-out explained fraction, with equivalence groups),
     and with --add the before/after of adding it."""
@@ -73,13 +76,15 @@ def diagnose(recording, vehicle, model_file, dbc, signalmap, report_dir, json_ou
         raise UserError(str(e)) from None
     dbc, signalmap = recorded_decoding(recording, dbc, signalmap)  # what the recording names, unless given
     from vdps_hil.batch.progress import ProgressBar
+    from vdps_hil.workbench.dataset import DatasetConfig
     from vdps_hil.workbench.diagnosis import diagnose as run
 
     stages = 3 + (0 if no_simulation else 1) + (5 if add else 0)  # the stages the workbench names
     try:
         with ProgressBar(stages, "vdps diagnose", unit="stage", quiet=quiet) as bar:
             dg = run(recording, veh, model=model_file, dbc=dbc, signalmap=signalmap, add=add, user_effects=user,
-                     save_model=save_model, with_simulation=not no_simulation, progress=bar.stage_callback())
+                     save_model=save_model, with_simulation=not no_simulation, progress=bar.stage_callback(),
+                     dataset_config=DatasetConfig(sensorset=sensorset))
     except (DatasetError, ModelFileError, ValueError) as e:
         if debug_enabled():
             raise

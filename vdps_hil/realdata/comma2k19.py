@@ -13,7 +13,8 @@ from vdps_hil.geodesy import EnuOrigin, ecef_to_enu_matrix, ecef_to_geodetic, ge
 from vdps_hil.realdata.containers import GnssFixes, ImuSeries, Reference
 from vdps_hil.units import wrap_pi
 
-__all__ = ["COMMA_SEGMENT", "read_comma_ublox", "read_comma_phone_imu", "read_comma_reference"]
+__all__ = ["COMMA_SEGMENT", "read_comma_ublox", "read_comma_phone_imu", "read_comma_reference",
+           "read_comma_reference_heading"]
 
 COMMA_SEGMENT = "comma2k19_rav4_2018-08-02_seg40"
 
@@ -66,3 +67,22 @@ def read_comma_reference(seg_dir, origin: EnuOrigin | None = None) -> Reference:
     rot = ecef_to_enu_matrix(origin.lat_deg, origin.lon_deg)
     ecef0 = geodetic_to_ecef(origin.lat_deg, origin.lon_deg, origin.h_m)
     return Reference(t, origin, (p - ecef0) @ rot.T, v @ rot.T)
+
+
+def read_comma_reference_heading(seg_dir, origin: EnuOrigin) -> tuple[np.ndarray, np.ndarray]:
+    """(t_s, heading_rad) of comma2k19 ``global_pose``: the device's forward axis in ENU, as an
+    angle from east counter-clockwise (the pipeline's yaw convention, eq 1), at the reference's
+    20 Hz frames. ``frame_orientations`` holds unit quaternions (w, x, y, z) rotating the device
+    frame (forward, right, down) into ECEF; the forward axis is the first column of that rotation
+    (R e_1 = (1 - 2(y^2 + z^2), 2(xy + wz), 2(xz - wy))), turned into ENU about ``origin``. The
+    device sits on the windscreen, so this is the car's heading plus a constant mount yaw."""
+    d = _seg(seg_dir) / "global_pose"
+    t = np.load(d / "frame_times").astype(float)
+    q = np.load(d / "frame_orientations").astype(float)
+    if q.ndim != 2 or q.shape != (t.shape[0], 4):
+        raise ValueError(f"{d}: expected frame_orientations of shape (N, 4) matching frame_times, got {q.shape}")
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    fwd_ecef = np.column_stack([1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)])
+    fwd = fwd_ecef @ ecef_to_enu_matrix(origin.lat_deg, origin.lon_deg).T
+    return t, np.arctan2(fwd[:, 1], fwd[:, 0])

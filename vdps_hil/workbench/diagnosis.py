@@ -85,7 +85,8 @@ class Diagnosis:
                  "groups": rk.groups, "selected": list(rk.selected), "n_eff": rk.n_eff,
                  "worst_windows": [w.to_json() for w in self.windows],
                  "regimes": {k: v.to_json() for k, v in self.regimes.items()},
-                 "estimator_nis": _nis(self.table), "duration_s": self.table.duration_s,
+                 "estimator_nis": _nis(self.table), "sensor_set": _clean_set(self.table.sensors),
+                 "duration_s": self.table.duration_s,
                  "timings_s": dict(self.timings), "saved_model": self.saved_model,
                  "simulation_notes": self.simulation_notes()}
         if self.table.rls is not None:  # the identifier's outcome on the drive (``ranking.rls_check``)
@@ -142,6 +143,13 @@ def _num(v):
     except (TypeError, ValueError):
         return None
     return v if math.isfinite(v) else None
+
+
+def _clean_set(desc) -> dict:
+    """The sensor set the estimator ran with (``pipeline.configure.system_config``'s description:
+    named or inferred, the sensors, the kind map) as plain JSON values."""
+    return {str(k): (v if isinstance(v, (str, bool, int, float, type(None))) else
+                     dict(v) if isinstance(v, dict) else str(v)) for k, v in dict(desc or {}).items()}
 
 
 def _nis(table: DriveTable) -> dict:
