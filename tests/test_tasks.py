@@ -103,6 +103,24 @@ def test_replay_tasks_carry_keys_costs_and_inputs(drive, tmp_path):
     k1 = replay_tasks([drive], options={"params": os.fspath(params)})[0].key
     params.write_text('{"mass_kg": 1}')
     assert replay_tasks([drive], options={"params": os.fspath(params)})[0].key != k1
+    # so is a sensor-set file; a set named by its name changes the key as an option
+    sset = tmp_path / "s.toml"
+    sset.write_text('name = "s"\n[sensors]\nimu = "6axis"\n')
+    k2 = replay_tasks([drive], options={"sensorset": os.fspath(sset)})[0].key
+    sset.write_text('name = "s"\n[sensors]\nimu = "6axis"\ngnss = "single_antenna"\n')
+    assert replay_tasks([drive], options={"sensorset": os.fspath(sset)})[0].key not in (k2, tasks[0].key)
+    assert replay_tasks([drive], options={"sensorset": "table1"})[0].key != tasks[0].key
+
+
+def test_a_named_sensor_set_reaches_the_replay_and_the_workbench(drive, replayed):
+    """``vdps batch replay|diagnose --sensorset``: the task's run uses that set, not the one the
+    recording's fields infer (both name it in their result)."""
+    assert replayed["sensor_set"]["source"] == "inferred from the recording"
+    doc = replay_drive(drive, options={"sensorset": "table1", "predict": False, "identify": False})
+    assert doc["sensor_set"]["source"] == "table1"
+    bad = execute("vdps_hil.batch.tasks:diagnose_drive",
+                  {"path": drive, "options": {"sensorset": "nosuch", "with_simulation": False}})
+    assert bad["status"] == "failed" and "cannot read sensor set" in bad["error"]["message"], bad["error"]
 
 
 def test_est_dir_gives_each_drive_its_estimate_recording(drive, tmp_path):

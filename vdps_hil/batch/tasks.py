@@ -74,10 +74,10 @@ class NoRawData(ValueError):
 
 
 REPLAY_OPTIONS = ("model", "dbc", "signalmap", "bus_map", "params", "identify", "predict",
-                  "susp_sigma_m", "paper_faithful", "output")
+                  "susp_sigma_m", "paper_faithful", "sensorset", "output")
 """Keyword arguments of ``vdps_hil.app.replay.replay_file`` a batch may set (``config`` objects and
 ``save_params`` are per-run choices a batch does not make)."""
-REPLAY_FILE_OPTIONS = ("model", "dbc", "signalmap", "params")
+REPLAY_FILE_OPTIONS = ("model", "dbc", "signalmap", "params", "sensorset")
 """Options naming files: their contents are part of the resume key."""
 TIMING_KEYS = ("wall_time_s", "realtime_factor")
 
@@ -108,10 +108,11 @@ def replay_drive(path: str, *, vehicle: str = DEFAULT_MODEL,
     return doc
 
 
-DIAGNOSE_OPTIONS = ("model", "dbc", "signalmap", "add", "with_simulation")
+DIAGNOSE_OPTIONS = ("model", "dbc", "signalmap", "add", "with_simulation", "sensorset")
 """Keyword arguments of ``vdps_hil.workbench.diagnosis.diagnose`` a batch may set (user effect
-code and ``save_model`` are per-drive choices a batch does not make)."""
-DIAGNOSE_FILE_OPTIONS = ("model", "dbc", "signalmap")
+code and ``save_model`` are per-drive choices a batch does not make); ``sensorset`` becomes its
+``DatasetConfig(sensorset=...)``."""
+DIAGNOSE_FILE_OPTIONS = ("model", "dbc", "signalmap", "sensorset")
 
 
 def _diagnose_fn():
@@ -137,6 +138,10 @@ def diagnose_drive(path: str, *, vehicle: str = DEFAULT_MODEL,
         raise ValueError(f"unknown diagnose option(s): {', '.join(unknown)}")
     if "add" in opts:
         opts["add"] = tuple(opts["add"])
+    if "sensorset" in opts:
+        from vdps_hil.workbench.dataset import DatasetConfig
+
+        opts["dataset_config"] = DatasetConfig(sensorset=opts.pop("sensorset"))
     diagnose = _diagnose_fn()
     doc = diagnose(path, load_vehicle(vehicle, "model"), **opts).to_json()
     wb = doc.get("workbench") if isinstance(doc.get("workbench"), dict) else {}

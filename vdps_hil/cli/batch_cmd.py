@@ -186,6 +186,9 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
               help="Signal map (configs/signalmaps/NAME or a .toml path) for a foreign DBC.")
 @click.option("--bus", "bus_map", multiple=True, metavar="REC=MAP",
               help="Decode recording bus REC with the signal map's bus MAP; repeatable.")
+@click.option("--sensorset", default=None, metavar="NAME",
+              help="Sensor set (configs/sensorsets/NAME or a .toml path) for every drive [default: inferred "
+                   "from each recording's fields].")
 @click.option("--no-identify", is_flag=True, help="Do not run the parameter identifier.")
 @click.option("--no-predict", is_flag=True, help="Do not run the predictor and the rollover warning.")
 @click.option("--susp-sigma", "susp_sigma_m", type=float, default=0.001, show_default=True,
@@ -198,7 +201,7 @@ PAPER_SWITCHES = ("a_psi_v_zero_rate", "b_y2_gps", "c_y2_sus_single_plane", "d_a
               help="Also write each drive's estimate recording (raw + /est/ topics) to "
                    "DIR/<drive>.mcap.")
 @engine_options
-def replay(patterns, vehicle, model_file, params, dbc, signalmap, bus_map, no_identify, no_predict,
+def replay(patterns, vehicle, model_file, params, dbc, signalmap, bus_map, sensorset, no_identify, no_predict,
            susp_sigma_m, paper_faithful, effects, est_dir, workers, scheduler, backend,
            allowed_failures, no_dashboard, out_dir, json_out, report_dir, force, rehash, quiet):
     """Replay every recording matching GLOB... (one task per recording, as ``vdps replay``):
@@ -223,7 +226,7 @@ def replay(patterns, vehicle, model_file, params, dbc, signalmap, bus_map, no_id
         raise UserError(f"--susp-sigma must be positive, got {susp_sigma_m}")
     options = {k: v for k, v in {
         "model": model_file, "params": params, "dbc": dbc, "signalmap": signalmap,
-        "bus_map": buses or None, "paper_faithful": sorted(paper_faithful) or None}.items()
+        "bus_map": buses or None, "paper_faithful": sorted(paper_faithful) or None, "sensorset": sensorset}.items()
         if v is not None}
     if no_identify:
         options["identify"] = False
@@ -252,9 +255,12 @@ def replay(patterns, vehicle, model_file, params, dbc, signalmap, bus_map, no_id
 @click.option("--signalmap", default=None, metavar="FILE", help="Signal map of the CAN frames to bus fields.")
 @click.option("--add", "add", multiple=True, metavar="NAME",
               help="Add an effect on every drive, re-identify, before/after; repeatable.")
+@click.option("--sensorset", default=None, metavar="NAME",
+              help="Sensor set (configs/sensorsets/NAME or a .toml path) for every drive [default: inferred "
+                   "from each recording's fields].")
 @click.option("--no-simulation", is_flag=True, help="Skip the predictor runs (simulation error).")
 @engine_options
-def diagnose(patterns, vehicle, model_file, dbc, signalmap, add, no_simulation, workers, scheduler,
+def diagnose(patterns, vehicle, model_file, dbc, signalmap, add, sensorset, no_simulation, workers, scheduler,
              backend, allowed_failures, no_dashboard, out_dir, json_out, report_dir, force, rehash, quiet):
     """Diagnose every recording matching GLOB... with the model workbench (one task per
     recording, as vdps diagnose): which effects each drive recommends, identified parameters,
@@ -271,7 +277,7 @@ def diagnose(patterns, vehicle, model_file, dbc, signalmap, add, no_simulation, 
     if (dbc is None) != (signalmap is None) and dbc is not None:
         raise UserError("--dbc needs --signalmap (which frames feed which fields)")
     options = {k: v for k, v in {"model": model_file, "dbc": dbc, "signalmap": signalmap,
-                                 "add": list(add) or None}.items() if v is not None}
+                                 "add": list(add) or None, "sensorset": sensorset}.items() if v is not None}
     if no_simulation:
         options["with_simulation"] = False
     digests = DigestCache(out / ".digests.json", enabled=not rehash)
