@@ -28,6 +28,16 @@ def test_a_missing_signal_group_is_named_with_what_it_prevents():
     assert C.missing_signals(_table()) == []
 
 
+def test_a_sensor_the_set_left_out_is_named():
+    """``load_drive`` records what the sensor set's kind map left out (``sensorsets.KindMap``) in
+    ``table.sensors["not_used"]``; the diagnosis says it beside the missing signals."""
+    tab = _table()
+    tab.sensors = {"source": "rav4-can-ublox", "kind_map": {"esc_imu": "imu"}, "not_used": {"imu/imu": 6256}}
+    assert C.missing_signals(tab) == ["not used: imu/imu (6256 samples): the sensor set feeds imu from esc_imu"]
+    tab.sensors = {"source": "inferred from the recording", "kind_map": {}}
+    assert C.missing_signals(tab) == []
+
+
 def test_unusable_rows_say_why():
     assert "never moves faster than 5 m/s" in C.unusable_reason(_table(speed=1.0))
     msg = C.unusable_reason(_table(drop=["steer_wheel_angle_rad"]))

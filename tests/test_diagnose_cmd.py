@@ -65,25 +65,9 @@ def test_the_real_rav4_drive_is_diagnosed_with_its_own_sensor_set(tmp_path, caps
     and u-blox GNSS, no wheel torques and no suspension. ``vdps diagnose`` exits 0, names both
     missing signal groups and what they prevent, ranks the candidates the remaining equations
     can judge, and prints no NaN and no implausible value as a recommendation."""
-    import importlib.util
+    from rav4_import import import_rav4
 
-    from conftest import REAL_DATA, REPO
-    from vdps_hil.realdata.comma2k19 import COMMA_SEGMENT
-    from vdps_hil.record.importer import CanSource, SerialSource, import_logs
-
-    seg = REAL_DATA / COMMA_SEGMENT
-    if not seg.is_dir():
-        pytest.skip(f"real data not present: {seg}")
-    spec = importlib.util.spec_from_file_location("convert_comma2k19", REPO / "tools" / "convert_comma2k19.py")
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
-    conv = tmp_path / "conv"
-    tool.convert(seg, conv)
-    rec = tmp_path / "rav4.mcap"
-    rep = import_logs(rec, [CanSource("pt", str(conv / "pt.candump.log"), "can0")],
-                      [SerialSource("gnss", str(conv / "gnss.nmea")), SerialSource("imu", str(conv / "imu.mti"), 115200)],
-                      signalmap="toyota_rav4_2017", dbc={"*": str(seg / "toyota_new_mc_pt_generated.dbc")})
-    assert rep["write_errors"] == 0
+    rec = import_rav4(tmp_path)
     rc = main(["diagnose", str(rec), "--vehicle", "rav4-model", "--json", "-", "--quiet"])
     out = capsys.readouterr()
     assert rc == 0, out.err

@@ -421,6 +421,34 @@ def test_rav4_import_replays_without_signalmap_or_dbc(rav4_import, tmp_path):
     assert "not decoded" not in r.output
 
 
+def test_a_sensor_the_named_set_does_not_name_is_left_out_and_said(tmp_path):
+    """The RAV4 imported with its phone IMU (kind ``imu``) beside the ESC cluster (``esc_imu``),
+    replayed with ``--sensorset rav4-can-ublox`` (which maps ``esc_imu`` -> ``imu``): the phone's
+    samples are not interleaved with the ESC's on the estimator's one IMU input; they are counted
+    (``sensor_set.not_used``) and said in one line. The estimator still tracks the drive: every GNSS
+    velocity update but a few accepted (their NIS gate)."""
+    from rav4_import import import_rav4
+
+    rec = import_rav4(tmp_path)
+    js = tmp_path / "r.json"
+    r = CliRunner().invoke(cli, ["replay", str(rec), "--vehicle", "rav4-model", "--sensorset", "rav4-can-ublox",
+                                 "--no-identify", "--no-predict", "--jobs", "1", "--json", str(js)],
+                           catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    doc = json.loads(js.read_text())
+    phone = doc["messages_read"]["per_source_kind"]["imu/imu"]
+    assert phone > 6000 and doc["sensor_set"]["not_used"] == {"imu/imu": phone}
+    assert "  not used: imu/imu (%d samples): the sensor set feeds imu from esc_imu" % phone in r.output.splitlines()
+    vel = doc["innovations"]["gnss_vel"]
+    assert vel["accepted"] >= 0.98 * vel["updates"] > 500
+    # inferred (no --sensorset): the phone's six axes are the IMU, nothing is left out
+    r = CliRunner().invoke(cli, ["replay", str(rec), "--vehicle", "rav4-model", "--no-identify", "--no-predict",
+                                 "--jobs", "1", "--json", str(js)], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    doc = json.loads(js.read_text())
+    assert doc["sensor_set"]["imu"] == "6axis" and "not_used" not in doc["sensor_set"] and "not used" not in r.output
+
+
 def test_undecoded_can_frames_are_said_loudly(drive, tmp_path):
     """A bus no signal map decodes: one warning line with the count and the options."""
     from vdps_hil.record.decode import raw_copier

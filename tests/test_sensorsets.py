@@ -11,7 +11,7 @@ import pytest
 from vdps_hil.adapters.signalmap import load_signalmap
 from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation.ekf_config import SensorSet
-from vdps_hil.estimation.sensorsets import (SensorSetError, ZeroRateCalibration, infer_sensor_set, load_sensorset,
+from vdps_hil.estimation.sensorsets import (KindMap, SensorSetError, ZeroRateCalibration, infer_sensor_set, load_sensorset,
                                             parse_sensorset)
 
 
@@ -96,3 +96,24 @@ def test_zero_rate_calibration_learns_at_standstill_and_is_causal(rng):
     assert np.allclose(late.mean(axis=0), 0.2, atol=2e-3)  # bias removed from the moving part
     early = np.array([s.fields["angular_rate_radps_z"] for s in imu if s.t_ns < 3e9])
     assert abs(early.mean() - (0.2 + bias[2])) < 2e-3  # samples before the stop are untouched
+
+
+def test_kind_map_renames_leaves_out_what_it_feeds_from_elsewhere_and_counts_it():
+    """``KindMap``: ``esc_imu`` -> ``imu`` renames the ESC's samples; another source's ``imu``
+    samples (a phone IMU the set does not name) are left out and counted per source/kind; kinds the
+    map neither renames nor feeds pass as they are (the same object)."""
+    km = KindMap({"esc_imu": "imu"})
+    esc = Sample(1_000, "can.pt", "esc_imu", {"angular_rate_radps_z": 0.1}, 5, True)
+    phone = Sample(2_000, "imu", "imu", {"angular_rate_radps_z": 0.2})
+    gnss = Sample(3_000, "gnss", "gnss_pos", {"gnss_lat_deg": 1.0})
+    out = km(esc)
+    assert (out.kind, out.source, out.t_ns, out.fields, out.wall_time_ns, out.valid) == \
+        ("imu", "can.pt", 1_000, esc.fields, 5, True)
+    assert km(phone) is None and km(phone) is None
+    assert km(gnss) is gnss
+    assert km.dropped == {"imu/imu": 2}
+    assert km.note() == "not used: imu/imu (2 samples): the sensor set feeds imu from esc_imu"
+    empty = KindMap({})
+    assert not empty and empty(phone) is phone and empty.note() is None
+    swap = KindMap({"a": "b", "b": "a"})  # a kind both renamed and fed is renamed, never left out
+    assert swap(Sample(0, "s", "b", {})).kind == "a" and swap.dropped == {}

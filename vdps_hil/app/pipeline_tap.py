@@ -40,7 +40,7 @@ class PipelineTap:
         self.probe_s = PROBE_SECONDS if probe_s is None else probe_s
         self.system = None
         self.settings: dict | None = None  # what the system was sized from (recorded with the order)
-        self.kind_map: dict[str, str] = {}
+        self.kind_map = None  # a KindMap once the system is configured
         self.error: str | None = None  # the system could not be configured (no IMU): not running
         self.order = InputOrder() if record_order else None
         self.order_written = False
@@ -78,16 +78,18 @@ class PipelineTap:
         from dataclasses import replace
 
         from vdps_hil.app.replay import DEFAULT_SUSP_SIGMA_M, ReplayError, replay_config, sample_stats
+        from vdps_hil.estimation.sensorsets import KindMap
         from vdps_hil.pipeline.node import VdpsSystem
 
         pending, self._pending = self._pending, []
         _, rates, fields = sample_stats(iter(pending), self.probe_s)
         try:
-            cfg, self.kind_map, _, _ = replay_config(rates, fields, self.model, DEFAULT_SUSP_SIGMA_M, None,
-                                                     identify=True, predict=True)
+            cfg, kind_map, _, _ = replay_config(rates, fields, self.model, DEFAULT_SUSP_SIGMA_M, None,
+                                                identify=True, predict=True)
         except ReplayError as e:
             self.error = str(e)
             return
+        self.kind_map = KindMap(kind_map)
         if self.start is not None:
             cfg = replace(cfg, start_params=self.start)
         # predictions inline (prediction.offpath's wait rule): this tap runs in a process of its own
@@ -105,8 +107,10 @@ class PipelineTap:
         if self.order is not None:
             self.order.note(s)
         self.samples += 1
-        if s.kind in self.kind_map:  # as replay_file
-            s = self._sample_type(s.t_ns, s.source, self.kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
+        if self.kind_map:  # as replay_file
+            s = self.kind_map(s)
+            if s is None:  # a sensor the set does not name
+                return
         self._outputs(self.system.handle(s))
         self._fed_since_clear += 1
         if self._fed_since_clear >= 4096:  # a live run keeps the file, not a copy in memory

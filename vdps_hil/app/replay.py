@@ -24,6 +24,7 @@ from typing import Any, Mapping
 
 from vdps_hil.app.replay_summary import ReplaySummary
 from vdps_hil.bus.samples import Sample
+from vdps_hil.estimation.sensorsets import KindMap
 from vdps_hil.model.params import IdentifiedParams, Vehicle
 from vdps_hil.pipeline.configure import (DEFAULT_SUSP_SIGMA_M, PROBE_SECONDS, SystemConfigError, sample_stats,
                                         system_config)
@@ -255,7 +256,10 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
             source = view.tap(source, out)
         if progress is not None:
             source = _progress_tap(source, progress)
-        _feed(system, source, None if counter is None else counter.count, kind_map, nodes, summary, out)
+        mapper = KindMap(kind_map)
+        _feed(system, source, None if counter is None else counter.count, mapper, nodes, summary, out)
+        if mapper.dropped and sensors_desc is not None:
+            sensors_desc["not_used"] = dict(mapper.dropped)  # a sensor the set does not name
         summary.outputs(system.finish(), out.writer)
         side.finish()
         summary.take_counts(side.sample_counts if counter is None else counter.document())
@@ -267,18 +271,21 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
     return system, side, summary, sensors_desc
 
 
-def _feed(system: VdpsSystem, source, count, kind_map: Mapping[str, str], nodes, summary: ReplaySummary,
+def _feed(system: VdpsSystem, source, count, kind_map: KindMap, nodes, summary: ReplaySummary,
           side) -> None:
-    """Every sample of ``source`` (counted by ``count``, kinds renamed by ``kind_map``, through
-    the calibration ``nodes``) into the system; its outputs into the summary and ``side.writer``
-    (read at each output: the output opens at the first raw record)."""
+    """Every sample of ``source`` (counted by ``count``, kinds renamed by ``kind_map``, which
+    leaves out a sensor the set does not name, through the calibration ``nodes``) into the
+    system; its outputs into the summary and ``side.writer`` (read at each output: the output
+    opens at the first raw record)."""
     handle = system.handle
     n = 0
     for s in source:
         if count is not None:
             count(s)
-        if kind_map and s.kind in kind_map:
-            s = Sample(s.t_ns, s.source, kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
+        if kind_map:
+            s = kind_map(s)
+            if s is None:
+                continue
         for node in nodes:
             s = node.process(s)
         outs = handle(s)

@@ -126,6 +126,12 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
         more = f" (and {len(problems) - 1} more: see --json decode.reader.problems)" if len(problems) > 1 else ""
         eprint(f"vdps replay: warning: parts of {recording} skipped: {problems[0]}{more}")
     click.echo(summary_line(doc, output), err=bool(json_out == "-"))
+    from vdps_hil.estimation.sensorsets import not_used_note
+
+    sset = doc.get("sensor_set") or {}
+    unused = not_used_note(sset.get("not_used"), sset.get("kind_map"))
+    if unused:  # a sensor in the recording the sensor set does not name (estimation.sensorsets.KindMap)
+        click.echo("  " + unused, err=bool(json_out == "-"))
     for name, st in doc.get("identification", {}).get("status", {}).items():
         if st["status"] != "converged":  # never a silent "identified": say which and why
             why = [f"{p} {v['status']}" for p, v in st["params"].items() if v["status"] != "identified"]

@@ -27,7 +27,7 @@ from vdps_hil.estimation.pipeline_config import Latencies, PipelineConfig
 from vdps_hil.model.params import CONFIG_DIR
 
 __all__ = ["SENSORSET_DIR", "SensorSetError", "SensorSetConfig", "parse_sensorset", "load_sensorset",
-           "infer_sensor_set", "ZeroRateCalibration"]
+           "infer_sensor_set", "KindMap", "not_used_note", "ZeroRateCalibration"]
 
 SENSORSET_DIR = CONFIG_DIR / "sensorsets"
 
@@ -223,6 +223,52 @@ def infer_sensor_set(fields_by_kind: Mapping[str, Iterable[str]]) -> tuple[Senso
     susp = all(f"susp_deflection_m_{i}" in all_fields for i in range(1, 5))
     wheels = all(f"wheel_speed_radps_{i}" in all_fields for i in range(1, 5))
     return SensorSet(imu=imu, gnss=gnss, suspension=susp, wheel_speeds=wheels), kind_map
+
+
+class KindMap:
+    """A sensor set's ``kind_map`` applied to samples: ``kind_map(sample)`` is the sample with its
+    recorded kind renamed to the pipeline's (``esc_imu`` -> ``imu``), or None for a sample of a
+    kind the map feeds from another recorded kind. A recording may hold a sensor the set does not
+    name: the comma2k19 RAV4 imported with its phone IMU (kind ``imu``) as well as the car's ESC
+    cluster (``esc_imu``), which ``rav4-can-ublox`` maps to ``imu``. Passed on, the two IMUs'
+    samples would interleave on the estimator's one IMU input, each with its own mounting and
+    axes; the set names the ESC, so the phone's samples are left out and counted in ``dropped``
+    (``"source/kind"`` -> samples). Kinds the map neither renames nor feeds pass unchanged."""
+
+    __slots__ = ("map", "dropped", "_fed")
+
+    def __init__(self, kind_map: Mapping[str, str] | None = None):
+        self.map = dict(kind_map or {})
+        self._fed = frozenset(self.map.values()) - frozenset(self.map)
+        self.dropped: dict[str, int] = {}
+
+    def __bool__(self) -> bool:
+        return bool(self.map)
+
+    def __call__(self, s):
+        k = s.kind
+        to = self.map.get(k)
+        if to is not None:
+            return type(s)(s.t_ns, s.source, to, s.fields, s.wall_time_ns, s.valid)
+        if k in self._fed:
+            key = f"{s.source}/{k}"
+            self.dropped[key] = self.dropped.get(key, 0) + 1
+            return None
+        return s
+
+    def note(self) -> str | None:
+        """One line naming what was left out, or None (:func:`not_used_note`)."""
+        return not_used_note(self.dropped, self.map)
+
+
+def not_used_note(not_used: Mapping[str, int] | None, kind_map: Mapping[str, str] | None) -> str | None:
+    """The line saying which samples a :class:`KindMap` left out (``"source/kind"`` -> count, as
+    a replay's ``sensor_set.not_used``) and what the set feeds instead, or None when none was."""
+    if not not_used:
+        return None
+    fed = ", ".join(f"{k} from {src}" for src, k in sorted((kind_map or {}).items()))
+    left = ", ".join(f"{key} ({n} samples)" for key, n in sorted(not_used.items()))
+    return f"not used: {left}: the sensor set feeds {fed}"
 
 
 # ------------------------------------------------------------------------------ calibration

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from vdps_hil.estimation.sensorsets import not_used_note
+
 from .dataset import DriveTable
 from .residuals import MIN_SPEED_MPS, NEEDED_COLUMNS, TORQUE_COLUMNS, usable_rows
 
@@ -56,6 +58,10 @@ def missing_signals(table: DriveTable) -> list[str]:
     for label, cols, prevents in _GROUPS:
         if not table.has(*cols):
             out.append(f"missing signals: {label} ({', '.join(cols)}): {prevents}")
+    sensors = getattr(table, "sensors", None) or {}
+    unused = not_used_note(sensors.get("not_used"), sensors.get("kind_map"))
+    if unused:  # a sensor in the recording its sensor set does not name (sensorsets.KindMap)
+        out.append(unused)
     return out
 
 

@@ -67,6 +67,7 @@ from scipy.signal import butter, filtfilt
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation.pipeline import PipelineConfig
+from vdps_hil.estimation.sensorsets import KindMap
 from vdps_hil.pipeline.configure import DEFAULT_SUSP_SIGMA_M, SystemConfigError, sample_stats, system_config
 from vdps_hil.pipeline.node import SystemConfig
 from vdps_hil.model.effects.base import MeasurementEffect
@@ -387,13 +388,15 @@ def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap
         if track is None:  # one pass for the track, then the samples again
             track = _gyro_track(feed, kind_map, make_nodes, cfg)
             feed = source()
-        feed = imu_corrected(renamed(feed, kind_map, make_nodes()), imu_effects, track)
+    km = KindMap(kind_map)
+    if imu_effects:
+        feed = imu_corrected(renamed(feed, km, make_nodes()), imu_effects, track)
     else:
-        feed = renamed(feed, kind_map, make_nodes())
+        feed = renamed(feed, km, make_nodes())
     streams = Streams()
     run = run_system(streams.tap(feed), vehicle, system, cfg.period_s)
     table = build_table(streams, run, vehicle, cfg)
-    table.sensors = desc
+    table.sensors = dict(desc, not_used=dict(km.dropped)) if km.dropped else desc
     return table
 
 

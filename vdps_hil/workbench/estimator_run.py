@@ -21,6 +21,7 @@ import numpy as np
 from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation.estimates import Estimate
 from vdps_hil.estimation.pipeline import Innovation
+from vdps_hil.estimation.sensorsets import KindMap
 from vdps_hil.model.params import Vehicle
 from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
 
@@ -65,12 +66,17 @@ class EstimatorRun:
     rls: RlsResult | None = None
 
 
-def renamed(samples: Iterable[Sample], kind_map: Mapping[str, str], nodes: Sequence = ()) -> Iterator[Sample]:
+def renamed(samples: Iterable[Sample], kind_map: "Mapping[str, str] | KindMap", nodes: Sequence = ()
+            ) -> Iterator[Sample]:
     """The samples with their kinds renamed by a sensor set's kind map (e.g. the RAV4's
-    ``esc_imu`` -> ``imu``), through its calibration nodes (as ``vdps replay`` feeds them)."""
+    ``esc_imu`` -> ``imu``; a sensor the set does not name left out and counted in a
+    :class:`KindMap`'s ``dropped``), through its calibration nodes (as ``vdps replay`` feeds them)."""
+    km = kind_map if isinstance(kind_map, KindMap) else KindMap(kind_map)
     for s in samples:
-        if kind_map and s.kind in kind_map:
-            s = Sample(s.t_ns, s.source, kind_map[s.kind], s.fields, s.wall_time_ns, s.valid)
+        if km:
+            s = km(s)
+            if s is None:
+                continue
         for node in nodes:
             s = node.process(s)
         yield s
