@@ -59,16 +59,20 @@ def test_help_shows_an_example(capsys):
     assert "vdps diagnose drive.mcap --add aero_drag" in capsys.readouterr().out
 
 
-def test_the_real_rav4_drive_is_diagnosed_with_its_own_sensor_set(tmp_path, capsys):
+@pytest.fixture(scope="module")
+def rav4(tmp_path_factory):
+    from rav4_import import import_rav4
+
+    return import_rav4(tmp_path_factory.mktemp("rav4"))
+
+
+def test_the_real_rav4_drive_is_diagnosed_with_its_own_sensor_set(rav4, capsys):
     """Issue 18 item 4 on the real RAV4 (comma2k19, converted and imported as README "Real cars"
     says): the car has wheel speeds, steering, the ESC's yaw rate and accelerations, a phone IMU
     and u-blox GNSS, no wheel torques and no suspension. ``vdps diagnose`` exits 0, names both
     missing signal groups and what they prevent, ranks the candidates the remaining equations
     can judge, and prints no NaN and no implausible value as a recommendation."""
-    from rav4_import import import_rav4
-
-    rec = import_rav4(tmp_path)
-    rc = main(["diagnose", str(rec), "--vehicle", "rav4-model", "--json", "-", "--quiet"])
+    rc = main(["diagnose", str(rav4), "--vehicle", "rav4-model", "--json", "-", "--quiet"])
     out = capsys.readouterr()
     assert rc == 0, out.err
     assert "NaN" not in out.out and "nan" not in out.err.lower().replace("nanoseconds", "")
@@ -87,3 +91,26 @@ def test_the_real_rav4_drive_is_diagnosed_with_its_own_sensor_set(tmp_path, caps
     if doc["recommendation"] is not None:
         top = next(e for e in ranked if e["effect"] == doc["recommendation"])
         assert top["plausible"] and top["excited"], top
+
+
+def test_the_real_rav4_with_its_named_set_judges_the_esc_cluster_alone(rav4, capsys):
+    """``--sensorset rav4-can-ublox``: the car's ESC cluster (a_x, a_y, yaw rate) is the IMU and the
+    phone IMU of the import is left out (``sensorsets.KindMap``). The workbench substitutes the
+    cluster's missing axes as the estimator does and evaluates only the equations that do not need
+    them: the lateral and yaw balances are judged (finite), the vertical, roll and pitch ones are
+    not, and both the substitution and the sensor left out are named."""
+    rc = main(["diagnose", str(rav4), "--vehicle", "rav4-model", "--sensorset", "rav4-can-ublox", "--json", "-",
+               "--quiet", "--no-simulation"])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    doc = json.loads(out.out)
+    sset = doc["workbench"]["sensor_set"]
+    assert (sset["source"], sset["imu"]) == ("rav4-can-ublox", "esc3")
+    assert set(sset["imu_substituted"]) == {"specific_force_mps2_z", "angular_rate_radps_x", "angular_rate_radps_y"}
+    assert sset["not_used"]["imu/imu"] > 6000
+    msgs = doc["workbench"]["messages"]
+    assert any(m.startswith("missing signals: IMU axes") and "not evaluated" in m for m in msgs), msgs
+    assert any(m.startswith("not used: imu/imu") for m in msgs), msgs
+    rms = doc["before"]["residual_rms"]
+    assert set(rms) == {"lat", "yaw"} and all(v is not None and v > 0 for v in rms.values()), rms
+    assert len(doc["ranking"]) >= 5

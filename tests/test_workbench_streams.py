@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from vdps_hil.bus.samples import Sample
-from vdps_hil.workbench.streams import (ANGULAR_RATE_FIELDS, GNSS_POS_FIELDS, SPECIFIC_FORCE_FIELDS, Smoother, Streams,
-                                        on_grid, smoothed, uniform)
+from vdps_hil.units import GRAVITY_MPS2
+from vdps_hil.workbench.streams import (ANGULAR_RATE_FIELDS, ESC_SUBSTITUTES, GNSS_POS_FIELDS, SPECIFIC_FORCE_FIELDS,
+                                        Smoother, Streams, on_grid, smoothed, smoothed_or_substituted, uniform)
 
 IMU = tuple(SPECIFIC_FORCE_FIELDS) + tuple(ANGULAR_RATE_FIELDS)
 
@@ -68,3 +69,45 @@ def test_smoothed_slow_stream_gives_values_without_derivative_and_empty_stream_n
     assert np.isfinite(val[grid <= 19.8]).all() and np.isnan(val[grid > 19.95]).all()  # NaN outside the span
     val, der, rate = smoothed(Streams(), "suspension", ["susp_deflection_m_1"], Smoother(10.0), grid, 0, 20.0, True)
     assert rate == 0.0 and np.isnan(val).all() and np.isnan(der).all()
+
+
+def _esc_streams(rate_hz=83.0, duration_s=4.0):
+    """An ESC cluster: a_x, a_y and the yaw rate only (1.3 Hz motion)."""
+    st = Streams()
+    for i in range(int(duration_s * rate_hz)):
+        t = i / rate_hz
+        st.add(Sample(int(round(t * 1e9)), "can.pt", "imu", fields={
+            "specific_force_mps2_x": np.sin(2 * np.pi * 1.3 * t), "specific_force_mps2_y": np.cos(2 * np.pi * 1.3 * t),
+            "angular_rate_radps_z": 0.1 * np.sin(2 * np.pi * 1.3 * t)}))
+    return st
+
+
+def test_an_esc_cluster_has_its_missing_axes_substituted_where_it_is_measured():
+    """f_z := g and w_x = w_y := 0 (derivatives 0) on the rows the three measured axes reach; those
+    three are smoothed exactly as ``smoothed`` smooths them alone; the substituted names are
+    returned. A six-axis IMU substitutes nothing and equals ``smoothed``."""
+    grid = np.arange(-0.5, 4.5, 0.02)
+    sm = Smoother(10.0)
+    esc = _esc_streams()
+    val, der, rate, subst = smoothed_or_substituted(esc, "imu", IMU, ESC_SUBSTITUTES, sm, grid, 0, 5.0)
+    assert set(subst) == {"specific_force_mps2_z", "angular_rate_radps_x", "angular_rate_radps_y"}
+    measured = [n for n in IMU if n not in subst]
+    v, d, r = smoothed(esc, "imu", measured, sm, grid, 0, 5.0, True)
+    assert r == rate
+    there = np.isfinite(v).all(axis=1)
+    assert 0 < there.sum() < len(grid)  # the grid runs past the stream on both ends
+    for k, n in enumerate(IMU):
+        if n in subst:
+            want = GRAVITY_MPS2 if n == "specific_force_mps2_z" else 0.0
+            assert np.all(val[there, k] == want) and np.all(der[there, k] == 0.0)
+            assert np.isnan(val[~there, k]).all() and np.isnan(der[~there, k]).all()
+        else:
+            j = measured.index(n)
+            np.testing.assert_array_equal(val[:, k], v[:, j])
+            np.testing.assert_array_equal(der[:, k], d[:, j])
+    six = _imu_streams(duration_s=2.0)
+    val, der, rate, subst = smoothed_or_substituted(six, "imu", IMU, ESC_SUBSTITUTES, sm, grid, 0, 5.0)
+    ref = smoothed(six, "imu", IMU, sm, grid, 0, 5.0, True)
+    assert subst == () and rate == ref[2]
+    np.testing.assert_array_equal(val, ref[0])
+    np.testing.assert_array_equal(der, ref[1])

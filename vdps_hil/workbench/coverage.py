@@ -59,6 +59,10 @@ def missing_signals(table: DriveTable) -> list[str]:
         if not table.has(*cols):
             out.append(f"missing signals: {label} ({', '.join(cols)}): {prevents}")
     sensors = getattr(table, "sensors", None) or {}
+    if sensors.get("imu_substituted"):
+        out.append(f"missing signals: IMU axes ({', '.join(sensors['imu_substituted'])}; an ESC cluster): "
+                   "substituted as the estimator does (f_z = g, roll and pitch rates 0); the vertical, roll "
+                   "and pitch balances are not evaluated")
     unused = not_used_note(sensors.get("not_used"), sensors.get("kind_map"))
     if unused:  # a sensor in the recording its sensor set does not name (sensorsets.KindMap)
         out.append(unused)

@@ -76,9 +76,9 @@ from vdps_hil.model.params import Vehicle
 
 from .estimator_run import EstimatorRun, RlsResult, innovation_tables, renamed, run_system
 from .imu_effects import gyro_track, imu_corrected
-from .streams import (ANGULAR_RATE_FIELDS, GNSS_ATT_FIELDS, GNSS_POS_FIELDS, GNSS_VEL_FIELDS, SPECIFIC_FORCE_FIELDS,
-                      SUSPENSION_FIELDS, WHEEL_SPEED_FIELDS, WHEEL_TORQUE_FIELDS, DatasetError, Smoother, Streams,
-                      iter_raw, on_grid, smoothed, stream)
+from .streams import (ANGULAR_RATE_FIELDS, ESC_SUBSTITUTES, GNSS_ATT_FIELDS, GNSS_POS_FIELDS, GNSS_VEL_FIELDS,
+                      SPECIFIC_FORCE_FIELDS, SUSPENSION_FIELDS, WHEEL_SPEED_FIELDS, WHEEL_TORQUE_FIELDS, DatasetError,
+                      Smoother, Streams, iter_raw, on_grid, smoothed, smoothed_or_substituted, stream)
 
 __all__ = ["DatasetConfig", "DatasetError", "DriveTable", "load_drive", "reestimator", "build_table",
            "table_from_samples", "column_names", "STATE_COLUMNS"]
@@ -203,7 +203,7 @@ def build_table(samples: Streams | Sequence[Sample], run: EstimatorRun, vehicle:
     sig: dict[str, np.ndarray] = {}
     rates: dict[str, float] = {}
     c, vg_raw = _state_columns(run, grid, rel, sm, cols, sig)
-    f = _imu_columns(samples, vehicle, grid, t0_ns, sm, cfg, cols, rates)
+    f, subst = _imu_columns(samples, vehicle, grid, t0_ns, sm, cfg, cols, rates)
     _velocity_columns(grid, vg_raw, c, f, cfg, cols)
     _wheel_columns(samples, grid, t0_ns, sm, cfg, cols, rates)
     _input_columns(samples, grid, rel, cols, rates)
@@ -212,7 +212,8 @@ def build_table(samples: Streams | Sequence[Sample], run: EstimatorRun, vehicle:
     gnss = _gnss_tables(samples, run.origin, rel)
     innov = innovation_tables(run.innovations, rel)
     counters = {"estimator": run.counters, "samples": samples.count}
-    return DriveTable(t0_ns, grid, cols, sig, gnss, innov, rates, vehicle, counters, run.rls)
+    return DriveTable(t0_ns, grid, cols, sig, gnss, innov, rates, vehicle, counters, run.rls,
+                      {"imu_substituted": list(subst)} if subst else {})
 
 
 def _state_columns(run: EstimatorRun, grid: np.ndarray, rel: Callable, sm: Smoother, cols: dict,
@@ -238,11 +239,13 @@ def _state_columns(run: EstimatorRun, grid: np.ndarray, rel: Callable, sm: Smoot
 
 
 def _imu_columns(samples: Streams, vehicle: Vehicle, grid: np.ndarray, t0_ns: int, sm: Smoother, cfg: DatasetConfig,
-                 cols: dict, rates: dict) -> np.ndarray:
+                 cols: dict, rates: dict) -> tuple[np.ndarray, tuple[str, ...]]:
     """IMU: rotate sensor -> body, smooth, derivative of the rate, move to the CG (the model
-    file's mounting). Returns the specific force at the CG in body axes (n, 3)."""
+    file's mounting). Returns (the specific force at the CG in body axes (n, 3), the sensor
+    fields substituted: an ESC cluster's missing axes, ``streams.ESC_SUBSTITUTES``)."""
     imu_names = list(SPECIFIC_FORCE_FIELDS) + list(ANGULAR_RATE_FIELDS)
-    val, der, rate = smoothed(samples, "imu", imu_names, sm, grid, t0_ns, cfg.min_rate_for_derivative_hz, True)
+    val, der, rate, subst = smoothed_or_substituted(samples, "imu", imu_names, ESC_SUBSTITUTES, sm, grid, t0_ns,
+                                                    cfg.min_rate_for_derivative_hz)
     rates["imu"] = rate
     m = vehicle.mounting
     rot = np.asarray(m.imu_rotation_rpy_rad, dtype=float)
@@ -257,7 +260,7 @@ def _imu_columns(samples: Streams, vehicle: Vehicle, grid: np.ndarray, t0_ns: in
         cols[f"specific_force_b_mps2_{a}"] = f[:, k]
         cols[f"rate_b_radps_{a}"] = w[:, k]
         cols[f"angular_accel_b_radps2_{a}"] = wd[:, k]
-    return f
+    return f, subst
 
 
 def _velocity_columns(grid: np.ndarray, vg_raw: np.ndarray, c: np.ndarray, f: np.ndarray, cfg: DatasetConfig,
@@ -396,7 +399,7 @@ def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap
     streams = Streams()
     run = run_system(streams.tap(feed), vehicle, system, cfg.period_s)
     table = build_table(streams, run, vehicle, cfg)
-    table.sensors = dict(desc, not_used=dict(km.dropped)) if km.dropped else desc
+    table.sensors = dict(desc, **table.sensors, **({"not_used": dict(km.dropped)} if km.dropped else {}))
     return table
 
 

@@ -148,8 +148,9 @@ def _num(v):
 def _clean_set(desc) -> dict:
     """The sensor set the estimator ran with (``pipeline.configure.system_config``'s description:
     named or inferred, the sensors, the kind map) as plain JSON values."""
-    return {str(k): (v if isinstance(v, (str, bool, int, float, type(None))) else
-                     dict(v) if isinstance(v, dict) else str(v)) for k, v in dict(desc or {}).items()}
+    return {str(k): (v if isinstance(v, (str, bool, int, float, type(None))) else dict(v) if isinstance(v, dict)
+                     else [str(x) for x in v] if isinstance(v, (list, tuple)) else str(v))
+            for k, v in dict(desc or {}).items()}
 
 
 def _nis(table: DriveTable) -> dict:

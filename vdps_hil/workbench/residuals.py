@@ -250,8 +250,10 @@ def compute_residuals(table: DriveTable, vehicle: Vehicle, effects: EffectSet | 
     else:
         _python_rows(rm, st, meas, vals, ws, nuis, lat, quants if with_quantities else None)
     avail = np.ones(14, bool)
-    if not st.has_susp:
-        avail[2:5] = False  # vert, roll, pitch need the suspension forces (eq 14)
+    if not st.has_susp or (getattr(table, "sensors", None) or {}).get("imu_substituted"):
+        # vert, roll, pitch need the suspension forces (eq 14), and f_z, p, q measured (an ESC
+        # cluster's are substitutes: dataset.ESC_SUBSTITUTES)
+        avail[2:5] = False
         vals[:, 2:5] = np.nan
     if not st.has_torque:
         # no wheel torques: the longitudinal balance and the wheel rows are not evaluated, and the

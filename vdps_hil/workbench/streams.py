@@ -19,8 +19,9 @@ import numpy as np
 from scipy.signal import butter, filtfilt
 
 from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
+from vdps_hil.units import GRAVITY_MPS2
 
-__all__ = ["DatasetError", "iter_raw", "decode_raw", "Streams", "stream", "Smoother", "uniform", "on_grid", "smoothed",
+__all__ = ["DatasetError", "iter_raw", "decode_raw", "Streams", "stream", "Smoother", "uniform", "on_grid", "smoothed", "smoothed_or_substituted", "ESC_SUBSTITUTES",
            "STREAM_FIELDS", "SPECIFIC_FORCE_FIELDS", "ANGULAR_RATE_FIELDS", "WHEEL_SPEED_FIELDS", "WHEEL_TORQUE_FIELDS",
            "SUSPENSION_FIELDS", "GNSS_POS_FIELDS", "GNSS_ATT_FIELDS", "GNSS_VEL_FIELDS"]
 
@@ -190,6 +191,38 @@ def smoothed(samples, kind, names, smoother, grid_s, t0_ns, min_rate_hz, want_ra
         if want_rate and rate >= min_rate_hz:
             der[:, k] = on_grid(grid_s, tg, np.gradient(vs, 1.0 / rate)[:, None])[:, 0]
     return val, der, rate
+
+
+ESC_SUBSTITUTES = {"specific_force_mps2_z": GRAVITY_MPS2, "angular_rate_radps_x": 0.0, "angular_rate_radps_y": 0.0}
+"""An ESC cluster's missing IMU axes, as the estimator substitutes them (``EkfConfig.substitute_*``:
+f_z := g, w_x = w_y := 0, a level car); the equations that need them are not evaluated
+(``residuals.compute_residuals``, ``DriveTable.sensors["imu_substituted"]``)."""
+
+
+def smoothed_or_substituted(samples: "Streams", kind: str, names: Sequence[str], substitutes: Mapping[str, float],
+                            smoother, grid_s, t0_ns, min_rate_hz):
+    """:func:`smoothed` of ``names`` (with derivatives), except that the fields of
+    ``substitutes`` the stream never carries (finite in no sample) are their constants, wherever
+    the measured fields reach, with a zero derivative, when every other field is measured: (values,
+    derivatives, native rate, the substituted names). Otherwise as :func:`smoothed`, nothing
+    substituted."""
+    _, raw = samples.view(kind, names)
+    have = {n for n, c in zip(names, raw) if np.isfinite(c).any()}
+    del raw
+    subst = tuple(n for n in substitutes if n in names and n not in have)
+    if not subst or not all(n in have for n in names if n not in substitutes):
+        return (*smoothed(samples, kind, names, smoother, grid_s, t0_ns, min_rate_hz, True), ())
+    measured = [n for n in names if n not in subst]
+    v, d, rate = smoothed(samples, kind, measured, smoother, grid_s, t0_ns, min_rate_hz, True)
+    there = np.isfinite(v).all(axis=1)  # rows the measured fields reach
+    val, der = np.empty((len(grid_s), len(names))), np.empty((len(grid_s), len(names)))
+    for k, n in enumerate(names):
+        if n in subst:
+            val[:, k], der[:, k] = np.where(there, substitutes[n], np.nan), np.where(there, 0.0, np.nan)
+        else:
+            j = measured.index(n)
+            val[:, k], der[:, k] = v[:, j], d[:, j]
+    return val, der, rate, subst
 
 
 class Smoother:
