@@ -29,7 +29,8 @@ def import_rav4(tmp_path: Path) -> Path:
     tool.convert(seg, conv)
     rec = tmp_path / "rav4.mcap"
     rep = import_logs(rec, [CanSource("pt", str(conv / "pt.candump.log"), "can0")],
-                      [SerialSource("gnss", str(conv / "gnss.nmea")), SerialSource("imu", str(conv / "imu.mti"), 115200)],
+                      [SerialSource("gnss", str(conv / "gnss.nmea")),
+                       SerialSource("imu", str(conv / "imu.mti"), 115200)],
                       signalmap="toyota_rav4_2017", dbc={"*": str(seg / "toyota_new_mc_pt_generated.dbc")})
     assert rep["write_errors"] == 0
     return rec

@@ -229,7 +229,8 @@ def _heading_against_reference(drive, pipeline_config, kind_map) -> dict:
     d = np.degrees(np.angle(np.exp(1j * (r.track.x[m, 8] - np.interp(t[m], t_ref, np.unwrap(h_ref))))))
     tm = t[m]
     first, last = d[tm < tm[0] + 10.0].mean(), d[tm > tm[-1] - 10.0].mean()
-    return {"n": int(m.sum()), "offset_deg": float(d.mean()), "spread_deg": float(d.std()), "drift_deg": float(last - first)}
+    return {"n": int(m.sum()), "offset_deg": float(d.mean()), "spread_deg": float(d.std()),
+            "drift_deg": float(last - first)}
 
 
 def test_an_inferred_sensor_set_keeps_the_heading_on_the_reference(drive):

@@ -11,8 +11,8 @@ import pytest
 from vdps_hil.adapters.signalmap import load_signalmap
 from vdps_hil.bus.samples import Sample
 from vdps_hil.estimation.ekf_config import SensorSet
-from vdps_hil.estimation.sensorsets import (KindMap, SensorSetError, ZeroRateCalibration, infer_sensor_set, load_sensorset,
-                                            parse_sensorset)
+from vdps_hil.estimation.sensorsets import (KindMap, SensorSetError, ZeroRateCalibration, infer_sensor_set,
+                                            load_sensorset, not_used_note, parse_sensorset)
 
 
 # ------------------------------------------------------------------------------ sensor sets
@@ -112,8 +112,8 @@ def test_kind_map_renames_leaves_out_what_it_feeds_from_elsewhere_and_counts_it(
     assert km(phone) is None and km(phone) is None
     assert km(gnss) is gnss
     assert km.dropped == {"imu/imu": 2}
-    assert km.note() == "not used: imu/imu (2 samples): the sensor set feeds imu from esc_imu"
+    assert not_used_note(km.dropped, km.map) == "not used: imu/imu (2 samples): the sensor set feeds imu from esc_imu"
     empty = KindMap({})
-    assert not empty and empty(phone) is phone and empty.note() is None
+    assert not empty and empty(phone) is phone and not_used_note(empty.dropped, empty.map) is None
     swap = KindMap({"a": "b", "b": "a"})  # a kind both renamed and fed is renamed, never left out
     assert swap(Sample(0, "s", "b", {})).kind == "a" and swap.dropped == {}

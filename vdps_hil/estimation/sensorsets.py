@@ -233,7 +233,8 @@ class KindMap:
     cluster (``esc_imu``), which ``rav4-can-ublox`` maps to ``imu``. Passed on, the two IMUs'
     samples would interleave on the estimator's one IMU input, each with its own mounting and
     axes; the set names the ESC, so the phone's samples are left out and counted in ``dropped``
-    (``"source/kind"`` -> samples). Kinds the map neither renames nor feeds pass unchanged."""
+    (``"source/kind"`` -> samples; :func:`not_used_note` says it in one line). Kinds the map
+    neither renames nor feeds pass unchanged."""
 
     __slots__ = ("map", "dropped", "_fed")
 
@@ -255,10 +256,6 @@ class KindMap:
             self.dropped[key] = self.dropped.get(key, 0) + 1
             return None
         return s
-
-    def note(self) -> str | None:
-        """One line naming what was left out, or None (:func:`not_used_note`)."""
-        return not_used_note(self.dropped, self.map)
 
 
 def not_used_note(not_used: Mapping[str, int] | None, kind_map: Mapping[str, str] | None) -> str | None:

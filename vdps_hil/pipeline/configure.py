@@ -14,8 +14,9 @@ rows (``EkfConfig.with_real_car_rows``: gyro and accelerometer bias states, the 
 constraint, the wheel-speed row and its scale state when the car has tachometers), as the named
 real-car sets do. Without them nothing measures the heading: the eq 7 filter integrates the
 gyro's bias into the yaw, and the body velocity it reports turns with it (the real RAV4 drive,
-inferred: the heading drifted 5 deg from the course in 57 s of straight road, a lateral velocity
-of -1.1 m/s). The paper's Table 1 set (three antennas) keeps the eq 7 filter as printed.
+inferred: the heading drifted 5 deg from the course in 57 s of straight road, the lateral
+velocity reached -1.1 m/s). The paper's Table 1 set (three antennas) keeps the eq 7 filter as
+printed.
 """
 
 from __future__ import annotations

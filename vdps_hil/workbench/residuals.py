@@ -252,7 +252,7 @@ def compute_residuals(table: DriveTable, vehicle: Vehicle, effects: EffectSet | 
     avail = np.ones(14, bool)
     if not st.has_susp or (getattr(table, "sensors", None) or {}).get("imu_substituted"):
         # vert, roll, pitch need the suspension forces (eq 14), and f_z, p, q measured (an ESC
-        # cluster's are substitutes: dataset.ESC_SUBSTITUTES)
+        # cluster's are substitutes: streams.ESC_SUBSTITUTES)
         avail[2:5] = False
         vals[:, 2:5] = np.nan
     if not st.has_torque:

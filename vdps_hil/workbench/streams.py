@@ -21,7 +21,8 @@ from scipy.signal import butter, filtfilt
 from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
 from vdps_hil.units import GRAVITY_MPS2
 
-__all__ = ["DatasetError", "iter_raw", "decode_raw", "Streams", "stream", "Smoother", "uniform", "on_grid", "smoothed", "smoothed_or_substituted", "ESC_SUBSTITUTES",
+__all__ = ["DatasetError", "iter_raw", "decode_raw", "Streams", "stream", "Smoother", "uniform", "on_grid", "smoothed",
+           "smoothed_or_substituted", "ESC_SUBSTITUTES",
            "STREAM_FIELDS", "SPECIFIC_FORCE_FIELDS", "ANGULAR_RATE_FIELDS", "WHEEL_SPEED_FIELDS", "WHEEL_TORQUE_FIELDS",
            "SUSPENSION_FIELDS", "GNSS_POS_FIELDS", "GNSS_ATT_FIELDS", "GNSS_VEL_FIELDS"]
 
