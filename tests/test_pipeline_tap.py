@@ -42,3 +42,35 @@ def test_pipeline_tap_runs_the_system_live_and_reports_the_warning(tmp_path):
     assert "/est/state" in topics
     first_warning_t = min(t for t, lvl in levels if lvl >= 2) / 1e9
     assert first_warning_t < 3.72 - 1.0
+
+
+def test_the_tap_waits_for_an_imu_that_starts_late_and_sizes_as_the_replay(tmp_path):
+    """The live tap holds samples until the probe window of ``sample_stats`` ends, which waits
+    for a late IMU (``pipeline.configure.ProbeWindow``): GNSS from 0 s, the IMU from 5 s. At 4 s it
+    still holds and says no IMU sample has come; after 8 s it is running, sized from the rates
+    ``sample_stats`` measures on the same samples."""
+    from vdps_hil.bus.samples import Sample
+    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.pipeline.configure import sample_stats
+    from vdps_hil.record.writer import RecordingWriter
+
+    stream = []
+    for i in range(1000):  # 10 s: GNSS at 4 Hz from 0 s, a 6-axis IMU at 100 Hz from 5 s
+        t = i * 10_000_000
+        if i % 25 == 0:
+            stream.append(Sample(t, "gnss", "gnss_pos", {"gnss_lat_deg": 40.0, "gnss_lon_deg": -105.0,
+                                                         "gnss_alt_m": 1600.0}))
+        if i >= 500:
+            stream.append(Sample(t, "imu", "imu", {"specific_force_mps2_x": 0.0, "specific_force_mps2_y": 0.0,
+                                                    "specific_force_mps2_z": 9.81, "angular_rate_radps_x": 0.0,
+                                                    "angular_rate_radps_y": 0.0, "angular_rate_radps_z": 0.0}))
+    with RecordingWriter(str(tmp_path / "live.mcap")) as w:
+        tap = PipelineTap(load_vehicle("sedan-model", expect_kind="model"), w)
+        for smp in stream:
+            tap([smp])
+            if smp.t_ns == 4_000_000_000:
+                assert tap.system is None and "no IMU sample yet" in tap.status_line()
+        assert tap.system is not None and tap.error is None
+        _, rates, _ = sample_stats(iter(stream))
+        assert tap.settings["probe_rates_hz"] == rates and rates["imu"] > 99.0
+        tap.finish()

@@ -25,6 +25,7 @@ import pytest
 from vdps_hil.estimation.pipeline_config import Latencies
 from vdps_hil.estimation.sensorsets import load_sensorset
 from vdps_hil.model.params import load_vehicle
+from vdps_hil.pipeline.configure import sample_stats, system_config
 from vdps_hil.realdata.outages import outage_errors, outage_windows, summarize_outages
 from vdps_hil.realdata.reference import interp_angle, velocity_lag
 from vdps_hil.realdata.rtklib import RTKLIB_DRIVE, publisher_mounting_rpy, read_rtklib_pos
@@ -182,3 +183,38 @@ def test_effect_of_the_stated_imu_lag_and_misalignment(drive, published):
     assert nis["mis"] > 2.0 * nis["pub"]
     assert abs((att_mis[1] - att_pub[1]) - (-6.79)) < 1.0  # pitch offset = the stated misalignment pitch
     assert abs((att_mis[0] - att_pub[0]) - (-5.35)) < 1.5  # yaw offset = the stated misalignment yaw
+
+
+def test_the_inferred_probe_waits_for_the_imu_that_starts_after_the_gnss(drive):
+    """``vdps replay FILE`` without a named set sizes the system from the drive's first seconds.
+    On this drive the IMU stream starts 3.4 s after the GNSS: the probe waits for it
+    (``pipeline.configure.ProbeWindow``; a probe of the first 3 s alone found no IMU and the
+    replay refused the drive, "no IMU") and infers a 6-axis IMU with a single antenna, which runs
+    the real-car rows (``tests/test_configure.py``)."""
+    samples, _, veh, _, _, _ = drive
+    first: dict[str, int] = {}
+    for smp in samples:
+        first.setdefault(smp.kind, smp.t_ns)
+    assert first["imu"] - first["gnss_pos"] > 3e9  # the drive's own late IMU, the reason for the rule
+    _, rates, fields = sample_stats(iter(samples))
+    assert rates["imu"] == pytest.approx(100.0, rel=0.02)
+    cfg, _, _, desc = system_config(rates, fields, veh)
+    assert (desc["imu"], desc["gnss"]) == ("6axis", "single_antenna")
+    assert cfg.pipeline.ekf.nonholonomic and cfg.pipeline.ekf.gyro_bias
+
+
+def test_the_recorded_order_gives_the_effective_time_order_s_estimates(drive):
+    """``vdps replay`` hands the samples on in the recorded order, and the pipeline's sequencing
+    (``estimation.sequencing``) must make the stated 0.125 s IMU lag what ordering by effective
+    time makes it: the same updates accepted and the same final state (to the ordering's float
+    noise). Before, the 50 ms hold released every RTK fix 75 ms before its IMU samples: `vdps
+    replay FILE --vehicle rtklib-car-model --sensorset rtklib-car` accepted 916 of 2579 fixes and
+    its heading ran 95 deg off the course."""
+    samples, _, veh, ss, _, _ = drive
+    cfg = ss.pipeline_config(observability_window_s=None, output_period_s=0.05)
+    runs = [run_pipeline(veh, cfg, samples, preprocess=ss.calibration_nodes(veh), order_by_effective_time=o)
+            for o in (True, False)]
+    ups = [{k: (v["accepted"], v["gated"]) for k, v in r.pipeline.counters["ekf"]["updates"].items()} for r in runs]
+    assert ups[0] == ups[1] and ups[0]["gnss_pos"][1] == 0 and ups[0]["gnss_pos"][0] > 2000
+    x0, x1 = runs[0].track.x[-1], runs[1].track.x[-1]
+    assert np.hypot(x0[0] - x1[0], x0[1] - x1[1]) < 0.01 and abs(wrap_pi(x0[8] - x1[8])) < 1e-3

@@ -82,7 +82,8 @@ def test_sample_stats_takes_the_first_seconds_and_leaves_the_rest():
     stream = []
     for i in range(5000):  # 5 s: IMU at 1 kHz, wheel half-frames at 1 kHz, suspension at 10 Hz
         t = i * 1_000_000
-        stream.append(Sample(t, "imu", "imu", {"angular_rate_radps_z": 0.1, "specific_force_mps2_x": math.nan}))
+        stream.append(Sample(t, "imu", "imu", {"angular_rate_radps_z": 0.1, "specific_force_mps2_x": 0.2,
+                                               "specific_force_mps2_y": 0.0, "specific_force_mps2_z": math.nan}))
         stream.append(Sample(t, "can", "wheel_speed", {"wheel_speed_radps_1": 1.0, "wheel_speed_radps_2": 1.0}))
         stream.append(Sample(t, "can", "wheel_speed", {"wheel_speed_radps_3": 1.0, "wheel_speed_radps_4": 1.0}))
         if i % 100 == 0:
@@ -93,5 +94,37 @@ def test_sample_stats_takes_the_first_seconds_and_leaves_the_rest():
     assert taken[-1].t_ns > 3_000_000_000 >= taken[-2].t_ns  # the window ends with the first sample after it
     assert rates["imu"] == pytest.approx(1000.0, rel=1e-9) and rates["wheel_speed"] == pytest.approx(1000.0, rel=1e-9)
     assert rates["suspension"] == pytest.approx(10.0, rel=1e-9)
-    assert fields["imu"] == {"angular_rate_radps_z"}
+    assert fields["imu"] == {"angular_rate_radps_z", "specific_force_mps2_x", "specific_force_mps2_y"}
     assert fields["wheel_speed"] == {f"wheel_speed_radps_{i}" for i in range(1, 5)}
+
+
+def _gnss_then_imu(imu_from_s: float | None, duration_s: float = 40.0) -> list:
+    """GNSS at 4 Hz from 0 s, an IMU at 100 Hz from ``imu_from_s`` (None: never)."""
+    out = []
+    for i in range(int(duration_s * 100)):
+        t = i * 10_000_000
+        if i % 25 == 0:
+            out.append(Sample(t, "gnss", "gnss_pos", {"gnss_lat_deg": 40.0, "gnss_lon_deg": -105.0}))
+        if imu_from_s is not None and t >= imu_from_s * 1e9:
+            out.append(Sample(t, "imu", "imu", {"specific_force_mps2_x": 0.1, "specific_force_mps2_y": 0.0,
+                                                 "specific_force_mps2_z": 9.8, "angular_rate_radps_x": 0.0,
+                                                 "angular_rate_radps_y": 0.0, "angular_rate_radps_z": 0.01}))
+    return out
+
+
+def test_sample_stats_waits_for_an_imu_that_starts_after_the_gnss():
+    """A real drive may start its IMU after its GNSS (the rtklibexplorer drive: 3.4 s later): the
+    probe then runs 3 s from the first IMU sample, so the IMU is found and its rate measured;
+    without any IMU it stops 30 s after the first sample (``PROBE_MAX_SECONDS``), not at the end
+    of the file. An IMU within the first 3 s leaves the window at 3 s."""
+    stream = _gnss_then_imu(5.0)
+    it = iter(stream)
+    taken, rates, fields = sample_stats(it, 3.0)
+    assert taken + list(it) == stream
+    assert 8.0e9 < taken[-1].t_ns <= 8.0e9 + 1e7  # 3 s after the IMU's first sample at 5 s
+    assert rates["imu"] == pytest.approx(100.0, rel=1e-9) and rates["gnss_pos"] == pytest.approx(4.0, rel=1e-9)
+    assert "angular_rate_radps_z" in fields["imu"]
+    taken, rates, fields = sample_stats(iter(_gnss_then_imu(None)), 3.0)
+    assert 30.0e9 < taken[-1].t_ns <= 30.0e9 + 2.5e8 and "imu" not in fields
+    taken, _, _ = sample_stats(iter(_gnss_then_imu(1.0)), 3.0)
+    assert 3.0e9 < taken[-1].t_ns <= 3.0e9 + 1e7

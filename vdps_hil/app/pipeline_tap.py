@@ -15,7 +15,8 @@ class PipelineTap:
     the status line. It never sends on the bus (the bench does).
 
     Configuration as ``vdps replay`` derives it (``app.replay.replay_config``): the samples of the
-    first ``probe_s`` (``PROBE_SECONDS``, 3 s) of data are held, the sensor set is inferred from
+    first ``probe_s`` (``PROBE_SECONDS``, 3 s) of data are held (longer when the IMU starts
+    late: ``pipeline.configure.ProbeWindow``), the sensor set is inferred from
     their fields and the suspension averaging sized from their rate (suspension sigma
     ``DEFAULT_SUSP_SIGMA_M``), then they go to the system at once -- so the first estimates and
     warnings come out after those seconds. ``record_order``: every sample fed is noted
@@ -32,6 +33,7 @@ class PipelineTap:
         from vdps_hil.estimation.estimates import Estimate
         from vdps_hil.record.input_order import InputOrder
         from vdps_hil.app.replay import PROBE_SECONDS
+        from vdps_hil.pipeline.configure import ProbeWindow
         from vdps_hil.pipeline.outputs import CanFrame
 
         self._sample_type, self._frame_type, self._est_type = Sample, CanFrame, Estimate
@@ -45,7 +47,7 @@ class PipelineTap:
         self.order = InputOrder() if record_order else None
         self.order_written = False
         self._pending: list = []
-        self._t0: int | None = None
+        self._window = ProbeWindow(self.probe_s)  # sample_stats' window (longer when the IMU starts late)
         self._fed_since_clear = 0
         self._decoder = VdpsCanDecoder(source="pipeline")
         self.samples = self.estimates = self.frames = 0
@@ -68,9 +70,7 @@ class PipelineTap:
                 self._feed(ev)
             elif self.error is None:
                 self._pending.append(ev)
-                if self._t0 is None:
-                    self._t0 = ev.t_ns
-                if ev.t_ns - self._t0 > self.probe_s * 1e9:  # sample_stats' end of the window
+                if self._window.past(ev):  # sample_stats' end of the window
                     self._configure()
 
     def _configure(self) -> None:
@@ -156,7 +156,9 @@ class PipelineTap:
         if self.system is None:
             if self.error is not None:
                 return f"pipeline: not running ({self.error})"
-            return f"pipeline: sizing from the first {self.probe_s:g} s of data ({len(self._pending)} samples held)"
+            wait = ", no IMU sample yet" if self._pending and self._window.t_imu is None else ""
+            return (f"pipeline: sizing from the first {self.probe_s:g} s of data ({len(self._pending)} samples held"
+                    f"{wait})")
         w = self.last_warning
         if w is None:
             return f"pipeline: {self.samples} samples, {self.estimates} estimates, no warning frame yet"

@@ -9,7 +9,9 @@ filter (GNSS, suspension; wheel speeds when the filter takes them: the kinds of
 at or after its time arrives, and the held ones go first, in time order -- the order a
 time-ordered input has anyway -- or until the newest sample time has moved ``hold_ns``
 (``PipelineConfig.imu_hold_s``, default 50 ms) past its arrival (the IMU stopped; counted
-``hold_expired``). Other samples (torques, steering, wheel speeds feeding only the alpha-beta
+``hold_expired``), plus the IMU's latency beyond the measurement's own: an IMU whose time stamps
+lag (rtklib-car: 0.125 s) reaches a measurement's time only that much after the measurement
+arrived, and a 50 ms hold alone released every GNSS fix of that drive before its IMU samples. Other samples (torques, steering, wheel speeds feeding only the alpha-beta
 filters) go on at once. ``release_all`` hands on what is held at the end of the input. Before the
 first IMU sample nothing is held. Times are compared with the per-sensor latencies removed.
 """
@@ -76,8 +78,11 @@ class ImuSequencer:
             else:
                 self._held_seq += 1
                 self.held += 1
-                heapq.heappush(held, (t_s - lat, self._held_seq, self._newest, sample, fn))
-        while held and self._newest - held[0][2] >= self._hold_ns:  # the IMU has stopped
+                # its deadline: hold_ns past its arrival, plus what the IMU's time stamps lag behind
+                # its own (rtklib-car: 0.125 s; the IMU mark trails the newest sample time by that)
+                deadline = self._newest + self._hold_ns + max(0, self._imu_lat - lat)
+                heapq.heappush(held, (t_s - lat, self._held_seq, deadline, sample, fn))
+        while held and self._newest >= held[0][2]:  # the IMU has stopped
             h = heapq.heappop(held)
             self.hold_expired += 1
             h[4](h[3], out)

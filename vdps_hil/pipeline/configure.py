@@ -28,10 +28,17 @@ from typing import Iterator, Mapping
 from vdps_hil.bus.samples import Sample
 from vdps_hil.pipeline.node import SystemConfig, default_pipeline_config
 
-__all__ = ["PROBE_SECONDS", "DEFAULT_SUSP_SIGMA_M", "SystemConfigError", "sample_stats", "system_config"]
+__all__ = ["PROBE_SECONDS", "PROBE_MAX_SECONDS", "DEFAULT_SUSP_SIGMA_M", "ProbeWindow", "SystemConfigError",
+           "sample_stats", "system_config"]
 
 PROBE_SECONDS = 3.0
 """The sensor set and suspension rate are inferred from this much of the decoded data."""
+
+PROBE_MAX_SECONDS = 30.0
+"""The probe waits at most this long after the first sample for the first IMU sample
+(:class:`ProbeWindow`)."""
+
+_IMU_FIELDS = ("specific_force_mps2_x", "specific_force_mps2_y", "angular_rate_radps_z")
 
 DEFAULT_SUSP_SIGMA_M = 0.001
 """Suspension deflection sigma (``vdps replay --susp-sigma``; Table 1: 1 mm)."""
@@ -41,24 +48,53 @@ class SystemConfigError(ValueError):
     """A sensor set or setting the node cannot run with (one line)."""
 
 
+class ProbeWindow:
+    """Where the probe ends: ``seconds`` after the first sample, or, when no IMU (a kind that has
+    carried x/y specific force and yaw rate, finite) has come by then, ``seconds`` after it came,
+    at most ``max_seconds`` after the first sample. A real drive may start its IMU stream after its
+    GNSS (the rtklibexplorer drive: 3.4 s later), and a probe of its first seconds alone would
+    find no IMU and refuse it. ``past(sample)``: True for the first sample beyond the window
+    (it ends the window; :func:`sample_stats` and the live tap both use this rule)."""
+
+    def __init__(self, seconds: float = PROBE_SECONDS, max_seconds: float = PROBE_MAX_SECONDS):
+        self.span_ns = seconds * 1e9
+        self.max_ns = max(max_seconds, seconds) * 1e9
+        self.t0: int | None = None
+        self.t_imu: int | None = None  # when a kind had carried all of _IMU_FIELDS (infer_sensor_set's ESC rule)
+        self._seen: dict[str, set] = {}
+
+    def past(self, s: Sample) -> bool:
+        t = s.t_ns
+        if self.t0 is None:
+            self.t0 = t
+        if self.t_imu is None:
+            seen = self._seen.setdefault(s.kind, set())
+            seen.update(n for n in _IMU_FIELDS if math.isfinite(s.fields.get(n, math.nan)))
+            if len(seen) == len(_IMU_FIELDS):
+                self.t_imu = t
+        if t - self.t0 > self.max_ns:
+            return True
+        start = self.t0 if self.t_imu is None or self.t_imu - self.t0 <= self.span_ns else self.t_imu
+        return t - start > self.span_ns and self.t_imu is not None
+
+
 def sample_stats(samples: Iterator[Sample], seconds: float = PROBE_SECONDS
                  ) -> tuple[list[Sample], dict[str, float], dict[str, set]]:
     """Take the samples of the first ``seconds`` from the iterator ``samples`` (plus the first
-    sample after them, which ends the window): (the samples taken, in order; sample rate [Hz]
-    per kind; catalogue fields with a finite value per kind). Samples of one instant from one
-    kind count once in the rate. The caller feeds the samples taken to the system after
-    configuring it from the rest, so the recording is decoded once."""
+    sample after them, which ends the window; longer when the IMU starts late,
+    :class:`ProbeWindow`): (the samples taken, in order; sample rate [Hz] per kind; catalogue
+    fields with a finite value per kind). Samples of one instant from one kind count once in the
+    rate. The caller feeds the samples taken to the system after configuring it from the rest,
+    so the recording is decoded once."""
     taken: list[Sample] = []
     first: dict[str, int] = {}
     last: dict[str, int] = {}
     count: dict[str, int] = {}
     fields: dict[str, set] = {}
-    t0 = None
-    span_ns = seconds * 1e9
+    window = ProbeWindow(seconds)
     for s in samples:
         taken.append(s)
-        t0 = s.t_ns if t0 is None else t0
-        if s.t_ns - t0 > span_ns:
+        if window.past(s):
             break
         k = s.kind
         fields.setdefault(k, set()).update(n for n, v in s.fields.items() if math.isfinite(v))
