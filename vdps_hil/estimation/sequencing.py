@@ -11,8 +11,9 @@ time-ordered input has anyway -- or until the newest sample time has moved ``hol
 (``PipelineConfig.imu_hold_s``, default 50 ms) past its arrival (the IMU stopped; counted
 ``hold_expired``), plus the IMU's latency beyond the measurement's own: an IMU whose time stamps
 lag (rtklib-car: 0.125 s) reaches a measurement's time only that much after the measurement
-arrived, and a 50 ms hold alone released every GNSS fix of that drive before its IMU samples. Other samples (torques, steering, wheel speeds feeding only the alpha-beta
-filters) go on at once. ``release_all`` hands on what is held at the end of the input. Before the
+arrived, and a 50 ms hold alone released every GNSS fix of that drive before its IMU samples.
+Other samples (torques, steering, wheel speeds feeding only the alpha-beta filters) go on at
+once. ``release_all`` hands on what is held at the end of the input. Before the
 first IMU sample nothing is held. Times are compared with the per-sensor latencies removed.
 """
 

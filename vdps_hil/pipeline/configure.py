@@ -60,7 +60,7 @@ class ProbeWindow:
         self.span_ns = seconds * 1e9
         self.max_ns = max(max_seconds, seconds) * 1e9
         self.t0: int | None = None
-        self.t_imu: int | None = None  # when a kind had carried all of _IMU_FIELDS (infer_sensor_set's ESC rule)
+        self.t_imu: int | None = None  # when one kind had carried all of _IMU_FIELDS (the ESC rule)
         self._seen: dict[str, set] = {}
 
     def past(self, s: Sample) -> bool:
