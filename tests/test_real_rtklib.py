@@ -212,6 +212,7 @@ def test_the_recorded_order_gives_the_effective_time_order_s_estimates(drive):
     its heading ran 95 deg off the course."""
     samples, _, veh, ss, _, _ = drive
     cfg = ss.pipeline_config(observability_window_s=None, output_period_s=0.05)
+    assert not cfg.ekf.use_gnss_velocity  # its velocity updates are "disabled" (the replay's by_status)
     runs = [run_pipeline(veh, cfg, samples, preprocess=ss.calibration_nodes(veh), order_by_effective_time=o)
             for o in (True, False)]
     ups = [{k: (v["accepted"], v["gated"]) for k, v in r.pipeline.counters["ekf"]["updates"].items()} for r in runs]

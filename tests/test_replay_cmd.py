@@ -258,6 +258,9 @@ def test_sensor_set_inferred_or_named(drive, tmp_path):
     b = json.loads((tmp_path / "b.json").read_text())
     assert b["sensor_set"]["source"] == "small" and b["observability"]["in_progress"]["n_states"] == 9
     assert b["innovations"]["gnss_att"]["accepted"] == 0 and b["estimates_summary"]["count"] > 250
+    # a kind the set has no sensor for: its measurements are counted as disabled, not refused
+    att = b["innovations"]["gnss_att"]
+    assert att["updates"] > 0 and att["by_status"] == {"disabled": att["updates"]}
     code, text = run("replay", str(drive), "--sensorset", str(tmp_path / "missing.toml"),
                      "-o", str(tmp_path / "never.mcap"))
     assert code == 2 and "sensor set" in text and len(text.strip().splitlines()) == 1
@@ -441,6 +444,7 @@ def test_a_sensor_the_named_set_does_not_name_is_left_out_and_said(tmp_path):
     assert "  not used: imu/imu (%d samples): the sensor set feeds imu from esc_imu" % phone in r.output.splitlines()
     vel = doc["innovations"]["gnss_vel"]
     assert vel["accepted"] >= 0.98 * vel["updates"] > 500
+    assert sum(vel["by_status"].values()) == vel["updates"] and vel["by_status"]["accepted"] == vel["accepted"]
     # inferred (no --sensorset): the phone's six axes are the IMU, nothing is left out
     r = CliRunner().invoke(cli, ["replay", str(rec), "--vehicle", "rav4-model", "--no-identify", "--no-predict",
                                  "--jobs", "1", "--json", str(js)], catch_exceptions=False)

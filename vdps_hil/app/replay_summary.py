@@ -50,8 +50,9 @@ class ReplaySummary:
                 sig = [v * v for v in o.sigma]
                 self.sig_sum = sig if self.sig_sum is None else [a + b for a, b in zip(self.sig_sum, sig)]
             elif isinstance(o, Innovation):
-                c = self.innov.setdefault(o.kind, [0, 0, 0.0, 0])
+                c = self.innov.setdefault(o.kind, [0, 0, 0.0, 0, {}])
                 c[0] += 1
+                c[4][o.status] = c[4].get(o.status, 0) + 1
                 if o.status == "accepted":
                     c[1] += 1
                     if math.isfinite(o.nis) and o.dof:
@@ -95,7 +96,9 @@ class ReplaySummary:
             "messages_read": {"raw_records": reader_c["raw_records"], "samples": sum(self.samples.values()),
                               "per_source_kind": dict(sorted(self.samples.items()))},
             "estimates_summary": es,
-            "innovations": {k: {"updates": c[0], "accepted": c[1],
+            # per status too: a kind the configuration switches off (rtklib-car's GNSS velocity)
+            # counts its measurements as "disabled", not as refused
+            "innovations": {k: {"updates": c[0], "accepted": c[1], "by_status": dict(sorted(c[4].items())),
                                 "mean_nis_per_dof": (c[2] / c[3]) if c[3] else None}
                             for k, c in sorted(self.innov.items())},
             "rejected": rejected,
