@@ -61,3 +61,13 @@ def test_a_named_sensor_set_is_taken_as_written():
 def test_no_imu_is_a_one_line_error():
     with pytest.raises(SystemConfigError, match="no IMU"):
         system_config(RATES, {"gnss_pos": POS}, VEH)
+
+
+def test_an_altitude_in_a_frame_of_its_own_is_named_for_the_join():
+    """A recording with a ``gnss_alt`` kind (the CANedge's GNSS) is described as joining it
+    (``sensor_set.gnss_altitude``), which switches on ``KindMap``'s altitude join."""
+    fields = {"imu": SIX, "gnss_pos": {"gnss_lat_deg", "gnss_lon_deg"}, "gnss_alt": {"gnss_alt_m"}, "gnss_att": ATT}
+    _, _, _, desc = system_config(RATES, fields, VEH)
+    assert desc["gnss_altitude"] == "joined from gnss_alt"
+    _, _, _, desc = system_config(RATES, {"imu": SIX, "gnss_pos": POS, "gnss_att": ATT}, VEH)
+    assert "gnss_altitude" not in desc

@@ -453,6 +453,30 @@ def test_a_sensor_the_named_set_does_not_name_is_left_out_and_said(tmp_path):
     assert doc["sensor_set"]["imu"] == "6axis" and "not_used" not in doc["sensor_set"] and "not used" not in r.output
 
 
+def test_a_canedge_mf4_drive_replays_with_its_altitude_joined(tmp_path, real_data):
+    """The CSS CANedge drive (gnss1.MF4, its GNSS at 1 Hz sends the altitude in a frame of its own:
+    kinds gnss_pos and gnss_alt), imported with the shipped signal map and replayed with the set
+    inferred: the fixes get their altitude (``sensorsets.KindMap``), so the estimator starts and
+    takes them. Before, every fix was refused for want of an altitude and the replay ended with 0
+    estimates."""
+    from vdps_hil.record.importer import CanSource, import_logs
+
+    folder = real_data / "css_canedge_gnss_imu_mf4"
+    rec = tmp_path / "c.mcap"
+    import_logs(rec, [CanSource("gnss", str(folder / "gnss1.MF4"))], signalmap="canedge_gnss_imu",
+                dbc={"gnss": str(folder / "gnss.dbc")})
+    js = tmp_path / "c.json"
+    r = CliRunner().invoke(cli, ["replay", str(rec), "--no-identify", "--no-predict", "--jobs", "1", "--json", str(js)],
+                           catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    doc = json.loads(js.read_text())
+    assert doc["sensor_set"]["gnss_altitude"] == "joined from gnss_alt"
+    fixes = doc["messages_read"]["per_source_kind"]["can.gnss/gnss_pos"]
+    pos = doc["innovations"]["gnss_pos"]
+    assert fixes > 150 and pos["accepted"] >= fixes - 5 and doc["rejected"]["gnss_pos"] <= 5
+    assert doc["estimates_summary"]["count"] > 1000
+
+
 def test_undecoded_can_frames_are_said_loudly(drive, tmp_path):
     """A bus no signal map decodes: one warning line with the count and the options."""
     from vdps_hil.record.decode import raw_copier

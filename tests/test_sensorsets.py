@@ -117,3 +117,25 @@ def test_kind_map_renames_leaves_out_what_it_feeds_from_elsewhere_and_counts_it(
     assert not empty and empty(phone) is phone and not_used_note(empty.dropped, empty.map) is None
     swap = KindMap({"a": "b", "b": "a"})  # a kind both renamed and fed is renamed, never left out
     assert swap(Sample(0, "s", "b", {})).kind == "a" and swap.dropped == {}
+
+
+def test_kind_map_joins_an_altitude_sent_in_a_frame_of_its_own():
+    """``join_altitude`` (the CANedge's GNSS: kinds ``gnss_pos`` without an altitude and
+    ``gnss_alt``): each fix gets the newest altitude and its sigma when it is at most 2 s old; the
+    altitude samples are taken in; a fix that carries its own altitude, or comes without a recent
+    one, passes unchanged; the map then renames as before."""
+    km = KindMap({}, join_altitude=True)
+    assert km  # on, although it renames nothing
+    pos = lambda t, **f: Sample(t, "can.gnss", "gnss_pos", {"gnss_lat_deg": 47.0, "gnss_lon_deg": 8.0, **f})
+    assert km(pos(0)).fields.get("gnss_alt_m") is None  # no altitude yet
+    assert km(Sample(1_000_000_000, "can.gnss", "gnss_alt", {"gnss_alt_m": 412.5, "gnss_pos_sigma_v_m": 1.5})) is None
+    got = km(pos(1_000_000_000))
+    assert got.kind == "gnss_pos" and got.fields["gnss_alt_m"] == 412.5 and got.fields["gnss_pos_sigma_v_m"] == 1.5
+    assert got.fields["gnss_lat_deg"] == 47.0
+    own = pos(2_000_000_000, gnss_alt_m=400.0)
+    assert km(own) is own
+    assert km(pos(3_500_000_000)).fields.get("gnss_alt_m") is None  # 2.5 s old: not joined
+    assert km.joined == 1 and km.dropped == {}
+    off = KindMap({})
+    alt = Sample(0, "can.gnss", "gnss_alt", {"gnss_alt_m": 1.0})
+    assert not off and off(alt) is alt

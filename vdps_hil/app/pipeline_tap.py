@@ -84,12 +84,12 @@ class PipelineTap:
         pending, self._pending = self._pending, []
         _, rates, fields = sample_stats(iter(pending), self.probe_s)
         try:
-            cfg, kind_map, _, _ = replay_config(rates, fields, self.model, DEFAULT_SUSP_SIGMA_M, None,
-                                                identify=True, predict=True)
+            cfg, kind_map, _, desc = replay_config(rates, fields, self.model, DEFAULT_SUSP_SIGMA_M, None,
+                                                   identify=True, predict=True)
         except ReplayError as e:
             self.error = str(e)
             return
-        self.kind_map = KindMap(kind_map)
+        self.kind_map = KindMap(kind_map, join_altitude="gnss_altitude" in (desc or {}))
         if self.start is not None:
             cfg = replace(cfg, start_params=self.start)
         # predictions inline (prediction.offpath's wait rule): this tap runs in a process of its own

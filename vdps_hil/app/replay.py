@@ -256,7 +256,7 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
             source = view.tap(source, out)
         if progress is not None:
             source = _progress_tap(source, progress)
-        mapper = KindMap(kind_map)
+        mapper = KindMap(kind_map, join_altitude="gnss_altitude" in (sensors_desc or {}))
         _feed(system, source, None if counter is None else counter.count, mapper, nodes, summary, out)
         if mapper.dropped and sensors_desc is not None:
             sensors_desc["not_used"] = dict(mapper.dropped)  # a sensor the set does not name

@@ -236,18 +236,30 @@ class KindMap:
     (``"source/kind"`` -> samples; :func:`not_used_note` says it in one line). Kinds the map
     neither renames nor feeds pass unchanged."""
 
-    __slots__ = ("map", "dropped", "_fed")
+    __slots__ = ("map", "dropped", "joined", "_fed", "_join", "_alt")
 
-    def __init__(self, kind_map: Mapping[str, str] | None = None):
+    ALTITUDE_MAX_AGE_NS = 2_000_000_000
+    """How old a ``gnss_alt`` sample may be to complete a ``gnss_pos`` one (1 Hz frames: the
+    epoch's own or the one before)."""
+
+    def __init__(self, kind_map: Mapping[str, str] | None = None, join_altitude: bool = False):
         self.map = dict(kind_map or {})
         self._fed = frozenset(self.map.values()) - frozenset(self.map)
         self.dropped: dict[str, int] = {}
+        self._join = bool(join_altitude)
+        self._alt = None  # (t_ns, altitude, its sigma) of the newest gnss_alt sample
+        self.joined = 0
 
     def __bool__(self) -> bool:
-        return bool(self.map)
+        return bool(self.map) or self._join
 
     def __call__(self, s):
         k = s.kind
+        if self._join and k in ("gnss_alt", "gnss_pos"):
+            s = self._altitude(s)
+            if s is None:
+                return None
+            k = s.kind
         to = self.map.get(k)
         if to is not None:
             return type(s)(s.t_ns, s.source, to, s.fields, s.wall_time_ns, s.valid)
@@ -256,6 +268,27 @@ class KindMap:
             self.dropped[key] = self.dropped.get(key, 0) + 1
             return None
         return s
+
+    def _altitude(self, s):
+        """``join_altitude``: a receiver that sends its altitude in a frame of its own (the
+        CANedge's GNSS, ``configs/signalmaps/canedge_gnss_imu``: kinds ``gnss_pos`` without an
+        altitude and ``gnss_alt``) has each ``gnss_pos`` completed with the newest altitude and its
+        sigma, at most ``ALTITUDE_MAX_AGE_NS`` old (counted in ``joined``); the ``gnss_alt``
+        samples are taken in (None). The estimator refuses a fix without an altitude."""
+        f = s.fields
+        if s.kind == "gnss_alt":
+            alt = f.get("gnss_alt_m", math.nan)
+            if math.isfinite(alt):
+                self._alt = (s.t_ns, alt, f.get("gnss_pos_sigma_v_m", math.nan))
+            return None
+        if math.isfinite(f.get("gnss_alt_m", math.nan)) or self._alt is None \
+                or abs(s.t_ns - self._alt[0]) > self.ALTITUDE_MAX_AGE_NS:
+            return s
+        extra = {"gnss_alt_m": self._alt[1]}
+        if math.isfinite(self._alt[2]) and "gnss_pos_sigma_v_m" not in f:
+            extra["gnss_pos_sigma_v_m"] = self._alt[2]
+        self.joined += 1
+        return type(s)(s.t_ns, s.source, s.kind, {**f, **extra}, s.wall_time_ns, s.valid)
 
 
 def not_used_note(not_used: Mapping[str, int] | None, kind_map: Mapping[str, str] | None) -> str | None:

@@ -141,5 +141,7 @@ def system_config(rates: Mapping[str, float], fields: Mapping[str, set], veh, su
     if not (math.isfinite(susp_sigma_m) and susp_sigma_m > 0):
         raise SystemConfigError(f"suspension sigma must be positive, got {susp_sigma_m!r}")
     desc["kind_map"] = kind_map
+    if "gnss_alt" in fields:  # altitude in a frame of its own: joined to the fixes (sensorsets.KindMap)
+        desc["gnss_altitude"] = "joined from gnss_alt"
     cfg = SystemConfig.for_profile(rates.get("suspension", 1.0), susp_sigma_m, pipeline=pc, **kw)
     return cfg, kind_map, nodes, desc

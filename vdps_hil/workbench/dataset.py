@@ -391,7 +391,7 @@ def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap
         if track is None:  # one pass for the track, then the samples again
             track = _gyro_track(feed, kind_map, make_nodes, cfg)
             feed = source()
-    km = KindMap(kind_map)
+    km = KindMap(kind_map, join_altitude="gnss_altitude" in (desc or {}))
     if imu_effects:
         feed = imu_corrected(renamed(feed, km, make_nodes()), imu_effects, track)
     else:
