@@ -42,7 +42,7 @@ class PipelineTap:
         self.probe_s = PROBE_SECONDS if probe_s is None else probe_s
         self.system = None
         self.settings: dict | None = None  # what the system was sized from (recorded with the order)
-        self.kind_map = None  # a KindMap once the system is configured
+        self.kind_map = None  # a KindMap once the system is configured, if it maps anything
         self.error: str | None = None  # the system could not be configured (no IMU): not running
         self.order = InputOrder() if record_order else None
         self.order_written = False
@@ -84,12 +84,13 @@ class PipelineTap:
         pending, self._pending = self._pending, []
         _, rates, fields = sample_stats(iter(pending), self.probe_s)
         try:
-            cfg, kind_map, _, desc = replay_config(rates, fields, self.model, DEFAULT_SUSP_SIGMA_M, None,
-                                                   identify=True, predict=True)
+            cfg, _, _, desc = replay_config(rates, fields, self.model, DEFAULT_SUSP_SIGMA_M, None,
+                                            identify=True, predict=True)
         except ReplayError as e:
             self.error = str(e)
             return
-        self.kind_map = KindMap(kind_map, join_altitude="gnss_altitude" in (desc or {}))
+        km = KindMap.of(desc)
+        self.kind_map = km if km else None  # None: nothing to map (asked once, not per sample)
         if self.start is not None:
             cfg = replace(cfg, start_params=self.start)
         # predictions inline (prediction.offpath's wait rule): this tap runs in a process of its own
@@ -107,7 +108,7 @@ class PipelineTap:
         if self.order is not None:
             self.order.note(s)
         self.samples += 1
-        if self.kind_map:  # as replay_file
+        if self.kind_map is not None:  # as replay_file
             s = self.kind_map(s)
             if s is None:  # a sensor the set does not name
                 return

@@ -222,10 +222,10 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
         else:
             side = LocalRecordingSide(reader, **io_kw)
         head: list[Sample] = []
-        kind_map, nodes, sensors_desc = {}, [], None
+        nodes, sensors_desc = [], None
         if config is None:  # the sensor set and suspension rate from the first seconds, decoded once
             head, rates, fields = sample_stats(side) if probe is None else ([], *probe)
-            config, kind_map, nodes, sensors_desc = configure(rates, fields)
+            config, _, nodes, sensors_desc = configure(rates, fields)
         side.start_output({"source": "vdps replay", "input": os.path.basename(os.fspath(path)),
                            "vehicle": veh.name, "vehicle_sha256": veh.source_sha256})
         if start is not None:
@@ -256,7 +256,7 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
             source = view.tap(source, out)
         if progress is not None:
             source = _progress_tap(source, progress)
-        mapper = KindMap(kind_map, join_altitude="gnss_altitude" in (sensors_desc or {}))
+        mapper = KindMap.of(sensors_desc)
         _feed(system, source, None if counter is None else counter.count, mapper, nodes, summary, out)
         if mapper.dropped and sensors_desc is not None:
             sensors_desc["not_used"] = dict(mapper.dropped)  # a sensor the set does not name
@@ -278,11 +278,12 @@ def _feed(system: VdpsSystem, source, count, kind_map: KindMap, nodes, summary: 
     system; its outputs into the summary and ``side.writer`` (read at each output: the output
     opens at the first raw record)."""
     handle = system.handle
+    kind_map = kind_map if kind_map else None  # asked once, not per sample
     n = 0
     for s in source:
         if count is not None:
             count(s)
-        if kind_map:
+        if kind_map is not None:
             s = kind_map(s)
             if s is None:
                 continue

@@ -250,6 +250,13 @@ class KindMap:
         self._alt = None  # (t_ns, altitude, its sigma) of the newest gnss_alt sample
         self.joined = 0
 
+    @classmethod
+    def of(cls, sensor_set: Mapping | None) -> "KindMap":
+        """The map a sensor-set description (``pipeline.configure.system_config``'s) asks for: its
+        ``kind_map``, and the altitude join when it says ``gnss_altitude`` (None: an empty map)."""
+        d = sensor_set or {}
+        return cls(d.get("kind_map"), join_altitude="gnss_altitude" in d)
+
     def __bool__(self) -> bool:
         return bool(self.map) or self._join
 

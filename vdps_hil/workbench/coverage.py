@@ -58,7 +58,7 @@ def missing_signals(table: DriveTable) -> list[str]:
     for label, cols, prevents in _GROUPS:
         if not table.has(*cols):
             out.append(f"missing signals: {label} ({', '.join(cols)}): {prevents}")
-    sensors = getattr(table, "sensors", None) or {}
+    sensors = table.sensors
     if sensors.get("imu_substituted"):
         out.append(f"missing signals: IMU axes ({', '.join(sensors['imu_substituted'])}; an ESC cluster): "
                    "substituted as the estimator does (f_z = g, roll and pitch rates 0); the vertical, roll "

@@ -385,13 +385,13 @@ def load_drive(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalmap
 
     if samples is not None and imu_effects and iter(samples) is samples:
         samples = list(samples)  # a one-shot iterator cannot be read twice
-    feed, system, kind_map, make_nodes, desc = _configured(source(), path, vehicle, cfg)
+    feed, system, make_nodes, desc = _configured(source(), path, vehicle, cfg)
     if imu_effects:
         track = gyro
         if track is None:  # one pass for the track, then the samples again
-            track = _gyro_track(feed, kind_map, make_nodes, cfg)
+            track = _gyro_track(feed, desc, make_nodes, cfg)
             feed = source()
-    km = KindMap(kind_map, join_altitude="gnss_altitude" in (desc or {}))
+    km = KindMap.of(desc)
     if imu_effects:
         feed = imu_corrected(renamed(feed, km, make_nodes()), imu_effects, track)
     else:
@@ -417,37 +417,38 @@ def reestimator(path: str | os.PathLike, vehicle: Vehicle, *, dbc=None, signalma
         if not effects:
             return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=cfg)
         if not kept:
-            feed, _, kind_map, make_nodes, _ = _configured(iter_raw(path, dbc=dbc, signalmap=signalmap), path,
-                                                           vehicle, cfg)
-            kept.append(_gyro_track(feed, kind_map, make_nodes, cfg))
+            feed, _, make_nodes, desc = _configured(iter_raw(path, dbc=dbc, signalmap=signalmap), path, vehicle, cfg)
+            kept.append(_gyro_track(feed, desc, make_nodes, cfg))
         return load_drive(path, vehicle, dbc=dbc, signalmap=signalmap, config=cfg, imu_effects=effects,
                           gyro=kept[0])
     return run
 
 
-def _gyro_track(samples: Iterable[Sample], kind_map, make_nodes, cfg: DatasetConfig):
+def _gyro_track(samples: Iterable[Sample], desc: dict, make_nodes, cfg: DatasetConfig):
     """The IMU corrections' gyro track (``imu_effects.gyro_track``) of the samples as the estimator
-    sees them (kind map, fresh calibration nodes): one definition for :func:`load_drive` and the
-    track :func:`reestimator` keeps, which must be the same."""
-    return gyro_track(renamed(samples, kind_map, make_nodes()), cfg.cutoff_hz)
+    sees them (the kind map of the sensor-set description ``desc``, fresh calibration nodes): one
+    definition for :func:`load_drive` and the track :func:`reestimator` keeps, which must be the
+    same."""
+    return gyro_track(renamed(samples, KindMap.of(desc), make_nodes()), cfg.cutoff_hz)
 
 
 def _configured(samples: Iterable[Sample], path, vehicle: Vehicle, cfg: DatasetConfig):
-    """(the samples from their start, SystemConfig, kind map, calibration-node factory, sensor-set
-    description): the node configured from the first seconds of ``samples`` (``sample_stats``)."""
+    """(the samples from their start, SystemConfig, calibration-node factory, sensor-set
+    description with its kind map): the node configured from the first seconds of ``samples``
+    (``sample_stats``)."""
     it = iter(samples)
     head, rates, fields = sample_stats(it)
     if not head:
         raise DatasetError(f"{path}: no decodable /raw/ samples")
-    system, kind_map, make_nodes, desc = _system_config(rates, fields, vehicle, cfg)
-    return itertools.chain(head, it), system, kind_map, make_nodes, desc
+    system, make_nodes, desc = _system_config(rates, fields, vehicle, cfg)
+    return itertools.chain(head, it), system, make_nodes, desc
 
 
 def _system_config(rates, fields, vehicle: Vehicle, cfg: DatasetConfig):
-    """(SystemConfig without predictor, kind map, a factory of fresh calibration nodes, sensor-set
-    description) as ``vdps replay`` configures itself from the first seconds."""
+    """(SystemConfig without predictor, a factory of fresh calibration nodes, sensor-set
+    description with its kind map) as ``vdps replay`` configures itself from the first seconds."""
     try:
-        system, kind_map, _, desc = system_config(rates, fields, vehicle, cfg.susp_sigma_m, None, cfg.sensorset,
+        system, _, _, desc = system_config(rates, fields, vehicle, cfg.susp_sigma_m, None, cfg.sensorset,
                                                   predict=False, identify=cfg.identify)
     except SystemConfigError as e:
         raise DatasetError(str(e)) from None
@@ -461,7 +462,7 @@ def _system_config(rates, fields, vehicle: Vehicle, cfg: DatasetConfig):
         from vdps_hil.estimation.sensorsets import load_sensorset
 
         return load_sensorset(cfg.sensorset).calibration_nodes(vehicle)
-    return system, kind_map, make_nodes, desc
+    return system, make_nodes, desc
 
 
 def table_from_samples(samples: Iterable[Sample], vehicle: Vehicle, config: DatasetConfig | None = None,

@@ -32,6 +32,7 @@ import numpy as np
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import Effect
 from vdps_hil.model.params import Vehicle
+from vdps_hil.record.schemas import clean_json
 
 from .add import AddResult, FittedModel, add_effects, cleaned_residuals, residual_change, rms_by_equation
 from .dataset import DatasetConfig, DriveTable, load_drive, reestimator
@@ -85,7 +86,7 @@ class Diagnosis:
                  "groups": rk.groups, "selected": list(rk.selected), "n_eff": rk.n_eff,
                  "worst_windows": [w.to_json() for w in self.windows],
                  "regimes": {k: v.to_json() for k, v in self.regimes.items()},
-                 "estimator_nis": _nis(self.table), "sensor_set": _clean_set(self.table.sensors),
+                 "estimator_nis": _nis(self.table), "sensor_set": clean_json(dict(self.table.sensors)),
                  "duration_s": self.table.duration_s,
                  "timings_s": dict(self.timings), "saved_model": self.saved_model,
                  "simulation_notes": self.simulation_notes()}
@@ -143,14 +144,6 @@ def _num(v):
     except (TypeError, ValueError):
         return None
     return v if math.isfinite(v) else None
-
-
-def _clean_set(desc) -> dict:
-    """The sensor set the estimator ran with (``pipeline.configure.system_config``'s description:
-    named or inferred, the sensors, the kind map) as plain JSON values."""
-    return {str(k): (v if isinstance(v, (str, bool, int, float, type(None))) else dict(v) if isinstance(v, dict)
-                     else [str(x) for x in v] if isinstance(v, (list, tuple)) else str(v))
-            for k, v in dict(desc or {}).items()}
 
 
 def _nis(table: DriveTable) -> dict:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from array import array
 from dataclasses import dataclass, field
-from typing import Iterable, Iterator, Mapping, Sequence
+from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -66,14 +66,13 @@ class EstimatorRun:
     rls: RlsResult | None = None
 
 
-def renamed(samples: Iterable[Sample], kind_map: "Mapping[str, str] | KindMap", nodes: Sequence = ()
-            ) -> Iterator[Sample]:
-    """The samples with their kinds renamed by a sensor set's kind map (e.g. the RAV4's
-    ``esc_imu`` -> ``imu``; a sensor the set does not name left out and counted in a
-    :class:`KindMap`'s ``dropped``), through its calibration nodes (as ``vdps replay`` feeds them)."""
-    km = kind_map if isinstance(kind_map, KindMap) else KindMap(kind_map)
+def renamed(samples: Iterable[Sample], kind_map: KindMap, nodes: Sequence = ()) -> Iterator[Sample]:
+    """The samples through a sensor set's :class:`KindMap` (kinds renamed, e.g. the RAV4's
+    ``esc_imu`` -> ``imu``; a sensor the set does not name left out and counted in its
+    ``dropped``), then its calibration nodes (as ``vdps replay`` feeds them)."""
+    km = kind_map if kind_map else None  # asked once, not per sample
     for s in samples:
-        if km:
+        if km is not None:
             s = km(s)
             if s is None:
                 continue

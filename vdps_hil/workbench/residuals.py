@@ -250,7 +250,7 @@ def compute_residuals(table: DriveTable, vehicle: Vehicle, effects: EffectSet | 
     else:
         _python_rows(rm, st, meas, vals, ws, nuis, lat, quants if with_quantities else None)
     avail = np.ones(14, bool)
-    if not st.has_susp or (getattr(table, "sensors", None) or {}).get("imu_substituted"):
+    if not st.has_susp or table.sensors.get("imu_substituted"):
         # vert, roll, pitch need the suspension forces (eq 14), and f_z, p, q measured (an ESC
         # cluster's are substitutes: streams.ESC_SUBSTITUTES)
         avail[2:5] = False
