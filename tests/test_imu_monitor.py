@@ -110,6 +110,37 @@ def test_gap_is_an_outage_that_spans_are_checked_against():
     assert mon.fault_age_ns(2101 * MS) == 1 * MS
 
 
+def test_a_slow_imu_teaches_its_period_and_is_not_in_outage():
+    """An IMU at 10 Hz (the CANedge's IMU frames): its intervals exceed the 20 ms timeout, so the
+    period could never be learned from intervals within it and every sample was an outage. Three
+    alike long intervals are its period: only the first two count as outages, and then samples
+    100 ms apart cover the spans between them and the IMU is not missing 0.5 s after the last."""
+    mon = ImuMonitor()
+    rng = np.random.default_rng(5)
+    t = [int((100 * k + rng.uniform(-5, 5)) * MS) for k in range(50)]  # 10 Hz with +-5 ms stamp jitter
+    assert all(mon.check(tk, G, (0.0, 0.0, 0.1)) for tk in t)
+    assert mon.counters["outages"] == 2 and mon.counters["period_relearned"] >= 1
+    assert 0.9e9 <= mon.timeout_ns <= 1.1e9  # 10 learned periods
+    assert mon.covered(t[-2], t[-1]) and not mon.missing(t[-1] + 500 * MS)
+    assert mon.fault_age_ns(t[-1]) == t[-1] - t[2]  # the last fault: the second interval's end
+    # a real outage of the slow IMU is still one
+    assert mon.missing(t[-1] + 2000 * MS)
+    assert mon.check(t[-1] + 3000 * MS, G, (0.0, 0.0, 0.1))
+    assert mon.counters["outages"] == 3
+
+
+def test_two_alike_gaps_of_a_fast_imu_stay_outages():
+    """The slow-rate rule needs three alike long intervals in a row: a 1 kHz IMU that drops out
+    twice for 300 ms with one sample between counts two outages and keeps its period."""
+    mon = ImuMonitor()
+    _stream(mon, 100, lambda k: (0.0, 0.0, 0.2))
+    assert mon.check(400 * MS, G, (0.0, 0.0, 0.2)) and mon.check(700 * MS, G, (0.0, 0.0, 0.2))
+    assert mon.counters["outages"] == 2 and mon.counters["period_relearned"] == 0
+    _stream(mon, 100, lambda k: (0.0, 0.0, 0.2), t0_ms=701)
+    assert mon.timeout_ns == 20 * MS  # max(timeout, 10 x 1 ms)
+    assert mon.counters["outages"] == 2
+
+
 def test_covariance_grows_with_the_outage_as_the_markov_input_error_says():
     """EKF at rest, IMU lost at 0: over T = 0.6 s (< tau = 1 s) the yaw variance must grow by
     sigma_wz^2 T^2 (the integral of q(t) = 2 sigma^2 t), within 10 %; and the horizontal velocity

@@ -30,7 +30,12 @@ spike           |w_i - w_ref,i| > J_i + min(``max_rate_accel_radps2`` dt,
                 check cannot lock the IMU out for good. The first sample
                 after a gap (nothing seen for the timeout) has no reference and is taken.
 gap             no accepted sample for longer than ``timeout_s`` (or 10 learned periods):
-                the span without samples is an *outage*
+                the span without samples is an *outage*. The period is learned from the
+                intervals within the timeout; an IMU slower than the timeout allows (the
+                CANedge's 10 Hz IMU frames against 20 ms) could never teach it, and every
+                sample was an outage: three consecutive long intervals alike (within 25 % of
+                their mean) are taken as its period instead (``period_relearned``), so only
+                its first two intervals are outages
 ==============  ===========================================================================
 
 What follows from it (``pipeline``): a predict over a span the accepted samples do not cover
@@ -61,6 +66,8 @@ TUNING_SEEDS = (0,)
 limits were looked at with (by judgment, not fitted); no study or test uses it."""
 
 _NEVER = -(1 << 62)
+_SLOW_RATE_TOLERANCE = 0.25
+"""Three consecutive intervals within this fraction of their mean are a sample period."""
 
 
 @dataclass(frozen=True)
@@ -124,8 +131,9 @@ class ImuMonitor:
         self._outage_psd = c.outage_psd()
         self._settle_ns = int(round(c.settle_s * 1e9))
         self._outage = False  # the EKF runs with the outage input noise now
+        self._long: list[int] = []  # accepted intervals beyond the timeout since the last short one
         self.counters = {"accepted": 0, "not_finite": 0, "time": 0, "implausible": 0, "spike": 0,
-                         "reanchored": 0, "outages": 0}
+                         "reanchored": 0, "outages": 0, "period_relearned": 0}
 
     @property
     def timeout_ns(self) -> int:
@@ -185,10 +193,16 @@ class ImuMonitor:
         if prev != _NEVER:
             dt = t_ns - prev
             if dt > self.timeout_ns:
-                self.gap = (prev, t_ns)
-                self.counters["outages"] += 1
-                self.last_fault_ns = t_ns
+                if self._slow_rate(dt):  # a slow IMU, not an outage (module docstring)
+                    self._period_ns = float(dt)
+                    self.counters["period_relearned"] += 1
+                else:
+                    self.gap = (prev, t_ns)
+                    self.counters["outages"] += 1
+                    self.last_fault_ns = t_ns
             elif dt > 0:
+                if self._long:
+                    self._long.clear()
                 self._period_ns = dt if self._period_ns == 0.0 else self._period_ns + 0.05 * (dt - self._period_ns)
         self.t_good = max(prev, t_ns)
         ref = self._ref
@@ -196,6 +210,18 @@ class ImuMonitor:
             self._learn_steps(v, ref[1])
         self._ref = (t_ns, v)
         self.counters["accepted"] += 1
+
+    def _slow_rate(self, dt: int) -> bool:
+        """True when ``dt`` and the two accepted intervals before it, all beyond the timeout, are
+        alike (within ``_SLOW_RATE_TOLERANCE`` of their mean): the IMU's own period, not an
+        outage. ``_long`` holds the long intervals since the last short one."""
+        long_ = self._long
+        long_.append(dt)
+        if len(long_) < 3:
+            return False
+        del long_[:-3]
+        mean = (long_[0] + long_[1] + long_[2]) / 3.0
+        return all(abs(d - mean) <= _SLOW_RATE_TOLERANCE * mean for d in long_)
 
     def _learn_steps(self, v, r) -> None:
         """s_i += a (|v_i - r_i| - s_i) and J_i = max(floor_i, k s_i) (module docstring)."""
