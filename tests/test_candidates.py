@@ -15,12 +15,16 @@ def test_adapters_per_built_in_effect():
                      "low_pressure_tire": "LowPressureCandidate", "crosswind": "CrosswindCandidate",
                      "steering_compliance": "NumericCandidate", "roll_stiffness": "RegressorCandidate",
                      "imu_bias": "MeasurementCandidate",
-                     "imu_lever_arm": "MeasurementCandidate"}
+                     "imu_lever_arm": "MeasurementCandidate", "steering_offset": "SteeringOffsetCandidate"}
+    # a sensor effect whose evidence is the balance rows: fitted and judged as a dynamics effect
+    so = C.candidate_for(REGISTRY["steering_offset"])
+    assert so.family == "dynamics" and REGISTRY["steering_offset"].family == "measurement"
 
 
 def test_default_candidates_skip_the_models_effects_and_the_linear_tire():
     names = [c.name for c in C.default_candidates(EffectSet([REGISTRY["aero_drag"]()]))]
     assert "aero_drag" not in names and "linear_tire" not in names and len(names) == 9
+    assert "steering_offset" not in names and set(C.ADD_ONLY) == {"steering_offset"}  # --add only (ADD_ONLY)
 
 
 def test_user_effect_without_regressors_is_numeric():

@@ -9,7 +9,7 @@ from vdps_hil.model.effects import (DYNAMICS_HOOKS, REGISTRY, DynamicsEffect, Ef
 
 CANONICAL = {"linear_tire", "magic_formula_tire", "aero_drag", "rolling_resistance",
              "load_dependent_cornering_stiffness", "low_pressure_tire", "crosswind", "steering_compliance",
-             "roll_stiffness", "imu_bias", "imu_lever_arm"}
+             "roll_stiffness", "imu_bias", "imu_lever_arm", "steering_offset"}
 
 
 def test_registry_has_the_canonical_names_and_documented_effects():

@@ -1,12 +1,14 @@
 """Steering compliance: the implicit compliance equation is solved exactly, and the understeer
-gradient rises by the analytic amount W_f K_c / g."""
+gradient rises by the analytic amount W_f K_c / g. The steering-angle sensor's offset: what the
+sensor reports, in the effect and in a simulated drive's steering sensor."""
 
 import math
 
 import pytest
 
 from vdps_hil.model.core import Env, Inputs, Model
-from vdps_hil.model.effects import EffectSet, LinearTire, SteeringCompliance
+from vdps_hil.model.effects import REGISTRY, EffectConfigError, EffectSet, LinearTire, SteeringCompliance, SteeringOffset
+from vdps_hil.model.effects.base import ImuKinematics
 from vdps_hil.model.params import load_vehicle
 from vdps_hil.sim.simulator import Simulator
 from vdps_hil.units import GRAVITY_MPS2 as G
@@ -61,3 +63,38 @@ def test_regressor_first_order():
     r = e.regressors({"cornering_stiffness_front_nprad": 120000.0, "front_lateral_force_n": 3000.0, "l_f_m": 1.2})
     assert r["lat"]["compliance_radpn"] == -120000.0 * 3000.0
     assert r["yaw"]["compliance_radpn"] == pytest.approx(1.2 * -120000.0 * 3000.0)
+
+
+def test_steering_offset_adds_to_the_steering_reading_only():
+    kin = ImuKinematics(0.0, (0.0, 0.0, 9.81), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    e = SteeringOffset(offset_rad=0.03)
+    out = e.apply({"steer_wheel_angle_rad": 0.5, "specific_force_mps2_x": 1.0}, kin)
+    assert out == {"steer_wheel_angle_rad": 0.5 + 0.03, "specific_force_mps2_x": 1.0}
+    assert e.apply({"specific_force_mps2_x": 1.0}, kin) == {"specific_force_mps2_x": 1.0}
+    assert e.regressors(kin) == {"steer_wheel_angle_rad": {"offset_rad": 1.0}}
+    assert REGISTRY["steering_offset"] is SteeringOffset and SteeringOffset.family == "measurement"
+    with pytest.raises(EffectConfigError):
+        REGISTRY.make("steering_offset", offset_rad=float("nan"))
+
+
+def test_a_simulated_steering_sensor_reads_the_wheel_angle_plus_the_offset():
+    """A drive with the offset in the truth: the chassis steering sensor reports the truth's
+    steering wheel angle plus 0.03 rad: against the same sensor without it (the same seeded
+    noise), exactly 0.03 at every sample."""
+    import numpy as np
+
+    from vdps_hil.sim.profiles import load_profile
+    from vdps_hil.sim.sampling import Block
+    from vdps_hil.sim.sensors import chassis_sensors
+
+    prof = load_profile("table1")
+    sensors = chassis_sensors(prof, seed=3, dt_ns=1_000_000, effects=[SteeringOffset(offset_rad=0.03)])
+    steer = next(s for s in sensors if s.name == "steering")
+    plain = next(s for s in chassis_sensors(prof, seed=3, dt_ns=1_000_000) if s.name == "steering")
+
+    n = np.arange(200)
+    block = Block.build(n, 1_000_000, steer=np.linspace(-0.2, 0.4, 200))  # 1 kHz truth steps, 0.2 s
+    t1, v1 = steer.sample(block)
+    t0, v0 = plain.sample(block)
+    assert len(t1) > 10 and np.array_equal(t1, t0)
+    assert np.allclose(v1 - v0, 0.03, rtol=0, atol=1e-12)  # the same seeded noise on both

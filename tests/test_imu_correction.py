@@ -93,3 +93,20 @@ def test_gap_restarts_the_filter_and_bad_config_is_refused():
     assert out.fields[F[0]] == pytest.approx(0.25, abs=1e-12)
     with pytest.raises(ValueError):
         ImuEffectCorrection([eff], cutoff_hz=0.0)
+
+
+def test_a_steering_offset_is_taken_out_of_the_steering_samples_exactly():
+    """A saved model's steering offset (``steering_offset``) is taken out of the ``steer``
+    samples (the estimator's wheel-speed row and the identifier's slip angles read them), with or
+    without IMU effects beside it; the IMU samples are then left to the IMU effects alone."""
+    off = REGISTRY["steering_offset"](offset_rad=0.03)
+    node = ImuEffectCorrection([off])
+    s = Sample(7, "can0", "steer", {"steer_wheel_angle_rad": 0.25 + 0.03})
+    assert node.process(s).fields["steer_wheel_angle_rad"] == pytest.approx(0.25, abs=1e-15)
+    imu = Sample(8, "imu0", "imu", dict(zip(F, (0.0, 0.0, 9.81))) | dict(zip(W, (0.0, 0.0, 0.0))))
+    assert node.process(imu) is imu  # nothing of the offset's reaches the IMU
+    both = ImuEffectCorrection([off, REGISTRY["imu_bias"]()])
+    assert both.process(s).fields["steer_wheel_angle_rad"] == pytest.approx(0.25, abs=1e-15)
+    assert both.process(imu).fields["specific_force_mps2_x"] == pytest.approx(-0.05)
+    bad = Sample(9, "can0", "steer", {"steer_wheel_angle_rad": 0.1}, valid=False)
+    assert both.process(bad) is bad

@@ -34,3 +34,15 @@ def test_the_gyro_track_is_interpolated_exactly_as_numpy_interp():
     at = IE._Linear(x, y)
     for t in np.concatenate([rng.uniform(-0.5, 5.5, 3000), x[:3], x[-3:]]):
         assert at(float(t)) == tuple(float(np.interp(t, x, y[:, k])) for k in range(6))
+
+
+def test_a_steering_offset_is_taken_out_of_the_steering_samples():
+    """The workbench's re-estimation with a fitted steering offset (``--add steering_offset``):
+    the steering samples lose it exactly, the IMU samples are untouched (no IMU effect, and no
+    gyro track needed for it)."""
+    off = make_effect("steering_offset", offset_rad=-0.02)
+    steer = [Sample(i * 10_000_000, "can", "steer", {"steer_wheel_angle_rad": 0.1 * i - 0.02}) for i in range(5)]
+    imu = Sample(3, "imu", "imu", {"specific_force_mps2_x": 1.0})
+    out = list(IE.imu_corrected(steer + [imu], [off], None))
+    assert [s.fields["steer_wheel_angle_rad"] for s in out[:5]] == pytest.approx([0.1 * i for i in range(5)], abs=1e-15)
+    assert out[5] is imu

@@ -9,7 +9,8 @@ model file only, ``experiments.workbench_study.run_job``):
   (a_y ramped to 7.5 m/s^2); a hit is tire saturation (``magic_formula_tire``) recommended, named
   equivalent, or in the top group with the recommendation (``is_hit``);
 * ``null``: the four CommonRoad maneuvers with nothing injected; counted: runs where a *sensor*
-  effect (a measurement effect: ``imu_bias``, ``imu_lever_arm``) is recommended or selected;
+  effect (a measurement effect: ``imu_bias``, ``imu_lever_arm``, ``steering_offset``) is
+  recommended or selected;
 * ``imu_bias`` (on ``cr-sine-accel``) and ``imu_lever_arm`` (0.5 m forward, on
   ``cr-lane-change``) injected into the sensor models: hit as above.
 

@@ -22,6 +22,10 @@ removed from w before (2)).
 
 Symbols: m measured fields (catalogue names, SI), f corrected, w [rad/s], wdot [rad/s^2],
 dt [s] between IMU samples (gaps > ``max_gap_s`` restart the filter), f_c [Hz].
+
+A steering-sensor effect of the model (``steering_offset``) is taken out of the ``steer``
+samples the same way, r - (e(r) - r) (``model.effects.steering.steer_corrected``; exact for an
+offset): the estimator's wheel-speed row and the identifier's slip angles read the steering.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from typing import Sequence
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.model.effects.base import ImuKinematics, MeasurementEffect
+from vdps_hil.model.effects.steering import STEER_FIELD, steer_corrected, steering_effects
 
 __all__ = ["ImuEffectCorrection"]
 
@@ -44,7 +49,9 @@ class ImuEffectCorrection:
 
     def __init__(self, effects: Sequence[MeasurementEffect], cutoff_hz: float = 10.0, max_gap_s: float = 0.1,
                  kind: str = "imu"):
-        self.effects = tuple(e for e in effects if isinstance(e, MeasurementEffect))
+        meas = [e for e in effects if isinstance(e, MeasurementEffect)]
+        self._steer = tuple(steering_effects(meas))  # out of the steering samples (r - (e(r) - r))
+        self.effects = tuple(e for e in meas if e not in self._steer)
         if not (math.isfinite(cutoff_hz) and cutoff_hz > 0):
             raise ValueError("cutoff_hz must be positive")
         self.cutoff_hz = float(cutoff_hz)
@@ -67,6 +74,10 @@ class ImuEffectCorrection:
         return tuple(w[n] for n in _W)
 
     def process(self, sample: Sample) -> Sample:
+        if self._steer and sample.kind == "steer" and sample.valid and STEER_FIELD in sample.fields:
+            f = dict(sample.fields)
+            f[STEER_FIELD] = steer_corrected(f[STEER_FIELD], self._steer)
+            return Sample(sample.t_ns, sample.source, sample.kind, f, sample.wall_time_ns, sample.valid)
         if not self.effects or sample.kind != self.kind or not sample.valid:
             return sample
         f0 = sample.fields

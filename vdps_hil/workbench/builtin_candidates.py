@@ -13,6 +13,10 @@ adapter                              columns
 :class:`TireSaturationCandidate`    the ranking's saturation column: s times the generic Magic
                                      Formula's pure-lateral departure from the linear tire (linear
                                      in s, judged beyond the re-identified stiffnesses)
+:class:`SteeringOffsetCandidate`     the steering-angle sensor's offset: central differences of
+                                     the residual (the rows' steering taken out by it); judged on
+                                     the balance rows as a dynamics effect is, not on the GNSS
+                                     innovations (it does not touch the IMU)
 ===================================  ===============================================================
 """
 
@@ -24,9 +28,10 @@ import numpy as np
 
 from vdps_hil.model.frames import dcm_gv_batch
 
-from .candidate_base import Candidate
+from .candidate_base import Candidate, NumericCandidate
 
 __all__ = ["CrosswindCandidate", "LowPressureCandidate", "MagicFormulaCandidate", "TireSaturationCandidate",
+           "SteeringOffsetCandidate",
            "saturation_columns", "cornering_coefficient"]
 
 
@@ -333,3 +338,23 @@ def saturation_columns(res, tire, coefficient_per_rad: float = math.nan) -> np.n
             # (direction) dF_b = (direction) alpha_i C'_i ratio
             out[j] -= unit[j, :, i - 1] * ca * ratio
     return np.nan_to_num(out)
+
+
+class SteeringOffsetCandidate(NumericCandidate):
+    """``steering_offset``: a sensor effect whose evidence is the lateral and yaw balance (the
+    model steers by the reading), so the ranking fits and judges it on the balance rows
+    (``family`` "dynamics" here; the effect stays a measurement effect) and it has no innovation
+    columns (the strapdown of the GNSS innovations never reads the steering)."""
+
+    def __init__(self, effect_cls, params=None):
+        super().__init__(effect_cls, params)
+        self.family = "dynamics"
+
+    def columns(self, ctx):
+        base = dict(self.defaults)
+        cols = []
+        for p in self.params:
+            h = max(abs(base[p]), 1e-3)  # the residual is close to linear in the offset (small angles)
+            lo, hi = self.effect_cls(**{**base, p: base[p] - h}), self.effect_cls(**{**base, p: base[p] + h})
+            cols.append((ctx.dyn_contribution(hi) - ctx.dyn_contribution(lo)) / (2.0 * h))
+        return np.stack(cols, axis=2), None

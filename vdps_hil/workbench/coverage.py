@@ -48,6 +48,7 @@ EFFECT_NEEDS = {
     "steering_compliance": "cornering at several lateral accelerations",
     "imu_bias": "GNSS position and velocity over a drive with turns and speed changes",
     "imu_lever_arm": "yaw and roll accelerations (a slalom or lane change)",
+    "steering_offset": "driving at speed with the steering angle recorded (straight or cornering)",
 }
 """What a drive needs to excite each built-in effect (the ``not excited`` words)."""
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from vdps_hil.bus.samples import Sample
 from vdps_hil.model.effects.base import ImuKinematics, MeasurementEffect
+from vdps_hil.model.effects.steering import STEER_FIELD, steer_corrected, steering_effects
 
 from .streams import ANGULAR_RATE_FIELDS, SPECIFIC_FORCE_FIELDS, Smoother, stream, uniform
 
@@ -60,15 +61,26 @@ class _Linear:
 
 
 def imu_corrected(samples: Iterable[Sample], effects: Sequence[MeasurementEffect], track) -> Iterator[Sample]:
-    """The samples with the effects taken out of the IMU ones (``track``: :func:`gyro_track`)."""
+    """The samples with the effects taken out of the IMU ones (``track``: :func:`gyro_track`;
+    None: no gyro, the IMU samples pass unchanged) and the steering-sensor effects
+    (``steering_offset``) out of the steering ones."""
     effects = [e for e in effects if isinstance(e, MeasurementEffect)]
-    if not effects or track is None:
+    steer = steering_effects(effects)
+    effects = [e for e in effects if e not in steer]
+    if (not effects or track is None) and not steer:
         yield from samples
         return
-    t_base, tg, ws, wd = track
-    at = _Linear(tg, np.hstack([ws, wd]))
+    at = None
+    if effects and track is not None:
+        t_base, tg, ws, wd = track
+        at = _Linear(tg, np.hstack([ws, wd]))
     for s in samples:
-        if s.kind != "imu" or not s.valid:
+        if steer and s.kind == "steer" and s.valid and STEER_FIELD in s.fields:
+            f = dict(s.fields)
+            f[STEER_FIELD] = steer_corrected(f[STEER_FIELD], steer)
+            yield Sample(s.t_ns, s.source, s.kind, f, s.wall_time_ns, s.valid)
+            continue
+        if at is None or s.kind != "imu" or not s.valid:
             yield s
             continue
         ts = (s.t_ns - t_base) * 1e-9

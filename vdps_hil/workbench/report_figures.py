@@ -42,7 +42,7 @@ EFFECT_REGRESSOR = {
     "aero_drag": "speed_mps", "rolling_resistance": "speed_mps", "low_pressure_tire": "speed_mps",
     "crosswind": "heading_deg", "magic_formula_tire": "slip_angle_front_deg", "linear_tire": "slip_angle_front_deg",
     "load_dependent_cornering_stiffness": "ay_mps2", "steering_compliance": "ay_mps2", "roll_stiffness": "roll_deg",
-    "imu_lever_arm": "yaw_rate_degps", "imu_bias": "t_s",
+    "imu_lever_arm": "yaw_rate_degps", "imu_bias": "t_s", "steering_offset": "t_s",
 }
 """Effect -> the quantity its law depends on (x of the law plot); another effect: time."""
 

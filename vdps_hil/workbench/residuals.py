@@ -35,7 +35,7 @@ table's bandwidth (the residual of an unmodelled effect is slow; the sensor nois
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -46,6 +46,7 @@ from vdps_hil.model.core_kernel import N_DIAG
 from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import EQUATIONS as DYNAMIC_EQUATIONS
 from vdps_hil.model.effects.base import ImuKinematics
+from vdps_hil.model.effects.steering import steer_corrected, steering_effects
 from vdps_hil.model.params import Vehicle
 from vdps_hil.prediction.predictor import Predictor, PredictorConfig, PredictorInitialState
 
@@ -231,6 +232,7 @@ def compute_residuals(table: DriveTable, vehicle: Vehicle, effects: EffectSet | 
     the per-row path (``RowModel.residual``, the reference)."""
     effects = effects if isinstance(effects, EffectSet) else EffectSet(effects)
     st = states if states is not None else row_states(table, vehicle)
+    st = _remove_steering_effects(st, effects)
     rm = RowModel(vehicle, effects)
     n = len(st.index)
     vals = np.full((n, 14), np.nan)
@@ -387,6 +389,17 @@ def _remove_measurement_effects(table: DriveTable, st: RowStates, effects: Effec
             for q, a in enumerate("xyz"):
                 out[j, q] -= app[f"specific_force_mps2_{a}"] - fields[f"specific_force_mps2_{a}"]
     return out
+
+
+def _remove_steering_effects(st: RowStates, effects: EffectSet) -> RowStates:
+    """The rows' inputs with the model's steering-sensor effects (``steering_offset``) taken out
+    of the steering wheel angle (``effects.steering.steer_corrected``); ``st`` itself when the
+    model has none (its kept arrays stay)."""
+    ms = steering_effects(effects.measurement)
+    if not ms:
+        return st
+    us = [replace(u, steer_wheel_angle_rad=steer_corrected(u.steer_wheel_angle_rad, ms)) for u in st.u]
+    return RowStates(st.index, st.x, us, st.env, st.meas, st.has_susp, st.has_torque)
 
 
 def imu_kinematics(c, k) -> ImuKinematics:

@@ -23,7 +23,7 @@ EFFECT_LABELS = {
     "aero_drag": "aerodynamic drag", "rolling_resistance": "rolling resistance",
     "magic_formula_tire": "tire saturation", "load_dependent_cornering_stiffness": "load-dependent cornering stiffness",
     "low_pressure_tire": "under-inflated tire", "crosswind": "crosswind", "steering_compliance": "steering compliance",
-    "imu_bias": "IMU bias", "imu_lever_arm": "IMU lever arm",
+    "imu_bias": "IMU bias", "imu_lever_arm": "IMU lever arm", "steering_offset": "steering-angle offset",
     **{v: PARAM_LABELS[k] for k, v in PARAM_ALIASES.items()},
 }
 _WHEEL = {1: "front left", 2: "front right", 3: "rear right", 4: "rear left"}
@@ -48,6 +48,10 @@ _MANEUVERS = {
                                                "acceleration, the yaw inertia on the yaw moment)",
     frozenset({"imu_bias", "mass"}): "accelerations and braking at different levels (a bias is constant, the "
                                      "mass scales with the acceleration)",
+    frozenset({"steering_offset", "crosswind"}): "the same stretch driven in both directions (the wind's side "
+                                                 "force changes sign, a sensor offset does not)",
+    frozenset({"steering_offset", "imu_bias"}): "straight driving at two speeds (the offset's side force at the "
+                                                "front axle also turns the car: a yaw moment a bias lacks)",
 }
 
 
@@ -221,6 +225,11 @@ def _effect_words(rk, e) -> str:
         dk = math.degrees(w_f * v)
         return (f"the front wheels yield {math.degrees(v) * 1e3:.3f} +- {math.degrees(s) * 1e3:.3f} deg per kN of "
                 f"front lateral force ({dk:.2f} deg/g more understeer)")
+    if name == "steering_offset":
+        v, s = _pv(e, "offset_rad")
+        return (f"the steering-angle sensor reads {math.degrees(v):+.2f} +- {math.degrees(s):.2f} deg at the steering "
+                f"wheel when the front wheels point straight ahead ({math.degrees(v / veh.geometry.steer_ratio):+.3f} "
+                "deg at the road wheels)")
     if name == "imu_bias":
         parts = []
         for a in "xyz":

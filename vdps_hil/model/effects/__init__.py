@@ -21,6 +21,7 @@ steering_compliance                dynamics    steering
 roll_stiffness                     dynamics    chassis (anti-roll bars; ``model.chassis``)
 imu_bias                           measurement imu
 imu_lever_arm                      measurement imu
+steering_offset                    measurement steering (the steering-angle sensor)
 ================================== =========== ==================================================
 """
 
@@ -35,7 +36,7 @@ from .base import (DYNAMICS_HOOKS, EQUATIONS, DynamicsEffect, Effect, EffectConf
 from .imu import ImuBias, ImuLeverArm
 from .registry import BUILTIN_EFFECTS, REGISTRY, EffectRegistry
 from .rolling import RollingResistance
-from .steering import SteeringCompliance
+from .steering import SteeringCompliance, SteeringOffset
 from .tires import LinearTire, LoadDependentCorneringStiffness, LowPressureTire, MagicFormulaTire
 
 TIRE_MODEL_NAMES = tuple(n for n, c in REGISTRY.items() if issubclass(c, TireModel))
@@ -76,5 +77,5 @@ __all__ = ["REGISTRY", "BUILTIN_EFFECTS", "EffectRegistry", "TIRE_MODEL_NAMES", 
            "effects_from_names", "Effect", "DynamicsEffect", "MeasurementEffect", "TireModel", "EffectSet",
            "EffectConfigError", "ParamSpec", "ImuKinematics", "EQUATIONS", "DYNAMICS_HOOKS", "LinearTire",
            "MagicFormulaTire", "AeroDrag", "Crosswind", "RollingResistance",
-           "LoadDependentCorneringStiffness", "LowPressureTire", "SteeringCompliance", "RollStiffness", "ImuBias",
+           "LoadDependentCorneringStiffness", "LowPressureTire", "SteeringCompliance", "SteeringOffset", "RollStiffness", "ImuBias",
            "ImuLeverArm"]

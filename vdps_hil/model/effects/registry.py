@@ -21,12 +21,12 @@ from .base import Effect, EffectConfigError
 from .chassis import RollStiffness
 from .imu import ImuBias, ImuLeverArm
 from .rolling import RollingResistance
-from .steering import SteeringCompliance
+from .steering import SteeringCompliance, SteeringOffset
 from .tires import LinearTire, LoadDependentCorneringStiffness, LowPressureTire, MagicFormulaTire
 
 BUILTIN_EFFECTS: tuple[type[Effect], ...] = (
     LinearTire, MagicFormulaTire, AeroDrag, RollingResistance, LoadDependentCorneringStiffness,
-    LowPressureTire, Crosswind, SteeringCompliance, RollStiffness, ImuBias, ImuLeverArm)
+    LowPressureTire, Crosswind, SteeringCompliance, RollStiffness, ImuBias, ImuLeverArm, SteeringOffset)
 """The built-in effect classes, in the order the registry lists them."""
 
 
