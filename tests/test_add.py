@@ -173,8 +173,9 @@ def test_an_equation_the_added_effect_makes_worse_is_named():
 
 
 def test_add_steering_offset_takes_it_out_of_the_steering_and_removes_half_the_error(tmp_path_factory):
-    """``steering_offset`` (not ranked by default: ``candidates.ADD_ONLY``) through ``--add``: the
-    steering-angle sensor reads 0.03 rad (1.7 deg) high on a lane change (seed 21). The fitted
+    """``steering_offset`` through ``--add`` on a drive where the ranking does not offer it (a lane
+    change: no half turn, ``candidates.TURN_NEEDED_RAD``): the steering-angle sensor reads 0.03 rad
+    (1.7 deg) high (seed 21). The fitted
     offset is the hidden one within 10 %, and after adding it the 1 s and 2 s prediction errors of
     position and yaw fall by >= 50 % of their attributable part (hidden minus nothing hidden, same
     maneuver and seed). Measured: 0.02997 +- 0.00016 rad; 2 s position 1.79 -> 0.19 m."""

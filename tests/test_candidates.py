@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
+import pytest
+
 from vdps_hil.model.effects import REGISTRY, DynamicsEffect, EffectSet, ParamSpec
 from vdps_hil.workbench import candidate_base as CB
 from vdps_hil.workbench import candidates as C
@@ -23,8 +28,27 @@ def test_adapters_per_built_in_effect():
 
 def test_default_candidates_skip_the_models_effects_and_the_linear_tire():
     names = [c.name for c in C.default_candidates(EffectSet([REGISTRY["aero_drag"]()]))]
-    assert "aero_drag" not in names and "linear_tire" not in names and len(names) == 9
-    assert "steering_offset" not in names and set(C.ADD_ONLY) == {"steering_offset"}  # --add only (ADD_ONLY)
+    assert "aero_drag" not in names and "linear_tire" not in names and len(names) == 10
+
+
+def test_the_steering_offset_is_ranked_only_over_half_a_turn():
+    """``TURN_NEEDED_RAD``: on a drive whose heading spans less than pi the steering offset is not
+    offered (a crosswind's side force is not told apart from it there); over half a turn it is."""
+    names = lambda span: {c.name for c in C.default_candidates(EffectSet(), heading_span=span)}  # noqa: E731
+    assert "steering_offset" not in names(math.radians(179.0)) and "steering_offset" in names(math.pi)
+    assert names(0.0) - {"steering_offset"} == names(math.pi) - {"steering_offset"}
+
+
+@pytest.mark.parametrize("headings_deg, span_deg", [
+    ([10.0, 20.0, 15.0], 10.0),
+    ([350.0, 10.0, 5.0], 20.0),  # across north
+    ([0.0, 90.0, 180.0, 270.0], 270.0),  # the largest gap (90 deg) left out
+    (list(range(0, 360, 5)), 355.0),  # a full circle at 5 deg steps
+    ([-170.0, 170.0], 20.0),  # -170 is 190
+    ([42.0], 0.0),
+])
+def test_heading_span_is_the_smallest_arc_holding_every_heading(headings_deg, span_deg):
+    assert math.degrees(C.heading_span_rad(np.radians(headings_deg + [math.nan]))) == pytest.approx(span_deg, abs=1e-9)
 
 
 def test_user_effect_without_regressors_is_numeric():
@@ -39,3 +63,18 @@ def test_user_effect_without_regressors_is_numeric():
     c = C.candidate_for(Push)
     assert isinstance(c, CB.NumericCandidate) and c.params == ("force_n",) and c.linear
     assert C.default_candidates(EffectSet(), [Push])[-1].name == "push"
+
+
+def test_drive_candidates_say_what_they_leave_out_and_at_which_span():
+    straight = np.radians([80.0, 85.0, 90.0])
+    cands, left = C.drive_candidates(EffectSet(), (), straight)
+    assert "steering_offset" not in {c.name for c in cands}
+    assert left == {"steering_offset": pytest.approx(math.radians(10.0))}
+    circle = np.radians(np.arange(0.0, 360.0, 10.0))
+    cands, left = C.drive_candidates(EffectSet(), (), circle)
+    assert "steering_offset" in {c.name for c in cands} and left == {}
+    named = [C.candidate_for(REGISTRY["aero_drag"])]  # the caller's own list: as it is, nothing said
+    assert C.drive_candidates(EffectSet(), (), straight, named) == (named, {})
+    model = EffectSet([REGISTRY["steering_offset"]()])  # already in the model: neither offered nor said
+    cands, left = C.drive_candidates(model, (), straight)
+    assert left == {} and "steering_offset" not in {c.name for c in cands}

@@ -20,6 +20,7 @@ crosswind                          straight-25          10 m/s toward north, eas
 steering_compliance                step-steer           2e-6 rad/N, ISO 7401 step to 4 m/s^2 at 80 km/h
 imu_bias                           circle-straight      0.05 m/s^2 and 0.1 deg/s on every axis; 80 m straight then a 40 m circle
 imu_lever_arm                      lane-change          IMU 0.5 m ahead of the CG, ISO 3888 at 80 km/h
+steering_offset                    circle-straight      the steering sensor reads 0.03 rad (1.7 deg) high
 ================================== ==================== ===================================================
 
 Refinements against the issue's wording (stated here and in the tests): drives are 12-20 s
@@ -30,7 +31,8 @@ not excited; the load-dependent stiffness needs about 5 m/s^2 of lateral acceler
 an axle's stiffness by a few per cent, so the sweep is 0.75 rad; it ends at 1 Hz, where the
 reduced model of eq 13 (unsprung masses riding with the body, rigid tires) still follows the
 truth simulator's body modes; the IMU bias
-drive joins the straight and the circle in one drive. The sensor profile is Table 1 with the
+drive joins the straight and the circle in one drive, and so does the steering offset's (it is
+ranked only over half a turn of heading: ``workbench.candidates.TURN_NEEDED_RAD``). The sensor profile is Table 1 with the
 suspension at 100 Hz (the estimator's cost is dominated by the 1 kHz suspension updates).
 """
 
@@ -152,6 +154,7 @@ HIDDEN: dict[str, tuple[str, str]] = {
     "steering_compliance": ("step-steer", "steering_compliance:compliance_radpn=2e-6"),
     "imu_bias": ("circle-straight", "imu_bias"),
     "imu_lever_arm": ("lane-change", "imu_lever_arm:lever_x_m=0.5"),
+    "steering_offset": ("circle-straight", "steering_offset:offset_rad=0.03"),
 }
 """Effect -> (maneuver, effect spec for ``Drive(effects=[...])``)."""
 

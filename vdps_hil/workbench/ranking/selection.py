@@ -50,8 +50,8 @@ from vdps_hil.model.effects.base import Effect
 from vdps_hil.model.params import Vehicle
 
 from ..candidate_base import PARAM_ALIASES, Candidate
-from ..candidates import default_candidates
-from ..coverage import MIN_ROWS, coverage_messages, unusable_reason
+from ..candidates import drive_candidates
+from ..coverage import MIN_ROWS, coverage_messages, not_ranked_lines, unusable_reason
 from ..dataset import DriveTable
 from ..innovations import Innovations, compute_innovations
 from ..residuals import DYNAMIC_EQUATIONS, RowStates, row_states
@@ -121,7 +121,7 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
         raise ValueError(unusable_reason(table))
     inn = compute_innovations(table)
     point, d, always, _ = identify(table, vehicle, effects, states, inn, cfg, reference=vehicle)
-    cands = list(candidates) if candidates is not None else default_candidates(effects, user_effects)
+    cands, not_ranked = drive_candidates(effects, user_effects, table.columns["yaw_g_rad"][states.index], candidates)
     by_name: dict[str, Candidate] = {c.name: c for c in cands}
     ctx = d.ctx
     for c in cands:
@@ -136,7 +136,7 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
     ev = _excitation(s)
     _forward_selection(s, ev)
     rk = _result(s, ev)
-    rk.messages = coverage_messages(table, states.index) + rk.messages
+    rk.messages = coverage_messages(table, states.index) + rk.messages + not_ranked_lines(not_ranked)
     rk.design = rk.context = None  # the drive-sized design is not read after the ranking: freed here
     return rk
 
