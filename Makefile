@@ -34,20 +34,34 @@ browser:
 # more than the cores this process may use, to fill the time tests wait on subprocesses, sockets
 # and the browser, and to hold the suite's share of the CPU beside other work), then the
 # real-time tests (tests/conftest.py REALTIME_MODULES) on their own, collecting only their modules
-# (collecting the whole suite took 10 s; the full tree if the list cannot be read), a module to a
-# worker, one worker per core the machine leaves idle at that moment (tools/realtime_workers.py:
-# one at a time they use 0.73 of a core and took 161 s, two at a time 87 s on a quiet machine;
-# beside one CPU-bound process they run one at a time, as they always did).
+# (collecting the whole suite took 10 s; the full tree if the list cannot be read): two at a time
+# when the machine leaves two cores idle at that moment (tools/realtime_workers.py), in two pytest
+# processes side by side, the bench and the served logger (REALTIME_TOGETHER) in one of them so
+# they never overlap, each process's output printed when both have ended; otherwise one at a time
+# in one process (one at a time they use 0.73 of a core and took 161 s, two at a time 87 s on a
+# quiet machine; beside one CPU-bound process they run one at a time, as they always did).
 PYTEST := $(PY) -m pytest -q -p no:cacheprovider --timeout 600
 WORKERS := $(shell echo $$(( $$(nproc) + 1 )))
 RT_MODULES = $(PY) -P -c "import sys; sys.path.insert(0, 'tests'); import conftest; \
 	print(' '.join(f'tests/{m}.py' for m in sorted(conftest.REALTIME_MODULES)))"
+RT_SPLIT = $(PY) -P -c "import sys; sys.path.insert(0, 'tests'); import conftest as c; \
+	t = sorted(c.REALTIME_TOGETHER); r = sorted(c.REALTIME_MODULES - c.REALTIME_TOGETHER); \
+	print(' '.join(f'tests/{m}.py' for m in t)); print(' '.join(f'tests/{m}.py' for m in r))"
 test: setup browser
 	@$(PYTEST) -n $(WORKERS) --dist loadfile --durations 15 -m "not realtime" tests; a=$$?; \
 	rt=$$($(RT_MODULES)) || rt=tests; \
 	n=$$($(PY) tools/realtime_workers.py) || n=1; \
-	if [ "$${n:-1}" -gt 1 ] 2>/dev/null; then par="-n $$n --dist loadfile"; else par=""; fi; \
-	$(PYTEST) $$par --durations 5 -m realtime $${rt:-tests}; b=$$?; \
+	split=$$($(RT_SPLIT)) || split=""; heavy=$$(echo "$$split" | sed -n 1p); rest=$$(echo "$$split" | sed -n 2p); \
+	if [ "$${n:-1}" -gt 1 ] 2>/dev/null && [ -n "$$heavy" ] && [ -n "$$rest" ]; then \
+		log=$$(mktemp -d); \
+		$(PYTEST) --durations 5 -m realtime $$heavy > $$log/heavy 2>&1 & pid=$$!; \
+		$(PYTEST) --durations 5 -m realtime $$rest > $$log/rest 2>&1; b2=$$?; \
+		wait $$pid; b1=$$?; cat $$log/heavy $$log/rest; rm -rf $$log; \
+		echo "make test: real-time tests exit $$b1 ($$heavy), $$b2 (the others)"; \
+		b=$$(( b1 != 0 || b2 != 0 )); \
+	else \
+		$(PYTEST) --durations 5 -m realtime $${rt:-tests}; b=$$?; \
+	fi; \
 	echo "make test: other tests exit $$a, real-time tests exit $$b"; [ $$a -eq 0 ] && [ $$b -eq 0 ]
 
 clean:

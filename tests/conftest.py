@@ -55,6 +55,18 @@ two WebSocket clients received nothing in 90 s (keepalive ping timeout), while t
 alone passes in 6 s.)"""
 
 
+REALTIME_TOGETHER = frozenset({"test_bench", "test_live_view"})
+"""Real-time modules that must not run at the same time as each other. Where the real-time phase
+runs two at a time, ``make test`` runs these in one pytest process, one after the other, and the
+other real-time modules in a second process beside it (xdist's ``loadgroup`` would say the same,
+but with pytest 9.2 it no longer groups: pytest-xdist issue 1386, seen here too). Two at a time
+under ``--dist loadfile``, 2026-12-06 (fresh clone of 2c39bd5, quiet machine), the two overlapped:
+the bench's react test warned 0.87 s before the point of no return (>= 1.0 asked) while
+``test_live_view``'s served logger answered no WebSocket ping for 20 s and served nothing in
+90 s. Each passed alone (16.7 s and 13.1 s), and the phase passed two at a time in 82 s right
+after."""
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.stem in REALTIME_MODULES:
