@@ -36,11 +36,15 @@ def test_the_measurement_runs_the_bench_itself_and_counts_both_sides_cpu():
     wall = time.perf_counter() - w0
     assert b.headroom is h and h.probe_s == pytest.approx(0.5) and h.speed == 1.0
     # the probe ran live at the run's speed (or half of it, twice at most, when even that skipped
-    # work; or again at the speed with WARN_BELOW headroom when 1x has less): 0.8 simulated s
-    # take at least 0.8 / speed of wall time
-    assert 0 < h.probe_speed <= min(b.config.speed, PROBE_SPEED)
+    # work; or again, slower, at the speed the first probe said has WARN_BELOW headroom when 1x has
+    # less): 0.8 simulated s take at least 0.8 / speed of wall time. The second probe's own cost is
+    # the one kept and need not say the same speed: on a loaded machine a second probe at 0.77x
+    # cost 0.90 s per simulated s (supported 0.55x; fresh-clone CI, 2026-12-06), so only its being
+    # slower than the first is asserted (measure_headroom: below 0.9 of it)
+    first = min(b.config.speed, PROBE_SPEED)
+    assert 0 < h.probe_speed <= first
     if h.probe_speed != b.config.speed:
-        assert h.probe_speed in (0.5, 0.25) or h.probe_speed == pytest.approx(h.supported_speed, rel=0.3)
+        assert h.probe_speed in (0.5, 0.25) or h.probe_speed < 0.9 * first
     assert wall >= 0.8 / h.probe_speed and h.wall_s == pytest.approx(wall, rel=0.05)
     # both sides cost something, and no machine runs the bench a million times faster than real time
     assert 1e-6 < h.sim_cost < 100 and 1e-6 < h.pipeline_cost < 100
