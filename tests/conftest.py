@@ -40,9 +40,10 @@ REALTIME_MODULES = frozenset({"test_bench", "test_bench_cmd", "test_log_cmd", "t
 logger at Table 1 rates, kill -9 while logging, the node reading real ptys and a CAN bus fed at
 the recording's pace). They carry the ``realtime`` marker: ``make test`` runs them in a phase of
 their own, after the rest has run on both cores, so they meet the machine's own load, not the
-load of the test suite's other half; there a module goes to a worker, one worker per core the
-machine leaves idle at that moment (``tools/realtime_workers.py``; 2026-12-06: two at a time on a
-quiet machine, one at a time beside a CPU-bound process). (``test_node`` joined on 2026-12-05: scheduled beside the
+load of the test suite's other half; there they run two at a time when the machine leaves two
+cores idle at that moment (``tools/realtime_workers.py``; two pytest processes side by side, the
+modules of ``REALTIME_TOGETHER`` in one of them), one at a time otherwise (beside a CPU-bound
+process). (``test_node`` joined on 2026-12-05: scheduled beside the
 three heaviest modules on the two cores, its live IMU stamps, mapped from the device clock by
 the host's receive times, re-anchored under the delay and came out in another order than the
 recording's decoding, twice in one run; it passed in every run where it met less load.
