@@ -142,3 +142,30 @@ def test_reestimator_gives_load_drive_s_tables_and_decodes_once_per_call_after_t
         _same_tables(again(e), want)
     assert len(decodes) == 2 + 1 + 1
     assert not np.array_equal(expected[0].columns["vel_g_mps_u"], expected[1].columns["vel_g_mps_u"])
+
+
+def test_the_estimators_gyro_bias_comes_out_of_the_rates_only(drive):
+    """``EstimatorRun.gyro_bias_radps`` (the filter's final b_g; zero for the Table 1 set, as
+    here) is taken out of the table's rates exactly, and nothing else moves: not their
+    derivative, not the specific force (no lever arm on this model file)."""
+    import dataclasses
+
+    from vdps_hil.workbench.estimator_run import run_system
+    from vdps_hil.workbench.streams import Streams
+
+    from vdps_hil.workbench.streams import iter_raw
+
+    path, table, _ = drive
+    cfg = D.DatasetConfig()
+    feed, system, _, _ = D._configured(iter_raw(path), path, VEH, cfg)
+    streams = Streams()
+    run = run_system(streams.tap(feed), VEH, system, cfg.period_s)
+    assert run.gyro_bias_radps == (0.0, 0.0, 0.0)
+    b = (0.001, -0.002, 0.007)
+    plain = D.build_table(streams, run, VEH)
+    shifted = D.build_table(streams, dataclasses.replace(run, gyro_bias_radps=b), VEH)
+    for k, a in enumerate("xyz"):
+        assert np.allclose(plain.columns[f"rate_b_radps_{a}"] - shifted.columns[f"rate_b_radps_{a}"], b[k],
+                           rtol=0, atol=1e-15)
+        for other in ("angular_accel_b_radps2_", "specific_force_b_mps2_"):
+            assert np.array_equal(plain.columns[other + a], shifted.columns[other + a])

@@ -64,6 +64,9 @@ class EstimatorRun:
     origin: object
     counters: dict
     rls: RlsResult | None = None
+    gyro_bias_radps: tuple = (0.0, 0.0, 0.0)
+    """The estimator's final gyro bias b_g per body axis (``MultiRateEKF.bias``; zero where its
+    configuration carries no bias state, as the paper's Table 1 set)."""
 
 
 def renamed(samples: Iterable[Sample], kind_map: KindMap, nodes: Sequence = ()) -> Iterator[Sample]:
@@ -115,7 +118,7 @@ def run_system(samples: Iterable[Sample], vehicle: Vehicle, config: SystemConfig
     n = len(ts)
     return EstimatorRun(np.frombuffer(ts, dtype=np.int64).copy(), np.frombuffer(xs, dtype=float).reshape(n, -1).copy(),
                         np.frombuffer(ss, dtype=float).reshape(n, -1).copy(), innov, p.pipeline.origin,
-                        dict(p.pipeline.counters), rls)
+                        dict(p.pipeline.counters), rls, p.pipeline.ekf.bias()[0])
 
 
 def _rls_result(system: VdpsSystem) -> RlsResult | None:
