@@ -344,17 +344,12 @@ class SteeringOffsetCandidate(NumericCandidate):
     """``steering_offset``: a sensor effect whose evidence is the lateral and yaw balance (the
     model steers by the reading), so the ranking fits and judges it on the balance rows
     (``family`` "dynamics" here; the effect stays a measurement effect) and it has no innovation
-    columns (the strapdown of the GNSS innovations never reads the steering)."""
+    columns (the strapdown of the GNSS innovations never reads the steering). Its central
+    difference spans 0 to twice the prior (the residual is close to linear in the offset)."""
+
+    STEP = 1.0
+    INNOVATIONS = False
 
     def __init__(self, effect_cls, params=None):
         super().__init__(effect_cls, params)
         self.family = "dynamics"
-
-    def columns(self, ctx):
-        base = dict(self.defaults)
-        cols = []
-        for p in self.params:
-            h = max(abs(base[p]), 1e-3)  # the residual is close to linear in the offset (small angles)
-            lo, hi = self.effect_cls(**{**base, p: base[p] - h}), self.effect_cls(**{**base, p: base[p] + h})
-            cols.append((ctx.dyn_contribution(hi) - ctx.dyn_contribution(lo)) / (2.0 * h))
-        return np.stack(cols, axis=2), None

@@ -188,19 +188,23 @@ class MeasurementCandidate(Candidate):
 
 class NumericCandidate(Candidate):
     """Central differences of the residual in each parameter at the effect's generic prior
-    (exact for effects linear in their parameters)."""
+    (exact for effects linear in their parameters), with steps of ``STEP`` times the prior; a
+    sensor effect's innovation columns too unless ``INNOVATIONS`` is False."""
+
+    STEP = 0.1
+    INNOVATIONS = True
 
     def columns(self, ctx):
         base = dict(self.defaults)
         cols = []
         for p in self.params:
-            h = max(abs(base[p]) * 0.1, 1e-6)
+            h = max(abs(base[p]) * self.STEP, 1e-6)
             lo = self.effect_cls(**{**base, p: base[p] - h}) if self._ok(p, base[p] - h) else self.effect_cls(**base)
             hi = self.effect_cls(**{**base, p: base[p] + h})
             dl = base[p] - h if self._ok(p, base[p] - h) else base[p]
             cols.append((ctx.dyn_contribution(hi) - ctx.dyn_contribution(lo)) / (base[p] + h - dl))
         inn = None
-        if issubclass(self.effect_cls, MeasurementEffect):
+        if self.INNOVATIONS and issubclass(self.effect_cls, MeasurementEffect):
             inn = ctx.innovation_columns(self.effect_cls(**base), self.params)
         return np.stack(cols, axis=2), inn
 
