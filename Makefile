@@ -40,7 +40,12 @@ browser:
 # they never overlap, each process's output printed when both have ended; otherwise one at a time
 # in one process (one at a time they use 0.73 of a core and took 161 s, two at a time 87 s on a
 # quiet machine; beside one CPU-bound process they run one at a time, as they always did).
-PYTEST := $(PY) -m pytest -q -p no:cacheprovider --timeout 600
+# One BLAS thread per test process: numpy's OpenBLAS otherwise starts a thread per core in each of
+# the first phase's three workers (and in the process pools some tests start), which then spin
+# against each other on two cores. tests/test_ranking.py alone, side by side in one session:
+# 143.6 s of CPU and 75.7 s wall with OpenBLAS's default, 111.4 s and 59.6 s with one thread.
+TESTENV := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1
+PYTEST := $(TESTENV) $(PY) -m pytest -q -p no:cacheprovider --timeout 600
 WORKERS := $(shell echo $$(( $$(nproc) + 1 )))
 RT_MODULES = $(PY) -P -c "import sys; sys.path.insert(0, 'tests'); import conftest; \
 	print(' '.join(f'tests/{m}.py' for m in sorted(conftest.REALTIME_MODULES)))"
