@@ -11,12 +11,30 @@ import sys
 
 from planted_modules import markers, plant
 
-from vdps_hil.app.children import (PACKAGE_ROOT, child_environ, isolate_spawned_children,
-                                   python_module_command)
+from vdps_hil.app.children import (BLAS_THREAD_VARIABLES, PACKAGE_ROOT, child_environ, isolate_spawned_children,
+                                   one_blas_thread_per_child, python_module_command)
 
 
 def _plus_one(x: int) -> int:
     return x + 1
+
+
+def _blas_probe() -> tuple[dict, int]:
+    """In a spawned child: its BLAS thread variables, and the threads importing numpy started
+    (OpenBLAS starts its pool when it loads: one thread fewer than its thread count)."""
+    import sys
+
+    assert "numpy" not in sys.modules
+    before = len(os.listdir("/proc/self/task"))
+    import numpy as np
+
+    np.ones((64, 64)) @ np.ones((64, 64))
+    return {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES}, len(os.listdir("/proc/self/task")) - before
+
+
+def _spawned_blas_probe() -> tuple[dict, int]:
+    with cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as ex:
+        return ex.submit(_blas_probe).result(timeout=120)
 
 
 def test_plain_python_m_would_import_the_planted_module(tmp_path):
@@ -62,3 +80,24 @@ def test_spawned_pool_workers_import_nothing_from_the_cwd(tmp_path, monkeypatch)
     with cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as ex:
         assert ex.submit(_plus_one, 1).result(timeout=120) == 2
     assert markers(d) == []
+
+
+def test_spawned_children_load_numpy_with_one_blas_thread(monkeypatch):
+    for k in BLAS_THREAD_VARIABLES:
+        monkeypatch.delenv(k, raising=False)  # as in a user's shell; restored afterwards
+    one_blas_thread_per_child()
+    env, started = _spawned_blas_probe()
+    assert env == {k: "1" for k in BLAS_THREAD_VARIABLES}
+    assert started == 0
+
+
+def test_a_blas_thread_count_the_user_set_is_kept(monkeypatch):
+    """The user's own OPENBLAS_NUM_THREADS wins; with 2 the child's OpenBLAS starts a second
+    thread (the probe above sees threads: it would see this one)."""
+    for k in BLAS_THREAD_VARIABLES:
+        monkeypatch.delenv(k, raising=False)
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")
+    one_blas_thread_per_child()
+    env, started = _spawned_blas_probe()
+    assert env["OPENBLAS_NUM_THREADS"] == "2" and env["OMP_NUM_THREADS"] == "1"
+    assert started == min(2, os.cpu_count() or 1) - 1  # OpenBLAS takes no more threads than cores

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 
+from vdps_hil.app.children import BLAS_THREAD_VARIABLES
 from vdps_hil.batch.engine import Engine, EngineConfig
 from vdps_hil.batch.keys import tool_version
 from vdps_hil.batch.runner import AGGREGATE, result_path, run_batch, strip_run
@@ -283,3 +284,14 @@ def test_spawned_workers_import_nothing_from_the_working_directory(backend, tmp_
         out = list(eng.run([Task("info", "vdps_hil.batch.tasks:worker_info")]))
     assert [o.status for o in out] == ["ok"], [o.error for o in out]
     assert markers(cwd) == []
+
+
+def test_process_pool_workers_load_numpy_with_one_blas_thread(monkeypatch):
+    """A pool of one worker per core: one BLAS thread each (``app.children.one_blas_thread_per_child``;
+    numpy's OpenBLAS started one per core in every worker)."""
+    for k in BLAS_THREAD_VARIABLES:
+        monkeypatch.delenv(k, raising=False)  # as in a user's shell; restored afterwards
+    with Engine(EngineConfig(backend="processes", workers=2)) as eng:
+        out = list(eng.run([Task(f"info{i}", "vdps_hil.batch.tasks:worker_info") for i in range(2)]))
+    assert [o.status for o in out] == ["ok", "ok"], [o.error for o in out]
+    assert all(o.result["blas_threads"] == {k: "1" for k in BLAS_THREAD_VARIABLES} for o in out), out

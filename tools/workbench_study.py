@@ -35,10 +35,11 @@ import os
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
+from vdps_hil.app.children import spawned_pool  # noqa: E402
 from vdps_hil.experiments.workbench_study import HIDDEN, MANEUVERS, run_job, wilson_interval  # noqa: E402
 
 
@@ -109,7 +110,7 @@ def main(argv=None) -> int:
         todo = []
     if done:
         print(f"{len(results)} of {len(jobs)} drives already in {a.runs}; {len(todo)} to run", flush=True)
-    with ProcessPoolExecutor(max_workers=a.jobs) as ex:
+    with spawned_pool(a.jobs) as ex:
         futs = [ex.submit(_one, j) for j in todo]
         for f in as_completed(futs):
             r = f.result()

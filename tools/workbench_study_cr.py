@@ -31,10 +31,11 @@ import json
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
+from vdps_hil.app.children import spawned_pool  # noqa: E402
 from vdps_hil.experiments.ident_study import CR_SCENARIOS  # noqa: E402
 from vdps_hil.experiments.workbench_study import run_job, wilson_interval  # noqa: E402
 from vdps_hil.model.effects.base import MeasurementEffect  # noqa: E402
@@ -108,7 +109,7 @@ def main(argv=None) -> int:
     runs = [done[_key(j)] for j in jobs if _key(j) in done]
     todo = [j for j in jobs if _key(j) not in done]
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=max(1, a.jobs)) as ex:
+    with spawned_pool(max(1, a.jobs)) as ex:
         for f in as_completed([ex.submit(run_job, j) for j in todo]):
             r = f.result()
             runs.append(r)

@@ -13,7 +13,10 @@ Backends (``EngineConfig.backend``)
                workers must see the input files at the same paths and be able to import this
                package; results come back to this process, which alone writes ``--out``.
 ``processes``  ``concurrent.futures.ProcessPoolExecutor`` (spawn context), the same
-               :func:`execute` in each worker: for machines without ``distributed``.
+               :func:`execute` in each worker: for machines without ``distributed``. Its workers
+               load numpy's BLAS with one thread (as Dask's nannies do for theirs:
+               :func:`vdps_hil.app.children.spawned_pool`; a user's own
+               ``OPENBLAS_NUM_THREADS`` is kept).
 ``inline``     :func:`execute` in this process, one task after the other (the serial reference
                the parallel results are checked against, and the easiest to debug).
 
@@ -43,13 +46,12 @@ Failure model
 from __future__ import annotations
 
 import concurrent.futures as cf
-import multiprocessing
 import os
 import uuid
 from dataclasses import dataclass
 from typing import Any, Iterator, Sequence
 
-from vdps_hil.app.children import isolate_spawned_children
+from vdps_hil.app.children import isolate_spawned_children, spawned_pool
 from vdps_hil.batch.keys import tool_version
 from vdps_hil.batch.worker import Outcome, Task, execute, failure, one_line, outcome
 
@@ -199,8 +201,7 @@ class Engine:
                 f"this client: {mine}): their results may differ from a local run")
 
     def _new_pool(self):
-        return cf.ProcessPoolExecutor(max_workers=self.config.resolved_workers(),
-                                      mp_context=multiprocessing.get_context("spawn"))
+        return spawned_pool(self.config.resolved_workers())  # one BLAS thread per worker
 
     def close(self) -> None:
         if self._client is not None:

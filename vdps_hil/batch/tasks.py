@@ -217,13 +217,16 @@ def diagnose_tasks(paths: Sequence[str | os.PathLike], *, vehicle: str = DEFAULT
 
 def worker_info() -> dict:
     """A probe task: the worker's tool version, Python and platform (to check that a remote
-    cluster runs the same code as the client)."""
+    cluster runs the same code as the client), and the BLAS thread variables its numpy was
+    loaded with (``app.children.BLAS_THREAD_VARIABLES``: None where unset)."""
+    import os
     import platform
     import sys
 
+    from vdps_hil.app.children import BLAS_THREAD_VARIABLES
     from vdps_hil.batch.keys import tool_version
     return {"tool": tool_version(), "python": sys.version.split()[0],
-            "platform": platform.platform()}
+            "platform": platform.platform(), "blas_threads": {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES}}
 
 
 # ------------------------------------------------------------------------------ study trials
