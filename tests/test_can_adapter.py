@@ -202,6 +202,44 @@ def test_missing_and_unknown_format_files(tmp_path):
         CanFileAdapter("b", p).open()
 
 
+@pytest.mark.parametrize("damage", ["truncated", "block_id"])
+def test_a_damaged_real_mf4_is_one_line_and_nothing_else_on_the_terminal(tmp_path, real_data, monkeypatch, damage):
+    """The CANedge log cut at 2 % (asammdf: "seek out of range"), or its first channel-group
+    block's id broken (asammdf logs "Expected ##CG block" on its own console handler): either
+    way asammdf's half-built reader raised in its __del__, which Python printed as "Exception
+    ignored ... Traceback" after our one line. Now the one line is all (adapters.quiet_readers):
+    nothing reaches the asammdf logger's handlers or Python's unraisable hook."""
+    import logging
+    import sys
+
+    data = (real_data / "css_canedge_gnss_imu_mf4" / "gnss1.MF4").read_bytes()
+    if damage == "truncated":
+        data = data[: len(data) // 50]
+    else:
+        i = data.index(b"##CG")
+        data = data[:i] + b"##CX" + data[i + 4:]
+    path = tmp_path / "gnss1.MF4"
+    path.write_bytes(data)
+    unraisable, logged = [], []
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: unraisable.append(repr(u.exc_value)))
+    handler = logging.Handler()
+    handler.emit = lambda record: logged.append(record.getMessage())
+    lg = logging.getLogger("asammdf")
+    lg.addHandler(handler)
+    try:
+        with pytest.raises(AdapterError) as ei:
+            CanFileAdapter("gnss", path).open()
+        import gc
+
+        gc.collect()
+    finally:
+        lg.removeHandler(handler)
+    msg = str(ei.value)
+    assert msg.startswith(f"CAN log {path}: unreadable: ") and "\n" not in msg, msg
+    assert unraisable == [] and logged == [], (unraisable, logged)
+    assert lg.disabled is False  # as it was before
+
+
 def _read_all(a):
     sub = a.subscribe(samples=False)
     a.open()

@@ -54,6 +54,19 @@ def test_errors_are_one_line(drive, capsys, args, msg):
     assert msg in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
+def test_a_drive_too_short_for_held_out_blocks_is_one_line(tmp_path, capsys):
+    """2.5 s of the paper drive: past the estimator's settling and the row count, 3 blocks of
+    0.5 s, too few to hold one out and fit on the rest (it was an IndexError)."""
+    short = tmp_path / "short.mcap"
+    assert main(["sim", "paper", "--duration", "2.5", "--quiet", "-o", str(short)]) == 0
+    capsys.readouterr()
+    rc = main(["diagnose", str(short), "--quiet", "--no-simulation"])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert "too short to judge an effect on held-out time blocks" in err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
 def test_help_shows_an_example(capsys):
     assert main(["diagnose", "--help"]) == 0
     assert "vdps diagnose drive.mcap --add aero_drag" in capsys.readouterr().out

@@ -29,6 +29,7 @@ import os
 from typing import Any, Iterable, Mapping, Sequence
 
 from vdps_hil.adapters.base import Adapter, AdapterError, DeviceLost, EndOfInput
+from vdps_hil.adapters.quiet_readers import collect_half_built, library_noise_off
 from vdps_hil.adapters.slcan import SlcanLines, fast_slcan_class, slcan_line
 from vdps_hil.bus.clocks import ReplayClock
 from vdps_hil.bus.raw import RawCan
@@ -380,24 +381,31 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
         if not os.path.isfile(self.path):
             raise AdapterError(f"CAN log {self.path}: no such file")
         suffix = os.path.splitext(self.path)[1].lower()
-        try:
-            if suffix in TEXT_SUFFIXES:
-                _update_reader_plugins()
-                self._reader_cls = MESSAGE_READERS[suffix]
-                self._raw_file = open(self.path, "rb")
-                self._feed = _TextFeed(self._raw_file, self.health.counters)
-            self._reader = self._make_reader()
-            self._it = iter(self._reader)
-        except ValueError as e:
-            raise AdapterError(f"CAN log {self.path}: {str(e).splitlines()[0]} (readable: "
-                               f"{', '.join(CAN_LOG_SUFFIXES)}, .mcap)") from None
-        except ImportError as e:
-            raise AdapterError(f"CAN log {self.path}: needs an optional package: {e}") from None
-        except OSError as e:
-            raise AdapterError(f"CAN log {self.path}: {e.strerror or e}") from None
-        except Exception as e:  # noqa: BLE001 - a broken file is the person's input
-            raise AdapterError(f"CAN log {self.path}: unreadable: {type(e).__name__}: "
-                               f"{str(e).splitlines()[0] if str(e) else ''}") from None
+        err = None  # raised after the reader's leftovers are gone (adapters.quiet_readers)
+        with library_noise_off():
+            try:
+                if suffix in TEXT_SUFFIXES:
+                    _update_reader_plugins()
+                    self._reader_cls = MESSAGE_READERS[suffix]
+                    self._raw_file = open(self.path, "rb")
+                    self._feed = _TextFeed(self._raw_file, self.health.counters)
+                self._reader = self._make_reader()
+                self._it = iter(self._reader)
+            except ValueError as e:
+                known = suffix in CAN_LOG_SUFFIXES or suffix == ".mcap"
+                err = f"{str(e).splitlines()[0]}" + ("" if known else
+                                                     f" (readable: {', '.join(CAN_LOG_SUFFIXES)}, .mcap)")
+                err = f"unreadable: {err}" if known else err
+            except ImportError as e:
+                err = f"needs an optional package: {e}"
+            except OSError as e:
+                err = f"{e.strerror or e}"
+            except Exception as e:  # noqa: BLE001 - a broken file is the person's input
+                err = f"unreadable: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
+            if err is not None:
+                collect_half_built()
+        if err is not None:
+            raise AdapterError(f"CAN log {self.path}: {err}")
 
     @property
     def lines_read(self) -> int | None:

@@ -189,7 +189,8 @@ class Design:
         return self._stats
 
     def folds(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(held-out micro blocks, training micro blocks) per fold."""
+        """(held-out micro blocks, training micro blocks) per fold. Raises ``ValueError`` (one
+        line) when a fold would leave no block to fit on: the drive is too short to judge."""
         nb = self.n_blocks
         k = max(2, min(self.cfg.folds, nb // 2))
         edges = np.linspace(0, nb, k + 1).round().astype(int)
@@ -199,7 +200,12 @@ class Design:
             if not len(held):
                 continue
             lo, hi = held[0] - self.cfg.gap_blocks, held[-1] + self.cfg.gap_blocks
-            train = np.array([b for b in range(nb) if b < lo or b > hi])
+            train = np.array([b for b in range(nb) if b < lo or b > hi], dtype=int)
+            if not len(train):
+                raise ValueError(
+                    f"the drive is too short to judge an effect on held-out time blocks: {nb * self.cfg.micro_block_s:g} s "
+                    f"({nb} blocks of {self.cfg.micro_block_s:g} s), and holding {len(held)} out with {self.cfg.gap_blocks} "
+                    f"beside them leaves none to fit on")
             out.append((held, train))
         return out
 

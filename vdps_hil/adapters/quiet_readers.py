@@ -1,0 +1,59 @@
+"""Third-party log readers that speak past our one-line errors, kept quiet while they open a file.
+
+asammdf (python-can's ``.mf4`` reader) prints its own errors on a console handler of the
+``asammdf`` logger ("asammdf - ERROR - Expected "##CG" block ..."), and when its reader fails
+half-built (a truncated or damaged MF4) its ``__del__`` raises ``AttributeError`` in the garbage
+collector, which Python prints as "Exception ignored in ... Traceback ...". The failure itself
+reaches the user once, as the adapter's one-line error; :func:`library_noise_off` keeps those
+two off the terminal while a reader opens (and, with ``collect``, until the half-built reader
+is gone).
+"""
+
+from __future__ import annotations
+
+import gc
+import logging
+import sys
+from contextlib import contextmanager
+from typing import Iterator
+
+__all__ = ["NOISY_LOGGERS", "library_noise_off", "collect_half_built"]
+
+NOISY_LOGGERS = ("asammdf",)
+"""Loggers of readers that print on their own handlers (not through the root logger)."""
+
+
+def _from_noisy_library(obj) -> bool:
+    module = getattr(obj, "__module__", None) or type(obj).__module__ or ""
+    return any(module == n or module.startswith(n + ".") for n in NOISY_LOGGERS)
+
+
+@contextmanager
+def library_noise_off() -> Iterator[None]:
+    """Within the block: the :data:`NOISY_LOGGERS` are disabled, and an exception raised in the
+    ``__del__`` of one of their objects is dropped (any other still goes to Python's hook). Call
+    ``gc.collect()`` inside the block (:func:`collect_half_built`) to let a failed reader's
+    leftovers go while it applies."""
+    loggers = [logging.getLogger(n) for n in NOISY_LOGGERS]
+    disabled = [lg.disabled for lg in loggers]
+    hook = sys.unraisablehook
+
+    def quiet(unraisable) -> None:
+        if not _from_noisy_library(unraisable.object):
+            hook(unraisable)
+
+    for lg in loggers:
+        lg.disabled = True
+    sys.unraisablehook = quiet
+    try:
+        yield
+    finally:
+        sys.unraisablehook = hook
+        for lg, d in zip(loggers, disabled):
+            lg.disabled = d
+
+
+def collect_half_built() -> None:
+    """Free a reader that failed in its constructor now (its frames may sit in a reference cycle),
+    inside :func:`library_noise_off`."""
+    gc.collect()
