@@ -280,7 +280,7 @@ def test_scenario_faults_come_first_and_bad_configs_are_one_line():
     sc = dc.replace(STRAIGHT, raw={**STRAIGHT.raw, "faults": ["gyro_spike", {"name": "gnss_outage", "t_s": 1.0}]})
     d = Drive(sc, faults=["clock_jump"])
     assert [f.name for f in d.faults] == ["gyro_spike", "gnss_outage", "clock_jump"]
-    for kw in ({"duration_s": 0.0}, {"effects": ["imu_bias:x"]}, {"effects": ["imu_bias:accel_bias_x_mps2=a"]},
+    for kw in ({"duration_s": 0.0}, {"duration_s": 86400.001}, {"effects": ["imu_bias:x"]}, {"effects": ["imu_bias:accel_bias_x_mps2=a"]},
                {"read_period_s": 0.0}):
         with pytest.raises(DriveError) as e:
             Drive(STRAIGHT, **kw)

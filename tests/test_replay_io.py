@@ -102,6 +102,18 @@ def test_errors_in_the_second_process_are_one_line(drive, tmp_path):
     side.abort()
 
 
+def test_a_child_that_refuses_its_options_leaves_one_line_on_the_terminal(drive, tmp_path):
+    """The child's own stderr is the user's terminal: after it sent its one-line error it used to
+    end through the interpreter's teardown, which aborted on stdin's lock held by its listening
+    thread ("Fatal Python error: _enter_buffered_busy ...", five more lines, on every run)."""
+    vdps = os.path.join(os.path.dirname(sys.executable), "vdps")
+    for _ in range(3):
+        r = subprocess.run([vdps, "replay", str(drive), "--jobs", "2", "--signalmap", "nosuch", "--dbc", "x.dbc"],
+                           cwd=tmp_path, capture_output=True, text=True, timeout=600)
+        assert r.returncode == 2
+        assert r.stderr.strip().splitlines() == ["vdps: error: signal map nosuch: cannot read: No such file or directory"]
+
+
 def test_a_child_that_dies_half_way_is_one_line(tmp_path):
     """Killed in the middle of a 10 s drive (its ~2.5 MB of sample frames cannot all wait in
     the 1 MiB pipe, so after the first frame the child is still decoding): the samples already

@@ -48,6 +48,8 @@ def test_default_output_and_json_on_stdout(tmp_path, monkeypatch, capsys):
     (["sim", "paper", "--vehicle", "sedan-model"], "truth file is needed"),
     (["sim", "paper", "--duration", "0"], "duration must be"),
     (["sim", "paper", "--duration", "x"], "Invalid value"),
+    (["sim", "paper", "--duration", "1e12"], "at most 86400 s"),  # it simulated until killed
+    (["sim", "paper", "--seed", "-5"], "not in the range x>=0"),  # was: internal error (ValueError)
     (["sim", "paper", "-o", "/no/such/dir/x.mcap"], "does not exist"),
     (["sim", "cr-sine-accel", "--truth", "commonroad-mb:2"], "reserved"),
     (["sim", "cr-sine-accel", "--truth", "commonroad-mb:7"], "1 or 3"),

@@ -466,20 +466,29 @@ def _child(args: dict) -> int:
         except (ReplayIOError, RecordingError) as e:
             _send(out, "error", _one_line(e))
             out.flush()
-            return 1
+            _exit_now(1)
         except Exception as e:  # a bug: one line to the parent instead of a traceback
             _send(out, "error", f"the replay's decoding process failed: {type(e).__name__}: {_one_line(e)}")
             out.flush()
-            return 1
+            _exit_now(1)
         _send(out, "closed", None)
         out.flush()
-        os._exit(0)  # the output is closed and said so: skip the interpreter's teardown the parent waits for
+        _exit_now(0)  # the output is closed and said so: skip the interpreter's teardown the parent waits for
     except BrokenPipeError:  # the parent stopped reading (a refused configuration, Ctrl-C)
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, out.fileno())  # nothing left to flush at exit
         if side is not None:
             side.abort()
+        _exit_now(0)
     return 0
+
+
+def _exit_now(code: int) -> None:
+    """End the child without the interpreter's teardown, which aborted on the stdin lock the
+    listening thread holds ("Fatal Python error: _enter_buffered_busy ..." on the user's
+    terminal under the one-line error). The caller has flushed what it wrote."""
+    sys.stderr.flush()
+    os._exit(code)
 
 
 def main(argv: list[str] | None = None) -> int:

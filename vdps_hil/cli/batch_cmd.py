@@ -324,7 +324,7 @@ study in OUT/study.json; a rerun reuses finished trials.
 @click.argument("study", type=click.Choice(["snr", "weighting", "effects"]))
 @click.option("--seeds", type=click.IntRange(1, None), default=5, show_default=True,
               help="Trials (seeds) per row.")
-@click.option("--seed0", type=int, default=1, show_default=True, help="First seed.")
+@click.option("--seed0", type=click.IntRange(0, None), default=1, show_default=True, help="First seed.")
 @click.option("--profile", default="table1-susp1k", show_default=True, metavar="NAME",
               help="Sensor profile (the data sheet the chain is configured from).")
 @click.option("--target-snr", "targets", type=float, multiple=True, metavar="DB",

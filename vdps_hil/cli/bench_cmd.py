@@ -66,7 +66,7 @@ missing" in its warnings rather than accumulating lag."""
               help="Interface the simulator opens when --can is an interface string (default: the same).")
 @click.option("--react/--no-react", default=False, show_default=True,
               help="Let the simulated ECU cut torque and brake on a warning.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of every sensor's random streams.")
+@click.option("--seed", type=click.IntRange(0, None), default=0, show_default=True, help="Seed of every sensor's random streams.")
 @click.option("--profile", default=None, metavar="NAME", help="Sensor profile [default: table1-susp1k].")
 @click.option("-o", "--output", default=None, metavar="FILE.mcap",
               help="Record the session: raw topics as the pipeline received them, /decoded, /est, /truth.")

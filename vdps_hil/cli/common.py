@@ -61,7 +61,7 @@ json_option = click.option("--json", "json_out", metavar="FILE", default=None,
                            help="Write a machine-readable summary to FILE ('-' for stdout).")
 output_option = click.option("-o", "--output", "output", metavar="FILE", default=None,
                              help="Output file.")
-seed_option = click.option("--seed", type=int, default=0, show_default=True,
+seed_option = click.option("--seed", type=click.IntRange(0, None), default=0, show_default=True,
                            help="Seed of every random number generator.")
 
 

@@ -27,7 +27,7 @@ snr_table, weighting_table (one profile: at the top level; both: under profiles.
 @click.option("--profile", "profiles", multiple=True, metavar="NAME",
               help="Sensor profile (repeatable; default: table1-susp1k and table1).")
 @click.option("--seeds", type=int, default=None, metavar="N", help="Seeds per profile (default 20, --quick 3).")
-@click.option("--seed0", type=int, default=1, show_default=True, help="First seed.")
+@click.option("--seed0", type=click.IntRange(0, None), default=1, show_default=True, help="First seed.")
 @click.option("--workers", type=int, default=2, show_default=True, help="Processes running drives in parallel.")
 @json_option
 @quiet_option

@@ -32,7 +32,7 @@ Without -o the recording is written to ./<scenario>.mcap."""
 @click.argument("scenario")
 @click.option("--duration", "duration_s", type=float, default=None, metavar="S",
               help="Simulated seconds (default: the scenario's).")
-@click.option("--seed", type=int, default=0, show_default=True,
+@click.option("--seed", type=click.IntRange(0, None), default=0, show_default=True,
               help="Seed of every sensor's random streams.")
 @click.option("--profile", default=None, metavar="NAME",
               help="Sensor profile (configs/profiles/NAME.toml or a .toml path) "

@@ -61,7 +61,11 @@ from .signals import ScenarioError
 from .sinks import DriveSink, RecordingSink
 from .truth_backends import TruthBackendError, truth_backend
 
-__all__ = ["Drive", "DriveError", "parse_effect_spec", "DEFAULT_PROFILE", "DEFAULT_BUS", "CONFIG_ERRORS"]
+__all__ = ["Drive", "DriveError", "parse_effect_spec", "DEFAULT_PROFILE", "DEFAULT_BUS", "CONFIG_ERRORS", "MAX_DURATION_S"]
+
+MAX_DURATION_S = 86400.0
+"""Longest drive the simulator takes (a day; the one-hour drives of tools/make_long_drive.py are
+well inside): a longer one is a mistyped option, not a test drive."""
 
 DEFAULT_PROFILE = "table1-susp1k"
 """Default sensor profile: Table 1 with the suspension at 1 kHz (see its file for why)."""
@@ -139,6 +143,8 @@ class Drive:
         dur = self.scenario.duration_s if duration_s is None else float(duration_s)
         if not (dur > 0 and math.isfinite(dur)):
             raise DriveError(f"duration must be a positive number of seconds, got {duration_s!r}")
+        if dur > MAX_DURATION_S:
+            raise DriveError(f"duration must be at most {MAX_DURATION_S:g} s (a day of driving), got {dur:g}")
         self.duration_s = dur
         S.check_name("bus", bus)
         self.bus = bus
