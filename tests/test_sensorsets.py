@@ -31,6 +31,9 @@ def test_sensor_set_files_load_and_build_pipeline_configs():
 
 @pytest.mark.parametrize("text, fragment", [
     ("[sensors]\nimu = \"9axis\"\n", "[sensors]"),
+    ("[sensors]\nsuspension = nan\n", "suspension must be true or false"),  # was an internal error
+    ("[ekf]\naccel_noise_mps2 = 1e300\n", "magnitude at most 1e+06"),  # overflowed in the filter
+    ("[latencies]\ngnss_s = 1e300\n", "magnitude at most 1e+06"),
     ("[ekf]\nwarp = 1.0\n", "unknown key 'warp'"),
     ("[ekf]\naccel_noise_mps2 = \"big\"\n", "expected a finite number"),
     ("[ekf]\nuse_gnss_velocity = 1\n", "expected true or false"),

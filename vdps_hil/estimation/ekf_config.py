@@ -98,6 +98,9 @@ class SensorSet:
             raise ValueError(f"SensorSet.imu must be one of {_IMU_KINDS}, got {self.imu!r}")
         if self.gnss not in _GNSS_KINDS:
             raise ValueError(f"SensorSet.gnss must be one of {_GNSS_KINDS}, got {self.gnss!r}")
+        for name in ("suspension", "wheel_speeds"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"SensorSet.{name} must be true or false, got {getattr(self, name)!r}")
 
     @classmethod
     def paper(cls) -> "SensorSet":

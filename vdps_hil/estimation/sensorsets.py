@@ -96,9 +96,16 @@ _CAL_KEYS = {"speed_still_mps", "min_still_s", "max_age_s"}
 _EKF_BOOL_KEYS = {"use_gnss_velocity", "gyro_bias", "accel_bias", "wheel_speed", "wheel_scale_state", "nonholonomic"}
 
 
+MAX_FIGURE = 1e6
+"""Largest magnitude of a sensor-set number (noise figures, rates, periods, latencies in SI):
+the shipped sets stay below 1e3; 1e300 passed the finite check and overflowed in the filter."""
+
+
 def _finite(v, where: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise SensorSetError(f"{where}: expected a finite number, got {v!r}")
+    if abs(v) > MAX_FIGURE:
+        raise SensorSetError(f"{where}: expected a number of magnitude at most {MAX_FIGURE:g}, got {v!r}")
     return float(v)
 
 
