@@ -37,6 +37,10 @@ def test_zero_noise_keeps_rates():
     (lambda s: s.replace('"PASHR"', '"GSV"'), "attitude_sentence"),
     (lambda s: s.replace("[imu]", "[imu]\nbogus = 1"), "unknown key"),
     (lambda s: s + "\n[[", "malformed TOML"),
+    # each was an internal error in vdps sim (a division by a zero period, an overflow, a ValueError)
+    (lambda s: s.replace("rate_hz = 5.0", "rate_hz = 1e300"), r"outside \[0, 100000\]"),
+    (lambda s: s.replace("baud = 115200", "baud = 0"), r"outside \[1, 1e\+08\]"),
+    (lambda s: s.replace("sigma_m = 0.001", "sigma_m = 1e300"), r"outside \[0, 1e\+06\]"),
 ])
 def test_bad_profiles(mutation, msg):
     with pytest.raises(ProfileError, match=msg):

@@ -46,6 +46,15 @@ def test_shipped_maps_load_and_name_only_catalogue_fields():
     ("[bus.a]\n[[bus.a.message]]\nframe_id = 1\nkind='k'\n"
      "signals=[{signal='S', field='steer_wheel_angle_rad', unit='deg', scale=0}]\n",
      "scale must not be 0"),  # close/20.md: accepted, every value decoded as the offset
+    # a list where a name belongs: each was an internal TypeError (unhashable type: 'list')
+    ("[bus.a]\n[[bus.a.message]]\nframe_id = 1\nkind='k'\n"
+     "signals=[{signal='S', field=['wheel_speed_radps_1', 'x']}]\n", "not in the bus catalogue"),
+    ("[bus.a]\n[[bus.a.message]]\nframe_id = 1\nkind='k'\n"
+     "signals=[{signal='S', field='steer_wheel_angle_rad', unit='deg', transform=[1, 2]}]\n", "unknown transform"),
+    ("[bus.a]\n[[bus.a.message]]\nframe_id = 1\nkind='k'\nchecksum=[1, 2]\n"
+     "signals=[{signal='S', field='steer_wheel_angle_rad', unit='deg'}]\n", "unknown checksum"),
+    ("[bus.a]\ncodec = [1, 2]\n", "unknown codec"),
+    ("[bus.a]\nmessage = 5\n", "'message' must be a list of tables"),
 ])
 def test_bad_maps_give_one_line_errors(tmp_path, text, needle):
     p = write_map(tmp_path, text)

@@ -285,7 +285,7 @@ def _signal_rule(where: str, d: Mapping, radius: float | None) -> SignalRule:
     if not sigs or not all(isinstance(s, str) and s for s in sigs):
         raise SignalMapError(f"{where}: 'signal' must be a name or a list of names")
     fld = d.get("field")
-    if fld not in FIELDS:
+    if not isinstance(fld, str) or fld not in FIELDS:
         raise SignalMapError(f"{where}: field {fld!r} is not in the bus catalogue "
                              "(vdps_hil.bus.samples.FIELDS)")
     unit = d.get("unit", "")
@@ -299,7 +299,7 @@ def _signal_rule(where: str, d: Mapping, radius: float | None) -> SignalRule:
     if sign not in (1.0, -1.0):
         raise SignalMapError(f"{where}: sign must be 1 or -1")
     transform = d.get("transform", "")
-    if transform not in TRANSFORMS:
+    if not isinstance(transform, str) or transform not in TRANSFORMS:
         raise SignalMapError(f"{where}: unknown transform {transform!r} "
                              f"(known: {', '.join(t for t in TRANSFORMS if t)})")
     try:
@@ -333,9 +333,11 @@ def _parse(doc: Mapping, path: Path | None, text: str) -> SignalMap:
             dbc = ((path.parent / dbc) if path is not None else Path(dbc)).resolve()
         channel = b.get("channel")
         codec = b.get("codec", "")
-        if codec not in CODECS:
+        if not isinstance(codec, str) or codec not in CODECS:
             raise SignalMapError(f"{where}: unknown codec {codec!r} (known: vdps)")
         msgs: dict[tuple[int, bool], MessageRule] = {}
+        if not isinstance(b.get("message", []), list):
+            raise SignalMapError(f"{where}: 'message' must be a list of tables ([[bus.NAME.message]])")
         for i, m in enumerate(b.get("message", [])):
             mw = f"{where} message #{i + 1}"
             if not isinstance(m, Mapping):
@@ -349,7 +351,7 @@ def _parse(doc: Mapping, path: Path | None, text: str) -> SignalMap:
             if not isinstance(kind, str) or not kind:
                 raise SignalMapError(f"{mw}: kind is required (e.g. 'wheel_speed')")
             cks = m.get("checksum", "")
-            if cks and cks not in CHECKSUMS:
+            if cks and (not isinstance(cks, str) or cks not in CHECKSUMS):
                 raise SignalMapError(f"{mw}: unknown checksum {cks!r} "
                                      f"(known: {', '.join(CHECKSUMS)})")
             sigs = m.get("signals", [])

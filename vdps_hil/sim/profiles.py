@@ -105,6 +105,14 @@ _CONVERT = {
 }
 
 
+_MAX_FIGURE = 1e6
+"""Largest value of a profile number (sigmas, latencies in s, ...; the shipped profiles stay
+below 1e3 but for the baud rates): 1e300 passed the finite check and overflowed downstream."""
+_RANGES = {"rate_hz": (0.0, 1e5), "baud": (1.0, 1e8)}
+"""Fields with their own range: a sample rate up to 100 kHz, a serial line of 1 Bd to 100 MBd
+(0 Bd was an internal error, a rate of 1e300 Hz a division by a zero period)."""
+
+
 def _section(cls, table, where: str):
     if not isinstance(table, dict):
         raise ProfileError(f"{where}: expected a table")
@@ -122,6 +130,9 @@ def _section(cls, table, where: str):
             continue
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
             raise ProfileError(f"{where}.{key}: expected a finite non-negative number, got {value!r}")
+        lo, hi = _RANGES.get(name, (0.0, _MAX_FIGURE))
+        if not lo <= value <= hi:
+            raise ProfileError(f"{where}.{key}: {value!r} is outside [{lo:g}, {hi:g}]")
         got[name] = int(value) if typ in ("int", int) else float(value) * factor
     missing = sorted(set(want) - set(got))
     if missing:
