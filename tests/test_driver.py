@@ -88,6 +88,7 @@ def test_driver_spec_errors_are_one_line():
     base = "name = \"t\"\nduration_s = 1.0\n[driver]\n"
     for text, msg in ((base + "gain = 1\n", "unknown key 'gain'"),
                       (base + "path = { type = \"spiral\" }\n", "path.type"),
+                      (base + "path = { type = [1, 2] }\n", "path.type"),  # was TypeError: unhashable
                       (base + "drive = \"4wd\"\n", "drive must be"),
                       (base + "path = { type = \"circle\" }\n", "radius_m")):
         with pytest.raises(ScenarioError, match=msg):

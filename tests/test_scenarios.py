@@ -34,6 +34,7 @@ def test_every_shipped_scenario_loads():
     (MINIMAL + "[road]\nbank = 2\n", "unknown key 'bank'"),
     (MINIMAL.replace("duration_s = 2.0", "duration_s = -1.0"), "must be positive"),
     (MINIMAL.replace("= 0.1", "= { type = \"square\" }"), "unknown signal type"),
+    (MINIMAL.replace("= 0.1", "= { type = [1, 2] }"), "unknown signal type"),  # was TypeError: unhashable
     (MINIMAL.replace("= 0.1", "= { type = \"sine\", amplitude = 1.0 }"), "missing key 'frequency_hz'"),
     (MINIMAL.replace("= 0.1", "= { type = \"sine\", amplitude = 1.0, frequency_hz = 1, freq = 2 }"), "unknown key 'freq'"),
     (MINIMAL.replace("[inputs]", "effects = [\"warp_drive\"]\n[inputs]"), "unknown effect 'warp_drive'"),

@@ -74,7 +74,7 @@ def validate_driver_spec(spec: Mapping[str, Any], where: str) -> None:
         raise _err(where, "drive must be fwd, rwd or awd")
     if "path" in spec:
         p = spec["path"]
-        if not isinstance(p, Mapping) or p.get("type") not in _PATH_KEYS:
+        if not isinstance(p, Mapping) or not isinstance(p.get("type"), str) or p.get("type") not in _PATH_KEYS:
             raise _err(where, f"path.type must be one of {', '.join(_PATH_KEYS)}")
         bad = sorted(set(p) - _PATH_KEYS[p["type"]] - {"type"})
         if bad:

@@ -54,7 +54,7 @@ def build_signal(spec: Any, where: str) -> Callable[[float], float]:
     if not isinstance(spec, Mapping):
         raise ScenarioError(f"{where}: a signal must be a table or a number")
     kind = spec.get("type")
-    if kind not in _SIGNAL_KEYS:
+    if not isinstance(kind, str) or kind not in _SIGNAL_KEYS:
         raise ScenarioError(f"{where}: unknown signal type {kind!r} (known: {', '.join(_SIGNAL_KEYS)})")
     unknown = sorted(set(spec) - _SIGNAL_KEYS[kind] - _MODIFIERS)
     if unknown:
