@@ -393,7 +393,7 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
                 self._it = iter(self._reader)
             except ValueError as e:
                 known = suffix in CAN_LOG_SUFFIXES or suffix == ".mcap"
-                err = f"{str(e).splitlines()[0]}" + ("" if known else
+                err = (str(e).splitlines() or [type(e).__name__])[0] + ("" if known else
                                                      f" (readable: {', '.join(CAN_LOG_SUFFIXES)}, .mcap)")
                 err = f"unreadable: {err}" if known else err
             except ImportError as e:

@@ -5,8 +5,8 @@ asammdf (python-can's ``.mf4`` reader) prints its own errors on a console handle
 half-built (a truncated or damaged MF4) its ``__del__`` raises ``AttributeError`` in the garbage
 collector, which Python prints as "Exception ignored in ... Traceback ...". The failure itself
 reaches the user once, as the adapter's one-line error; :func:`library_noise_off` keeps those
-two off the terminal while a reader opens (and, with ``collect``, until the half-built reader
-is gone).
+two off the terminal while a reader opens, and :func:`collect_half_built`, called inside it,
+frees the half-built reader before it ends.
 """
 
 from __future__ import annotations
