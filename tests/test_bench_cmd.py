@@ -134,6 +134,8 @@ def test_the_words_say_warning_time_lead_ecu_action_outcome_and_recording():
     (["--scenario", "no-such-scenario"], "unknown scenario"),
     (["--speed", "0"], "--speed must be a positive number"),
     (["--speed", "x"], "--speed must be a positive number or 'auto'"),
+    (["--speed", "1e9", "--no-headroom-check"], "--speed must be at most 1000"),  # was: 60 s, then "did not stop"
+    (["--seed", "-1"], "not in the range x>=0"),
     (["--speed", "auto", "--no-headroom-check"], "--speed auto needs the headroom measurement"),
     (["--can", "nonsense"], "is not INTERFACE:CHANNEL"),
     (["--can", "nosuchbus:0"], "unknown CAN interface"),

@@ -167,6 +167,11 @@ def bench(scenario, vehicle, model, effects, faults, duration_s, speed, can_spec
     write_json(doc, json_out)
 
 
+MAX_SPEED = 1000.0
+"""Fastest ``--speed`` taken: ten times what the simulator itself reaches (physics, sensors, wire
+encoding: about 100x real time, tools/bench_sim.py)."""
+
+
 def _parse_speed(value) -> float | str:
     """``--speed``: a positive number or ``auto`` (one-line error otherwise)."""
     text = str(value).strip().lower()
@@ -178,6 +183,8 @@ def _parse_speed(value) -> float | str:
         x = math.nan
     if not (math.isfinite(x) and x > 0):
         raise UserError(f"--speed must be a positive number or 'auto', got {value!r}")
+    if x > MAX_SPEED:  # 1e9 left the pipeline process waiting past the bench's stop (an error after 60 s)
+        raise UserError(f"--speed must be at most {MAX_SPEED:g} (the simulator runs about 100x real time), got {value!r}")
     return x
 
 
