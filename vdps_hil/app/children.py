@@ -21,8 +21,9 @@ prepended to ``sys.path``). ``-I`` (isolated mode) is not used: it would also dr
   (``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` = 1 where the user has not
   set them): a pool of one worker per core whose numpy each started a BLAS thread per core
   spun them against each other (``vdps batch diagnose --backend processes --workers 2`` on six
-  study drives, side by side: 22.2-22.7 s wall and 42 s of CPU with OpenBLAS's default, 18.1-19.2 s
-  and 34-36 s with one thread). Dask's nannies set the same three for their workers
+  study drives, one session: 22.2-22.7 s wall and 42 s of CPU with OpenBLAS's default, 18.1-19.2 s
+  and 34-36 s with one thread set by hand; the machine's spread is about as large, README). Dask's
+  nannies set the same three for their workers
   (``distributed.nanny.pre-spawn-environ``);
 * :func:`spawned_pool` -- a ``ProcessPoolExecutor`` of spawned children with both of the above
   (the batch engine's process backend and the study tools).
