@@ -391,11 +391,10 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
                     self._feed = _TextFeed(self._raw_file, self.health.counters)
                 self._reader = self._make_reader()
                 self._it = iter(self._reader)
-            except ValueError as e:
-                known = suffix in CAN_LOG_SUFFIXES or suffix == ".mcap"
-                err = (str(e).splitlines() or [type(e).__name__])[0] + ("" if known else
-                                                     f" (readable: {', '.join(CAN_LOG_SUFFIXES)}, .mcap)")
-                err = f"unreadable: {err}" if known else err
+            except ValueError as e:  # a known format that breaks, or python-can's "unknown log format"
+                first = (str(e).splitlines() or [type(e).__name__])[0]
+                err = (f"unreadable: {first}" if suffix in (*CAN_LOG_SUFFIXES, ".mcap")
+                       else f"{first} (readable: {', '.join(CAN_LOG_SUFFIXES)}, .mcap)")
             except ImportError as e:
                 err = f"needs an optional package: {e}"
             except OSError as e:

@@ -336,9 +336,10 @@ def _parse(doc: Mapping, path: Path | None, text: str) -> SignalMap:
         if not isinstance(codec, str) or codec not in CODECS:
             raise SignalMapError(f"{where}: unknown codec {codec!r} (known: vdps)")
         msgs: dict[tuple[int, bool], MessageRule] = {}
-        if not isinstance(b.get("message", []), list):
+        messages = b.get("message", [])
+        if not isinstance(messages, list):
             raise SignalMapError(f"{where}: 'message' must be a list of tables ([[bus.NAME.message]])")
-        for i, m in enumerate(b.get("message", [])):
+        for i, m in enumerate(messages):
             mw = f"{where} message #{i + 1}"
             if not isinstance(m, Mapping):
                 raise SignalMapError(f"{mw}: must be a table")

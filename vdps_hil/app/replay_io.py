@@ -42,7 +42,7 @@ import struct
 import subprocess
 import sys
 import threading
-from typing import Any, Iterator, Mapping
+from typing import Any, Iterator, Mapping, NoReturn
 
 from vdps_hil.app.children import child_environ, python_module_command
 from vdps_hil.bus.samples import Sample
@@ -401,8 +401,9 @@ class RecordingProcess:
             pass
 
 
-def _child(args: dict) -> int:
-    """The child: decode, send the samples, write the output as the parent says."""
+def _child(args: dict) -> NoReturn:
+    """The child: decode, send the samples, write the output as the parent says; it ends
+    through :func:`_exit_now` on every path."""
     from vdps_hil.record.reader import RecordingError, RecordingReader
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle: it closes the pipes
@@ -480,10 +481,9 @@ def _child(args: dict) -> int:
         if side is not None:
             side.abort()
         _exit_now(0)
-    return 0
 
 
-def _exit_now(code: int) -> None:
+def _exit_now(code: int) -> NoReturn:
     """End the child without the interpreter's teardown, which aborted on the stdin lock the
     listening thread holds ("Fatal Python error: _enter_buffered_busy ..." on the user's
     terminal under the one-line error). The caller has flushed what it wrote."""
@@ -491,9 +491,9 @@ def _exit_now(code: int) -> None:
     os._exit(code)
 
 
-def main(argv: list[str] | None = None) -> int:
-    return _child(json.loads((sys.argv[1:] if argv is None else argv)[0]))
+def main(argv: list[str] | None = None) -> NoReturn:
+    _child(json.loads((sys.argv[1:] if argv is None else argv)[0]))
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

@@ -135,9 +135,8 @@ class Engine:
 
     def start(self) -> None:
         cfg = self.config
-        if self.backend in ("dask", "processes"):
-            isolate_spawned_children()  # spawned workers import nothing from the working directory
         if self.backend == "dask":
+            isolate_spawned_children()  # spawned workers import nothing from the working directory
             self._start_dask()
         elif self.backend == "processes":
             self.info["workers"] = cfg.resolved_workers()
@@ -201,7 +200,7 @@ class Engine:
                 f"this client: {mine}): their results may differ from a local run")
 
     def _new_pool(self):
-        return spawned_pool(self.config.resolved_workers())  # one BLAS thread per worker
+        return spawned_pool(self.config.resolved_workers())  # safe-path mode, one BLAS thread per worker
 
     def close(self) -> None:
         if self._client is not None:
