@@ -216,12 +216,15 @@ def test_the_node_reads_real_ptys_and_a_can_bus_and_hands_over_every_sample(driv
     runner = threading.Thread(target=node.run, args=(stop,))
     feeder.start()
     runner.start()
+    t0 = time.monotonic()
     try:
         feeder.join(30)
+        fed_s = time.monotonic() - t0
         time.sleep(0.3)  # the last bytes through the ptys
         stop.set()
         runner.join(30)
         assert not runner.is_alive() and not node.errors
+        assert not feeder.is_alive(), f"the feeder still writing after {fed_s:.1f} s"
     finally:
         for m, sl in ptys.values():
             os.close(m)
@@ -232,7 +235,13 @@ def test_the_node_reads_real_ptys_and_a_can_bus_and_hands_over_every_sample(driv
         for dev, _, d in r.iter_raw_serial():
             n_bytes[dev] += len(d)
     got = node.received_counts()
-    assert (got["can_frames"], got["imu_bytes"], got["gnss_bytes"]) == (n_frames, n_bytes["imu"], n_bytes["gnss"])
+    # a short count has happened in CI runs (5,877 of 56,447 IMU bytes, once in ~40 runs): the
+    # message carries what tells its mechanism (a lost device, a reader overflow, a slow feed)
+    why = {a.name: (a.health.state, a.health.bytes, {k: v for k, v in a.health.counters.items() if v})
+           for a in node.adapters}
+    assert (got["can_frames"], got["imu_bytes"], got["gnss_bytes"]) == (n_frames, n_bytes["imu"], n_bytes["gnss"]), \
+        f"fed in {fed_s:.2f} s; adapters {why}"
+
     def by_kind(samples):
         out = {}
         for s in sorted(samples, key=lambda s: (s.t_ns, s.source)):
