@@ -21,7 +21,7 @@ from vdps_hil.codecs.framing import LineFramer, transmission_time_ns
 from vdps_hil.codecs.imu_decoder import ImuDecoder
 from vdps_hil.codecs.nmea.decoder import NmeaDecoder
 from vdps_hil.geodesy import DEFAULT_ORIGIN
-from vdps_hil.model.effects import REGISTRY as EFFECTS
+from vdps_hil.model.effects import REGISTRY as EFFECTS, EffectConfigError
 from vdps_hil.model.frames import dcm_global_to_vehicle
 from vdps_hil.record import schemas as S
 from vdps_hil.record.reader import RecordingReader
@@ -284,4 +284,11 @@ def test_scenario_faults_come_first_and_bad_configs_are_one_line():
                {"read_period_s": 0.0}):
         with pytest.raises(DriveError) as e:
             Drive(STRAIGHT, **kw)
+        assert "\n" not in str(e.value)
+    # a truth outside an effect's physical range (drag thrusting the car, a 1e5 m/s^2 bias; a drag
+    # area of 1e9 m^2 was an internal error: non-finite state at 0.002 s)
+    for spec, name in (("aero_drag:cda_m2=-5", "cda_m2"), ("aero_drag:cda_m2=1e9", "cda_m2"),
+                       ("imu_bias:accel_bias_x_mps2=1e5", "accel_bias_x_mps2")):
+        with pytest.raises(EffectConfigError, match=f"{name} = .* is outside its physical range") as e:
+            Drive(STRAIGHT, effects=[spec])
         assert "\n" not in str(e.value)

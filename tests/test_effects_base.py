@@ -24,6 +24,16 @@ def test_bad_names_and_values_are_one_line_errors():
         EffectSet([make_effect("aero_drag"), make_effect("aero_drag")])
 
 
+def test_check_plausible_names_the_parameter_and_its_physical_range():
+    make_effect("aero_drag", cda_m2=3.0).check_plausible()  # the bound itself is a car
+    e = make_effect("aero_drag", cda_m2=-0.5)  # a fit may leave the range: built, then labelled
+    assert not e.plausible()
+    with pytest.raises(EffectConfigError, match=r"cda_m2 = -0.5 m\^2 is outside its physical range \[0, 3\] m\^2"):
+        e.check_plausible()
+    with pytest.raises(EffectConfigError, match="gyro_bias_z_radps"):
+        make_effect("imu_bias", gyro_bias_z_radps=0.06).check_plausible()
+
+
 def test_effect_set_composition_and_lookup():
     s = EffectSet([make_effect("aero_drag")]) + make_effect("imu_bias") + [make_effect("magic_formula_tire")]
     assert s.names == ("aero_drag", "imu_bias", "magic_formula_tire")

@@ -171,7 +171,10 @@ class Drive:
                 names.append(name)
             if p:
                 params.setdefault(name, {}).update(p)
-        return effects_from_names(names, self.vehicle.effects, params)
+        effects = effects_from_names(names, self.vehicle.effects, params)
+        for e in effects:
+            e.check_plausible()
+        return effects
 
     def run(self, output: str | os.PathLike | IO[bytes], progress=None) -> DriveSummary:
         """Write the drive to a recording (a path or a binary stream) and return its summary;

@@ -144,6 +144,16 @@ class Effect:
         """True when every parameter is inside its plausible range."""
         return all(p.lower <= self._values[p.name] <= p.upper for p in self.PARAMS)
 
+    def check_plausible(self) -> None:
+        """Raise EffectConfigError (one line) naming the first parameter outside its plausible
+        range: a truth given to the simulator must be a car that can exist (a fit may leave the
+        range and is labelled implausible instead)."""
+        for p in self.PARAMS:
+            v = self._values[p.name]
+            if not p.lower <= v <= p.upper:
+                raise EffectConfigError(f"effect {self.name!r}: {p.name} = {v:g} {p.unit} is outside its "
+                                        f"physical range [{p.lower:g}, {p.upper:g}] {p.unit}")
+
     def __eq__(self, other):
         return type(self) is type(other) and self._values == other._values
 
