@@ -41,7 +41,10 @@ def test_a_sensor_the_set_left_out_is_named():
 def test_unusable_rows_say_why():
     assert "never moves faster than 5 m/s" in C.unusable_reason(_table(speed=1.0))
     msg = C.unusable_reason(_table(drop=["steer_wheel_angle_rad"]))
-    assert "steer_wheel_angle_rad" in msg and "0 of 500" in msg
+    assert "steer_wheel_angle_rad" in msg and "0 of 500, at least 50 needed" in msg
+    # every row usable and still too few (a 2 s drive read "49 of 49 ...: only 49 rows are moving")
+    msg = C.unusable_reason(_table(n=49))
+    assert "49 of 49, at least 50 needed" in msg and "the drive is too short, 49 rows of 0.02 s (1.0 s)" in msg
 
 
 def test_a_drive_that_stops_early_is_too_short_to_judge():

@@ -67,6 +67,19 @@ def test_a_drive_too_short_for_held_out_blocks_is_one_line(tmp_path, capsys):
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
+def test_an_error_on_a_damaged_recording_says_the_file_is_damaged(drive, tmp_path, capsys):
+    with open(drive, "rb") as f:
+        data = bytearray(f.read())
+    for i in range(2000, len(data) - 2000, 4096):  # a byte flipped in every compressed chunk
+        data[i] ^= 0xFF
+    bad = tmp_path / "striped.mcap"
+    bad.write_bytes(data)
+    rc = main(["diagnose", str(bad), "--quiet", "--no-simulation"])
+    err = capsys.readouterr().err
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert "(the recording is damaged: " in err and f"`vdps info {bad}` lists them)" in err
+
+
 def test_help_shows_an_example(capsys):
     assert main(["diagnose", "--help"]) == 0
     assert "vdps diagnose drive.mcap --add aero_drag" in capsys.readouterr().out

@@ -15,7 +15,7 @@ from mcap.reader import make_reader
 
 from vdps_hil.bus.samples import FIELDS, Sample
 from vdps_hil.record import schemas as S
-from vdps_hil.record.reader import RecordingError, RecordingReader
+from vdps_hil.record.reader import RecordingError, RecordingReader, damage_note, scan_damage
 from vdps_hil.record.writer import RecordingWriter
 
 EPOCH = S.DEFAULT_SIM_EPOCH_NS
@@ -264,6 +264,24 @@ def test_garbage_never_raises_anything_but_recording_error(tmp_path, content):
         return
     assert r.truncated and r.problems
     assert list(r.iter_messages()) == []
+
+
+def test_damage_note_counts_problems_but_not_a_missing_summary_alone(tmp_path, rng):
+    p = tmp_path / "d.mcap"
+    with RecordingWriter(p, sim_epoch_ns=EPOCH) as w:
+        for i in range(2000):
+            w.write_can("vdps", i * 1_000_000, can.Message(arbitration_id=0x100 + i % 7, is_extended_id=False,
+                                                           data=bytes(rng.integers(0, 256, 8).tolist())))
+    good = p.read_bytes()
+    assert scan_damage(p) == [] and damage_note([], p) == ""
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(good[: len(good) * 2 // 3])  # no summary, and a record cut in half
+    problems = scan_damage(cut)
+    note = damage_note(problems, cut)
+    assert problems and note.startswith(" (the recording is damaged: ") and f"`vdps info {cut}`" in note
+    assert damage_note(["no summary (cut off by a crash?): read by scanning"], cut) == ""
+    assert "2 problems" in damage_note(["a", "b"], cut)
+    assert scan_damage(tmp_path / "nope.mcap") == []
 
 
 def test_missing_file_is_one_line_error(tmp_path):

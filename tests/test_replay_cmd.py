@@ -241,6 +241,25 @@ def test_broken_inputs_are_one_line_errors_or_read_as_far_as_they_go(drive, tmp_
     assert len(warn) == 1 and f"parts of {cut} skipped: " in warn[0], text
 
 
+def _striped(drive, path):
+    """A copy of ``drive`` with a byte flipped every 4 KiB past its header: every compressed
+    chunk unreadable, so no sample is left."""
+    data = bytearray(drive.read_bytes())
+    for i in range(2000, len(data) - 2000, 4096):
+        data[i] ^= 0xFF
+    path.write_bytes(data)
+    return path
+
+
+def test_an_error_on_a_damaged_recording_says_the_file_is_damaged(drive, tmp_path):
+    """Flipped bytes in every chunk leave no IMU sample: the refusal says the file is damaged and
+    where to read how (it said only "no IMU", a property of the car it is not)."""
+    bad = _striped(drive, tmp_path / "striped.mcap")
+    code, text = run("replay", str(bad), "--no-predict")
+    assert code == 2 and len(text.strip().splitlines()) == 1, text
+    assert "no IMU" in text and "(the recording is damaged: " in text and f"`vdps info {bad}` lists them)" in text
+
+
 def test_sensor_set_inferred_or_named(drive, tmp_path):
     """Without --sensorset the set is inferred from the recording (the simulator's: 6-axis IMU,
     multi-antenna GNSS, suspension: 11 filter states); a named set with a single-antenna GNSS

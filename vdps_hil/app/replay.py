@@ -72,7 +72,7 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
     metadata names (``record.recorded_decoding``). ``progress(seconds_done)``: called every few
     thousand samples with the recording time fed so far. ``serve``: an ``app.live_view.LiveServer``
     that also gets the outputs and the view (with or without ``output``). Raises :class:`ReplayError` (one line)."""
-    from vdps_hil.record.reader import RecordingError, RecordingReader
+    from vdps_hil.record.reader import RecordingError, RecordingReader, damage_note
 
     wall0 = time.perf_counter()
     veh = _load_model_vehicle(vehicle)
@@ -98,9 +98,12 @@ def replay_file(path, *, vehicle: str | Vehicle = "sedan-model", output=None, mo
         if serve is not None:
             serve.epoch_ns = view.epoch_ns
         unsettled = tuple((model_doc or {}).get("params_unsettled", ()))
-        system, side, summary, sensors_desc = _run(path, reader, veh, config, configure, start, model_effects,
-                                                   recorded, probe, jobs, io_kw, view, progress, serve, unsettled,
-                                                   drops)
+        try:
+            system, side, summary, sensors_desc = _run(path, reader, veh, config, configure, start, model_effects,
+                                                       recorded, probe, jobs, io_kw, view, progress, serve,
+                                                       unsettled, drops)
+        except ReplayError as e:
+            raise ReplayError(f"{e}{damage_note(reader.problems, path)}") from None
     finally:
         reader.close()
     wall = time.perf_counter() - wall0

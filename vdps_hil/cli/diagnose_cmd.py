@@ -88,7 +88,12 @@ def diagnose(recording, vehicle, model_file, dbc, signalmap, sensorset, report_d
     except (DatasetError, ModelFileError, ValueError) as e:
         if debug_enabled():
             raise
-        raise UserError(str(e).splitlines()[0] if str(e) else type(e).__name__) from None
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        if isinstance(e, DatasetError):  # "no IMU" from a damaged file is the file, not the car
+            from vdps_hil.record.reader import damage_note, scan_damage
+
+            msg += damage_note(scan_damage(recording), recording)
+        raise UserError(msg) from None
     out = (lambda s: click.echo(s, err=True)) if json_out == "-" else click.echo
     for line in dg.summary_lines():
         out(line)

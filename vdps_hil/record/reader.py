@@ -32,7 +32,7 @@ from typing import IO, Iterable, Iterator, NamedTuple
 from vdps_hil.record import schemas as S
 from vdps_hil.record.mcap_file import MAGIC, McapIndex, one_line
 
-__all__ = ["RecordingError", "RecordingReader", "TopicInfo", "RawRecord"]
+__all__ = ["RecordingError", "RecordingReader", "TopicInfo", "RawRecord", "damage_note", "scan_damage"]
 
 
 class RecordingError(Exception):
@@ -293,3 +293,27 @@ class RecordingReader(McapIndex):
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def damage_note(problems, path) -> str:
+    """`` (the recording is damaged: ...; `vdps info PATH` lists them)`` for a reader's
+    ``problems`` (a missing summary alone is not damage: a recording cut off by a crash still
+    reads), else ''. Appended to an error such as "no IMU", so that it is not read as a
+    property of the car."""
+    problems = [p for p in problems if "no summary" not in p]
+    if not problems:
+        return ""
+    what = f"{len(problems)} problems" if len(problems) > 1 else problems[0]
+    return f" (the recording is damaged: {what}; `vdps info {path}` lists them)"
+
+
+def scan_damage(path) -> list[str]:
+    """The problems met reading every record of the recording at ``path`` (an error path's
+    second look; [] when it is not an MCAP recording at all)."""
+    try:
+        with RecordingReader(path) as r:
+            for _ in r.iter_records():
+                pass
+            return list(r.problems)
+    except (RecordingError, OSError):
+        return []

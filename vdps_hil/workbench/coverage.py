@@ -93,14 +93,17 @@ def unusable_reason(table: DriveTable) -> str:
         miss = int(np.sum(moving & ~fin))
         if miss:
             lacking.append((miss, name))
-    head = (f"too few usable rows ({int(usable_rows(table).sum())} of {n}; a row needs >= {MIN_SPEED_MPS:g} m/s and "
-            "every model signal)")
+    head = (f"too few usable rows: {int(usable_rows(table).sum())} of {n}, at least {MIN_ROWS} needed (a row needs "
+            f">= {MIN_SPEED_MPS:g} m/s and every model signal)")
     if not moving.any():
         return head + f": the car never moves faster than {MIN_SPEED_MPS:g} m/s on this drive"
     lacking.sort(reverse=True)
     if lacking:
         names = ", ".join(nm for _, nm in lacking[:4]) + (", ..." if len(lacking) > 4 else "")
         return head + f": missing on the moving rows: {names}"
+    if moving.all():  # every row usable, and still too few: the drive itself is short
+        return head + (f": the drive is too short, {n} rows of {table.period_s:g} s ({n * table.period_s:.1f} s) "
+                       "after the estimator settled")
     return head + f": only {int(moving.sum())} rows are moving"
 
 
