@@ -202,19 +202,24 @@ def test_missing_and_unknown_format_files(tmp_path):
         CanFileAdapter("b", p).open()
 
 
-@pytest.mark.parametrize("damage", ["truncated", "block_id"])
-def test_a_damaged_real_mf4_is_one_line_and_nothing_else_on_the_terminal(tmp_path, real_data, monkeypatch, damage):
+@pytest.mark.parametrize("damage", ["truncated", "cut_at_30_percent", "block_id"])
+def test_a_damaged_real_mf4_is_one_line_and_nothing_else_on_the_terminal(tmp_path, real_data, monkeypatch, capfd,
+                                                                          damage):
     """The CANedge log cut at 2 % (asammdf: "seek out of range"), or its first channel-group
     block's id broken (asammdf logs "Expected ##CG block" on its own console handler): either
     way asammdf's half-built reader raised in its __del__, which Python printed as "Exception
     ignored ... Traceback" after our one line. Now the one line is all (adapters.quiet_readers):
-    nothing reaches the asammdf logger's handlers or Python's unraisable hook."""
+    nothing reaches the asammdf logger's handlers or Python's unraisable hook. Cut at 30 %, asammdf
+    printed its own traceback (``print(format_exc())`` in ``_finalize``) on standard output: nothing
+    reaches the terminal now."""
     import logging
     import sys
 
     data = (real_data / "css_canedge_gnss_imu_mf4" / "gnss1.MF4").read_bytes()
     if damage == "truncated":
         data = data[: len(data) // 50]
+    elif damage == "cut_at_30_percent":
+        data = data[: len(data) * 3 // 10]
     else:
         i = data.index(b"##CG")
         data = data[:i] + b"##CX" + data[i + 4:]
@@ -238,6 +243,8 @@ def test_a_damaged_real_mf4_is_one_line_and_nothing_else_on_the_terminal(tmp_pat
     assert msg.startswith(f"CAN log {path}: unreadable: ") and "\n" not in msg, msg
     assert unraisable == [] and logged == [], (unraisable, logged)
     assert lg.disabled is False  # as it was before
+    out, err = capfd.readouterr()
+    assert out == "" and err == "", (out, err)
 
 
 def _read_all(a):

@@ -3,18 +3,22 @@
 asammdf (python-can's ``.mf4`` reader) prints its own errors on a console handler of the
 ``asammdf`` logger ("asammdf - ERROR - Expected "##CG" block ..."), and when its reader fails
 half-built (a truncated or damaged MF4) its ``__del__`` raises ``AttributeError`` in the garbage
-collector, which Python prints as "Exception ignored in ... Traceback ...". The failure itself
-reaches the user once, as the adapter's one-line error; :func:`library_noise_off` keeps those
-two off the terminal while a reader opens, and :func:`collect_half_built`, called inside it,
-frees the half-built reader before it ends.
+collector, which Python prints as "Exception ignored in ... Traceback ...". Where its finalising
+of an unfinished MF4 fails (the CANedge log cut at 30 %: "seek out of range") it prints the
+traceback itself, ``print(format_exc())``, on standard output. The failure itself reaches the
+user once, as the adapter's one-line error; :func:`library_noise_off` keeps all three off the
+terminal while a reader opens (``sys.stdout`` is a sink for that moment, process-wide: nothing of
+ours prints while a log opens), and :func:`collect_half_built`, called inside it, frees the
+half-built reader before it ends.
 """
 
 from __future__ import annotations
 
 import gc
+import io
 import logging
 import sys
-from contextlib import contextmanager
+from contextlib import contextmanager, redirect_stdout
 from typing import Iterator
 
 __all__ = ["NOISY_LOGGERS", "library_noise_off", "collect_half_built"]
@@ -30,7 +34,8 @@ def _from_noisy_library(obj) -> bool:
 
 @contextmanager
 def library_noise_off() -> Iterator[None]:
-    """Within the block: the :data:`NOISY_LOGGERS` are disabled, and an exception raised in the
+    """Within the block: the :data:`NOISY_LOGGERS` are disabled, what is printed on ``sys.stdout``
+    is dropped, and an exception raised in the
     ``__del__`` of one of their objects is dropped (any other still goes to Python's hook). Call
     ``gc.collect()`` inside the block (:func:`collect_half_built`) to let a failed reader's
     leftovers go while it applies."""
@@ -46,7 +51,8 @@ def library_noise_off() -> Iterator[None]:
         lg.disabled = True
     sys.unraisablehook = quiet
     try:
-        yield
+        with redirect_stdout(io.StringIO()):  # a library's own print(format_exc())
+            yield
     finally:
         sys.unraisablehook = hook
         for lg, d in zip(loggers, disabled):
