@@ -95,7 +95,7 @@ def toml_cases(path: str, reps: str):
 def byte_cases(path: str, seed: int):
     data = open(path, "rb").read()
     n, rnd = len(data), random.Random(seed)
-    for frac in (0.0, 0.01, 0.1, 0.37, 0.5, 0.73, 0.99):
+    for frac in (0.0, 0.01, 0.03, 0.1, 0.2, 0.3, 0.37, 0.5, 0.61, 0.73, 0.9, 0.99):
         yield f"cut at {frac:.0%}", data[: int(n * frac)]
     for k, count in enumerate((1, 10, 100, 200) * 2):
         b = bytearray(data)
@@ -139,7 +139,7 @@ def main(argv=None) -> int:
             try:
                 r = subprocess.run([c.replace("{}", damaged) for c in command], capture_output=True, text=True,
                                    timeout=a.timeout, cwd=td)
-                code, err = r.returncode, r.stderr
+                code, err = r.returncode, r.stderr + r.stdout  # a library may print a traceback on stdout
             except subprocess.TimeoutExpired:
                 code, err = "timeout", ""
             total += 1
