@@ -157,9 +157,10 @@ SEED = 21  # neither a tuning seed (100-103) nor a study seed (1000+)
 
 
 def test_seed_is_disjoint():
-    from vdps_hil.experiments.workbench_study import STUDY_SEEDS, TUNING_SEEDS
+    from vdps_hil.experiments.seeds import STUDIES, check_held_out
 
-    assert SEED not in TUNING_SEEDS and SEED not in STUDY_SEEDS
+    check_held_out([SEED], __name__)  # no tuning seed of any threshold (experiments.seeds)
+    assert all(SEED not in seeds for seeds in STUDIES.values())
 
 
 def test_circle_ramp_on_commonroad_set1_recommends_saturation_with_one_cornering_coefficient(tmp_path_factory):

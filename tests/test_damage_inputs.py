@@ -47,4 +47,4 @@ def test_exit_1_and_tracebacks_are_bad_a_one_line_refusal_is_not(tmp_path, capsy
     assert "3 cases, 1 bad" in out and "BAD a='zz': exit 1" in out
     ok = "import sys; print('error: one line', file=sys.stderr); sys.exit(2)"
     assert tool.main(["bytes", str(p), "--", sys.executable, "-c", ok, "{}"]) == 0
-    assert "19 cases, 0 bad" in capsys.readouterr().out
+    assert f"{len(list(tool.byte_cases(str(p), 5)))} cases, 0 bad" in capsys.readouterr().out

@@ -13,8 +13,11 @@ TEST_SEEDS = (112,)
 
 
 def test_no_study_or_test_seed_is_a_tuning_seed():
+    from vdps_hil.experiments.seeds import check_held_out
+
     assert not set(STUDY_SEEDS) & set(TUNING_SEEDS)
-    assert not set(TEST_SEEDS) & set(TUNING_SEEDS)
+    check_held_out([*STUDY_SEEDS, *TEST_SEEDS], __name__)  # every tuning set's (experiments.seeds)
+    assert not set(TEST_SEEDS) & set(STUDY_SEEDS)
     assert len(CR_SCENARIOS) == 4
 
 

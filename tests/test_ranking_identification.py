@@ -61,6 +61,9 @@ def test_a_nuisance_far_beyond_its_sigma_is_capped_per_knot_and_stays_capped():
 
 
 def test_seed_is_disjoint():
+    from vdps_hil.experiments.seeds import check_held_out
+
+    check_held_out([SEED], __name__)  # no tuning seed of any threshold (experiments.seeds)
     assert SEED not in TUNING_SEEDS and SEED not in STUDY_SEEDS
 
 

@@ -76,6 +76,9 @@ CR_SEED = 41
 def test_cr_seed_is_held_out():
     from vdps_hil.experiments import ident_study, workbench_study
 
+    from vdps_hil.experiments.seeds import check_held_out
+
+    check_held_out([CR_SEED], __name__)  # every tuning set's (experiments.seeds)
     for mod in (ident_study, workbench_study):
         assert CR_SEED not in mod.TUNING_SEEDS and CR_SEED not in mod.STUDY_SEEDS
 

@@ -24,8 +24,15 @@ from vdps_hil.workbench.ranking.sensor_fit import held_at, sensor_fit
 from vdps_hil.workbench.residuals import row_states
 
 SEED = 23
+
 VEH = load_vehicle("sedan-model")
 TRUTH = np.array([0.05, 0.05, 0.05] + [math.radians(0.1)] * 3)  # ImuBias defaults
+
+
+def test_seed_is_held_out():
+    from vdps_hil.experiments.seeds import check_held_out
+
+    check_held_out([SEED], __name__)  # no tuning seed of any threshold (experiments.seeds)
 
 
 def _design(path):

@@ -1,7 +1,10 @@
 """Issue 17's acceptance study: does the identifier say when it is wrong on a truth that is not
 its model? (``vdps_hil.experiments.ident_study``.)
 
-    python tools/ident_study.py --cache /tmp/ident_cache --sets 1 3 --seeds 102 111 --json out.json
+    python tools/ident_study.py --cache /tmp/ident_cache --sets 1 3 --seeds 113 122 --json out.json
+
+(the default seeds are ``ident_study.STUDY_SEEDS``; a tuning seed of any threshold of the project,
+``experiments.seeds``, is refused unless ``--tuning`` says the run is one.)
 
 Per drive (CommonRoad multibody sets 1/3, the four ``cr-*`` maneuvers, each seed; drives that
 are not cached are simulated, ~1-10 min each) every parameter's status and error; then per
@@ -46,7 +49,8 @@ from pathlib import Path
 import numpy as np
 
 from vdps_hil.experiments.ident_drives import DriveKey, cache_path
-from vdps_hil.experiments.ident_study import CR_SCENARIOS, TUNING_SEEDS, evaluate, yaw_row_config
+from vdps_hil.experiments.ident_study import CR_SCENARIOS, STUDY_SEEDS, evaluate, yaw_row_config
+from vdps_hil.experiments.seeds import check_held_out, tuning_seeds
 
 
 def _summary(results, statuses) -> dict:
@@ -120,7 +124,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cache", default="/tmp/ident_cache")
     ap.add_argument("--sets", type=int, nargs="+", default=[1, 3])
-    ap.add_argument("--seeds", type=int, nargs=2, default=[102, 111], metavar=("FIRST", "LAST"))
+    ap.add_argument("--seeds", type=int, nargs=2, default=[STUDY_SEEDS[0], STUDY_SEEDS[-1]], metavar=("FIRST", "LAST"))
+    ap.add_argument("--tuning", action="store_true",
+                    help="allow tuning seeds (experiments.seeds): a tuning run, not an acceptance figure")
     ap.add_argument("--cached-only", action="store_true")
     ap.add_argument("--json", default=None)
     ap.add_argument("--ours", type=int, nargs="*", default=None, metavar="SEED",
@@ -129,12 +135,18 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     config = yaw_row_config() if a.yaw_row else None
     if a.ours is not None:
-        ours_check([s for s in a.ours if s not in TUNING_SEEDS], a.cache)
+        ours_check([s for s in a.ours if s not in tuning_seeds()], a.cache)
         return 0
     if 2 in a.sets:
         print("ident_study: parameter set 2 is kept out of the project", file=sys.stderr)
         return 2
-    seeds = [s for s in range(a.seeds[0], a.seeds[1] + 1) if s not in TUNING_SEEDS]
+    seeds = list(range(a.seeds[0], a.seeds[1] + 1))
+    if not a.tuning:
+        try:
+            check_held_out(seeds, "ident_study")
+        except ValueError as e:
+            print(f"{e} (or --tuning)", file=sys.stderr)
+            return 2
     results, statuses = [], []
     for seed in seeds:
         for cr in a.sets:

@@ -41,6 +41,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 from vdps_hil.app.children import spawned_pool  # noqa: E402
 from vdps_hil.experiments.workbench_study import HIDDEN, MANEUVERS, run_job, wilson_interval  # noqa: E402
+from vdps_hil.experiments.seeds import check_held_out  # noqa: E402
 
 
 def _one(job: dict) -> dict:
@@ -51,6 +52,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--first-seed", type=int, default=1000)
+    ap.add_argument("--tuning", action="store_true",
+                    help="allow tuning seeds (experiments.seeds): a tuning run, not an acceptance figure")
     ap.add_argument("--effects", default=",".join(HIDDEN))
     ap.add_argument("--no-null", action="store_true", help="skip the nothing-hidden drives")
     ap.add_argument("--null-only", action="store_true", help="only the nothing-hidden drives (every study maneuver)")
@@ -72,6 +75,12 @@ def main(argv=None) -> int:
     if a.null_only and a.no_null:
         ap.error("--null-only and --no-null exclude each other")
     effects = [] if a.null_only else [e for e in a.effects.split(",") if e]
+    if not a.tuning:  # a tuning seed of any threshold is no acceptance figure (experiments.seeds)
+        try:
+            check_held_out(range(a.first_seed, a.first_seed + a.seeds), "workbench_study")
+        except ValueError as e:
+            print(f"{e} (or --tuning)", file=sys.stderr)
+            return 2
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
     jobs = []
     for eff in effects:

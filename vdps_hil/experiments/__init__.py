@@ -19,6 +19,7 @@ with the truth of the same drive.
 * ``scoring``         truth at an instant, fusion errors, relative parameter errors, the truth
                       trajectory of a prediction, warning frames against the truth events
 * ``workbench_study`` the hidden-effect drives of the model workbench's acceptance study
+* ``seeds``           every tuning set's seeds gathered, the held-out rule over all of them
 * ``synthetic``       analytic trajectories with their truth and Table-1 sensor streams (tests
                       and benchmarks of the estimator)
 * ``truth_init``      the truth-initialised predictor state (tests only)

@@ -1,0 +1,55 @@
+"""Every tuning seed of the project in one table, and the held-out rule over all of them.
+
+A seed on which a threshold was chosen (by a fit or by judgment) is declared once, beside the
+threshold it chose (``TUNING_SEEDS`` in its module); this module only gathers them. No study and
+no test may use a seed of *any* tuning set: a drive that chose the workbench's thresholds is not
+an independent check of the identifier either (the identification study's seeds were 102-111,
+two of which, 102 and 103, had chosen the workbench's ranking thresholds on the same CommonRoad
+circle-ramp drives; its seeds are 113-122 since 2026-12-06).
+
+:func:`check_held_out` raises a one-line ``ValueError`` naming the overlap; the study tools call
+it on the seeds they are given, ``tests/test_seeds.py`` on every study's seed set.
+
+Not covered: ``vdps sim``'s default seed is 0, the IMU monitor's tuning drive (``paper`` seed 0,
+its outage and spike limits looked at by judgment); tests of the simulator and the bench run
+drives of seed 0 without asserting those limits (the monitor's own tests use synthetic streams).
+"""
+
+from __future__ import annotations
+
+from typing import Iterable
+
+from vdps_hil.estimation.imu_monitor import TUNING_SEEDS as _IMU_MONITOR
+from vdps_hil.experiments.ident_study import STUDY_SEEDS as _IDENT_STUDY
+from vdps_hil.experiments.ident_study import TUNING_SEEDS as _IDENT
+from vdps_hil.experiments.workbench_study import STUDY_SEEDS as _WORKBENCH_STUDY
+from vdps_hil.experiments.workbench_study import TUNING_SEEDS as _WORKBENCH
+
+__all__ = ["TUNING", "STUDIES", "tuning_seeds", "check_held_out"]
+
+TUNING: dict[str, tuple[int, ...]] = {
+    "the IMU monitor's outage and spike limits (estimation.imu_monitor)": tuple(_IMU_MONITOR),
+    "the identification thresholds (experiments.ident_study)": tuple(_IDENT),
+    "the workbench's ranking thresholds (experiments.workbench_study)": tuple(_WORKBENCH),
+}
+"""What each tuning set chose -> its seeds (each declared in the module named)."""
+
+STUDIES: dict[str, tuple[int, ...]] = {
+    "identification study (tools/ident_study.py)": tuple(_IDENT_STUDY),
+    "workbench study (tools/workbench_study.py, workbench_study_cr.py)": tuple(_WORKBENCH_STUDY),
+}
+"""The acceptance studies' default seeds."""
+
+
+def tuning_seeds() -> frozenset[int]:
+    """Every seed of every tuning set."""
+    return frozenset(s for seeds in TUNING.values() for s in seeds)
+
+
+def check_held_out(seeds: Iterable[int], what: str) -> None:
+    """Raise ValueError (one line) when any of ``seeds`` (of ``what``: a study, a test) is a
+    tuning seed, naming the seed and the threshold it chose."""
+    for s in sorted(set(int(x) for x in seeds)):
+        chose = [name for name, tuned in TUNING.items() if s in tuned]
+        if chose:
+            raise ValueError(f"{what}: seed {s} is a tuning seed of {chose[0]}: use a held-out seed")
