@@ -50,7 +50,7 @@ import numpy as np
 
 from vdps_hil.experiments.ident_drives import DriveKey, cache_path
 from vdps_hil.experiments.ident_study import CR_SCENARIOS, STUDY_SEEDS, evaluate, yaw_row_config
-from vdps_hil.experiments.seeds import check_held_out, tuning_seeds
+from vdps_hil.experiments.seeds import refused_by_tool, tuning_seeds
 
 
 def _summary(results, statuses) -> dict:
@@ -141,12 +141,8 @@ def main(argv=None) -> int:
         print("ident_study: parameter set 2 is kept out of the project", file=sys.stderr)
         return 2
     seeds = list(range(a.seeds[0], a.seeds[1] + 1))
-    if not a.tuning:
-        try:
-            check_held_out(seeds, "ident_study")
-        except ValueError as e:
-            print(f"{e} (or --tuning)", file=sys.stderr)
-            return 2
+    if refused_by_tool(seeds, "ident_study", a.tuning):  # no acceptance figure (experiments.seeds)
+        return 2
     results, statuses = [], []
     for seed in seeds:
         for cr in a.sets:

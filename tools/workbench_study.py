@@ -41,7 +41,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 from vdps_hil.app.children import spawned_pool  # noqa: E402
 from vdps_hil.experiments.workbench_study import HIDDEN, MANEUVERS, run_job, wilson_interval  # noqa: E402
-from vdps_hil.experiments.seeds import check_held_out  # noqa: E402
+from vdps_hil.experiments.seeds import refused_by_tool  # noqa: E402
 
 
 def _one(job: dict) -> dict:
@@ -75,12 +75,8 @@ def main(argv=None) -> int:
     if a.null_only and a.no_null:
         ap.error("--null-only and --no-null exclude each other")
     effects = [] if a.null_only else [e for e in a.effects.split(",") if e]
-    if not a.tuning:  # a tuning seed of any threshold is no acceptance figure (experiments.seeds)
-        try:
-            check_held_out(range(a.first_seed, a.first_seed + a.seeds), "workbench_study")
-        except ValueError as e:
-            print(f"{e} (or --tuning)", file=sys.stderr)
-            return 2
+    if refused_by_tool(range(a.first_seed, a.first_seed + a.seeds), "workbench_study", a.tuning):  # experiments.seeds
+        return 2
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
     jobs = []
     for eff in effects:

@@ -37,7 +37,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 from vdps_hil.app.children import spawned_pool  # noqa: E402
 from vdps_hil.experiments.ident_study import CR_SCENARIOS  # noqa: E402
-from vdps_hil.experiments.seeds import check_held_out  # noqa: E402
+from vdps_hil.experiments.seeds import refused_by_tool  # noqa: E402
 from vdps_hil.experiments.workbench_study import run_job, wilson_interval  # noqa: E402
 from vdps_hil.model.effects.base import MeasurementEffect  # noqa: E402
 from vdps_hil.model.effects.registry import REGISTRY  # noqa: E402
@@ -105,12 +105,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default=None, help="directory of simulated drives: kept and reused, so a re-run "
                     "after a workbench change diagnoses the same files")
     a = ap.parse_args(argv)
-    if not a.tuning:  # a tuning seed of any threshold is no acceptance figure (experiments.seeds)
-        try:
-            check_held_out(range(a.first_seed, a.first_seed + a.seeds), "workbench_study_cr")
-        except ValueError as e:
-            print(f"{e} (or --tuning)", file=sys.stderr)
-            return 2
+    if refused_by_tool(range(a.first_seed, a.first_seed + a.seeds), "workbench_study_cr", a.tuning):  # experiments.seeds
+        return 2
     jobs = [dict(j, **({"cache": a.cache} if a.cache else {}))
             for seed in range(a.first_seed, a.first_seed + a.seeds) for s in a.sets for j in jobs_for(s, seed)
             if j["kind"] in a.kinds]

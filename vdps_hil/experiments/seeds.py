@@ -25,7 +25,7 @@ from vdps_hil.experiments.ident_study import TUNING_SEEDS as _IDENT
 from vdps_hil.experiments.workbench_study import STUDY_SEEDS as _WORKBENCH_STUDY
 from vdps_hil.experiments.workbench_study import TUNING_SEEDS as _WORKBENCH
 
-__all__ = ["TUNING", "STUDIES", "tuning_seeds", "check_held_out"]
+__all__ = ["TUNING", "STUDIES", "tuning_seeds", "check_held_out", "refused_by_tool"]
 
 TUNING: dict[str, tuple[int, ...]] = {
     "the IMU monitor's outage and spike limits (estimation.imu_monitor)": tuple(_IMU_MONITOR),
@@ -53,3 +53,18 @@ def check_held_out(seeds: Iterable[int], what: str) -> None:
         chose = [name for name, tuned in TUNING.items() if s in tuned]
         if chose:
             raise ValueError(f"{what}: seed {s} is a tuning seed of {chose[0]}: use a held-out seed")
+
+
+def refused_by_tool(seeds: Iterable[int], tool: str, tuning: bool) -> bool:
+    """A study tool's guard: True (after one line on stderr) when ``seeds`` hold a tuning seed
+    and the run was not declared a tuning run (``--tuning``)."""
+    if tuning:
+        return False
+    try:
+        check_held_out(seeds, tool)
+    except ValueError as e:
+        import sys
+
+        print(f"{e} (or --tuning)", file=sys.stderr)
+        return True
+    return False
