@@ -26,6 +26,12 @@ def test_a_tuning_seed_is_refused_by_name_and_a_held_out_one_passes():
         S.check_held_out([111, 102, 103], "a study")  # the identification study's old seeds
 
 
+def test_held_out_seeds_skip_every_tuning_seed():
+    assert S.held_out_seeds(1, 20) == list(range(3, 23))  # vdps paper's identification drives
+    assert S.held_out_seeds(99, 3) == [99, 104, 105]
+    assert not set(S.held_out_seeds(0, 200)) & S.tuning_seeds()
+
+
 @pytest.mark.parametrize("tool, args", [
     ("ident_study.py", ["--seeds", "101", "103", "--cached-only"]),
     ("workbench_study.py", ["--first-seed", "100", "--seeds", "1", "--summary-only"]),

@@ -163,7 +163,10 @@ def format_report(doc: dict) -> str:
     docs = doc["profiles"] if "profiles" in doc else {doc["profile"]: doc}
     lines = []
     for prof, d in docs.items():
-        lines.append(f"== profile {prof}: {len(d.get('seeds', []))} seeds ==")
+        seeds = d.get("seeds", [])
+        which = f" ({', '.join(map(str, seeds))}: no tuning seed)" if 0 < len(seeds) <= 3 else \
+            f" ({seeds[0]}-{seeds[-1]} without the tuning seeds)" if seeds else ""
+        lines.append(f"== profile {prof}: {len(seeds)} seeds{which} ==")
         if "fusion_std" in d:
             lines.append("Fusion (Fig 4): std of estimate - truth over 5-10 s, mean over seeds "
                          "(the paper gives these only in its figure)")

@@ -25,7 +25,7 @@ from vdps_hil.experiments.ident_study import TUNING_SEEDS as _IDENT
 from vdps_hil.experiments.workbench_study import STUDY_SEEDS as _WORKBENCH_STUDY
 from vdps_hil.experiments.workbench_study import TUNING_SEEDS as _WORKBENCH
 
-__all__ = ["TUNING", "STUDIES", "tuning_seeds", "check_held_out", "refused_by_tool"]
+__all__ = ["TUNING", "STUDIES", "tuning_seeds", "check_held_out", "held_out_seeds", "refused_by_tool"]
 
 TUNING: dict[str, tuple[int, ...]] = {
     "the IMU monitor's outage and spike limits (estimation.imu_monitor)": tuple(_IMU_MONITOR),
@@ -53,6 +53,18 @@ def check_held_out(seeds: Iterable[int], what: str) -> None:
         chose = [name for name, tuned in TUNING.items() if s in tuned]
         if chose:
             raise ValueError(f"{what}: seed {s} is a tuning seed of {chose[0]}: use a held-out seed")
+
+
+def held_out_seeds(first: int, n: int) -> list[int]:
+    """The first ``n`` seeds from ``first`` on that are no tuning seed (``vdps paper``'s
+    identification drives: its default 1-20 held the two ``paper-left-turn`` drives the
+    identification thresholds were chosen on, so it runs 3-22)."""
+    out, s, tuned = [], int(first), tuning_seeds()
+    while len(out) < n:
+        if s not in tuned:
+            out.append(s)
+        s += 1
+    return out
 
 
 def refused_by_tool(seeds: Iterable[int], tool: str, tuning: bool) -> bool:
