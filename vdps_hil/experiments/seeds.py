@@ -1,8 +1,8 @@
 """Every tuning seed of the project in one table, and the held-out rule over all of them.
 
 A seed on which a threshold was chosen (by a fit or by judgment) is declared once, beside the
-threshold it chose (``TUNING_SEEDS`` in its module); this module only gathers them. No study and
-no test may use a seed of *any* tuning set: a drive that chose the workbench's thresholds is not
+threshold it chose (``TUNING_SEEDS`` in its module); this module only gathers them. No study
+may use a seed of *any* tuning set: a drive that chose the workbench's thresholds is not
 an independent check of the identifier either (the identification study's seeds were 102-111,
 two of which, 102 and 103, had chosen the workbench's ranking thresholds on the same CommonRoad
 circle-ramp drives; its seeds are 113-122 since 2026-12-06).
@@ -10,9 +10,13 @@ circle-ramp drives; its seeds are 113-122 since 2026-12-06).
 :func:`check_held_out` raises a one-line ``ValueError`` naming the overlap; the study tools call
 it on the seeds they are given, ``tests/test_seeds.py`` on every study's seed set.
 
-Not covered: ``vdps sim``'s default seed is 0, the IMU monitor's tuning drive (``paper`` seed 0,
-its outage and spike limits looked at by judgment); tests of the simulator and the bench run
-drives of seed 0 without asserting those limits (the monitor's own tests use synthetic streams).
+A tuning seed is, strictly, a drive: the scenario and the seed the threshold was chosen on
+(``paper-left-turn`` 1 and 2, CommonRoad seed 101 and the workbench's maneuvers 100-103, ``paper``
+seed 0). The studies are held to the seed numbers (stricter); tests that drive other scenarios at
+seeds 0-2 (the decoder's, the simulator's and the bench's tests; ``vdps paper``'s rollover and
+false-alarm runs at its ``--seed0``) are other drives and are not checked. ``vdps sim``'s default
+seed is 0, the IMU monitor's tuning drive when the scenario is ``paper``; no test asserts the
+monitor's limits on it (the monitor's own tests use synthetic streams).
 """
 
 from __future__ import annotations
