@@ -2,6 +2,7 @@
 are a tuning seed of any threshold, a tuning seed is refused by name, and the study tools refuse
 one unless told the run is a tuning run."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -38,8 +39,11 @@ def test_held_out_seeds_skip_every_tuning_seed():
     ("workbench_study_cr.py", ["--first-seed", "102", "--seeds", "1"]),
 ])
 def test_the_study_tools_refuse_a_tuning_seed_in_one_line(tool, args, tmp_path):
+    # in safe-path mode, as a test worker's children are once a pool has run (app.children): the
+    # tools import their siblings from tools/ themselves (workbench_study_cr failed so in CI)
+    env = dict(os.environ, PYTHONSAFEPATH="1")
     r = subprocess.run([sys.executable, str(TOOLS / tool), *args], capture_output=True, text=True,
-                       cwd=tmp_path, timeout=120)
+                       cwd=tmp_path, timeout=120, env=env)
     assert r.returncode == 2, r.stderr
     assert "is a tuning seed of" in r.stderr and "(or --tuning)" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr

@@ -30,6 +30,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tools"))  # its sibling tools, also in safe-path mode (-P)
 
 from vdps_hil.experiments.truth_init import initial_state_from_truth  # noqa: E402
 from vdps_hil.model.params import load_vehicle  # noqa: E402
@@ -39,7 +40,7 @@ from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
 from vdps_hil.sim.simulator import Simulator  # noqa: E402
 from vdps_hil.sim.truth_cr import CommonRoadTruth  # noqa: E402
 
-from bench_sim_drive import pin_one_core  # noqa: E402  (tools/ is this script's sys.path[0])
+from bench_sim_drive import pin_one_core  # noqa: E402  (tools/, inserted above)
 
 
 def prediction_workload():

@@ -44,13 +44,14 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tools"))  # its sibling tools, also in safe-path mode (-P)
 
 from vdps_hil.sim.drive import Drive  # noqa: E402
 from vdps_hil.sim.scenarios import load_scenario  # noqa: E402
 from vdps_hil.sim.simulator import Simulator  # noqa: E402
 from vdps_hil.sim.truth_cr import CommonRoadTruth  # noqa: E402
 
-from bench_sim_drive import pin_one_core  # noqa: E402  (tools/ is this script's sys.path[0])
+from bench_sim_drive import pin_one_core  # noqa: E402  (tools/, inserted above)
 
 
 def cpu_s(fn) -> float:

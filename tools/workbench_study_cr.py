@@ -34,6 +34,7 @@ import time
 from concurrent.futures import as_completed
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # workbench_study.py, also under -P
 
 from vdps_hil.app.children import spawned_pool  # noqa: E402
 from vdps_hil.experiments.ident_study import CR_SCENARIOS  # noqa: E402
@@ -42,7 +43,7 @@ from vdps_hil.experiments.workbench_study import run_job, wilson_interval  # noq
 from vdps_hil.model.effects.base import MeasurementEffect  # noqa: E402
 from vdps_hil.model.effects.registry import REGISTRY  # noqa: E402
 
-from workbench_study import _load_runs  # noqa: E402  (tools/ is this script's sys.path[0])
+from workbench_study import _load_runs  # noqa: E402  (tools/, inserted above)
 
 SENSOR_EFFECTS = tuple(n for n in REGISTRY.names() if issubclass(REGISTRY[n], MeasurementEffect))
 INJECTED = {"imu_bias": ("shipped:cr-sine-accel", "imu_bias"),
