@@ -377,6 +377,44 @@ def test_slcan_adapter_on_a_pty_reconnects_after_unplug(tmp_path):
     assert c["bad_frames"] >= 1 and c["lost_frames"] == 0
 
 
+def test_an_slcan_port_another_reader_holds_is_refused_and_not_read(tmp_path):
+    """python-can opens an slcan port without a lock; the adapter takes the port's exclusive lock
+    first (``slcan.lock_port``). A port an exclusive reader holds (an IMU on a pseudo-terminal
+    whose number a bench's slcan bus had before) is refused in one line and none of its bytes
+    are taken; while the slcan bus holds its port, an exclusive serial reader is refused."""
+    import os
+
+    from vdps_hil.adapters.serial_adapter import SerialAdapter
+
+    link = tmp_path / "ttyIMU"
+    m, s = _plug(link)
+    holder = SerialAdapter("imu", str(link), 921600)
+    holder.open()
+    try:
+        os.write(m, b"x" * 1000)
+        a = CanAdapter("vdps", f"slcan:{link},sleep_after_open=0", reconnect_s=0.05)
+        with pytest.raises(AdapterError, match="in use by another reader") as e:
+            a.open()
+        assert "\n" not in str(e.value)
+        time.sleep(0.05)
+        assert holder.ser.read(holder.ser.in_waiting) == b"x" * 1000  # every byte still the holder's
+    finally:
+        holder.close()
+    a = CanAdapter("vdps", f"slcan:{link},sleep_after_open=0")
+    a.open()
+    try:
+        with pytest.raises(AdapterError, match="cannot open"):
+            SerialAdapter("imu2", str(link), 921600).open()
+        a.close()
+        after = SerialAdapter("imu3", str(link), 921600)  # the lock went with the bus
+        after.open()
+        after.close()
+    finally:
+        a.close()
+        os.close(m)
+        os.close(s)
+
+
 def test_slcan_reader_process_parses_frames_and_reconnects(tmp_path):
     """The starvation-proof path: a reader process drains the slcan port, the adapter parses
     the lines it collects; an unplug is reported by the reader and the replugged port is

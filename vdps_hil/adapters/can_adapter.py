@@ -30,7 +30,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from vdps_hil.adapters.base import Adapter, AdapterError, DeviceLost, EndOfInput
 from vdps_hil.adapters.quiet_readers import collect_half_built, library_noise_off
-from vdps_hil.adapters.slcan import SlcanLines, fast_slcan_class, slcan_line
+from vdps_hil.adapters.slcan import SlcanLines, fast_slcan_class, lock_port, slcan_line
 from vdps_hil.bus.clocks import ReplayClock
 from vdps_hil.bus.raw import RawCan
 
@@ -163,8 +163,13 @@ class CanAdapter(_CanDecodeMixin, Adapter):
         import can
 
         try:
-            if self.iface == "slcan":  # same protocol and options, reads in chunks
-                self.bus = fast_slcan_class()(channel=self.channel, **self.bus_kwargs)
+            if self.iface == "slcan":  # same protocol and options, reads in chunks; locked (lock_port)
+                self._port_lock = lock_port(self.channel)
+                try:
+                    self.bus = fast_slcan_class()(channel=self.channel, **self.bus_kwargs)
+                except BaseException:
+                    self._unlock_port()
+                    raise
             else:
                 self.bus = can.Bus(interface=self.iface, channel=self.channel,
                                    **self.bus_kwargs)
@@ -184,6 +189,12 @@ class CanAdapter(_CanDecodeMixin, Adapter):
                 self.bus.shutdown()
             finally:
                 self.bus = None
+                self._unlock_port()
+
+    def _unlock_port(self) -> None:
+        fd, self._port_lock = getattr(self, "_port_lock", None), None
+        if fd is not None:
+            os.close(fd)
 
     def _read(self, timeout_s: float) -> Sequence[tuple[int | None, Any]]:
         import can

@@ -5,7 +5,9 @@ line of a frame (what an adapter sends, for emulators and tests).
 
 from __future__ import annotations
 
-__all__ = ["SlcanLines", "fast_slcan_class", "slcan_line"]
+import os
+
+__all__ = ["SlcanLines", "fast_slcan_class", "slcan_line", "lock_port"]
 
 
 def fast_slcan_class():
@@ -139,3 +141,26 @@ def slcan_line(arbitration_id: int, data: bytes, is_extended_id: bool = False) -
     if is_extended_id:
         return b"T%08X%d%s\r" % (arbitration_id, len(data), data.hex().upper().encode())
     return b"t%03X%d%s\r" % (arbitration_id, len(data), data.hex().upper().encode())
+
+
+def lock_port(channel: str) -> int | None:
+    """Take the advisory exclusive lock of an slcan adapter's serial device path (``channel``,
+    ``PATH[@BAUD]``) before python-can opens it, which it does without one: a descriptor holding
+    ``flock(LOCK_EX)`` for the bus's life (close it after the bus). Returns None for a URL or a
+    path that does not exist (python-can reports those). Raises OSError when another exclusive
+    reader holds the device (``SerialAdapter`` opens ports so): python-can's set-up would write
+    commands to it and read its bytes. Seen in CI: a bench's pipeline child reconnecting its
+    slcan bus by path to a pseudo-terminal number the kernel had since given to another test's
+    IMU, whose bytes it then consumed (8,460 of 56,447 reached that test)."""
+    import fcntl
+
+    path = str(channel).split("@", 1)[0]
+    if "://" in path or not os.path.exists(path):
+        return None
+    fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise OSError(f"{path} is in use by another reader (locked)") from None
+    return fd
