@@ -152,6 +152,7 @@ class CanAdapter(_CanDecodeMixin, Adapter):
         self._external_bus = bus is not None
         self._last_dev_ns = -1
         self._slcan: SlcanLines | None = None
+        self._port_lock: int | None = None  # slcan: the descriptor holding its port's lock (lock_port)
         if spec is not None:
             self.iface, self.channel, self.bus_kwargs = parse_can_spec(spec)
         elif bus is None:
@@ -192,7 +193,7 @@ class CanAdapter(_CanDecodeMixin, Adapter):
                 self._unlock_port()
 
     def _unlock_port(self) -> None:
-        fd, self._port_lock = getattr(self, "_port_lock", None), None
+        fd, self._port_lock = self._port_lock, None
         if fd is not None:
             os.close(fd)
 

@@ -140,19 +140,22 @@ class Effect:
     def param_specs(cls) -> dict[str, ParamSpec]:
         return {p.name: p for p in cls.PARAMS}
 
+    def _first_implausible(self) -> ParamSpec | None:
+        return next((p for p in self.PARAMS if not p.lower <= self._values[p.name] <= p.upper), None)
+
     def plausible(self) -> bool:
         """True when every parameter is inside its plausible range."""
-        return all(p.lower <= self._values[p.name] <= p.upper for p in self.PARAMS)
+        return self._first_implausible() is None
 
     def check_plausible(self) -> None:
         """Raise EffectConfigError (one line) naming the first parameter outside its plausible
         range: a truth given to the simulator must be a car that can exist (a fit may leave the
         range and is labelled implausible instead)."""
-        for p in self.PARAMS:
+        p = self._first_implausible()
+        if p is not None:
             v = self._values[p.name]
-            if not p.lower <= v <= p.upper:
-                raise EffectConfigError(f"effect {self.name!r}: {p.name} = {v:g} {p.unit} is outside its "
-                                        f"physical range [{p.lower:g}, {p.upper:g}] {p.unit}")
+            raise EffectConfigError(f"effect {self.name!r}: {p.name} = {v:g} {p.unit} is outside its "
+                                    f"physical range [{p.lower:g}, {p.upper:g}] {p.unit}")
 
     def __eq__(self, other):
         return type(self) is type(other) and self._values == other._values
