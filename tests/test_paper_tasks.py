@@ -139,9 +139,10 @@ def test_left_turn_prediction_within_three_metres_and_degrees(ident_runs):
 def test_left_turn_prediction_is_bounded_and_no_false_alarm_on_the_left_turn(ident_runs):
     """Measured (seeds 30 / 31 / 32): 17.2 / 3.8 / 7.0 m, 17.3 / 3.8 / 6.9 deg at 15 s; bound 10 m /
     10 deg on the median. No warning episode on any seed (seed 34, outside this set, had one). The
-    warnings become valid once the cornering stiffnesses converge: on seeds 30 and 31 they never
-    were within the 15 s (valid fraction 0.0), on 32 0.80, so over the seeds at least a fifth of
-    the frames are valid (the check is not vacuous)."""
+    warnings become valid once the cornering stiffnesses have stayed converged 1 s
+    (``converged_hold_s``): on seeds 30 and 31 never within the 15 s (valid fraction 0.0), on 32
+    0.70 (0.80 without the hold), so over the seeds at least a fifth of the frames are valid (the
+    check is not vacuous)."""
     for r in ident_runs:
         lt = r["left_turn"]
         assert P.T0_S <= lt["t0_s"] <= P.T0_S + 0.01  # the first estimate at or after 10.25 s
@@ -151,6 +152,30 @@ def test_left_turn_prediction_is_bounded_and_no_false_alarm_on_the_left_turn(ide
     assert _median(ident_runs, lambda r: r["left_turn"]["position_err_m"]) <= 10.0
     assert _median(ident_runs, lambda r: abs(r["left_turn"]["yaw_err_deg"])) <= 10.0
     assert np.mean([r["warning"]["valid_fraction"] for r in ident_runs]) >= 0.2
+
+
+def test_a_convergence_flicker_sends_no_false_alarm_on_the_left_turn():
+    """Held-out seed 34 (found 2026-12-06, not a tuning drive): without the validity hold the
+    cornering problem's status said converged for 40 ms at ~1.4 s with the front stiffness 13.6 %
+    high, the frames were valid, and the chain sent a false alarm (level 2; no truth event). With
+    the shipped ``converged_hold_s`` (1 s, chosen on ``prediction.warning.TUNING_SEEDS``) none, and
+    the frames are valid later in the drive (measured: from 4.67 s, 69 % of the frames)."""
+    from dataclasses import replace
+
+    from vdps_hil.experiments.paper_chain import chain_run
+    from vdps_hil.experiments.scoring import evaluate_warning_frames
+    from vdps_hil.prediction.warning import load_warning_config
+
+    pol, node = load_warning_config()
+    got = {}
+    for hold in (pol.converged_hold_s, 0.0):
+        kw = {"warning_policy": replace(pol, converged_hold_s=hold), "warning_node": node}
+        r = chain_run("paper-left-turn", P.profile_of(PROFILE), 34, system_kw=kw)
+        got[hold] = evaluate_warning_frames(r["frames"], r["events"])
+    shipped, none = got[pol.converged_hold_s], got[0.0]
+    assert math.isnan(shipped.truth_point_of_no_return_t_s) and shipped.false_alarms == 0
+    assert shipped.frames_invalid_status < shipped.frames_accepted and shipped.frames_rejected == 0  # some valid
+    assert none.false_alarms >= 1  # the drive still holds the flicker the test is about
 
 
 def test_fusion_errors_are_reported_for_every_state(ident_runs):

@@ -34,6 +34,18 @@ def _nees_tool():
     return mod
 
 
+def _hold(hold_s: float) -> dict:
+    """SystemConfig keywords: the shipped warning config with ``converged_hold_s`` = ``hold_s``
+    (the shipped 1.0 s outlasts this module's 2.5 s drive, whose cornering problem converges for
+    good at ~1.96 s: its status tests use 0 or a shorter hold)."""
+    from dataclasses import replace
+
+    from vdps_hil.prediction.warning import load_warning_config
+
+    pol, node = load_warning_config()
+    return {"warning_policy": replace(pol, converged_hold_s=hold_s), "warning_node": node}
+
+
 @pytest.fixture(scope="module")
 def paper_samples():
     return drive_samples(7, 2.5)
@@ -41,7 +53,7 @@ def paper_samples():
 
 @pytest.fixture(scope="module")
 def paper_run(paper_samples):
-    cfg = SystemConfig.for_profile(1000.0, 0.001)
+    cfg = SystemConfig.for_profile(1000.0, 0.001, **_hold(0.0))
     return VdpsSystem.replay(MODEL, cfg, paper_samples)
 
 
@@ -100,17 +112,49 @@ def _live_status(cfg, samples):
 
 def test_warning_from_the_priors_is_valid_only_while_the_cornering_problem_has_converged(paper_samples):
     """The system's default validity rule (configs/prediction/default.toml [warning]
-    require_converged = ["cornering"]): started from the model file's priors, every frame says
-    "not converged" (1) while the identifier's cornering problem has not converged and "valid" (0)
-    while it has (both phases occur in this 2.5 s drive: it converges at ~1.2 s); the flag as read
-    at the last ``convergence_period_s`` boundary, which the 50 Hz frames fall on."""
-    system, rows = _live_status(SystemConfig.for_profile(1000.0, 0.001), paper_samples)
+    require_converged = ["cornering"]), here without the hold: started from the model file's
+    priors, every frame says "not converged" (1) while the identifier's cornering problem has not
+    converged and "valid" (0) while it has (both phases occur in this 2.5 s drive: it converges at
+    ~1.2 s); the flag as read at the last ``convergence_period_s`` boundary, which the 50 Hz frames
+    fall on."""
+    system, rows = _live_status(SystemConfig.for_profile(1000.0, 0.001, **_hold(0.0)), paper_samples)
     assert system.require_converged == ("cornering",)
     # the flag did not flip within the sample; 2 and 3: the fault handling's (aiding_monitor.health)
     settled = [r for r in rows if r[2] == r[3] and r[4] and r[1] not in (2, 3)]
     assert len(settled) > 0.9 * len(rows)
     assert all(r[1] == (0 if r[3] else 1) for r in settled)
     assert sum(1 for r in settled if r[1] == 1) >= 10 and sum(1 for r in settled if r[1] == 0) >= 10
+
+
+def test_a_frame_is_valid_only_once_the_cornering_problem_has_stayed_converged_for_the_hold(paper_samples):
+    """``converged_hold_s`` (prediction.warning, "Validity"), 0.3 s here: a frame says valid (0)
+    only when the cornering problem was converged at every frame of the hold before it (one 20 ms
+    convergence period of slack at either end: the chain reads the flag at period boundaries);
+    a converged run shorter than the hold is never valid, and a longer one is valid from its start
+    plus the hold on. This drive has one of each: 0.22 s from ~1.26 s (valid without the hold, the
+    flicker the hold is for) and from ~1.96 s to the end."""
+    hold = 0.3
+    _, rows = _live_status(SystemConfig.for_profile(1000.0, 0.001, **_hold(hold)), paper_samples)
+    t = np.array([r[0] for r in rows])
+    conv = np.array([r[3] for r in rows])
+    status = np.array([r[1] for r in rows])
+    for k in np.flatnonzero(status == 0):
+        window = (t >= t[k] - hold + 0.021) & (t <= t[k] - 0.021)
+        assert conv[window].all(), t[k]
+    edges = np.flatnonzero(np.diff(np.r_[0, conv.astype(int), 0]))
+    runs = list(zip(edges[::2], edges[1::2]))  # [start, end) frame indices of converged runs
+    short = [(a, b) for a, b in runs if t[b - 1] - t[a] < hold - 0.04]
+    long = [(a, b) for a, b in runs if t[b - 1] - t[a] > hold + 0.1]
+    assert short and long, runs
+    for a, b in short:
+        assert not (status[a:b] == 0).any()
+    for a, b in long:
+        late = (t[a:b] >= t[a] + hold + 0.041) & ~np.isin(status[a:b], (2, 3))
+        assert late.any() and (status[a:b][late] == 0).all()
+    # without the hold the short run's frames were valid
+    _, rows0 = _live_status(SystemConfig.for_profile(1000.0, 0.001, **_hold(0.0)), paper_samples)
+    a, b = short[0]
+    assert any(r[1] == 0 for r in rows0 if t[a] <= r[0] <= t[b - 1])
 
 
 def test_the_chain_reads_the_identifiers_convergence_once_per_convergence_period(paper_samples, monkeypatch):
@@ -177,7 +221,7 @@ def test_live_system_holds_no_replay_log_and_gives_the_same_outputs(paper_sample
     """keep_input_log=False (the live bench): neither the system nor its estimator keeps more
     than 4096 samples (a long bench's memory stays flat), and the outputs are those of the
     logging system (the log is only a record)."""
-    live = VdpsSystem(MODEL, SystemConfig.for_profile(1000.0, 0.001, keep_input_log=False))
+    live = VdpsSystem(MODEL, SystemConfig.for_profile(1000.0, 0.001, keep_input_log=False, **_hold(0.0)))
     out, held = [], 0
     for s in paper_samples:
         out += live.handle(s)

@@ -132,7 +132,7 @@ def test_save_params_then_start_from_them(drive, tmp_path):
 
 def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_path):
     """``vdps replay`` applies the system's validity rule by default: from the model file's priors
-    the warnings say "not converged" until the cornering problem converges (then valid); with
+    the warnings say "not converged" until the cornering problem has converged and stayed so; with
     ``--params`` they are valid at once: only the chain ticks before the EKF initialises are "not
     converged", as many as in a run without the identifier (nothing to wait for). A file whose
     problems were not all converged when saved (or that does not say) waits like the priors, and
@@ -156,7 +156,10 @@ def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_p
     assert st["unsure"]["not_converged"] >= st["params"]["not_converged"] + 50
     assert st["params"]["not_converged"] == st["no-ident"]["not_converged"] > 0
     assert st["priors"]["not_converged"] >= st["params"]["not_converged"] + 50  # >= 0.5 s waiting
-    assert st["priors"]["valid"] > 0  # converged within the 3 s drive (seed 5)
+    # from the priors valid only after the cornering problem has stayed converged 1 s
+    # (converged_hold_s): on this 3 s drive it converges at ~1.4 s and falls back at ~2.0 s, so
+    # never (without the hold 0.6 s were valid); tests/test_pipeline_node.py checks the transition
+    assert st["priors"]["valid"] < st["params"]["valid"]
     assert sum(st["priors"].values()) == sum(st["params"].values())
 
 

@@ -64,17 +64,24 @@ def test_warning_config_file_and_errors():
 
 
 def test_validity_rule_in_the_config_file():
-    """``require_converged`` (the system's validity rule, module docstring "Validity"): the file
-    names the cornering problem; names are checked against the identification problems."""
+    """``require_converged`` and ``converged_hold_s`` (the system's validity rule, module docstring
+    "Validity"): the file names the cornering problem and a 1 s hold; names are checked against the
+    identification problems."""
     pol, _ = load_warning_config()
     assert pol.require_converged == ("cornering",) == WarningPolicy().require_converged
-    pol, _ = warning_config_from_table({"require_converged": ["mass", "inertia"]})
-    assert pol.require_converged == ("mass", "inertia")
+    assert pol.converged_hold_s == 1.0 == WarningPolicy().converged_hold_s
+    p2, _ = warning_config_from_table({"require_converged": ["mass", "inertia"]})
+    assert p2.require_converged == ("mass", "inertia")
     assert warning_config_from_table({"require_converged": []})[0].require_converged == ()
     with pytest.raises(PredictionConfigError, match="unknown identification problem 'cornering_stiffness'"):
         warning_config_from_table({"require_converged": ["cornering_stiffness"]})
     with pytest.raises(PredictionConfigError, match="require_converged: expected a list"):
         warning_config_from_table({"require_converged": "cornering"})
+    # the hold (chosen on the declared tuning drives): a finite number >= 0
+    assert warning_config_from_table({"converged_hold_s": 0})[0].converged_hold_s == 0
+    for bad in (-0.1, float("nan"), "1", True):
+        with pytest.raises(PredictionConfigError, match="converged_hold_s must be a finite number >= 0"):
+            warning_config_from_table({"converged_hold_s": bad})
 
 
 # ----------------------------------------------------------------------------- the node

@@ -11,8 +11,8 @@ circle-ramp drives; its seeds are 113-122 since 2026-12-06).
 it on the seeds they are given, ``tests/test_seeds.py`` on every study's seed set.
 
 A tuning seed is, strictly, a drive: the scenario and the seed the threshold was chosen on
-(``paper-left-turn`` 1 and 2, CommonRoad seed 101 and the workbench's maneuvers 100-103, ``paper``
-seed 0). The studies are held to the seed numbers (stricter); tests that drive other scenarios at
+(``paper-left-turn`` 1, 2 and 200-209, CommonRoad seed 101 and the workbench's maneuvers 100-103,
+``paper`` seed 0). The studies are held to the seed numbers (stricter); tests that drive other scenarios at
 seeds 0-2 (the decoder's, the simulator's and the bench's tests; ``vdps paper``'s rollover and
 false-alarm runs at its ``--seed0``) are other drives and are not checked. ``vdps sim``'s default
 seed is 0, the IMU monitor's tuning drive when the scenario is ``paper``; no test asserts the
@@ -28,6 +28,7 @@ from vdps_hil.experiments.ident_study import STUDY_SEEDS as _IDENT_STUDY
 from vdps_hil.experiments.ident_study import TUNING_SEEDS as _IDENT
 from vdps_hil.experiments.workbench_study import STUDY_SEEDS as _WORKBENCH_STUDY
 from vdps_hil.experiments.workbench_study import TUNING_SEEDS as _WORKBENCH
+from vdps_hil.prediction.warning import TUNING_SEEDS as _WARNING_HOLD
 
 __all__ = ["TUNING", "STUDIES", "tuning_seeds", "check_held_out", "held_out_seeds", "refused_by_tool"]
 
@@ -35,6 +36,7 @@ TUNING: dict[str, tuple[int, ...]] = {
     "the IMU monitor's outage and spike limits (estimation.imu_monitor)": tuple(_IMU_MONITOR),
     "the identification thresholds (experiments.ident_study)": tuple(_IDENT),
     "the workbench's ranking thresholds (experiments.workbench_study)": tuple(_WORKBENCH),
+    "the warning's convergence hold (prediction.warning)": tuple(_WARNING_HOLD),
 }
 """What each tuning set chose -> its seeds (each declared in the module named)."""
 

@@ -47,11 +47,10 @@ a zero-noise drive (+215 %; 20 Hz: +33 %).
 
 Warning status sent with each frame: 1 "not converged" until the EKF is initialised and, when
 the identifier started from the model file's priors (no ``start_params``, i.e. no ``--params``),
-until the identification problems named in the warning policy's ``require_converged``
-(``configs/prediction/default.toml``: ``["cornering"]``) have converged (the chain re-reads the
-identifier's convergence every ``convergence_period_s`` of filter time, 0.02 s, the warning frames'
-period: ``Identifier.converged_of`` those problems; a problem another cause holds back, e.g. a model
-mismatch, is answered at once, the others take the corrected covariances, about 0.5 ms); 2 "sensor missing" when
+until the problems named in the warning policy's ``require_converged`` (``["cornering"]``) have
+stayed converged ``converged_hold_s`` (1 s; ``configs/prediction/default.toml``) without a break (the
+chain re-reads ``Identifier.converged_of`` those problems every ``convergence_period_s`` of filter time,
+0.02 s, the frames' period; a period not read breaks the hold); 2 "sensor missing" when
 the held inputs (steering, wheel torques) or a rate/wheel speed are missing, else 0; the node
 itself sends 3 "fault" for a stale prediction. ``SystemConfig.require_converged`` set to a tuple
 overrides that rule (``()``: never gate). Fault tolerance: 2 also while the IMU is missing or
@@ -223,7 +222,7 @@ class VdpsSystem:
         self._next_report: int | None = None
         self._conv_ns = int(round(cfg.convergence_period_s * 1e9))
         self._next_conv: int | None = None
-        self._conv_view: dict[str, bool] = {}
+        self._conv_ok, self._conv_since, self._conv_hold_ns = False, None, 0
         self.feeder = IdentFeeder(model_vehicle, cfg.feeder) if cfg.identify else None
         self.identifier = Identifier(model_vehicle, cfg.ident, start=cfg.start_params) if cfg.identify else None
         self._chain = None
@@ -258,6 +257,7 @@ class VdpsSystem:
             if rc is None:  # the policy's rule: gate only a chain started from the priors
                 rc = getattr(pol, "require_converged", ()) if cfg.start_params is None else ()
             self.require_converged = tuple(rc)
+            self._conv_hold_ns = int(round(getattr(pol, "converged_hold_s", 0.0) * 1e9))
             if self.identifier is not None and not set(rc) <= set(self.identifier.converged):
                 raise ValueError(f"require_converged: unknown identification problem in {rc!r}")
         self._imu_corr = None
@@ -446,13 +446,17 @@ class VdpsSystem:
                 out.append(self.ident_report(t))
         self._chain_tick(t, (est, filt_eff), out, why)
 
-    def _converged(self, t_ns: int) -> dict[str, bool]:
-        """The identifier's convergence as the chain sees it: re-read at the first estimate of
-        each ``convergence_period_s`` of filter time (module docstring), the same in a replay."""
+    def _converged(self, t_ns: int) -> bool:
+        """The identifier's convergence as the chain sees it, held ``converged_hold_s`` and re-read
+        at the first estimate of each ``convergence_period_s`` of filter time (module docstring)."""
         if self._next_conv is None or t_ns >= self._next_conv:
+            kept = self._next_conv is not None and t_ns < self._next_conv + self._conv_ns  # no period unread
             self._next_conv = t_ns - t_ns % self._conv_ns + self._conv_ns
-            self._conv_view = self.identifier.converged_of(self.require_converged)
-        return self._conv_view
+            view = self.identifier.converged_of(self.require_converged)
+            ok = all(view.get(n, False) for n in self.require_converged)
+            self._conv_since = (self._conv_since if kept and self._conv_since is not None else t_ns) if ok else None
+            self._conv_ok = ok and t_ns - self._conv_since >= self._conv_hold_ns
+        return self._conv_ok
 
     def _chain_tick(self, t_ns: int, ef, out: list, why: str | None = None) -> None:
         chain = self._chain
@@ -471,8 +475,7 @@ class VdpsSystem:
             except ValueError:
                 status = WarningStatus.SENSOR_MISSING
             if status == WarningStatus.VALID and self.require_converged and self.identifier is not None:
-                conv = self._converged(t_ns)
-                if not all(conv.get(n, False) for n in self.require_converged):
+                if not self._converged(t_ns):
                     status = WarningStatus.NOT_CONVERGED
             if status in (WarningStatus.VALID, WarningStatus.NOT_CONVERGED) and why is not None:
                 # a missing IMU or an inconsistent estimate outranks "not converged"
