@@ -22,16 +22,25 @@ N_STEPS = 3000  # 30 s at 100 Hz
 
 def _run(seed: int, rho: float):
     """A 2-row, 2-parameter regression with slowly varying regressors and AR(1) errors of unit
-    marginal variance (the design noise: Q = 1). Returns (|error|, raw sigma, jackknife sigma)."""
+    marginal variance (the design noise: Q = 1). Returns (|error|, raw sigma, jackknife sigma).
+    The data are drawn for all steps at once (numpy); the RLS takes them one update at a time."""
     rng = np.random.default_rng(seed)
     r = WeightedRLS([1.0, 1.0], [10.0, 10.0], [1.0, 1.0], sigma_autocorr=False, jackknife_blocks=10)
     ph = rng.uniform(0.0, 2.0 * math.pi, 2)
-    e = rng.normal(size=2)
-    for k in range(N_STEPS):
-        a = np.array([[1.0 + 0.5 * math.sin(0.01 * k + ph[0]), 0.3],
-                      [0.2, math.cos(0.013 * k + ph[1])]]) + 0.3 * rng.normal(size=(2, 2))
-        e = rho * e + math.sqrt(1.0 - rho * rho) * rng.normal(size=2)
-        r.update(a, a @ X_TRUE + e)
+    k = np.arange(N_STEPS)
+    a = np.empty((N_STEPS, 2, 2))
+    a[:, 0, 0] = 1.0 + 0.5 * np.sin(0.01 * k + ph[0])
+    a[:, 0, 1], a[:, 1, 0] = 0.3, 0.2
+    a[:, 1, 1] = np.cos(0.013 * k + ph[1])
+    a += 0.3 * rng.normal(size=(N_STEPS, 2, 2))
+    w = math.sqrt(1.0 - rho * rho) * rng.normal(size=(N_STEPS, 2))
+    e = np.empty((N_STEPS, 2))
+    prev = rng.normal(size=2)  # stationary start: unit variance
+    for i in range(N_STEPS):
+        prev = e[i] = rho * prev + w[i]
+    y = a @ X_TRUE + e
+    for i in range(N_STEPS):
+        r.update(a[i], y[i])
     raw = np.sqrt(np.diag(r.covariance))
     jack = np.sqrt(np.diag(r.jackknife_covariance))
     return np.abs(r.x - X_TRUE), raw, jack
