@@ -144,13 +144,24 @@ def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_p
     save_params(saved, veh.params, veh, meta={"status": {n: "converged" for n in PROBLEM_NAMES}})
     save_params(unsure, veh.params, veh, meta={"status": {**{n: "converged" for n in PROBLEM_NAMES},
                                                           "cornering": "model mismatch"}})
-    st, docs = {}, {}
+    st, docs, lines = {}, {}, {}
     for name, extra in (("priors", ()), ("params", ("--params", str(saved))), ("no-ident", ("--no-identify",)),
                         ("unsure", ("--params", str(unsure)))):
-        code, _ = run("replay", str(drive), *extra, "--json", str(tmp_path / f"{name}.json"))
+        code, text = run("replay", str(drive), *extra, "--json", str(tmp_path / f"{name}.json"))
         assert code == 0
         docs[name] = json.loads((tmp_path / f"{name}.json").read_text())
         st[name] = docs[name]["system"]["status"]
+        lines[name] = [ln for ln in text.splitlines() if ln.startswith("  warning: ")]
+    # the sent frames by status (decoded from VDPS_Warning) and one line saying so
+    for name, doc in docs.items():
+        p = doc["prediction"]
+        assert sum(p["frames_by_status"].values()) == p["frames_sent"] > 100
+        assert len(lines[name]) == 1 and lines[name][0].startswith(
+            f"  warning: {p['frames_by_status']['valid']} of {p['frames_sent']} frames valid")
+    pp, pr = docs["params"]["prediction"], docs["priors"]["prediction"]
+    assert pp["frames_by_status"]["valid"] >= pp["frames_sent"] - 5 and 0.0 < pp["first_valid_s"] < 0.1
+    assert pp["require_converged"] == [] and pr["require_converged"] == ["cornering"] and pr["converged_hold_s"] == 1.0
+    assert f"from {pp['first_valid_s']:.2f} s, highest valid level " in lines["params"][0]
     assert docs["unsure"]["params_unsettled"] == {"cornering": "model mismatch"}
     assert "params_unsettled" not in docs["params"]
     assert st["unsure"]["not_converged"] >= st["params"]["not_converged"] + 50
@@ -161,6 +172,30 @@ def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_p
     # never (without the hold 0.6 s were valid); tests/test_pipeline_node.py checks the transition
     assert st["priors"]["valid"] < st["params"]["valid"]
     assert sum(st["priors"].values()) == sum(st["params"].values())
+
+
+def test_the_warning_line_says_what_the_frames_said_and_what_an_invalid_warning_waits_for():
+    """``replay_cmd.warning_line`` on the JSON's ``prediction`` block: valid frames, from when,
+    the highest valid level, the other statuses; with no valid frame, the validity rule it waits
+    for (not converged) or the inputs the predictor needs (sensor missing); nothing without
+    frames (``--no-predict``)."""
+    from vdps_hil.cli.replay_cmd import warning_line
+
+    def doc(valid, nc, sm, first=None, lvl=None):
+        return {"prediction": {"frames_sent": valid + nc + sm, "first_valid_s": first, "max_level_valid": lvl,
+                               "frames_by_status": {"valid": valid, "not_converged": nc, "sensor_missing": sm, "fault": 0},
+                               "require_converged": ["cornering"], "converged_hold_s": 1.0}}
+
+    assert warning_line(doc(180, 70, 1, 3.604, 2)) == ("  warning: 180 of 251 frames valid from 3.60 s, highest valid "
+                                                      "level warning (the others: not converged 70, sensor missing 1)")
+    assert warning_line(doc(0, 250, 1)) == (
+        "  warning: 0 of 251 frames valid (the others: not converged 250, sensor missing 1); from the priors a frame "
+        "is valid once cornering has converged and stayed so 1 s ([warning] of the prediction config); --params "
+        "starts from saved parameters")
+    assert warning_line(doc(0, 24, 3012)).endswith(
+        "(the others: not converged 24, sensor missing 3012); sensor missing: the predictor needs the steering, "
+        "the wheel torques, the IMU rates and the wheel speeds")
+    assert warning_line({}) is None and warning_line({"prediction": {"frames_sent": 0}}) is None
 
 
 @pytest.mark.parametrize("args,needle", [

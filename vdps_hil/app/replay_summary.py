@@ -33,7 +33,8 @@ class ReplaySummary:
         self.sig_sum = None
         self.innov: dict[str, list] = {}
         self.pred = {"predictions": 0, "rollover_predicted": 0, "min_time_to_point_of_no_return_s": None}
-        self.frames = {"sent": 0, "max_level": 0}
+        self.frames = {"sent": 0, "max_level": 0, "by_status": [0, 0, 0, 0], "max_level_valid": None,
+                       "first_valid_ns": None}
 
     def take_counts(self, counts: Mapping) -> None:
         """The samples the replay fed (``app.replay_io.SampleCounter``)."""
@@ -67,8 +68,15 @@ class ReplaySummary:
                     p["min_time_to_point_of_no_return_s"] = o.time_to_point_of_no_return_s if m is None else \
                         min(m, o.time_to_point_of_no_return_s)
             elif isinstance(o, CanFrame):
-                self.frames["sent"] += 1
-                self.frames["max_level"] = max(self.frames["max_level"], (o.data[1] >> 4) & 0x3)
+                f = self.frames  # VDPS_Warning: level in bits 12-13, status in bits 14-15 (dbc/vdps.dbc)
+                level, status = (o.data[1] >> 4) & 0x3, (o.data[1] >> 6) & 0x3
+                f["sent"] += 1
+                f["max_level"] = max(f["max_level"], level)
+                f["by_status"][status] += 1
+                if status == 0:
+                    f["max_level_valid"] = max(f["max_level_valid"] or 0, level)
+                    if f["first_valid_ns"] is None:
+                        f["first_valid_ns"] = o.t_ns
             if writer is not None:
                 write_output(o, writer)
 
@@ -120,5 +128,11 @@ class ReplaySummary:
             st["prior"] = veh.params.as_dict()
             doc["identification"] = st
         if system.config.predict:
-            doc["prediction"] = dict(self.pred, frames_sent=self.frames["sent"], max_level=self.frames["max_level"])
+            f = self.frames
+            first = None if f["first_valid_ns"] is None or self.t_first is None else (f["first_valid_ns"] - self.t_first) / 1e9
+            doc["prediction"] = dict(
+                self.pred, frames_sent=f["sent"], max_level=f["max_level"], max_level_valid=f["max_level_valid"],
+                frames_by_status=dict(zip(("valid", "not_converged", "sensor_missing", "fault"), f["by_status"])),
+                first_valid_s=first, require_converged=list(system.require_converged),
+                converged_hold_s=system.converged_hold_ns / 1e9)
         return doc

@@ -137,6 +137,9 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
             why = [f"{p} {v['status']}" for p, v in st["params"].items() if v["status"] != "identified"]
             rows = f" (rows: {', '.join(st['mismatch_rows'])})" if st["mismatch_rows"] else ""
             click.echo(f"  {name}: {st['status']}{rows}: {'; '.join(why)}", err=bool(json_out == "-"))
+    wline = warning_line(doc)
+    if wline:
+        click.echo(wline, err=bool(json_out == "-"))
     if doc.get("params_unsettled"):
         click.echo("  --params: not identified when saved: " + ", ".join(
             f"{k} {v}" for k, v in doc["params_unsettled"].items()) + "; warnings invalid until identified here",
@@ -164,6 +167,34 @@ def summary_line(doc: dict, output=None) -> str:
             line += f"{';' if conv.get('mass') else ','} not converged: {', '.join(waiting)}"
     if output:
         line += f" -> {output}"
+    return line
+
+
+LEVELS = ("none", "caution", "warning", "imminent")
+"""VDPS_Warning's levels 0-3 (prediction.warning.WarningLevel)."""
+
+
+def warning_line(doc: dict) -> str | None:
+    """One line on the rollover warning frames the replay sent: how many were valid (status 0),
+    from when, the highest valid level, what the others said, and, when none was valid for want of
+    convergence, what the warning waits for (``require_converged`` held ``converged_hold_s``), or
+    for want of inputs, what the predictor needs (whichever status the most frames said)."""
+    p = doc.get("prediction")
+    if not p or not p.get("frames_sent") or "frames_by_status" not in p:
+        return None
+    by = p["frames_by_status"]
+    line = f"  warning: {by['valid']} of {p['frames_sent']} frames valid"
+    if by["valid"]:
+        line += f" from {p['first_valid_s']:.2f} s, highest valid level {LEVELS[p['max_level_valid']]}"
+    others = [f"{k.replace('_', ' ')} {by[k]}" for k in ("not_converged", "sensor_missing", "fault") if by[k]]
+    if others:
+        line += f" (the others: {', '.join(others)})"
+    if not by["valid"] and by["not_converged"] >= by["sensor_missing"] and p.get("require_converged"):
+        line += (f"; from the priors a frame is valid once {', '.join(p['require_converged'])} has converged and"
+                 f" stayed so {p['converged_hold_s']:g} s ([warning] of the prediction config); --params starts"
+                 " from saved parameters")
+    elif not by["valid"] and by["sensor_missing"]:
+        line += "; sensor missing: the predictor needs the steering, the wheel torques, the IMU rates and the wheel speeds"
     return line
 
 

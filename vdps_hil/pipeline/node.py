@@ -222,7 +222,7 @@ class VdpsSystem:
         self._next_report: int | None = None
         self._conv_ns = int(round(cfg.convergence_period_s * 1e9))
         self._next_conv: int | None = None
-        self._conv_ok, self._conv_since, self._conv_hold_ns = False, None, 0
+        self._conv_ok, self._conv_since, self.converged_hold_ns = False, None, 0  # validity hold (docstring)
         self.feeder = IdentFeeder(model_vehicle, cfg.feeder) if cfg.identify else None
         self.identifier = Identifier(model_vehicle, cfg.ident, start=cfg.start_params) if cfg.identify else None
         self._chain = None
@@ -257,7 +257,7 @@ class VdpsSystem:
             if rc is None:  # the policy's rule: gate only a chain started from the priors
                 rc = getattr(pol, "require_converged", ()) if cfg.start_params is None else ()
             self.require_converged = tuple(rc)
-            self._conv_hold_ns = int(round(getattr(pol, "converged_hold_s", 0.0) * 1e9))
+            self.converged_hold_ns = int(round(getattr(pol, "converged_hold_s", 0.0) * 1e9))
             if self.identifier is not None and not set(rc) <= set(self.identifier.converged):
                 raise ValueError(f"require_converged: unknown identification problem in {rc!r}")
         self._imu_corr = None
@@ -455,7 +455,7 @@ class VdpsSystem:
             view = self.identifier.converged_of(self.require_converged)
             ok = all(view.get(n, False) for n in self.require_converged)
             self._conv_since = (self._conv_since if kept and self._conv_since is not None else t_ns) if ok else None
-            self._conv_ok = ok and t_ns - self._conv_since >= self._conv_hold_ns
+            self._conv_ok = ok and t_ns - self._conv_since >= self.converged_hold_ns
         return self._conv_ok
 
     def _chain_tick(self, t_ns: int, ef, out: list, why: str | None = None) -> None:
