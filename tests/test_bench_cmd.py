@@ -126,6 +126,15 @@ def test_the_words_say_warning_time_lead_ecu_action_outcome_and_recording():
                                      pipeline_keeps_up=False, output=None)))
     assert "ROLLED OVER" in rolled and "4 were LOST" in rolled and "listening only" in rolled
     assert "did NOT keep up" in rolled and "recording:" not in rolled
+    # no valid frame at all for want of convergence (a run from the priors): said, with the way out
+    waited = "\n".join(describe(_doc(first_warning_t_s=None, warning_status={"valid": 0, "not_converged": 370,
+                                                                              "sensor_missing": 1, "fault": 0})))
+    assert ("warning: none -- the pipeline never sent a valid VDPS_Warning of level >= 2; no frame was valid: "
+            "'not converged' in 370 of 371 warning cycles (from the model file's priors the warning waits for the "
+            "identification: [warning] require_converged and converged_hold_s; --calibrate or --params start from "
+            "identified parameters)") in waited
+    some = "\n".join(describe(_doc(first_warning_t_s=None, warning_status={"valid": 5, "not_converged": 365})))
+    assert "never sent a valid VDPS_Warning of level >= 2\n" in some + "\n" and "no frame was valid" not in some
     lifted = copy.deepcopy(_doc(truth_events=[{"kind": "tip_up", "t_s": 2.21}]))
     assert "after lifting two wheels" in "\n".join(describe(lifted))
 

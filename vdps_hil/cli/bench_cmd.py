@@ -273,7 +273,13 @@ def describe(d: dict) -> list[str]:
                  + f"; {d['late_sends']} of {d['sends']} sends later than {d['late_tolerance_ms']:g} ms")
     ref = d["lead_reference"] == "open_loop"
     if d["first_warning_t_s"] is None or not math.isfinite(d["first_warning_t_s"]):
-        lines.append("  warning: none -- the pipeline never sent a valid VDPS_Warning of level >= 2")
+        ws = d.get("warning_status") or {}
+        why = ""
+        if not ws.get("valid") and ws.get("not_converged", 0) >= max(1, ws.get("sensor_missing", 0)):
+            why = (f"; no frame was valid: 'not converged' in {ws['not_converged']} of {sum(ws.values())} warning "
+                   "cycles (from the model file's priors the warning waits for the identification: [warning] "
+                   "require_converged and converged_hold_s; --calibrate or --params start from identified parameters)")
+        lines.append("  warning: none -- the pipeline never sent a valid VDPS_Warning of level >= 2" + why)
     else:
         lt = d["warning_lead_time_s"]
         ponr = d["point_of_no_return_t_s"]
