@@ -128,11 +128,13 @@ class ReplaySummary:
             st["prior"] = veh.params.as_dict()
             doc["identification"] = st
         if system.config.predict:
+            from vdps_hil.prediction.warning import WarningStatus
+
             f = self.frames
             first = None if f["first_valid_ns"] is None or self.t_first is None else (f["first_valid_ns"] - self.t_first) / 1e9
             doc["prediction"] = dict(
                 self.pred, frames_sent=f["sent"], max_level=f["max_level"], max_level_valid=f["max_level_valid"],
-                frames_by_status=dict(zip(("valid", "not_converged", "sensor_missing", "fault"), f["by_status"])),
+                frames_by_status={st.key: n for st, n in zip(WarningStatus, f["by_status"])},
                 first_valid_s=first, require_converged=list(system.require_converged),
                 converged_hold_s=system.converged_hold_ns / 1e9)
         return doc

@@ -170,22 +170,20 @@ def summary_line(doc: dict, output=None) -> str:
     return line
 
 
-LEVELS = ("none", "caution", "warning", "imminent")
-"""VDPS_Warning's levels 0-3 (prediction.warning.WarningLevel)."""
-
-
 def warning_line(doc: dict) -> str | None:
     """One line on the rollover warning frames the replay sent: how many were valid (status 0),
     from when, the highest valid level, what the others said, and, when none was valid for want of
     convergence, what the warning waits for (``require_converged`` held ``converged_hold_s``), or
     for want of inputs, what the predictor needs (whichever status the most frames said)."""
+    from vdps_hil.prediction.warning import WarningLevel
+
     p = doc.get("prediction")
     if not p or not p.get("frames_sent") or "frames_by_status" not in p:
         return None
     by = p["frames_by_status"]
     line = f"  warning: {by['valid']} of {p['frames_sent']} frames valid"
     if by["valid"]:
-        line += f" from {p['first_valid_s']:.2f} s, highest valid level {LEVELS[p['max_level_valid']]}"
+        line += f" from {p['first_valid_s']:.2f} s, highest valid level {WarningLevel(p['max_level_valid']).name.lower()}"
     others = [f"{k.replace('_', ' ')} {by[k]}" for k in ("not_converged", "sensor_missing", "fault") if by[k]]
     if others:
         line += f" (the others: {', '.join(others)})"

@@ -486,9 +486,7 @@ class VdpsSystem:
             self._chain_params = params
         n_before = chain.assessments_total
         frames = chain.handle(t_ns, init, status)
-        key = {WarningStatus.VALID: "valid", WarningStatus.NOT_CONVERGED: "not_converged",
-               WarningStatus.SENSOR_MISSING: "sensor_missing", WarningStatus.FAULT: "fault"}[chain.status]
-        self.counters["status"][key] += 1
+        self.counters["status"][chain.status.key] += 1
         if chain.assessments_total > n_before:
             a = chain.last_assessment
             self.counters["predictions"] += 1

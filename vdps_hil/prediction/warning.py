@@ -109,6 +109,11 @@ class WarningStatus(enum.IntEnum):
     SENSOR_MISSING = 2
     FAULT = 3
 
+    @property
+    def key(self) -> str:
+        """The name counters and JSON use: "valid", "not_converged", "sensor_missing", "fault"."""
+        return self.name.lower()
+
 
 # ---------------------------------------------------------------------------------------------
 # policy
