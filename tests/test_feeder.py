@@ -272,3 +272,26 @@ def test_steering_and_torques_are_extrapolated_to_the_estimate_time():
     # too old: the held values
     late = ramp_feeder().inputs(estimate(t_ns=1_100_000_000, vel=(25.0, 0.0, 0.0)), held)
     assert late.wheel_torque_nm == pytest.approx((110.0, 210.0, 310.0, 410.0))
+
+
+def _susp(t, h=0.01):
+    return Sample(t, "can", "suspension", {f"susp_deflection_m_{i}": h for i in range(1, 5)})
+
+
+def test_the_suspension_interval_is_the_longer_of_the_sampling_interval_and_the_age():
+    """``susp_interval_s`` (the strut-force rows' gate, ``problems.suspension_gate``): inf before
+    two suspension samples; then max(last interval, age of the newest at the estimate's time).
+    Invalid, all-NaN and repeated samples do not count."""
+    fd = IdentFeeder(MODEL)
+    fd.observe(imu((0.0, 0.0, G), t=1_000_000_000))
+    fd.observe(_susp(1_000_000_000))
+    assert fd.inputs(estimate(t_ns=1_000_000_000), filtered()).susp_interval_s == math.inf
+    fd.observe(_susp(1_001_000_000))  # 1 kHz
+    assert fd.inputs(estimate(t_ns=1_001_000_000), filtered()).susp_interval_s == pytest.approx(0.001)
+    assert fd.inputs(estimate(t_ns=1_006_000_000), filtered()).susp_interval_s == pytest.approx(0.005)  # age
+    fd.observe(_susp(1_001_000_000))  # repeated stamp
+    fd.observe(_susp(1_002_000_000, h=math.nan))  # no deflection
+    fd.observe(Sample(1_003_000_000, "can", "suspension", dict(_susp(0).fields), valid=False))
+    assert fd.inputs(estimate(t_ns=1_001_000_000), filtered()).susp_interval_s == pytest.approx(0.001)
+    fd.observe(_susp(2_001_000_000))  # 1 Hz (Table 1 as printed)
+    assert fd.inputs(estimate(t_ns=2_001_000_000), filtered()).susp_interval_s == pytest.approx(1.0)

@@ -59,3 +59,14 @@ def test_load_band_is_a_tracking_key_off_by_default():
     assert cfg.tracking.load_band == 0.1
     with pytest.raises(IdentConfigError, match="applies to \\[tracking\\] only"):
         parse_ident_config(text.replace("[mass]                           # eq 20", "[mass]\nload_band = 0.1\n# eq 20"))
+
+
+@pytest.mark.parametrize("value,ok", [("0.05", True), ("0", False), ("-1", False), ("nan", False), ('"x"', False)])
+def test_suspension_max_interval_is_a_positive_number(value, ok):
+    text = DEFAULT_CONFIG_PATH.read_text().replace("suspension_max_interval_s = 0.02",
+                                                   f"suspension_max_interval_s = {value}", 1)
+    if ok:
+        assert parse_ident_config(text).suspension_max_interval_s == float(value)
+    else:
+        with pytest.raises(IdentConfigError, match="suspension_max_interval_s"):
+            parse_ident_config(text)

@@ -107,6 +107,13 @@ def test_identification_report_says_why(table1_drive):
     print("  " + no_susp["mass"].explanations[0].text)
     print("  " + no_wheels["tracking"].explanations[0].text)
     assert full["mass"].status == "identified" and full["tracking"].status == "identified"
+    # Table 1 prints the suspension at 1 Hz: the roll and pitch rows (strut forces) are refused and
+    # named as such; I_z, from the yaw row, still learns
+    inertia = full["inertia"]
+    print("  " + inertia.explanations[0].text)
+    assert inertia.status == "partially_identified" and inertia.identified == 1
+    assert {e.names[0] for e in inertia.explanations} == {"inertia_x_kgm2", "inertia_y_kgm2"}
+    assert "refused as 'suspension too slow'" in inertia.explanations[0].text
     assert no_susp["mass"].status == "inputs_missing" and "susp_deflection_m" in no_susp["mass"].explanations[0].text
     assert no_wheels["tracking"].status == "inputs_missing"
     assert "wheel_speed_radps" in no_wheels["tracking"].explanations[0].text or \

@@ -359,3 +359,17 @@ def test_prediction_is_invariant_to_the_estimator_origin(left_turn, source):
     assert np.allclose(b.euler_v_rad, a.euler_v_rad, atol=1e-12)
     assert np.allclose(b.normal_load_n, a.normal_load_n, atol=1e-6)
     assert np.array_equal(a.pos_g_m[0], init.pos_g_m)
+
+
+def test_predictor_effects_join_a_workbench_model():
+    """The workbench model's dynamics join the configured effects; its tire replaces the
+    configured tire; its measurement effects stay out of the predictor."""
+    from vdps_hil.model.effects import REGISTRY, EffectSet
+    from vdps_hil.prediction.predictor import predictor_effects
+
+    base = EffectSet([REGISTRY["linear_tire"]()])
+    wb = EffectSet([REGISTRY["aero_drag"](cda_m2=0.9), REGISTRY["magic_formula_tire"](), REGISTRY["imu_bias"]()])
+    names = sorted(e.name for e in predictor_effects(base, wb))
+    assert names == ["aero_drag", "magic_formula_tire"]
+    names = sorted(e.name for e in predictor_effects(base, EffectSet([REGISTRY["aero_drag"]()])))
+    assert names == ["aero_drag", "linear_tire"]

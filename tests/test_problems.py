@@ -244,3 +244,35 @@ def test_the_roll_row_carries_the_normal_load_tilt_as_its_structure_term(rng):
     tilt = MODEL.tire.rolling_radius_m * road_normal_body(0.05, -0.01)[1] * fz
     assert reg.structure[0] == pytest.approx(tilt, rel=1e-12) and abs(tilt) > 0.01 * MODEL.params.mass_kg * G * 0.344
     assert reg.structure[1] == reg.structure[2] == 0.0
+
+
+def test_stale_suspension_refuses_the_roll_and_pitch_rows_and_holds_i_x_i_y_in_the_yaw_row(rng):
+    """``problems.suspension_gate``: with suspension samples further apart (or older) than
+    ``suspension_max_interval_s`` the roll and pitch rows (M_x, M_y hold the strut forces) are
+    refused and counted; the yaw row then takes I_x, I_y at their current values (its gyroscopic
+    term moved into b), so the row still holds for the true inertias. Fresh or unknown
+    (None: inputs built by hand): the regressor is unchanged."""
+    cfg = load_ident_config()
+    assert cfg.suspension_max_interval_s == 0.02
+    inp = forward(rng, 1)
+    base = inertia_regressor(inp, MODEL, TRUE, cfg)
+    for fresh in (None, 0.001, 0.02):
+        reg = inertia_regressor(dataclasses.replace(inp, susp_interval_s=fresh), MODEL, TRUE, cfg)
+        assert np.array_equal(reg.a, base.a) and np.array_equal(reg.b, base.b) and reg.row_gates is None
+    stale = inertia_regressor(dataclasses.replace(inp, susp_interval_s=1.0), MODEL, TRUE, cfg)
+    assert not stale.rows[0] and not stale.rows[1] and stale.rows[2] == base.rows[2]
+    assert stale.row_gates == {"suspension too slow": int(base.rows[0]) + int(base.rows[1])}
+    assert stale.a[2, 0] == stale.a[2, 1] == 0.0 and stale.a[2, 2] == base.a[2, 2]
+    x = np.array([TRUE.inertia_x_kgm2, TRUE.inertia_y_kgm2, TRUE.inertia_z_kgm2])
+    assert stale.a[2] @ x == pytest.approx(stale.b[2], rel=1e-9)  # the yaw balance with the true inertias
+    assert base.a[2] @ x == pytest.approx(base.b[2], rel=1e-9)
+    # no suspension at all (NaN deflections, no interval): the roll and pitch rows are left to the
+    # RLS's NaN guard (counted there as NaN rows, not as this gate), the yaw row is the same as above
+    none = inertia_regressor(dataclasses.replace(inp, susp_interval_s=math.inf, susp_deflection_m=(math.nan,) * 4),
+                             MODEL, TRUE, cfg)
+    assert none.row_gates is None and not np.isfinite(none.b[:2]).any()
+    assert none.a[2, 0] == none.a[2, 1] == 0.0 and none.b[2] == pytest.approx(stale.b[2], rel=1e-12)
+    # the mass row (static weight) is not gated
+    from vdps_hil.identification.problems import mass_regressor
+    m = mass_regressor(dataclasses.replace(inp, susp_interval_s=1.0), MODEL, cfg)
+    assert m.rows[0] and m.row_gates is None

@@ -105,6 +105,7 @@ class IdentConfig:
     inertia: ProblemConfig
     moment_form: str = "stiffness"  # eq 23's b: "stiffness" (eq 15 forces) or "measured" (docstring)
     upstream_idle_inputs: int = 0  # an upstream problem unexcited for this many inputs does not block (0: off)
+    suspension_max_interval_s: float = 0.02  # strut-force rows need suspension this fresh (``problems``)
     status: StatusConfig = StatusConfig()
 
     def problem(self, name: str) -> ProblemConfig:
@@ -114,7 +115,7 @@ class IdentConfig:
 _GENERAL_KEYS = {"form", "bounds_mode", "bounds_factor", "min_speed_mps", "sigma_autocorr", "min_dof",
                  "converged_rel_sigma", "min_updates_converged", "steer_form", "mass_form", "upstream_min_updates",
                  "upstream_max_wait"}
-_GENERAL_OPTIONAL = {"moment_form", "upstream_idle_inputs"}
+_GENERAL_OPTIONAL = {"moment_form", "upstream_idle_inputs", "suspension_max_interval_s"}
 _PROBLEM_KEYS = {"q", "w", "forgetting", "prior_rel_sigma", "excitation_min"}
 _PROBLEM_OPTIONAL = {"p0_scaled", "lateral_accel_min_mps2", "lateral_accel_max_mps2", "slip_noise_factor", "load_band"}
 _CORNERING_ONLY = {"lateral_accel_min_mps2", "lateral_accel_max_mps2", "slip_noise_factor"}
@@ -220,7 +221,10 @@ def parse_ident_config(text: str, origin: str = "<string>") -> IdentConfig:
                                  positive=True),
         min_updates_converged=g["min_updates_converged"], steer_form=g["steer_form"], mass_form=g["mass_form"],
         upstream_min_updates=g["upstream_min_updates"], upstream_max_wait=g["upstream_max_wait"],
-        moment_form=moment_form, upstream_idle_inputs=idle, status=_status_config(doc.get("status", {}), origin),
+        moment_form=moment_form, upstream_idle_inputs=idle,
+        suspension_max_interval_s=_num(opt.get("suspension_max_interval_s", IdentConfig.suspension_max_interval_s),
+                                       f"{origin}[general].suspension_max_interval_s", positive=True),
+        status=_status_config(doc.get("status", {}), origin),
         **problems)
 
 

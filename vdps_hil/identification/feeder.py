@@ -76,7 +76,10 @@ sqrt(1 + 2 ((t - t_k) / T)^2 + ...) ~ 2.2 at t - t_k = T).
 For eq 23's ``"measured"`` moment form the inputs also carry the specific force at the CG in
 body axes (``specific_force_b_mps2`` = f_cg above) and the road-relative roll and pitch
 (``vehicle_angles_rad``, eq 4 of the estimate); for the excitation gates the EKF's 1-sigma of
-the lateral velocity yd_a (``lateral_velocity_sigma_mps``, from the ENU velocity sigmas).
+the lateral velocity yd_a (``lateral_velocity_sigma_mps``, from the ENU velocity sigmas); for
+the strut-force rows (``problems.suspension_gate``) how old the suspension deflections may be,
+``susp_interval_s``: the longer of the interval between the last two suspension samples and the
+newest one's age at the estimate's time (inf before two samples).
 
 Symbols and units: v_g [m/s] ENU; f [m/s^2]; w [rad/s]; wd [rad/s^2]; l [m] (body axes);
 angles [rad]; lambda [-]; alpha [rad]; G [m/s^2].
@@ -104,6 +107,7 @@ VERTICAL = ("struts", "aux")
 
 _SF = axis_fields("specific_force_mps2")
 _TQ = wheel_fields("wheel_torque_nm")
+_SUSP = wheel_fields("susp_deflection_m")
 _NAN = math.nan
 _MAX_IMU_AGE_NS = 100_000_000  # an older IMU sample does not stand for the estimate's instant
 
@@ -158,13 +162,21 @@ class IdentFeeder:
         self._win_ns = int(round(self.config.accel_window_s * 1e9))
         self._steer: deque[tuple[int, tuple[float, ...]]] = deque(maxlen=2)
         self._torque: deque[tuple[int, tuple[float, ...]]] = deque(maxlen=2)
+        self._susp_t: deque[int] = deque(maxlen=2)  # times of the last two suspension samples
         self._max_ex_ns = int(round(self.config.max_extrapolation_s * 1e9))
         self.counters = {"calls": 0, "inputs": 0, "incomplete": 0, "no_imu": 0, "imu_samples": 0}
 
     # ------------------------------------------------------------------ IMU
     def observe(self, sample: Sample) -> None:
-        """Keep the specific force of recent ``imu`` samples and the last two steering and
-        wheel-torque samples (others are ignored)."""
+        """Keep the specific force of recent ``imu`` samples, the last two steering and
+        wheel-torque samples and the times of the last two suspension samples (others are
+        ignored)."""
+        if sample.kind == "suspension":
+            hist = self._susp_t
+            if (sample.valid and any(math.isfinite(sample.fields.get(n, _NAN)) for n in _SUSP)
+                    and (not hist or sample.t_ns > hist[-1])):
+                hist.append(sample.t_ns)
+            return
         if sample.kind in ("steer", "wheel_torque") and sample.valid:
             names = ("steer_wheel_angle_rad",) if sample.kind == "steer" else _TQ
             vals = tuple(sample.fields.get(n, _NAN) for n in names)
@@ -259,11 +271,20 @@ class IdentFeeder:
             wheel_speed_radps=filtered.wheel_speed_radps, wheel_accel_radps2=filtered.wheel_accel_radps2,
             wheel_torque_nm=torque, slip_ratio=slip, slip_angle_rad=alpha,
             wheel_angle_rad=delta, specific_force_b_mps2=tuple(float(v) for v in f_cg),
-            vehicle_angles_rad=(phi_v, theta_v), lateral_velocity_sigma_mps=_lateral_sigma(estimate, c_ga))
+            vehicle_angles_rad=(phi_v, theta_v), lateral_velocity_sigma_mps=_lateral_sigma(estimate, c_ga),
+            susp_interval_s=self._susp_interval_s(t_est))
         self.counters["inputs"] += 1
         if not _all_finite(inp):
             self.counters["incomplete"] += 1
         return inp
+
+    def _susp_interval_s(self, t_ns: int) -> float:
+        """The longer of the last suspension sampling interval and the newest sample's age at
+        ``t_ns`` [s]; inf before two samples (the strut forces' rates need two)."""
+        hist = self._susp_t
+        if len(hist) < 2:
+            return math.inf
+        return max(hist[1] - hist[0], t_ns - hist[1], 0) * 1e-9
 
     def _tire_kinematics(self, estimate, filtered, v_b: np.ndarray, omega: np.ndarray, steer: float | None = None):
         """Slip ratios, slip angles and road-wheel angles from the core (module docstring)."""

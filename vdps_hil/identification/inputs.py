@@ -46,6 +46,8 @@ class IdentInputs:
     specific_force_b_mps2: tuple[float, float, float] | None = None  # f at the CG, body axes ("measured")
     vehicle_angles_rad: tuple[float, float] | None = None  # road-relative (phi_v, theta_v), eq 4
     lateral_velocity_sigma_mps: float | None = None  # EKF 1-sigma of yd_a (excitation gates)
+    susp_interval_s: float | None = None  # the longer of the last suspension sampling interval and the
+    #                                       newest sample's age at t_ns (feeder; strut-force rows gate on it)
 
     def __post_init__(self):
         if not isinstance(self.t_ns, int) or isinstance(self.t_ns, bool):
@@ -62,6 +64,8 @@ class IdentInputs:
                                                                    "specific_force_b_mps2"))
         if self.lateral_velocity_sigma_mps is not None:
             object.__setattr__(self, "lateral_velocity_sigma_mps", float(self.lateral_velocity_sigma_mps))
+        if self.susp_interval_s is not None:
+            object.__setattr__(self, "susp_interval_s", float(self.susp_interval_s))
         if self.vehicle_angles_rad is not None:
             object.__setattr__(self, "vehicle_angles_rad", _tup(self.vehicle_angles_rad, 2, "vehicle_angles_rad"))
 

@@ -36,7 +36,7 @@ from vdps_hil.estimation.observability_explain import (Explanation, StructuralRe
                                                         structural_report)
 from vdps_hil.identification.config import PROBLEM_NAMES, PROBLEM_PARAMS, load_ident_config
 from vdps_hil.identification.inputs import IdentInputs
-from vdps_hil.identification.problems import REGRESSORS
+from vdps_hil.identification.problems import REGRESSORS, SUSPENSION_GATE
 
 __all__ = ["ProblemReport", "IdentificationMonitor", "ObservabilityReportDoc", "identification_report",
            "input_dependencies", "observability_report"]
@@ -249,9 +249,16 @@ def _ident_status(name: str, rls, monitor: IdentificationMonitor | None, identif
                 status = "inputs_missing"
         mx = monitor.max_excitation[name]
         seen = monitor.rows_seen[name]
+        named = identifier.problem_status[name].gated  # gates with a name: rows they refused
+        for g_name, n_rows in sorted(named.items()):
+            if n_rows:
+                lim = identifier.config.suspension_max_interval_s
+                parts.append(f"{n_rows} rows refused as '{g_name}'" + (
+                    f" (their strut forces need suspension samples at most {lim:g} s apart and {lim:g} s old)"
+                    if g_name == SUSPENSION_GATE else ""))
         if mx is not None and seen:
             low = [i for i, (m, g) in enumerate(zip(mx, gate)) if m < g]
-            share = monitor.gated_rows[name] / seen
+            share = max(monitor.gated_rows[name] - sum(named.values()), 0) / seen
             if low:
                 parts.append("below the excitation gate: "
                              + ", ".join(f"row {i + 1} max |A| {mx[i]:.3g} < {gate[i]:.3g}" for i in low))

@@ -189,6 +189,38 @@ def mass_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
     return Regressor(a, b, _gate(a, cfg.mass.excitation_min), structure=structure)
 
 
+SUSPENSION_GATE = "suspension too slow"
+"""The row gate of ``suspension_gate`` (counted by the identifier, named in the reports)."""
+
+
+def suspension_gate(inp: IdentInputs, cfg: IdentConfig, rows: np.ndarray, strut_rows) -> tuple[np.ndarray, dict | None]:
+    """Refuse the rows whose b holds strut forces (eq 14: K_s H + D_s Hd; ``strut_rows``) when
+    the suspension deflections are older than ``cfg.suspension_max_interval_s``
+    (``inp.susp_interval_s``: the longer of the last sampling interval and the newest sample's
+    age). Returns (rows, {SUSPENSION_GATE: refused} or None). Used by eq 23's roll and pitch rows;
+    eq 20's mass row is not gated: its A (about g) and b are the static weight, which a held
+    deflection carries (its dynamic share averages out over a drive).
+
+    Why: the strut forces must follow the body's heave, pitch and roll (about 1-2 Hz), and their
+    damper share needs the deflection rate. Sampled every T, a deflection is up to T old and its
+    rate, differenced over T, lags by about T/2: phases of 2 pi f T and pi f T at frequency f, at
+    2 Hz 0.25 and 0.13 rad (14 and 7 deg) for T = 0.02 s, growing in proportion beyond it. The paper's Table 1 prints the suspension at
+    1 Hz (profile ``table1``): each sample restarts the alpha-beta filter (its gap limit), the rate
+    is 0, the deflection a held value up to 1 s old, and the inertia problem ended with I_x and
+    I_y on their bounds even on noise-free sensors (-59 %, -79 %) while it reported them from
+    rows it should not have used. ``None`` (inputs built by hand) is not gated."""
+    dt = inp.susp_interval_s
+    if dt is None or dt <= cfg.suspension_max_interval_s:
+        return rows, None
+    if not all(math.isfinite(h) for h in inp.susp_deflection_m):
+        return rows, None  # no suspension at all: NaN rows, which the RLS leaves out and counts
+    out = rows.copy()
+    idx = list(strut_rows)
+    n = int(np.count_nonzero(out[idx]))
+    out[idx] = False
+    return out, ({SUSPENSION_GATE: n} if n else None)
+
+
 def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
                        params: IdentifiedParams | None = None) -> Regressor:
     """Eq 21: A = diag(-r lambda_i), b_i = I_w wd_i - T_i, with the optional load gate
@@ -355,7 +387,15 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
     else:
         structure = None
     rows = _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps)
-    return Regressor(a, b, rows, db, structure=structure)
+    rows, refused = suspension_gate(inp, cfg, rows, (0, 1))  # M_x, M_y hold the strut forces
+    if inp.susp_interval_s is not None and inp.susp_interval_s > cfg.suspension_max_interval_s:
+        # without the roll and pitch rows (stale, or no suspension: NaN) the yaw row's gyroscopic
+        # term w_x w_y (I_y - I_x) would be all that moves I_x and I_y: it takes them at their
+        # current values (b_3 less that term)
+        b = b.copy()
+        b[2] += wx * wy * (params.inertia_x_kgm2 - params.inertia_y_kgm2)
+        a[2, 0] = a[2, 1] = 0.0
+    return Regressor(a, b, rows, db, structure=structure, row_gates=refused)
 
 
 def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:

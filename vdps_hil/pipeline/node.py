@@ -59,6 +59,9 @@ inconsistent (``estimation.aiding_monitor.health``), counted per reason in
 ``counters["unhealthy"]``; these two outrank 1 "not converged" (a disconnected IMU shows as 2
 also while the identification is still converging); the identifier is not fed on the estimates of an IMU fault.
 
+The predictor's parameters (``predict_from``): per parameter the last value the identifier called
+"identified", else the start value (``identification.trusted``, re-read at the predictor's cadence).
+
 Predictions off the sample path (``prediction.offpath``): the chain's prediction at t0 runs on
 a snapshot (parameters, initial state) in ``prediction_worker`` ("inline" by default; "process"
 live) and is used from t0 + ``prediction_latency_s``; ``prediction_deadline`` "wait" (replay:
@@ -86,10 +89,11 @@ from vdps_hil.estimation.suspension import CONDITIONING_SIGMA_FACTOR, SUSPENSION
 from vdps_hil.identification.feeder import FeederConfig, IdentFeeder
 from vdps_hil.identification.config import IdentConfig
 from vdps_hil.identification.identifier import Identifier
+from vdps_hil.identification.trusted import TrustedParams
 from vdps_hil.model.params import IdentifiedParams, Vehicle
 from vdps_hil.pipeline.outputs import CanFrame, IdentReport, PredictionReport
 
-__all__ = ["LIVE_PREDICTIONS", "SystemConfig", "VdpsSystem", "default_pipeline_config", "predictor_effects"]
+__all__ = ["LIVE_PREDICTIONS", "SystemConfig", "VdpsSystem", "default_pipeline_config"]
 
 LIVE_PREDICTIONS = {"prediction_worker": "process", "prediction_deadline": "drop", "keep_input_log": False}
 """How a live system predicts (the bench, ``vdps log --pipeline``; ``SystemConfig`` fields,
@@ -108,6 +112,11 @@ def default_pipeline_config(**kw) -> PipelineConfig:
     d = {"emit_estimates": False, "bandwidths": Bandwidths(20.0, 20.0, 20.0), "gnss_speed_sigma_mps": 0.05}
     d.update(kw)
     return PipelineConfig(**d)
+
+
+PREDICT_FROM = ("identified", "current")
+"""The parameters the predictor uses: per parameter the last value the identifier called identified,
+else the start value (``identification.trusted``), or the identifier's current estimates."""
 
 
 @dataclass(frozen=True)
@@ -141,6 +150,7 @@ class SystemConfig:
     prediction_deadline: str = "wait"  # "wait" (replay) or "drop" (live; prediction.offpath)
     keep_input_log: bool = True  # False (live bench): no replay log held, a long run's memory stays flat
     prediction_drops_t0_ns: tuple[int, ...] = ()  # a live run's dropped predictions, dropped again
+    predict_from: str = "identified"  # PREDICT_FROM: the values identified (identification.trusted) or "current"
 
     def __post_init__(self):
         for name in ("estimate_period_s", "ident_period_s", "ident_report_period_s", "convergence_period_s"):
@@ -155,6 +165,8 @@ class SystemConfig:
         if self.prediction_worker not in WORKERS or self.prediction_deadline not in DEADLINES:
             raise ValueError(f"SystemConfig: prediction_worker must be one of {WORKERS} and prediction_deadline "
                              f"one of {DEADLINES}, got {self.prediction_worker!r}, {self.prediction_deadline!r}")
+        if self.predict_from not in PREDICT_FROM:
+            raise ValueError(f"SystemConfig.predict_from must be one of {PREDICT_FROM}, got {self.predict_from!r}")
         if self.suspension_stamp not in SUSPENSION_STAMPS:
             raise ValueError(f"SystemConfig.suspension_stamp must be one of {SUSPENSION_STAMPS}, "
                              f"got {self.suspension_stamp!r}")
@@ -172,22 +184,6 @@ class SystemConfig:
         pc = kw.pop("pipeline", default_pipeline_config())
         pc = replace(pc, susp_sigma_m=k * susp_sigma_m / math.sqrt(n))
         return cls(pipeline=pc, **kw)
-
-
-
-def predictor_effects(base, model_effects):
-    """The predictor's configured effects (``base``, e.g. the paper's ``linear_tire``) with a
-    saved workbench model's *dynamics* effects joined: a tire model in the workbench model
-    replaces the configured tire, any other effect is added (an effect of the same name is
-    taken from the workbench model). Measurement effects are not part of the predictor."""
-    from vdps_hil.model.effects import EffectSet
-    from vdps_hil.model.effects.base import TireModel
-
-    added = list(EffectSet(model_effects).dynamics)
-    names = {e.name for e in added}
-    new_tire = any(isinstance(e, TireModel) for e in added)
-    keep = [e for e in base if e.name not in names and not (new_tire and isinstance(e, TireModel))]
-    return EffectSet(keep + added)
 
 
 
@@ -227,11 +223,12 @@ class VdpsSystem:
         self.identifier = Identifier(model_vehicle, cfg.ident, start=cfg.start_params) if cfg.identify else None
         self._chain = None
         self._chain_params = None
+        self._trusted = None
         self.require_converged: tuple[str, ...] = ()
         """Problems whose convergence makes a warning valid (module docstring); () = no gate."""
         if cfg.predict:
             from vdps_hil.prediction.config import load_predictor_config
-            from vdps_hil.prediction.predictor import Predictor
+            from vdps_hil.prediction.predictor import Predictor, predictor_effects
             from vdps_hil.prediction.warning import WarningChain, load_warning_config
 
             pcfg = cfg.predictor if cfg.predictor is not None else load_predictor_config()
@@ -253,6 +250,8 @@ class VdpsSystem:
             self._chain = WarningChain(pred, pol, node, keep=WARNING_HISTORY, runner=runner,
                                        deadline=cfg.prediction_deadline, drop_t0_ns=cfg.prediction_drops_t0_ns)
             self._chain_params = params
+            if self.identifier is not None and cfg.predict_from == "identified":  # what the identifier vouches for
+                self._trusted = TrustedParams(self.identifier, params, 1.0 / pcfg.cadence_hz)
             rc = cfg.require_converged
             if rc is None:  # the policy's rule: gate only a chain started from the priors
                 rc = getattr(pol, "require_converged", ()) if cfg.start_params is None else ()
@@ -292,6 +291,8 @@ class VdpsSystem:
             if sample.kind == "suspension":
                 ready = cond.add(sample)
                 if ready is not None:
+                    if self.feeder is not None:  # the sample times (the strut-force rows' gate)
+                        self.feeder.observe(sample)
                     for s in ready:
                         self._step(s, out)
                     return out
@@ -480,7 +481,7 @@ class VdpsSystem:
             if status in (WarningStatus.VALID, WarningStatus.NOT_CONVERGED) and why is not None:
                 # a missing IMU or an inconsistent estimate outranks "not converged"
                 status = WarningStatus.SENSOR_MISSING if why.startswith("imu") else WarningStatus.FAULT
-        params = self._params()
+        params = self._params() if self._trusted is None else self._trusted.at(t_ns)
         if init is not None and params is not self._chain_params:
             chain.set_params(params.as_dict())
             self._chain_params = params

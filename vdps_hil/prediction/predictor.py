@@ -256,4 +256,18 @@ class Cadence:
         return False
 
 
-__all__ = ["Cadence", "Predictor"]
+def predictor_effects(base, model_effects):
+    """The predictor's configured effects (``base``, e.g. the paper's ``linear_tire``) with a
+    saved workbench model's *dynamics* effects joined: a tire model in the workbench model
+    replaces the configured tire, any other effect is added (an effect of the same name is
+    taken from the workbench model). Measurement effects are not part of the predictor."""
+    from vdps_hil.model.effects.base import TireModel
+
+    added = list(EffectSet(model_effects).dynamics)
+    names = {e.name for e in added}
+    new_tire = any(isinstance(e, TireModel) for e in added)
+    keep = [e for e in base if e.name not in names and not (new_tire and isinstance(e, TireModel))]
+    return EffectSet(keep + added)
+
+
+__all__ = ["Cadence", "Predictor", "predictor_effects"]
