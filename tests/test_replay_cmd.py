@@ -14,7 +14,7 @@ from click.testing import CliRunner
 from vdps_hil.cli.main import cli
 from vdps_hil.identification.config import PROBLEM_NAMES
 from vdps_hil.identification.persistence import load_params
-from vdps_hil.model.params import load_vehicle
+from vdps_hil.model.params import PARAM_NAMES, load_vehicle
 from vdps_hil.record.decode import copy_raw_topics
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
@@ -172,6 +172,23 @@ def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_p
     # never (without the hold 0.6 s were valid); tests/test_pipeline_node.py checks the transition
     assert st["priors"]["valid"] < st["params"]["valid"]
     assert sum(st["priors"].values()) == sum(st["params"].values())
+    # what the predictor used (identification.trusted): every parameter named, with its source
+    for name in ("priors", "params"):
+        src = docs[name]["prediction"]["param_sources"]
+        assert set(src) == set(PARAM_NAMES) and set(src.values()) <= {"identified", "held", "start"}
+    assert docs["no-ident"]["prediction"]["param_sources"] == {}
+
+
+def test_the_predictor_line_says_where_its_parameters_came_from():
+    """``replay_cmd.predictor_params_line``: counts of identified and held values and the names
+    of those still at the run's start values; nothing without sources (no identifier)."""
+    from vdps_hil.cli.replay_cmd import predictor_params_line
+
+    src = {"mass_kg": "identified", "inertia_x_kgm2": "start", "inertia_y_kgm2": "start", "inertia_z_kgm2": "held"}
+    assert predictor_params_line({"prediction": {"param_sources": src}}) == (
+        "  predictor parameters at the end: 1 identified, 1 held from earlier, 2 at the run's start values "
+        "(inertia_x_kgm2, inertia_y_kgm2)")
+    assert predictor_params_line({"prediction": {"param_sources": {}}}) is None and predictor_params_line({}) is None
 
 
 def test_the_warning_line_says_what_the_frames_said_and_what_an_invalid_warning_waits_for():

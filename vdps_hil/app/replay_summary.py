@@ -136,5 +136,6 @@ class ReplaySummary:
                 self.pred, frames_sent=f["sent"], max_level=f["max_level"], max_level_valid=f["max_level_valid"],
                 frames_by_status={st.key: n for st, n in zip(WarningStatus, f["by_status"])},
                 first_valid_s=first, require_converged=list(system.require_converged),
-                converged_hold_s=system.converged_hold_ns / 1e9)
+                converged_hold_s=system.converged_hold_ns / 1e9,
+                param_sources=system.status().get("prediction", {}).get("param_sources", {}))
         return doc

@@ -137,9 +137,9 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
             why = [f"{p} {v['status']}" for p, v in st["params"].items() if v["status"] != "identified"]
             rows = f" (rows: {', '.join(st['mismatch_rows'])})" if st["mismatch_rows"] else ""
             click.echo(f"  {name}: {st['status']}{rows}: {'; '.join(why)}", err=bool(json_out == "-"))
-    wline = warning_line(doc)
-    if wline:
-        click.echo(wline, err=bool(json_out == "-"))
+    for line in (warning_line(doc), predictor_params_line(doc)):
+        if line:
+            click.echo(line, err=bool(json_out == "-"))
     if doc.get("params_unsettled"):
         click.echo("  --params: not identified when saved: " + ", ".join(
             f"{k} {v}" for k, v in doc["params_unsettled"].items()) + "; warnings invalid until identified here",
@@ -193,6 +193,20 @@ def warning_line(doc: dict) -> str | None:
                  " from saved parameters")
     elif not by["valid"] and by["sensor_missing"]:
         line += "; sensor missing: the predictor needs the steering, the wheel torques, the IMU rates and the wheel speeds"
+    return line
+
+
+def predictor_params_line(doc: dict) -> str | None:
+    """One line on the parameters the predictor used at the end (``identification.trusted``): how
+    many were identified then, held from an earlier identification, or still their start values
+    (named)."""
+    src = (doc.get("prediction") or {}).get("param_sources")
+    if not src:
+        return None
+    n = {k: sum(1 for v in src.values() if v == k) for k in ("identified", "held", "start")}
+    line = f"  predictor parameters at the end: {n['identified']} identified, {n['held']} held from earlier"
+    if n["start"]:
+        line += f", {n['start']} at the run's start values ({', '.join(k for k, v in src.items() if v == 'start')})"
     return line
 
 

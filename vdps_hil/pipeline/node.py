@@ -388,7 +388,8 @@ class VdpsSystem:
             d["prediction"] = {"worker": ch.runner.worker, "deadline": ch.deadline,
                                "latency_s": ch.node.config.prediction_latency_s, "started": ch.started,
                                "used": ch.assessments_total, "dropped": ch.drops, "failed": ch.prediction_failures,
-                               "dropped_t0_ns": list(ch.dropped_t0_ns)}
+                               "dropped_t0_ns": list(ch.dropped_t0_ns), "params_from": self.config.predict_from,
+                               "param_sources": {} if self._trusted is None else dict(self._trusted.source)}
         return d
 
     @property
