@@ -245,3 +245,22 @@ def test_the_mass_sigma_reports_the_strut_axis_bias_the_fit_cannot_see(rng):
     assert ident.sigmas_raw["mass_kg"] < abs(err) / 2.0  # the noise model alone does not see it
     flat = drive(np.zeros(600))
     assert flat.sigmas["mass_kg"] < 0.2 * ident.sigmas["mass_kg"]
+
+
+def test_a_value_on_its_bound_is_never_handed_over(rng):
+    """``handover_params`` (what ``--save-params`` and a calibration hand on): the estimates, but
+    a parameter "at bound" keeps the run's start value. Inputs of a vehicle 3.5x as heavy as the
+    model file's prior put the mass on its 3x bound; the other problems keep their estimates."""
+    start = dataclasses.replace(MODEL.params, mass_kg=1700.0)
+    ident = Identifier(MODEL, start=start)
+    heavy = dataclasses.replace(TRUE, mass_kg=3.5 * MODEL.params.mass_kg)
+    for k in range(300):
+        ident.update(forward(rng, k, true=heavy))
+    assert ident.problem_status["mass"].params[0].status == "at bound"
+    assert ident.params.mass_kg == pytest.approx(3.0 * MODEL.params.mass_kg)
+    values, at_bound = ident.handover_params()
+    assert at_bound == ("mass_kg",) and values.mass_kg == 1700.0
+    others = [n for n in PARAM_NAMES if n != "mass_kg"]
+    assert all(getattr(values, n) == getattr(ident.params, n) for n in others)
+    fresh = Identifier(MODEL)
+    assert fresh.handover_params() == (fresh.params, ())  # nothing excited: nothing at bound

@@ -120,6 +120,12 @@ def test_save_params_then_start_from_them(drive, tmp_path):
     first = json.loads((tmp_path / "1.json").read_text())["identification"]["params"]
     p = load_params(saved, load_vehicle("sedan-model")).params
     assert p.mass_kg == pytest.approx(first["mass_kg"], rel=1e-12)
+    # a value on its bound is saved as the run's start (here the prior), and named
+    doc1 = json.loads((tmp_path / "1.json").read_text())["identification"]
+    kept = json.loads(saved.read_text())["meta"]["at_bound_kept_start"]
+    assert kept == [n for st in doc1["status"].values() for n, v in st["params"].items() if v["status"] == "at bound"]
+    for n in kept:
+        assert getattr(p, n) == doc1["prior"][n] and first[n] != doc1["prior"][n]
     code, _ = run("replay", str(drive), "--no-predict", "--params", str(saved), "--json", str(tmp_path / "2.json"))
     assert code == 0
     second = json.loads((tmp_path / "2.json").read_text())["identification"]

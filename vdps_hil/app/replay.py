@@ -319,11 +319,13 @@ def _document(path, output, veh: Vehicle, system: VdpsSystem, side, summary: Rep
         from vdps_hil.identification.persistence import ParamsFileError, save_params as _save
 
         idf = system.identifier
+        values, at_bound = idf.handover_params()  # a value on its bound is never saved as one
         try:
-            _save(save_params, idf.params, veh, sigmas=idf.sigmas,
+            _save(save_params, values, veh, sigmas=idf.sigmas,
                   meta={"source": os.path.basename(os.fspath(path)), "updates":
                         {n: c.updates for n, c in idf.counters.items()},
-                        "status": {n: st.status for n, st in idf.problem_status.items()}})
+                        "status": {n: st.status for n, st in idf.problem_status.items()},
+                        "at_bound_kept_start": list(at_bound)})
         except ParamsFileError as e:
             raise ReplayError(str(e)) from None
         doc["saved_params"] = os.fspath(save_params)

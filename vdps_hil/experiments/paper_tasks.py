@@ -257,7 +257,7 @@ def _start_kw(profile, seed: int, model: str, truth_vehicle: str | None, calibra
         return {}, None
     cal = chain_run(calibration, profile, seed + 1000, model=model, truth_vehicle=truth_vehicle, predict=False,
                     ident_report_period_s=1.0)
-    start = cal["identifier"].params
+    start, _ = cal["identifier"].handover_params()  # as --save-params: no value on its bound
     return ({"start_params": start},
             {"scenario": calibration, "seed": seed + 1000, "rel_err": relative_errors(start.as_dict(),
                                                                                        truth_params(model))})

@@ -186,6 +186,17 @@ class Identifier:
     def prior(self) -> IdentifiedParams:
         return self._prior
 
+    def handover_params(self) -> tuple[IdentifiedParams, tuple[str, ...]]:
+        """The parameters a drive hands over (``--save-params``, a calibration): the current
+        estimates, except those "at bound" (``status``: unexcited or model mismatch, never a
+        value), which keep this run's start value; and the names of those."""
+        at_bound = tuple(p.name for st in self.problem_status.values() for p in st.params if p.status == "at bound")
+        if not at_bound:
+            return self._params, ()
+        vals = self._params.as_dict()
+        vals.update({n: getattr(self._start, n) for n in at_bound})
+        return IdentifiedParams(**vals), at_bound
+
     @property
     def covariances(self) -> dict[str, np.ndarray]:
         """Problem -> covariance of its parameters (physical units), corrected so that it does not

@@ -12,6 +12,9 @@ File format (JSON, UTF-8, written atomically: temporary file + rename)::
       "meta": {...}                          # optional free-form JSON (counters, time, source)
     }
 
+``vdps replay --save-params`` saves the identifier's estimates except those "at bound" (never a
+value, ``identification.status``), which keep the run's start value (``Identifier.handover_params``;
+named in ``meta.at_bound_kept_start``).
 ``meta.status`` (written by ``vdps replay --save-params``): problem -> the identifier's status
 when saved ("converged", or why not: ``identification.status``). :func:`unsettled_problems`
 reads it back: a warning chain started from such a file stays invalid until the live identifier
