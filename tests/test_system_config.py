@@ -14,7 +14,8 @@ from vdps_hil.pipeline.system_config import LIVE_PREDICTIONS, PREDICT_FROM, Syst
 
 @pytest.mark.parametrize("kw,name", [
     ({"estimate_period_s": 0.0}, "estimate_period_s"), ({"ident_period_s": math.nan}, "ident_period_s"),
-    ({"ident_report_period_s": -1.0}, "ident_report_period_s"), ({"convergence_period_s": math.inf}, "convergence_period_s"),
+    ({"ident_report_period_s": -1.0}, "ident_report_period_s"),
+    ({"convergence_period_s": math.inf}, "convergence_period_s"),
     ({"suspension_rate_hz": 0.0}, "suspension_rate_hz"), ({"prediction_worker": "gpu"}, "prediction_worker"),
     ({"prediction_deadline": "later"}, "prediction_deadline"), ({"predict_from": "truth"}, "predict_from"),
     ({"suspension_stamp": "middle"}, "suspension_stamp")])

@@ -204,11 +204,12 @@ def suspension_gate(inp: IdentInputs, cfg: IdentConfig, rows: np.ndarray, strut_
     Why: the strut forces must follow the body's heave, pitch and roll (about 1-2 Hz), and their
     damper share needs the deflection rate. Sampled every T, a deflection is up to T old and its
     rate, differenced over T, lags by about T/2: phases of 2 pi f T and pi f T at frequency f, at
-    2 Hz 0.25 and 0.13 rad (14 and 7 deg) for T = 0.02 s, growing in proportion beyond it. The paper's Table 1 prints the suspension at
-    1 Hz (profile ``table1``): each sample restarts the alpha-beta filter (its gap limit), the rate
-    is 0, the deflection a held value up to 1 s old, and the inertia problem ended with I_x and
-    I_y on their bounds even on noise-free sensors (-59 %, -79 %) while it reported them from
-    rows it should not have used. ``None`` (inputs built by hand) is not gated."""
+    2 Hz 0.25 and 0.13 rad (14 and 7 deg) for T = 0.02 s, growing in proportion beyond it. The
+    paper's Table 1 prints the suspension at 1 Hz (profile ``table1``): each sample restarts the
+    alpha-beta filter (its gap limit), the rate is 0, the deflection a held value up to 1 s old,
+    and the inertia problem ended with I_x and I_y on their bounds even on noise-free sensors
+    (-59 %, -79 %) from rows it should not have used. ``None`` (inputs built by hand) is not
+    gated."""
     dt = inp.susp_interval_s
     if dt is None or dt <= cfg.suspension_max_interval_s:
         return rows, None

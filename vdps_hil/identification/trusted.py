@@ -21,8 +21,9 @@ the calibrated values, reached its bounds (rear 54 -> 306 kN/rad, I_z 1053 kg m^
 and wandered "not converged" between them (rear 50-113 kN/rad at 3.75-5.0 s); the predictor
 used those values and foresaw a point of no return four times. Predicting from the values last
 identified (the calibration's), the run sent no warning; the lane change and the steady circle
-were unchanged (no warning either way). Measured with ``/tmp`` scripts around
-``experiments.paper_chain.chain_run``; the test is ``tests/test_trusted.py``.
+were unchanged (no warning either way). Measured with scratch scripts around
+``experiments.paper_chain.chain_run``; the sweep is a test both ways in
+``tests/test_paper_tasks.py``, the rule itself in ``tests/test_trusted.py``.
 """
 
 from __future__ import annotations
