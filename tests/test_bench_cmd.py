@@ -51,6 +51,7 @@ def test_bench_prints_what_happened_and_writes_json_and_recording(short_run, spe
     assert "  headroom: " in text and f"x at speed {float(speed):g}x (measured before the run" in text
     assert "the pipeline received every one of them" in text
     assert "warning: none" in text and "stayed upright" in text
+    assert "  predictor parameters at the end: " in text  # from the priors: which were identified
     assert f"recording: {out}" in text and out.stat().st_size > 0
     # the status line (not a terminal here: one line per simulated second, and the last one)
     status = [ln for ln in cap.err.splitlines() if ln.startswith("t ")]
@@ -60,6 +61,7 @@ def test_bench_prints_what_happened_and_writes_json_and_recording(short_run, spe
         assert isinstance(doc[k], typ), (k, doc[k])
     assert set(doc["warning_latency_ms"]) >= {"p50", "p99"}
     assert doc["dropped"] == 0 and doc["frames_received"] == doc["frames_sent"] > 0
+    assert set(doc["predictions"]["param_sources"].values()) <= {"identified", "held", "start"}
     assert doc["rolled_over"] is False and doc["output"] == str(out)
     assert doc["transport"] == "tcp" and doc["headroom"]["headroom"] >= 1.0 and doc["headroom"]["speed"] == float(speed)
     # SCHED_FIFO 10 by default where the machine permits it, else the default policy and why

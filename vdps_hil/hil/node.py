@@ -461,5 +461,6 @@ class PipelineNode:
     def _predictions(self) -> dict:
         """The warning chain's predictions: started, used, dropped at their deadline, failed."""
         pred = self.system.status().get("prediction") if hasattr(self.system, "status") else None
-        return {} if not pred else {k: pred[k] for k in ("worker", "latency_s", "started", "used", "dropped", "failed")}
+        return {} if not pred else {k: pred[k] for k in ("worker", "latency_s", "started", "used", "dropped", "failed",
+                                                         "param_sources") if k in pred}
 
