@@ -95,6 +95,7 @@ class ReplaySummary:
             es["rms_sigma"] = {n: math.sqrt(v / self.n_est) for n, v in zip(STATE_NAMES, self.sig_sum)}
         rejected = dict(side.rejected())
         rejected.update(system.pipeline.rejected())
+        sys_status = system.status()
         obs = [{"t_start_s": a / 1e9, "t_end_s": b / 1e9, "rank": r.rank, "n_states": r.n_states,
                 "unobservable": list(r.unobservable)} for a, b, r in system.pipeline.observability_reports]
         now = system.pipeline.observability_now()
@@ -114,7 +115,7 @@ class ReplaySummary:
                               {"rank": now.rank, "n_states": now.n_states, "unobservable": list(now.unobservable)}},
             "decode": {k: v for k, v in side.counters.items()},
             "decoding": dict(side.decoding),
-            "system": system.status()["counters"],
+            "system": sys_status["counters"],
         }
         # computed observability (issue 11): structural rank of the sensor set, each window's null
         # space explained, and each identification problem's information with its cause
@@ -137,5 +138,5 @@ class ReplaySummary:
                 frames_by_status={st.key: n for st, n in zip(WarningStatus, f["by_status"])},
                 first_valid_s=first, require_converged=list(system.require_converged),
                 converged_hold_s=system.converged_hold_ns / 1e9,
-                param_sources=system.status().get("prediction", {}).get("param_sources", {}))
+                param_sources=sys_status.get("prediction", {}).get("param_sources", {}))
         return doc

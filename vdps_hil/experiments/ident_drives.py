@@ -32,7 +32,6 @@ CACHE_VERSION = 2  # 2: ``susp_interval_s`` (2026-12-07)
 _FIELDS = tuple(f.name for f in dataclasses.fields(IdentInputs))
 _OPTIONAL = ("moments_nm", "specific_force_b_mps2", "vehicle_angles_rad", "lateral_velocity_sigma_mps",
              "susp_interval_s")
-_INF_KEPT = ("susp_interval_s",)  # inf is a value there (fewer than two suspension samples); NaN is None
 
 
 class DriveKey(NamedTuple):
@@ -77,7 +76,7 @@ def inputs_from_arrays(arrays) -> list[IdentInputs]:
     for k in range(len(t)):
         kw = {n: (float(c[k]) if c.ndim == 1 else tuple(c[k].tolist())) for n, c in cols.items()}
         for n in _OPTIONAL:
-            if n in kw and not np.all(np.isfinite(kw[n])) and (n not in _INF_KEPT or np.isnan(kw[n])):
+            if n in kw and np.any(np.isnan(kw[n])):  # None was written as NaN (inf is a value)
                 kw[n] = None
         out.append(IdentInputs(t_ns=int(t[k]), **kw))
     return out

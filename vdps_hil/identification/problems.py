@@ -193,6 +193,13 @@ SUSPENSION_GATE = "suspension too slow"
 """The row gate of ``suspension_gate`` (counted by the identifier, named in the reports)."""
 
 
+def suspension_stale(inp: IdentInputs, cfg: IdentConfig) -> bool:
+    """The suspension deflections are older than ``cfg.suspension_max_interval_s`` (or missing:
+    inf); inputs built by hand (``susp_interval_s`` None) are never stale."""
+    dt = inp.susp_interval_s
+    return dt is not None and dt > cfg.suspension_max_interval_s
+
+
 def suspension_gate(inp: IdentInputs, cfg: IdentConfig, rows: np.ndarray, strut_rows) -> tuple[np.ndarray, dict | None]:
     """Refuse the rows whose b holds strut forces (eq 14: K_s H + D_s Hd; ``strut_rows``) when
     the suspension deflections are older than ``cfg.suspension_max_interval_s``
@@ -210,8 +217,7 @@ def suspension_gate(inp: IdentInputs, cfg: IdentConfig, rows: np.ndarray, strut_
     and the inertia problem ended with I_x and I_y on their bounds even on noise-free sensors
     (-59 %, -79 %) from rows it should not have used. ``None`` (inputs built by hand) is not
     gated."""
-    dt = inp.susp_interval_s
-    if dt is None or dt <= cfg.suspension_max_interval_s:
+    if not suspension_stale(inp, cfg):
         return rows, None
     if not all(math.isfinite(h) for h in inp.susp_deflection_m):
         return rows, None  # no suspension at all: NaN rows, which the RLS leaves out and counts
@@ -389,7 +395,7 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
         structure = None
     rows = _gate(a, cfg.inertia.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps)
     rows, refused = suspension_gate(inp, cfg, rows, (0, 1))  # M_x, M_y hold the strut forces
-    if inp.susp_interval_s is not None and inp.susp_interval_s > cfg.suspension_max_interval_s:
+    if suspension_stale(inp, cfg):
         # without the roll and pitch rows (stale, or no suspension: NaN) the yaw row's gyroscopic
         # term w_x w_y (I_y - I_x) would be all that moves I_x and I_y: it takes them at their
         # current values (b_3 less that term)
