@@ -11,7 +11,8 @@ frame "not converged" through the 3.7 s fishhook (the cornering problem has not 
 The runs go at a speed this machine supports now (``ci_speed``): 1x, or the speed at which the
 bench's own probe (``hil.headroom``, measured once per module) leaves 2x headroom when that is
 lower (a loaded machine); every physical assertion is on the simulated time axis, so it holds at
-any speed. A pipeline given a quarter of the CPU it needs skips its own work, counts it and stays
+any speed. A rollover run that skipped input all the same (load that came after the probe) is
+checked for counting and flagging its skips and run again slower (``supported_run``). A pipeline given a quarter of the CPU it needs skips its own work, counts it and stays
 within a few deadlines of its input."""
 
 from __future__ import annotations
@@ -37,6 +38,14 @@ def assert_nothing_lost(d: dict) -> None:
     assert d["seq_counters"]["can_counter_breaks"] == 0 and d["seq_counters"]["imu_seq_gaps"] == 0
     assert d["dropped"] == 0 and sum(d["dropped_at_device"].values()) == 0
     assert d["rejected"] == {"can": 0, "imu": 0, "gnss": 0}
+
+
+def _why(d: dict) -> dict:
+    """What a lead-time failure needs explained: the warning episodes, the frames' statuses, the
+    predictions and the deadline misses of the run."""
+    return {k: d.get(k) for k in ("first_warning_t_s", "warning_episodes", "warning_status", "predictions",
+                                  "deadline_misses", "warning_frames_not_valid", "speed", "realtime_factor",
+                                  "slower_runs")}
 
 
 @pytest.fixture(scope="module")
@@ -69,6 +78,36 @@ def calibrated_params(tmp_path_factory):
     return str(path)
 
 
+SLOWER_TRIES = 2
+"""Runs at half the speed after a run the machine did not support (``supported_run``)."""
+
+
+def supported_run(make_config, speed: float, status=None) -> dict:
+    """The bench run of ``make_config(speed)``, again at half the speed (at most
+    :data:`SLOWER_TRIES` times) while a run counts deadline misses: the probe's headroom holds for
+    the load it saw, and other work on a shared machine (the real-time phase's second pytest
+    process) can stall the pipeline later. A stall past the deadline skips input, counted, and the
+    frames say "sensor missing" for the IMU monitor's settle time after it (a 0.2 s stall at 1.2 s
+    cost 0.6 s of warning lead, measured 2026-12-07), so the lead-time assertions are about a run
+    the machine kept up with. Every run that missed is checked for what it must still do: its
+    skips counted per kind and flagged on the bus. Returns the last run's JSON with
+    ``"slower_runs"``: the speeds and miss counts of the runs before it."""
+    tried = []
+    for _ in range(SLOWER_TRIES + 1):
+        d = Bench(make_config(speed)).run(status).to_json()
+        m = d["deadline_misses"]
+        assert m["samples"] == sum(m["by_kind"].values())
+        if m["samples"] == 0:
+            break
+        assert d["warning_status"]["sensor_missing"] > 0, (m, d["warning_status"])
+        print(f"bench tests: {m['samples']} samples skipped at {speed:.3g}x (load the probe did not see); "
+              f"again at {speed / 2:.3g}x")
+        tried.append({"speed": speed, "skipped": m["samples"]})
+        speed /= 2
+    d["slower_runs"] = tried
+    return d
+
+
 @pytest.fixture(scope="module")
 def rollover_run(tmp_path_factory, calibrated_params, ci_speed):
     out = tmp_path_factory.mktemp("bench") / "fishhook.mcap"
@@ -78,24 +117,27 @@ def rollover_run(tmp_path_factory, calibrated_params, ci_speed):
         s["listening"] = listening_sockets(s["pids"]["simulator"])
         seen.append(s)
 
-    r = Bench(BenchConfig(scenario="fishhook-suv", speed=ci_speed, output=str(out),
-                          params=calibrated_params)).run(status)
-    return r.to_json(), out, seen
+    def config(speed):
+        seen.clear()
+        if out.exists():
+            out.unlink()
+        return BenchConfig(scenario="fishhook-suv", speed=speed, output=str(out), params=calibrated_params)
+
+    return supported_run(config, ci_speed, status), out, seen
 
 
 def test_embedded_bench_loses_nothing_warns_early_and_rolls_over_without_the_ecu(rollover_run, ci_speed):
     d, _, seen = rollover_run
-    assert d["transport"] == "virtual" and d["speed"] == ci_speed and not d["react"] and d["params"]
+    assert d["transport"] == "virtual" and not d["react"] and d["params"]
+    assert d["speed"] == ci_speed / 2 ** len(d["slower_runs"])
     assert_nothing_lost(d)
-    # at a supported speed nothing is skipped; the load of a shared machine can still stall the
-    # pipeline past its deadline: then the skipped work is counted and the frames say so
-    m = d["deadline_misses"]
-    assert m["samples"] == sum(m["by_kind"].values())
-    assert m["samples"] == 0 or d["warning_status"]["sensor_missing"] > 0, (m, d["warning_status"])
+    # at a supported speed nothing is skipped (a run that skipped was run again slower, its skips
+    # counted and flagged: supported_run)
+    assert d["deadline_misses"]["samples"] == 0, _why(d)
     assert d["rolled_over"] and d["stop_reason"] == "point_of_no_return"
     assert d["lead_reference"] == "this_run"
     assert d["point_of_no_return_t_s"] == pytest.approx(3.72, abs=0.02)
-    assert d["warning_lead_time_s"] >= 1.0
+    assert d["warning_lead_time_s"] >= 1.0, _why(d)
     assert d["warning_lead_to_tipup_s"] == pytest.approx(d["warning_lead_time_s"] - (3.72 - 2.21), abs=0.02)
     assert d["warning_frames_accepted"] == d["warning_frames"] == d["warning_frames_on_bus"] > 0
     assert d["ecu"]["frames"]["crc_mismatch"] == 0 and d["ecu"]["intervention_t_s"] is None
@@ -105,7 +147,7 @@ def test_embedded_bench_loses_nothing_warns_early_and_rolls_over_without_the_ecu
         assert math.isfinite(d["warning_latency_ms"][k]) and d["warning_latency_ms"][k] >= 0
     assert d["warning_latency_ms"]["p50"] <= d["warning_latency_ms"]["p99"] <= d["warning_latency_ms"]["max"]
     assert d["sends"] > 0 and 0 <= d["late_sends"] <= d["sends"]
-    assert d["realtime_factor"] > 0.5 * ci_speed
+    assert d["realtime_factor"] > 0.5 * d["speed"]
     # the status line saw the run progress and end; the embedded bench listens on no network
     # socket but loopback
     assert seen[-1]["final"] and seen[-1]["frames_sent"] == d["frames_sent"]
@@ -159,8 +201,8 @@ def test_live_estimates_are_bit_identical_to_a_replay_in_the_recorded_input_orde
 
 
 def test_with_react_the_ecu_brakes_and_the_suv_stays_upright(calibrated_params, ci_speed):
-    d = Bench(BenchConfig(scenario="fishhook-suv", speed=ci_speed, react=True,
-                          params=calibrated_params)).run().to_json()
+    d = supported_run(lambda speed: BenchConfig(scenario="fishhook-suv", speed=speed, react=True,
+                                                params=calibrated_params), ci_speed)
     assert_nothing_lost(d)
     assert not d["rolled_over"] and d["stop_reason"] == "duration" and d["duration_s"] == pytest.approx(7.0)
     e = d["ecu"]
@@ -169,7 +211,7 @@ def test_with_react_the_ecu_brakes_and_the_suv_stays_upright(calibrated_params, 
     assert e["full_brake_t_s"] == pytest.approx(e["actuation_t_s"] + 0.3)
     # the lead time is taken to the point of no return of the same drive without the ECU
     assert d["lead_reference"] == "open_loop" and d["point_of_no_return_t_s"] == pytest.approx(3.72, abs=0.02)
-    assert d["warning_lead_time_s"] >= 1.0
+    assert d["warning_lead_time_s"] >= 1.0, _why(d)
     assert d["max_abs_roll_deg"] < 20.0
 
 
@@ -196,11 +238,11 @@ def test_cross_process_bench_over_loopback_tcp(calibrated_params, ci_speed):
         for pid in set(s["pids"].values()):
             sockets.extend(listening_sockets(pid))
 
-    d = Bench(BenchConfig(scenario="fishhook-suv", speed=ci_speed, can="tcp",
-                          params=calibrated_params)).run(status).to_json()
+    d = supported_run(lambda speed: BenchConfig(scenario="fishhook-suv", speed=speed, can="tcp",
+                                                params=calibrated_params), ci_speed, status)
     assert d["transport"] == "tcp" and d["can"]["listen"].startswith("127.0.0.1:")
     assert_nothing_lost(d)
-    assert d["rolled_over"] and d["warning_lead_time_s"] >= 1.0
+    assert d["rolled_over"] and d["warning_lead_time_s"] >= 1.0, _why(d)
     assert d["output_cycles"] >= 1000 and d["pipeline"]["errors"] == []
     assert sockets and all(addr == "127.0.0.1" for addr, _ in sockets), sockets
 

@@ -65,7 +65,12 @@ def test_nothing_lost_at_table1_rates_and_sigterm_closes_cleanly(tmp_path):
     assert raw_gga == s["gnss"]
     assert all(h["drops"] == 0 for h in health.values()), \
         {k: (h["loss"], {c: n for c, n in h["counters"].items() if n}) for k, h in health.items()}
-    assert health["can.vdps"]["counters"]["lost_frames"] == 0
+    # a receiver cannot tell a sender that went silent for more than half a 4-bit counter cycle
+    # (8 x 1 ms for the wheel speeds) from one whose frames of whole cycles were lost
+    # (codecs.can_e2e: the wraps are counted when the next frame comes at the frame pace); the
+    # emulator itself stalls like that on a loaded machine and says so (emulator_max_stall_s)
+    lost, stall_s = health["can.vdps"]["counters"]["lost_frames"], sent["emulator_max_stall_s"]
+    assert lost == 0 or (stall_s > 0.008 and lost % 16 == 0), (lost, stall_s)
     # the decoded topics: complete unless skipping was counted, in order either way
     skipped = sum(h["loss"]["decoded_skipped"] for h in health.values())
     want = {"imu": (imu_seq, s["imu"], 65536), "gnss_att": ([0] * gnss, s["gnss"], 1)}
