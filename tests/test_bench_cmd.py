@@ -91,6 +91,35 @@ def test_json_on_stdout_moves_the_words_to_stderr(tmp_path, monkeypatch, speed, 
     assert not list(tmp_path.iterdir())  # no -o: no recording
 
 
+def test_a_parameter_file_that_had_not_settled_the_cornering_stiffnesses_keeps_the_warning_waiting(
+        tmp_path, speed, capsys):
+    """``--params`` starts the pipeline from the file's values; the warning is valid at once only
+    for the problems the file settled (its ``meta.status``; pipeline.node's rule): cornering
+    "model mismatch" there waits for the pipeline's own identification, as from the priors."""
+    from vdps_hil.identification.config import PROBLEM_NAMES
+    from vdps_hil.identification.persistence import save_params
+    from vdps_hil.model.params import load_vehicle
+
+    veh = load_vehicle("sedan-model")
+    docs = {}
+    for name, cornering in (("settled", "converged"), ("unsettled", "model mismatch")):
+        f = tmp_path / f"{name}.json"
+        save_params(f, veh.params, veh, meta={"status": {**{n: "converged" for n in PROBLEM_NAMES},
+                                                         "cornering": cornering}})
+        assert main(["bench", "--scenario", "paper", "--duration", "0.8", "--speed", speed, "--can", "virtual",
+                     "--no-headroom-check", "--quiet", "--params", str(f), "--json", "-"]) == 0
+        cap = capsys.readouterr()
+        docs[name] = (json.loads(cap.out), cap.err)
+    settled, unsettled = docs["settled"][0], docs["unsettled"][0]
+    assert settled["predictions"]["require_converged"] == [] and "parameter file:" not in docs["settled"][1]
+    assert unsettled["predictions"]["require_converged"] == ["cornering"]
+    assert "parameter file: it had not settled cornering" in docs["unsettled"][1]
+    # 0.8 s cannot converge the cornering problem (held 1 s): no valid frame; from the settled file
+    # the frames are valid from the first prediction on
+    assert unsettled["warning_status"]["valid"] == 0 and unsettled["warning_status"]["not_converged"] > 0
+    assert settled["warning_status"]["valid"] > 0
+
+
 def _doc(**over) -> dict:
     base = {"scenario": "fishhook-suv", "vehicle": "suv", "model": "suv-model", "transport": "virtual",
             "can": {"pipeline_spec": "virtual:x"}, "speed": 1.0, "react": True, "duration_s": 7.0,
@@ -138,11 +167,17 @@ def test_the_words_say_warning_time_lead_ecu_action_outcome_and_recording():
     assert "did NOT keep up" in rolled and "recording:" not in rolled
     # no valid frame at all for want of convergence (a run from the priors): said, with the way out
     waited = "\n".join(describe(_doc(first_warning_t_s=None, warning_status={"valid": 0, "not_converged": 370,
-                                                                              "sensor_missing": 1, "fault": 0})))
+                                                                              "sensor_missing": 1, "fault": 0},
+                                      predictions={"require_converged": ["cornering"]})))
     assert ("warning: none -- the pipeline never sent a valid VDPS_Warning of level >= 2; no frame was valid: "
-            "'not converged' in 370 of 371 warning cycles (from the model file's priors the warning waits for the "
-            "identification: [warning] require_converged and converged_hold_s; --calibrate or --params start from "
-            "identified parameters)") in waited
+            "'not converged' in 370 of 371 warning cycles (the warning waited for cornering: from the model file's "
+            "priors, or a parameter file that had not settled it; [warning] require_converged and "
+            "converged_hold_s)") in waited
+    # a parameter file that had not settled what the warning waits for: said
+    assert "parameter file:" not in waited
+    unsettled = "\n".join(describe(_doc(params="p.json", predictions={"require_converged": ["cornering"]})))
+    assert ("parameter file: it had not settled cornering; the warning waited for the pipeline's own "
+            "identification of it (as from the priors)") in unsettled
     some = "\n".join(describe(_doc(first_warning_t_s=None, warning_status={"valid": 5, "not_converged": 365})))
     assert "never sent a valid VDPS_Warning of level >= 2\n" in some + "\n" and "no frame was valid" not in some
     lifted = copy.deepcopy(_doc(truth_events=[{"kind": "tip_up", "t_s": 2.21}]))

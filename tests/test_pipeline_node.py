@@ -184,7 +184,7 @@ def test_the_chain_reads_the_identifiers_convergence_once_per_convergence_period
 def test_warning_from_identified_parameters_is_valid_at_once(paper_samples):
     """Started from identified parameters (``start_params``, what ``--params`` sets): no gate, the
     frames are valid from the node's first prediction after the EKF initialises, whatever the
-    identifier's flags; an explicit
+    identifier's flags; a start that had not settled the policy's problems keeps those gated; an explicit
     ``require_converged`` overrides the rule either way; unknown problem names are refused."""
     system, rows = _live_status(SystemConfig.for_profile(1000.0, 0.001, start_params=MODEL.params), paper_samples)
     assert system.require_converged == ()
@@ -194,6 +194,13 @@ def test_warning_from_identified_parameters_is_valid_at_once(paper_samples):
     assert after_init[first_valid][0] - after_init[0][0] <= 0.021
     assert not any(r[1] == 1 for r in after_init[first_valid:])
     assert any(not r[3] for r in after_init[first_valid:])  # valid although cornering had not converged yet
+    # a start that had not settled some problems (a parameter file's meta.status): the policy's
+    # problems among them are gated, the others not
+    for unsettled, gated in ((("cornering", "inertia"), ("cornering",)), (("inertia", "tracking"), ()),
+                             (("mass", "tracking", "cornering", "inertia"), ("cornering",))):
+        assert VdpsSystem(MODEL, SystemConfig(start_params=MODEL.params,
+                                              start_unsettled=unsettled)).require_converged == gated
+    assert VdpsSystem(MODEL, SystemConfig(start_unsettled=("inertia",))).require_converged == ("cornering",)
     # explicit overrides
     assert VdpsSystem(MODEL, SystemConfig(require_converged=())).require_converged == ()
     assert VdpsSystem(MODEL, SystemConfig(start_params=MODEL.params,

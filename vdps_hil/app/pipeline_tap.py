@@ -27,7 +27,7 @@ class PipelineTap:
     had run through the files before it, so only the first file could be reproduced."""
 
     def __init__(self, model_vehicle, writer, start_params=None, *, record_order: bool = True,
-                 params_file: str | None = None, probe_s: float | None = None):
+                 params_file: str | None = None, probe_s: float | None = None, start_unsettled: tuple = ()):
         from vdps_hil.bus.samples import Sample
         from vdps_hil.codecs.can_decode import VdpsCanDecoder
         from vdps_hil.estimation.estimates import Estimate
@@ -38,6 +38,7 @@ class PipelineTap:
 
         self._sample_type, self._frame_type, self._est_type = Sample, CanFrame, Estimate
         self.model, self.start, self.params_file = model_vehicle, start_params, params_file
+        self.start_unsettled = tuple(start_unsettled)  # the file's problems not settled: pipeline.node's rule
         self.writer = writer
         self.probe_s = PROBE_SECONDS if probe_s is None else probe_s
         self.system = None
@@ -92,7 +93,7 @@ class PipelineTap:
         km = KindMap.of(desc)
         self.kind_map = km if km else None  # None: nothing to map (asked once, not per sample)
         if self.start is not None:
-            cfg = replace(cfg, start_params=self.start)
+            cfg = replace(cfg, start_params=self.start, start_unsettled=self.start_unsettled)
         # predictions inline (prediction.offpath's wait rule): this tap runs in a process of its own
         # (app.tap_process), off the readers' path, and a daemon process cannot start a worker
         self.system = VdpsSystem(self.model, cfg)

@@ -233,8 +233,8 @@ def _run(path, reader, veh: Vehicle, config, configure, start, model_effects, re
                            "vehicle": veh.name, "vehicle_sha256": veh.source_sha256})
         if start is not None:
             config = replace(config, start_params=start)
-        if unsettled:
-            config = replace(config, require_converged=unsettled)
+        if unsettled:  # the validity rule gates those the warning policy names (pipeline.node)
+            config = replace(config, start_unsettled=tuple(unsettled))
         if model_effects is not None:
             config = replace(config, model_effects=model_effects)
         if drops:

@@ -94,12 +94,13 @@ def _child(conn_in, conn_out, vehicle: str, params: str | None, options: dict, n
     writer = _CallLog()
     try:
         model = load_vehicle(vehicle, expect_kind="model")
-        start = None
+        start, unsettled = None, ()
         if params is not None:
-            from vdps_hil.identification.persistence import load_params
+            from vdps_hil.identification.persistence import load_params, unsettled_problems
 
-            start = load_params(params, model).params
-        tap = PipelineTap(model, writer, start, **options)
+            saved = load_params(params, model)
+            start, unsettled = saved.params, tuple(unsettled_problems(saved))
+        tap = PipelineTap(model, writer, start, start_unsettled=unsettled, **options)
         unfed = 0
         while True:
             msg = conn_in.recv()

@@ -72,8 +72,9 @@ missing" in its warnings rather than accumulating lag."""
               help="Record the session: raw topics as the pipeline received them, /decoded, /est, /truth.")
 @click.option("--params", default=None, metavar="FILE",
               help="Start the pipeline from saved identified parameters (vdps replay --save-params): "
-                   "warnings valid at once [default: the model file's priors, warnings valid once "
-                   "the cornering stiffnesses converge].")
+                   "warnings valid at once, unless the file had not settled the cornering stiffnesses "
+                   "[default: the model file's priors, warnings valid once the cornering stiffnesses "
+                   "converge].")
 @click.option("--calibrate", "calibrate_on", default=None, metavar="SCENARIO",
               help="First drive SCENARIO (e.g. paper) with the same vehicle, offline, replay it with the "
                    "identifier and start the pipeline from the parameters it identified (as --params).")
@@ -276,9 +277,10 @@ def describe(d: dict) -> list[str]:
         ws = d.get("warning_status") or {}
         why = ""
         if not ws.get("valid") and ws.get("not_converged", 0) >= max(1, ws.get("sensor_missing", 0)):
+            waits = ", ".join((d.get("predictions") or {}).get("require_converged") or ()) or "the identification"
             why = (f"; no frame was valid: 'not converged' in {ws['not_converged']} of {sum(ws.values())} warning "
-                   "cycles (from the model file's priors the warning waits for the identification: [warning] "
-                   "require_converged and converged_hold_s; --calibrate or --params start from identified parameters)")
+                   f"cycles (the warning waited for {waits}: from the model file's priors, or a parameter file "
+                   "that had not settled it; [warning] require_converged and converged_hold_s)")
         lines.append("  warning: none -- the pipeline never sent a valid VDPS_Warning of level >= 2" + why)
     else:
         lt = d["warning_lead_time_s"]
@@ -348,6 +350,9 @@ def _health_lines(d: dict) -> list[str]:
     line = predictor_params_line({"prediction": pr})  # identification.trusted: what the predictor had
     if line:
         lines.append(line)
+    if d.get("params") and pr.get("require_converged"):
+        lines.append(f"  parameter file: it had not settled {', '.join(pr['require_converged'])}; the warning "
+                     "waited for the pipeline's own identification of it (as from the priors)")
     un = d.get("warning_unhealthy") or {}
     if un.get("inconsistent"):
         cycles = sum((d.get("warning_status") or {}).values())

@@ -64,10 +64,18 @@ def model_for(truth_name: str) -> str:
 def start_params(model: str, params: str):
     """The identified parameters saved in ``params`` for the model vehicle file ``model``
     (``ParamsFileError``, a ValueError, when the file is unusable)."""
-    from vdps_hil.identification.persistence import load_params
+    return start_point(model, params)[0]
+
+
+def start_point(model: str, params: str):
+    """(identified parameters, problems the file did not settle) of the parameter file
+    ``params`` for the model vehicle file ``model`` (``identification.persistence``;
+    ``ParamsFileError``, a ValueError, when the file is unusable)."""
+    from vdps_hil.identification.persistence import load_params, unsettled_problems
     from vdps_hil.model.params import load_vehicle
 
-    return load_params(params, load_vehicle(model, "model")).params
+    saved = load_params(params, load_vehicle(model, "model"))
+    return saved.params, tuple(unsettled_problems(saved))
 
 
 def calibrate(scenario: str, truth_vehicle: str, model: str, directory: str | os.PathLike, *,
@@ -113,8 +121,9 @@ def make_system(model: str, susp_rate_hz: float, susp_sigma_m: float, params: st
     saved = _saved_workbench_model(model)
     if saved is None:
         vehicle = load_vehicle(model, "model")
-        start = start_params(model, params) if params is not None else None
+        start, unsettled = start_point(model, params) if params is not None else (None, ())
         return _ready(VdpsSystem(vehicle, SystemConfig.for_profile(susp_rate_hz, susp_sigma_m, start_params=start,
+                                                                   start_unsettled=unsettled,
                                                                    **_prediction_kw(live, drops))))
     if params is not None:
         raise BenchError("give --params or a saved workbench model as --model (it carries its parameters), not both")

@@ -462,5 +462,5 @@ class PipelineNode:
         """The warning chain's predictions: started, used, dropped at their deadline, failed."""
         pred = self.system.status().get("prediction") if hasattr(self.system, "status") else None
         return {} if not pred else {k: pred[k] for k in ("worker", "latency_s", "started", "used", "dropped", "failed",
-                                                         "param_sources") if k in pred}
+                                                         "param_sources", "require_converged") if k in pred}
 

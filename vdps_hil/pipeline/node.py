@@ -52,8 +52,12 @@ stayed converged ``converged_hold_s`` (1 s; ``configs/prediction/default.toml``)
 chain re-reads ``Identifier.converged_of`` those problems every ``convergence_period_s`` of filter time,
 0.02 s, the frames' period; a period not read breaks the hold); 2 "sensor missing" when
 the held inputs (steering, wheel torques) or a rate/wheel speed are missing, else 0; the node
-itself sends 3 "fault" for a stale prediction. ``SystemConfig.require_converged`` set to a tuple
-overrides that rule (``()``: never gate). Fault tolerance: 2 also while the IMU is missing or
+itself sends 3 "fault" for a stale prediction. Started from ``start_params`` (``--params``), the rule
+gates those of the policy's problems that the start did not settle (``SystemConfig.start_unsettled``:
+a parameter file's problems not "converged" when saved, or every problem when the file does not
+say; ``identification.persistence.unsettled_problems``), so a file from a drive that never
+identified the cornering stiffnesses waits for them like the priors, and one that did is valid at
+once. ``SystemConfig.require_converged`` set to a tuple overrides that rule (``()``: never gate). Fault tolerance: 2 also while the IMU is missing or
 within ``ImuChecks.settle_s`` of an IMU fault, 3 while the aiding innovations say the estimate is
 inconsistent (``estimation.aiding_monitor.health``), counted per reason in
 ``counters["unhealthy"]``; these two outrank 1 "not converged" (a disconnected IMU shows as 2
@@ -160,8 +164,9 @@ class VdpsSystem:
             if self.identifier is not None and cfg.predict_from == "identified":  # what the identifier vouches for
                 self._trusted = TrustedParams(self.identifier, params, 1.0 / pcfg.cadence_hz)
             rc = cfg.require_converged
-            if rc is None:  # the policy's rule: gate only a chain started from the priors
-                rc = getattr(pol, "require_converged", ()) if cfg.start_params is None else ()
+            if rc is None:  # the policy's rule: gate a chain started from the priors, or the start's unsettled
+                rc = tuple(n for n in getattr(pol, "require_converged", ())
+                           if cfg.start_params is None or n in cfg.start_unsettled)
             self.require_converged = tuple(rc)
             self.converged_hold_ns = int(round(getattr(pol, "converged_hold_s", 0.0) * 1e9))
             if self.identifier is not None and not set(rc) <= set(self.identifier.converged):
@@ -296,7 +301,8 @@ class VdpsSystem:
                                "latency_s": ch.node.config.prediction_latency_s, "started": ch.started,
                                "used": ch.assessments_total, "dropped": ch.drops, "failed": ch.prediction_failures,
                                "dropped_t0_ns": list(ch.dropped_t0_ns), "params_from": self.config.predict_from,
-                               "param_sources": {} if self._trusted is None else dict(self._trusted.source)}
+                               "param_sources": {} if self._trusted is None else dict(self._trusted.source),
+                               "require_converged": list(self.require_converged)}
         return d
 
     @property

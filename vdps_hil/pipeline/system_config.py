@@ -66,6 +66,7 @@ class SystemConfig:
     warning_node: Any = None  # WarningNodeConfig
     warning_bus: str = "vdps"
     require_converged: tuple[str, ...] | None = None  # None: the warning policy's, if started from the priors
+    start_unsettled: tuple[str, ...] = ()  # problems start_params did not settle (a --params file's meta.status)
     model_effects: Any = None  # EffectSet of a saved workbench model: dynamics join the predictor,
     # IMU measurement effects are removed from the readings (estimation.imu_correction)
     prediction_worker: str = "inline"  # prediction.offpath.WORKERS: "inline", "thread", "process"
