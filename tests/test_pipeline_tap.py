@@ -74,3 +74,26 @@ def test_the_tap_waits_for_an_imu_that_starts_late_and_sizes_as_the_replay(tmp_p
         _, rates, _ = sample_stats(iter(stream))
         assert tap.settings["probe_rates_hz"] == rates and rates["imu"] > 99.0
         tap.finish()
+
+
+def test_a_parameter_file_s_unsettled_problems_gate_the_live_warning_as_in_a_replay(tmp_path):
+    """``vdps log --pipeline --params``: the tap's system takes the file's values and the
+    problems it had not settled (``start_unsettled``), and gates the warning on those the policy
+    names (pipeline.node's rule, as ``vdps replay`` and ``vdps bench``)."""
+    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.record.decode import decode_recording
+    from vdps_hil.record.writer import RecordingWriter
+    from vdps_hil.sim.drive import Drive
+
+    rec = tmp_path / "p.mcap"
+    Drive("paper", profile="table1", seed=2, duration_s=3.5).run(str(rec))
+    samples = list(decode_recording(str(rec)))
+    veh = load_vehicle("sedan-model", expect_kind="model")
+    for unsettled, gated in ((("cornering", "inertia"), ("cornering",)), (("inertia",), ())):
+        with RecordingWriter(str(tmp_path / f"{len(gated)}.mcap")) as w:
+            tap = PipelineTap(veh, w, veh.params, start_unsettled=unsettled, record_order=False)
+            for smp in samples:
+                tap([smp])
+            assert tap.system is not None and tap.system.config.start_params == veh.params
+            assert tap.system.require_converged == gated
+            tap.finish()
