@@ -121,7 +121,7 @@ TRACKING = tuple(f"tracking_stiffness_{i}_n" for i in range(1, 5))
                    "its own least-squares secant sum(F_x kappa)/sum(kappa^2) over 0-10.25 s is -3.9 / -4.3 / -6.2 / "
                    "-3.4 % (wheels 1-4; the same on seeds 30-32, the truth does not depend on the seed), so 6.2 of "
                    "wheel 3's 8 % are the tire law the linear model cannot hold, and the sensor noise spreads the rest "
-                   "(/tmp script: Drive('paper-left-turn') /truth/state slip_ratio_i, tire_force_long_n_i)")
+                   "(tools/tire_secant.py)")
 def test_tracking_stiffnesses_below_a_fifth_of_their_prior_error(ident_runs):
     prior = ident_runs[0]["prior_rel_err"]
     for k in TRACKING:
