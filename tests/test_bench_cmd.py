@@ -111,9 +111,11 @@ def test_a_parameter_file_that_had_not_settled_the_cornering_stiffnesses_keeps_t
         cap = capsys.readouterr()
         docs[name] = (json.loads(cap.out), cap.err)
     settled, unsettled = docs["settled"][0], docs["unsettled"][0]
-    assert settled["predictions"]["require_converged"] == [] and "parameter file:" not in docs["settled"][1]
+    assert settled["predictions"]["require_converged"] == [] and "--params:" not in docs["settled"][1]
+    assert "params_unsettled" not in settled
     assert unsettled["predictions"]["require_converged"] == ["cornering"]
-    assert "parameter file: it had not settled cornering" in docs["unsettled"][1]
+    assert unsettled["params_unsettled"] == {"cornering": "model mismatch"}
+    assert "--params: not identified when saved: cornering model mismatch; the warning waited" in docs["unsettled"][1]
     # 0.8 s cannot converge the cornering problem (held 1 s): no valid frame; from the settled file
     # the frames are valid from the first prediction on
     assert unsettled["warning_status"]["valid"] == 0 and unsettled["warning_status"]["not_converged"] > 0
@@ -173,11 +175,12 @@ def test_the_words_say_warning_time_lead_ecu_action_outcome_and_recording():
             "'not converged' in 370 of 371 warning cycles (the warning waited for cornering: from the model file's "
             "priors, or a parameter file that had not settled it; [warning] require_converged and "
             "converged_hold_s)") in waited
-    # a parameter file that had not settled what the warning waits for: said
-    assert "parameter file:" not in waited
-    unsettled = "\n".join(describe(_doc(params="p.json", predictions={"require_converged": ["cornering"]})))
-    assert ("parameter file: it had not settled cornering; the warning waited for the pipeline's own "
-            "identification of it (as from the priors)") in unsettled
+    # a parameter file that had not settled what the warning waits for: said as vdps replay says it
+    assert "--params:" not in waited
+    unsettled = "\n".join(describe(_doc(params="p.json", params_unsettled={"cornering": "model mismatch"},
+                                         params_not_identified=None, predictions={"require_converged": ["cornering"]})))
+    assert ("--params: not identified when saved: cornering model mismatch; the warning waited for cornering to be "
+            "identified here") in unsettled
     some = "\n".join(describe(_doc(first_warning_t_s=None, warning_status={"valid": 5, "not_converged": 365})))
     assert "never sent a valid VDPS_Warning of level >= 2\n" in some + "\n" and "no frame was valid" not in some
     lifted = copy.deepcopy(_doc(truth_events=[{"kind": "tip_up", "t_s": 2.21}]))

@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from vdps_hil.identification.persistence import (SCHEMA, SCHEMA_VERSION, ParamsFileError, load_params,
-                                                 parse_params, reset_params, save_params, unsettled_problems)
+                                                 parse_params, reset_params, save_params, unidentified_params,
+                                                 unsettled_problems)
 from vdps_hil.identification.identifier import Identifier
 from vdps_hil.model.params import PARAM_NAMES, load_vehicle
 
@@ -149,3 +150,20 @@ def test_a_file_says_which_problems_were_not_identified_when_saved(tmp_path):
     save_params(path, IDENTIFIED, MODEL)  # a file that does not say: nothing is taken as identified
     assert unsettled_problems(load_params(path, MODEL)) == {n: "unknown" for n in status}
 
+
+
+def test_a_file_says_which_parameters_were_not_identified_when_saved(tmp_path):
+    path = tmp_path / "p.json"
+    ps = {n: "identified" for n in PARAM_NAMES}
+    save_params(path, IDENTIFIED, MODEL, meta={"param_status": {**ps, "inertia_x_kgm2": "at bound",
+                                                                "cornering_stiffness_rear_nprad": "model mismatch"}})
+    assert unidentified_params(load_params(path, MODEL)) == {"inertia_x_kgm2": "at bound",
+                                                             "cornering_stiffness_rear_nprad": "model mismatch"}
+    # a parameter it does not name is not taken as identified; a file that does not say, or says
+    # nonsense there, gives None (the problems' statuses then speak for it)
+    del ps["mass_kg"]
+    save_params(path, IDENTIFIED, MODEL, meta={"param_status": ps})
+    assert unidentified_params(load_params(path, MODEL)) == {"mass_kg": "unknown"}
+    for meta in ({}, {"param_status": [1, 2]}, {"param_status": "identified"}):
+        save_params(path, IDENTIFIED, MODEL, meta=meta)
+        assert unidentified_params(load_params(path, MODEL)) is None

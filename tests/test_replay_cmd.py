@@ -124,6 +124,9 @@ def test_save_params_then_start_from_them(drive, tmp_path):
     doc1 = json.loads((tmp_path / "1.json").read_text())["identification"]
     kept = json.loads(saved.read_text())["meta"]["at_bound_kept_start"]
     assert kept == [n for st in doc1["status"].values() for n, v in st["params"].items() if v["status"] == "at bound"]
+    # every parameter's status is saved with it (read back by persistence.unidentified_params)
+    assert json.loads(saved.read_text())["meta"]["param_status"] == {
+        n: v["status"] for st in doc1["status"].values() for n, v in st["params"].items()}
     for n in kept:
         assert getattr(p, n) == doc1["prior"][n] and first[n] != doc1["prior"][n]
     code, _ = run("replay", str(drive), "--no-predict", "--params", str(saved), "--json", str(tmp_path / "2.json"))
@@ -150,14 +153,22 @@ def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_p
     save_params(saved, veh.params, veh, meta={"status": {n: "converged" for n in PROBLEM_NAMES}})
     save_params(unsure, veh.params, veh, meta={"status": {**{n: "converged" for n in PROBLEM_NAMES},
                                                           "cornering": "model mismatch"}})
-    st, docs, lines = {}, {}, {}
+    # a file from a drive that left the inertias at their bound: said per parameter, not waited for
+    # (the validity rule names the cornering problem only)
+    inertia = tmp_path / "i.json"
+    save_params(inertia, veh.params, veh, meta={"status": {**{n: "converged" for n in PROBLEM_NAMES},
+                                                           "inertia": "at bound"},
+                                                "param_status": {**{n: "identified" for n in PARAM_NAMES},
+                                                                 "inertia_x_kgm2": "at bound"}})
+    st, docs, lines, said = {}, {}, {}, {}
     for name, extra in (("priors", ()), ("params", ("--params", str(saved))), ("no-ident", ("--no-identify",)),
-                        ("unsure", ("--params", str(unsure)))):
+                        ("unsure", ("--params", str(unsure))), ("inertia", ("--params", str(inertia)))):
         code, text = run("replay", str(drive), *extra, "--json", str(tmp_path / f"{name}.json"))
         assert code == 0
         docs[name] = json.loads((tmp_path / f"{name}.json").read_text())
         st[name] = docs[name]["system"]["status"]
         lines[name] = [ln for ln in text.splitlines() if ln.startswith("  warning: ")]
+        said[name] = [ln for ln in text.splitlines() if ln.startswith("  --params: ")]
     # the sent frames by status (decoded from VDPS_Warning) and one line saying so
     for name, doc in docs.items():
         p = doc["prediction"]
@@ -169,7 +180,16 @@ def test_warning_validity_from_the_priors_and_from_saved_parameters(drive, tmp_p
     assert pp["require_converged"] == [] and pr["require_converged"] == ["cornering"] and pr["converged_hold_s"] == 1.0
     assert f"from {pp['first_valid_s']:.2f} s, highest valid level " in lines["params"][0]
     assert docs["unsure"]["params_unsettled"] == {"cornering": "model mismatch"}
-    assert "params_unsettled" not in docs["params"]
+    assert docs["unsure"]["prediction"]["require_converged"] == ["cornering"]
+    assert said["unsure"] == ["  --params: not identified when saved: cornering model mismatch; the warning waited "
+                              "for cornering to be identified here"]
+    assert "params_unsettled" not in docs["params"] and said["params"] == []
+    di = docs["inertia"]
+    assert di["params_unsettled"] == {"inertia": "at bound"} and di["params_not_identified"] == {
+        "inertia_x_kgm2": "at bound"} and di["prediction"]["require_converged"] == []
+    assert said["inertia"] == ["  --params: not identified when saved: inertia_x_kgm2 at bound; the warning did not "
+                               "wait for them (its validity rule, [warning] require_converged, does not name them)"]
+    assert di["prediction"]["frames_by_status"] == docs["params"]["prediction"]["frames_by_status"]
     assert st["unsure"]["not_converged"] >= st["params"]["not_converged"] + 50
     assert st["params"]["not_converged"] == st["no-ident"]["not_converged"] > 0
     assert st["priors"]["not_converged"] >= st["params"]["not_converged"] + 50  # >= 0.5 s waiting

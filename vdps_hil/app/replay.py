@@ -159,7 +159,8 @@ def _starting_point(veh: Vehicle, params, model):
     if params is not None and model is not None:
         raise ReplayError("give --params or --model (a saved model carries its parameters), not both")
     if params is not None:
-        from vdps_hil.identification.persistence import ParamsFileError, load_params, unsettled_problems
+        from vdps_hil.identification.persistence import (ParamsFileError, load_params, unidentified_params,
+                                                         unsettled_problems)
 
         try:
             saved = load_params(params, veh)
@@ -167,8 +168,8 @@ def _starting_point(veh: Vehicle, params, model):
             raise ReplayError(str(e)) from None
         start = saved.params
         unsettled = unsettled_problems(saved)
-        if unsettled:  # the chain waits for the live identifier on these (persistence docstring)
-            model_doc = {"params_unsettled": unsettled}
+        if unsettled:  # the chain waits for the live identifier on those the policy names (pipeline.node)
+            model_doc = {"params_unsettled": unsettled, "params_not_identified": unidentified_params(saved)}
     model_effects = None
     if model is not None:
         start, model_effects, model_doc = _load_workbench_model(model, veh)
@@ -312,7 +313,8 @@ def _document(path, output, veh: Vehicle, system: VdpsSystem, side, summary: Rep
                 "realtime_factor": (doc["duration_s"] / wall) if wall > 0 and doc["duration_s"] else None,
                 "jobs": 2 if isinstance(side, RecordingProcess) else 1})
     if model_doc is not None and "params_unsettled" in model_doc:
-        doc["params_unsettled"] = model_doc["params_unsettled"]  # warnings wait for these problems
+        doc["params_unsettled"] = model_doc["params_unsettled"]  # the policy's among them gate the warning
+        doc["params_not_identified"] = model_doc["params_not_identified"]
     elif model_doc is not None:
         doc["model"] = model_doc
     if save_params is not None:
@@ -325,6 +327,7 @@ def _document(path, output, veh: Vehicle, system: VdpsSystem, side, summary: Rep
                   meta={"source": os.path.basename(os.fspath(path)), "updates":
                         {n: c.updates for n, c in idf.counters.items()},
                         "status": {n: st.status for n, st in idf.problem_status.items()},
+                        "param_status": {p.name: p.status for st in idf.problem_status.values() for p in st.params},
                         "at_bound_kept_start": list(at_bound)})
         except ParamsFileError as e:
             raise ReplayError(str(e)) from None

@@ -345,14 +345,14 @@ def _health_lines(d: dict) -> list[str]:
         lines.append(f"  predictions: {pr.get('dropped', 0)} of {pr.get('started', 0)} dropped at their deadline "
                      f"({1e3 * pr.get('latency_s', 0.0):g} ms of bus time), {pr.get('failed', 0)} failed; "
                      f"the warning frames said 'fault' until the next prediction was used")
-    from vdps_hil.cli.replay_cmd import predictor_params_line
+    from vdps_hil.cli.replay_cmd import params_line, predictor_params_line
 
     line = predictor_params_line({"prediction": pr})  # identification.trusted: what the predictor had
     if line:
         lines.append(line)
-    if d.get("params") and pr.get("require_converged"):
-        lines.append(f"  parameter file: it had not settled {', '.join(pr['require_converged'])}; the warning "
-                     "waited for the pipeline's own identification of it (as from the priors)")
+    line = params_line({**d, "prediction": pr})  # what --params had not settled, and what the warning waited for
+    if line:
+        lines.append(line)
     un = d.get("warning_unhealthy") or {}
     if un.get("inconsistent"):
         cycles = sum((d.get("warning_status") or {}).values())

@@ -140,11 +140,24 @@ def replay(recording, vehicle, model_file, dbc, signalmap, bus_map, sensorset, o
     for line in (warning_line(doc), predictor_params_line(doc)):
         if line:
             click.echo(line, err=bool(json_out == "-"))
-    if doc.get("params_unsettled"):
-        click.echo("  --params: not identified when saved: " + ", ".join(
-            f"{k} {v}" for k, v in doc["params_unsettled"].items()) + "; warnings invalid until identified here",
-            err=bool(json_out == "-"))
+    line = params_line(doc)
+    if line:
+        click.echo(line, err=bool(json_out == "-"))
     write_json(doc, json_out)
+
+
+def params_line(doc: dict) -> str | None:
+    """What a ``--params`` file had not settled (per parameter where it says, else per problem) and
+    what the warning waited for here, or None."""
+    un = doc.get("params_unsettled")
+    if not un:
+        return None
+    per = doc.get("params_not_identified") or un
+    waits = (doc.get("prediction") or {}).get("require_converged") or []
+    tail = (f"; the warning waited for {', '.join(waits)} to be identified here" if waits
+            else "; the warning did not wait for them (its validity rule, [warning] require_converged, "
+                 "does not name them)")
+    return "  --params: not identified when saved: " + ", ".join(f"{k} {v}" for k, v in per.items()) + tail
 
 
 def summary_line(doc: dict, output=None) -> str:

@@ -91,7 +91,7 @@ from vdps_hil.adapters.base import AdapterError
 from vdps_hil.record import schemas as S
 from vdps_hil.units import NS_PER_S
 
-from .bench_config import BenchConfig, BenchError, model_for, start_params
+from .bench_config import BenchConfig, BenchError, model_for, params_not_settled
 from .ecu import Ecu
 from .latency import cycle_latencies, latency_summary, lead_times, reference_events
 from .pacing import BenchClock
@@ -162,9 +162,10 @@ class Bench:
         truth = c.vehicle or self.drive.scenario.raw.get("vehicle") or self.drive.vehicle.name
         self.truth_vehicle = str(truth)  # the file or name the simulator drives (calibrate() drives it too)
         self.model = c.model or model_for(str(truth))
+        self.params_not_settled: dict = {}  # what --params had not settled (bench_config.params_not_settled)
         if c.params is not None:
             try:
-                start_params(self.model, c.params)
+                self.params_not_settled = params_not_settled(self.model, c.params)
             except (ValueError, OSError) as e:
                 raise BenchError(str(e).splitlines()[0]) from None
 
@@ -392,6 +393,7 @@ class Bench:
             "scenario": self.drive.scenario.name, "vehicle": self.drive.vehicle.name, "model": self.model,
             "profile": self.drive.profile.name, "seed": self.drive.seed, "transport": self.transport.name,
             "can": side.can.describe(), "speed": c.speed, "react": c.react, "params": c.params,
+            **self.params_not_settled,
             "effects": list(self.drive.effect_set.names), "faults": [str(f) for f in c.faults],
             "duration_s": sim_s, "wall_time_s": wall,
             "realtime_factor": sim_s / wall if wall > 0 else math.nan,

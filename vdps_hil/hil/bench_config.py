@@ -13,7 +13,7 @@ from pathlib import Path
 from .ecu import ActuatorConfig
 from .pacing import DEFAULT_LATE_TOLERANCE_S
 
-__all__ = ["BenchConfig", "BenchError", "calibrate", "make_system", "model_for", "start_params",
+__all__ = ["BenchConfig", "BenchError", "calibrate", "make_system", "model_for", "params_not_settled", "start_point",
            "warm_pipeline_kernels"]
 
 
@@ -61,10 +61,16 @@ def model_for(truth_name: str) -> str:
     raise BenchError(f"no model file paired with vehicle {truth_name!r}: give --model FILE")
 
 
-def start_params(model: str, params: str):
-    """The identified parameters saved in ``params`` for the model vehicle file ``model``
-    (``ParamsFileError``, a ValueError, when the file is unusable)."""
-    return start_point(model, params)[0]
+def params_not_settled(model: str, params: str) -> dict:
+    """What the parameter file had not settled when saved, as ``vdps replay``'s JSON says it:
+    {"params_unsettled": problem -> status, "params_not_identified": parameter -> status or None}
+    (empty when it settled everything)."""
+    from vdps_hil.identification.persistence import load_params, unidentified_params, unsettled_problems
+    from vdps_hil.model.params import load_vehicle
+
+    saved = load_params(params, load_vehicle(model, "model"))
+    un = unsettled_problems(saved)
+    return {"params_unsettled": un, "params_not_identified": unidentified_params(saved)} if un else {}
 
 
 def start_point(model: str, params: str):

@@ -16,9 +16,11 @@ File format (JSON, UTF-8, written atomically: temporary file + rename)::
 value, ``identification.status``), which keep the run's start value (``Identifier.handover_params``;
 named in ``meta.at_bound_kept_start``).
 ``meta.status`` (written by ``vdps replay --save-params``): problem -> the identifier's status
-when saved ("converged", or why not: ``identification.status``). :func:`unsettled_problems`
-reads it back: a warning chain started from such a file stays invalid until the live identifier
-has identified those problems (``app.replay``), and says so.
+when saved ("converged", or why not: ``identification.status``); ``meta.param_status``: parameter ->
+its status ("identified", or why not). :func:`unsettled_problems` and :func:`unidentified_params`
+read them back: a warning chain started from such a file stays invalid until the live identifier
+has identified those of the unsettled problems the warning's validity rule names (the cornering
+problem; ``pipeline.node``), and the commands say which values were not identified when saved.
 
 Loading checks (each failure is one line, :class:`ParamsFileError`): size <= 1 MB, valid JSON,
 the schema name, a supported schema version, the vehicle name of the model file in use, all
@@ -200,6 +202,16 @@ def reset_params(path: str | Path) -> bool:
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "ParamsFileError", "PersistedParams", "check_params",
            "load_params", "parse_params", "reset_params", "save_params"]
+
+
+def unidentified_params(persisted: PersistedParams) -> dict[str, str] | None:
+    """Parameter -> status of the parameters that were not "identified" when the file was saved
+    (``meta.param_status``, written since 2026-12-07: "at bound", "model mismatch", ...); None
+    when the file does not say (older files: only the problems' statuses)."""
+    st = persisted.meta.get("param_status") if isinstance(persisted.meta, dict) else None
+    if not isinstance(st, dict):
+        return None
+    return {n: str(st.get(n, "unknown")) for n in PARAM_NAMES if st.get(n) != "identified"}
 
 
 def unsettled_problems(persisted: PersistedParams) -> dict[str, str]:
