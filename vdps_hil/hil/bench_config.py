@@ -61,14 +61,20 @@ def model_for(truth_name: str) -> str:
     raise BenchError(f"no model file paired with vehicle {truth_name!r}: give --model FILE")
 
 
+def _saved_params(model: str, params: str):
+    from vdps_hil.identification.persistence import load_params
+    from vdps_hil.model.params import load_vehicle
+
+    return load_params(params, load_vehicle(model, "model"))
+
+
 def params_not_settled(model: str, params: str) -> dict:
     """What the parameter file had not settled when saved, as ``vdps replay``'s JSON says it:
     {"params_unsettled": problem -> status, "params_not_identified": parameter -> status or None}
-    (empty when it settled everything)."""
-    from vdps_hil.identification.persistence import load_params, unidentified_params, unsettled_problems
-    from vdps_hil.model.params import load_vehicle
+    (empty when it settled everything; ``ParamsFileError``, a ValueError, when it is unusable)."""
+    from vdps_hil.identification.persistence import unidentified_params, unsettled_problems
 
-    saved = load_params(params, load_vehicle(model, "model"))
+    saved = _saved_params(model, params)
     un = unsettled_problems(saved)
     return {"params_unsettled": un, "params_not_identified": unidentified_params(saved)} if un else {}
 
@@ -77,10 +83,9 @@ def start_point(model: str, params: str):
     """(identified parameters, problems the file did not settle) of the parameter file
     ``params`` for the model vehicle file ``model`` (``identification.persistence``;
     ``ParamsFileError``, a ValueError, when the file is unusable)."""
-    from vdps_hil.identification.persistence import load_params, unsettled_problems
-    from vdps_hil.model.params import load_vehicle
+    from vdps_hil.identification.persistence import unsettled_problems
 
-    saved = load_params(params, load_vehicle(model, "model"))
+    saved = _saved_params(model, params)
     return saved.params, tuple(unsettled_problems(saved))
 
 
