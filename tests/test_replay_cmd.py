@@ -235,6 +235,10 @@ def test_the_warning_line_says_what_the_frames_said_and_what_an_invalid_warning_
         "  warning: 0 of 251 frames valid (the others: not converged 250, sensor missing 1); from the priors a frame "
         "is valid once cornering has converged and stayed so 1 s ([warning] of the prediction config); --params "
         "starts from saved parameters")
+    assert warning_line({**doc(0, 250, 1), "params_unsettled": {"cornering": "model mismatch"}}) == (
+        "  warning: 0 of 251 frames valid (the others: not converged 250, sensor missing 1); a frame is valid once "
+        "cornering has converged and stayed so 1 s ([warning] of the prediction config); the --params file had not "
+        "settled it")
     assert warning_line(doc(0, 24, 3012)).endswith(
         "(the others: not converged 24, sensor missing 3012); sensor missing: the predictor needs the steering, "
         "the wheel torques, the IMU rates and the wheel speeds")

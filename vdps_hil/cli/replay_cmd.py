@@ -201,9 +201,10 @@ def warning_line(doc: dict) -> str | None:
     if others:
         line += f" (the others: {', '.join(others)})"
     if not by["valid"] and by["not_converged"] >= by["sensor_missing"] and p.get("require_converged"):
-        line += (f"; from the priors a frame is valid once {', '.join(p['require_converged'])} has converged and"
-                 f" stayed so {p['converged_hold_s']:g} s ([warning] of the prediction config); --params starts"
-                 " from saved parameters")
+        unsettled = bool(doc.get("params_unsettled"))  # from a --params file that had not settled them
+        line += (f"; {'' if unsettled else 'from the priors '}a frame is valid once {', '.join(p['require_converged'])}"
+                 f" has converged and stayed so {p['converged_hold_s']:g} s ([warning] of the prediction config)"
+                 + ("; the --params file had not settled it" if unsettled else "; --params starts from saved parameters"))
     elif not by["valid"] and by["sensor_missing"]:
         line += "; sensor missing: the predictor needs the steering, the wheel torques, the IMU rates and the wheel speeds"
     return line
