@@ -217,6 +217,23 @@ def test_the_predictor_line_says_where_its_parameters_came_from():
     assert predictor_params_line({"prediction": {"param_sources": {}}}) is None and predictor_params_line({}) is None
 
 
+def test_the_params_line_says_a_problem_once_when_all_its_parameters_share_a_status():
+    from vdps_hil.cli.replay_cmd import params_line
+
+    per = {n: "not excited" for n in PARAM_NAMES}
+    per["tracking_stiffness_2_n"] = "at bound"
+    doc = {"params_unsettled": {"mass": "not excited"}, "params_not_identified": per,
+           "prediction": {"require_converged": ["cornering"]}}
+    assert params_line(doc) == (
+        "  --params: not identified when saved: mass_kg not excited, inertia (all 3) not excited, tracking_stiffness_1_n "
+        "not excited, tracking_stiffness_2_n at bound, tracking_stiffness_3_n not excited, tracking_stiffness_4_n not "
+        "excited, cornering (all 2) not excited; the warning waited for cornering to be identified here")
+    # an older file (problems only) is said per problem
+    assert params_line({**doc, "params_not_identified": None}).startswith(
+        "  --params: not identified when saved: mass not excited;")
+    assert params_line({"params_unsettled": {}}) is None and params_line({}) is None
+
+
 def test_the_warning_line_says_what_the_frames_said_and_what_an_invalid_warning_waits_for():
     """``replay_cmd.warning_line`` on the JSON's ``prediction`` block: valid frames, from when,
     the highest valid level, the other statuses; with no valid frame, the validity rule it waits

@@ -157,7 +157,26 @@ def params_line(doc: dict) -> str | None:
     tail = (f"; the warning waited for {', '.join(waits)} to be identified here" if waits
             else "; the warning did not wait for them (its validity rule, [warning] require_converged, "
                  "does not name them)")
-    return "  --params: not identified when saved: " + ", ".join(f"{k} {v}" for k, v in per.items()) + tail
+    return "  --params: not identified when saved: " + ", ".join(_by_problem(per)) + tail
+
+
+def _by_problem(per: dict) -> list[str]:
+    """"name status" per entry, a problem's parameters that share one status said once as
+    "problem (all n) status" (the entries are parameters or problems)."""
+    from vdps_hil.identification.config import PROBLEM_PARAMS
+
+    out, done = [], set()
+    for k, v in per.items():
+        if k in done:
+            continue
+        prob = next((p for p, names in PROBLEM_PARAMS.items() if k in names), None)
+        names = PROBLEM_PARAMS.get(prob, ())
+        if len(names) > 1 and all(per.get(n) == v for n in names):
+            out.append(f"{prob} (all {len(names)}) {v}")
+            done.update(names)
+        else:
+            out.append(f"{k} {v}")
+    return out
 
 
 def summary_line(doc: dict, output=None) -> str:
