@@ -159,17 +159,15 @@ def _starting_point(veh: Vehicle, params, model):
     if params is not None and model is not None:
         raise ReplayError("give --params or --model (a saved model carries its parameters), not both")
     if params is not None:
-        from vdps_hil.identification.persistence import (ParamsFileError, load_params, unidentified_params,
-                                                         unsettled_problems)
+        from vdps_hil.identification.persistence import ParamsFileError, load_params, not_settled
 
         try:
             saved = load_params(params, veh)
         except ParamsFileError as e:
             raise ReplayError(str(e)) from None
         start = saved.params
-        unsettled = unsettled_problems(saved)
-        if unsettled:  # the chain waits for the live identifier on those the policy names (pipeline.node)
-            model_doc = {"params_unsettled": unsettled, "params_not_identified": unidentified_params(saved)}
+        # the chain waits for the live identifier on those of them the policy names (pipeline.node)
+        model_doc = not_settled(saved) or None
     model_effects = None
     if model is not None:
         start, model_effects, model_doc = _load_workbench_model(model, veh)

@@ -72,11 +72,9 @@ def params_not_settled(model: str, params: str) -> dict:
     """What the parameter file had not settled when saved, as ``vdps replay``'s JSON says it:
     {"params_unsettled": problem -> status, "params_not_identified": parameter -> status or None}
     (empty when it settled everything; ``ParamsFileError``, a ValueError, when it is unusable)."""
-    from vdps_hil.identification.persistence import unidentified_params, unsettled_problems
+    from vdps_hil.identification.persistence import not_settled
 
-    saved = _saved_params(model, params)
-    un = unsettled_problems(saved)
-    return {"params_unsettled": un, "params_not_identified": unidentified_params(saved)} if un else {}
+    return not_settled(_saved_params(model, params))
 
 
 def start_point(model: str, params: str):

@@ -201,7 +201,8 @@ def reset_params(path: str | Path) -> bool:
 
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "ParamsFileError", "PersistedParams", "check_params",
-           "load_params", "parse_params", "reset_params", "save_params"]
+           "load_params", "not_settled", "parse_params", "reset_params", "save_params",
+           "unidentified_params", "unsettled_problems"]
 
 
 def unidentified_params(persisted: PersistedParams) -> dict[str, str] | None:
@@ -212,6 +213,14 @@ def unidentified_params(persisted: PersistedParams) -> dict[str, str] | None:
     if not isinstance(st, dict):
         return None
     return {n: str(st.get(n, "unknown")) for n in PARAM_NAMES if st.get(n) != "identified"}
+
+
+def not_settled(persisted: PersistedParams) -> dict:
+    """What the file had not settled when saved, as the commands' JSON says it:
+    {"params_unsettled": :func:`unsettled_problems`, "params_not_identified":
+    :func:`unidentified_params`}, or {} when it settled every problem."""
+    un = unsettled_problems(persisted)
+    return {"params_unsettled": un, "params_not_identified": unidentified_params(persisted)} if un else {}
 
 
 def unsettled_problems(persisted: PersistedParams) -> dict[str, str]:
