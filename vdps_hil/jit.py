@@ -50,7 +50,7 @@ KERNEL_GROUPS: tuple[tuple[str, ...], ...] = (
     ("vdps_hil.model.reduced", "vdps_hil.model.core_kernel", "vdps_hil.prediction.integration_kernel",
      "vdps_hil.sim.step_kernel", "vdps_hil.workbench.row_kernel"),
     ("vdps_hil.estimation.ekf_kernels", "vdps_hil.estimation.ekf_update_kernels",
-     "vdps_hil.identification.rls_kernels"),
+     "vdps_hil.identification.rls_kernels", "vdps_hil.identification.mismatch_kernels"),
 )
 """Modules that define kernels and a ``warm()`` that compiles them with representative
 arguments (``python -m vdps_hil.jit --warm``), in groups: a module whose kernels call another

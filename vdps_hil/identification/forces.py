@@ -141,27 +141,20 @@ def _slip_angles(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
 def tire_forces_wheel_n(slip_ratio, slip_angle_rad, params: IdentifiedParams) -> tuple[np.ndarray, np.ndarray]:
     """Eq 15 with eq 17's equal sides: F_a,i = C_lambda,i lambda_i, F_b,i = C_alpha,axle/2
     alpha_i [N], wheel frame (a forward along the wheel, b to its left)."""
-    c_l = np.array(params.tracking_stiffness_n)
-    c_a = np.array([params.cornering_stiffness_front_nprad, params.cornering_stiffness_front_nprad,
-                    params.cornering_stiffness_rear_nprad, params.cornering_stiffness_rear_nprad]) / 2.0
-    return c_l * np.asarray(slip_ratio, dtype=float), c_a * np.asarray(slip_angle_rad, dtype=float)
+    fa, fb = _wheel_forces(params, _floats(slip_ratio), _floats(slip_angle_rad))
+    return np.array(fa), np.array(fb)
 
 
 def tire_forces_body_n(f_a_n, f_b_n, wheel_angle_rad) -> tuple[np.ndarray, np.ndarray]:
     """Eq 16 per wheel: wheel-frame forces rotated by the wheel angle into the vehicle frame."""
-    d = np.asarray(wheel_angle_rad, dtype=float)
-    fa, fb = np.asarray(f_a_n, dtype=float), np.asarray(f_b_n, dtype=float)
-    c, s = np.cos(d), np.sin(d)
-    return fa * c - fb * s, fa * s + fb * c
+    fx, fy = _body_forces(_floats(f_a_n), _floats(f_b_n), _floats(wheel_angle_rad))
+    return np.array(fx), np.array(fy)
 
 
 def body_moments_nm(geometry: Geometry, f_susp_body_n, f_x_n, f_y_n) -> np.ndarray:
     """(M_x, M_y, M_z) about the CG, vehicle frame, of the strut and tire forces:
     sum_i r_i x F_i with r_i = (x_i, y_i, -h_cg) and F_i = (F_x,i, F_y,i, F_s,i)."""
-    xy = corner_xy_array(geometry)
-    x, y, h = xy[:, 0], xy[:, 1], geometry.h_cg_m
-    fs, fx, fy = (np.asarray(v, dtype=float) for v in (f_susp_body_n, f_x_n, f_y_n))
-    return np.array([(y * fs + h * fy).sum(), (-x * fs - h * fx).sum(), (x * fy - y * fx).sum()])
+    return np.array(_body_moments(geometry, _floats(f_susp_body_n), _floats(f_x_n), _floats(f_y_n)))
 
 
 def unsprung_inertia_moments_nm(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
@@ -169,14 +162,57 @@ def unsprung_inertia_moments_nm(vehicle: Vehicle, inp: IdentInputs) -> np.ndarra
     m_u,i (g - a) at the wheel centre r_w,i = (x_i, y_i, -(h_cg - r) + H_i)), as the physics
     core applies them to the sprung body. a - g in the aux frame is (xdd_a - yd_a psid_v - G_x,
     ydd_a + xd_a psid_v - G_y) (eq 13's left-hand sides over m)."""
+    return np.array(_unsprung_moments(vehicle, inp))
+
+
+# The float cores of the functions above: per wheel in plain floats (4 values each, where numpy's
+# per-call cost exceeds the arithmetic), the same operations in the same order as elementwise
+# numpy, sums from 0.0 in wheel order as numpy's for 4 values: the results are bit-identical.
+def _floats(v) -> list[float]:
+    return np.asarray(v, dtype=float).tolist()
+
+
+def _wheel_forces(params: IdentifiedParams, slip_ratio, slip_angle_rad) -> tuple[list, list]:
+    c_f = params.cornering_stiffness_front_nprad / 2.0
+    c_r = params.cornering_stiffness_rear_nprad / 2.0
+    return ([c * lam for c, lam in zip(params.tracking_stiffness_n, slip_ratio, strict=True)],
+            [c * al for c, al in zip((c_f, c_f, c_r, c_r), slip_angle_rad, strict=True)])
+
+
+def _body_forces(fa, fb, wheel_angle_rad) -> tuple[list, list]:
+    fx, fy = [], []
+    for a, b, d in zip(fa, fb, wheel_angle_rad, strict=True):
+        c, s = math.cos(d), math.sin(d)
+        fx.append(a * c - b * s)
+        fy.append(a * s + b * c)
+    return fx, fy
+
+
+def _body_moments(geometry: Geometry, fs, fx, fy) -> list[float]:
+    h = geometry.h_cg_m
+    mx = my = mz = 0.0
+    for (x, y), s, a, b in zip(corner_xy_array(geometry).tolist(), fs, fx, fy, strict=True):
+        mx += y * s + h * b
+        my += -x * s - h * a
+        mz += x * b - y * a
+    return [mx, my, mz]
+
+
+def _unsprung_moments(vehicle: Vehicle, inp: IdentInputs) -> list[float]:
     geo = vehicle.geometry
-    xy = corner_xy_array(geo)
-    mu = unsprung_masses_kg(vehicle)
-    zw = -(geo.h_cg_m - vehicle.tire.rolling_radius_m) + np.asarray(inp.susp_deflection_m, dtype=float)
+    zw0 = -(geo.h_cg_m - vehicle.tire.rolling_radius_m)
     psid = inp.psi_v_dot_radps
-    ux = -mu * (inp.xdd_a_mps2 - inp.yd_a_mps * psid - inp.gravity_aux_mps2[0])
-    uy = -mu * (inp.ydd_a_mps2 + inp.xd_a_mps * psid - inp.gravity_aux_mps2[1])
-    return np.array([(-zw * uy).sum(), (zw * ux).sum(), (xy[:, 0] * uy - xy[:, 1] * ux).sum()])
+    ax = inp.xdd_a_mps2 - inp.yd_a_mps * psid - inp.gravity_aux_mps2[0]
+    ay = inp.ydd_a_mps2 + inp.xd_a_mps * psid - inp.gravity_aux_mps2[1]
+    mx = my = mz = 0.0
+    for (x, y), mu, hh in zip(corner_xy_array(geo).tolist(), unsprung_masses_kg(vehicle).tolist(),
+                              inp.susp_deflection_m, strict=True):
+        zw = zw0 + hh
+        ux, uy = -mu * ax, -mu * ay
+        mx += -zw * uy
+        my += zw * ux
+        mz += x * uy - y * ux
+    return [mx, my, mz]
 
 
 def moments_from_inputs(vehicle: Vehicle, params: IdentifiedParams, inp: IdentInputs,
@@ -187,15 +223,15 @@ def moments_from_inputs(vehicle: Vehicle, params: IdentifiedParams, inp: IdentIn
     if inp.moments_nm is not None:
         return np.array(inp.moments_nm)
     fs = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
-    fa, fb = tire_forces_wheel_n(inp.slip_ratio, slip_angles_rad(vehicle, inp), params)
-    fx, fy = tire_forces_body_n(fa, fb, inp.wheel_angle_rad)
-    m = body_moments_nm(vehicle.geometry, fs, fx, fy) + unsprung_inertia_moments_nm(vehicle, inp)
+    fa, fb = _wheel_forces(params, inp.slip_ratio, slip_angles_rad(vehicle, inp).tolist())
+    fx, fy = _body_forces(fa, fb, inp.wheel_angle_rad)
+    m = [b + u for b, u in zip(_body_moments(vehicle.geometry, fs.tolist(), fx, fy), _unsprung_moments(vehicle, inp))]
     ch = vehicle.chassis
     if ch.has_roll_centres:
         m[0] -= ch.roll_centre_height_front_m * (fy[0] + fy[1]) + ch.roll_centre_height_rear_m * (fy[2] + fy[3])
     if form == "measured" and inp.specific_force_b_mps2 is not None and inp.vehicle_angles_rad is not None:
         m[0], m[1] = measured_roll_pitch_moments_nm(vehicle, params.mass_kg, inp, fs)
-    return m
+    return np.array(m)
 
 
 def road_normal_body(phi_v_rad: float, theta_v_rad: float) -> np.ndarray:
@@ -209,20 +245,27 @@ def measured_roll_pitch_moments_nm(vehicle: Vehicle, mass_kg: float, inp: IdentI
                                    ) -> tuple[float, float]:
     """(M_x, M_y) of the ``"measured"`` moment form (module docstring) [N m]."""
     geo = vehicle.geometry
-    xy = corner_xy_array(geo)
     h, r = geo.h_cg_m, vehicle.tire.rolling_radius_m
     fs = (suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
-          if strut_n is None else np.asarray(strut_n, dtype=float))
-    fz = float(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps).sum())
-    hh = np.asarray(inp.susp_deflection_m, dtype=float)
-    mu = unsprung_masses_kg(vehicle)
-    zw = -(h - r) + hh
+          if strut_n is None else strut_n)
+    fz = 0.0
+    for v in suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps).tolist():
+        fz += v
+    # in floats, numpy's order (sums from 0.0 in wheel order: ``_floats``)
+    hh = _floats(inp.susp_deflection_m)
+    sx = sy = szm = hsum = 0.0
+    for (x, y), s, mu, hi in zip(corner_xy_array(geo).tolist(), _floats(fs), unsprung_masses_kg(vehicle).tolist(), hh,
+                                 strict=True):
+        sx += x * s
+        sy += y * s
+        szm += (-(h - r) + hi) * mu
+        hsum += hi
     n = road_normal_body(*inp.vehicle_angles_rad)
     f = inp.specific_force_b_mps2
-    lever = h - float(hh.mean())
+    lever = h - hsum / len(hh)
     ch = vehicle.chassis
     if ch.has_roll_centres:
         lever -= (ch.roll_centre_height_front_m * geo.l_r_m + ch.roll_centre_height_rear_m * geo.l_f_m) / geo.wheelbase_m
-    mx = float((xy[:, 1] * fs).sum() + lever * mass_kg * f[1] - r * n[1] * fz + (zw * mu).sum() * f[1])
-    my = float(-(xy[:, 0] * fs).sum() - lever * mass_kg * f[0] + r * n[0] * fz - (zw * mu).sum() * f[0])
+    mx = float(sy + lever * mass_kg * f[1] - r * n[1] * fz + szm * f[1])
+    my = float(-sx - lever * mass_kg * f[0] + r * n[0] * fz - szm * f[0])
     return mx, my

@@ -121,11 +121,14 @@ class Identifier:
             self._structure[name] *= pc.forgetting
         if reg.structure is None:
             return
-        a, b = np.asarray(reg.a, dtype=float), np.asarray(reg.b, dtype=float)
-        s = np.asarray(reg.structure, dtype=float)
-        used = np.asarray(reg.rows, dtype=bool) & np.isfinite(a).all(axis=1) & np.isfinite(b) & np.isfinite(s)
-        q2 = np.asarray(pc.q, dtype=float)[: len(b)] ** 2
-        self._structure[name] += (a[used] * (q2[used] * s[used])[:, None]).sum(axis=0)
+        # in floats, numpy's order: column sums from 0.0 over the used rows of A_i (Q_ii^2 s_i)
+        a = np.asarray(reg.a, dtype=float).tolist()
+        g = [0.0] * len(a[0])
+        for row, s, q, used in zip(a, np.asarray(reg.structure, dtype=float).tolist(), pc.q, reg.used):
+            if used and math.isfinite(s):
+                f = q * q * s
+                g = [gj + v * f for gj, v in zip(g, row)]
+        self._structure[name] += g
 
     def _structure_bias(self, name: str) -> np.ndarray:
         """The least-squares bias C g of a problem's unmodelled term (``_add_structure``; C the

@@ -61,6 +61,7 @@ class BlockJackknife:
     def reset(self) -> None:
         self._info = np.zeros((2 * self.blocks, self.n, self.n))
         self._score = np.zeros((2 * self.blocks, self.n))
+        self._block_views = [(self._info[k], self._score[k]) for k in range(2 * self.blocks)]  # added to in place
         self._span = self.first_span
         self._updates = 0
 
@@ -77,8 +78,9 @@ class BlockJackknife:
         if lam < 1.0:
             self._info *= lam
             self._score *= lam
-        self._info[k] += aq.T @ aq
-        self._score[k] += aq.T @ y
+        info, score = self._block_views[k]
+        info += aq.T @ aq
+        score += aq.T @ y
         self._updates += 1
 
     @property

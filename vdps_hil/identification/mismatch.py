@@ -55,6 +55,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vdps_hil.identification.mismatch_kernels import add_lag_products
+
 __all__ = ["CROSS_CHECKS", "ROW_NAMES", "MismatchMonitor", "RowTest"]
 
 ROW_NAMES: dict[str, tuple[str, ...]] = {
@@ -118,8 +120,7 @@ class _Row:
     def add(self, k_bin: int, r: float) -> None:
         j = self.n % MAX_LAG
         if self.n:  # lags 1..m, m = min(n, MAX_LAG): ring[j + MAX_LAG - k] is r_(t-k)
-            m = min(self.n, MAX_LAG)
-            self.lag_sums[1:1 + m] += r * self.ring[j + MAX_LAG - m:j + MAX_LAG][::-1]
+            add_lag_products(self.lag_sums, self.ring, j + MAX_LAG, min(self.n, MAX_LAG), r)
         self.ring[j] = self.ring[j + MAX_LAG] = r
         self.n += 1
         self.s1 += r
@@ -207,7 +208,7 @@ class MismatchMonitor:
     def observe(self, t_ns: int, reg, x_prior: np.ndarray, c_prior: np.ndarray) -> None:
         """The normalised a priori residuals of the rows ``reg`` used (module docstring)."""
         a, b = reg.a, reg.b
-        use = (np.asarray(reg.rows, dtype=bool) & np.isfinite(a).all(axis=1) & np.isfinite(b)).tolist()
+        use = reg.used
         if True not in use:
             return
         k_bin = t_ns // self._bin_ns

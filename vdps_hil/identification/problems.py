@@ -149,6 +149,18 @@ class Regressor:
     structure: np.ndarray | None = None  # per row: an unmodelled term of b the fit cannot tell (N; identifier)
     row_gates: dict | None = None  # validity gate -> rows it refused in this input (counted by the identifier)
 
+    @property
+    def used(self) -> tuple[bool, ...]:
+        """Per row: excited (``rows``) with A's row and b finite: the rows the RLS uses (its NaN
+        guard), which the identifier's statistics follow (made once)."""
+        used = self.__dict__.get("_used")
+        if used is None:
+            used = tuple(u and math.isfinite(b) and all(map(math.isfinite, row)) for u, b, row in
+                         zip(np.asarray(self.rows, dtype=bool).tolist(), np.asarray(self.b, dtype=float).tolist(),
+                             np.asarray(self.a, dtype=float).tolist(), strict=True))
+            object.__setattr__(self, "_used", used)  # a cache of the frozen fields, not a field
+        return used
+
 
 def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
     """Rows whose largest |entry| reaches the threshold. Non-finite rows pass, so the RLS NaN
@@ -235,21 +247,19 @@ def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
     "load transfer"). ``structure`` (the load-transfer term, ``load_ratio``): a tire whose slope
     grows with its load, C_lambda,i F_z,i / F_z0,i, puts A_ii C_lambda,i (F_z,i / F_z0,i - 1) more
     into b_i; C_lambda,i the current estimate in ``params`` (default the prior)."""
-    r, iw = vehicle.tire.rolling_radius_m, vehicle.tire.wheel_inertia_kgm2
-    lam = np.asarray(inp.slip_ratio)
-    a = np.diag(-r * lam)
-    b = iw * np.asarray(inp.wheel_accel_radps2) - np.asarray(inp.wheel_torque_nm)
-    with np.errstate(invalid="ignore"):
-        moving = ((abs(inp.xd_a_mps) >= cfg.min_speed_mps)
-                  & (r * np.asarray(inp.wheel_speed_radps) >= cfg.min_speed_mps))
-    rows = _gate(a, cfg.tracking.excitation_min, moving)
-    dev = load_ratio(inp, vehicle) - 1.0
-    structure = -r * lam * np.array((params or vehicle.params).tracking_stiffness_n) * dev
+    r, iw, v_min = vehicle.tire.rolling_radius_m, vehicle.tire.wheel_inertia_kgm2, cfg.min_speed_mps
+    ra = [-r * lam for lam in inp.slip_ratio]  # per wheel in floats (the elementwise numpy's operations)
+    a = np.diag(ra)
+    b = np.array([iw * acc - t for acc, t in zip(inp.wheel_accel_radps2, inp.wheel_torque_nm, strict=True)])
+    fast = abs(inp.xd_a_mps) >= v_min
+    rows = _gate(a, cfg.tracking.excitation_min, [fast and r * w >= v_min for w in inp.wheel_speed_radps])
+    dev = [v - 1.0 for v in load_ratio(inp, vehicle).tolist()]
+    structure = np.array([x * c * e for x, c, e in zip(ra, (params or vehicle.params).tracking_stiffness_n, dev,
+                                                       strict=True)])
     band = cfg.tracking.load_band
-    with np.errstate(invalid="ignore"):
-        off = np.abs(dev) > band if math.isfinite(band) else np.zeros(4, dtype=bool)
-    refused = int(np.count_nonzero(rows & off))
-    return Regressor(a, b, rows & ~off, structure=structure,
+    off = [abs(e) > band for e in dev] if math.isfinite(band) else [False] * 4
+    refused = sum(1 for u, o in zip(rows.tolist(), off) if u and o)
+    return Regressor(a, b, rows & ~np.array(off), structure=structure,
                      row_gates={"load transfer": refused} if refused else None)
 
 
@@ -276,30 +286,36 @@ def load_ratio(inp: IdentInputs, vehicle: Vehicle) -> np.ndarray:
 def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams,
                         cfg: IdentConfig) -> Regressor:
     """Eq 22 with the current mass and tracking stiffness estimates in ``params``."""
+    # per wheel in plain floats: the elementwise numpy's operations, sums from 0.0 in wheel order
     al = slip_angles_rad(vehicle, inp)
-    d = np.asarray(inp.wheel_angle_rad)
+    d, lam = inp.wheel_angle_rad, inp.slip_ratio
+    cos_d, sin_d = [math.cos(v) for v in d], [math.sin(v) for v in d]
     if cfg.steer_form == "per_wheel":
-        s, c = al * np.sin(d), al * np.cos(d)
+        s, c = [v * w for v, w in zip(al.tolist(), sin_d)], [v * w for v, w in zip(al.tolist(), cos_d)]
         a = np.array([[-(s[0] + s[1]) / 2.0, -(s[2] + s[3]) / 2.0],
                       [(c[0] + c[1]) / 2.0, (c[2] + c[3]) / 2.0]])
     else:  # eq 22 as printed
         af, ar, df = (al[0] + al[1]) / 2.0, (al[2] + al[3]) / 2.0, (d[0] + d[1]) / 2.0
         a = np.array([[-af * math.sin(df), 0.0], [af * math.cos(df), ar]])
-    fa = np.array(params.tracking_stiffness_n) * np.asarray(inp.slip_ratio)
+    fa = [k * v for k, v in zip(params.tracking_stiffness_n, lam, strict=True)]
     m, g = params.mass_kg, inp.gravity_aux_mps2
     psid = inp.psi_v_dot_radps
-    acc = np.array([inp.xdd_a_mps2 - inp.yd_a_mps * psid - g[0], inp.ydd_a_mps2 + inp.xd_a_mps * psid - g[1]])
-    b = m * acc - np.array([(fa * np.cos(d)).sum(), (fa * np.sin(d)).sum()])
-    lam = np.asarray(inp.slip_ratio)
-    db = np.column_stack([acc, -np.vstack([lam * np.cos(d), lam * np.sin(d)])])  # d/d[m, C_lambda,1..4]
+    acc = [inp.xdd_a_mps2 - inp.yd_a_mps * psid - g[0], inp.ydd_a_mps2 + inp.xd_a_mps * psid - g[1]]
+    fx = fy = 0.0
+    for f, cd, sd in zip(fa, cos_d, sin_d):
+        fx += f * cd
+        fy += f * sd
+    b = np.array([m * acc[0] - fx, m * acc[1] - fy])
+    db = np.array([[acc[0]] + [-(v * cd) for v, cd in zip(lam, cos_d)],  # d/d[m, C_lambda,1..4]
+                   [acc[1]] + [-(v * sd) for v, sd in zip(lam, sin_d)]])
     if len(cfg.cornering.q) == 3:  # the yaw row
-        a_z, b_z, db_z = _cornering_yaw_row(inp, vehicle, params, fa, al)
+        a_z, b_z, db_z = _cornering_yaw_row(inp, vehicle, params, np.array(fa), al)
         # its b uses I_z: weight sd_row / sqrt(sd_row^2 + (sigma_Iz wd_z)^2), sigma_Iz the prior's
         s_iz = cfg.inertia.prior_rel_sigma * vehicle.params.inertia_z_kgm2 * cfg.cornering.q[2]
         k = 1.0 / math.sqrt(1.0 + (s_iz * inp.omega_dot_radps2[2]) ** 2)
         a, b, db = np.vstack([a, k * a_z]), np.append(b, k * b_z), np.vstack([db, k * db_z])
     rows = _gate(a, cfg.cornering.excitation_min, abs(inp.xd_a_mps) >= cfg.min_speed_mps)
-    gated = lateral_gate(inp, al, float(acc[1]), cfg.cornering)
+    gated = lateral_gate(inp, al, acc[1], cfg.cornering)
     if gated is not None:
         rows = np.zeros(len(rows), dtype=bool)
     return Regressor(a, b, rows, db, gated)
@@ -410,20 +426,22 @@ def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
     tire stiffnesses; dM/dF_x,i = (0, -h, -y_i), dM/dF_y,i = (h - h_rc,i, 0, x_i) (h_rc,i the
     roll-centre height of the corner's axle, ``model.chassis``; 0 in the paper's model)."""
     geometry = vehicle.geometry
-    xy = corner_xy_array(geometry)
+    xy = corner_xy_array(geometry).tolist()
     h = geometry.h_cg_m
-    h_rc = roll_centre_heights_m(vehicle)
-    d = np.asarray(inp.wheel_angle_rad)
-    lam, al = np.asarray(inp.slip_ratio), slip_angles_rad(vehicle, inp)
-    dm_dfx = np.stack([np.zeros(4), np.full(4, -h), -xy[:, 1]])  # 3 x 4
-    dm_dfy = np.stack([h - h_rc, np.zeros(4), xy[:, 0]])
-    c, s = np.cos(d), np.sin(d)
-    out = np.zeros((3, 6))
-    out[:, :4] = dm_dfx * (lam * c) + dm_dfy * (lam * s)
-    per_wheel = dm_dfx * (-al * s / 2.0) + dm_dfy * (al * c / 2.0)
-    out[:, 4] = per_wheel[:, 0] + per_wheel[:, 1]
-    out[:, 5] = per_wheel[:, 2] + per_wheel[:, 3]
-    return out
+    dm_dfx = ([0.0] * 4, [-h] * 4, [-y for _, y in xy])  # 3 x 4
+    dm_dfy = ([h - hr for hr in roll_centre_heights_m(vehicle).tolist()], [0.0] * 4, [x for x, _ in xy])
+    lam_c, lam_s, al_s, al_c = [], [], [], []  # per wheel, as elementwise numpy would form them
+    for d, lam, al in zip(inp.wheel_angle_rad, inp.slip_ratio, slip_angles_rad(vehicle, inp).tolist(), strict=True):
+        c, s = math.cos(d), math.sin(d)
+        lam_c.append(lam * c)
+        lam_s.append(lam * s)
+        al_s.append(-al * s / 2.0)
+        al_c.append(al * c / 2.0)
+    out = []
+    for fx, fy in zip(dm_dfx, dm_dfy):
+        w = [fx[i] * al_s[i] + fy[i] * al_c[i] for i in range(4)]
+        out.append([fx[i] * lam_c[i] + fy[i] * lam_s[i] for i in range(4)] + [w[0] + w[1], w[2] + w[3]])
+    return np.array(out)
 
 
 RegressorBuilder = Callable[[IdentInputs, Vehicle, IdentifiedParams, IdentConfig], Regressor]

@@ -167,6 +167,10 @@ class WeightedRLS:
         """The block sums of ``jackknife_covariance`` (None: off)."""
         self._compiled = jit.ENABLED and form == "covariance"
         """Covariance-form updates through the compiled ``rls_kernels`` (numpy with VDPS_JIT=0)."""
+        self._all_rows = np.ones(self.m, dtype=bool)  # ``rows`` None (never written)
+        self._scratch = np.empty((self.m, self.n)), np.empty((self.m, self.n)), np.empty(self.m)  # Q A, A_Q, Q b
+        self._bounds = tuple(zip(self._w.tolist(), self._lower.tolist(), self._upper.tolist()))
+        self._ww = np.outer(self._w, self._w)  # W_ii W_jj
         self._resets = -1
         self.reset()
 
@@ -208,7 +212,7 @@ class WeightedRLS:
         b = np.asarray(b, dtype=float)
         if a.shape != (self.m, self.n) or b.shape != (self.m,):
             raise ValueError(f"A must be ({self.m}, {self.n}) and b ({self.m},); got {a.shape}, {b.shape}")
-        sel = np.ones(self.m, dtype=bool) if rows is None else np.asarray(rows, dtype=bool).reshape(self.m)
+        sel = self._all_rows if rows is None else np.asarray(rows, dtype=bool).reshape(self.m)
         qv = self._q if q is None else _vector("q", q, self.m)
         if self._compiled:
             return self._update_compiled(a, b, sel, qv, db_dtheta)
@@ -258,8 +262,8 @@ class WeightedRLS:
     def _update_compiled(self, a, b, sel, qv, db_dtheta) -> bool:
         """``update`` in covariance form through the compiled ``rls_kernels`` (equal to the numpy
         lines of ``update`` within 1e-12; ``tests/test_rls_kernels.py``)."""
-        m, n, lam = self.m, self.n, self.forgetting
-        qa, aq, y = np.empty((m, n)), np.empty((m, n)), np.empty(m)
+        n, lam = self.n, self.forgetting
+        qa, aq, y = self._scratch
         xq_new, p_new = np.empty(n), np.empty((n, n))
         c = np.ascontiguousarray
         k, nan_rows, drss = RK.covariance_step(c(a), c(b), c(sel), c(qv), self._w, self._xq, self._P, lam, qa, aq, y,
@@ -278,8 +282,9 @@ class WeightedRLS:
         self._g_prev = g
         if self._jack is not None:
             self._jack.add(aq[:k], y[:k], lam)
-        if db_dtheta is not None:
-            sel = sel & np.isfinite(a).all(axis=1) & np.isfinite(b)
+        if db_dtheta is not None:  # the rows used, in floats
+            sel = [u and math.isfinite(v) and all(map(math.isfinite, row))
+                   for u, v, row in zip(sel.tolist(), b.tolist(), a.tolist())]
             self._add_sensitivity(db_dtheta, qv, sel, aq[:k])
         return True
 
@@ -289,7 +294,11 @@ class WeightedRLS:
         return False
 
     def _bounded(self, xq_new, drss: float, k: int):
-        """The candidate x_Q within the bounds (clamped), or None: non-finite or rejected."""
+        """The candidate x_Q within the bounds (clamped), or None: non-finite or rejected. (The
+        common case, finite and inside, in floats: the same products and comparisons.)"""
+        if math.isfinite(drss) and all(math.isfinite(xq) and lo <= xq * w <= hi
+                                       for xq, (w, lo, hi) in zip(xq_new.tolist(), self._bounds)):
+            return xq_new
         if not (np.isfinite(xq_new).all() and math.isfinite(drss)):
             self._c["nan_rows"] += k  # cannot happen with finite rows; never keep it
             self._g_prev = None
@@ -318,8 +327,9 @@ class WeightedRLS:
         d = np.asarray(db_dtheta, dtype=float)
         if d.ndim != 2 or d.shape[0] != self.m:
             raise ValueError(f"db_dtheta must be ({self.m}, p), got {d.shape}")
-        ds = d[sel]
-        contrib = aq.T @ (qv[sel, None] * np.where(np.isfinite(ds), ds, 0.0))
+        # Q db/dtheta on the rows ``sel``, non-finite entries 0: in floats, numpy's elementwise order
+        qd = [[q * (v if math.isfinite(v) else 0.0) for v in row] for row, q, u in zip(d.tolist(), qv.tolist(), sel) if u]
+        contrib = aq.T @ np.array(qd).reshape(len(qd), d.shape[1])
         if self._sens is None or self._sens.shape != contrib.shape:
             self._sens = np.zeros_like(contrib)
         self._sens = self.forgetting * self._sens + contrib
@@ -381,7 +391,7 @@ class WeightedRLS:
     @property
     def covariance(self) -> np.ndarray:
         """W P W: the covariance of x for unit weighted residual variance (physical units)."""
-        return self.covariance_scaled * np.outer(self._w, self._w)
+        return (self._P if self.form == "covariance" else self.covariance_scaled) * self._ww
 
     @property
     def residual_variance(self) -> float:
@@ -421,7 +431,7 @@ class WeightedRLS:
         if self._jack is None:
             return None
         v = self._jack.variance(self._p0_inv, self._xq0)
-        return None if v is None else v * np.outer(self._w, self._w)
+        return None if v is None else v * self._ww
 
     def consider_covariance(self, cov_theta) -> np.ndarray:
         """Covariance of x caused by the uncertainty ``cov_theta`` (p x p) of the consider
