@@ -84,6 +84,10 @@ def test_kernels_are_bit_equal_to_their_python_form(rng):
         args = (a, b, rows, rng.uniform(0.5, 2, m), rng.uniform(0.5, 2, n), rng.normal(size=n), P, 0.98,
                 np.zeros((m, n)), np.zeros((m, n)), np.zeros(m), np.zeros(n), np.zeros((n, n)))
         calls.append(("vdps_hil.identification.rls_kernels", "covariance_step", args))
+        lo = np.full(n, -np.inf) if len(calls) % 2 else rng.normal(size=n)  # inside, or some bounds crossed
+        calls.append(("vdps_hil.identification.rls_kernels", "update_inside",
+                      args[:8] + (lo, np.full(n, np.inf)) + args[8:] + (np.eye(n), np.eye(n), np.ones(n), np.ones(n),
+                                                                        rng.normal(size=n), True)))
         qa, aq = rng.normal(size=(m, n)), rng.normal(size=(m, n))
         calls.append(("vdps_hil.identification.rls_kernels", "accumulate",
                       (qa, aq, rng.normal(size=m), 3, rng.normal(size=n), 0.98, np.eye(n), np.eye(n),

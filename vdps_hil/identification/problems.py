@@ -249,10 +249,13 @@ def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
     into b_i; C_lambda,i the current estimate in ``params`` (default the prior)."""
     r, iw, v_min = vehicle.tire.rolling_radius_m, vehicle.tire.wheel_inertia_kgm2, cfg.min_speed_mps
     ra = [-r * lam for lam in inp.slip_ratio]  # per wheel in floats (the elementwise numpy's operations)
-    a = np.diag(ra)
+    a = np.zeros((4, 4))
+    for i, v in enumerate(ra):
+        a[i, i] = v
     b = np.array([iw * acc - t for acc, t in zip(inp.wheel_accel_radps2, inp.wheel_torque_nm, strict=True)])
     fast = abs(inp.xd_a_mps) >= v_min
-    rows = _gate(a, cfg.tracking.excitation_min, [fast and r * w >= v_min for w in inp.wheel_speed_radps])
+    rows = _gate(np.array(ra)[:, None], cfg.tracking.excitation_min,  # A's rows: 0 but the diagonal
+                 [fast and r * w >= v_min for w in inp.wheel_speed_radps])
     dev = [v - 1.0 for v in load_ratio(inp, vehicle).tolist()]
     structure = np.array([x * c * e for x, c, e in zip(ra, (params or vehicle.params).tracking_stiffness_n, dev,
                                                        strict=True)])
@@ -279,8 +282,11 @@ def load_ratio(inp: IdentInputs, vehicle: Vehicle) -> np.ndarray:
     sigma (``identifier._structure_bias``); ``load_band`` would refuse the rows instead."""
     fz = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps)
     fz0 = suspension_forces_n(vehicle, (0.0,) * 4, (0.0,) * 4)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return fz / fz0
+    loads, static = fz.tolist(), fz0.tolist()
+    if 0.0 in static:  # a corner without static load: numpy's inf / NaN
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return fz / fz0
+    return np.array([f / f0 for f, f0 in zip(loads, static)])
 
 
 def cornering_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedParams,

@@ -169,7 +169,6 @@ class WeightedRLS:
         """Covariance-form updates through the compiled ``rls_kernels`` (numpy with VDPS_JIT=0)."""
         self._all_rows = np.ones(self.m, dtype=bool)  # ``rows`` None (never written)
         self._scratch = np.empty((self.m, self.n)), np.empty((self.m, self.n)), np.empty(self.m)  # Q A, A_Q, Q b
-        self._bounds = tuple(zip(self._w.tolist(), self._lower.tolist(), self._upper.tolist()))
         self._ww = np.outer(self._w, self._w)  # W_ii W_jj
         self._resets = -1
         self.reset()
@@ -266,19 +265,21 @@ class WeightedRLS:
         qa, aq, y = self._scratch
         xq_new, p_new = np.empty(n), np.empty((n, n))
         c = np.ascontiguousarray
-        k, nan_rows, drss = RK.covariance_step(c(a), c(b), c(sel), c(qv), self._w, self._xq, self._P, lam, qa, aq, y,
-                                               xq_new, p_new)
+        has_prev = self._g_prev is not None
+        g = np.zeros(n) if not has_prev else self._g_prev
+        k, nan_rows, drss, done = RK.update_inside(c(a), c(b), c(sel), c(qv), self._w, self._xq, self._P, lam,
+                                                   self._lower, self._upper, qa, aq, y, xq_new, p_new, self._info,
+                                                   self._info_scaled, self._gg, self._g1, g, has_prev)
         self._c["nan_rows"] += nan_rows
         if k == 0:
             return self._not_excited()
-        xq_new = self._bounded(xq_new, drss, k)
-        if xq_new is None:
-            return False
+        if not done:  # the bounds' cases
+            xq_new = self._bounded(xq_new, drss, k)
+            if xq_new is None:
+                return False
+            RK.accumulate(qa, aq, y, k, xq_new, lam, self._info, self._info_scaled, self._gg, self._g1, g, has_prev)
         self._xq, self._P = xq_new, p_new
         self._commit_common(drss, k)
-        has_prev = self._g_prev is not None
-        g = np.zeros(n) if not has_prev else self._g_prev
-        RK.accumulate(qa, aq, y, k, xq_new, lam, self._info, self._info_scaled, self._gg, self._g1, g, has_prev)
         self._g_prev = g
         if self._jack is not None:
             self._jack.add(aq[:k], y[:k], lam)
@@ -294,11 +295,7 @@ class WeightedRLS:
         return False
 
     def _bounded(self, xq_new, drss: float, k: int):
-        """The candidate x_Q within the bounds (clamped), or None: non-finite or rejected. (The
-        common case, finite and inside, in floats: the same products and comparisons.)"""
-        if math.isfinite(drss) and all(math.isfinite(xq) and lo <= xq * w <= hi
-                                       for xq, (w, lo, hi) in zip(xq_new.tolist(), self._bounds)):
-            return xq_new
+        """The candidate x_Q within the bounds (clamped), or None: non-finite or rejected."""
         if not (np.isfinite(xq_new).all() and math.isfinite(drss)):
             self._c["nan_rows"] += k  # cannot happen with finite rows; never keep it
             self._g_prev = None

@@ -13,7 +13,8 @@ The formulas are the reference's term for term (``rls`` module docstring)::
     J increment = lambda v^T S^-1 v
 
 and, after the bounds (``accumulate``): info += (Q A)^T Q A, info_scaled += A_Q^T A_Q (both
-discounted by lambda), the score g = A_Q^T (y - A_Q x_Q+) and its lag-0 / lag-1 sums.
+discounted by lambda), the score g = A_Q^T (y - A_Q x_Q+) and its lag-0 / lag-1 sums
+(``update_inside``: both in one call when the bounds leave x_Q+ as it is).
 The gain and the Joseph form are the EKF update's kernels (``ekf_update_kernels``: loops in a fixed
 summation order instead of BLAS, S^-1 by Gauss-Jordan elimination with partial pivoting instead of
 LAPACK), so the estimates move in their last bits.
@@ -21,12 +22,14 @@ LAPACK), so the estimates move in their last bits.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from vdps_hil.estimation.ekf_update_kernels import _gain, _joseph
 from vdps_hil.jit import kernel
 
-__all__ = ["accumulate", "covariance_step", "warm"]
+__all__ = ["accumulate", "covariance_step", "update_inside", "warm"]
 
 
 @kernel()
@@ -117,6 +120,23 @@ def accumulate(qa, aq, y, k, xq_new, lam, info, info_scaled, gg, g1, g_prev, has
         g_prev[j] = s
 
 
+@kernel()
+def update_inside(a, b, sel, qv, w, xq, P, lam, lower, upper, qa, aq, y, xq_new, P_new, info, info_scaled, gg, g1,
+                  g_prev, has_prev):
+    """``covariance_step``, then ``accumulate`` when the update needs no bounds handling: x_Q+ and
+    the J increment finite, x = x_Q+ W within [lower, upper] (the common case; one call instead of
+    two). Returns (k, rows left out as non-finite, J increment, accumulated)."""
+    k, nan_rows, drss = covariance_step(a, b, sel, qv, w, xq, P, lam, qa, aq, y, xq_new, P_new)
+    if k == 0 or not math.isfinite(drss):
+        return k, nan_rows, drss, False
+    for j in range(xq_new.shape[0]):
+        x = xq_new[j] * w[j]
+        if not math.isfinite(xq_new[j]) or x < lower[j] or x > upper[j]:
+            return k, nan_rows, drss, False
+    accumulate(qa, aq, y, k, xq_new, lam, info, info_scaled, gg, g1, g_prev, has_prev)
+    return k, nan_rows, drss, True
+
+
 def warm() -> None:
     """Compile (or load from the cache) both kernels with the argument types the RLS uses."""
     m, n = 3, 2
@@ -128,3 +148,6 @@ def warm() -> None:
                               P_new)
     accumulate(qa, aq, y, k, xq_new, 1.0, np.zeros((n, n)), np.zeros((n, n)), np.zeros(n), np.zeros(n),
                np.zeros(n), True)
+    update_inside(a, b, sel, np.ones(m), np.ones(n), np.zeros(n), np.eye(n), 1.0, np.full(n, -np.inf),
+                  np.full(n, np.inf), qa, aq, y, xq_new, P_new, np.zeros((n, n)), np.zeros((n, n)), np.zeros(n),
+                  np.zeros(n), np.zeros(n), True)

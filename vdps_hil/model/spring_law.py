@@ -70,38 +70,38 @@ def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
       the free length stands in for the rebound stop, as in the core).
 
     The identifier asks for the same corners several times per input (its deflections and rates
-    are tuples): the last few results are kept and a copy returned."""
+    are tuples), with and without the weight: both are made at once, the last few results kept and
+    a copy returned."""
     key = None
     if type(susp_deflection_m) is tuple and type(susp_rate_mps) is tuple:
-        key = (id(vehicle), susp_deflection_m, susp_rate_mps, bool(include_unsprung_weight))
-        hit = _MEMO.get(key)
+        key = (id(vehicle), susp_deflection_m, susp_rate_mps)
+        hit = _MEMO.get(key + (bool(include_unsprung_weight),))
         if hit is not None and _CONSTANTS.get(id(vehicle), (None,))[0] is vehicle:
             return hit.copy()
-    out = _forces(vehicle, susp_deflection_m, susp_rate_mps, include_unsprung_weight)
+    loads, struts = _forces(vehicle, susp_deflection_m, susp_rate_mps)
     if key is not None:
-        if len(_MEMO) > 8:
+        if len(_MEMO) > 16:
             _MEMO.clear()
-        _MEMO[key] = out.copy()
-    return out
+        _MEMO[key + (True,)], _MEMO[key + (False,)] = loads.copy(), struts.copy()
+    return loads if include_unsprung_weight else struts
 
 
-def _forces(vehicle: Vehicle, susp_deflection_m, susp_rate_mps, include_unsprung_weight: bool) -> np.ndarray:
+def _forces(vehicle: Vehicle, susp_deflection_m, susp_rate_mps) -> tuple[np.ndarray, np.ndarray]:
+    """(with the unsprung weight, without) per corner (``suspension_forces_n``)."""
     corners, arb = _corner_constants(vehicle)
     defl = [float(v) for v in susp_deflection_m]
     hd = [float(v) for v in susp_rate_mps]
     farb = None if arb is None else anti_roll_forces_n(*arb, defl)
-    out = np.empty(4)
+    loads, struts = np.empty(4), np.empty(4)
     for i in range(4):
         static, c1, c2, c3, damper, mug = corners[i]
         hs = static + defl[i]
         if not (math.isfinite(hs) and math.isfinite(hd[i])):
-            out[i] = math.nan
+            loads[i] = struts[i] = math.nan
             continue
         fsp = spring_force_n(min(hs, 10.0), c1, c2, c3)
         if farb is not None:
             fsp += farb[i]
-        if not include_unsprung_weight:
-            out[i] = fsp + damper * hd[i]
-            continue
-        out[i] = 0.0 if fsp + mug <= 0.0 else max(fsp + damper * hd[i] + mug, 0.0)
-    return out
+        struts[i] = fsp + damper * hd[i]
+        loads[i] = 0.0 if fsp + mug <= 0.0 else max(fsp + damper * hd[i] + mug, 0.0)
+    return loads, struts
