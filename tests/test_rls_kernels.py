@@ -88,8 +88,25 @@ def test_kernels_are_bit_equal_to_their_python_form(rng):
         calls.append(("vdps_hil.identification.rls_kernels", "update_inside",
                       args[:8] + (lo, np.full(n, np.inf)) + args[8:] + (np.eye(n), np.eye(n), np.ones(n), np.ones(n),
                                                                         rng.normal(size=n), True)))
+        d = rng.normal(size=(m, 5))
+        d[rng.integers(m), rng.integers(5)] = np.nan
+        calls.append(("vdps_hil.identification.rls_kernels", "consider_rows", (a, b, rows, args[3], d, np.zeros((m, 5)))))
         qa, aq = rng.normal(size=(m, n)), rng.normal(size=(m, n))
         calls.append(("vdps_hil.identification.rls_kernels", "accumulate",
                       (qa, aq, rng.normal(size=m), 3, rng.normal(size=n), 0.98, np.eye(n), np.eye(n),
                        np.ones(n), np.ones(n), rng.normal(size=n), True)))
     assert same_bits(run_compiled(calls), run_pure_python(calls))
+
+
+def test_the_consider_rows_are_the_numpy_expression_bit_for_bit(rng):
+    from vdps_hil.identification.rls_kernels import consider_rows
+    for _ in range(50):
+        a, b, rows, d = _step(rng, 4, 3)
+        d[rng.integers(4), rng.integers(2)] = np.inf
+        qv = rng.uniform(0.5, 2.0, 4)
+        sel = rows & np.isfinite(a).all(axis=1) & np.isfinite(b)
+        ds = d[sel]
+        want = qv[sel, None] * np.where(np.isfinite(ds), ds, 0.0)
+        out = np.zeros((4, 2))
+        k = consider_rows(a, b, rows, qv, d, out)
+        assert k == int(sel.sum()) and np.array_equal(out[:k], want)

@@ -172,6 +172,15 @@ def _floats(v) -> list[float]:
     return np.asarray(v, dtype=float).tolist()
 
 
+def sum_from_zero(values) -> float:
+    """``float(np.sum(values))`` for a few values (numpy adds fewer than 8 in order, from 0.0), in
+    floats."""
+    total = 0.0
+    for v in _floats(values):
+        total += v
+    return total
+
+
 def _wheel_forces(params: IdentifiedParams, slip_ratio, slip_angle_rad) -> tuple[list, list]:
     c_f = params.cornering_stiffness_front_nprad / 2.0
     c_r = params.cornering_stiffness_rear_nprad / 2.0
@@ -248,9 +257,7 @@ def measured_roll_pitch_moments_nm(vehicle: Vehicle, mass_kg: float, inp: IdentI
     h, r = geo.h_cg_m, vehicle.tire.rolling_radius_m
     fs = (suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
           if strut_n is None else strut_n)
-    fz = 0.0
-    for v in suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps).tolist():
-        fz += v
+    fz = sum_from_zero(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps))
     # in floats, numpy's order (sums from 0.0 in wheel order: ``_floats``)
     hh = _floats(inp.susp_deflection_m)
     sx = sy = szm = hsum = 0.0

@@ -79,8 +79,9 @@ class BlockJackknife:
             self._info *= lam
             self._score *= lam
         info, score = self._block_views[k]
-        info += aq.T @ aq
-        score += aq.T @ y
+        at = aq.T
+        info += at @ aq
+        score += at @ y
         self._updates += 1
 
     @property

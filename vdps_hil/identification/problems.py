@@ -128,7 +128,7 @@ from typing import Callable
 import numpy as np
 
 from vdps_hil.identification.config import IdentConfig
-from vdps_hil.identification.forces import (corner_xy_array, moments_from_inputs, road_normal_body,
+from vdps_hil.identification.forces import (corner_xy_array, moments_from_inputs, road_normal_body, sum_from_zero,
                                             roll_centre_heights_m, slip_angles_rad, unsprung_inertia_moments_nm)
 from vdps_hil.model.spring_law import suspension_forces_n
 from vdps_hil.identification.inputs import IdentInputs
@@ -155,9 +155,11 @@ class Regressor:
         guard), which the identifier's statistics follow (made once)."""
         used = self.__dict__.get("_used")
         if used is None:
-            used = tuple(u and math.isfinite(b) and all(map(math.isfinite, row)) for u, b, row in
-                         zip(np.asarray(self.rows, dtype=bool).tolist(), np.asarray(self.b, dtype=float).tolist(),
-                             np.asarray(self.a, dtype=float).tolist(), strict=True))
+            used = []
+            for u, b, row in zip(np.asarray(self.rows, dtype=bool).tolist(), np.asarray(self.b, dtype=float).tolist(),
+                                 np.asarray(self.a, dtype=float).tolist(), strict=True):
+                used.append(u and math.isfinite(b) and all(map(math.isfinite, row)))
+            used = tuple(used)
             object.__setattr__(self, "_used", used)  # a cache of the frozen fields, not a field
         return used
 
@@ -193,7 +195,7 @@ def mass_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
         b = np.array([suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps).sum()])
     else:
         struts = suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
-        b = np.array([struts.sum() + vehicle.unsprung_mass_total_kg * a[0, 0]])
+        b = np.array([sum_from_zero(struts) + vehicle.unsprung_mass_total_kg * a[0, 0]])
     structure = None
     if inp.specific_force_b_mps2 is not None and inp.vehicle_angles_rad is not None:
         m_s = (params or vehicle.params).mass_kg - vehicle.unsprung_mass_total_kg
@@ -410,7 +412,7 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
     if (cfg.moment_form == "measured" and inp.specific_force_b_mps2 is not None
             and inp.vehicle_angles_rad is not None):
         db[:2, :] = 0.0  # M_x, M_y no longer use the tire stiffnesses
-        fz = float(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps).sum())
+        fz = sum_from_zero(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps))
         tilt = vehicle.tire.rolling_radius_m * road_normal_body(*inp.vehicle_angles_rad)[1] * fz
         structure = np.array([tilt, 0.0, 0.0])
     else:

@@ -255,7 +255,8 @@ class WeightedRLS:
         if self._jack is not None:
             self._jack.add(aq, y, lam)
         if db_dtheta is not None:
-            self._add_sensitivity(db_dtheta, qv, sel, aq)
+            ds = self._sensitivity(db_dtheta)[sel]
+            self._add_sensitivity(aq, qv[sel, None] * np.where(np.isfinite(ds), ds, 0.0))
         return True
 
     def _update_compiled(self, a, b, sel, qv, db_dtheta) -> bool:
@@ -283,10 +284,11 @@ class WeightedRLS:
         self._g_prev = g
         if self._jack is not None:
             self._jack.add(aq[:k], y[:k], lam)
-        if db_dtheta is not None:  # the rows used, in floats
-            sel = [u and math.isfinite(v) and all(map(math.isfinite, row))
-                   for u, v, row in zip(sel.tolist(), b.tolist(), a.tolist())]
-            self._add_sensitivity(db_dtheta, qv, sel, aq[:k])
+        if db_dtheta is not None:
+            d = self._sensitivity(db_dtheta)
+            qd = np.empty(d.shape)
+            RK.consider_rows(c(a), c(b), c(sel), c(qv), c(d), qd)
+            self._add_sensitivity(aq[:k], qd[:k])
         return True
 
     def _not_excited(self) -> bool:
@@ -320,13 +322,16 @@ class WeightedRLS:
         self._c["updates"] += 1
         self._c["rows_used"] += k
 
-    def _add_sensitivity(self, db_dtheta, qv, sel, aq) -> None:
+    def _sensitivity(self, db_dtheta) -> np.ndarray:
         d = np.asarray(db_dtheta, dtype=float)
         if d.ndim != 2 or d.shape[0] != self.m:
             raise ValueError(f"db_dtheta must be ({self.m}, p), got {d.shape}")
-        # Q db/dtheta on the rows ``sel``, non-finite entries 0: in floats, numpy's elementwise order
-        qd = [[q * (v if math.isfinite(v) else 0.0) for v in row] for row, q, u in zip(d.tolist(), qv.tolist(), sel) if u]
-        contrib = aq.T @ np.array(qd).reshape(len(qd), d.shape[1])
+        return d
+
+    def _add_sensitivity(self, aq, qd) -> None:
+        """sum A_Q^T Q db/dtheta += this update's (``qd``: Q db/dtheta on the used rows, non-finite
+        entries 0)."""
+        contrib = aq.T @ qd
         if self._sens is None or self._sens.shape != contrib.shape:
             self._sens = np.zeros_like(contrib)
         self._sens = self.forgetting * self._sens + contrib

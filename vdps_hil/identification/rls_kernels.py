@@ -14,7 +14,8 @@ The formulas are the reference's term for term (``rls`` module docstring)::
 
 and, after the bounds (``accumulate``): info += (Q A)^T Q A, info_scaled += A_Q^T A_Q (both
 discounted by lambda), the score g = A_Q^T (y - A_Q x_Q+) and its lag-0 / lag-1 sums
-(``update_inside``: both in one call when the bounds leave x_Q+ as it is).
+(``update_inside``: both in one call when the bounds leave x_Q+ as it is); ``consider_rows``: the
+used rows of Q db/dtheta for the consider covariance.
 The gain and the Joseph form are the EKF update's kernels (``ekf_update_kernels``: loops in a fixed
 summation order instead of BLAS, S^-1 by Gauss-Jordan elimination with partial pivoting instead of
 LAPACK), so the estimates move in their last bits.
@@ -29,7 +30,7 @@ import numpy as np
 from vdps_hil.estimation.ekf_update_kernels import _gain, _joseph
 from vdps_hil.jit import kernel
 
-__all__ = ["accumulate", "covariance_step", "update_inside", "warm"]
+__all__ = ["accumulate", "consider_rows", "covariance_step", "update_inside", "warm"]
 
 
 @kernel()
@@ -45,6 +46,30 @@ def _residual(aq, y, k, xq):
 
 
 @kernel()
+def _finite_row(a, b, i):
+    """A's row i and b_i finite (x - x is 0 for finite x only)."""
+    ok = b[i] - b[i] == 0.0
+    for j in range(a.shape[1]):
+        ok = ok and a[i, j] - a[i, j] == 0.0
+    return ok
+
+
+@kernel()
+def consider_rows(a, b, sel, qv, d, out):
+    """Q db/dtheta on the rows ``covariance_step`` uses (``sel`` and finite), non-finite entries 0,
+    into the first k rows of ``out``; returns k. Element for element the reference's
+    ``qv[sel, None] * np.where(np.isfinite(d[sel]), d[sel], 0.0)`` (bit-equal)."""
+    k = 0
+    for i in range(a.shape[0]):
+        if sel[i] and _finite_row(a, b, i):
+            for j in range(d.shape[1]):
+                v = d[i, j]
+                out[k, j] = qv[i] * (v if v - v == 0.0 else 0.0)
+            k += 1
+    return k
+
+
+@kernel()
 def covariance_step(a, b, sel, qv, w, xq, P, lam, qa, aq, y, xq_new, P_new):
     """One eq-19 step on the rows ``sel`` of (a, b) that are finite: fills qa, aq, y (first k
     rows), xq_new and P_new; returns (k, rows left out as non-finite, J increment). k = 0: nothing
@@ -56,10 +81,7 @@ def covariance_step(a, b, sel, qv, w, xq, P, lam, qa, aq, y, xq_new, P_new):
     for i in range(m):
         if not sel[i]:
             continue
-        ok = b[i] - b[i] == 0.0
-        for j in range(n):
-            ok = ok and a[i, j] - a[i, j] == 0.0
-        if not ok:
+        if not _finite_row(a, b, i):
             nan_rows += 1
             continue
         for j in range(n):
@@ -148,6 +170,7 @@ def warm() -> None:
                               P_new)
     accumulate(qa, aq, y, k, xq_new, 1.0, np.zeros((n, n)), np.zeros((n, n)), np.zeros(n), np.zeros(n),
                np.zeros(n), True)
+    consider_rows(a, b, sel, np.ones(m), np.ones((m, 4)), np.empty((m, 4)))
     update_inside(a, b, sel, np.ones(m), np.ones(n), np.zeros(n), np.eye(n), 1.0, np.full(n, -np.inf),
                   np.full(n, np.inf), qa, aq, y, xq_new, P_new, np.zeros((n, n)), np.zeros((n, n)), np.zeros(n),
                   np.zeros(n), np.zeros(n), True)
