@@ -263,8 +263,9 @@ def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
                                                        strict=True)])
     band = cfg.tracking.load_band
     off = [abs(e) > band for e in dev] if math.isfinite(band) else [False] * 4
-    refused = sum(1 for u, o in zip(rows.tolist(), off) if u and o)
-    return Regressor(a, b, rows & ~np.array(off), structure=structure,
+    rows = rows.tolist()
+    refused = sum(1 for u, o in zip(rows, off) if u and o)
+    return Regressor(a, b, np.array([u and not o for u, o in zip(rows, off)]), structure=structure,
                      row_gates={"load transfer": refused} if refused else None)
 
 
@@ -408,10 +409,10 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
                   [wz * wx, dy, -wz * wx],
                   [-wx * wy, wx * wy, dz]])
     b = moments_from_inputs(vehicle, params, inp, cfg.moment_form)
-    db = np.zeros((3, 6)) if inp.moments_nm is not None else _moment_sensitivity(vehicle, inp)
-    if (cfg.moment_form == "measured" and inp.specific_force_b_mps2 is not None
-            and inp.vehicle_angles_rad is not None):
-        db[:2, :] = 0.0  # M_x, M_y no longer use the tire stiffnesses
+    measured = (cfg.moment_form == "measured" and inp.specific_force_b_mps2 is not None
+                and inp.vehicle_angles_rad is not None)  # M_x, M_y no longer use the tire stiffnesses
+    db = np.zeros((3, 6)) if inp.moments_nm is not None else _moment_sensitivity(vehicle, inp, yaw_only=measured)
+    if measured:
         fz = sum_from_zero(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps))
         tilt = vehicle.tire.rolling_radius_m * road_normal_body(*inp.vehicle_angles_rad)[1] * fz
         structure = np.array([tilt, 0.0, 0.0])
@@ -429,10 +430,11 @@ def inertia_regressor(inp: IdentInputs, vehicle: Vehicle, params: IdentifiedPara
     return Regressor(a, b, rows, db, structure=structure, row_gates=refused)
 
 
-def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
+def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs, yaw_only: bool = False) -> np.ndarray:
     """d(M_x, M_y, M_z)/d(C_lambda,1..4, C_alpha,f, C_alpha,r): the moments are linear in the
     tire stiffnesses; dM/dF_x,i = (0, -h, -y_i), dM/dF_y,i = (h - h_rc,i, 0, x_i) (h_rc,i the
-    roll-centre height of the corner's axle, ``model.chassis``; 0 in the paper's model)."""
+    roll-centre height of the corner's axle, ``model.chassis``; 0 in the paper's model).
+    ``yaw_only``: the rows of M_x and M_y are 0."""
     geometry = vehicle.geometry
     xy = corner_xy_array(geometry).tolist()
     h = geometry.h_cg_m
@@ -445,8 +447,8 @@ def _moment_sensitivity(vehicle: Vehicle, inp: IdentInputs) -> np.ndarray:
         lam_s.append(lam * s)
         al_s.append(-al * s / 2.0)
         al_c.append(al * c / 2.0)
-    out = []
-    for fx, fy in zip(dm_dfx, dm_dfy):
+    out = [[0.0] * 6, [0.0] * 6] if yaw_only else []
+    for fx, fy in zip(dm_dfx[len(out):], dm_dfy[len(out):]):
         w = [fx[i] * al_s[i] + fy[i] * al_c[i] for i in range(4)]
         out.append([fx[i] * lam_c[i] + fy[i] * lam_s[i] for i in range(4)] + [w[0] + w[1], w[2] + w[3]])
     return np.array(out)
