@@ -82,22 +82,21 @@ def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
     if key is not None:
         if len(_MEMO) > 16:
             _MEMO.clear()
-        _MEMO[key + (True,)], _MEMO[key + (False,)] = loads.copy(), struts.copy()
-    return loads if include_unsprung_weight else struts
+        _MEMO[key + (True,)], _MEMO[key + (False,)] = np.array(loads), np.array(struts)
+    return np.array(loads if include_unsprung_weight else struts)
 
 
-def _forces(vehicle: Vehicle, susp_deflection_m, susp_rate_mps) -> tuple[np.ndarray, np.ndarray]:
+def _forces(vehicle: Vehicle, susp_deflection_m, susp_rate_mps) -> tuple[list[float], list[float]]:
     """(with the unsprung weight, without) per corner (``suspension_forces_n``)."""
     corners, arb = _corner_constants(vehicle)
     defl = [float(v) for v in susp_deflection_m]
     hd = [float(v) for v in susp_rate_mps]
     farb = None if arb is None else anti_roll_forces_n(*arb, defl)
-    loads, struts = np.empty(4), np.empty(4)
+    loads, struts = [math.nan] * 4, [math.nan] * 4
     for i in range(4):
         static, c1, c2, c3, damper, mug = corners[i]
         hs = static + defl[i]
         if not (math.isfinite(hs) and math.isfinite(hd[i])):
-            loads[i] = struts[i] = math.nan
             continue
         fsp = spring_force_n(min(hs, 10.0), c1, c2, c3)
         if farb is not None:
