@@ -55,7 +55,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vdps_hil.identification.mismatch_kernels import add_lag_products
+from vdps_hil.identification.mismatch_kernels import add_residual
 
 __all__ = ["CROSS_CHECKS", "ROW_NAMES", "MismatchMonitor", "RowTest"]
 
@@ -118,10 +118,7 @@ class _Row:
         self.lag_sums = np.zeros(MAX_LAG + 1)  # lag_sums[k] = sum_t r_t r_(t-k), k = 1..MAX_LAG
 
     def add(self, k_bin: int, r: float) -> None:
-        j = self.n % MAX_LAG
-        if self.n:  # lags 1..m, m = min(n, MAX_LAG): ring[j + MAX_LAG - k] is r_(t-k)
-            add_lag_products(self.lag_sums, self.ring, j + MAX_LAG, min(self.n, MAX_LAG), r)
-        self.ring[j] = self.ring[j + MAX_LAG] = r
+        add_residual(self.lag_sums, self.ring, self.n, r)  # lags 1..min(n, MAX_LAG), r into the ring
         self.n += 1
         self.s1 += r
         self.s2 += r * r
