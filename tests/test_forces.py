@@ -158,3 +158,14 @@ def test_the_kept_corner_arrays_are_the_files_figures_and_read_only():
     assert roll_centre_heights_m(MODEL).tolist() == [MODEL.chassis.roll_centre_height_m(i) for i in range(4)]
     with pytest.raises(ValueError):
         xy[0, 0] = 1.0
+
+
+def test_sum_from_zero_is_numpys_sum_of_four_bit_for_bit(rng):
+    from vdps_hil.identification.forces import sum_from_zero
+    cases = [rng.normal(0.0, 1.0, 4) * 10.0 ** rng.integers(-6, 7, 4) for _ in range(2000)]
+    cases += [np.array([-0.0] * 4), np.array([1.0, np.nan, 2.0, 3.0]), np.array([np.inf, 1.0, -np.inf, 0.0])]
+    for v in cases:
+        with np.errstate(invalid="ignore"):  # inf - inf
+            want = float(np.sum(v))
+        got = sum_from_zero(v)
+        assert (got == want and math.copysign(1.0, got) == math.copysign(1.0, want)) or (got != got and want != want)

@@ -276,3 +276,11 @@ def test_stale_suspension_refuses_the_roll_and_pitch_rows_and_holds_i_x_i_y_in_t
     from vdps_hil.identification.problems import mass_regressor
     m = mass_regressor(dataclasses.replace(inp, susp_interval_s=1.0), MODEL, cfg)
     assert m.rows[0] and m.row_gates is None
+
+
+def test_the_used_rows_are_the_excited_finite_ones_made_once():
+    from vdps_hil.identification.problems import Regressor
+    a = np.array([[1.0, 2.0], [np.nan, 1.0], [1.0, 1.0], [1.0, 1.0]])
+    reg = Regressor(a, np.array([1.0, 1.0, np.inf, 2.0]), np.array([True, True, True, False]))
+    assert reg.used == (True, False, False, False)
+    assert reg.used is reg.used and reg == Regressor(reg.a, reg.b, reg.rows)  # a cache, not a field
