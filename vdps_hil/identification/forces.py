@@ -258,7 +258,7 @@ def measured_roll_pitch_moments_nm(vehicle: Vehicle, mass_kg: float, inp: IdentI
     fs = (suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps, include_unsprung_weight=False)
           if strut_n is None else strut_n)
     fz = sum_from_zero(suspension_forces_n(vehicle, inp.susp_deflection_m, inp.susp_rate_mps))
-    # in floats, numpy's order (sums from 0.0 in wheel order: ``_floats``)
+    # in floats, numpy's order (the float cores' rule above)
     hh = _floats(inp.susp_deflection_m)
     sx = sy = szm = hsum = 0.0
     for (x, y), s, mu, hi in zip(corner_xy_array(geo).tolist(), _floats(fs), unsprung_masses_kg(vehicle).tolist(), hh,
