@@ -164,12 +164,13 @@ class Regressor:
         return used
 
 
-def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
-    """Rows whose largest |entry| reaches the threshold. Non-finite rows pass, so the RLS NaN
+def _gate(a, thresholds, moving=True) -> np.ndarray:
+    """Rows (of an array or a list of lists) whose largest |entry| reaches the threshold, and
+    ``moving`` (one bool, or one per row). Non-finite rows pass, so the RLS NaN
     guard leaves them out *and counts them*. (Per row in Python: these are 1-4 rows of 1-3
     entries, where numpy's reductions cost more than the arithmetic.)"""
     out = []
-    for row, thr in zip(a.tolist(), thresholds, strict=True):
+    for row, thr in zip(a.tolist() if isinstance(a, np.ndarray) else a, thresholds, strict=True):
         mag = 0.0
         for v in row:
             v = abs(v)
@@ -179,7 +180,9 @@ def _gate(a: np.ndarray, thresholds, moving=True) -> np.ndarray:
             if v > mag:
                 mag = v
         out.append(mag >= thr)
-    return np.array(out, dtype=bool) & moving
+    if isinstance(moving, (list, tuple, np.ndarray)):  # per row; else one bool (numpy's & with it: 1-2 us)
+        return np.array([g and bool(m) for g, m in zip(out, moving, strict=True)], dtype=bool)
+    return np.array(out, dtype=bool) if moving else np.zeros(len(out), dtype=bool)
 
 
 def mass_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
@@ -256,7 +259,7 @@ def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
         a[i, i] = v
     b = np.array([iw * acc - t for acc, t in zip(inp.wheel_accel_radps2, inp.wheel_torque_nm, strict=True)])
     fast = abs(inp.xd_a_mps) >= v_min
-    rows = _gate(np.array(ra)[:, None], cfg.tracking.excitation_min,  # A's rows: 0 but the diagonal
+    rows = _gate([[v] for v in ra], cfg.tracking.excitation_min,  # A's rows: 0 but the diagonal
                  [fast and r * w >= v_min for w in inp.wheel_speed_radps])
     dev = [v - 1.0 for v in load_ratio(inp, vehicle).tolist()]
     structure = np.array([x * c * e for x, c, e in zip(ra, (params or vehicle.params).tracking_stiffness_n, dev,
