@@ -39,6 +39,7 @@ def spring_compression_m(vehicle: Vehicle, susp_deflection_m) -> np.ndarray:
 
 _CONSTANTS: dict[int, tuple] = {}  # id(vehicle) -> (vehicle, its corners' constants)
 _MEMO: dict[tuple, np.ndarray] = {}  # the last results by (id(vehicle), deflections, rates, weight)
+_LAST: list = [(None, None, None, None, None)]  # (vehicle, deflection and rate tuples, loads, struts) last made
 
 
 def _corner_constants(vehicle: Vehicle) -> tuple:
@@ -70,8 +71,11 @@ def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
       the free length stands in for the rebound stop, as in the core).
 
     The identifier asks for the same corners several times per input (its deflections and rates
-    are tuples), with and without the weight: both are made at once, the last few results kept and
-    a copy returned."""
+    are tuples, the same objects): with and without the weight made at once, the last few results
+    kept (the last by the tuples' identity) and a copy returned."""
+    last = _LAST[0]  # one tuple, read and replaced whole
+    if last[1] is susp_deflection_m and last[2] is susp_rate_mps and last[0] is vehicle:
+        return (last[3] if include_unsprung_weight else last[4]).copy()
     key = None
     if type(susp_deflection_m) is tuple and type(susp_rate_mps) is tuple:
         key = (id(vehicle), susp_deflection_m, susp_rate_mps)
@@ -83,6 +87,7 @@ def suspension_forces_n(vehicle: Vehicle, susp_deflection_m, susp_rate_mps,
         if len(_MEMO) > 16:
             _MEMO.clear()
         _MEMO[key + (True,)], _MEMO[key + (False,)] = np.array(loads), np.array(struts)
+        _LAST[0] = (vehicle, susp_deflection_m, susp_rate_mps, _MEMO[key + (True,)], _MEMO[key + (False,)])
     return np.array(loads if include_unsprung_weight else struts)
 
 
