@@ -159,6 +159,10 @@ class StateLayout:
         sel = np.zeros((N_FULL, len(idx)))
         sel[np.array(idx[:n_kin], dtype=int), np.arange(n_kin)] = 1.0
         object.__setattr__(self, "_sel_full", sel)
+        object.__setattr__(self, "_idx_kin", self._idx[:n_kin].copy())
+        # filter positions of the angles psi_v of eq 4 depends on (E's psi_v row)
+        psi_cols = [] if self.psi_v_state else [self._pos[6 + k] for k in range(5 if self.road_estimated else 3)]
+        object.__setattr__(self, "_psi_v_cols", np.array(psi_cols, dtype=int))
 
     @property
     def n(self) -> int:
@@ -254,14 +258,13 @@ class StateLayout:
         eq 4 (the pipeline's output path)."""
         from vdps_hil.estimation.kinematics import vehicle_angles_eq4
 
-        nk = self._n_kin
         xf = np.zeros(N_FULL)
-        xf[self._idx[:nk]] = x[:nk]
+        xf[self._idx_kin] = x[:self._n_kin]
         e = self._sel_full.copy()
         ang, jac = vehicle_angles_eq4(xf[ANGLES5], with_jacobian=True)
         if not self.psi_v_state:
-            for k in range(5 if self.road_estimated else 3):
-                e[States.PSI_V, self._pos[6 + k]] = jac[2, k]
+            cols = self._psi_v_cols
+            e[States.PSI_V, cols] = jac[2, :len(cols)]
             xf[States.PSI_V] = ang[2]
         return xf, e, ang, jac
 
