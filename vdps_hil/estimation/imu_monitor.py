@@ -176,9 +176,13 @@ class ImuMonitor:
         sample steps back by the run's offset or is back within the jump of r."""
         c, jumps, run = self.checks, self._jumps, self._run
         if run is None:
-            dt = max(0, t_ns - t_ref) * 1e-9
-            sf, sw = min(c.max_jerk_mps3 * dt, c.force_slew_cap_mps2), min(c.max_rate_accel_radps2 * dt,
-                                                                             c.rate_slew_cap_radps)
+            dt = (t_ns - t_ref if t_ns > t_ref else 0) * 1e-9
+            sf, cap = c.max_jerk_mps3 * dt, c.force_slew_cap_mps2
+            if cap < sf:
+                sf = cap
+            sw, cap = c.max_rate_accel_radps2 * dt, c.rate_slew_cap_radps
+            if cap < sw:
+                sw = cap
             if (abs(v[0] - r[0]) > jumps[0] + sf or abs(v[1] - r[1]) > jumps[1] + sf
                     or abs(v[2] - r[2]) > jumps[2] + sf or abs(v[3] - r[3]) > jumps[3] + sw
                     or abs(v[4] - r[4]) > jumps[4] + sw or abs(v[5] - r[5]) > jumps[5] + sw):

@@ -170,20 +170,25 @@ class IdentFeeder:
         """Keep the specific force of recent ``imu`` samples, the last two steering and
         wheel-torque samples and the times of the last two suspension samples (others are
         ignored)."""
-        if sample.kind == "suspension":
+        kind = sample.kind
+        if kind == "imu":
+            if not sample.valid:
+                return
+        elif kind == "suspension":
             hist = self._susp_t
-            if (sample.valid and any(math.isfinite(sample.fields.get(n, _NAN)) for n in _SUSP)
-                    and (not hist or sample.t_ns > hist[-1])):
-                hist.append(sample.t_ns)
+            if sample.valid and (not hist or sample.t_ns > hist[-1]):
+                g = sample.fields.get
+                if (math.isfinite(g(_SUSP[0], _NAN)) or math.isfinite(g(_SUSP[1], _NAN))
+                        or math.isfinite(g(_SUSP[2], _NAN)) or math.isfinite(g(_SUSP[3], _NAN))):
+                    hist.append(sample.t_ns)
             return
-        if sample.kind in ("steer", "wheel_torque") and sample.valid:
-            names = ("steer_wheel_angle_rad",) if sample.kind == "steer" else _TQ
-            vals = tuple(sample.fields.get(n, _NAN) for n in names)
-            hist = self._steer if sample.kind == "steer" else self._torque
-            if all(math.isfinite(v) for v in vals) and (not hist or sample.t_ns > hist[-1][0]):
-                hist.append((sample.t_ns, vals))
-            return
-        if sample.kind != "imu" or not sample.valid:
+        else:
+            if (kind == "steer" or kind == "wheel_torque") and sample.valid:
+                names = ("steer_wheel_angle_rad",) if kind == "steer" else _TQ
+                vals = tuple(sample.fields.get(n, _NAN) for n in names)
+                hist = self._steer if kind == "steer" else self._torque
+                if all(math.isfinite(v) for v in vals) and (not hist or sample.t_ns > hist[-1][0]):
+                    hist.append((sample.t_ns, vals))
             return
         g = sample.fields.get
         fx, fy, fz = g(_SF[0], _NAN), g(_SF[1], _NAN), g(_SF[2], _NAN)
@@ -317,6 +322,7 @@ def _rotation_elements(axis: int, angle: float) -> list[float]:
 
 
 _G_DOWN = np.array([0.0, 0.0, -GRAVITY_MPS2])
+_RZ_0 = _rotation_elements(2, 0.0)  # R(z, psi_r = 0) of eq 2
 
 
 def _frames(phi_g: float, theta_g: float, psi_g: float, phi_r: float, theta_r: float,
@@ -327,8 +333,9 @@ def _frames(phi_g: float, theta_g: float, psi_g: float, phi_r: float, theta_r: f
     chains side by side in stacked numpy calls (BLAS per matrix: the same results as one call
     per product)."""
     rot = _rotation_elements
-    r = np.array(rot(0, phi_g) + rot(2, 0.0) + rot(2, psi_v) + rot(1, theta_g) + rot(0, phi_r) + rot(0, phi_r)
-                 + rot(2, psi_g) + rot(1, theta_r) + rot(1, theta_r) + rot(2, psi_v)).reshape(10, 3, 3)
+    rx_r, ry_r, rz_v = rot(0, phi_r), rot(1, theta_r), rot(2, psi_v)
+    r = np.array(rot(0, phi_g) + _RZ_0 + rz_v + rot(1, theta_g) + rx_r + rx_r + rot(2, psi_g) + ry_r + ry_r
+                 + rz_v).reshape(10, 3, 3)
     m = r[:3] @ r[3:6] @ r[6:9]  # C_g^v, C_g^r, R_z(psi_v) R_x(phi_r) R_y(theta_r)
     g = (m[2] @ _G_DOWN).tolist()
     return m[0], r[9] @ m[1], (g[0], g[1], g[2])
