@@ -134,14 +134,13 @@ def vehicle_angles_eq4(a5, with_jacobian: bool = True):
     (phi_v, theta_v, psi_v) [rad], and the 3 x 5 Jacobian if asked."""
     gv = _gv_partial_elements(float(a5[0]), float(a5[1]), float(a5[2]))  # C_g^v and its partials
     gr = _gr_partial_elements(float(a5[3]), float(a5[4]))  # C_g^r and its partials
-    cgv, cgr = gv[:9], gr[:9]
-    # C_g^v C_g^r^T, the partials of C_g^v times C_g^r^T and C_g^v times those of C_g^r^T: the
-    # six 3 x 3 products in one stacked numpy call (BLAS per matrix: the same results as one
-    # call per product); the scalar formulas below on plain floats (the same IEEE operations
-    # as on numpy scalars, without their per-element overhead: a hot path)
-    m = np.array(gv + cgv + cgv + cgr + cgr + cgr + cgr + gr[9:]).reshape(12, 3, 3)
-    d = (m[:6] @ m[6:].transpose(0, 2, 1)).reshape(54).tolist()
-    c00, c01, c02, c12, c22 = d[0], d[1], d[2], d[5], d[8]
+    # every product of a 3 x 3 block of gv with one of gr transposed in one matmul, (12 x 3)
+    # (9 x 3)^T: each element is the three-term dot product of one BLAS call per 3 x 3 product,
+    # bit for bit (tests/test_kinematics.py); block (i, j) of d = gv_i gr_j^T starts at 27 i + 3 j
+    # of the flat 12 x 9 result. The scalar formulas below on plain floats (the same IEEE
+    # operations as on numpy scalars, without their per-element overhead: a hot path)
+    d = (np.fromiter(gv, float, 36).reshape(12, 3) @ np.fromiter(gr, float, 27).reshape(9, 3).T).reshape(108).tolist()
+    c00, c01, c02, c12, c22 = d[0], d[1], d[2], d[11], d[20]
     c02 = max(-1.0, min(1.0, c02))
     ang = np.array([math.atan2(c12, c22), math.asin(c02), math.atan2(c01, c00)])
     if not with_jacobian:
@@ -150,8 +149,8 @@ def vehicle_angles_eq4(a5, with_jacobian: bool = True):
     n_psi = c00 ** 2 + c01 ** 2
     ct = math.sqrt(max(1e-300, 1.0 - c02 * c02))
     rows: tuple[list, list, list] = ([], [], [])
-    for k in (9, 18, 27, 36, 45):  # d(C_r^v)/d(phi_g, theta_g, psi_g, phi_r, theta_r)
-        d00, d01, d02, d12, d22 = d[k], d[k + 1], d[k + 2], d[k + 5], d[k + 8]
+    for k in (27, 54, 81, 3, 6):  # d(C_r^v)/d(phi_g, theta_g, psi_g, phi_r, theta_r): blocks (1..3, 0), (0, 1..2)
+        d00, d01, d02, d12, d22 = d[k], d[k + 1], d[k + 2], d[k + 11], d[k + 20]
         rows[0].append((c22 * d12 - c12 * d22) / n_phi)
         rows[1].append(d02 / ct)
         rows[2].append((c00 * d01 - c01 * d00) / n_psi)

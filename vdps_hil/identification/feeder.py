@@ -355,4 +355,4 @@ def _all_finite(inp: IdentInputs) -> bool:
             *inp.gravity_aux_mps2, *inp.omega_radps, *inp.omega_dot_radps2, *inp.susp_deflection_m,
             *inp.susp_rate_mps, *inp.wheel_speed_radps, *inp.wheel_accel_radps2, *inp.wheel_torque_nm,
             *inp.slip_ratio, *inp.slip_angle_rad, *inp.wheel_angle_rad)
-    return all(math.isfinite(v) for v in vals)
+    return all(map(math.isfinite, vals))
