@@ -295,3 +295,19 @@ def test_the_suspension_interval_is_the_longer_of_the_sampling_interval_and_the_
     assert fd.inputs(estimate(t_ns=1_001_000_000), filtered()).susp_interval_s == pytest.approx(0.001)
     fd.observe(_susp(2_001_000_000))  # 1 Hz (Table 1 as printed)
     assert fd.inputs(estimate(t_ns=2_001_000_000), filtered()).susp_interval_s == pytest.approx(1.0)
+
+
+def test_frames_are_bit_equal_to_the_frames_module_products(rng):
+    """``_frames`` (the three rotation chains in stacked matmuls) gives C_g^v, C_g^a and G of
+    ``frames.dcm_global_to_vehicle``, ``dcm_road_to_aux @ dcm_global_to_road`` and
+    ``inputs.gravity_aux_mps2`` bit for bit."""
+    from vdps_hil.identification.feeder import _frames
+    from vdps_hil.identification.inputs import gravity_aux_mps2
+    from vdps_hil.model.frames import dcm_global_to_road, dcm_road_to_aux
+
+    for _ in range(300):
+        a = rng.uniform(-1, 1, 6) * np.array([0.3, 0.3, 3.1, 0.1, 0.1, 3.1])
+        c_gv, c_ga, grav = _frames(*a)
+        assert np.array_equal(c_gv, dcm_global_to_vehicle(*a[:3]))
+        assert np.array_equal(c_ga, dcm_road_to_aux(a[5]) @ dcm_global_to_road(a[3], a[4]))
+        assert grav == gravity_aux_mps2(a[3], a[4], a[5])

@@ -128,3 +128,23 @@ def test_step_integrates_a_coordinated_turn_exactly():
     np.testing.assert_allclose(x[3:5], [V * math.cos(r * t), V * math.sin(r * t)], atol=1e-4)
     assert abs(x[2]) < 1e-9 and abs(x[5]) < 1e-9
     assert abs(x[8] - r * t) < 1e-9
+
+
+def test_vehicle_angles_eq4_is_bit_equal_to_one_matmul_per_product(rng):
+    """The six 3 x 3 products of eq 4's angles and Jacobian, made in one (12 x 3) (9 x 3)^T
+    matmul, equal the one-call-per-product form (C_g^v C_g^r^T and the partials) bit for bit."""
+    for k in range(400):
+        a5 = rng.uniform(-1, 1, 5) * np.array([0.5, 0.5, 3.1, 0.2, 0.2]) * (1e-3 if k % 4 == 0 else 1.0)
+        cgv, dgv_f, dgv_t, dgv_p = K.dcm_gv_partials(*a5[:3])
+        cgr, dgr_f, dgr_t = K.dcm_gr_partials(*a5[3:])
+        c = cgv @ cgr.T
+        dcs = (dgv_f @ cgr.T, dgv_t @ cgr.T, dgv_p @ cgr.T, cgv @ dgr_f.T, cgv @ dgr_t.T)
+        s02 = max(-1.0, min(1.0, c[0, 2]))
+        ang = [math.atan2(c[1, 2], c[2, 2]), math.asin(s02), math.atan2(c[0, 1], c[0, 0])]
+        ct = math.sqrt(max(1e-300, 1.0 - s02 * s02))
+        jac = [[(c[2, 2] * d[1, 2] - c[1, 2] * d[2, 2]) / (c[1, 2] ** 2 + c[2, 2] ** 2) for d in dcs],
+               [d[0, 2] / ct for d in dcs],
+               [(c[0, 0] * d[0, 1] - c[0, 1] * d[0, 0]) / (c[0, 0] ** 2 + c[0, 1] ** 2) for d in dcs]]
+        ang_k, jac_k = K.vehicle_angles_eq4(a5)
+        assert ang_k.tolist() == ang and jac_k.tolist() == jac
+        assert K.vehicle_angles_eq4(a5, False).tolist() == ang

@@ -223,7 +223,7 @@ class TimedAlphaBetaBank:
     ``TimedAlphaBeta`` with its own state and time, sharing the bandwidth and the gain cache
     (one call per sample instead of n). ``rejected[i]`` counts skipped non-finite values."""
 
-    __slots__ = ("bandwidth_hz", "max_gap_ns", "x", "v", "t", "rejected", "restarts", "_gains", "_lag_s")
+    __slots__ = ("bandwidth_hz", "max_gap_ns", "x", "v", "t", "rejected", "restarts", "_gains", "_lag_s", "_all")
 
     def __init__(self, n: int, bandwidth_hz: float, max_gap_s: float = 0.5):
         critically_damped_gains(bandwidth_hz, 1e-3)  # validates
@@ -236,6 +236,7 @@ class TimedAlphaBetaBank:
         self.restarts = 0
         self._gains: dict[int, tuple[float, float, float, float]] = {}  # ns interval -> (alpha, beta/T, T, lag)
         self._lag_s = math.nan
+        self._all = range(n)
 
     def update(self, t_ns: int, values, indices=None) -> int:
         """Feed one value per signal (NaN: skipped for that signal); returns how many were used.
@@ -244,7 +245,8 @@ class TimedAlphaBetaBank:
         used = 0
         xs, vs, ts, gains, max_gap = self.x, self.v, self.t, self._gains, self.max_gap_ns
         g = None  # the gains of the last filter step, if any
-        for i, z in zip(range(len(xs)) if indices is None else indices, values):
+        d_last = None  # the interval of g: the signals of a bank are mostly sampled together
+        for i, z in zip(self._all if indices is None else indices, values):
             if z - z != 0.0:  # NaN or +-inf
                 self.rejected[i] += 1
                 continue
@@ -259,23 +261,31 @@ class TimedAlphaBetaBank:
             if d <= 0:
                 self.rejected[i] += 1
                 continue
-            g = gains.get(d)
-            if g is None:
-                dt = d * 1e-9
-                a, b = critically_damped_gains(self.bandwidth_hz, dt)
-                g = (a, b / dt, dt, derivative_lag_s(a, b, dt))
-                if len(gains) < 256:
-                    gains[d] = g
+            if d != d_last:
+                g = gains.get(d)
+                if g is None:
+                    g = self._new_gains(d)
+                d_last = d
             a, bt, dt, _ = g
-            xp = xs[i] + dt * vs[i]
+            v = vs[i]
+            xp = xs[i] + dt * v
             r = z - xp
             xs[i] = xp + a * r
-            vs[i] += bt * r
+            vs[i] = v + bt * r
             ts[i] = t_ns
             used += 1
         if g is not None:
             self._lag_s = g[3]
         return used
+
+    def _new_gains(self, d_ns: int) -> tuple[float, float, float, float]:
+        """(alpha, beta / T, T, lag) of the interval ``d_ns``, kept in the cache while it has room."""
+        dt = d_ns * 1e-9
+        a, b = critically_damped_gains(self.bandwidth_hz, dt)
+        g = (a, b / dt, dt, derivative_lag_s(a, b, dt))
+        if len(self._gains) < 256:
+            self._gains[d_ns] = g
+        return g
 
     @property
     def lag_s(self) -> float:

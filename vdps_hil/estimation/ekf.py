@@ -312,7 +312,8 @@ class MultiRateEKF:
         """One update with measurement ``z`` (m,) and covariance ``R`` (m, m) of ``kind`` taken at
         ``t_ns`` (None: now). NaN rows of z are dropped; t_ns in the future predicts first; in
         the past uses the history (module docstring). Wrong shapes raise ValueError."""
-        kind = ObsKind(kind)
+        if kind.__class__ is not ObsKind:
+            kind = ObsKind(kind)
         model = self._models[kind]
         z = np.asarray(z, dtype=float)
         R = np.asarray(R, dtype=float)
@@ -334,8 +335,7 @@ class MultiRateEKF:
         return self._delayed(kind, z, R, t_m, aux)
 
     def _apply(self, kind: ObsKind, z, R, t_m: int, aux, count: bool, delayed: bool = False) -> UpdateResult:
-        ok = np.isfinite(z)
-        if not ok.any():
+        if not np.isfinite(z).any():
             return self._finish(UpdateResult(kind, t_m, "nan", delayed=delayed), count)
         if self._hist_ns > 0:
             self._record(False, t_m, (kind, z.copy(), R.copy(), aux))
@@ -429,10 +429,12 @@ class MultiRateEKF:
         wrap_positions(self._x, self._yaw_pos)
 
     def _check_finite(self) -> None:
-        if self._x is not None and not (math.isfinite(float(self._x.sum())) and math.isfinite(float(self._P.sum()))):
+        x = self._x
+        if x is not None and not (math.isfinite(_sum(x, None)) and math.isfinite(_sum(self._P, None))):
             self.reset("nan")
 
 
+_sum = np.add.reduce  # ndarray.sum without its Python wrapper (axis None: the same reduction)
 _KIND_CODE = {ObsKind(v): i for i, v in enumerate(UK.KIND_CODES)}
 _KERNEL_STATUS = {UK.ACCEPTED: "accepted", UK.GATED: "gated", UK.NAN: "nan"}
 _NO_AUX = np.zeros(11)

@@ -6,6 +6,7 @@ the identifier reads).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,10 +32,8 @@ class Estimate:
         P_full = E P E^T, the eq-4 angles' covariance J P_full[6:11, 6:11] J^T."""
         xf, e, ang, jac = layout.expand_with_vehicle_angles(x)
         pf = e @ P @ e.T
-        sig = np.sqrt(np.maximum(pf.diagonal(), 0.0))
         pa = jac @ pf[6:11, 6:11] @ jac.T
-        sa = np.sqrt(np.maximum(pa.diagonal(), 0.0))
-        return cls(t_ns, tuple(xf.tolist()), tuple(sig.tolist()), tuple(ang.tolist()), tuple(sa.tolist()))
+        return cls(t_ns, tuple(xf.tolist()), _sigmas(pf), tuple(ang.tolist()), _sigmas(pa))
 
     def get(self, state) -> float:
         return self.x[_state_index(state)]
@@ -88,6 +87,13 @@ class FilteredSignals:
     wheel_torque_nm: tuple[float, float, float, float]
     steer_wheel_angle_rad: float
     lags_s: dict
+
+
+def _sigmas(p: np.ndarray) -> tuple[float, ...]:
+    """sqrt(max(p_ii, 0)) per diagonal element (NaN stays NaN) on floats: numpy's maximum and
+    sqrt element for element (a diagonal made by matmul is never -0.0, the one input where a
+    vectorised maximum may pick the other zero)."""
+    return tuple([math.sqrt(v) if v > 0.0 else (v if v != v else 0.0) for v in p.diagonal().tolist()])
 
 
 def _state_index(state) -> int:

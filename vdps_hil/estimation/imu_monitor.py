@@ -125,6 +125,7 @@ class ImuMonitor:
         self._jumps = self._floors  # J_i (module docstring), from the running mean step
         self._step = None  # the running mean |step| s_i of consecutive accepted samples
         self._period_ns = 0.0  # learned sample period (EWMA of accepted intervals)
+        self._timeout = self._timeout_ns  # ``timeout_ns``, renewed with the period (read per sample)
         self.t_good = _NEVER  # last accepted sample
         self.gap = (_NEVER, _NEVER)  # (last good before, first good after) of the latest outage
         self.last_fault_ns = _NEVER  # end of the latest fault (gap closed, sample rejected)
@@ -138,21 +139,32 @@ class ImuMonitor:
     @property
     def timeout_ns(self) -> int:
         """The gap that makes an outage: max(timeout_s, 10 learned periods) [ns]."""
-        return max(self._timeout_ns, int(10 * self._period_ns))
+        return self._timeout
+
+    def _set_period(self, period_ns: float) -> None:
+        self._period_ns = period_ns
+        self._timeout = max(self._timeout_ns, int(10 * period_ns))
 
     def check(self, t_ns: int, f, w) -> bool:
         """True: the sample (body axes) may be used; False: rejected and counted."""
         c = self.checks
-        if not math.isfinite(f[0] + f[1] + f[2] + w[0] + w[1] + w[2]):
+        f0, f1, f2 = f
+        w0, w1, w2 = w
+        if not math.isfinite(f0 + f1 + f2 + w0 + w1 + w2):
             return self._reject("not_finite", t_ns)
-        if t_ns < self._last_t - self.timeout_ns:
+        last, timeout = self._last_t, self._timeout
+        if t_ns < last - timeout:
             return self._reject("time", t_ns)
-        after_gap = t_ns - self._last_t > self.timeout_ns  # nothing seen for a while: no reference
-        self._last_t = max(self._last_t, t_ns)
-        if max(abs(w[0]), abs(w[1]), abs(w[2])) >= c.max_rate_radps or \
-                max(abs(f[0]), abs(f[1]), abs(f[2])) >= c.max_specific_force_mps2:
+        after_gap = t_ns - last > timeout  # nothing seen for a while: no reference
+        if t_ns > last:
+            self._last_t = t_ns
+        m = c.max_rate_radps
+        if abs(w0) >= m or abs(w1) >= m or abs(w2) >= m:
             return self._reject("implausible", t_ns)
-        ref, v = self._ref, (*f, *w)
+        m = c.max_specific_force_mps2
+        if abs(f0) >= m or abs(f1) >= m or abs(f2) >= m:
+            return self._reject("implausible", t_ns)
+        ref, v = self._ref, (f0, f1, f2, w0, w1, w2)
         if ref is not None and not after_gap and self._spike(t_ns, v, ref[1], ref[0]):
             return self._reject("spike", t_ns)
         self._accept(t_ns, v)
@@ -164,13 +176,18 @@ class ImuMonitor:
         sample steps back by the run's offset or is back within the jump of r."""
         c, jumps, run = self.checks, self._jumps, self._run
         if run is None:
-            dt = max(0, t_ns - t_ref) * 1e-9
-            sf, sw = min(c.max_jerk_mps3 * dt, c.force_slew_cap_mps2), min(c.max_rate_accel_radps2 * dt,
-                                                                             c.rate_slew_cap_radps)
-            for i in range(6):  # per sample at 1 kHz: a plain loop, not a generator
-                if abs(v[i] - r[i]) > jumps[i] + (sf if i < 3 else sw):
-                    self._run = (t_ns, tuple(a - b for a, b in zip(v, r)), v)
-                    return True
+            dt = (t_ns - t_ref if t_ns > t_ref else 0) * 1e-9
+            sf, cap = c.max_jerk_mps3 * dt, c.force_slew_cap_mps2
+            if cap < sf:
+                sf = cap
+            sw, cap = c.max_rate_accel_radps2 * dt, c.rate_slew_cap_radps
+            if cap < sw:
+                sw = cap
+            if (abs(v[0] - r[0]) > jumps[0] + sf or abs(v[1] - r[1]) > jumps[1] + sf
+                    or abs(v[2] - r[2]) > jumps[2] + sf or abs(v[3] - r[3]) > jumps[3] + sw
+                    or abs(v[4] - r[4]) > jumps[4] + sw or abs(v[5] - r[5]) > jumps[5] + sw):
+                self._run = (t_ns, tuple(a - b for a, b in zip(v, r)), v)
+                return True
             return False
         start, off, prev = run
         back = all(abs(a - p + o) <= j for a, p, o, j in zip(v, prev, off, jumps))
@@ -192,9 +209,9 @@ class ImuMonitor:
         prev = self.t_good
         if prev != _NEVER:
             dt = t_ns - prev
-            if dt > self.timeout_ns:
+            if dt > self._timeout:
                 if self._slow_rate(dt):  # a slow IMU, not an outage (module docstring)
-                    self._period_ns = float(dt)
+                    self._set_period(float(dt))
                     self.counters["period_relearned"] += 1
                 else:
                     self.gap = (prev, t_ns)
@@ -203,10 +220,14 @@ class ImuMonitor:
             elif dt > 0:
                 if self._long:
                     self._long.clear()
-                self._period_ns = dt if self._period_ns == 0.0 else self._period_ns + 0.05 * (dt - self._period_ns)
-        self.t_good = max(prev, t_ns)
+                p = self._period_ns
+                self._period_ns = p = dt if p == 0.0 else p + 0.05 * (dt - p)
+                ten = int(10 * p)  # ``_set_period`` inline: once per sample
+                self._timeout = ten if ten > self._timeout_ns else self._timeout_ns
+        if t_ns > prev:
+            self.t_good = t_ns
         ref = self._ref
-        if ref is not None and 0 < t_ns - ref[0] <= self.timeout_ns:
+        if ref is not None and 0 < t_ns - ref[0] <= self._timeout:
             self._learn_steps(v, ref[1])
         self._ref = (t_ns, v)
         self.counters["accepted"] += 1
@@ -225,22 +246,28 @@ class ImuMonitor:
 
     def _learn_steps(self, v, r) -> None:
         """s_i += a (|v_i - r_i| - s_i) and J_i = max(floor_i, k s_i) (module docstring)."""
+        d0, d1, d2 = abs(v[0] - r[0]), abs(v[1] - r[1]), abs(v[2] - r[2])
+        d3, d4, d5 = abs(v[3] - r[3]), abs(v[4] - r[4]), abs(v[5] - r[5])
         s = self._step
         if s is None:
-            self._step = s = [abs(v[i] - r[i]) for i in range(6)]
+            s = (d0, d1, d2, d3, d4, d5)
         else:
             a = self.checks.jump_scale_weight
-            self._step = s = [s[i] + a * (abs(v[i] - r[i]) - s[i]) for i in range(6)]
-        k, fl = self.checks.jump_noise_factor, self._floors
-        self._jumps = (max(fl[0], k * s[0]), max(fl[1], k * s[1]), max(fl[2], k * s[2]),
-                       max(fl[3], k * s[3]), max(fl[4], k * s[4]), max(fl[5], k * s[5]))
+            s0, s1, s2, s3, s4, s5 = s
+            s = (s0 + a * (d0 - s0), s1 + a * (d1 - s1), s2 + a * (d2 - s2),
+                 s3 + a * (d3 - s3), s4 + a * (d4 - s4), s5 + a * (d5 - s5))
+        self._step = s
+        k, (fl0, fl1, fl2, fl3, fl4, fl5) = self.checks.jump_noise_factor, self._floors
+        j0, j1, j2, j3, j4, j5 = k * s[0], k * s[1], k * s[2], k * s[3], k * s[4], k * s[5]
+        self._jumps = (j0 if j0 > fl0 else fl0, j1 if j1 > fl1 else fl1, j2 if j2 > fl2 else fl2,
+                       j3 if j3 > fl3 else fl3, j4 if j4 > fl4 else fl4, j5 if j5 > fl5 else fl5)
 
     def covered(self, t0_ns: int, t1_ns: int) -> bool:
         """True when accepted samples cover the predict span (t0, t1]: no outage in it and
         the newest accepted sample within the timeout of t1."""
         if self.t_good == _NEVER:
             return True  # before the first sample (initialisation by levelling)
-        if t1_ns - self.t_good > self.timeout_ns:
+        if t1_ns - self.t_good > self._timeout:
             return False
         g0, g1 = self.gap
         return not (t0_ns < g1 and t1_ns > g0)
@@ -267,7 +294,7 @@ class ImuMonitor:
 
     def missing(self, t_ns: int) -> bool:
         """No accepted sample within the timeout before ``t_ns`` (the IMU is missing now)."""
-        return self.t_good != _NEVER and t_ns - self.t_good > self.timeout_ns
+        return self.t_good != _NEVER and t_ns - self.t_good > self._timeout
 
     def fault_age_ns(self, t_ns: int) -> int:
         """Time since the latest IMU fault ended [ns] (very large: never a fault)."""

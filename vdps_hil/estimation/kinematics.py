@@ -50,29 +50,35 @@ from vdps_hil.units import GRAVITY_MPS2
 _I3 = np.eye(3)
 
 
+def _gv_partial_elements(phi: float, theta: float, psi: float) -> list[float]:
+    """C_g^v, dC/dphi, dC/dtheta, dC/dpsi of eq 1: their 36 elements, row by row
+    (``dcm_gv_partials``)."""
+    sf, cf = math.sin(phi), math.cos(phi)
+    st, ct = math.sin(theta), math.cos(theta)
+    sp, cp = math.sin(psi), math.cos(psi)
+    c = list(dcm_gv_elements(sf, cf, st, ct, sp, cp))
+    return c + [0.0, 0.0, 0.0, *c[6:9], -c[3], -c[4], -c[5],
+                -st * cp, -st * sp, ct, -sf * ct * cp, -sf * ct * sp, -sf * st, -cf * ct * cp, -cf * ct * sp, -cf * st,
+                -ct * sp, ct * cp, 0.0, -c[4], c[3], 0.0, -c[7], c[6], 0.0]
+
+
 def dcm_gv_partials(phi: float, theta: float, psi: float):
     """(C_g^v, dC/dphi, dC/dtheta, dC/dpsi) of eq 1.
 
     dC/dphi = K_x C with K_x = [[0,0,0],[0,0,1],[0,-1,0]] (rows: 0, C_2, -C_1);
     dC/dpsi = C K_z with K_z = [[0,1,0],[-1,0,0],[0,0,0]] (columns: -C_:1, C_:0, 0)."""
-    sf, cf = math.sin(phi), math.cos(phi)
-    st, ct = math.sin(theta), math.cos(theta)
-    sp, cp = math.sin(psi), math.cos(psi)
-    c00, c01, c02, *r12 = dcm_gv_elements(sf, cf, st, ct, sp, cp)
-    r1, r2 = r12[0:3], r12[3:6]
-    c = np.array([[c00, c01, c02], r1, r2])
-    d_phi = np.array([[0.0, 0.0, 0.0], r2, [-r1[0], -r1[1], -r1[2]]])
-    d_theta = np.array([
-        [-st * cp, -st * sp, ct],
-        [-sf * ct * cp, -sf * ct * sp, -sf * st],
-        [-cf * ct * cp, -cf * ct * sp, -cf * st],
-    ])
-    d_psi = np.array([
-        [-ct * sp, ct * cp, 0.0],
-        [-r1[1], r1[0], 0.0],
-        [-r2[1], r2[0], 0.0],
-    ])
-    return c, d_phi, d_theta, d_psi
+    return tuple(np.array(_gv_partial_elements(phi, theta, psi)).reshape(4, 3, 3))
+
+
+def _gr_partial_elements(phi_r: float, theta_r: float) -> list[float]:
+    """C_g^r, dC/dphi_r, dC/dtheta_r of eq 2: their 27 elements, row by row (``dcm_gr_partials``)."""
+    sf, cf = math.sin(phi_r), math.cos(phi_r)
+    st, ct = math.sin(theta_r), math.cos(theta_r)
+    r1 = [-sf * st, cf, sf * ct]
+    r2 = [-cf * st, -sf, cf * ct]
+    return [ct, 0.0, st, *r1, *r2,
+            0.0, 0.0, 0.0, *r2, -r1[0], -r1[1], -r1[2],
+            -st, 0.0, ct, -sf * ct, 0.0, -sf * st, -cf * ct, 0.0, -cf * st]
 
 
 def dcm_gr_partials(phi_r: float, theta_r: float):
@@ -80,14 +86,7 @@ def dcm_gr_partials(phi_r: float, theta_r: float):
 
     Row 3 of C_g^r is the road normal in {g}: n = [-cos(phi_r) sin(theta_r), -sin(phi_r),
     cos(phi_r) cos(theta_r)]."""
-    sf, cf = math.sin(phi_r), math.cos(phi_r)
-    st, ct = math.sin(theta_r), math.cos(theta_r)
-    r1 = [-sf * st, cf, sf * ct]
-    r2 = [-cf * st, -sf, cf * ct]
-    c = np.array([[ct, 0.0, st], r1, r2])
-    d_phi = np.array([[0.0, 0.0, 0.0], r2, [-r1[0], -r1[1], -r1[2]]])
-    d_theta = np.array([[-st, 0.0, ct], [-sf * ct, 0.0, -sf * st], [-cf * ct, 0.0, -cf * st]])
-    return c, d_phi, d_theta
+    return tuple(np.array(_gr_partial_elements(phi_r, theta_r)).reshape(3, 3, 3))
 
 
 def road_normal(phi_r: float, theta_r: float):
@@ -133,23 +132,25 @@ def euler_rate_matrix(phi: float, theta: float) -> np.ndarray:
 def vehicle_angles_eq4(a5, with_jacobian: bool = True):
     """Eq 4 with psi_r = 0: five angles (phi_g, theta_g, psi_g, phi_r, theta_r) ->
     (phi_v, theta_v, psi_v) [rad], and the 3 x 5 Jacobian if asked."""
-    cgv, dgv_f, dgv_t, dgv_p = dcm_gv_partials(float(a5[0]), float(a5[1]), float(a5[2]))
-    cgr, dgr_f, dgr_t = dcm_gr_partials(float(a5[3]), float(a5[4]))
-    cgr_t = cgr.T
-    # the 3 x 3 products in numpy, the scalar formulas below on plain floats (the same IEEE
+    gv = _gv_partial_elements(float(a5[0]), float(a5[1]), float(a5[2]))  # C_g^v and its partials
+    gr = _gr_partial_elements(float(a5[3]), float(a5[4]))  # C_g^r and its partials
+    # every product of a 3 x 3 block of gv with one of gr transposed in one matmul, (12 x 3)
+    # (9 x 3)^T: each element is the three-term dot product of one BLAS call per 3 x 3 product,
+    # bit for bit (tests/test_kinematics.py); block (i, j) of d = gv_i gr_j^T starts at 27 i + 3 j
+    # of the flat 12 x 9 result. The scalar formulas below on plain floats (the same IEEE
     # operations as on numpy scalars, without their per-element overhead: a hot path)
-    (c00, c01, c02), (_, _, c12), (_, _, c22) = (cgv @ cgr_t).tolist()
+    d = (np.fromiter(gv, float, 36).reshape(12, 3) @ np.fromiter(gr, float, 27).reshape(9, 3).T).reshape(108).tolist()
+    c00, c01, c02, c12, c22 = d[0], d[1], d[2], d[11], d[20]
     c02 = max(-1.0, min(1.0, c02))
     ang = np.array([math.atan2(c12, c22), math.asin(c02), math.atan2(c01, c00)])
     if not with_jacobian:
         return ang
-    dcs = (dgv_f @ cgr_t, dgv_t @ cgr_t, dgv_p @ cgr_t, cgv @ dgr_f.T, cgv @ dgr_t.T)
     n_phi = c12 ** 2 + c22 ** 2
     n_psi = c00 ** 2 + c01 ** 2
     ct = math.sqrt(max(1e-300, 1.0 - c02 * c02))
     rows: tuple[list, list, list] = ([], [], [])
-    for d in dcs:
-        (d00, d01, d02), (_, _, d12), (_, _, d22) = d.tolist()
+    for k in (27, 54, 81, 3, 6):  # d(C_r^v)/d(phi_g, theta_g, psi_g, phi_r, theta_r): blocks (1..3, 0), (0, 1..2)
+        d00, d01, d02, d12, d22 = d[k], d[k + 1], d[k + 2], d[k + 11], d[k + 20]
         rows[0].append((c22 * d12 - c12 * d22) / n_phi)
         rows[1].append(d02 / ct)
         rows[2].append((c00 * d01 - c01 * d00) / n_psi)

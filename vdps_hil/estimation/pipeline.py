@@ -75,6 +75,7 @@ from vdps_hil.geodesy import EnuOrigin
 KINDS = ("imu", "gnss_pos", "gnss_att", "gnss_vel", "suspension", "wheel_speed", "wheel_torque", "steer")
 
 _NAN = math.nan
+_SUSPENSION_KINDS = frozenset((ObsKind.Y1_SUS, ObsKind.Y2_SUS_PLANE, ObsKind.Y2_SUS_RATE))
 
 
 class EstimatorPipeline:
@@ -427,7 +428,7 @@ class EstimatorPipeline:
                                     self.config.susp_sigma_m)
         self._aid.susp = (t, sm)
         ekf = self.ekf
-        if not ekf.initialized or not ekf.kinds & {ObsKind.Y1_SUS, ObsKind.Y2_SUS_PLANE, ObsKind.Y2_SUS_RATE}:
+        if not ekf.initialized or not ekf.kinds & _SUSPENSION_KINDS:
             return
         if not self._predict_for(t):
             return

@@ -119,6 +119,14 @@ def wrap_angle(a: float) -> float:
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
+def _as_slice(positions) -> slice | np.ndarray:
+    """``positions`` as an index: a slice when they are consecutive (cheaper to assign through)."""
+    p = [int(i) for i in positions]
+    if p and p == list(range(p[0], p[0] + len(p))):
+        return slice(p[0], p[0] + len(p))
+    return np.array(p, dtype=int)
+
+
 @dataclass(frozen=True)
 class StateLayout:
     """Which full-vector states the filter carries.
@@ -159,6 +167,10 @@ class StateLayout:
         sel = np.zeros((N_FULL, len(idx)))
         sel[np.array(idx[:n_kin], dtype=int), np.arange(n_kin)] = 1.0
         object.__setattr__(self, "_sel_full", sel)
+        object.__setattr__(self, "_idx_kin", _as_slice(idx[:n_kin]))
+        # filter positions of the angles psi_v of eq 4 depends on (E's psi_v row)
+        psi_cols = [] if self.psi_v_state else [self._pos[6 + k] for k in range(5 if self.road_estimated else 3)]
+        object.__setattr__(self, "_psi_v_cols", (_as_slice(psi_cols), len(psi_cols)))
 
     @property
     def n(self) -> int:
@@ -254,14 +266,13 @@ class StateLayout:
         eq 4 (the pipeline's output path)."""
         from vdps_hil.estimation.kinematics import vehicle_angles_eq4
 
-        nk = self._n_kin
         xf = np.zeros(N_FULL)
-        xf[self._idx[:nk]] = x[:nk]
+        xf[self._idx_kin] = x[:self._n_kin]
         e = self._sel_full.copy()
         ang, jac = vehicle_angles_eq4(xf[ANGLES5], with_jacobian=True)
         if not self.psi_v_state:
-            for k in range(5 if self.road_estimated else 3):
-                e[States.PSI_V, self._pos[6 + k]] = jac[2, k]
+            cols, k = self._psi_v_cols
+            e[States.PSI_V, cols] = jac[2, :k]
             xf[States.PSI_V] = ang[2]
         return xf, e, ang, jac
 

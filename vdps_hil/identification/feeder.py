@@ -94,10 +94,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
-from vdps_hil.identification.inputs import IdentInputs, gravity_aux_mps2
+from vdps_hil.identification.inputs import IdentInputs
 from vdps_hil.model.core import SLIP_SPEED_FLOOR_MPS, Env, Inputs, Model
-from vdps_hil.model.frames import (c_omega_inv, dcm_global_to_road, dcm_global_to_vehicle,
-                                   dcm_road_to_aux)
+from vdps_hil.model.frames import c_omega_inv, dcm_global_to_vehicle
 from vdps_hil.model.params import Vehicle
 from vdps_hil.units import GRAVITY_MPS2
 
@@ -171,20 +170,25 @@ class IdentFeeder:
         """Keep the specific force of recent ``imu`` samples, the last two steering and
         wheel-torque samples and the times of the last two suspension samples (others are
         ignored)."""
-        if sample.kind == "suspension":
+        kind = sample.kind
+        if kind == "imu":
+            if not sample.valid:
+                return
+        elif kind == "suspension":
             hist = self._susp_t
-            if (sample.valid and any(math.isfinite(sample.fields.get(n, _NAN)) for n in _SUSP)
-                    and (not hist or sample.t_ns > hist[-1])):
-                hist.append(sample.t_ns)
+            if sample.valid and (not hist or sample.t_ns > hist[-1]):
+                g = sample.fields.get
+                if (math.isfinite(g(_SUSP[0], _NAN)) or math.isfinite(g(_SUSP[1], _NAN))
+                        or math.isfinite(g(_SUSP[2], _NAN)) or math.isfinite(g(_SUSP[3], _NAN))):
+                    hist.append(sample.t_ns)
             return
-        if sample.kind in ("steer", "wheel_torque") and sample.valid:
-            names = ("steer_wheel_angle_rad",) if sample.kind == "steer" else _TQ
-            vals = tuple(sample.fields.get(n, _NAN) for n in names)
-            hist = self._steer if sample.kind == "steer" else self._torque
-            if all(math.isfinite(v) for v in vals) and (not hist or sample.t_ns > hist[-1][0]):
-                hist.append((sample.t_ns, vals))
-            return
-        if sample.kind != "imu" or not sample.valid:
+        else:
+            if (kind == "steer" or kind == "wheel_torque") and sample.valid:
+                names = ("steer_wheel_angle_rad",) if kind == "steer" else _TQ
+                vals = tuple(sample.fields.get(n, _NAN) for n in names)
+                hist = self._steer if kind == "steer" else self._torque
+                if all(math.isfinite(v) for v in vals) and (not hist or sample.t_ns > hist[-1][0]):
+                    hist.append((sample.t_ns, vals))
             return
         g = sample.fields.get
         fx, fy, fz = g(_SF[0], _NAN), g(_SF[1], _NAN), g(_SF[2], _NAN)
@@ -240,37 +244,38 @@ class IdentFeeder:
         x = estimate.x
         phi_g, theta_g, psi_g, phi_r, theta_r, psi_v = (float(v) for v in x[6:12])
         phi_v, theta_v, _ = (float(v) for v in estimate.vehicle_angles_rad)
-        c_gv = dcm_global_to_vehicle(phi_g, theta_g, psi_g)
-        c_ga = dcm_road_to_aux(psi_v) @ dcm_global_to_road(phi_r, theta_r)
+        c_gv, c_ga, grav = _frames(phi_g, theta_g, psi_g, phi_r, theta_r, psi_v)
         v_g = np.array(x[3:6], dtype=float)
-        v_a = c_ga @ v_g
-        grav = gravity_aux_mps2(phi_r, theta_r, psi_v)
-        omega = np.array(filtered.angular_rate_radps, dtype=float)
-        omega_dot = np.array(filtered.angular_accel_radps2, dtype=float)
+        v_a = (c_ga @ v_g).tolist()
+        omega = tuple(float(v) for v in filtered.angular_rate_radps)
+        omega_dot = tuple(float(v) for v in filtered.angular_accel_radps2)
         # an ESC cluster has no roll/pitch rate (NaN): the kinematics below take them as 0, as the
         # estimator does; the inputs keep them NaN (not measured)
-        w0, wd0 = omega, omega_dot
-        if math.isfinite(omega[2]) and not np.isfinite(omega).all():
-            w0 = np.where(np.isfinite(omega), omega, 0.0)
-            wd0 = np.where(np.isfinite(omega_dot), omega_dot, 0.0)
+        rates_finite = math.isfinite(omega[0]) and math.isfinite(omega[1]) and math.isfinite(omega[2])
+        w0, wd0 = np.array(omega), np.array(omega_dot)
+        if math.isfinite(omega[2]) and not rates_finite:
+            w0 = np.array([v if math.isfinite(v) else 0.0 for v in omega])
+            wd0 = np.array([v if math.isfinite(v) else 0.0 for v in omega_dot])
         f_cg = self._mean_specific_force(int(estimate.t_ns), w0, wd0)
-        a_a = c_ga @ (c_gv.T @ f_cg) + np.array(grav)
+        a_a = (c_ga @ (c_gv.T @ f_cg)).tolist()
+        a_a = (a_a[0] + grav[0], a_a[1] + grav[1], a_a[2] + grav[2])
         psi_v_dot = float((c_omega_inv(phi_v, theta_v) @ w0)[2])
-        xdd = float(a_a[0] + v_a[1] * psi_v_dot)
-        ydd = float(a_a[1] - v_a[0] * psi_v_dot)
-        zdd = float(a_a[2]) if self.config.vertical == "aux" else float(f_cg[2] + grav[2])
+        xdd = a_a[0] + v_a[1] * psi_v_dot
+        ydd = a_a[1] - v_a[0] * psi_v_dot
+        f_cg = f_cg.tolist()
+        zdd = a_a[2] if self.config.vertical == "aux" else f_cg[2] + grav[2]
         t_est = int(estimate.t_ns)
         steer = self._extrapolated(self._steer, t_est, (float(filtered.steer_wheel_angle_rad),))[0]
         torque = self._extrapolated(self._torque, t_est, tuple(filtered.wheel_torque_nm))
         slip, alpha, delta = self._tire_kinematics(estimate, filtered, c_gv @ v_g, w0, steer)
         inp = IdentInputs(
-            t_ns=int(estimate.t_ns), xdd_a_mps2=xdd, ydd_a_mps2=ydd, zdd_a_mps2=zdd,
-            xd_a_mps=float(v_a[0]), yd_a_mps=float(v_a[1]), psi_v_dot_radps=psi_v_dot,
-            gravity_aux_mps2=grav, omega_radps=tuple(omega.tolist()), omega_dot_radps2=tuple(omega_dot.tolist()),
+            t_ns=t_est, xdd_a_mps2=xdd, ydd_a_mps2=ydd, zdd_a_mps2=zdd,
+            xd_a_mps=v_a[0], yd_a_mps=v_a[1], psi_v_dot_radps=psi_v_dot,
+            gravity_aux_mps2=grav, omega_radps=omega, omega_dot_radps2=omega_dot,
             susp_deflection_m=filtered.susp_deflection_m, susp_rate_mps=filtered.susp_rate_mps,
             wheel_speed_radps=filtered.wheel_speed_radps, wheel_accel_radps2=filtered.wheel_accel_radps2,
             wheel_torque_nm=torque, slip_ratio=slip, slip_angle_rad=alpha,
-            wheel_angle_rad=delta, specific_force_b_mps2=tuple(float(v) for v in f_cg),
+            wheel_angle_rad=delta, specific_force_b_mps2=tuple(f_cg),
             vehicle_angles_rad=(phi_v, theta_v), lateral_velocity_sigma_mps=_lateral_sigma(estimate, c_ga),
             susp_interval_s=self._susp_interval_s(t_est))
         self.counters["inputs"] += 1
@@ -292,23 +297,57 @@ class IdentFeeder:
         env = Env(float(x[9]), float(x[10]))
         n = env.normal_g
         h = self._h_cg
-        w = np.where(np.isfinite(omega), omega, 0.0) if not np.isfinite(omega).all() else omega
+        w = [float(v) for v in omega]
+        finite = math.isfinite(w[0]) and math.isfinite(w[1]) and math.isfinite(w[2])
+        if not finite:
+            w = [v if math.isfinite(v) else 0.0 for v in w]
         state = [h * n[0], h * n[1], h * n[2], float(x[6]), float(x[7]), float(x[8]),
-                 float(v_b[0]), float(v_b[1]), float(v_b[2]), float(w[0]), float(w[1]), float(w[2]),
-                 *(float(v) for v in filtered.wheel_speed_radps)]
+                 float(v_b[0]), float(v_b[1]), float(v_b[2]), *w, *(float(v) for v in filtered.wheel_speed_radps)]
         if steer is None:
             steer = float(filtered.steer_wheel_angle_rad)
         slip, alpha, delta = self._model.corner_kinematics(state, Inputs(steer_wheel_angle_rad=steer), env)
-        if not np.isfinite(omega).all():  # the slips need the rates (v_w = v_b + w x r_w)
+        if not finite:  # the slips need the rates (v_w = v_b + w x r_w)
             slip = alpha = (_NAN,) * 4
         return slip, alpha, delta
+
+
+def _rotation_elements(axis: int, angle: float) -> list[float]:
+    """The nine elements of R(x|y|z, angle) of eq 1 (``frames.rot_x``, ``rot_y``, ``rot_z``), row by row."""
+    c, s = math.cos(angle), math.sin(angle)
+    if axis == 0:
+        return [1.0, 0.0, 0.0, 0.0, c, s, 0.0, -s, c]
+    if axis == 1:
+        return [c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c]
+    return [c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0]
+
+
+_G_DOWN = np.array([0.0, 0.0, -GRAVITY_MPS2])
+_RZ_0 = _rotation_elements(2, 0.0)  # R(z, psi_r = 0) of eq 2
+
+
+def _frames(phi_g: float, theta_g: float, psi_g: float, phi_r: float, theta_r: float,
+            psi_v: float) -> tuple[np.ndarray, np.ndarray, tuple[float, float, float]]:
+    """(C_g^v, C_g^a, G) of the module docstring: the products of ``frames.dcm_global_to_vehicle``
+    (R_x R_y R_z), ``dcm_road_to_aux`` @ ``dcm_global_to_road`` (R_z(psi_v) (R_z(0) R_x R_y)) and
+    ``inputs.gravity_aux_mps2`` ((R_z(psi_v) R_x R_y) [0, 0, -g]) in the same order, the three
+    chains side by side in stacked numpy calls (BLAS per matrix: the same results as one call
+    per product)."""
+    rot = _rotation_elements
+    rx_r, ry_r, rz_v = rot(0, phi_r), rot(1, theta_r), rot(2, psi_v)
+    r = np.array(rot(0, phi_g) + _RZ_0 + rz_v + rot(1, theta_g) + rx_r + rx_r + rot(2, psi_g) + ry_r + ry_r
+                 + rz_v).reshape(10, 3, 3)
+    m = r[:3] @ r[3:6] @ r[6:9]  # C_g^v, C_g^r, R_z(psi_v) R_x(phi_r) R_y(theta_r)
+    g = (m[2] @ _G_DOWN).tolist()
+    return m[0], r[9] @ m[1], (g[0], g[1], g[2])
 
 
 def _lateral_sigma(estimate, c_ga: np.ndarray) -> float:
     """1-sigma of yd_a from the EKF's ENU velocity sigmas (their correlation neglected):
     sqrt(sum_j C_ga[1, j]^2 sigma_v,j^2)."""
-    sv = np.asarray(estimate.sigma[3:6], dtype=float)
-    return float(math.sqrt(float(np.sum((c_ga[1] * sv) ** 2))))
+    c = c_ga[1].tolist()
+    s = estimate.sigma
+    a, b, d = c[0] * float(s[3]), c[1] * float(s[4]), c[2] * float(s[5])
+    return math.sqrt(a * a + b * b + d * d)
 
 
 def _all_finite(inp: IdentInputs) -> bool:
@@ -316,4 +355,4 @@ def _all_finite(inp: IdentInputs) -> bool:
             *inp.gravity_aux_mps2, *inp.omega_radps, *inp.omega_dot_radps2, *inp.susp_deflection_m,
             *inp.susp_rate_mps, *inp.wheel_speed_radps, *inp.wheel_accel_radps2, *inp.wheel_torque_nm,
             *inp.slip_ratio, *inp.slip_angle_rad, *inp.wheel_angle_rad)
-    return all(math.isfinite(v) for v in vals)
+    return all(map(math.isfinite, vals))

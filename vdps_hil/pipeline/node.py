@@ -210,7 +210,7 @@ class VdpsSystem:
                     return out
         if self.feeder is not None:
             self.feeder.observe(sample)
-        self._step(sample, out)
+        self._after(self.pipeline.handle(sample), sample.t_ns, out)  # _step, inline: once per sample
         return out
 
     def finish(self) -> list:
