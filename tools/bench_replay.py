@@ -26,6 +26,20 @@ per-kind cost from ``tools/bench_ekf.py``'s micro-benchmark when it is present.
 Usage::
 
     .venv/bin/python tools/bench_replay.py [--duration 30] [--repeat 2] [--json FILE]
+    .venv/bin/python tools/bench_replay.py --baseline REF [--rounds 4] [--duration 12] [--profiles P]
+
+``--baseline REF`` (a git ref) measures the in-process stages (decode; estimator; + identifier;
+complete chain) of the tree of REF (``git archive``, its own numba cache) and of this tree on the
+same recording (simulated once by this tree), each in a fresh process, ``--rounds`` times in
+ABBA order, and prints the least CPU time per stage and tree with their ratio. Measured
+2026-12-07 (fb4dbe4 against the identifier's and estimator's per-cycle Python cut, README
+"Replay"; the same figures by a scratch form of this script, load average 1.0-2.0)::
+
+    stage           table1-susp1k            table1
+    decode          18.0x -> 20.5x (1.13)    21.2x -> 22.0x (1.04)   (not changed: the noise)
+    estimator       11.2x -> 14.1x (1.26)    21.9x -> 28.0x (1.28)
+    +identify        4.9x ->  7.4x (1.51)     7.0x -> 10.4x (1.49)
+    complete         3.6x ->  5.0x (1.39)     4.6x ->  6.0x (1.30)
 
 Measured (``--duration 30 --repeat 3``, the 2-core VM with nothing else running, load average
 ~1.0 from the benchmark itself; session 3)::
@@ -234,6 +248,70 @@ def print_side_by_side(prof: str, comp: dict, ref: dict) -> None:
               f"{c['wall_s']:.2f} s compiled, {p['wall_s']:.2f} s VDPS_JIT=0", flush=True)
 
 
+_STAGES = r"""
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+from vdps_hil.model.params import load_vehicle
+from vdps_hil.pipeline.node import SystemConfig, VdpsSystem
+from vdps_hil.record.decode import decode_recording
+from vdps_hil.sim.profiles import load_profile
+path, profile = sys.argv[2], sys.argv[3]
+prof, veh = load_profile(profile), load_vehicle("sedan-model", "model")
+res, samples = {}, []
+for _ in range(2):
+    t0 = time.process_time()
+    samples = list(decode_recording(path))
+    res["decode"] = min(res.get("decode", 9e9), time.process_time() - t0)
+for name, kw in (("estimator", dict(identify=False, predict=False)), ("identify", dict(identify=True, predict=False)),
+                 ("complete", dict(identify=True, predict=True))):
+    cfg = SystemConfig.for_profile(prof.suspension.rate_hz, prof.suspension.sigma_m, **kw)
+    for _ in range(2):
+        s = VdpsSystem(veh, cfg)
+        t0 = time.process_time()
+        for x in samples:
+            s.handle(x)
+        s.finish()
+        res[name] = min(res.get(name, 9e9), time.process_time() - t0)
+print(json.dumps(res))
+"""
+"""The stages of ``bench_profile`` in a fresh process of one tree (argv: tree, recording,
+profile): least CPU time of two runs each [s], as JSON."""
+
+
+def side_by_side(ref: str, profile: str, duration_s: float, rounds: int) -> dict:
+    """{tree: {stage: least CPU s}} of the tree of git ``ref`` and this tree (module docstring)."""
+    import subprocess
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    out: dict[str, dict[str, list]] = {ref: {}, "this tree": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        rec = os.path.join(tmp, f"{profile}.mcap")
+        Drive("paper", profile=profile, seed=1, duration_s=duration_s).run(rec)
+        base = Path(tmp) / "baseline"
+        base.mkdir()
+        archive = subprocess.run(["git", "-C", str(repo), "archive", ref], capture_output=True, check=True)
+        subprocess.run(["tar", "-x", "-C", str(base)], input=archive.stdout, check=True)
+        env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+        trees = [(ref, base, dict(env, NUMBA_CACHE_DIR=str(Path(tmp) / "numba"))), ("this tree", repo, env)]
+        for r in range(rounds):
+            for name, tree, e in (trees if r % 2 == 0 else trees[::-1]):
+                p = subprocess.run([sys.executable, "-c", _STAGES, str(tree), rec, profile], cwd=tmp, env=e,
+                                   capture_output=True, text=True)
+                if p.returncode != 0:
+                    raise RuntimeError(f"{name}: {p.stderr.strip().splitlines()[-1:]}")
+                for k, v in json.loads(p.stdout.strip().splitlines()[-1]).items():
+                    out[name].setdefault(k, []).append(v)
+    return {name: {k: min(v) for k, v in st.items()} for name, st in out.items()}
+
+
+def print_baseline(profile: str, duration_s: float, res: dict) -> None:
+    (n0, b), (n1, t) = res.items()
+    print(f"{profile}: RTF (least CPU time), {n0} -> {n1} (ratio), load average {os.getloadavg()}")
+    for k in b:
+        print(f"  {k:10s} {duration_s / b[k]:6.1f}x -> {duration_s / t[k]:6.1f}x ({b[k] / t[k]:.2f})", flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--duration", type=float, default=30.0)
@@ -243,7 +321,13 @@ def main(argv=None) -> int:
     ap.add_argument("--compare-python", action="store_true",
                     help="also run each profile with VDPS_JIT=0 (in a child, right after) and print both")
     ap.add_argument("--no-micro", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--baseline", default=None, help="git ref: its stages side by side with this tree's")
+    ap.add_argument("--rounds", type=int, default=4, help="with --baseline: rounds, ABBA order")
     a = ap.parse_args(argv)
+    if a.baseline:
+        for prof in a.profiles.split(","):
+            print_baseline(prof, a.duration, side_by_side(a.baseline, prof, a.duration, a.rounds))
+        return 0
     from vdps_hil import jit
 
     doc = {"profiles": {}, "jit": jit.ENABLED, "load_average": {"start": os.getloadavg()}}
