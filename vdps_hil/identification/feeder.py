@@ -96,7 +96,7 @@ import numpy as np
 from vdps_hil.bus.samples import Sample, axis_fields, wheel_fields
 from vdps_hil.identification.inputs import IdentInputs
 from vdps_hil.model.core import SLIP_SPEED_FLOOR_MPS, Env, Inputs, Model
-from vdps_hil.model.frames import c_omega_inv, dcm_global_to_vehicle
+from vdps_hil.model.frames import c_omega_inv, dcm_global_to_vehicle, rot_x, rot_y, rot_z
 from vdps_hil.model.params import Vehicle
 from vdps_hil.units import GRAVITY_MPS2
 
@@ -311,18 +311,8 @@ class IdentFeeder:
         return slip, alpha, delta
 
 
-def _rotation_elements(axis: int, angle: float) -> list[float]:
-    """The nine elements of R(x|y|z, angle) of eq 1 (``frames.rot_x``, ``rot_y``, ``rot_z``), row by row."""
-    c, s = math.cos(angle), math.sin(angle)
-    if axis == 0:
-        return [1.0, 0.0, 0.0, 0.0, c, s, 0.0, -s, c]
-    if axis == 1:
-        return [c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c]
-    return [c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0]
-
-
 _G_DOWN = np.array([0.0, 0.0, -GRAVITY_MPS2])
-_RZ_0 = _rotation_elements(2, 0.0)  # R(z, psi_r = 0) of eq 2
+_RZ_0 = rot_z(0.0)  # R(z, psi_r = 0) of eq 2
 
 
 def _frames(phi_g: float, theta_g: float, psi_g: float, phi_r: float, theta_r: float,
@@ -332,10 +322,8 @@ def _frames(phi_g: float, theta_g: float, psi_g: float, phi_r: float, theta_r: f
     ``inputs.gravity_aux_mps2`` ((R_z(psi_v) R_x R_y) [0, 0, -g]) in the same order, the three
     chains side by side in stacked numpy calls (BLAS per matrix: the same results as one call
     per product)."""
-    rot = _rotation_elements
-    rx_r, ry_r, rz_v = rot(0, phi_r), rot(1, theta_r), rot(2, psi_v)
-    r = np.array(rot(0, phi_g) + _RZ_0 + rz_v + rot(1, theta_g) + rx_r + rx_r + rot(2, psi_g) + ry_r + ry_r
-                 + rz_v).reshape(10, 3, 3)
+    rx_r, ry_r, rz_v = rot_x(phi_r), rot_y(theta_r), rot_z(psi_v)
+    r = np.stack((rot_x(phi_g), _RZ_0, rz_v, rot_y(theta_g), rx_r, rx_r, rot_z(psi_g), ry_r, ry_r, rz_v))
     m = r[:3] @ r[3:6] @ r[6:9]  # C_g^v, C_g^r, R_z(psi_v) R_x(phi_r) R_y(theta_r)
     g = (m[2] @ _G_DOWN).tolist()
     return m[0], r[9] @ m[1], (g[0], g[1], g[2])

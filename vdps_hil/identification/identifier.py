@@ -90,7 +90,7 @@ class Identifier:
             return
         self._last_t_ns = inputs.t_ns
         for name in PROBLEM_NAMES:
-            if not (self._ready[name] or self._upstream_ready(name)):
+            if not self._upstream_ready(name):
                 self._waiting[name] += 1
                 self._excited[name] = False
                 continue

@@ -61,7 +61,6 @@ class BlockJackknife:
     def reset(self) -> None:
         self._info = np.zeros((2 * self.blocks, self.n, self.n))
         self._score = np.zeros((2 * self.blocks, self.n))
-        self._block_views = [(self._info[k], self._score[k]) for k in range(2 * self.blocks)]  # added to in place
         self._span = self.first_span
         self._updates = 0
 
@@ -78,7 +77,7 @@ class BlockJackknife:
         if lam < 1.0:
             self._info *= lam
             self._score *= lam
-        info, score = self._block_views[k]
+        info, score = self._info[k], self._score[k]  # views: added to in place
         at = aq.T
         info += at @ aq
         score += at @ y

@@ -123,6 +123,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Callable
 
 import numpy as np
@@ -149,19 +150,14 @@ class Regressor:
     structure: np.ndarray | None = None  # per row: an unmodelled term of b the fit cannot tell (N; identifier)
     row_gates: dict | None = None  # validity gate -> rows it refused in this input (counted by the identifier)
 
-    @property
+    @cached_property
     def used(self) -> tuple[bool, ...]:
         """Per row: excited (``rows``) with A's row and b finite: the rows the RLS uses (its NaN
         guard), which the identifier's statistics follow (made once)."""
-        used = self.__dict__.get("_used")
-        if used is None:
-            used = []
-            for u, b, row in zip(np.asarray(self.rows, dtype=bool).tolist(), np.asarray(self.b, dtype=float).tolist(),
-                                 np.asarray(self.a, dtype=float).tolist(), strict=True):
-                used.append(u and math.isfinite(b) and all(map(math.isfinite, row)))
-            used = tuple(used)
-            object.__setattr__(self, "_used", used)  # a cache of the frozen fields, not a field
-        return used
+        return tuple(u and math.isfinite(b) and all(map(math.isfinite, row))
+                     for u, b, row in zip(np.asarray(self.rows, dtype=bool).tolist(),
+                                          np.asarray(self.b, dtype=float).tolist(),
+                                          np.asarray(self.a, dtype=float).tolist(), strict=True))
 
 
 def _gate(a, thresholds, moving=True) -> np.ndarray:
@@ -254,9 +250,7 @@ def tracking_regressor(inp: IdentInputs, vehicle: Vehicle, cfg: IdentConfig,
     into b_i; C_lambda,i the current estimate in ``params`` (default the prior)."""
     r, iw, v_min = vehicle.tire.rolling_radius_m, vehicle.tire.wheel_inertia_kgm2, cfg.min_speed_mps
     ra = [-r * lam for lam in inp.slip_ratio]  # per wheel in floats (the elementwise numpy's operations)
-    a = np.zeros((4, 4))
-    for i, v in enumerate(ra):
-        a[i, i] = v
+    a = np.diag(ra)
     b = np.array([iw * acc - t for acc, t in zip(inp.wheel_accel_radps2, inp.wheel_torque_nm, strict=True)])
     fast = abs(inp.xd_a_mps) >= v_min
     rows = _gate([[v] for v in ra], cfg.tracking.excitation_min,  # A's rows: 0 but the diagonal
