@@ -1,6 +1,7 @@
 """CAN adapters: interface strings, python-can's virtual bus as a live source, every log
 format python-can writes read back, bad input counted and never fatal."""
 
+import tempfile
 import threading
 import time
 
@@ -225,6 +226,9 @@ def test_a_damaged_real_mf4_is_one_line_and_nothing_else_on_the_terminal(tmp_pat
         data = data[:i] + b"##CX" + data[i + 4:]
     path = tmp_path / "gnss1.MF4"
     path.write_bytes(data)
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
     unraisable, logged = [], []
     monkeypatch.setattr(sys, "unraisablehook", lambda u: unraisable.append(repr(u.exc_value)))
     handler = logging.Handler()
@@ -245,6 +249,7 @@ def test_a_damaged_real_mf4_is_one_line_and_nothing_else_on_the_terminal(tmp_pat
     assert lg.disabled is False  # as it was before
     out, err = capfd.readouterr()
     assert out == "" and err == "", (out, err)
+    assert sorted(p.name for p in scratch.iterdir()) == []  # no copy of the log left behind
 
 
 def _read_all(a):

@@ -26,10 +26,11 @@ from __future__ import annotations
 
 import logging
 import os
+import tempfile
 from typing import Any, Iterable, Mapping, Sequence
 
 from vdps_hil.adapters.base import Adapter, AdapterError, DeviceLost, EndOfInput
-from vdps_hil.adapters.quiet_readers import collect_half_built, library_noise_off
+from vdps_hil.adapters.quiet_readers import collect_half_built, library_noise_off, reader_scratch_folder
 from vdps_hil.adapters.slcan import SlcanLines, fast_slcan_class, lock_port, slcan_line
 from vdps_hil.bus.clocks import ReplayClock
 from vdps_hil.bus.raw import RawCan
@@ -378,6 +379,7 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
         self._feed: _TextFeed | None = None
         self._raw_file = None
         self._reader_cls = None
+        self._scratch: tempfile.TemporaryDirectory | None = None  # asammdf's working copies
         self._log_handler = _LogCount(self)
 
     def _make_reader(self):
@@ -394,7 +396,9 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
             raise AdapterError(f"CAN log {self.path}: no such file")
         suffix = os.path.splitext(self.path)[1].lower()
         err = None  # raised after the reader's leftovers are gone (adapters.quiet_readers)
-        with library_noise_off():
+        if suffix == ".mf4":
+            self._scratch = tempfile.TemporaryDirectory(prefix="vdps-mf4-")
+        with library_noise_off(), reader_scratch_folder(self._scratch.name if self._scratch else None):
             try:
                 if suffix in TEXT_SUFFIXES:
                     _update_reader_plugins()
@@ -416,6 +420,7 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
             if err is not None:
                 collect_half_built()
         if err is not None:
+            self._drop_scratch()
             raise AdapterError(f"CAN log {self.path}: {err}")
 
     @property
@@ -433,6 +438,12 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
         if self._raw_file is not None:
             self._raw_file.close()
             self._raw_file = None
+        self._drop_scratch()
+
+    def _drop_scratch(self) -> None:
+        if self._scratch is not None:
+            self._scratch.cleanup()
+            self._scratch = None
 
     def _bad_line(self, e: BaseException) -> bool:
         """A text reader failed on the feed's last line: count it, continue after it.

@@ -10,6 +10,10 @@ user once, as the adapter's one-line error; :func:`library_noise_off` keeps all 
 terminal while a reader opens (``sys.stdout`` is a sink for that moment, process-wide: nothing of
 ours prints while a log opens), and :func:`collect_half_built`, called inside it, frees the
 half-built reader before it ends.
+
+asammdf also copies an unfinalised MF4 (a CANedge log) into the temporary folder to finalise it,
+and deletes the copy only when the reader closes: a reader that fails while opening left the copy
+behind, one per attempt. :func:`reader_scratch_folder` points that copy into a folder of ours.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ import sys
 from contextlib import contextmanager, redirect_stdout
 from typing import Iterator
 
-__all__ = ["NOISY_LOGGERS", "library_noise_off", "collect_half_built"]
+__all__ = ["NOISY_LOGGERS", "library_noise_off", "collect_half_built", "reader_scratch_folder"]
 
 NOISY_LOGGERS = ("asammdf",)
 """Loggers of readers that print on their own handlers (not through the root logger)."""
@@ -63,3 +67,25 @@ def collect_half_built() -> None:
     """Free a reader that failed in its constructor now (its frames may sit in a reference cycle),
     inside :func:`library_noise_off`."""
     gc.collect()
+
+
+@contextmanager
+def reader_scratch_folder(folder: str | None) -> Iterator[None]:
+    """Within the block, asammdf puts its working copies of a file in ``folder`` (its global
+    ``temporary_folder`` option, restored after; the caller removes the folder when its reader is
+    closed or has failed). Without asammdf installed, or with ``folder`` None, the block runs
+    unchanged."""
+    if folder is None:
+        yield
+        return
+    try:
+        from asammdf.blocks.options import GLOBAL_OPTIONS, set_global_option
+    except ImportError:
+        yield
+        return
+    before = GLOBAL_OPTIONS.get("temporary_folder")
+    set_global_option("temporary_folder", folder)
+    try:
+        yield
+    finally:
+        set_global_option("temporary_folder", before)
