@@ -11,3 +11,7 @@ Data flow (the package tree follows it)::
 """
 
 __version__ = "0.1.0"
+
+from vdps_hil import deferred_imports as _deferred_imports
+
+_deferred_imports.install()  # python-can's MF4 backend (asammdf, pandas) loads when an MF4 is opened

@@ -26,12 +26,12 @@ from __future__ import annotations
 
 import logging
 import os
-import tempfile
 from typing import Any, Iterable, Mapping, Sequence
 
 from vdps_hil.adapters.base import Adapter, AdapterError, DeviceLost, EndOfInput
-from vdps_hil.adapters.quiet_readers import collect_half_built, library_noise_off, reader_scratch_folder
+from vdps_hil.adapters.quiet_readers import collect_half_built, library_noise_off, reader_scratch, reader_scratch_folder
 from vdps_hil.adapters.slcan import SlcanLines, fast_slcan_class, lock_port, slcan_line
+from vdps_hil.adapters.text_logs import TEXT_SUFFIXES, SkippedLineCount, TextFeed
 from vdps_hil.bus.clocks import ReplayClock
 from vdps_hil.bus.raw import RawCan
 
@@ -268,85 +268,6 @@ class CanAdapter(_CanDecodeMixin, Adapter):
         self.health.count("sent")
 
 
-TEXT_SUFFIXES = (".asc", ".log", ".trc", ".csv")
-"""Line-based formats read through :class:`_TextFeed` (bad lines skipped and counted)."""
-
-
-class _TextFeed:
-    """The lines of a text log for a python-can reader, one at a time, with the header kept.
-
-    Bytes that are not UTF-8 are skipped (``non_utf8_lines``). When the reader fails on a
-    line, :meth:`restart` replays the header (the lines before the first message) so a new
-    reader over the same feed continues after the bad line with the header state restored.
-    """
-
-    def __init__(self, f, counters: dict):
-        self.f = f
-        self.counters = counters
-        self.header: list[str] = []
-        self.in_header = True
-        self._replay: list[str] = []
-        self.last = ""
-        self.consumed = 0
-
-    def __iter__(self):
-        return self
-
-    def __next__(self) -> str:
-        if self._replay:
-            return self._replay.pop(0)
-        while True:
-            b = self.f.readline()
-            if not b:
-                raise StopIteration
-            try:
-                line = b.decode("utf-8")
-            except UnicodeDecodeError:
-                self.counters["non_utf8_lines"] = self.counters.get("non_utf8_lines", 0) + 1
-                continue
-            self.consumed += 1
-            if self.in_header:
-                self.header.append(line)
-            self.last = line
-            return line
-
-    def message_seen(self) -> None:
-        if self.in_header:
-            self.in_header = False
-            if self.header:
-                self.header.pop()  # that line was a message, not header
-
-    def restart(self) -> None:
-        self.in_header = False
-        self._replay = list(self.header)
-
-    def close(self) -> None:
-        pass
-
-    @property
-    def closed(self) -> bool:
-        return self.f.closed
-
-
-class _LogCount(logging.Handler):
-    """Counts the lines python-can's readers skip with a warning (e.g. TRC's "Failed to parse
-    message"), instead of printing them."""
-
-    def __init__(self, adapter):
-        super().__init__(logging.INFO)
-        self.adapter = adapter
-
-    def emit(self, record) -> None:
-        h = self.adapter.health
-        msg = record.getMessage()
-        if "Dropping" in msg or record.levelno < logging.INFO:
-            h.count("skipped_lines")  # e.g. TRC bus-information lines: legitimately skipped
-            return
-        h.count("bad_lines")
-        if not h.last_error:
-            h.last_error = msg.splitlines()[0][:200]
-
-
 class CanFileAdapter(_CanDecodeMixin, Adapter):
     """A recorded CAN log read through python-can's readers (asc, blf, candump log, trc, mf4,
     csv, db, and ``.mcap`` through our plugin), replayed as fast as it can be read.
@@ -376,11 +297,11 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
         self.batch = int(batch)
         self._reader = None
         self._it = None
-        self._feed: _TextFeed | None = None
+        self._feed: TextFeed | None = None
         self._raw_file = None
         self._reader_cls = None
-        self._scratch: tempfile.TemporaryDirectory | None = None  # asammdf's working copies
-        self._log_handler = _LogCount(self)
+        self._scratch = None  # asammdf's working copies of an MF4 (adapters.quiet_readers)
+        self._log_handler = SkippedLineCount(self)
 
     def _make_reader(self):
         if self._feed is not None:
@@ -396,15 +317,14 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
             raise AdapterError(f"CAN log {self.path}: no such file")
         suffix = os.path.splitext(self.path)[1].lower()
         err = None  # raised after the reader's leftovers are gone (adapters.quiet_readers)
-        if suffix == ".mf4":
-            self._scratch = tempfile.TemporaryDirectory(prefix="vdps-mf4-")
-        with library_noise_off(), reader_scratch_folder(self._scratch.name if self._scratch else None):
+        self._scratch = reader_scratch(suffix)
+        with library_noise_off(), reader_scratch_folder(self._scratch):
             try:
                 if suffix in TEXT_SUFFIXES:
                     _update_reader_plugins()
                     self._reader_cls = MESSAGE_READERS[suffix]
                     self._raw_file = open(self.path, "rb")
-                    self._feed = _TextFeed(self._raw_file, self.health.counters)
+                    self._feed = TextFeed(self._raw_file, self.health.counters)
                 self._reader = self._make_reader()
                 self._it = iter(self._reader)
             except ValueError as e:  # a known format that breaks, or python-can's "unknown log format"
@@ -420,7 +340,7 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
             if err is not None:
                 collect_half_built()
         if err is not None:
-            self._drop_scratch()
+            self._close()
             raise AdapterError(f"CAN log {self.path}: {err}")
 
     @property
@@ -438,9 +358,6 @@ class CanFileAdapter(_CanDecodeMixin, Adapter):
         if self._raw_file is not None:
             self._raw_file.close()
             self._raw_file = None
-        self._drop_scratch()
-
-    def _drop_scratch(self) -> None:
         if self._scratch is not None:
             self._scratch.cleanup()
             self._scratch = None

@@ -13,7 +13,9 @@ half-built reader before it ends.
 
 asammdf also copies an unfinalised MF4 (a CANedge log) into the temporary folder to finalise it,
 and deletes the copy only when the reader closes: a reader that fails while opening left the copy
-behind, one per attempt. :func:`reader_scratch_folder` points that copy into a folder of ours.
+behind, one per attempt. :func:`reader_scratch` makes a folder of ours for it (loading
+python-can's MF4 support, ``deferred_imports.mf4_support``), :func:`reader_scratch_folder` points
+asammdf there while the reader opens; the adapter removes the folder when it closes or fails.
 """
 
 from __future__ import annotations
@@ -22,10 +24,13 @@ import gc
 import io
 import logging
 import sys
+import tempfile
 from contextlib import contextmanager, redirect_stdout
 from typing import Iterator
 
-__all__ = ["NOISY_LOGGERS", "library_noise_off", "collect_half_built", "reader_scratch_folder"]
+from vdps_hil.deferred_imports import mf4_support
+
+__all__ = ["NOISY_LOGGERS", "library_noise_off", "collect_half_built", "reader_scratch", "reader_scratch_folder"]
 
 NOISY_LOGGERS = ("asammdf",)
 """Loggers of readers that print on their own handlers (not through the root logger)."""
@@ -70,7 +75,7 @@ def collect_half_built() -> None:
 
 
 @contextmanager
-def reader_scratch_folder(folder: str | None) -> Iterator[None]:
+def reader_scratch_folder(folder: tempfile.TemporaryDirectory | None) -> Iterator[None]:
     """Within the block, asammdf puts its working copies of a file in ``folder`` (its global
     ``temporary_folder`` option, restored after; the caller removes the folder when its reader is
     closed or has failed). Without asammdf installed, or with ``folder`` None, the block runs
@@ -84,8 +89,17 @@ def reader_scratch_folder(folder: str | None) -> Iterator[None]:
         yield
         return
     before = GLOBAL_OPTIONS.get("temporary_folder")
-    set_global_option("temporary_folder", folder)
+    set_global_option("temporary_folder", folder.name)
     try:
         yield
     finally:
         set_global_option("temporary_folder", before)
+
+
+def reader_scratch(suffix: str) -> tempfile.TemporaryDirectory | None:
+    """For a ``.mf4`` log: python-can's MF4 support loaded and a fresh folder for asammdf's
+    working copies (:func:`reader_scratch_folder`); None for any other format."""
+    if suffix != ".mf4":
+        return None
+    mf4_support()
+    return tempfile.TemporaryDirectory(prefix="vdps-mf4-")
