@@ -15,7 +15,6 @@ made, so they work from then on. Nothing else is hidden: an ``import asammdf`` f
 from __future__ import annotations
 
 import importlib
-import importlib.abc
 import sys
 
 __all__ = ["install", "mf4_support"]
@@ -34,9 +33,10 @@ def _importing_from_can_mf4() -> bool:
     return False
 
 
-class _DeferFromCanMf4(importlib.abc.MetaPathFinder):
-    """Answers "not installed" for asammdf while ``can.io.mf4`` is first imported; otherwise
-    leaves the search to the other finders."""
+class _DeferFromCanMf4:
+    """A finder on ``sys.meta_path`` (the protocol of ``importlib.abc.MetaPathFinder``, not
+    imported: the package's import must stay cheap) that answers "not installed" for asammdf
+    while ``can.io.mf4`` is first imported, and otherwise leaves the search to the others."""
 
     def find_spec(self, name, path=None, target=None):
         if _released or (name != _DEFERRED and not name.startswith(_DEFERRED + ".")):
