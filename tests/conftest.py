@@ -80,6 +80,19 @@ def rng():
     return np.random.default_rng(12345)
 
 
+@pytest.fixture(scope="session")
+def drive_cache(tmp_path_factory) -> Path:
+    """The folder of the simulated drives of this test run (``workbench_study.cached_drive``):
+    one for every pytest-xdist worker of the run (beside the workers' own temporary folders), so
+    a drive several modules read is simulated once, by the first worker that asks for it."""
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent
+    folder = base / "shared_drives"
+    folder.mkdir(exist_ok=True)
+    return folder
+
+
 @pytest.fixture
 def real_data() -> Path:
     if not REAL_DATA.is_dir():

@@ -26,8 +26,8 @@ VEH = load_vehicle("sedan-model")
 
 
 @pytest.fixture(scope="module")
-def drag(tmp_path_factory):
-    cache = tmp_path_factory.getbasetemp() / "wb_drives"
+def drag(drive_cache):
+    cache = drive_cache
     man, spec = HIDDEN["aero_drag"]
     out = {}
     for label, specs in (("hidden", [spec]), ("null", [])):
@@ -132,14 +132,14 @@ def test_rollover_prediction_with_the_tire_fitted_before_the_start(rollover):
     assert m1["inaccuracy_pct"] < 10.0
 
 
-def test_add_imu_bias_reestimates_and_removes_half_the_attributable_error(tmp_path_factory):
+def test_add_imu_bias_reestimates_and_removes_half_the_attributable_error(drive_cache):
     """A sensor effect is taken out of the IMU readings and the drive re-estimated: the hidden
     bias (ImuBias defaults, 0.05 m/s^2 and 0.1 deg/s per axis) makes the estimate's vertical
     velocity drift, which the predictions (started from the estimate, compared with it) cannot
     follow; the vertical accelerometer bias is re-solved from that drift (the heave equation
     alone confounds it). Seed 3000, 2 s horizon: after adding, the position error falls by >= 50 %
     of the attributable part (hidden minus nothing hidden, same maneuver and seed)."""
-    cache = tmp_path_factory.getbasetemp() / "wb_drives"
+    cache = drive_cache
     man, spec = HIDDEN["imu_bias"]
     path = cached_drive(cache, man, [spec], seed=3000)
     tab = load_drive(path, VEH)
@@ -172,14 +172,14 @@ def test_an_equation_the_added_effect_makes_worse_is_named():
     assert set(worse_equations(before, after, {"lat": 377.2 / WORSE_NOISE - 1.0})) == {"lat"}
 
 
-def test_add_steering_offset_takes_it_out_of_the_steering_and_removes_half_the_error(tmp_path_factory):
+def test_add_steering_offset_takes_it_out_of_the_steering_and_removes_half_the_error(drive_cache):
     """``steering_offset`` through ``--add`` on a drive where the ranking does not offer it (a lane
     change: no half turn, ``candidates.TURN_NEEDED_RAD``): the steering-angle sensor reads 0.03 rad
     (1.7 deg) high (seed 21). The fitted
     offset is the hidden one within 10 %, and after adding it the 1 s and 2 s prediction errors of
     position and yaw fall by >= 50 % of their attributable part (hidden minus nothing hidden, same
     maneuver and seed). Measured: 0.02997 +- 0.00016 rad; 2 s position 1.79 -> 0.19 m."""
-    cache = tmp_path_factory.getbasetemp() / "wb_drives"
+    cache = drive_cache
     path = cached_drive(cache, "lane-change", ["steering_offset:offset_rad=0.03"], seed=21)
     res = add_effects(load_drive(path, VEH), VEH, EffectSet(), ["steering_offset"], refit_every_s=4.0,
                       reestimate=reestimator(path, VEH))

@@ -163,7 +163,7 @@ def test_seed_is_disjoint():
     assert all(SEED not in seeds for seeds in STUDIES.values())
 
 
-def test_circle_ramp_on_commonroad_set1_recommends_saturation_with_one_cornering_coefficient(tmp_path_factory):
+def test_circle_ramp_on_commonroad_set1_recommends_saturation_with_one_cornering_coefficient(drive_cache):
     """CommonRoad set 1 (Ford Escort), the circle ramped to 7.5 m/s^2 (issue 18; a reduced, seeded
     ``tools/workbench_study_cr.py``): tire saturation is recommended with the four tires' common
     cornering coefficient (its rear axle is identified above the tires' slope, where the axle
@@ -175,7 +175,7 @@ def test_circle_ramp_on_commonroad_set1_recommends_saturation_with_one_cornering
     from vdps_hil.workbench.ranking.selection import rank
 
     veh = load_vehicle(model_file("commonroad-mb:1"))
-    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "shipped:cr-circle-ramp", (), SEED,
+    path = cached_drive(drive_cache, "shipped:cr-circle-ramp", (), SEED,
                         truth="commonroad-mb:1")
     rk = rank(load_drive(path, veh), veh)
     assert rk.recommendation == "magic_formula_tire", rk.messages

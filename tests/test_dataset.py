@@ -19,9 +19,9 @@ VEH = load_vehicle("sedan-model")
 
 
 @pytest.fixture(scope="module")
-def drive(tmp_path_factory):
+def drive(drive_cache):
     """A 12 s step steer (seed 5) and its table."""
-    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "step-steer", (), seed=5)
+    path = cached_drive(drive_cache, "step-steer", (), seed=5)
     table = D.load_drive(path, VEH)
     with RecordingReader(path) as r:
         truth = {t: doc["values"] for _, t, doc in r.iter_messages(["/truth/state"])}

@@ -11,9 +11,9 @@ from vdps_hil.experiments.workbench_study import HIDDEN, cached_drive
 
 
 @pytest.fixture(scope="module")
-def drive(tmp_path_factory):
+def drive(drive_cache):
     man, spec = HIDDEN["low_pressure_tire"]
-    return cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", man, [spec], seed=21)
+    return cached_drive(drive_cache, man, [spec], seed=21)
 
 
 def test_full_run(drive, tmp_path, capsys):

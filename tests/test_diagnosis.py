@@ -32,11 +32,11 @@ class SideForce(DynamicsEffect):
 
 
 @pytest.fixture(scope="module")
-def stripped(tmp_path_factory):
+def stripped(drive_cache, tmp_path_factory):
     """The drag drive with only /raw/ left, and a vehicle directory holding only the model file."""
     d = tmp_path_factory.mktemp("raw_only")
     man, spec = HIDDEN["aero_drag"]
-    src = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", man, [spec], seed=21)
+    src = cached_drive(drive_cache, man, [spec], seed=21)
     dst = d / "drive.mcap"
     copy_raw_topics(src, dst)
     vdir = d / "vehicles"

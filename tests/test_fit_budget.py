@@ -16,9 +16,9 @@ from vdps_hil.workbench.ranking.config import RankingConfig
 
 
 @pytest.fixture(scope="module")
-def drive(tmp_path_factory):
+def drive(drive_cache):
     man, spec = HIDDEN["aero_drag"]
-    return cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", man, [spec], seed=21)
+    return cached_drive(drive_cache, man, [spec], seed=21)
 
 
 @pytest.fixture(scope="module")

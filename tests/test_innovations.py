@@ -15,9 +15,9 @@ VEH = load_vehicle("sedan-model")
 
 
 @pytest.fixture(scope="module")
-def drive(tmp_path_factory):
+def drive(drive_cache):
     """The step steer of test_residuals (seed 5) and its table, as (table, None, None)."""
-    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "step-steer", (), seed=5)
+    path = cached_drive(drive_cache, "step-steer", (), seed=5)
     return load_drive(path, VEH), None, None
 
 

@@ -55,8 +55,8 @@ def _jobs(cache: str) -> list[dict]:
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    cache = str(tmp_path_factory.getbasetemp() / "wb_drives")
+def runs(drive_cache):
+    cache = str(drive_cache)
     jobs = _jobs(cache)
     with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as ex:
         out = list(ex.map(run_job, jobs))
@@ -159,10 +159,10 @@ def test_seeds_are_disjoint():
 
 
 @pytest.fixture(scope="module")
-def lane_change_runs(tmp_path_factory):
+def lane_change_runs(drive_cache):
     """Issue 18 on the shipped ISO 3888 lane change (Magic Formula truth tire): each effect hidden
     on the test seeds, and the nothing-hidden drives of the same seeds."""
-    cache = str(tmp_path_factory.getbasetemp() / "wb_lane_change")
+    cache = str(drive_cache)
     jobs = [{"key": (eff, s), "maneuver": LANE_CHANGE, "specs": [HIDDEN[eff][1]], "seed": s, "effect": eff,
              "cache": cache} for eff in LANE_CHANGE_EFFECTS for s in SEEDS]
     jobs += [{"key": (None, s), "maneuver": LANE_CHANGE, "specs": [], "seed": s, "cache": cache} for s in SEEDS]

@@ -68,14 +68,14 @@ def test_seed_is_disjoint():
 
 
 @pytest.fixture(scope="module")
-def circle_set3(tmp_path_factory):
+def circle_set3(drive_cache):
     from vdps_hil.experiments.workbench_study import cached_drive, model_file
     from vdps_hil.model.params import load_vehicle
     from vdps_hil.workbench.dataset import load_drive
     from vdps_hil.workbench.ranking.selection import rank
 
     veh = load_vehicle(model_file("commonroad-mb:3"))
-    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "shipped:cr-circle-ramp", (), SEED,
+    path = cached_drive(drive_cache, "shipped:cr-circle-ramp", (), SEED,
                         truth="commonroad-mb:3")
     return rank(load_drive(path, veh), veh)
 

@@ -35,8 +35,8 @@ def test_worst_windows_find_the_defects_in_order():
 
 
 @pytest.fixture(scope="module")
-def drive(tmp_path_factory):
-    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "step-steer", (), seed=5)
+def drive(drive_cache):
+    path = cached_drive(drive_cache, "step-steer", (), seed=5)
     tab = load_drive(path, VEH)
     return tab, compute_residuals(tab, VEH, EffectSet())
 

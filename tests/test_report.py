@@ -71,9 +71,9 @@ def _need_chromium():
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
+def report(drive_cache, tmp_path_factory):
     man, spec = HIDDEN["aero_drag"]
-    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", man, [spec], seed=21)
+    path = cached_drive(drive_cache, man, [spec], seed=21)
     dg = diagnose(path, load_vehicle("sedan-model"), add=["aero_drag"])
     d = tmp_path_factory.mktemp("report")
     return write_report(dg, d), dg

@@ -17,8 +17,8 @@ TRUE = VEH.with_params(**load_vehicle("sedan-truth").params.as_dict())  # tests 
 
 
 @pytest.fixture(scope="module")
-def drive(tmp_path_factory):
-    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "step-steer", (), seed=5)
+def drive(drive_cache):
+    path = cached_drive(drive_cache, "step-steer", (), seed=5)
     tab = load_drive(path, VEH)
     st = R.row_states(tab, TRUE)
     res = R.compute_residuals(tab, TRUE, EffectSet(), states=st)

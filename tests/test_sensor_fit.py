@@ -48,8 +48,8 @@ def _design(path):
 
 
 @pytest.fixture(scope="module")
-def designs(tmp_path_factory):
-    cache = tmp_path_factory.getbasetemp() / "wb_drives"
+def designs(drive_cache):
+    cache = drive_cache
     man, spec = HIDDEN["imu_bias"]
     return {"hidden": _design(cached_drive(cache, man, [spec], seed=SEED)),
             "nothing": _design(cached_drive(cache, man, [], seed=SEED))}

@@ -17,9 +17,9 @@ TRUE = VEH.with_params(**load_vehicle("sedan-truth").params.as_dict())  # tests 
 
 
 @pytest.fixture(scope="module")
-def drive(tmp_path_factory):
+def drive(drive_cache):
     """The step steer of test_residuals (seed 5) and its table, as (table, None, None)."""
-    path = cached_drive(tmp_path_factory.getbasetemp() / "wb_drives", "step-steer", (), seed=5)
+    path = cached_drive(drive_cache, "step-steer", (), seed=5)
     return load_drive(path, VEH), None, None
 
 

@@ -82,3 +82,33 @@ def test_the_model_file_follows_the_truth_backend():
     for bad in ("commonroad-mb:2", "commonroad-ks:1", "ours"):
         with pytest.raises(ValueError, match="unknown study truth"):
             model_file(bad)
+
+
+def test_processes_sharing_a_drive_folder_simulate_each_drive_once(tmp_path, monkeypatch):
+    """cached_drive's lock: two callers asking for one drive at once (threads here, each with its
+    own open file, which flock treats as two holders) simulate it once; the other waits and reads
+    the file; a drive with another key is simulated for itself."""
+    import threading
+    import time
+
+    calls = []
+
+    def fake_drive(path, maneuver, effects=(), seed=0, duration_s=None, truth=None):
+        calls.append((maneuver, seed))
+        time.sleep(0.3)  # long enough for the other caller to arrive while this one holds the lock
+        with open(path, "wb") as f:
+            f.write(b"drive")
+
+    monkeypatch.setattr(S, "hidden_drive", fake_drive)
+    got = []
+    threads = [threading.Thread(target=lambda: got.append(S.cached_drive(tmp_path, "step-steer", (), seed=5)))
+               for _ in range(2)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert calls == [("step-steer", 5)] and len(set(got)) == 1
+    assert open(got[0], "rb").read() == b"drive"
+    S.cached_drive(tmp_path, "step-steer", (), seed=6)
+    assert calls == [("step-steer", 5), ("step-steer", 6)]
+    assert not list(tmp_path.glob("*.tmp"))

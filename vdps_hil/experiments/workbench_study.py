@@ -252,17 +252,24 @@ def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float
 def cached_drive(directory: str | os.PathLike, maneuver: str, effects: Sequence[str] = (), seed: int = 0,
                  duration_s: float | None = None, truth: str | None = None) -> str:
     """The drive's MCAP in ``directory`` (simulated once; the name encodes maneuver, effects,
-    seed and truth backend, the content is deterministic for them)."""
+    seed and truth backend, the content is deterministic for them). Processes sharing the
+    directory simulate a drive once: the first holds a lock on it (``fcntl.flock`` on
+    ``<drive>.lock``) while it simulates, the others wait and read its file."""
+    import fcntl
     import hashlib
 
     ident = (maneuver_text(maneuver), tuple(effects), int(seed), duration_s) + ((truth,) if truth else ())
     key = hashlib.sha256(repr(ident).encode()).hexdigest()[:16]
     os.makedirs(directory, exist_ok=True)
     path = os.path.join(directory, f"{maneuver}-{key}.mcap")
-    if not os.path.exists(path):
-        tmp = f"{path}.{os.getpid()}.tmp"
-        hidden_drive(tmp, maneuver, effects, seed=seed, duration_s=duration_s, truth=truth)
-        os.replace(tmp, path)
+    if os.path.exists(path):
+        return path
+    with open(f"{path}.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not os.path.exists(path):  # not made by another process while this one waited
+            tmp = f"{path}.{os.getpid()}.tmp"
+            hidden_drive(tmp, maneuver, effects, seed=seed, duration_s=duration_s, truth=truth)
+            os.replace(tmp, path)
     return path
 
 
