@@ -188,22 +188,16 @@ def _imu_in_sensor_frame(samples, rot_rpy=(0.0, 0.0, 0.0), arm=(0.0, 0.0, 0.0)):
     c_bs = dcm_gv(*rot_rpy)
     imu = [s for s in samples if s.kind == "imu"]
     tr = syn.truth(MAN, np.array([s.t_ns for s in imu]) / 1e9 - 0.5e-3)
-    arm = np.asarray(arm)
-    out, k = [], 0
-    for s in samples:
-        if s.kind != "imu":
-            out.append(s)
-            continue
-        f = np.array([s.fields[f"specific_force_mps2_{a}"] for a in "xyz"])
-        w = np.array([s.fields[f"angular_rate_radps_{a}"] for a in "xyz"])
-        wt, wd = tr.omega_b[k], tr.omega_dot_b[k]
-        f = f + np.cross(wd, arm) + np.cross(wt, np.cross(wt, arm))
-        f, w = c_bs @ f, c_bs @ w
-        fields = {**{f"specific_force_mps2_{a}": float(v) for a, v in zip("xyz", f)},
-                  **{f"angular_rate_radps_{a}": float(v) for a, v in zip("xyz", w)}}
-        out.append(dataclasses.replace(s, fields=fields))
-        k += 1
-    return out
+    arm = np.asarray(arm, dtype=float)
+    f = np.array([[s.fields[f"specific_force_mps2_{a}"] for a in "xyz"] for s in imu])
+    w = np.array([[s.fields[f"angular_rate_radps_{a}"] for a in "xyz"] for s in imu])
+    wt, wd = tr.omega_b[: len(imu)], tr.omega_dot_b[: len(imu)]
+    f = f + np.cross(wd, arm) + np.cross(wt, np.cross(wt, arm))  # all samples at once, row by row
+    f, w = f @ c_bs.T, w @ c_bs.T
+    moved = iter([dataclasses.replace(s, fields={**{f"specific_force_mps2_{a}": float(v) for a, v in zip("xyz", fk)},
+                                                 **{f"angular_rate_radps_{a}": float(v) for a, v in zip("xyz", wk)}})
+                  for s, fk, wk in zip(imu, f, w)])
+    return [next(moved) if s.kind == "imu" else s for s in samples]
 
 
 def test_imu_mounting_rotation_and_lever_arm_from_the_model_file():
