@@ -31,6 +31,12 @@ def weak_prior_config(**general):
     return dataclasses.replace(cfg, **probs, **general)
 
 
+def _cross(a, b) -> np.ndarray:
+    """a x b of two 3-vectors: np.cross's products and differences, in Python floats (np.cross's
+    own overhead per call was most of this module's time in the tests)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def forward(rng, k, true=TRUE, ackermann=True, pitch_scale=1.0, **override):
     """One consistent IdentInputs from random excitation and eq 13-17 with ``true``."""
     geo, r, iw = MODEL.geometry, MODEL.tire.rolling_radius_m, MODEL.tire.wheel_inertia_kgm2
@@ -69,11 +75,11 @@ def forward(rng, k, true=TRUE, ackermann=True, pitch_scale=1.0, **override):
     moment = np.zeros(3)
     a_minus_g = np.array([f_body[:, 0].sum() / m, f_body[:, 1].sum() / m, 0.0])  # horizontal
     for i, ((x, y), fb, fz) in enumerate(zip(geo.corner_xy_m(), f_body, fz_body)):
-        moment += np.cross([x, y, -geo.h_cg_m], [fb[0], fb[1], fz])  # strut + tire forces
+        moment += _cross([x, y, -geo.h_cg_m], [fb[0], fb[1], fz])  # strut + tire forces
         mu = (MODEL.front if i < 2 else MODEL.rear).unsprung_mass_kg  # unsprung d'Alembert force
-        moment += np.cross([x, y, -(geo.h_cg_m - r) + h[i]], -mu * a_minus_g)
+        moment += _cross([x, y, -(geo.h_cg_m - r) + h[i]], -mu * a_minus_g)
     inertia = np.diag([true.inertia_x_kgm2, true.inertia_y_kgm2, true.inertia_z_kgm2])
-    omega_dot = np.linalg.solve(inertia, moment - np.cross(omega, inertia @ omega))
+    omega_dot = np.linalg.solve(inertia, moment - _cross(omega, inertia @ omega))
     return IdentInputs(
         t_ns=int(k * 10_000_000), xdd_a_mps2=xdd, ydd_a_mps2=ydd, zdd_a_mps2=zdd, xd_a_mps=speed,
         yd_a_mps=yd, psi_v_dot_radps=psid, gravity_aux_mps2=g_aux, omega_radps=tuple(omega),
