@@ -15,6 +15,7 @@ flow (README, "Layout"); the same list stands there. Two further rules:
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -67,6 +68,13 @@ def _is_type_checking(test: ast.expr) -> bool:
         isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
 
 
+@functools.lru_cache(maxsize=None)
+def _parse(source: str) -> ast.Module:
+    """The syntax tree of a source text, made once per text (each module is read by three tests;
+    nothing changes a tree)."""
+    return ast.parse(source)
+
+
 def imports_of(path: Path, package_dir: Path = PACKAGE, include_type_only: bool = True) -> list[tuple[str, int]]:
     """Every vdps_hil module this file imports, with its line: absolute and relative imports,
     at any depth (inside functions, classes, if/try blocks, ``importlib.import_module("...")``
@@ -77,7 +85,7 @@ def imports_of(path: Path, package_dir: Path = PACKAGE, include_type_only: bool 
     package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
     root = package_dir.parent
     found = []
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+    tree = _parse(path.read_text(encoding="utf-8"))
     type_only = {id(n) for block in ast.walk(tree) if isinstance(block, ast.If) and _is_type_checking(block.test)
                  for stmt in block.body for n in ast.walk(stmt)}
     for node in ast.walk(tree):
@@ -231,7 +239,7 @@ equal to their reference (e.g. tests/test_reduced.py)."""
 def test_modules_and_functions_fit_in_a_head(path):
     src = path.read_text(encoding="utf-8")
     assert len(src.splitlines()) <= MAX_MODULE_LINES
-    tree = ast.parse(src)
+    tree = _parse(src)
     too_long = []
 
     def walk(node, kernel: bool):
