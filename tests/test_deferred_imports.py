@@ -71,3 +71,24 @@ print(json.dumps({"before": before, "after": after}))
     assert got == {"before": False, "after": True}
     got = _run("import json, vdps_hil, can, asammdf; print(json.dumps({'ok': asammdf.MDF is not None}))")
     assert got == {"ok": True}
+
+
+def test_only_the_thread_running_python_can_s_module_is_answered_not_installed():
+    """The hiding follows the thread that runs ``can.io.mf4`` (another thread may import asammdf at
+    that moment): asked from this thread while another holds it, asammdf imports; asked while this
+    thread holds it, "not installed"."""
+    code = """
+import _thread, json
+import vdps_hil.deferred_imports as d
+d._state["hiding"] = _thread.get_ident()
+try:
+    import asammdf.blocks.options
+    mine = "imported"
+except ModuleNotFoundError as e:
+    mine = "not installed" if "deferred" in str(e) else repr(e)
+d._state["hiding"] = -1  # another thread's
+import asammdf
+other = "imported" if asammdf.MDF is not None else "?"
+print(json.dumps({"mine": mine, "other": other}))
+"""
+    assert _run(code) == {"mine": "not installed", "other": "imported"}

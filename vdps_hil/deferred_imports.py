@@ -15,6 +15,7 @@ own "asammdf not found" stays), and an ``import asammdf`` from anywhere else is 
 
 from __future__ import annotations
 
+import _thread
 import functools
 import importlib
 import sys
@@ -23,7 +24,7 @@ __all__ = ["install", "mf4_support"]
 
 CAN_MF4 = "can.io.mf4"
 _DEFERRED = "asammdf"
-_state = {"hiding": False, "released": False}
+_state = {"hiding": None, "released": False}  # hiding: the thread running can.io.mf4 without asammdf
 
 
 class _DeferredMf4Finder:
@@ -34,7 +35,7 @@ class _DeferredMf4Finder:
     def find_spec(self, name, path=None, target=None):
         if _state["released"]:
             return None
-        if _state["hiding"] and (name == _DEFERRED or name.startswith(_DEFERRED + ".")):
+        if _state["hiding"] == _thread.get_ident() and (name == _DEFERRED or name.startswith(_DEFERRED + ".")):
             raise ModuleNotFoundError(f"{name}: deferred until an MF4 file is opened "
                                       "(vdps_hil.deferred_imports)", name=name)
         if name != CAN_MF4 or _DEFERRED in sys.modules:
@@ -68,11 +69,11 @@ class _DeferringLoader:
         return self.loader.create_module(spec)
 
     def exec_module(self, module) -> None:
-        _state["hiding"] = True
+        _state["hiding"] = _thread.get_ident()  # another thread's import of asammdf is served as usual
         try:
             self.loader.exec_module(module)
         finally:
-            _state["hiding"] = False
+            _state["hiding"] = None
         for name in ("MF4Reader", "MF4Writer"):
             cls = getattr(module, name, None)
             if isinstance(cls, type):
