@@ -65,24 +65,27 @@ class Rig:
         return json.loads((self.d / "sent.json").read_text())
 
     def end_stream(self, timeout: float = 60) -> dict:
-        """End the emulator's stream now (``DIR/stop`` while streaming, tools/bench_logger.py)
-        and return what it sent (``sent``)."""
-        (self.d / "stop").touch()
+        """End the emulator's stream now (``DIR/end``, tools/bench_logger.py: the ptys stay open
+        until :meth:`close`) and return what it sent (``sent``)."""
+        (self.d / "end").touch()
         return self.sent(timeout)
 
     def progress(self) -> list[dict]:
         return [json.loads(ln) for ln in (self.d / "progress.jsonl").read_text().splitlines()]
 
     def close(self) -> None:
+        """The logger first, then the devices: a logger that outlived its ptys would reconnect
+        by path, and the kernel may meanwhile have given a pty of that number to another test's
+        emulator (its own logger then could not lock the port: seen once in a fresh-clone run)."""
+        if self.logger.poll() is None:
+            self.logger.kill()
+            self.logger.wait()
         (self.d / "stop").touch()
         try:
             self.emu.wait(30)
         except subprocess.TimeoutExpired:
             self.emu.kill()
             self.emu.wait()
-        if self.logger.poll() is None:
-            self.logger.kill()
-            self.logger.wait()
 
 
 def raw_serial(reader) -> tuple[list[int], int]:

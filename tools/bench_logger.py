@@ -19,8 +19,11 @@ so lost data shows up as sequence gaps in the recording, as it would on a real l
 Symlinks ``DIR/can``, ``DIR/imu``, ``DIR/gnss`` name the devices; ``DIR/ready.json`` says they
 exist; streaming starts when ``DIR/go`` appears; ``DIR/progress.jsonl`` gets a line every
 100 ms (monotonic time and counts sent so far, for crash tests); ``DIR/sent.json`` the totals;
-the ptys stay open until ``DIR/stop`` appears (or ``--linger`` s); a ``DIR/stop`` that
-appears while streaming also ends the stream early (``sent.json`` then has what was sent).
+the ptys stay open until ``DIR/stop`` appears (or ``--linger`` s); a ``DIR/end`` or
+``DIR/stop`` that appears while streaming ends the stream early (``sent.json`` then has what was
+sent); after ``DIR/end`` the ptys stay open, so a reader still running never sees its devices
+vanish (a reader that reconnects by path could otherwise open a pty number the kernel has given
+to another process in the meantime).
 
 The emulator warms its encoders up before it says it is ready, and reports its own longest
 stall (``emulator_max_stall_s``): on a loaded machine the emulator itself can stop for a while
@@ -241,7 +244,7 @@ def emulate(args) -> int:
             prog.write(json.dumps({"t": now, "sent": sent, "dropped": dropped}) + "\n")
             prog.flush()
             next_progress += 0.1
-            if (d / "stop").exists():  # ended early by the caller (checked at 10 Hz)
+            if (d / "stop").exists() or (d / "end").exists():  # ended early by the caller (10 Hz)
                 break
         if now >= t_end:
             break
@@ -311,12 +314,13 @@ def run_pair(d: Path, seconds: float, extra_fps: int, *, logger: str = "vdps",
     the logger's CPU seconds over the streaming window (between ``go`` and the emulator's
     end) with that window's length."""
     d.mkdir(parents=True, exist_ok=True)
-    for f in ("go", "stop", "sent.json", "ready.json"):
+    for f in ("go", "end", "stop", "sent.json", "ready.json"):
         (d / f).unlink(missing_ok=True)
     py = sys.executable
     emu = subprocess.Popen([py, __file__, "emulate", "--dir", str(d), "--seconds", str(seconds),
                             "--extra-fps", str(extra_fps), "--imu-hz", str(imu_hz),
                             "--scale", str(scale), "--linger", "60"])
+    lg = None
     try:
         if not _wait_for(d / "ready.json", 30):
             raise RuntimeError("emulator did not start")
@@ -348,6 +352,9 @@ def run_pair(d: Path, seconds: float, extra_fps: int, *, logger: str = "vdps",
         if lg.returncode not in (0, -signal.SIGINT, 130, 1) and logger == "vdps":
             raise RuntimeError(f"logger failed ({lg.returncode}): {err[-500:]}")
     finally:
+        if lg is not None and lg.poll() is None:  # the logger before its devices (module docstring)
+            lg.kill()
+            lg.wait()
         (d / "stop").touch()
         try:
             emu.wait(30 if (d / "sent.json").exists() else 0.5)
