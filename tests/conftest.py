@@ -86,8 +86,8 @@ def drive_cache(tmp_path_factory) -> Path:
     one for every pytest-xdist worker of the run (beside the workers' own temporary folders), so
     a drive several modules read is simulated once, by the first worker that asks for it."""
     base = tmp_path_factory.getbasetemp()
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        base = base.parent
+    if os.environ.get("PYTEST_XDIST_WORKER") and base.name.startswith("popen-"):
+        base = base.parent  # the run's own folder (xdist's layout); never one shared by other runs
     folder = base / "shared_drives"
     folder.mkdir(exist_ok=True)
     return folder

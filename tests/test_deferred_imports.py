@@ -92,3 +92,27 @@ other = "imported" if asammdf.MDF is not None else "?"
 print(json.dumps({"mine": mine, "other": other}))
 """
     assert _run(code) == {"mine": "not installed", "other": "imported"}
+
+
+def test_a_python_can_without_the_expected_classes_gets_asammdf_at_once():
+    """Where python-can's MF4 module has no MF4Reader and MF4Writer classes (another version),
+    nothing could make asammdf available later: the module runs again at once with it."""
+    code = """
+import json, sys, types
+import vdps_hil.deferred_imports as d
+
+class FakeLoader:  # a module body that imports asammdf, as python-can's does
+    def create_module(self, spec):
+        return None
+    def exec_module(self, module):
+        try:
+            import asammdf
+            module.runs = getattr(module, "runs", []) + ["with asammdf"]
+        except ModuleNotFoundError:
+            module.runs = getattr(module, "runs", []) + ["without"]
+
+m = types.ModuleType("can.io.mf4")
+d._DeferringLoader(FakeLoader()).exec_module(m)
+print(json.dumps({"runs": m.runs, "released": d._state["released"]}))
+"""
+    assert _run(code) == {"runs": ["without", "with asammdf"], "released": True}

@@ -74,10 +74,13 @@ class _DeferringLoader:
             self.loader.exec_module(module)
         finally:
             _state["hiding"] = None
-        for name in ("MF4Reader", "MF4Writer"):
-            cls = getattr(module, name, None)
-            if isinstance(cls, type):
-                cls.__init__ = _enabling(cls.__init__)
+        classes = [getattr(module, name, None) for name in ("MF4Reader", "MF4Writer")]
+        if not all(isinstance(cls, type) for cls in classes):  # not the python-can this was written for:
+            _state["released"] = True  # run it again with asammdf, as python-can itself would have
+            self.loader.exec_module(module)
+            return
+        for cls in classes:
+            cls.__init__ = _enabling(cls.__init__)
 
 
 def _enabling(init):
