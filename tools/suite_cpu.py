@@ -52,19 +52,22 @@ _CATEGORY_RE = [(name, re.compile(pattern)) for name, pattern in CATEGORIES]
 FRAME = re.compile(r"^(?P<fn>.*) \((?P<path>.*?):(?P<line>\d+)\)$")
 
 
+def _relative(path: str) -> str:
+    """A module file's path from its import root (site-packages, the standard library, this repo)."""
+    path = path.split("/site-packages/")[-1].replace(str(REPO) + "/", "")
+    return re.sub(r".*/lib/python3\.\d+/", "", path)
+
+
 def _short(frame: str) -> str:
     m = FRAME.match(frame)
     if not m:
         return frame[:80]
-    path = m["path"].split("/site-packages/")[-1].replace(str(REPO) + "/", "")
-    path = re.sub(r".*/lib/python3\.\d+/", "", path)
-    return f"{m['fn']} ({path})"
+    return f"{m['fn']} ({_relative(m['path'])})"
 
 
 def _package(path: str) -> str:
     """The top-level package of a module file (``vdps_hil`` itself as ``vdps_hil/<subpackage>``)."""
-    p = path.split("/site-packages/")[-1].replace(str(REPO) + "/", "")
-    parts = p.split("/")
+    parts = _relative(path).split("/")
     return "/".join(parts[:2]) if parts[0] == "vdps_hil" else parts[0]
 
 

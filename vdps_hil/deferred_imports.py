@@ -74,6 +74,7 @@ class _DeferringLoader:
             self.loader.exec_module(module)
         finally:
             _state["hiding"] = None
+            _uninstall()  # its work is done: no later import passes through it
         classes = [getattr(module, name, None) for name in ("MF4Reader", "MF4Writer")]
         if not all(isinstance(cls, type) for cls in classes):  # not the python-can this was written for:
             _state["released"] = True  # run it again with asammdf, as python-can itself would have
@@ -101,12 +102,16 @@ def install() -> None:
         sys.meta_path.insert(0, _FINDER)
 
 
+def _uninstall() -> None:
+    if _FINDER in sys.meta_path:
+        sys.meta_path.remove(_FINDER)
+
+
 def mf4_support() -> bool:
     """Make python-can's MF4 reader and writer ready now: import asammdf and, if ``can.io.mf4``
     ran without it, run it again. False when asammdf is not installed."""
     _state["released"] = True
-    if _FINDER in sys.meta_path:
-        sys.meta_path.remove(_FINDER)
+    _uninstall()
     try:
         import asammdf  # noqa: F401
     except ImportError:

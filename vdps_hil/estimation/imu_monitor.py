@@ -221,9 +221,7 @@ class ImuMonitor:
                 if self._long:
                     self._long.clear()
                 p = self._period_ns
-                self._period_ns = p = dt if p == 0.0 else p + 0.05 * (dt - p)
-                ten = int(10 * p)  # ``_set_period`` inline: once per sample
-                self._timeout = ten if ten > self._timeout_ns else self._timeout_ns
+                self._set_period(dt if p == 0.0 else p + 0.05 * (dt - p))
         if t_ns > prev:
             self.t_good = t_ns
         ref = self._ref
