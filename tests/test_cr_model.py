@@ -132,6 +132,31 @@ def test_smoothed_sign_makes_the_camber_force_continuous_and_keeps_it_away_from_
             assert abs(fs - fe) <= 0.005 * max(abs(fe), fz * p.tire.p_vy1)
 
 
+# ------------------------------------------------------------------ change 4: the linear lateral law
+def test_the_linear_lateral_law_is_the_magic_formulas_slope_and_does_not_saturate():
+    p = crm.load_parameters(1)
+    fz = crm.static_ride(p).tire_load_front_n
+    pac = crm.tire_functions().formula_lateral
+    lin = crm.tire_functions(lateral_law="linear").formula_lateral
+    k_y = p.tire.p_ky1 * fz  # B C D, the formula's slope at zero slip [N/rad]
+    # tangent at zero slip: the laws differ at third order, relative O((B alpha)^2) with B = K_y / (C D)
+    # about 15 per rad (|alpha| = 1e-4 rad: 1.5e-6 measured, 1e-5 allowed)
+    for a in (1e-4, -1e-4):
+        assert lin(a, 0.0, fz, p.tire)[0] == pytest.approx(pac(a, 0.0, fz, p.tire)[0], rel=1e-5)
+    for g in (0.0, 0.004, -0.05):  # camber inside and outside the smoothed sign's width
+        # the camber force at zero slip: alpha + S_Hy = S_Hy, up to about 10 mrad, so the curvature
+        # shows at 0.04 % (camber 0.004) to 0.35 % (-0.05) measured; 1 % allowed
+        assert lin(0.0, g, fz, p.tire)[0] == pytest.approx(pac(0.0, g, fz, p.tire)[0], rel=1e-2, abs=1e-9)
+        # exactly linear in alpha, slope K_y; the friction value returned as the package's
+        slope = (lin(0.2, g, fz, p.tire)[0] - lin(0.1, g, fz, p.tire)[0]) / 0.1
+        assert slope == pytest.approx(k_y, rel=1e-9)
+        assert lin(0.1, g, fz, p.tire)[1] == pac(0.1, g, fz, p.tire)[1]
+    # at 0.15 rad the Magic Formula has saturated: its force is far below the tangent's
+    assert abs(pac(0.15, 0.0, fz, p.tire)[0]) < 0.5 * abs(lin(0.15, 0.0, fz, p.tire)[0])
+    with pytest.raises(crm.CrParameterError, match="unknown lateral tire law"):
+        crm.tire_functions(lateral_law="brush")
+
+
 # ------------------------------------------------------------------ change 2: mirror symmetry
 @pytest.mark.parametrize("set_id", SETS)
 def test_combined_slip_functions_are_mirror_symmetric_and_the_package_is_not(set_id, rng):

@@ -26,9 +26,18 @@ def test_the_commonroad_backend_is_registered_and_refuses_bad_sets():
     assert "commonroad-mb" in BACKENDS
     b = truth_backend("commonroad-mb:1", flat_road=True)
     assert b.spec == "commonroad-mb:1" and b.flat_road and b.vehicle.kind == "truth"
-    for bad in ("commonroad-mb", "commonroad-mb:x", "commonroad-mb:2", "commonroad-mb:4"):
-        with pytest.raises(TruthBackendError):
+    for bad in ("commonroad-mb", "commonroad-mb:x", "commonroad-mb:2", "commonroad-mb:4", "commonroad-mb:1:brush",
+                "commonroad-mb:2:linear-lateral"):
+        with pytest.raises(TruthBackendError) as e:
             truth_backend(bad)
+        assert "\n" not in str(e.value)
+
+
+def test_the_linear_lateral_variant_is_the_same_vehicle_without_saturation():
+    b = truth_backend("commonroad-mb:3:linear-lateral")
+    assert b.spec == "commonroad-mb:3:linear-lateral" and b.set_id == 3 and b.lateral_law == "linear"
+    assert b.vehicle == truth_backend("commonroad-mb:3").vehicle
+    assert b.describe()["lateral_law"] == "linear" and truth_backend("commonroad-mb:3").describe()["lateral_law"] == "pacejka"
 
 
 def test_backend_errors_are_configuration_errors_of_a_drive():

@@ -123,6 +123,27 @@ def test_a_left_turn_turns_left_and_rolls_right_side_down():
     assert s["susp_deflection_m_2"] > 0.0 > s["susp_deflection_m_1"]  # right compressed, left extended
 
 
+def test_without_saturation_the_truth_is_the_same_in_the_linear_range_and_needs_less_slip_beyond():
+    """``lateral_law="linear"`` (``commonroad-mb:N:linear-lateral``): a 5 deg steering-wheel step
+    at 20 m/s (0.8 m/s^2) gives the same motion to 0.1 % (the front slip angle, 3 mrad, to 1 %:
+    the Magic Formula's curvature already shows there, 0.6 % measured); a 30 deg step (about
+    5 m/s^2) makes the saturating front tires need > 5 % more slip angle than the linear ones for
+    their force (11 % measured), and the car turns less (1.7 %)."""
+    out = {}
+    for sw in (5.0, 30.0):
+        for law in ("pacejka", "linear"):
+            sim = CommonRoadTruth(1, inputs=Inputs(math.radians(sw)), initial_speed_mps=20.0, lateral_law=law)
+            sim.run(2.0)
+            out[sw, law] = sim.truth[-1]
+    lin, pac = out[5.0, "linear"], out[5.0, "pacejka"]
+    for k in ("accel_b_mps2_y", "rate_b_radps_z"):
+        assert lin[k] == pytest.approx(pac[k], rel=1e-3)
+    assert lin["slip_angle_rad_1"] == pytest.approx(pac["slip_angle_rad_1"], rel=1e-2)
+    lin, pac = out[30.0, "linear"], out[30.0, "pacejka"]
+    assert pac["slip_angle_rad_1"] > 1.05 * lin["slip_angle_rad_1"] > 0.0
+    assert lin["rate_b_radps_z"] > pac["rate_b_radps_z"] > 0.2
+
+
 def test_the_mirror_image_drive_is_the_mirror_image():
     a = CommonRoadTruth(3, inputs=sine_steer(sign=1.0), initial_speed_mps=25.0)
     b = CommonRoadTruth(3, inputs=sine_steer(sign=-1.0), initial_speed_mps=25.0)

@@ -79,7 +79,8 @@ def test_the_model_file_follows_the_truth_backend():
 
     assert model_file(None) == "sedan-model"
     assert model_file("commonroad-mb:1") == "cr1-model" and model_file("commonroad-mb:3") == "cr3-model"
-    for bad in ("commonroad-mb:2", "commonroad-ks:1", "ours"):
+    assert model_file("commonroad-mb:3:linear-lateral") == "cr3-model"  # the same vehicle, tires unsaturated
+    for bad in ("commonroad-mb:2", "commonroad-ks:1", "ours", "commonroad-mb:1:brush", "commonroad-mb:2:linear-lateral"):
         with pytest.raises(ValueError, match="unknown study truth"):
             model_file(bad)
 

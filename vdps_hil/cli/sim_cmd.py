@@ -20,7 +20,8 @@ Examples:
 \b
 Truth (--truth): ours (default, this project's physics core) or commonroad-mb:1 / :3
 (CommonRoad's multibody model, parameter set 1 or 3; flat road only, no wheel lift-off:
-see vdps_hil/sim/truth_cr.py).
+see vdps_hil/sim/truth_cr.py); commonroad-mb:N:linear-lateral is the same vehicle with its
+tires' lateral law linear (no saturation), to measure what saturation costs a model.
 
 \b
 Faults (NAME or NAME:key=value,...): gnss_outage, gyro_spike, frozen_can_signal,

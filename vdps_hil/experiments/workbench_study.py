@@ -215,11 +215,13 @@ def hidden_drive(path: str | os.PathLike, maneuver: str, effects: Sequence[str] 
 
 def model_file(truth: str | None) -> str:
     """The model vehicle file the workbench gets for a drive of ``truth``: ``sedan-model`` for
-    ours (the study maneuvers' sedan), ``crN-model`` for ``commonroad-mb:N``."""
+    ours (the study maneuvers' sedan), ``crN-model`` for ``commonroad-mb:N`` (and for its
+    ``:linear-lateral`` variant, the same vehicle)."""
     if truth is None:
         return "sedan-model"
-    name, _, set_id = truth.partition(":")
-    if name != "commonroad-mb" or set_id not in ("1", "3"):
+    name, _, rest = truth.partition(":")
+    set_id, _, variant = rest.partition(":")
+    if name != "commonroad-mb" or set_id not in ("1", "3") or variant not in ("", "linear-lateral"):
         raise ValueError(f"unknown study truth {truth!r} (commonroad-mb:1 or commonroad-mb:3)")
     return f"cr{set_id}-model"
 

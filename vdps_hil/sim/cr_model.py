@@ -71,6 +71,12 @@ Changes made here (each switchable for tests; the defaults are what the truth ba
 3. **A probe** (``probe=True``): the tire functions record their inputs and outputs, so the
    truth snapshot reports exactly the slips, loads and forces the model used (order of the calls
    in the package: LF, RF, LR, RR for each of the four functions).
+4. **Without saturation, on request** (``lateral_law="linear"``; the truth backend's
+   ``commonroad-mb:N:linear-lateral``, never the default): the pure-slip lateral law replaced by
+   its slope at zero slip (:func:`linear_lateral`), everything else as above. The same vehicle
+   and maneuver with and without the tires' saturation: the part of the model's prediction error
+   that saturation causes is the difference of the two drives' errors (as "hidden minus nothing
+   hidden" on our own simulator).
 
 Parameter sets
 --------------
@@ -136,7 +142,7 @@ from .truth_backends import TruthBackendError
 
 __all__ = ["ADMITTED_SETS", "RESERVED_SET", "CAMBER_SIGN_WIDTH_RAD", "CR_GRAVITY_MPS2", "ASSUMED",
            "CrParameterError", "load_parameters", "parameter_sha256", "mb_rhs", "TireProbe",
-           "truth_figures", "truth_vehicle", "package_version"]
+           "truth_figures", "truth_vehicle", "package_version", "LATERAL_LAWS", "linear_lateral"]
 
 ADMITTED_SETS = (1, 3)
 """CommonRoad vehicle parameter sets used in this project (1: Ford Escort, 3: VW Vanagon)."""
@@ -144,6 +150,9 @@ RESERVED_SET = 2
 """Kept out of the project as an acceptance check: refused by :func:`load_parameters`."""
 CAMBER_SIGN_WIDTH_RAD = 0.01
 """w of sign(gamma) ~ tanh(gamma / w) in the lateral camber terms [rad] (module docstring)."""
+LATERAL_LAWS = ("pacejka", "linear")
+"""The pure-slip lateral tire laws of :func:`tire_functions`: the package's Magic Formula (the
+truth), or its slope at zero slip (``linear_lateral``: the truth without saturation)."""
 CR_GRAVITY_MPS2 = 9.81
 """The package's gravity (hard-coded in ``vehicle_dynamics_mb``) [m/s^2]."""
 ASSUMED = {"steer_ratio": 16.0,
@@ -237,19 +246,48 @@ class TireProbe:
         return recorded
 
 
+def linear_lateral(sign: Callable[[float], float]) -> Callable:
+    """The pure-slip lateral law with the Magic Formula replaced by its slope at zero slip,
+    camber shifts and friction as the package has them (``sign``: its sign function, or the
+    smoothed one)::
+
+        F_y = K_y (alpha + S_Hy) + S_Vy,   K_y = p_ky1 F_z (= B C D, the formula's slope at 0)
+        S_Hy = sign(gamma) (p_hy1 + p_hy3 |gamma|),  S_Vy = sign(gamma) F_z (p_vy1 + p_vy3 |gamma|)
+        mu_y = p_dy1 (1 - p_dy3 gamma^2)            (returned as the package's function does)
+
+    Pacejka, *Tire and Vehicle Dynamics* (3rd ed.), sec 4.3.2: the formula's slope at the origin
+    is B C D. The truth ``commonroad-mb:N:linear-lateral`` uses it: the same vehicle without tire
+    saturation (what a drive's prediction error owes to saturation is measured against it)."""
+
+    def lateral(alpha, gamma, F_z, p):
+        s = sign(gamma)
+        s_hy = s * (p.p_hy1 + p.p_hy3 * abs(gamma))
+        s_vy = s * F_z * (p.p_vy1 + p.p_vy3 * abs(gamma))
+        return [F_z * p.p_ky1 * (alpha + s_hy) + s_vy, p.p_dy1 * (1.0 - p.p_dy3 * gamma ** 2)]
+
+    return lateral
+
+
 def tire_functions(sign_width_rad: float = CAMBER_SIGN_WIDTH_RAD, mirror_combined: bool = True,
-                   probe: TireProbe | None = None) -> types.SimpleNamespace:
+                   probe: TireProbe | None = None, lateral_law: str = "pacejka") -> types.SimpleNamespace:
     """The four tire functions the re-bound model calls (module docstring, changes 1-3).
     ``sign_width_rad = 0`` keeps the package's sign(); ``mirror_combined = False`` keeps its
-    combined-slip functions."""
+    combined-slip functions; ``lateral_law = "linear"``: the pure-slip lateral law of
+    :func:`linear_lateral` instead of the package's Magic Formula."""
     import vehiclemodels.utils.tire_model as tm
 
+    if lateral_law not in LATERAL_LAWS:
+        raise CrParameterError(f"unknown lateral tire law {lateral_law!r} (known: {', '.join(LATERAL_LAWS)})")
     if sign_width_rad > 0.0:
         w = float(sign_width_rad)
         tanh = math.tanh
-        lateral = _rebind(tm.formula_lateral, sign=lambda g: tanh(g / w))
+        smooth = lambda g: tanh(g / w)  # noqa: E731
+        lateral = _rebind(tm.formula_lateral, sign=smooth)
     else:
+        smooth = tm.sign
         lateral = tm.formula_lateral
+    if lateral_law == "linear":
+        lateral = linear_lateral(smooth)
     long_comb, lat_comb = tm.formula_longitudinal_comb, tm.formula_lateral_comb
     if mirror_combined:
         def long_comb_m(kappa, alpha, f0x, p, _f=tm.formula_longitudinal_comb):
@@ -266,7 +304,7 @@ def tire_functions(sign_width_rad: float = CAMBER_SIGN_WIDTH_RAD, mirror_combine
 
 
 def mb_rhs(sign_width_rad: float = CAMBER_SIGN_WIDTH_RAD, mirror_combined: bool = True,
-           probe: TireProbe | None = None) -> Callable:
+           probe: TireProbe | None = None, lateral_law: str = "pacejka") -> Callable:
     """``f(x, u, p) -> x_dot``: the package's ``vehicle_dynamics_mb`` calling the tire functions
     of :func:`tire_functions`. With ``sign_width_rad = 0`` and ``mirror_combined = False`` it is
     the package's function exactly (tested bit for bit). The package may set negative wheel
@@ -274,7 +312,7 @@ def mb_rhs(sign_width_rad: float = CAMBER_SIGN_WIDTH_RAD, mirror_combined: bool 
     from vehiclemodels import vehicle_dynamics_mb as mb
 
     return _rebind(mb.vehicle_dynamics_mb,
-                   tireModel=tire_functions(sign_width_rad, mirror_combined, probe))
+                   tireModel=tire_functions(sign_width_rad, mirror_combined, probe, lateral_law))
 
 
 # ---------------------------------------------------------------------------------------------

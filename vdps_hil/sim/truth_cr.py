@@ -140,15 +140,15 @@ class CommonRoadTruth(FixedStepTruth):
     measurement effects kept), ``inputs`` (an Inputs or ``source(t, x) -> Inputs`` instead of the
     scenario's), ``initial_speed_mps``, ``dt_s`` (outer step, <= 1 ms, dividing 10 ms),
     ``integrator`` ("rk2" or "rk4"), ``refine`` (sub-step multiplier), ``flat_road``,
-    ``record_truth``, ``on_truth``, ``duration_s``, ``sign_width_rad`` and ``mirror_combined``
-    (``cr_model.mb_rhs``; the defaults are the truth backend's)."""
+    ``record_truth``, ``on_truth``, ``duration_s``, ``sign_width_rad``, ``mirror_combined`` and
+    ``lateral_law`` (``cr_model.mb_rhs``; the defaults are the truth backend's)."""
 
     def __init__(self, set_id: int, scenario=None, effects: EffectSet | None = None, *,
                  inputs: Inputs | InputSource | None = None, initial_speed_mps: float | None = None,
                  dt_s: float = 1e-3, integrator: str = "rk2", refine: int = 1, flat_road: bool = False,
                  truth_rate_hz: float = 100.0, record_truth: bool = True,
                  on_truth: Callable[[dict], None] | None = None, duration_s: float | None = None,
-                 sign_width_rad: float | None = None, mirror_combined: bool = True):
+                 sign_width_rad: float | None = None, mirror_combined: bool = True, lateral_law: str = "pacejka"):
         self.set_id = int(set_id)
         self.p = p = load_parameters(self.set_id)
         self.vehicle = truth_vehicle(self.set_id)
@@ -163,7 +163,8 @@ class CommonRoadTruth(FixedStepTruth):
         if not (isinstance(refine, int) and refine >= 1):
             raise SimulationError(f"refine must be an integer >= 1, got {refine!r}")
         self.refine = refine
-        kw = {"mirror_combined": mirror_combined}
+        kw = {"mirror_combined": mirror_combined, "lateral_law": lateral_law}
+        self.lateral_law = lateral_law
         if sign_width_rad is not None:
             kw["sign_width_rad"] = sign_width_rad
         self._rhs = mb_rhs(**kw)
@@ -407,26 +408,35 @@ class CommonRoadTruth(FixedStepTruth):
         return []
 
 
+LINEAR_LATERAL = "linear-lateral"
+"""The variant suffix of ``commonroad-mb:N:linear-lateral`` (``cr_model.linear_lateral``)."""
+
+
 class CommonRoadBackend:
     """The ``commonroad-mb:N`` truth backend of ``vdps sim`` (``sim.truth_backends``): parameter
-    set N in (1, 3); ``flat_road`` drives a banked or graded scenario on a level road."""
+    set N in (1, 3); ``flat_road`` drives a banked or graded scenario on a level road.
+    ``commonroad-mb:N:linear-lateral`` is the same vehicle with the tires' lateral law linear
+    (no saturation; ``cr_model`` change 4), for measuring what saturation costs a model."""
 
     name = "commonroad-mb"
 
     def __init__(self, arg: str, *, flat_road: bool = False):
-        text = str(arg).strip()
+        text, _, variant = str(arg).strip().partition(":")
         if not text.isdigit():
             raise CrParameterError(f"commonroad-mb needs a parameter set number (commonroad-mb:1 or "
                                    f"commonroad-mb:3), got {arg!r}")
+        if variant not in ("", LINEAR_LATERAL):
+            raise CrParameterError(f"commonroad-mb:{text}: unknown variant {variant!r} (known: {LINEAR_LATERAL})")
         load_parameters(int(text))  # refuses the reserved and unknown sets before anything else
         self.set_id = int(text)
+        self.lateral_law = "linear" if variant else "pacejka"
         self.flat_road = bool(flat_road)
         self.vehicle = truth_vehicle(self.set_id)
         self.notes: list[str] = []
 
     @property
     def spec(self) -> str:
-        return f"{self.name}:{self.set_id}"
+        return f"{self.name}:{self.set_id}" + (f":{LINEAR_LATERAL}" if self.lateral_law == "linear" else "")
 
     def prepare(self, scenario, effects: EffectSet) -> tuple[EffectSet, list[str]]:
         """Check the scenario and effects now (one-line TruthRangeError); the kept effects and notes."""
@@ -434,13 +444,14 @@ class CommonRoadBackend:
         return kept, list(self.notes)
 
     def simulator(self, scenario, effects: EffectSet, **kw) -> CommonRoadTruth:
-        return CommonRoadTruth(self.set_id, scenario, effects, flat_road=self.flat_road, **kw)
+        return CommonRoadTruth(self.set_id, scenario, effects, flat_road=self.flat_road, lateral_law=self.lateral_law,
+                               **kw)
 
     def describe(self, sim: CommonRoadTruth | None = None) -> dict:
         from .cr_model import CAMBER_SIGN_WIDTH_RAD, package_version
         d = {"backend": self.spec, "package": "commonroad-vehicle-models", "package_version": package_version(),
              "parameter_set": self.set_id, "camber_sign_width_rad": CAMBER_SIGN_WIDTH_RAD,
-             "combined_slip": "mirror-symmetric part", "flat_road": self.flat_road,
+             "combined_slip": "mirror-symmetric part", "lateral_law": self.lateral_law, "flat_road": self.flat_road,
              "steer_ratio": self.vehicle.geometry.steer_ratio, "notes": list(self.notes)}
         if sim is not None:
             d["notes"] += [n for n in sim.notes if n not in d["notes"]]

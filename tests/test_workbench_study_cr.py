@@ -1,0 +1,48 @@
+"""Tests of ``tools/workbench_study_cr.py``'s ``add`` figures: the prediction error attributable
+to saturation (the saturation drive's minus the linear-tire drive's, both of the base model) and
+the fraction of it that ``--add magic_formula_tire`` removes. The study itself runs minutes per
+seed (``tools/``); its refusal of tuning seeds is tested in ``tests/test_seeds.py``."""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
+
+import workbench_study_cr as wsc  # noqa: E402
+
+
+def _run(kind, seed, before, after, rec=None):
+    return {"kind": kind, "set": 1, "seed": seed, "recommendation": rec,
+            "add_before": {"2": {"position_m": before[0], "yaw_deg": before[1]}},
+            "add_after": {"2": {"position_m": after[0], "yaw_deg": after[1]}}}
+
+
+def test_attributable_error_and_the_fraction_removed():
+    add = _run("add", 5, (0.9, 2.0), (0.75, 1.5), "magic_formula_tire")
+    null = _run("add-null", 5, (0.7, 1.6), (0.7, 1.7))
+    f = wsc.add_figures(add, null)
+    assert f["position_m"]["attributable"] == pytest.approx(0.2)
+    assert f["position_m"]["removed"] == pytest.approx(0.75)  # 0.15 of 0.2
+    assert f["yaw_deg"]["removed"] == pytest.approx(1.25)  # better than the drive without saturation
+    # nothing attributable (the linear drive predicts worse): no fraction, never counted as met
+    f = wsc.add_figures(add, _run("add-null", 5, (1.0, 2.5), (1.0, 2.5)))
+    assert math.isnan(f["position_m"]["removed"]) and not f["position_m"]["removed"] >= 0.5
+
+
+def test_the_summary_counts_seeds_meeting_half_and_saturation_named_without_it():
+    runs = [_run("add", 1, (0.9, 2.0), (0.75, 1.5), "magic_formula_tire"), _run("add-null", 1, (0.7, 1.6), (0.7, 1.6)),
+            _run("add", 2, (0.9, 2.0), (0.85, 1.9), "magic_formula_tire"),
+            _run("add-null", 2, (0.7, 1.6), (0.7, 1.6), "magic_formula_tire")]
+    text = "\n".join(wsc.summary(runs))
+    assert "cr1: --add takes >= 50 % off the position" in text and "  1/2" in text.split("off the position")[1][:12]
+    assert "pooled: 0.2 of 0.4 attributable removed (50 %)" in text
+    assert "cr1: no saturation recommended without it" in text and "  1/2" in text.split("without it")[1][:12]
+    jobs = wsc.jobs_for(3, 1000)
+    kinds = {j["kind"]: j for j in jobs}
+    assert kinds["add"]["truth"] == "commonroad-mb:3" and kinds["add-null"]["truth"] == "commonroad-mb:3:linear-lateral"
+    assert kinds["add"]["add"] == kinds["add-null"]["add"] == "magic_formula_tire"
