@@ -17,7 +17,8 @@ from vdps_hil.prediction.predictor import Predictor
 from vdps_hil.record.reader import RecordingReader
 from vdps_hil.sim.drive import Drive
 from vdps_hil.sim.scenarios import load_scenario
-from vdps_hil.workbench.add import WORSE_FRACTION, WORSE_NOISE, add_effects, before_after, fit_model, residual_change, worse_equations
+from vdps_hil.workbench.add import (WORSE_FRACTION, WORSE_NOISE, add_effects, before_after, fit_model, residual_change,
+                                    worse_equations, worse_predictions)
 from vdps_hil.workbench.candidates import candidate_for
 from vdps_hil.workbench.dataset import load_drive, reestimator
 from vdps_hil.workbench.simulation_errors import _initial_state
@@ -170,6 +171,21 @@ def test_an_equation_the_added_effect_makes_worse_is_named():
     # a rise within half the equation's noise sigma is the noise of re-estimating, not "worse"
     assert worse_equations(before, after, {"lat": 377.2 / WORSE_NOISE + 1.0}) == {}
     assert set(worse_equations(before, after, {"lat": 377.2 / WORSE_NOISE - 1.0})) == {"lat"}
+
+
+def test_a_held_out_prediction_the_added_effect_makes_worse_is_named():
+    """A quantity of the held-out prediction error that rises by more than WORSE_FRACTION (10 %):
+    CommonRoad set 3's circle ramp (tuning seed 100), ``--add magic_formula_tire``: position
+    0.555 -> 0.973 m, yaw 2.81 -> 3.20 deg at 2 s; a diverged (None) or non-finite figure is not
+    compared."""
+    q = ("position_m", "yaw_deg", "roll_deg", "speed_mps")
+    before = {"simulation_error": {"0.5": dict(zip(q, (0.1, 0.4, 0.9, 0.04))), "2": dict(zip(q, (0.555, 2.81, 0.6, 0.2)))}}
+    after = {"simulation_error": {"0.5": dict(zip(q, (0.1, 0.44, 0.9, None))),
+                                  "2": dict(zip(q, (0.973, 3.20, 0.6 * (1 + 0.99 * WORSE_FRACTION), float("nan"))))}}
+    w = worse_predictions(before, after)
+    assert set(w) == {"2"} and set(w["2"]) == {"position_m", "yaw_deg"}  # roll: 9.9 % is not "worse"
+    assert w["2"]["position_m"] == pytest.approx(0.7532, abs=1e-3)
+    assert worse_predictions(before, None) == {} and worse_predictions({}, after) == {}
 
 
 def test_add_steering_offset_takes_it_out_of_the_steering_and_removes_half_the_error(drive_cache):

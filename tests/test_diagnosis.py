@@ -112,6 +112,15 @@ def test_add_through_the_diagnosis_fills_after(stripped, monkeypatch, tmp_path):
     assert 0.5 * lat0 > 0.5 * dg.add.noise_sigma["lat"]  # above the noise floor of "worse"
     assert (f"worse with aerodynamic drag: the lat residual rose 50 % ({lat0:.4g} -> {1.5 * lat0:.4g} N)"
             in dg.summary_lines())
+    # a held-out prediction error the effect made worse: a line, the JSON, the report's table
+    q = ("position_m", "yaw_deg", "roll_deg", "speed_mps")
+    dg.add.before["simulation_error"] = {"2": dict(zip(q, (0.5, 2.0, 1.0, 0.1)))}
+    dg.add.after["simulation_error"] = {"2": dict(zip(q, (0.75, 2.1, 1.0, 0.1)))}
+    assert ("worse with aerodynamic drag: the held-out 2 s prediction error rose: position 0.5 -> 0.75 m (+50 %)"
+            in dg.summary_lines())
+    assert dg.to_json()["workbench"]["added"]["worse_predictions"] == {"2": {"position_m": pytest.approx(0.5)}}
+    from vdps_hil.workbench.report import render_report
+    assert "<td>0.75 m (worse)</td>" in render_report(dg) and "<td>2.1 deg</td>" in render_report(dg)
     from vdps_hil.workbench.model_file import load_model
 
     _, eff, _ = load_model(tmp_path / "m.json", veh)

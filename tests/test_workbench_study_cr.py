@@ -40,7 +40,7 @@ def test_the_summary_counts_seeds_meeting_half_and_saturation_named_without_it()
             _run("add-null", 2, (0.7, 1.6), (0.7, 1.6), "magic_formula_tire")]
     text = "\n".join(wsc.summary(runs))
     assert "cr1: --add takes >= 50 % off the position" in text and "  1/2" in text.split("off the position")[1][:12]
-    assert "pooled: 0.2 of 0.4 attributable removed (50 %)" in text
+    assert "pooled over the 2 seeds with an attributable part: 0.2 of 0.4 removed (50 %)" in text
     assert "cr1: no saturation recommended without it" in text and "  1/2" in text.split("without it")[1][:12]
     jobs = wsc.jobs_for(3, 1000)
     kinds = {j["kind"]: j for j in jobs}

@@ -128,10 +128,11 @@ def summary(runs: list[dict]) -> list[str]:
             for q in ADD_QUANTITIES:
                 ok = sum(figs[s][q]["removed"] >= 0.5 for s in seeds)
                 rate(f"cr{set_id}: --add takes >= 50 % off the {q.split('_')[0]}", ok, len(seeds), ">= 90 %")
-                att = sum(max(figs[s][q]["attributable"], 0.0) for s in seeds)
-                cut = sum(figs[s][q]["before"] - figs[s][q]["after"] for s in seeds)
-                lines.append(f"    pooled: {cut:.3g} of {att:.3g} attributable removed"
-                             f" ({100 * cut / att if att > 0 else float('nan'):.0f} %)")
+                pos = [s for s in seeds if figs[s][q]["attributable"] > 0]
+                att = sum(figs[s][q]["attributable"] for s in pos)
+                cut = sum(figs[s][q]["before"] - figs[s][q]["after"] for s in pos)
+                lines.append(f"    pooled over the {len(pos)} seeds with an attributable part: {cut:.3g} of {att:.3g}"
+                             f" removed ({100 * cut / att if att > 0 else float('nan'):.0f} %)")
                 lines.append(f"    {q} at {ADD_HORIZON} s, per seed (before / null / after, removed): " + "; ".join(
                     f"{s}: {figs[s][q]['before']:.3g} / {figs[s][q]['null']:.3g} / {figs[s][q]['after']:.3g}, "
                     f"{100 * figs[s][q]['removed']:.0f} %" for s in seeds))

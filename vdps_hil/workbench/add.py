@@ -17,7 +17,9 @@ Before/after (the issue's ``before``/``after``):
 * ``simulation_error`` per horizon (0.5, 1, 2 s): the input-driven predictor started from the
   estimate every ``every_s``; the model used for a prediction starting at t0 is fitted **only on
   data before t0** (an expanding window refitted at ``refit_every_s`` boundaries; predictions
-  start after ``min_train_s`` of data), so every prediction is made on held-out time.
+  start after ``min_train_s`` of data), so every prediction is made on held-out time; a quantity
+  whose error rises by more than ``WORSE_FRACTION`` is reported as made worse
+  (:func:`worse_predictions`: text, JSON, HTML).
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ from .residuals import EQUATIONS, row_states
 from .simulation_errors import HORIZONS_S, SimErrors, simulation_errors
 
 __all__ = ["FittedModel", "fit_model", "AddResult", "add_effects", "cleaned_residuals", "before_after", "cleaned_rms",
-           "rms_by_equation"]
+           "rms_by_equation", "worse_predictions"]
 
 
 @dataclass
@@ -153,10 +155,15 @@ class AddResult:
         """Equation -> relative rise, for the equations the added effects made worse."""
         return worse_equations(self.before, self.after, self.noise_sigma)
 
+    def worse_predictions(self) -> dict[str, dict[str, float]]:
+        """Horizon -> {quantity: relative rise}: the held-out prediction errors the added effects
+        made worse (:func:`worse_predictions`)."""
+        return worse_predictions(self.before, self.after)
+
     def to_json(self) -> dict:
         return {"added": list(self.added), "parameters": self.parameters, "before": self.before, "after": self.after,
                 "residual_change": residual_change(self.before, self.after), "worse": sorted(self.worse()),
-                "noise_sigma": dict(self.noise_sigma)}
+                "worse_predictions": self.worse_predictions(), "noise_sigma": dict(self.noise_sigma)}
 
 
 WORSE_FRACTION = 0.10
@@ -190,6 +197,30 @@ def worse_equations(before: dict, after: dict | None, noise_sigma: dict | None =
     noise = noise_sigma or {}
     return {eq: c for eq, c in residual_change(before, after).items()
             if c is not None and c > WORSE_FRACTION and ra[eq] - rb[eq] > WORSE_NOISE * noise.get(eq, 0.0)}
+
+
+PREDICTED_QUANTITIES = ("position_m", "yaw_deg", "roll_deg", "speed_mps")
+"""The held-out prediction errors of ``simulation_error`` (per horizon)."""
+
+
+def worse_predictions(before: dict, after: dict | None) -> dict[str, dict[str, float]]:
+    """Horizon -> {quantity: relative rise} of the held-out prediction errors (``simulation_error``)
+    that rose by more than :data:`WORSE_FRACTION` with the added effects: the model with them
+    predicts worse on time it was not fitted on (on CommonRoad set 3's circle ramp, tuning seed
+    100, ``--add magic_formula_tire`` took the 2 s position error from 0.555 to 0.973 m). A
+    diverged or missing figure is not compared (the diverged starts are said apart)."""
+    sb = before.get("simulation_error") or {}
+    sa = (after or {}).get("simulation_error") or {}
+    out: dict[str, dict[str, float]] = {}
+    for h, d in sb.items():
+        a = sa.get(h) or {}
+        for q in PREDICTED_QUANTITIES:
+            vb, va = d.get(q), a.get(q)
+            if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (vb, va)) or vb <= 0:
+                continue
+            if (va - vb) / vb > WORSE_FRACTION:
+                out.setdefault(h, {})[q] = (va - vb) / vb
+    return out
 
 
 def cleaned_residuals(table: DriveTable, model: FittedModel, vehicle: Vehicle, config: RankingConfig | None = None

@@ -188,13 +188,23 @@ def _before_after_lines(before: dict, after: dict | None) -> list[str]:
 
 
 def _worse_lines(add) -> list[str]:
-    """A line per equation the added effects made worse (``AddResult.worse``)."""
+    """A line per equation, and per prediction horizon, the added effects made worse
+    (``AddResult.worse``, ``AddResult.worse_predictions``)."""
     from .words import EFFECT_LABELS
 
     names = ", ".join(EFFECT_LABELS.get(a, a) for a in add.added)
     rb, ra = add.before["residual_rms"], add.after["residual_rms"]
-    return [f"worse with {names}: the {eq} residual rose {100 * c:.0f} % ({rb[eq]:.4g} -> {ra[eq]:.4g} "
-            f"{EQUATION_UNITS.get(eq, '')})" for eq, c in add.worse().items()]
+    out = [f"worse with {names}: the {eq} residual rose {100 * c:.0f} % ({rb[eq]:.4g} -> {ra[eq]:.4g} "
+           f"{EQUATION_UNITS.get(eq, '')})" for eq, c in add.worse().items()]
+    sb, sa = add.before.get("simulation_error", {}), add.after.get("simulation_error", {})
+    for h, qs in add.worse_predictions().items():
+        out.append(f"worse with {names}: the held-out {h} s prediction error rose: " + ", ".join(
+            f"{q.split('_')[0]} {sb[h][q]:.3g} -> {sa[h][q]:.3g} {_PREDICTED_UNITS[q]} (+{100 * c:.0f} %)"
+            for q, c in qs.items()))
+    return out
+
+
+_PREDICTED_UNITS = {"position_m": "m", "yaw_deg": "deg", "roll_deg": "deg", "speed_mps": "m/s"}
 
 
 def _sim_value(d: dict, k: str, unit: str) -> str:

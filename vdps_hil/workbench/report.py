@@ -106,7 +106,9 @@ _SIM_COLUMNS = (("position_m", "m", "position"), ("yaw_deg", "deg", "yaw"), ("ro
                 ("speed_mps", "m/s", "speed"))
 
 
-def _sim_table(sb: dict, sa: dict | None) -> str:
+def _sim_table(sb: dict, sa: dict | None, worse: dict | None = None) -> str:
+    """The held-out prediction errors per horizon, before (and after, an after value the added
+    effects made worse labelled: ``AddResult.worse_predictions``)."""
     header = ["horizon"]
     for _, _, label in _SIM_COLUMNS:
         header += [f"{label} before", f"{label} after"] if sa is not None else [label]
@@ -116,7 +118,7 @@ def _sim_table(sb: dict, sa: dict | None) -> str:
         for q, unit, _ in _SIM_COLUMNS:
             row.append(_fmt(d.get(q), unit))
             if sa is not None:
-                row.append(_fmt(sa.get(h, {}).get(q), unit))
+                row.append(_fmt(sa.get(h, {}).get(q), unit) + (" (worse)" if q in (worse or {}).get(h, {}) else ""))
         rows.append(row)
     return _table(rows, header)
 
@@ -189,7 +191,7 @@ def render_report(dg) -> str:
         parts.append(_table(rows, ["equation", "cleaned residual RMS before", "after", "change"]))
         sb, sa = b.get("simulation_error", {}), a.get("simulation_error", {})
         if sb:
-            parts.append(_sim_table(sb, sa))
+            parts.append(_sim_table(sb, sa, dg.add.worse_predictions()))
             parts.append("<p class=\"small\">Held-out prediction error (RMS over the starts): each prediction "
                          "uses a model fitted only on data before its start.</p>")
             parts.append(_fig(F.fig_prediction_errors(dg), "prediction error before and after"))
