@@ -24,6 +24,11 @@ model file only, ``experiments.workbench_study.run_job``):
 The issue's goals: saturation >= 90 % of seeds; no sensor effect on >= 95 % of the null runs; each
 injected sensor effect >= 90 %. Rates with Wilson 95 % intervals.
 
+Last measured, ``add`` (2026-12-07, ``--sets 1 3 --seeds 10 --first-seed 1000 --kinds add --jobs 2
+--cache DIR``, 2065 s wall, quiet 2-core machine): set 1 10/10 seeds with >= 50 % of the
+attributable 2 s position and yaw errors removed (pooled 132 % / 163 %); set 3 0/10 and 3/10, every
+prediction worse with the effect (README, "Measured against the attributable part").
+
 Usage::
 
     .venv/bin/python tools/workbench_study_cr.py [--sets 1 3] [--seeds 3] [--first-seed 1000]
