@@ -255,8 +255,8 @@ def linear_lateral(sign: Callable[[float], float]) -> Callable:
         S_Hy = sign(gamma) (p_hy1 + p_hy3 |gamma|),  S_Vy = sign(gamma) F_z (p_vy1 + p_vy3 |gamma|)
         mu_y = p_dy1 (1 - p_dy3 gamma^2)            (returned as the package's function does)
 
-    Pacejka, *Tire and Vehicle Dynamics* (3rd ed.), sec 4.3.2: the formula's slope at the origin
-    is B C D. The truth ``commonroad-mb:N:linear-lateral`` uses it: the same vehicle without tire
+    Pacejka, *Tire and Vehicle Dynamics* (3rd ed.), ch. 4 (the Magic Formula): the formula's
+    slope at the origin is B C D. The truth ``commonroad-mb:N:linear-lateral`` uses it: the same vehicle without tire
     saturation (what a drive's prediction error owes to saturation is measured against it)."""
 
     def lateral(alpha, gamma, F_z, p):

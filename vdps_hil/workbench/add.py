@@ -46,7 +46,7 @@ from .residuals import EQUATIONS, row_states
 from .simulation_errors import HORIZONS_S, SimErrors, simulation_errors
 
 __all__ = ["FittedModel", "fit_model", "AddResult", "add_effects", "cleaned_residuals", "before_after", "cleaned_rms",
-           "rms_by_equation", "worse_predictions"]
+           "rms_by_equation", "worse_predictions", "PREDICTED_UNITS"]
 
 
 @dataclass
@@ -199,8 +199,8 @@ def worse_equations(before: dict, after: dict | None, noise_sigma: dict | None =
             if c is not None and c > WORSE_FRACTION and ra[eq] - rb[eq] > WORSE_NOISE * noise.get(eq, 0.0)}
 
 
-PREDICTED_QUANTITIES = ("position_m", "yaw_deg", "roll_deg", "speed_mps")
-"""The held-out prediction errors of ``simulation_error`` (per horizon)."""
+PREDICTED_UNITS = {"position_m": "m", "yaw_deg": "deg", "roll_deg": "deg", "speed_mps": "m/s"}
+"""The held-out prediction errors of ``simulation_error`` (per horizon) and their units."""
 
 
 def worse_predictions(before: dict, after: dict | None) -> dict[str, dict[str, float]]:
@@ -214,7 +214,7 @@ def worse_predictions(before: dict, after: dict | None) -> dict[str, dict[str, f
     out: dict[str, dict[str, float]] = {}
     for h, d in sb.items():
         a = sa.get(h) or {}
-        for q in PREDICTED_QUANTITIES:
+        for q in PREDICTED_UNITS:
             vb, va = d.get(q), a.get(q)
             if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (vb, va)) or vb <= 0:
                 continue

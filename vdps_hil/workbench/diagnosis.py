@@ -34,7 +34,7 @@ from vdps_hil.model.effects.base import Effect
 from vdps_hil.model.params import Vehicle
 from vdps_hil.record.schemas import clean_json
 
-from .add import AddResult, FittedModel, add_effects, cleaned_residuals, residual_change, rms_by_equation
+from .add import PREDICTED_UNITS, AddResult, FittedModel, add_effects, cleaned_residuals, residual_change, rms_by_equation
 from .dataset import DatasetConfig, DriveTable, load_drive, reestimator
 from .fit_budget import FitSubset, add_window, fit_subset
 from .memory import release_freed_memory
@@ -178,7 +178,7 @@ def _before_after_lines(before: dict, after: dict | None) -> list[str]:
         for h, d in sb.items():
             a = sa.get(h, {})
             parts = []
-            for k, unit in (("position_m", "m"), ("yaw_deg", "deg"), ("roll_deg", "deg"), ("speed_mps", "m/s")):
+            for k, unit in PREDICTED_UNITS.items():
                 s = f"{k.split('_')[0]} {_sim_value(d, k, unit)}"
                 if a:
                     s += f" -> {_sim_value(a, k, unit)}"
@@ -199,12 +199,10 @@ def _worse_lines(add) -> list[str]:
     sb, sa = add.before.get("simulation_error", {}), add.after.get("simulation_error", {})
     for h, qs in add.worse_predictions().items():
         out.append(f"worse with {names}: the held-out {h} s prediction error rose: " + ", ".join(
-            f"{q.split('_')[0]} {sb[h][q]:.3g} -> {sa[h][q]:.3g} {_PREDICTED_UNITS[q]} (+{100 * c:.0f} %)"
+            f"{q.split('_')[0]} {sb[h][q]:.3g} -> {sa[h][q]:.3g} {PREDICTED_UNITS[q]} (+{100 * c:.0f} %)"
             for q, c in qs.items()))
     return out
 
-
-_PREDICTED_UNITS = {"position_m": "m", "yaw_deg": "deg", "roll_deg": "deg", "speed_mps": "m/s"}
 
 
 def _sim_value(d: dict, k: str, unit: str) -> str:
