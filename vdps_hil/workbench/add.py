@@ -70,7 +70,8 @@ def fit_model(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequ
               start: dict | None = None) -> FittedModel:
     """Identify the ten parameters and the added candidates' parameters jointly on the rows of
     ``mask`` (module docstring). ``start``: candidate name -> starting parameters (default the
-    effect's generic prior)."""
+    effect's generic prior); ``iterations``: Gauss-Newton steps when a sensor effect is added
+    (dynamics effects alone: :func:`_descend`)."""
     cfg = config or RankingConfig()
     tab = table.slice(mask) if mask is not None else table
     states = row_states(tab, vehicle)
