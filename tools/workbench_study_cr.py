@@ -28,9 +28,9 @@ Last measured, ``add`` (2026-12-07, ``--sets 1 3 --seeds 10 --first-seed 1000 --
 --cache DIR``, 2065 s wall, quiet 2-core machine): set 1 10/10 seeds with >= 50 % of the
 attributable 2 s position and yaw errors removed (pooled 132 % / 163 %); set 3 0/10 and 3/10, every
 prediction worse with the effect (README, "Measured against the attributable part"). After the
-fit's steps had to lower the objective (``workbench.add._descend``), seeds 1000-1004 only: set 1
-5/5 and 5/5 (pooled 144 % / 197 %), set 3 4/5 and 4/5 (123 % / 128 %; the miss has nothing
-attributable), no prediction made worse.
+fit's steps had to lower the objective (``workbench.add._descend``), seeds 1000-1009: set 1
+10/10 and 10/10 (pooled 150 % / 199 %), set 3 8/10 and 8/10 (142 % / 146 %; the two misses have
+nothing attributable).
 
 Usage::
 
