@@ -87,10 +87,10 @@ def fit_model(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequ
     selected = {c.name: c for c in add}
     point, d, cols, _ = identify(tab, vehicle, eff, states, inn, cfg, reference=vehicle, phis=phis, selected=selected)
     sig: dict[str, dict[str, float]] = {}
-    if add and not any(c.family == "measurement" for c in add):
-        point, d, cols = _descend(tab, vehicle, states, inn, cfg, add, point, d, cols)
-        iterations = 0
-    for _ in range(iterations if add else 0):
+    dynamics_only = bool(add) and not any(c.family == "measurement" for c in add)
+    if dynamics_only:
+        point, d, cols = _descend(tab, vehicle, states, inn, cfg, selected, point, d, cols)
+    for _ in range(iterations if add and not dynamics_only else 0):
         dh, ch, sensor = _held_sensors(d, cols, add)
         th, obj = dh.objective(ch)
         new_phis = dict(point.phis)
@@ -131,7 +131,7 @@ DESCENT_MIN_STEP = 1.0 / 16.0
 """The smallest fraction of a Gauss-Newton step :func:`_descend` tries before it stops."""
 
 
-def _descend(tab, vehicle, states, inn, cfg, add, point, d, cols):
+def _descend(tab, vehicle, states, inn, cfg, selected: dict[str, Candidate], point, d, cols):
     """Gauss-Newton on the added dynamics effects' parameters and the ten parameters, each step
     kept only where it lowers the MAP objective at the new point (the added effects' parameters
     held there, the ten parameters and the nuisance re-fitted: ``Design.objective`` without the
@@ -139,8 +139,9 @@ def _descend(tab, vehicle, states, inn, cfg, add, point, d, cols):
     :data:`DESCENT_ITERATIONS` steps. Full steps from the generic prior, as before, put the
     held-out refits of ``--add magic_formula_tire`` on CommonRoad set 3's circle ramp on a
     degenerate point (seed 1001: peak friction 0.11, sigma 0.0007, the front stiffness on its
-    bound; every held-out prediction worse). Returns (point, design, columns)."""
-    selected = {c.name: c for c in add}
+    bound; every held-out prediction worse). ``selected``: the added candidates by name.
+    Returns (point, design, columns)."""
+    add = list(selected.values())
 
     def at_point(d, cols) -> float:  # the objective at the point: the added effects' step columns held at zero
         own = {k for c in add for k in d.blocks.get(c.name, [])}
