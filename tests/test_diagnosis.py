@@ -125,3 +125,21 @@ def test_add_through_the_diagnosis_fills_after(stripped, monkeypatch, tmp_path):
 
     _, eff, _ = load_model(tmp_path / "m.json", veh)
     assert eff["aero_drag"].cda_m2 == pytest.approx(0.7, abs=0.07)
+    # the added effect's parameters with their status (workbench.added_params): fitted here
+    cda = doc["workbench"]["added"]["parameters"]["aero_drag"]["cda_m2"]
+    assert cda["status"] == "fitted" and cda["sigma"] > 0
+    assert any(ln.startswith("  cda_m2: fitted ") and ln.endswith(" m^2") for ln in dg.summary_lines())
+    # at a bound: never a result -- no sigma in the text or the saved file, named in the report
+    from vdps_hil.workbench.added_params import parameter_entries
+    from vdps_hil.workbench.diagnosis import _save_fitted
+    from vdps_hil.workbench.model_file import read_model
+    dg.add.parameters["aero_drag"] = parameter_entries(dg.add.fitted.effects["aero_drag"], {"cda_m2": 1e-3})
+    dg.add.parameters["aero_drag"]["cda_m2"].update(value=3.0, status="at bound", bound="upper", sigma=None)
+    line = next(ln for ln in dg.summary_lines() if ln.lstrip().startswith("cda_m2"))
+    assert "AT BOUND -- 3 m^2, the upper bound of 0-3: not identified" in line and "+-" not in line
+    assert "AT BOUND (upper bound 3): not identified" in render_report(dg)
+    _save_fitted(tmp_path / "b.json", path, ["aero_drag"], dg.add, None, dg.ranking)
+    assert read_model(tmp_path / "m.json").effect_sigmas["aero_drag"]["cda_m2"] > 0  # fitted: kept
+    mf = read_model(tmp_path / "b.json")
+    assert mf.source.endswith("; at bound, not identified: aero_drag.cda_m2")
+    assert "cda_m2" not in mf.effect_sigmas.get("aero_drag", {}) and dict(mf.effects)["aero_drag"]["cda_m2"] > 0

@@ -35,6 +35,7 @@ from vdps_hil.model.effects import EffectSet
 from vdps_hil.model.effects.base import Effect, MeasurementEffect
 from vdps_hil.model.params import Vehicle
 
+from .added_params import IDENTIFIED_KEY, parameter_entries
 from .candidate_base import Candidate
 from .candidates import candidate_for
 from .dataset import DriveTable
@@ -390,8 +391,8 @@ def before_after(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: S
     params = {}
     for e in m1.effects:
         if e.name in m1.sigmas:
-            params[e.name] = {k: {"value": v, "sigma": m1.sigmas[e.name].get(k)} for k, v in e.params.items()}
-    params["identified"] = {k: {"before": getattr(m0.vehicle.params, k), "after": getattr(m1.vehicle.params, k)}
+            params[e.name] = parameter_entries(e, m1.sigmas[e.name])
+    params[IDENTIFIED_KEY] = {k: {"before": getattr(m0.vehicle.params, k), "after": getattr(m1.vehicle.params, k)}
                             for k in cfg.identify}
     return AddResult([c.name for c in add], m1, before, after, sim0, sim1, params, noise)
 
@@ -490,7 +491,7 @@ def add_effects(table: DriveTable, vehicle: Vehicle, effects: EffectSet, names: 
         res = before_after(table, vehicle, effects, cands, table_after=tab_after, **kw)
         res.added = list(names)
         for e in fitted:
-            res.parameters[e.name] = {k: {"value": v, "sigma": m.sigmas[e.name].get(k)} for k, v in e.params.items()}
+            res.parameters[e.name] = parameter_entries(e, m.sigmas[e.name])
         res.fitted = FittedModel(res.fitted.vehicle, res.fitted.effects + EffectSet(fitted),
                                  {**res.fitted.sigmas, **{e.name: m.sigmas[e.name] for e in fitted}})
         return res

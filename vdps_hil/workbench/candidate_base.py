@@ -59,6 +59,19 @@ PARAM_ALIASES = {"cornering_stiffness_front_nprad": "cornering_stiffness_front",
 """Ranking names of the parameters (the JSON ``effect`` field)."""
 
 
+def param_unit(p: str) -> tuple[str, float]:
+    """(display unit, scale) of one of the ten parameters from its name's SI suffix."""
+    if p.endswith("_nprad"):
+        return "kN/rad", 1e3
+    if p.endswith("_kgm2"):
+        return "kg m^2", 1.0
+    if p.endswith("_kg"):
+        return "kg", 1.0
+    if p.endswith("_n"):
+        return "kN", 1e3
+    return "", 1.0
+
+
 class Candidate:
     """One candidate of the ranking. Subclasses set ``params`` and implement ``columns``."""
 

@@ -35,6 +35,7 @@ from vdps_hil.model.params import Vehicle
 from vdps_hil.record.schemas import clean_json
 
 from .add import PREDICTED_UNITS, AddResult, FittedModel, add_effects, cleaned_residuals, residual_change, rms_by_equation
+from .added_params import added_parameter_lines, at_bound
 from .dataset import DatasetConfig, DriveTable, load_drive, reestimator
 from .fit_budget import FitSubset, add_window, fit_subset
 from .memory import release_freed_memory
@@ -120,6 +121,8 @@ class Diagnosis:
         if self.windows:
             out.append("worst windows: " + "; ".join(f"{w.t_start_s:.1f}-{w.t_end_s:.1f} s ({w.equation})"
                                                       for w in self.windows))
+        if self.add is not None:
+            out += _added_lines(self.add)
         out += _before_after_lines(self.before, self.add.after if self.add else None)
         if self.add is not None:
             out += _worse_lines(self.add)
@@ -187,6 +190,14 @@ def _before_after_lines(before: dict, after: dict | None) -> list[str]:
     return out
 
 
+def _added_lines(add) -> list[str]:
+    """The added effects' parameters with their status (``added_params``)."""
+    from .words import EFFECT_LABELS
+
+    units = {e.name: {p.name: p.unit for p in getattr(e, "PARAMS", ())} for e in add.fitted.effects}
+    return added_parameter_lines(add.parameters, units, EFFECT_LABELS)
+
+
 def _worse_lines(add) -> list[str]:
     """A line per equation, and per prediction horizon, the added effects made worse
     (``AddResult.worse``, ``AddResult.worse_predictions``)."""
@@ -217,6 +228,24 @@ def _diverged_phrase(d: dict, a: dict) -> str:
     parts = [f"{w}{x['n_diverged']} of {x['n'] + x['n_diverged']} predictions diverged"
              for x, w in ((d, "" if not a else "before: "), (a, "after: ")) if x and x.get("n_diverged")]
     return ("  (" + "; ".join(parts) + ", left out)") if parts else ""
+
+
+def _save_fitted(target, path, add, add_res, base: FittedModel, rk: Ranking) -> str:
+    """``--save-model``: the fitted model (with the added effects when there are any); an added
+    parameter at a bound keeps the value the model used, without a sigma, and the file's source
+    line names it as not identified (``added_params``)."""
+    from .model_file import save_model as _save
+
+    fm = add_res.fitted if add_res is not None else base
+    sig = {p.param if hasattr(p, "param") else next(iter(p.parameters)): next(iter(p.parameters.values()))[1]
+           for p in rk.parameters}
+    src = f"vdps diagnose {Path(path).name}" + "".join(f" --add {a}" for a in add)
+    esig = fm.sigmas
+    bound = at_bound(add_res.parameters) if add_res is not None else []
+    if bound:
+        esig = {e: {k: v for k, v in ps.items() if (e, k) not in bound} for e, ps in fm.sigmas.items()}
+        src += "; at bound, not identified: " + ", ".join(f"{e}.{k}" for e, k in bound)
+    return str(_save(target, fm.vehicle, fm.effects, sigmas=sig, effect_sigmas=esig, source=src))
 
 
 def _rank_in_budget(table: DriveTable, vehicle: Vehicle, model_effects: EffectSet, user_effects, ranking_config):
@@ -299,13 +328,7 @@ def diagnose(path: str | Path, vehicle: Vehicle, *, model: str | Path | None = N
         tm["add"] = time.perf_counter() - t1
     saved = None
     if save_model is not None:
-        from .model_file import save_model as _save
-
-        fm = add_res.fitted if add_res is not None else base
-        sig = {p.param if hasattr(p, "param") else next(iter(p.parameters)): next(iter(p.parameters.values()))[1]
-               for p in rk.parameters}
-        src = f"vdps diagnose {Path(path).name}" + "".join(f" --add {a}" for a in add)
-        saved = str(_save(save_model, fm.vehicle, fm.effects, sigmas=sig, effect_sigmas=fm.sigmas, source=src))
+        saved = _save_fitted(save_model, path, add, add_res, base, rk)
     tm["total"] = time.perf_counter() - t0
     return Diagnosis(str(path), vehicle, model_effects, table, rk, res, wins, regs, sim, before, add_res, tm, saved,
                      cleaned, sub)

@@ -21,6 +21,7 @@ import numpy as np
 
 from . import report_figures as F
 from .add import residual_change, rms_by_equation
+from .added_params import IDENTIFIED_KEY
 from .residuals import EQUATION_LABELS, EQUATION_UNITS, EQUATIONS
 
 __all__ = ["write_report", "render_report"]
@@ -92,6 +93,25 @@ def _change(c: float | None, worse: bool) -> str:
     if c is None:
         return "-"
     return f"{100 * c:+.0f} %" + (" (worse)" if worse else "")
+
+
+def _added_rows(parameters: dict) -> list[list[str]]:
+    """One row per parameter of an added effect, with its status (``added_params``): a value at a
+    bound is "AT BOUND ... not identified", never shown as a result."""
+    from .words import EFFECT_LABELS
+
+    rows = []
+    for e, ps in parameters.items():
+        if e == IDENTIFIED_KEY:
+            continue
+        for k, d in ps.items():
+            st = d["status"]
+            if st == "at bound":
+                st = f"AT BOUND ({d['bound']} bound {_fmt(d[d['bound']])}): not identified"
+            elif st == "held":
+                st = "held at the generic prior"
+            rows.append([EFFECT_LABELS.get(e, e), k, _fmt(d["value"]), _fmt(d.get("sigma"), nd=2), st])
+    return rows
 
 
 def _img(uri: str, alt: str) -> str:
@@ -182,6 +202,7 @@ def render_report(dg) -> str:
                      f"square.</p>")
     if dg.add is not None:
         parts.append("<h2>Before and after</h2>")
+        parts.append(_table(_added_rows(dg.add.parameters), ["added effect", "parameter", "value", "sigma", "status"]))
         parts.append(_fig(F.fig_before_after(dg), "before and after"))
         b, a = dg.add.before, dg.add.after
         change, worse = residual_change(b, a), dg.add.worse()

@@ -12,7 +12,7 @@ import math
 
 from vdps_hil.units import GRAVITY_MPS2
 
-from .candidate_base import PARAM_ALIASES, PARAM_LABELS
+from .candidate_base import PARAM_ALIASES, PARAM_LABELS, param_unit
 from .coverage import EFFECT_NEEDS
 from .residuals import EQUATION_LABELS
 
@@ -111,7 +111,7 @@ def describe_entry(rk, e) -> str:
     if e.kind == "parameter":
         (p, (v, s)), = e.parameters.items()
         ref = e.reference.get(p, math.nan)
-        unit, k = _unit(p)
+        unit, k = param_unit(p)
         if not e.excited:
             return f"{label}: not excited on this drive, held at the model file's {ref / k:.4g} {unit}"
         if not e.plausible:
@@ -166,18 +166,6 @@ def _checked_parameter(label, idf: dict, v, s, ref, unit, k) -> str:
                 f"(z = {idf['z']:.1f}): one of the two models does not fit this drive ({model})")
     return (f"{label}: not confirmed -- fitted {fit}, the identifier says \"{idf['status']}\" on this "
             f"drive ({model})")
-
-
-def _unit(p: str) -> tuple[str, float]:
-    if p.endswith("_nprad"):
-        return "kN/rad", 1e3
-    if p.endswith("_kgm2"):
-        return "kg m^2", 1.0
-    if p.endswith("_kg"):
-        return "kg", 1.0
-    if p.endswith("_n"):
-        return "kN", 1e3
-    return "", 1.0
 
 
 def _effect_words(rk, e) -> str:
