@@ -125,12 +125,13 @@ def _same_tables(a, b):
                 assert np.array_equal(tabs_a[k][c], tabs_b[k][c], equal_nan=True), (k, c)
 
 
-def test_reestimator_gives_load_drive_s_tables_and_decodes_once_per_call_after_the_first(drive, monkeypatch):
+def test_reestimator_gives_load_drive_s_tables_and_decodes_once_per_call_after_the_first(drive_cache, monkeypatch):
     """``reestimator`` (``vdps diagnose --add`` of a sensor effect): for two different sets of
     IMU effects and for none, the tables equal ``load_drive(..., imu_effects=...)`` exactly; the
     gyro track is made once, so the first call decodes the recording twice and every later one
-    once (``load_drive`` itself decodes twice per call with effects)."""
-    path, _, _ = drive
+    once (``load_drive`` itself decodes twice per call with effects). The first 5 s of the step
+    steer: six estimator passes, and what is compared does not depend on the drive's length."""
+    path = cached_drive(drive_cache, "step-steer", (), seed=5, duration_s=5.0)
     effect_sets = ([make_effect("imu_bias", accel_bias_z_mps2=0.05, gyro_bias_z_radps=0.002)],
                    [make_effect("imu_bias", accel_bias_x_mps2=-0.1)], [])
     expected = [D.load_drive(path, VEH, imu_effects=e) for e in effect_sets]
