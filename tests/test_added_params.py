@@ -51,7 +51,7 @@ def test_the_text_never_gives_a_bound_value_a_sigma_and_names_the_moved_paramete
     mu = next(ln for ln in lines if "peak_friction" in ln)
     assert "AT BOUND -- 1.6, the upper bound of 0.1-1.6: not identified" in mu and "+-" not in mu
     assert "  cda_m2: fitted 0.71 +- 0.012 m^2" in lines
-    assert lines[0] == "added tire saturation (magic_formula_tire), fitted with the ten parameters:"
+    assert lines[0] == "added tire saturation (magic_formula_tire):"
     assert "held at the generic prior: shape_lateral 1.3" in text
     moved = lines[-1]
     assert moved == "re-identified with them (changes above 1 %): front cornering stiffness 163.7 -> 189.4 kN/rad (+16 %)"

@@ -87,7 +87,7 @@ def added_parameter_lines(parameters: dict, units: dict | None = None, labels: d
     for e, ps in parameters.items():
         if e == IDENTIFIED_KEY:
             continue
-        out.append(f"added {labels.get(e, e)} ({e}), fitted with the ten parameters:")
+        out.append(f"added {labels.get(e, e)} ({e}):")
         held = []
         for k, d in ps.items():
             u = _unit(units.get(e, {}).get(k, ""))
