@@ -42,6 +42,15 @@ def test_the_summary_counts_seeds_meeting_half_and_saturation_named_without_it()
     assert "cr1: --add takes >= 50 % off the position" in text and "  1/2" in text.split("off the position")[1][:12]
     assert "pooled over the 2 seeds with an attributable part: 0.2 of 0.4 removed (50 %)" in text
     assert "cr1: no saturation recommended without it" in text and "  1/2" in text.split("without it")[1][:12]
+    assert "of the 2 seeds with an attributable part: 1 with >= 50 % removed" in text
+    assert "--add's fitted parameters at a bound of their range (not identified) on 0 of 2 seeds" in text
+    # a peak friction on its upper bound, recorded before the status existed (value and sigma only)
+    mf = {"peak_friction": {"value": 1.6, "sigma": 0.0027}, "shape_lateral": {"value": 1.3, "sigma": None}}
+    runs[2]["add_parameters"] = {"magic_formula_tire": mf, "identified": {"mass_kg": {"before": 1.0, "after": 1.0}}}
+    assert wsc._at_bound(runs[2]) == [("magic_formula_tire", "peak_friction")]
+    assert "at a bound of their range (not identified) on 1 of 2 seeds: 2" in "\n".join(wsc.summary(runs))
+    mf["peak_friction"]["value"] = 1.05
+    assert wsc._at_bound(runs[2]) == []
     jobs = wsc.jobs_for(3, 1000)
     kinds = {j["kind"]: j for j in jobs}
     assert kinds["add"]["truth"] == "commonroad-mb:3" and kinds["add-null"]["truth"] == "commonroad-mb:3:linear-lateral"

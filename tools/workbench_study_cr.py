@@ -57,6 +57,7 @@ from vdps_hil.experiments.seeds import refused_by_tool  # noqa: E402
 from vdps_hil.experiments.workbench_study import run_job, wilson_interval  # noqa: E402
 from vdps_hil.model.effects.base import MeasurementEffect  # noqa: E402
 from vdps_hil.model.effects.registry import REGISTRY  # noqa: E402
+from vdps_hil.workbench.added_params import IDENTIFIED_KEY, at_bound, parameter_entries  # noqa: E402
 
 from workbench_study import _load_runs  # noqa: E402  (tools/, inserted above)
 
@@ -100,6 +101,21 @@ def add_figures(add: dict, null: dict) -> dict[str, dict[str, float]]:
     return out
 
 
+def _at_bound(run: dict) -> list[tuple[str, str]]:
+    """The added parameters of an ``add`` run at a bound (``workbench.added_params``); a run
+    recorded before the status existed is judged from its values and the effect's ranges."""
+    params = {}
+    for e, ps in (run.get("add_parameters") or {}).items():
+        if e == IDENTIFIED_KEY or e not in REGISTRY:
+            continue
+        if all("status" in d for d in ps.values()):
+            params[e] = ps
+        else:
+            eff = REGISTRY[e](**{k: d["value"] for k, d in ps.items()})
+            params[e] = parameter_entries(eff, {k: d["sigma"] for k, d in ps.items() if d.get("sigma") is not None})
+    return at_bound(params)
+
+
 def _key(job: dict) -> str:
     return json.dumps([job["kind"], job.get("effect"), job["maneuver"], job["truth"], int(job["seed"])])
 
@@ -114,6 +130,8 @@ def summary(runs: list[dict]) -> list[str]:
     lines = []
 
     def rate(label, k, n, goal):
+        if not n:  # a kind this run did not include
+            return
         lo, hi = wilson_interval(k, n)
         lines.append(f"{label:<44} {k:3d}/{n:<3d} {100 * k / max(n, 1):5.1f} %  Wilson95 {100 * lo:5.1f}-{100 * hi:5.1f} %"
                      f"  (goal {goal})")
@@ -137,6 +155,8 @@ def summary(runs: list[dict]) -> list[str]:
                 ok = sum(figs[s][q]["removed"] >= 0.5 for s in seeds)
                 rate(f"cr{set_id}: --add takes >= 50 % off the {q.split('_')[0]}", ok, len(seeds), ">= 90 %")
                 pos = [s for s in seeds if figs[s][q]["attributable"] > 0]
+                lines.append(f"    of the {len(pos)} seeds with an attributable part: "
+                             f"{sum(figs[s][q]['removed'] >= 0.5 for s in pos)} with >= 50 % removed")
                 att = sum(figs[s][q]["attributable"] for s in pos)
                 cut = sum(figs[s][q]["before"] - figs[s][q]["after"] for s in pos)
                 lines.append(f"    pooled over the {len(pos)} seeds with an attributable part: {cut:.3g} of {att:.3g}"
@@ -144,6 +164,9 @@ def summary(runs: list[dict]) -> list[str]:
                 lines.append(f"    {q} at {ADD_HORIZON} s, per seed (before / null / after, removed): " + "; ".join(
                     f"{s}: {figs[s][q]['before']:.3g} / {figs[s][q]['null']:.3g} / {figs[s][q]['after']:.3g}, "
                     f"{100 * figs[s][q]['removed']:.0f} %" for s in seeds))
+            bound = [s for s in seeds if _at_bound(adds[s])]
+            lines.append(f"    --add's fitted parameters at a bound of their range (not identified) on {len(bound)} "
+                         f"of {len(seeds)} seeds" + (f": {', '.join(str(s) for s in bound)}" if bound else ""))
             false_sat = sum(linear[s].get("recommendation") == "magic_formula_tire" for s in seeds)
             rate(f"cr{set_id}: no saturation recommended without it", len(seeds) - false_sat, len(seeds), ">= 95 %")
     return lines
