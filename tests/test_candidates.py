@@ -65,16 +65,36 @@ def test_user_effect_without_regressors_is_numeric():
     assert C.default_candidates(EffectSet(), [Push])[-1].name == "push"
 
 
-def test_drive_candidates_say_what_they_leave_out_and_at_which_span():
+def test_drive_candidates_say_what_they_leave_out_and_why():
     straight = np.radians([80.0, 85.0, 90.0])
     cands, left = C.drive_candidates(EffectSet(), (), straight)
     assert "steering_offset" not in {c.name for c in cands}
-    assert left == {"steering_offset": pytest.approx(math.radians(10.0))}
+    assert left == {"steering_offset": "the heading spans 10 deg, less than the half turn that tells its side force "
+                                       "apart from a crosswind's"}
     circle = np.radians(np.arange(0.0, 360.0, 10.0))
     cands, left = C.drive_candidates(EffectSet(), (), circle)
+    assert "steering_offset" in {c.name for c in cands} and left == {}
+    # a full circle without a straight: the offset is not told apart from what grows with the turn
+    cands, left = C.drive_candidates(EffectSet(), (), circle, straight_s=1.2)
+    assert "steering_offset" not in {c.name for c in cands}
+    assert left["steering_offset"].startswith("1.2 s of straight driving, less than the 2 s")
+    cands, left = C.drive_candidates(EffectSet(), (), circle, straight_s=2.0)
     assert "steering_offset" in {c.name for c in cands} and left == {}
     named = [C.candidate_for(REGISTRY["aero_drag"])]  # the caller's own list: as it is, nothing said
     assert C.drive_candidates(EffectSet(), (), straight, named) == (named, {})
     model = EffectSet([REGISTRY["steering_offset"]()])  # already in the model: neither offered nor said
     cands, left = C.drive_candidates(model, (), straight)
     assert left == {} and "steering_offset" not in {c.name for c in cands}
+
+
+def test_straight_time_counts_rows_whose_path_radius_exceeds_500_m():
+    """``straight_time_s``: rows at 50 Hz; |r| < v / 500 m is straight (at 14 m/s: 0.028 rad/s)."""
+    t = np.arange(0.0, 10.0, 0.02)
+    v = np.full_like(t, 14.0)
+    r = np.where(t < 5.0, 0.0, 14.0 / 40.0)  # 5 s straight, then a 40 m circle
+    r[10] = 0.99 * 14.0 / C.STRAIGHT_RADIUS_M  # a 505 m radius: straight
+    r[11] = 1.01 * 14.0 / C.STRAIGHT_RADIUS_M  # a 495 m radius: not
+    r[12], v[13] = np.nan, np.nan  # not counted
+    assert C.straight_time_s(t, r, v) == pytest.approx((250 - 3) * 0.02)
+    assert C.straight_time_s(t, -r, v) == pytest.approx((250 - 3) * 0.02)  # either turn direction
+    assert C.straight_time_s(t[:1], r[:1], v[:1]) == 0.0

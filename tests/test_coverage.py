@@ -56,12 +56,10 @@ def test_a_drive_that_stops_early_is_too_short_to_judge():
     assert not any("too little" in m for m in C.coverage_messages(_table(n=2000), np.arange(2000)))
 
 
-def test_an_effect_left_out_for_want_of_a_turn_is_said_with_the_heading_span():
-    import math
-
+def test_an_effect_left_out_is_said_with_why_and_how_to_fit_it_anyway():
     from vdps_hil.workbench.coverage import not_ranked_lines
 
     assert not_ranked_lines({}) == []
-    (line,) = not_ranked_lines({"steering_offset": math.radians(12.4)})
-    assert line.startswith("not ranked on this drive: steering_offset (the heading spans 12 deg")
-    assert line.endswith("vdps diagnose --add steering_offset fits it")
+    (line,) = not_ranked_lines({"steering_offset": "the heading spans 12 deg, less than the half turn"})
+    assert line == ("not ranked on this drive: steering_offset (the heading spans 12 deg, less than the half turn): "
+                    "vdps diagnose --add steering_offset fits it")

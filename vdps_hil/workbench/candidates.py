@@ -32,7 +32,8 @@ from .builtin_candidates import (CrosswindCandidate, LowPressureCandidate, Magic
                                  SteeringOffsetCandidate, TireSaturationCandidate)
 from .candidate_base import Candidate, MeasurementCandidate, NumericCandidate, RegressorCandidate
 
-__all__ = ["TURN_NEEDED_RAD", "candidate_for", "default_candidates", "drive_candidates", "heading_span_rad"]
+__all__ = ["TURN_NEEDED_RAD", "STRAIGHT_NEEDED_S", "STRAIGHT_RADIUS_M", "candidate_for", "default_candidates",
+           "drive_candidates", "heading_span_rad", "straight_time_s", "table_candidates"]
 
 
 _ADAPTERS = {"crosswind": CrosswindCandidate, "low_pressure_tire": LowPressureCandidate,
@@ -79,6 +80,35 @@ wind; on ``circle-straight`` (a full circle) the hidden offset, crosswind and IM
 recommended as themselves on both seeds. Half a turn is the physics' figure, not a fitted one."""
 
 
+STRAIGHT_NEEDED_S: dict[str, float] = {"steering_offset": 2.0}
+"""Built-in effects ranked only on a drive with at least this much straight driving at speed
+(:func:`straight_time_s`), besides their :data:`TURN_NEEDED_RAD`. ``steering_offset``: the
+reduced model's departures from a real car that grow with the turn -- the tire law's bend,
+compliance and roll steer, camber thrust -- add a steering-like side force of one sign on a
+drive that turns one way, and on a circle of one radius a constant offset is not told apart from
+them (nor from a steering-ratio error); on a straight they vanish while the offset's does not
+(the sensor reads it at zero curvature). Found on CommonRoad's circle ramp (a 40 m left circle
+entered after 10 m of straight, 1.2 s, study seeds 1004 and 1005, 2026-12-07): nothing injected,
+the offset was recommended on set 3 seed 1005 and selected on set 1 seed 1004, where the
+saturation was then not recommended; ``circle-straight`` (80 m straight at 14 m/s, about 5 s)
+holds its hidden offset. 2 s and 500 m are round physical figures (a few hundred rows; a path
+radius at which the lateral acceleration stays below 0.5 m/s^2 up to 15 m/s), not fitted to
+seeds."""
+STRAIGHT_RADIUS_M = 500.0
+"""A usable row is "straight" when its path radius v / |r| exceeds this."""
+
+
+def straight_time_s(t_s, yaw_rate_radps, speed_mps) -> float:
+    """Seconds of the rows (times ``t_s``) driven straight: path radius above
+    :data:`STRAIGHT_RADIUS_M` (|r| < v / R), each row counted for the drive's median row period."""
+    t = np.asarray(t_s, dtype=float)
+    if len(t) < 2:
+        return 0.0
+    r, v = np.abs(np.asarray(yaw_rate_radps, dtype=float)), np.asarray(speed_mps, dtype=float)
+    straight = np.isfinite(r) & np.isfinite(v) & (r * STRAIGHT_RADIUS_M < np.abs(v))
+    return float(np.count_nonzero(straight) * np.median(np.diff(t)))
+
+
 def heading_span_rad(yaw_rad) -> float:
     """The smallest arc [rad] that holds every finite heading of ``yaw_rad`` (2 pi less the largest
     gap between the sorted headings on the circle; 0 without two finite headings)."""
@@ -90,22 +120,45 @@ def heading_span_rad(yaw_rad) -> float:
 
 
 def drive_candidates(model_effects: EffectSet, extra: Sequence[type[Effect]], yaw_rad,
-                     given: Sequence[Candidate] | None = None) -> tuple[list[Candidate], dict[str, float]]:
-    """(the candidates of a drive whose usable rows have the headings ``yaw_rad``, the
-    :data:`TURN_NEEDED_RAD` effects left out: name -> the drive's heading span [rad]); the
-    ``given`` candidates as they are (nothing left out) when the caller names them."""
+                     given: Sequence[Candidate] | None = None, straight_s: float = math.inf
+                     ) -> tuple[list[Candidate], dict[str, str]]:
+    """(the candidates of a drive whose usable rows have the headings ``yaw_rad`` and
+    ``straight_s`` seconds of straight driving, the :data:`TURN_NEEDED_RAD` and
+    :data:`STRAIGHT_NEEDED_S` effects left out: name -> why, in words); the ``given``
+    candidates as they are (nothing left out) when the caller names them."""
     if given is not None:
         return list(given), {}
     span = heading_span_rad(yaw_rad)
-    cands = default_candidates(model_effects, extra, heading_span=span)
+    cands = default_candidates(model_effects, extra, heading_span=span, straight_s=straight_s)
     have = set(model_effects.names) | {c.name for c in cands}
-    return cands, {n: span for n in TURN_NEEDED_RAD if n not in have and n in REGISTRY}
+    why = {}
+    for n in sorted(set(TURN_NEEDED_RAD) | set(STRAIGHT_NEEDED_S)):
+        if n in have or n not in REGISTRY:
+            continue
+        if span < TURN_NEEDED_RAD.get(n, 0.0):
+            why[n] = (f"the heading spans {math.degrees(span):.0f} deg, less than the half turn that tells its "
+                      "side force apart from a crosswind's")
+        else:
+            why[n] = (f"{straight_s:.1f} s of straight driving, less than the {STRAIGHT_NEEDED_S[n]:g} s that tell "
+                      "it apart from what grows with the turn (tire law, compliance, camber thrust)")
+    return cands, why
+
+
+def table_candidates(table, index, model_effects: EffectSet, extra: Sequence[type[Effect]],
+                     given: Sequence[Candidate] | None = None) -> tuple[list[Candidate], dict[str, str]]:
+    """:func:`drive_candidates` of a drive table's usable rows ``index`` (their headings, and their
+    straight driving from the body yaw rate and forward speed)."""
+    col = table.columns
+    straight = straight_time_s(table.t_s[index], col["rate_b_radps_z"][index], col["vel_b_mps_x"][index])
+    return drive_candidates(model_effects, extra, col["yaw_g_rad"][index], given, straight)
 
 
 def default_candidates(model_effects: EffectSet, extra: Sequence[type[Effect]] = (),
-                       registry=None, heading_span: float = 2.0 * math.pi) -> list[Candidate]:
+                       registry=None, heading_span: float = 2.0 * math.pi,
+                       straight_s: float = math.inf) -> list[Candidate]:
     """Every registered effect (plus ``extra`` user effects) not already in the model, and of
-    :data:`TURN_NEEDED_RAD` only those the drive's ``heading_span`` [rad] allows; tire laws other
+    :data:`TURN_NEEDED_RAD` and :data:`STRAIGHT_NEEDED_S` only those the drive's ``heading_span``
+    [rad] and ``straight_s`` [s] allow; tire laws other
     than the model's are offered only as the saturation candidate."""
     reg = dict(registry if registry is not None else REGISTRY)
     for cls in extra:
@@ -115,7 +168,8 @@ def default_candidates(model_effects: EffectSet, extra: Sequence[type[Effect]] =
     for name, cls in reg.items():
         if name in have or name == "linear_tire":
             continue
-        if name in TURN_NEEDED_RAD and cls is REGISTRY.get(name) and heading_span < TURN_NEEDED_RAD[name]:
+        if cls is REGISTRY.get(name) and (heading_span < TURN_NEEDED_RAD.get(name, -math.inf)
+                                          or straight_s < STRAIGHT_NEEDED_S.get(name, -math.inf)):
             continue
         if issubclass(cls, TireModel) and model_effects.tire is not None and model_effects.tire.name != "linear_tire":
             continue

@@ -12,7 +12,6 @@ whether enough of it is usable to judge the slow effects.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -55,12 +54,11 @@ EFFECT_NEEDS = {
 """What a drive needs to excite each built-in effect (the ``not excited`` words)."""
 
 
-def not_ranked_lines(not_ranked: dict[str, float]) -> list[str]:
-    """One line per effect the ranking left out because the drive does not turn enough to judge it
-    (``candidates.drive_candidates``: name -> the drive's heading span [rad])."""
-    return [f"not ranked on this drive: {name} (the heading spans {math.degrees(span):.0f} deg, less than the "
-            "half turn that tells its side force apart from a crosswind's): vdps diagnose --add "
-            f"{name} fits it" for name, span in sorted(not_ranked.items())]
+def not_ranked_lines(not_ranked: dict[str, str]) -> list[str]:
+    """One line per effect the ranking left out because the drive cannot tell it apart from others
+    (``candidates.drive_candidates``: name -> why, in words)."""
+    return [f"not ranked on this drive: {name} ({why}): vdps diagnose --add {name} fits it"
+            for name, why in sorted(not_ranked.items())]
 
 
 def missing_signals(table: DriveTable) -> list[str]:

@@ -50,7 +50,7 @@ from vdps_hil.model.effects.base import Effect
 from vdps_hil.model.params import Vehicle
 
 from ..candidate_base import PARAM_ALIASES, Candidate
-from ..candidates import drive_candidates
+from ..candidates import table_candidates
 from ..coverage import MIN_ROWS, coverage_messages, not_ranked_lines, unusable_reason
 from ..dataset import DriveTable
 from ..innovations import Innovations, compute_innovations
@@ -121,7 +121,7 @@ def rank(table: DriveTable, vehicle: Vehicle, effects: EffectSet | Sequence[Effe
         raise ValueError(unusable_reason(table))
     inn = compute_innovations(table)
     point, d, always, _ = identify(table, vehicle, effects, states, inn, cfg, reference=vehicle)
-    cands, not_ranked = drive_candidates(effects, user_effects, table.columns["yaw_g_rad"][states.index], candidates)
+    cands, not_ranked = table_candidates(table, states.index, effects, user_effects, candidates)
     by_name: dict[str, Candidate] = {c.name: c for c in cands}
     ctx = d.ctx
     for c in cands:
