@@ -32,7 +32,8 @@ an axle's stiffness by a few per cent, so the sweep is 0.75 rad; it ends at 1 Hz
 reduced model of eq 13 (unsprung masses riding with the body, rigid tires) still follows the
 truth simulator's body modes; the IMU bias
 drive joins the straight and the circle in one drive, and so does the steering offset's (it is
-ranked only over half a turn of heading: ``workbench.candidates.TURN_NEEDED_RAD``). The sensor profile is Table 1 with the
+ranked only over half a turn of heading with 2 s of straight: ``workbench.candidates.TURN_NEEDED_RAD``,
+``STRAIGHT_NEEDED_S``). The sensor profile is Table 1 with the
 suspension at 100 Hz (the estimator's cost is dominated by the 1 kHz suspension updates).
 """
 

@@ -63,7 +63,8 @@ class SteeringOffset(MeasurementEffect):
     offset_rad [rad at the steering wheel], default 0.02 (1.1 deg: 0.07 deg at the road wheels on
     a 16:1 rack); plausible within +-0.1 rad (5.7 deg). Regressor: d(reading)/d(offset) = 1. Its
     evidence is the lateral and yaw balance (the workbench's ``SteeringOffsetCandidate``, ranked
-    over half a turn of heading: ``workbench.candidates.TURN_NEEDED_RAD``), not the GNSS
+    over half a turn of heading with a straight: ``workbench.candidates.TURN_NEEDED_RAD`` and
+    ``STRAIGHT_NEEDED_S``), not the GNSS
     innovations of the IMU's strapdown."""
 
     name = "steering_offset"
