@@ -98,3 +98,21 @@ def test_straight_time_counts_rows_whose_path_radius_exceeds_500_m():
     assert C.straight_time_s(t, r, v) == pytest.approx((250 - 3) * 0.02)
     assert C.straight_time_s(t, -r, v) == pytest.approx((250 - 3) * 0.02)  # either turn direction
     assert C.straight_time_s(t[:1], r[:1], v[:1]) == 0.0
+
+
+def test_table_candidates_read_the_usable_rows_heading_and_straight():
+    """``table_candidates``: 5 s straight then a full 40 m circle at 14 m/s (rows at 50 Hz) ranks the
+    offset; the circle's rows alone do not (no straight); a table without the yaw rate column
+    counts no straight."""
+    from types import SimpleNamespace
+
+    t = np.arange(0.0, 15.0, 0.02)
+    r = np.where(t < 5.0, 0.0, 14.0 / 40.0)
+    yaw = np.cumsum(r) * 0.02
+    tab = SimpleNamespace(t_s=t, columns={"yaw_g_rad": yaw, "rate_b_radps_z": r, "vel_b_mps_x": np.full_like(t, 14.0)})
+    names = lambda idx: {c.name for c in C.table_candidates(tab, idx, EffectSet(), ())[0]}  # noqa: E731
+    everything = np.arange(len(t))
+    assert "steering_offset" in names(everything)
+    assert "steering_offset" not in names(everything[t >= 5.0])  # the circle alone: heading, no straight
+    del tab.columns["rate_b_radps_z"]
+    assert "steering_offset" not in names(everything)

@@ -147,9 +147,10 @@ def drive_candidates(model_effects: EffectSet, extra: Sequence[type[Effect]], ya
 def table_candidates(table, index, model_effects: EffectSet, extra: Sequence[type[Effect]],
                      given: Sequence[Candidate] | None = None) -> tuple[list[Candidate], dict[str, str]]:
     """:func:`drive_candidates` of a drive table's usable rows ``index`` (their headings, and their
-    straight driving from the body yaw rate and forward speed)."""
+    straight driving from the body yaw rate and forward speed; none without those columns)."""
     col = table.columns
-    straight = straight_time_s(table.t_s[index], col["rate_b_radps_z"][index], col["vel_b_mps_x"][index])
+    r, v = col.get("rate_b_radps_z"), col.get("vel_b_mps_x")
+    straight = straight_time_s(table.t_s[index], r[index], v[index]) if r is not None and v is not None else 0.0
     return drive_candidates(model_effects, extra, col["yaw_g_rad"][index], given, straight)
 
 
