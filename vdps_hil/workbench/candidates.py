@@ -135,10 +135,10 @@ def drive_candidates(model_effects: EffectSet, extra: Sequence[type[Effect]], ya
     for n in sorted(set(TURN_NEEDED_RAD) | set(STRAIGHT_NEEDED_S)):
         if n in have or n not in REGISTRY:
             continue
-        if span < TURN_NEEDED_RAD.get(n, 0.0):
+        if span < TURN_NEEDED_RAD.get(n, -math.inf):
             why[n] = (f"the heading spans {math.degrees(span):.0f} deg, less than the half turn that tells its "
                       "side force apart from a crosswind's")
-        else:
+        elif straight_s < STRAIGHT_NEEDED_S.get(n, -math.inf):
             why[n] = (f"{straight_s:.1f} s of straight driving, less than the {STRAIGHT_NEEDED_S[n]:g} s that tell "
                       "it apart from what grows with the turn (tire law, compliance, camber thrust)")
     return cands, why
