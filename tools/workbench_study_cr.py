@@ -30,7 +30,9 @@ attributable 2 s position and yaw errors removed (pooled 132 % / 163 %); set 3 0
 prediction worse with the effect (README, "Measured against the attributable part"). After the
 fit's steps had to lower the objective (``workbench.add._descend``), seeds 1000-1009: set 1
 10/10 and 10/10 (pooled 150 % / 199 %), set 3 8/10 and 8/10 (142 % / 146 %; the two misses have
-nothing attributable).
+nothing attributable). Seeds 1010-1019, the same command: set 1 10/10 and 10/10 (143 % / 180 %;
+the peak friction at its 1.6 bound on all ten), set 3 5/10 and 6/10 (119 % / 126 %), every miss a
+seed whose linear-tire twin predicts worse than the saturating drive (nothing attributable).
 
 Usage::
 
