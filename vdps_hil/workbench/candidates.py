@@ -88,10 +88,10 @@ compliance and roll steer, camber thrust -- add a steering-like side force of on
 drive that turns one way, and on a circle of one radius a constant offset is not told apart from
 them (nor from a steering-ratio error); on a straight they vanish while the offset's does not
 (the sensor reads it at zero curvature). Found on CommonRoad's circle ramp (a 40 m left circle
-entered after 10 m of straight, 1.2 s, study seeds 1004 and 1005, 2026-12-07): nothing injected,
-the offset was recommended on set 3 seed 1005 and selected on set 1 seed 1004, where the
-saturation was then not recommended; ``circle-straight`` (80 m straight at 14 m/s, about 5 s)
-holds its hidden offset. 2 s and 500 m are round physical figures (a few hundred rows; a path
+entered after 10 m of straight; 0.0 s of straight usable rows; study seeds 1004 and 1005,
+2026-12-07): nothing injected, the offset was recommended on set 3 seed 1005 and selected on set 1
+seed 1004, where the saturation was then not recommended; ``circle-straight`` (80 m straight at
+14 m/s: 4.3 s of straight usable rows) holds its hidden offset. 2 s and 500 m are round physical figures (a few hundred rows; a path
 radius at which the lateral acceleration stays below 0.5 m/s^2 up to 15 m/s), not fitted to
 seeds."""
 STRAIGHT_RADIUS_M = 500.0

@@ -12,7 +12,6 @@ whether enough of it is usable to judge the slow effects.
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from vdps_hil.estimation.sensorsets import not_used_note
@@ -49,7 +48,7 @@ EFFECT_NEEDS = {
     "steering_compliance": "cornering at several lateral accelerations",
     "imu_bias": "GNSS position and velocity over a drive with turns and speed changes",
     "imu_lever_arm": "yaw and roll accelerations (a slalom or lane change)",
-    "steering_offset": "driving at speed with the steering angle recorded (straight or cornering)",
+    "steering_offset": "driving at speed with the steering angle recorded: 2 s straight and half a turn",
 }
 """What a drive needs to excite each built-in effect (the ``not excited`` words)."""
 
