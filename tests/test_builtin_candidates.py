@@ -182,3 +182,8 @@ def test_circle_ramp_on_commonroad_set1_recommends_saturation_with_one_cornering
     mf = next(e for e in rk.entries if e.effect == "magic_formula_tire")
     assert "cornering_coefficient_per_rad" in mf.parameters
     assert mf.plausible and 0.8 <= mf.parameters["peak_friction"][0] <= 1.3
+    # a circle that turns one way without a straight: no steering offset is ranked, and it is said
+    # (on study seeds 1004/1005 it took the drive before ``candidates.STRAIGHT_NEEDED_S``)
+    assert all(e.effect != "steering_offset" for e in rk.entries)
+    assert any(m.startswith("not ranked on this drive: steering_offset (0.0 s of straight driving")
+               for m in rk.messages), rk.messages
