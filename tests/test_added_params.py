@@ -45,8 +45,7 @@ def test_the_text_never_gives_a_bound_value_a_sigma_and_names_the_moved_paramete
                                "mass_kg": {"before": 1202.8, "after": 1199.6},  # -0.27 %: not listed
                                "inertia_z_kgm2": {"before": 2000.5, "after": 2000.5}}}
     assert at_bound(params) == [("magic_formula_tire", "peak_friction")]
-    lines = added_parameter_lines(params, {"aero_drag": {"cda_m2": "m^2"}},
-                                  {"magic_formula_tire": "tire saturation"})
+    lines = added_parameter_lines(params, {"magic_formula_tire": "tire saturation"})
     text = "\n".join(lines)
     mu = next(ln for ln in lines if "peak_friction" in ln)
     assert "AT BOUND -- 1.6, the upper bound of 0.1-1.6: not identified" in mu and "+-" not in mu

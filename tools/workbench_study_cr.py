@@ -59,7 +59,7 @@ from vdps_hil.experiments.seeds import refused_by_tool  # noqa: E402
 from vdps_hil.experiments.workbench_study import run_job, wilson_interval  # noqa: E402
 from vdps_hil.model.effects.base import MeasurementEffect  # noqa: E402
 from vdps_hil.model.effects.registry import REGISTRY  # noqa: E402
-from vdps_hil.workbench.added_params import IDENTIFIED_KEY, at_bound, parameter_entries  # noqa: E402
+from vdps_hil.workbench.added_params import added_entries, at_bound, parameter_entries  # noqa: E402
 
 from workbench_study import _load_runs  # noqa: E402  (tools/, inserted above)
 
@@ -107,8 +107,8 @@ def _at_bound(run: dict) -> list[tuple[str, str]]:
     """The added parameters of an ``add`` run at a bound (``workbench.added_params``); a run
     recorded before the status existed is judged from its values and the effect's ranges."""
     params = {}
-    for e, ps in (run.get("add_parameters") or {}).items():
-        if e == IDENTIFIED_KEY or e not in REGISTRY:
+    for e, ps in added_entries(run.get("add_parameters") or {}):
+        if e not in REGISTRY:
             continue
         if all("status" in d for d in ps.values()):
             params[e] = ps

@@ -28,7 +28,8 @@ from vdps_hil.model.effects.base import Effect
 
 from .candidate_base import BASE_PARAMS, PARAM_LABELS, param_unit
 
-__all__ = ["BOUND_MARGIN", "parameter_entries", "at_bound", "added_parameter_lines", "IDENTIFIED_KEY"]
+__all__ = ["BOUND_MARGIN", "parameter_entries", "added_entries", "at_bound", "added_parameter_lines",
+           "IDENTIFIED_KEY"]
 
 BOUND_MARGIN = StatusConfig().bound_margin
 """A fitted value within this fraction of its range's width from a bound is "at bound"."""
@@ -50,7 +51,7 @@ def _status(value: float, sigma, lower: float, upper: float) -> tuple[str, str |
 
 
 def parameter_entries(effect: Effect, sigmas: dict) -> dict[str, dict]:
-    """Parameter -> {value, sigma, status, bound, lower, upper} of one added ``effect``;
+    """Parameter -> {value, sigma, status, bound, lower, upper, unit} of one added ``effect``;
     ``sigmas``: the fit's sigmas of the parameters it moved (the others are held)."""
     specs = {p.name: p for p in getattr(effect, "PARAMS", ())}
     out = {}
@@ -60,14 +61,20 @@ def parameter_entries(effect: Effect, sigmas: dict) -> dict[str, dict]:
         lo, hi = (spec.lower, spec.upper) if spec is not None else (-math.inf, math.inf)
         status, side = _status(float(v), s, lo, hi)
         out[k] = {"value": v, "sigma": None if status == "at bound" else s, "status": status, "bound": side,
-                  "lower": lo if math.isfinite(lo) else None, "upper": hi if math.isfinite(hi) else None}
+                  "lower": lo if math.isfinite(lo) else None, "upper": hi if math.isfinite(hi) else None,
+                  "unit": spec.unit if spec is not None else ""}
     return out
+
+
+def added_entries(parameters: dict):
+    """(effect, {parameter: entry}) of each added effect in ``AddResult.parameters`` (not the ten
+    parameters' before/after under :data:`IDENTIFIED_KEY`)."""
+    return ((e, ps) for e, ps in parameters.items() if e != IDENTIFIED_KEY)
 
 
 def at_bound(parameters: dict) -> list[tuple[str, str]]:
     """(effect, parameter) of every added parameter at a bound (``AddResult.parameters``)."""
-    return [(e, k) for e, ps in parameters.items() if e != IDENTIFIED_KEY
-            for k, d in ps.items() if d.get("status") == "at bound"]
+    return [(e, k) for e, ps in added_entries(parameters) for k, d in ps.items() if d.get("status") == "at bound"]
 
 
 def _unit(unit: str) -> str:
@@ -79,18 +86,16 @@ def _fmt_range(d: dict) -> str:
     return f"{lo:.4g}-{hi:.4g}" if lo is not None and hi is not None else "its range"
 
 
-def added_parameter_lines(parameters: dict, units: dict | None = None, labels: dict | None = None) -> list[str]:
-    """The text lines of the added effects' parameters and of the ten parameters they moved.
-    ``units``/``labels``: effect -> parameter -> unit / effect -> label."""
-    units, labels = units or {}, labels or {}
+def added_parameter_lines(parameters: dict, labels: dict | None = None) -> list[str]:
+    """The text lines of the added effects' parameters and of the ten parameters they moved;
+    ``labels``: effect -> label."""
+    labels = labels or {}
     out = []
-    for e, ps in parameters.items():
-        if e == IDENTIFIED_KEY:
-            continue
+    for e, ps in added_entries(parameters):
         out.append(f"added {labels.get(e, e)} ({e}):")
         held = []
         for k, d in ps.items():
-            u = _unit(units.get(e, {}).get(k, ""))
+            u = _unit(d.get("unit", ""))
             v = d["value"]
             if d["status"] == "held":
                 held.append(f"{k} {v:.4g}{u}")

@@ -131,17 +131,21 @@ def drive_candidates(model_effects: EffectSet, extra: Sequence[type[Effect]], ya
     span = heading_span_rad(yaw_rad)
     cands = default_candidates(model_effects, extra, heading_span=span, straight_s=straight_s)
     have = set(model_effects.names) | {c.name for c in cands}
-    why = {}
-    for n in sorted(set(TURN_NEEDED_RAD) | set(STRAIGHT_NEEDED_S)):
-        if n in have or n not in REGISTRY:
-            continue
-        if span < TURN_NEEDED_RAD.get(n, -math.inf):
-            why[n] = (f"the heading spans {math.degrees(span):.0f} deg, less than the half turn that tells its "
-                      "side force apart from a crosswind's")
-        elif straight_s < STRAIGHT_NEEDED_S.get(n, -math.inf):
-            why[n] = (f"{straight_s:.1f} s of straight driving, less than the {STRAIGHT_NEEDED_S[n]:g} s that tell "
-                      "it apart from what grows with the turn (tire law, compliance, camber thrust)")
-    return cands, why
+    why = {n: _left_out(n, span, straight_s) for n in sorted(set(TURN_NEEDED_RAD) | set(STRAIGHT_NEEDED_S))
+           if n not in have and n in REGISTRY}
+    return cands, {n: w for n, w in why.items() if w}
+
+
+def _left_out(name: str, heading_span: float, straight_s: float) -> str | None:
+    """Why the drive cannot rank the built-in effect ``name`` (:data:`TURN_NEEDED_RAD`,
+    :data:`STRAIGHT_NEEDED_S`), in words; None when it can."""
+    if heading_span < TURN_NEEDED_RAD.get(name, -math.inf):
+        return (f"the heading spans {math.degrees(heading_span):.0f} deg, less than the half turn that tells its "
+                "side force apart from a crosswind's")
+    if straight_s < STRAIGHT_NEEDED_S.get(name, -math.inf):
+        return (f"{straight_s:.1f} s of straight driving, less than the {STRAIGHT_NEEDED_S[name]:g} s that tell "
+                "it apart from what grows with the turn (tire law, compliance, camber thrust)")
+    return None
 
 
 def table_candidates(table, index, model_effects: EffectSet, extra: Sequence[type[Effect]],
@@ -169,8 +173,7 @@ def default_candidates(model_effects: EffectSet, extra: Sequence[type[Effect]] =
     for name, cls in reg.items():
         if name in have or name == "linear_tire":
             continue
-        if cls is REGISTRY.get(name) and (heading_span < TURN_NEEDED_RAD.get(name, -math.inf)
-                                          or straight_s < STRAIGHT_NEEDED_S.get(name, -math.inf)):
+        if cls is REGISTRY.get(name) and _left_out(name, heading_span, straight_s):
             continue
         if issubclass(cls, TireModel) and model_effects.tire is not None and model_effects.tire.name != "linear_tire":
             continue

@@ -194,8 +194,7 @@ def _added_lines(add) -> list[str]:
     """The added effects' parameters with their status (``added_params``)."""
     from .words import EFFECT_LABELS
 
-    units = {e.name: {p.name: p.unit for p in getattr(e, "PARAMS", ())} for e in add.fitted.effects}
-    return added_parameter_lines(add.parameters, units, EFFECT_LABELS)
+    return added_parameter_lines(add.parameters, EFFECT_LABELS)
 
 
 def _worse_lines(add) -> list[str]:
@@ -213,7 +212,6 @@ def _worse_lines(add) -> list[str]:
             f"{q.split('_')[0]} {sb[h][q]:.3g} -> {sa[h][q]:.3g} {PREDICTED_UNITS[q]} (+{100 * c:.0f} %)"
             for q, c in qs.items()))
     return out
-
 
 
 def _sim_value(d: dict, k: str, unit: str) -> str:

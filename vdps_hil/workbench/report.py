@@ -21,7 +21,7 @@ import numpy as np
 
 from . import report_figures as F
 from .add import residual_change, rms_by_equation
-from .added_params import IDENTIFIED_KEY
+from .added_params import added_entries
 from .residuals import EQUATION_LABELS, EQUATION_UNITS, EQUATIONS
 
 __all__ = ["write_report", "render_report"]
@@ -101,9 +101,7 @@ def _added_rows(parameters: dict) -> list[list[str]]:
     from .words import EFFECT_LABELS
 
     rows = []
-    for e, ps in parameters.items():
-        if e == IDENTIFIED_KEY:
-            continue
+    for e, ps in added_entries(parameters):
         for k, d in ps.items():
             st = d["status"]
             if st == "at bound":
