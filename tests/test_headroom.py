@@ -11,7 +11,7 @@ import pytest
 from vdps_hil.cli.main import main
 from vdps_hil.hil.bench import Bench
 from vdps_hil.hil.bench_config import BenchConfig
-from vdps_hil.hil.headroom import PROBE_SPEED, REFUSE_BELOW, WARN_BELOW, Headroom
+from vdps_hil.hil.headroom import PROBE_SPEED, REFUSE_BELOW, WARN_BELOW, Headroom, _floor_2_digits
 
 
 def test_headroom_is_one_over_speed_times_the_summed_costs_and_the_verdicts_follow_it():
@@ -24,6 +24,15 @@ def test_headroom_is_one_over_speed_times_the_summed_costs_and_the_verdicts_foll
     d = h.to_json()
     assert d["headroom"] == pytest.approx(2.5) and d["verdict"] == "ok"
     assert "headroom 2.5x at speed 2x" in h.describe() and "\n" not in h.describe()
+
+
+@pytest.mark.parametrize("x, floor", [(0.897, 0.89), (0.8999, 0.89), (0.9, 0.9), (0.0456, 0.045),
+                                      (1.234, 1.2), (12.7, 12.0)])
+def test_the_second_probe_speed_is_rounded_down_never_up(x, floor):
+    """The slower probe runs at the speed with WARN_BELOW headroom rounded down to two digits:
+    0.897x rounded to nearest was a 0.9x probe, as fast as the first probe's 0.9 limit (a
+    loaded run, 2026-12-07)."""
+    assert _floor_2_digits(x) == floor and _floor_2_digits(x) <= x
 
 
 def test_the_measurement_runs_the_bench_itself_and_counts_both_sides_cpu():

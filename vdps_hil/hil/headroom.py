@@ -131,11 +131,19 @@ def measure_headroom(bench, probe_s: float = DEFAULT_PROBE_S, warm_s: float = 0.
     if not shed and probe_speed is None and 1.0 / (c.speed * cost) < WARN_BELOW and slower < 0.9 * speed:
         # the run will go slower (--speed auto, a loaded machine): the cost there, where the
         # bench spends more per simulated second (fewer items per pass and per wake-up)
-        again = _probe(bench, total_s, warm_s, float(f"{slower:.2g}"))
+        again = _probe(bench, total_s, warm_s, _floor_2_digits(slower))
         if not again[3]:
             sim_cost, pipe_cost, speed, shed = again
     return Headroom(float(c.speed), total_s - warm_s, sim_cost, pipe_cost, time.perf_counter() - w0,
                     sim_cost, pipe_cost, probe_speed=speed, probe_shed=int(shed))
+
+
+def _floor_2_digits(x: float) -> float:
+    """``x`` > 0 rounded down to two significant digits (0.897 -> 0.89): the second probe's speed
+    stays at or below the speed with ``WARN_BELOW`` headroom (rounding to nearest made 0.897 a
+    0.9x probe, no slower than the first's 0.9 limit)."""
+    q = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return float(f"{math.floor(x / q + 1e-9) * q:.2g}")
 
 
 def _probe(bench, total_s: float, warm_s: float, speed: float) -> tuple[float, float, float, int]:
