@@ -43,7 +43,7 @@ from .innovations import compute_innovations
 from .ranking.config import RankingConfig
 from .ranking.design import theta_of
 from .ranking.sensor_fit import held_at, sensor_fit
-from .ranking.identification import Point, apply_base, build_design, effects_with, identify, interp_base
+from .ranking.identification import Point, apply_base, build_design, capped_design, effects_with, identify, interp_base
 from .residuals import EQUATIONS, row_states
 from .simulation_errors import HORIZONS_S, SimErrors, simulation_errors
 
@@ -281,8 +281,9 @@ def worse_predictions(before: dict, after: dict | None) -> dict[str, dict[str, f
 
 def cleaned_residuals(table: DriveTable, model: FittedModel, vehicle: Vehicle, config: RankingConfig | None = None
                       ) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray]:
-    """The residual the model leaves once the estimator's errors (the nuisance directions) are
-    taken out -- the residual the ranking works on, in equation units: (t_s (n,), table rows
+    """The residual the model leaves once the estimator's errors (the nuisance directions, the
+    slow body velocity held as its fit held it: ``capped_design``) are taken out -- the residual
+    the ranking works on, in equation units: (t_s (n,), table rows
     (n,), equation names (the evaluated ones), values (n, len(names)))."""
     return _cleaned(table, model, vehicle, config)[:4]
 
@@ -293,8 +294,7 @@ def _cleaned(table: DriveTable, model: FittedModel, vehicle: Vehicle, config: Ra
     cfg = config or RankingConfig()
     states = row_states(table, model.vehicle)
     inn = compute_innovations(table)
-    _, d, cols = build_design(table, states, inn, vehicle, Point(model.vehicle, model.effects, {}), cfg, {})
-    th, _ = d.objective(cols)
+    _, d, cols, th = capped_design(table, states, inn, vehicle, Point(model.vehicle, model.effects, {}), cfg)
     r = d.y - d.predict(cols, th)
     ctx = d.ctx
     n, e = ctx.y_dyn.shape
