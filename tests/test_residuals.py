@@ -127,6 +127,12 @@ def test_parameter_columns_match_finite_differences(drive):
             assert np.linalg.norm(left) < 0.03 * np.linalg.norm(rest)
         else:
             err = np.linalg.norm(a - fd) / max(np.linalg.norm(fd), 1e-12)
+        if p.startswith("cornering_stiffness"):
+            # equation by equation: a whole-matrix norm let the lateral row, right, hide roll and
+            # yaw rows 3-4 % off (the unsprung masses' arm left out; CommonRoad set 1, 2026-12-07)
+            for k in range(a.shape[1]):
+                scale = max(np.linalg.norm(fd[:, k]), 1e-9 * np.linalg.norm(fd))
+                assert np.linalg.norm(a[:, k] - fd[:, k]) < 0.01 * scale, (p, R.EQUATIONS[k])
         assert err < 0.03, (p, err)
 
 

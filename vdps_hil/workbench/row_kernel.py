@@ -49,7 +49,8 @@ P_ZW = 9
 P_ARB, P_KF, P_KR, P_TF, P_TR, P_RC, P_HF, P_HR, P_NEWTON = range(10, 19)
 P_FZ0 = 19  # 4 values
 P_CA = 23  # 4 values
-N_P = 27
+P_RU = 27  # 3 values: the unsprung masses' moment arm (RowModel.unsprung_arm_m)
+N_P = 30
 NUISANCE_STEP_MPS = 0.02
 
 
@@ -107,7 +108,8 @@ def _measured_loads(r, D, meas, P, CORN, SPR):
                                   meas[18 + i], farb[i])
         if P[P_RC] != 0.0:
             fz += jac[i]
-        normal_load_change(r, fz - D[16 * i + 2], D[16 * i + 11], CORN[i, 0], CORN[i, 1], zw, nx, ny, nz)
+        normal_load_change(r, fz - D[16 * i + 2], D[16 * i + 11], CORN[i, 0] - P[P_RU], CORN[i, 1] - P[P_RU + 1],
+                           zw - P[P_RU + 2], nx, ny, nz)
 
 
 @inline
@@ -194,7 +196,8 @@ def _slip_columns(D, P, CORN, out):
     out[:, :] = 0.0
     for i in range(4):
         b = 16 * i
-        corner_force_columns(out, i, D[b + 9], D[b + 10], D[b + 11], D[b + 4], CORN[i, 0], CORN[i, 1], P[P_ZW],
+        corner_force_columns(out, i, D[b + 9], D[b + 10], D[b + 11], D[b + 4], CORN[i, 0] - P[P_RU],
+                             CORN[i, 1] - P[P_RU + 1], P[P_ZW] - P[P_RU + 2],
                              nx, ny, nz)
 
 

@@ -130,6 +130,12 @@ class RowModel:
         self.last_ws = [0.0] * 8
         self.last_slip_cols = None
         self._zw = self.model.wheel_centre_z_m
+        # r_u = sum_i m_u,i r_w,i / m_tot: the core's unsprung masses ride with the body and react
+        # to its acceleration a = F / m_tot + g (``stages.body_accelerations``: M += sum r_w,i x
+        # m_u,i (g - a)), so a force F at r_c turns the body by (r_c - r_u) x F
+        mu = [a.unsprung_mass_kg for a in self.axles]
+        self.unsprung_arm_m = tuple(sum(m * c[k] for m, c in zip(mu, self.corners)) / self.m for k in (0, 1)) + (
+            sum(mu) * self._zw / self.m,)
         tire = self.model.effects.tire
         self._tire = None if tire is None or tire.name == "linear_tire" else tire
         self._fz0 = self.model.static_load_n
@@ -153,6 +159,7 @@ class RowModel:
         P[rk.P_NEWTON] = 0.0 if self._tire is None else 1.0
         P[rk.P_FZ0:rk.P_FZ0 + 4] = self._fz0
         P[rk.P_CA:rk.P_CA + 4] = self._calpha
+        P[rk.P_RU:rk.P_RU + 3] = self.unsprung_arm_m
         return (*self.model.kernel_arrays, P, np.array(self.corners, dtype=float), np.array(self._spring, dtype=float))
 
     def residual(self, x, u, env, meas, want_named: bool = False, want_slip: bool = False):
@@ -225,7 +232,8 @@ class RowModel:
             if jac is not None:
                 fz += jac[i]
             xi, yi = self.corners[i]
-            rk.normal_load_change(r, fz - rec[i][2], rec[i][11], xi, yi, zw, nx, ny, nz)
+            ux, uy, uz = self.unsprung_arm_m
+            rk.normal_load_change(r, fz - rec[i][2], rec[i][11], xi - ux, yi - uy, zw - uz, nx, ny, nz)
 
     def _roll_centre_forces(self, rec, n_b) -> tuple[float, float, float, float]:
         """J_i (``chassis.roll_centre_forces_n``) from the axles' lateral tire forces in body y
@@ -261,8 +269,10 @@ class RowModel:
         slip angle: the cornering-stiffness columns of the linear tire)."""
         nx, ny, nz = n_b
         zw = self.model.wheel_centre_z_m
+        ux, uy, uz = self.unsprung_arm_m
         out = np.zeros((14, 8))
         for i in range(4):
             xi, yi = self.corners[i]
-            rk.corner_force_columns(out, i, rec[i][9], rec[i][10], rec[i][11], rec[i][4], xi, yi, zw, nx, ny, nz)
+            rk.corner_force_columns(out, i, rec[i][9], rec[i][10], rec[i][11], rec[i][4], xi - ux, yi - uy, zw - uz,
+                                    nx, ny, nz)
         return out
