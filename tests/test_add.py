@@ -218,8 +218,8 @@ def test_the_cleaned_residual_is_the_fitted_models_own_on_a_circle_to_the_limit(
     by more than 5 % of its identified value. On a circle ramped to the tires' limit (CommonRoad
     set 1, seed 21 as tests/test_builtin_candidates.py) the refit without that hold is another
     fit: the lateral knots take up the saturation and both stiffnesses move by more than 30 %
-    (CommonRoad set 1's tuning seed 100: +155 / +126 kN/rad, and the 'cleaned' lateral residual
-    read 15 N where the identified model's is 61 N)."""
+    (CommonRoad set 1's tuning seed 100, measured with the earlier columns: +155 / +126 kN/rad,
+    and the 'cleaned' lateral residual read 15 N where the identified model's was 61 N)."""
     from vdps_hil.experiments.workbench_study import model_file
     from vdps_hil.workbench.innovations import compute_innovations
     from vdps_hil.workbench.ranking.config import RankingConfig

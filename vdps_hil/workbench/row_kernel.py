@@ -72,7 +72,9 @@ def measured_normal_load(c1, c2, c3, sc, ds, mug, h, hd, farb):
 def normal_load_change(r, d, hw, xi, yi, zw, nx, ny, nz):
     """A corner's normal load changed by ``d`` [N] along the road normal n at its contact point
     r_c = (x_i, y_i, z_w) - h_w n: its force and moment taken off the residual ``r`` (rows 0-5).
-    Shared by ``RowModel._measured_loads`` and the kernel."""
+    The callers pass the corner relative to the unsprung masses' arm r_u
+    (``RowModel.unsprung_arm_m``), so the moment is the core's (r_c - r_u) x F. Shared by
+    ``RowModel._measured_loads`` and the kernel."""
     rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
     fx, fy, fz = nx * d, ny * d, nz * d
     r[0] -= fx
@@ -172,8 +174,9 @@ def _row(x, meas, xd, D, P, CORN, SPR, E, r, ws):
 def corner_force_columns(out, i, delta, ri, hw, alp, xi, yi, zw, nx, ny, nz):
     """Corner ``i``'s two columns of ``RowModel._slip_columns`` into ``out`` (14 x 8): d r / d F_a,i
     (column i: along the wheel's heading e_l at the contact point r_c, force, moment r_c x e_l,
-    wheel spin -r_i) and d r / d F_b,i times alpha_i (column 4 + i: along e_t). Shared by the
-    reference and the kernel: one formula for both."""
+    wheel spin -r_i) and d r / d F_b,i times alpha_i (column 4 + i: along e_t). ``xi, yi, zw``: the
+    corner relative to the unsprung masses' arm r_u (``RowModel.unsprung_arm_m``; the moment is
+    then the core's (r_c - r_u) x F). Shared by the reference and the kernel: one formula for both."""
     lx, ly, lz, tx, ty, tz = wheel_axes(delta, (nx, ny, nz))
     rcx, rcy, rcz = xi - hw * nx, yi - hw * ny, zw - hw * nz
     out[0, i], out[1, i], out[2, i] = -lx, -ly, -lz

@@ -226,13 +226,13 @@ class RowModel:
         if self._arb is not None:
             farb = anti_roll_forces_n(self._arb[0], self._arb[1], self._tracks[0], self._tracks[1], meas[14:18])
         jac = self._roll_centre_forces(rec, n_b) if self._roll_centre is not None else None
+        ux, uy, uz = self.unsprung_arm_m
         for i in range(4):
             fz = rk.measured_normal_load(*self._spring[i], meas[14 + i], meas[18 + i],
                                          0.0 if farb is None else farb[i])
             if jac is not None:
                 fz += jac[i]
             xi, yi = self.corners[i]
-            ux, uy, uz = self.unsprung_arm_m
             rk.normal_load_change(r, fz - rec[i][2], rec[i][11], xi - ux, yi - uy, zw - uz, nx, ny, nz)
 
     def _roll_centre_forces(self, rec, n_b) -> tuple[float, float, float, float]:
@@ -264,9 +264,10 @@ class RowModel:
 
     def _slip_columns(self, rec, n_b) -> np.ndarray:
         """(14, 8): d(residual)/d(F_a,i) (columns 0-3) -- a longitudinal tire force along the
-        wheel's heading in the road plane e_l at the contact point (force e_l, moment r_c x e_l,
-        wheel spin -r_i) -- and d(residual)/d(F_b,i) (columns 4-7, along e_t = n x e_l, times the
-        slip angle: the cornering-stiffness columns of the linear tire)."""
+        wheel's heading in the road plane e_l at the contact point (force e_l, moment (r_c - r_u) x
+        e_l with the unsprung masses' arm r_u, wheel spin -r_i) -- and d(residual)/d(F_b,i)
+        (columns 4-7, along e_t = n x e_l, times the slip angle: the cornering-stiffness columns of
+        the linear tire)."""
         nx, ny, nz = n_b
         zw = self.model.wheel_centre_z_m
         ux, uy, uz = self.unsprung_arm_m

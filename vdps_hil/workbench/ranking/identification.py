@@ -181,6 +181,7 @@ def cap_nuisance(d: Design, cols, th, states: RowStates, config: RankingConfig) 
     states.band_weight = new
     return True
 
+
 def capped_design(table, states, inn, ref: Vehicle, point: Point, cfg: RankingConfig):
     """:func:`build_design` at ``point`` with the slow body-velocity nuisance held as the fit
     that made ``point`` held it (:func:`cap_nuisance`, up to ``nuisance_cap_rounds``):
