@@ -234,7 +234,7 @@ def test_the_cleaned_residual_is_the_fitted_models_own_on_a_circle_to_the_limit(
     cfg, inn = RankingConfig(), compute_innovations(table)
     point = Point(base.vehicle, base.effects, {})
     stiff = ("cornering_stiffness_front_nprad", "cornering_stiffness_rear_nprad")
-    _, d, cols, th = capped_design(table, row_states(table, base.vehicle), inn, veh, point, cfg)
+    d, cols, th = capped_design(table, row_states(table, base.vehicle), inn, veh, point, cfg)
     for p in stiff:
         step = float(theta_of(d, p, cols, th)[0])
         assert abs(step) <= 0.05 * getattr(base.vehicle.params, p), (p, step)

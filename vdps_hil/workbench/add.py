@@ -294,7 +294,7 @@ def _cleaned(table: DriveTable, model: FittedModel, vehicle: Vehicle, config: Ra
     cfg = config or RankingConfig()
     states = row_states(table, model.vehicle)
     inn = compute_innovations(table)
-    _, d, cols, th = capped_design(table, states, inn, vehicle, Point(model.vehicle, model.effects, {}), cfg)
+    d, cols, th = capped_design(table, states, inn, vehicle, Point(model.vehicle, model.effects, {}), cfg)
     r = d.y - d.predict(cols, th)
     ctx = d.ctx
     n, e = ctx.y_dyn.shape

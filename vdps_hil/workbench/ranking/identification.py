@@ -185,15 +185,15 @@ def cap_nuisance(d: Design, cols, th, states: RowStates, config: RankingConfig) 
 def capped_design(table, states, inn, ref: Vehicle, point: Point, cfg: RankingConfig):
     """:func:`build_design` at ``point`` with the slow body-velocity nuisance held as the fit
     that made ``point`` held it (:func:`cap_nuisance`, up to ``nuisance_cap_rounds``):
-    (context, design, columns, theta). A refit at a fitted point without the cap is another fit:
+    (design, columns, theta; the context is ``design.ctx``). A refit at a fitted point without the cap is another fit:
     on CommonRoad set 1's circle ramp (tuning seed 100) its lateral knots ran to 0.7 m/s and its
     cornering-stiffness steps to +120-155 kN/rad, and the "cleaned" residual of the identified
     model read 15 N lateral where the fitted model's is 61 N."""
     for rnd in range(cfg.nuisance_cap_rounds + 1):
-        ctx, d, cols = build_design(table, states, inn, ref, point, cfg, {})
+        _, d, cols = build_design(table, states, inn, ref, point, cfg, {})
         th, _ = d.objective(cols)
         if rnd == cfg.nuisance_cap_rounds or not cap_nuisance(d, cols, th, states, cfg):
-            return ctx, d, cols, th
+            return d, cols, th
 
 
 def effects_with(effects: EffectSet, eff: Effect) -> EffectSet:
