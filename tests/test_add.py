@@ -242,3 +242,23 @@ def test_the_cleaned_residual_is_the_fitted_models_own_on_a_circle_to_the_limit(
     _, d0, cols0 = build_design(table, row_states(table, base.vehicle), inn, veh, point, cfg, {})
     th0, _ = d0.objective(cols0)
     assert all(abs(float(theta_of(d0, p, cols0, th0)[0])) > 0.3 * getattr(base.vehicle.params, p) for p in stiff)
+
+
+def test_a_friction_no_step_of_the_fit_moved_is_said_to_be_at_its_start(drive_cache):
+    """Our circle ramp with the Magic Formula hidden (seed 21): the generic prior of the peak
+    friction is the truth's (1.0), and on this drive no fraction of the descent's first step
+    lowers the objective (the step also takes the base fit's mass down; measured 2026-12-08), so
+    the value is exactly the start. The fit says so (``FittedModel.at_start``), and the entry is
+    "at start" without a sigma, never "fitted 1 +- 0.003"; a value the fit moved is "fitted"."""
+    from vdps_hil.model.effects import REGISTRY
+    from vdps_hil.workbench.added_params import parameter_entries
+
+    man, spec = HIDDEN["magic_formula_tire"]
+    tab = load_drive(cached_drive(drive_cache, man, [spec], seed=21), VEH)
+    m = fit_model(tab, VEH, EffectSet(), [candidate_for(REGISTRY["magic_formula_tire"])])
+    mf = m.effects["magic_formula_tire"]
+    moved = mf.peak_friction != 1.0  # the ParamSpec default, where the fit starts
+    assert ("magic_formula_tire" in m.at_start) == (not moved)
+    entry = parameter_entries(mf, m.sigmas["magic_formula_tire"], "magic_formula_tire" in m.at_start)["peak_friction"]
+    assert entry["status"] == ("fitted" if moved else "at start")
+    assert not moved, "the descent moved the friction on this drive: keep the test's premise true with another drive"

@@ -1,13 +1,15 @@
 """``workbench.added_params``: an added effect's parameter on or near a bound of its physical range
-is "at bound" (never identified, no sigma), one the fit did not move is "held", the rest "fitted";
-the text names each, and the ten parameters the fit moved by more than 1 %."""
+is "at bound" (never identified, no sigma), one the fit does not fit is "held", one its descent
+never moved "at start", the rest "fitted"; the text names each, and the ten parameters the fit
+moved by more than 1 %."""
 
 from __future__ import annotations
 
 import pytest
 
 from vdps_hil.model.effects import make_effect
-from vdps_hil.workbench.added_params import BOUND_MARGIN, IDENTIFIED_KEY, added_parameter_lines, at_bound, parameter_entries
+from vdps_hil.workbench.added_params import (BOUND_MARGIN, IDENTIFIED_KEY, added_parameter_lines, at_bound, not_fitted,
+                                              parameter_entries)
 
 
 def _mf(mu: float):
@@ -54,3 +56,17 @@ def test_the_text_never_gives_a_bound_value_a_sigma_and_names_the_moved_paramete
     assert "held at the generic prior: shape_lateral 1.3" in text
     moved = lines[-1]
     assert moved == "re-identified with them (changes above 1 %): front cornering stiffness 163.7 -> 189.4 kN/rad (+16 %)"
+
+
+def test_a_value_no_step_of_the_fit_moved_is_at_start_without_a_sigma():
+    """``at_start`` (``FittedModel.at_start``): the fit's descent kept no step, so the value is
+    still the generic prior; an interior value is then "at start", never "fitted" with the
+    curvature's sigma; a bound and the held factors keep their own status."""
+    d = parameter_entries(_mf(1.0), {"peak_friction": 0.0028}, at_start=True)
+    assert d["peak_friction"]["status"] == "at start" and d["peak_friction"]["sigma"] is None
+    assert d["shape_lateral"]["status"] == "held"
+    assert parameter_entries(_mf(1.6), {"peak_friction": 0.0028}, at_start=True)["peak_friction"]["status"] == "at bound"
+    params = {"magic_formula_tire": d}
+    assert not_fitted(params) == [("magic_formula_tire", "peak_friction")] and at_bound(params) == []
+    mu = next(ln for ln in added_parameter_lines(params) if "peak_friction" in ln)
+    assert mu.startswith("  peak_friction: AT START -- 1, the generic prior: no step of the fit") and "+-" not in mu

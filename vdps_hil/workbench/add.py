@@ -60,6 +60,7 @@ class FittedModel:
     effects: EffectSet
     sigmas: dict[str, dict[str, float]] = field(default_factory=dict)
     t_end_s: float = math.inf
+    at_start: frozenset = frozenset()  # added dynamics effects no step of the fit moved (_descend)
 
     @property
     def added(self) -> list[str]:
@@ -89,8 +90,9 @@ def fit_model(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequ
     point, d, cols, _ = identify(tab, vehicle, eff, states, inn, cfg, reference=vehicle, phis=phis, selected=selected)
     sig: dict[str, dict[str, float]] = {}
     dynamics_only = bool(add) and not any(c.family == "measurement" for c in add)
+    moved = True
     if dynamics_only:
-        point, d, cols = _descend(tab, vehicle, states, inn, cfg, selected, point, d, cols)
+        point, d, cols, moved = _descend(tab, vehicle, states, inn, cfg, selected, point, d, cols)
     for _ in range(iterations if add and not dynamics_only else 0):
         dh, ch, sensor = _held_sensors(d, cols, add)
         th, obj = dh.objective(ch)
@@ -123,7 +125,7 @@ def fit_model(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: Sequ
             np.array([math.sqrt(max(cov[pos[k], pos[k]] * s2, 0.0)) / d.scale[k] for k in ks])
         sig[c.name] = {k: v[1] for k, v in c.phi_report(point.phis[c.name], s).items()}
     t_end = float(tab.t_s[-1]) if len(tab.t_s) else math.inf
-    return FittedModel(point.base, point.effects, sig, t_end)
+    return FittedModel(point.base, point.effects, sig, t_end, frozenset() if moved else frozenset(selected))
 
 
 DESCENT_ITERATIONS = 4
@@ -133,15 +135,14 @@ DESCENT_MIN_STEP = 1.0 / 16.0
 
 
 def _descend(tab, vehicle, states, inn, cfg, selected: dict[str, Candidate], point, d, cols):
-    """Gauss-Newton on the added dynamics effects' parameters and the ten parameters, each step
-    kept only where it lowers the MAP objective at the new point (the added effects' parameters
-    held there, the ten parameters and the nuisance re-fitted: ``Design.objective`` without the
-    added effects' step columns), else halved down to :data:`DESCENT_MIN_STEP` of it; at most
-    :data:`DESCENT_ITERATIONS` steps. Full steps from the generic prior, as before, put the
-    held-out refits of ``--add magic_formula_tire`` on CommonRoad set 3's circle ramp on a
-    degenerate point (seed 1001: peak friction 0.11, sigma 0.0007, the front stiffness on its
-    bound; every held-out prediction worse). ``selected``: the added candidates by name.
-    Returns (point, design, columns)."""
+    """Gauss-Newton on the added dynamics effects' parameters and the ten parameters, each step kept
+    only where it lowers the MAP objective at the new point (the added effects' parameters held
+    there, the ten parameters and the nuisance re-fitted: ``Design.objective`` without the added
+    effects' step columns), else halved down to :data:`DESCENT_MIN_STEP` of it; at most
+    :data:`DESCENT_ITERATIONS` steps. Full steps from the generic prior put the held-out refits on
+    degenerate points (CommonRoad set 3's circle ramp, seed 1001: peak friction 0.11 +- 0.0007).
+    ``selected``: the added candidates by name. Returns (point, design, columns, whether a step was
+    kept: else the added parameters are their start, ``added_params`` "at start")."""
     add = list(selected.values())
 
     def at_point(d, cols) -> float:  # the objective at the point: the added effects' step columns held at zero
@@ -150,6 +151,7 @@ def _descend(tab, vehicle, states, inn, cfg, selected: dict[str, Candidate], poi
 
     th, _ = d.objective(cols)
     obj = at_point(d, cols)
+    moved = False
     for _ in range(DESCENT_ITERATIONS):
         base = apply_base(point, d, cols, th, cfg, vehicle)
         steps = {c.name: theta_of(d, c.name, cols, th) for c in add}
@@ -169,11 +171,12 @@ def _descend(tab, vehicle, states, inn, cfg, selected: dict[str, Candidate], poi
             if obj2 <= obj:
                 th2, _ = d2.objective(cols2)
                 point, d, cols, th, obj = trial, d2, cols2, th2, obj2
+                moved = True
                 break
             w /= 2.0
         else:
             break  # no fraction of the step lowers the objective: this point is kept
-    return point, d, cols
+    return point, d, cols, moved
 
 
 def _held_sensors(d, cols: list, add: Sequence[Candidate]):
@@ -212,8 +215,7 @@ class AddResult:
         return worse_equations(self.before, self.after, self.noise_sigma)
 
     def worse_predictions(self) -> dict[str, dict[str, float]]:
-        """Horizon -> {quantity: relative rise}: the held-out prediction errors the added effects
-        made worse (:func:`worse_predictions`)."""
+        """Horizon -> {quantity: relative rise} made worse (:func:`worse_predictions`)."""
         return worse_predictions(self.before, self.after)
 
     def to_json(self) -> dict:
@@ -391,18 +393,14 @@ def before_after(table: DriveTable, vehicle: Vehicle, effects: EffectSet, add: S
     params = {}
     for e in m1.effects:
         if e.name in m1.sigmas:
-            params[e.name] = parameter_entries(e, m1.sigmas[e.name])
+            params[e.name] = parameter_entries(e, m1.sigmas[e.name], at_start=e.name in m1.at_start)
     params[IDENTIFIED_KEY] = {k: {"before": getattr(m0.vehicle.params, k), "after": getattr(m1.vehicle.params, k)}
                             for k in cfg.identify}
     return AddResult([c.name for c in add], m1, before, after, sim0, sim1, params, noise)
 
 
 def _latest(models: list[FittedModel], ends: list[float], t0: float) -> FittedModel:
-    best = models[0]
-    for m, e in zip(models, ends):
-        if e <= t0 + 1e-9:
-            best = m
-    return best
+    return ([m for m, e in zip(models, ends) if e <= t0 + 1e-9] or models[:1])[-1]
 
 
 def vertical_velocity_drift(table: DriveTable) -> float | None:
@@ -493,6 +491,7 @@ def add_effects(table: DriveTable, vehicle: Vehicle, effects: EffectSet, names: 
         for e in fitted:
             res.parameters[e.name] = parameter_entries(e, m.sigmas[e.name])
         res.fitted = FittedModel(res.fitted.vehicle, res.fitted.effects + EffectSet(fitted),
-                                 {**res.fitted.sigmas, **{e.name: m.sigmas[e.name] for e in fitted}})
+                                 {**res.fitted.sigmas, **{e.name: m.sigmas[e.name] for e in fitted}},
+                                 res.fitted.t_end_s, res.fitted.at_start)
         return res
     return before_after(table, vehicle, effects, cands, **kw)

@@ -16,7 +16,11 @@ screening fit 1.03). Each parameter now carries one status, in the JSON, the tex
     still shown, as what the model used, never as a result;
 ``held``
     not fitted (no sigma): the effect's generic prior, kept (the Magic Formula's shape and
-    curvature factors, which the ``--add`` fit does not move).
+    curvature factors, which the ``--add`` fit does not move);
+``at start``
+    a parameter the fit was to move but no step of it kept (``add._descend``): still its start,
+    the generic prior, so neither a fitted value nor a sigma (on our own circle ramp with the Magic
+    Formula hidden the friction stayed at exactly 1.0 and was printed "fitted 1 +- 0.003").
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ from vdps_hil.model.effects.base import Effect
 
 from .candidate_base import BASE_PARAMS, PARAM_LABELS, param_unit
 
-__all__ = ["BOUND_MARGIN", "parameter_entries", "added_entries", "at_bound", "added_parameter_lines",
+__all__ = ["BOUND_MARGIN", "parameter_entries", "added_entries", "at_bound", "not_fitted", "added_parameter_lines",
            "IDENTIFIED_KEY"]
 
 BOUND_MARGIN = StatusConfig().bound_margin
@@ -50,9 +54,10 @@ def _status(value: float, sigma, lower: float, upper: float) -> tuple[str, str |
     return "fitted", None
 
 
-def parameter_entries(effect: Effect, sigmas: dict) -> dict[str, dict]:
+def parameter_entries(effect: Effect, sigmas: dict, at_start: bool = False) -> dict[str, dict]:
     """Parameter -> {value, sigma, status, bound, lower, upper, unit} of one added ``effect``;
-    ``sigmas``: the fit's sigmas of the parameters it moved (the others are held)."""
+    ``sigmas``: the fit's sigmas of the parameters it fitted (the others are held); ``at_start``:
+    no step of the fit moved them (``FittedModel.at_start``)."""
     specs = {p.name: p for p in getattr(effect, "PARAMS", ())}
     out = {}
     for k, v in effect.params.items():
@@ -60,7 +65,10 @@ def parameter_entries(effect: Effect, sigmas: dict) -> dict[str, dict]:
         spec = specs.get(k)
         lo, hi = (spec.lower, spec.upper) if spec is not None else (-math.inf, math.inf)
         status, side = _status(float(v), s, lo, hi)
-        out[k] = {"value": v, "sigma": None if status == "at bound" else s, "status": status, "bound": side,
+        if at_start and status == "fitted":
+            status = "at start"
+        out[k] = {"value": v, "sigma": s if status == "fitted" or status == "held" else None, "status": status,
+                  "bound": side,
                   "lower": lo if math.isfinite(lo) else None, "upper": hi if math.isfinite(hi) else None,
                   "unit": spec.unit if spec is not None else ""}
     return out
@@ -75,6 +83,13 @@ def added_entries(parameters: dict):
 def at_bound(parameters: dict) -> list[tuple[str, str]]:
     """(effect, parameter) of every added parameter at a bound (``AddResult.parameters``)."""
     return [(e, k) for e, ps in added_entries(parameters) for k, d in ps.items() if d.get("status") == "at bound"]
+
+
+def not_fitted(parameters: dict) -> list[tuple[str, str]]:
+    """(effect, parameter) of every added parameter the fit did not determine: at a bound or
+    still at its start (``AddResult.parameters``)."""
+    return [(e, k) for e, ps in added_entries(parameters) for k, d in ps.items()
+            if d.get("status") in ("at bound", "at start")]
 
 
 def _unit(unit: str) -> str:
@@ -103,6 +118,10 @@ def added_parameter_lines(parameters: dict, labels: dict | None = None) -> list[
                 out.append(f"  {k}: AT BOUND -- {v:.4g}{u}, the {d['bound']} bound of {_fmt_range(d)}: not "
                            "identified (the drive does not determine it or shows none of it, or the model misses "
                            "an effect that pulls it there); the 'after' figures use this value")
+            elif d["status"] == "at start":
+                out.append(f"  {k}: AT START -- {v:.4g}{u}, the generic prior: no step of the fit lowered its "
+                           "objective, so not a fitted value (the base model may hold an error that this value "
+                           "would have to make up for); the 'after' figures use this value")
             else:
                 s = d.get("sigma")
                 out.append(f"  {k}: fitted {v:.4g}" + (f" +- {s:.2g}" if s is not None else "") + u)

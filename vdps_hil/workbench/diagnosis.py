@@ -35,7 +35,7 @@ from vdps_hil.model.params import Vehicle
 from vdps_hil.record.schemas import clean_json
 
 from .add import PREDICTED_UNITS, AddResult, FittedModel, add_effects, cleaned_residuals, residual_change, rms_by_equation
-from .added_params import added_parameter_lines, at_bound
+from .added_params import added_parameter_lines, at_bound, not_fitted
 from .dataset import DatasetConfig, DriveTable, load_drive, reestimator
 from .fit_budget import FitSubset, add_window, fit_subset
 from .memory import release_freed_memory
@@ -240,9 +240,14 @@ def _save_fitted(target, path, add, add_res, base: FittedModel, rk: Ranking) -> 
     src = f"vdps diagnose {Path(path).name}" + "".join(f" --add {a}" for a in add)
     esig = fm.sigmas
     bound = at_bound(add_res.parameters) if add_res is not None else []
+    unmoved = [ek for ek in not_fitted(add_res.parameters) if ek not in bound] if add_res is not None else []
+    if bound or unmoved:
+        esig = {e: {k: v for k, v in ps.items() if (e, k) not in bound and (e, k) not in unmoved}
+                for e, ps in fm.sigmas.items()}
     if bound:
-        esig = {e: {k: v for k, v in ps.items() if (e, k) not in bound} for e, ps in fm.sigmas.items()}
         src += "; at bound, not identified: " + ", ".join(f"{e}.{k}" for e, k in bound)
+    if unmoved:
+        src += "; at the generic prior, not fitted: " + ", ".join(f"{e}.{k}" for e, k in unmoved)
     return str(_save(target, fm.vehicle, fm.effects, sigmas=sig, effect_sigmas=esig, source=src))
 
 

@@ -108,6 +108,8 @@ def _added_rows(parameters: dict) -> list[list[str]]:
                 st = f"AT BOUND ({d['bound']} bound {_fmt(d[d['bound']])}): not identified"
             elif st == "held":
                 st = "held at the generic prior"
+            elif st == "at start":
+                st = "AT START (the generic prior): no step of the fit moved it, not fitted"
             rows.append([EFFECT_LABELS.get(e, e), k, _fmt(d["value"]), _fmt(d.get("sigma"), nd=2), st])
     return rows
 
