@@ -113,3 +113,15 @@ def test_processes_sharing_a_drive_folder_simulate_each_drive_once(tmp_path, mon
     S.cached_drive(tmp_path, "step-steer", (), seed=6)
     assert calls == [("step-steer", 5), ("step-steer", 6)]
     assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_a_model_effect_of_a_job_is_in_the_model_it_ranks_against(drive_cache):
+    """``run_job``'s ``model_effects`` (``tools/workbench_study_cr.py --model-effect``): the model
+    carries the effect, so it is no candidate; with the hidden drag itself in the model (seed 21's
+    accel-coast, C_d A 0.7), nothing is missing and nothing is recommended."""
+    from vdps_hil.experiments.workbench_study import HIDDEN, run_job
+
+    man, spec = HIDDEN["aero_drag"]
+    r = run_job({"maneuver": man, "specs": [spec], "seed": 21, "cache": str(drive_cache), "model_effects": [spec]})
+    assert "error" not in r, r.get("error")
+    assert "aero_drag" not in r["entries"] and r["recommendation"] is None, (r["recommendation"], r["messages"])

@@ -55,3 +55,19 @@ def test_the_summary_counts_seeds_meeting_half_and_saturation_named_without_it()
     kinds = {j["kind"]: j for j in jobs}
     assert kinds["add"]["truth"] == "commonroad-mb:3" and kinds["add-null"]["truth"] == "commonroad-mb:3:linear-lateral"
     assert kinds["add"]["add"] == kinds["add-null"]["add"] == "magic_formula_tire"
+
+
+def test_a_model_effect_keys_its_runs_apart_and_a_bad_one_is_one_line(capsys):
+    """``--model-effect``: a run with a model effect is another run in a ``--runs`` file (the key of
+    a run without one is unchanged, so older files still resume); an unknown effect or parameter
+    refuses the study in one line (exit 2) before anything is simulated."""
+    job = wsc.jobs_for(1, 1000)[0]
+    spec = "load_dependent_cornering_stiffness:load_slope=1,load_degression=0"
+    assert wsc._key(job) == '["saturation", "magic_formula_tire", "shipped:cr-circle-ramp", "commonroad-mb:1", 1000]'
+    assert wsc._key(dict(job, model_effects=[spec])) != wsc._key(job)
+    eff = wsc.model_effect_set([spec])["load_dependent_cornering_stiffness"]
+    assert (eff.load_slope, eff.load_degression) == (1.0, 0.0)
+    for bad in ("no_such_effect", "load_dependent_cornering_stiffness:slope=1", "aero_drag:cda_m2=x"):
+        assert wsc.main(["--model-effect", bad, "--seeds", "1"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("workbench_study_cr: model effect") and "\n" not in err and "Traceback" not in err

@@ -39,6 +39,11 @@ Usage::
     .venv/bin/python tools/workbench_study_cr.py [--sets 1 3] [--seeds 3] [--first-seed 1000]
                                                   [--jobs 1] [--runs FILE.jsonl] [--json FILE]
                                                   [--kinds saturation null injected] [--cache DIR]
+                                                  [--model-effect SPEC ...]
+
+``--model-effect`` gives the model an effect for every run (ranked against and added to): the
+README's load-proportional tire split under ``--add`` was measured with
+``--model-effect load_dependent_cornering_stiffness:load_slope=1,load_degression=0``.
 """
 
 from __future__ import annotations
@@ -56,7 +61,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # workbench_stud
 from vdps_hil.app.children import spawned_pool  # noqa: E402
 from vdps_hil.experiments.ident_study import CR_SCENARIOS  # noqa: E402
 from vdps_hil.experiments.seeds import refused_by_tool  # noqa: E402
-from vdps_hil.experiments.workbench_study import run_job, wilson_interval  # noqa: E402
+from vdps_hil.experiments.workbench_study import model_effect_set, run_job, wilson_interval  # noqa: E402
 from vdps_hil.model.effects.base import MeasurementEffect  # noqa: E402
 from vdps_hil.model.effects.registry import REGISTRY  # noqa: E402
 from vdps_hil.workbench.added_params import added_entries, at_bound, parameter_entries  # noqa: E402
@@ -119,7 +124,10 @@ def _at_bound(run: dict) -> list[tuple[str, str]]:
 
 
 def _key(job: dict) -> str:
-    return json.dumps([job["kind"], job.get("effect"), job["maneuver"], job["truth"], int(job["seed"])])
+    """A run's identity in a ``--runs`` file (the model's effects only when it has some, so the
+    files written before ``--model-effect`` keep their keys)."""
+    key = [job["kind"], job.get("effect"), job["maneuver"], job["truth"], int(job["seed"])]
+    return json.dumps(key + ([list(job["model_effects"])] if job.get("model_effects") else []))
 
 
 def sensor_named(run: dict) -> list[str]:
@@ -188,10 +196,20 @@ def main(argv=None) -> int:
                     choices=["saturation", "null", "injected", "add"], help="which runs of each seed (default all)")
     ap.add_argument("--cache", default=None, help="directory of simulated drives: kept and reused, so a re-run "
                     "after a workbench change diagnoses the same files")
+    ap.add_argument("--model-effect", action="append", default=[], metavar="SPEC",
+                    help="an effect the model carries (NAME or NAME:param=value,...; repeatable), e.g. "
+                    "load_dependent_cornering_stiffness:load_slope=1,load_degression=0 (each tire's cornering "
+                    "stiffness proportional to its load, as CommonRoad's tires)")
     a = ap.parse_args(argv)
+    try:
+        model_effect_set(a.model_effect)
+    except ValueError as e:
+        print(f"workbench_study_cr: {e}", file=sys.stderr)
+        return 2
     if refused_by_tool(range(a.first_seed, a.first_seed + a.seeds), "workbench_study_cr", a.tuning):  # experiments.seeds
         return 2
-    jobs = [dict(j, **({"cache": a.cache} if a.cache else {}))
+    extra = {**({"cache": a.cache} if a.cache else {}), **({"model_effects": a.model_effect} if a.model_effect else {})}
+    jobs = [dict(j, **extra)
             for seed in range(a.first_seed, a.first_seed + a.seeds) for s in a.sets for j in jobs_for(s, seed)
             if j["kind"] in a.kinds or (j["kind"] == "add-null" and "add" in a.kinds)]
     done = _load_runs(a.runs, _key) if a.runs else {}

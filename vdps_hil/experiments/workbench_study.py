@@ -46,7 +46,7 @@ from typing import Sequence
 from vdps_hil.sim.profiles import SensorProfile, load_profile
 from vdps_hil.sim.scenarios import Scenario, parse_scenario
 
-__all__ = ["TUNING_SEEDS", "STUDY_SEEDS", "MANEUVERS", "HIDDEN", "TWO_HIDDEN", "cached_drive", "run_job", "scenario", "maneuver_text", "SHIPPED", "study_profile", "hidden_drive", "NULL_MANEUVERS", "is_hit",
+__all__ = ["TUNING_SEEDS", "STUDY_SEEDS", "MANEUVERS", "HIDDEN", "TWO_HIDDEN", "cached_drive", "run_job", "model_effect_set", "scenario", "maneuver_text", "SHIPPED", "study_profile", "hidden_drive", "NULL_MANEUVERS", "is_hit",
            "wilson_interval"]
 
 TUNING_SEEDS = (100, 101, 102, 103)
@@ -214,6 +214,23 @@ def hidden_drive(path: str | os.PathLike, maneuver: str, effects: Sequence[str] 
     return Drive(sc, seed=seed, effects=list(effects), profile=profile or study_profile(), truth=truth).run(path)
 
 
+def model_effect_set(specs: Sequence[str] = ()):
+    """The model's effects of a study job (``NAME`` or ``NAME:param=value,...`` each, as
+    ``--effect`` takes them); an unknown effect or parameter raises ValueError (one line)."""
+    from vdps_hil.model.effects import EffectSet, make_effect
+    from vdps_hil.sim.drive import DriveError, parse_effect_spec
+
+    out = []
+    for spec in specs:
+        try:
+            name, params = parse_effect_spec(spec)
+            out.append(make_effect(name, **params))
+        except (DriveError, KeyError, TypeError, ValueError) as e:
+            why = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise ValueError(f"model effect {spec!r}: {why}") from None
+    return EffectSet(out)
+
+
 def model_file(truth: str | None) -> str:
     """The model vehicle file the workbench gets for a drive of ``truth``: ``sedan-model`` for
     ours (the study maneuvers' sedan), ``crN-model`` for ``commonroad-mb:N`` (and for its
@@ -282,11 +299,11 @@ def run_job(job: dict) -> dict:
 
     ``job``: maneuver, specs (effect specs hidden in the truth), seed, optional effect (the hidden
     one, for the hit), add (run ``--add`` of that effect), cache (directory of drives), truth (a
-    truth backend, ``model_file`` names the model file; default ours)."""
+    truth backend, ``model_file`` names the model file; default ours), model_effects (effect specs
+    the model carries, as a ``vdps diagnose --model`` file gives them: ranked against and added to)."""
     import tempfile
     import time
 
-    from vdps_hil.model.effects import EffectSet
     from vdps_hil.model.params import load_vehicle
 
     from vdps_hil.workbench.add import add_effects
@@ -294,6 +311,7 @@ def run_job(job: dict) -> dict:
     from vdps_hil.workbench.ranking.selection import rank
 
     veh = load_vehicle(model_file(job.get("truth")))
+    model_effects = model_effect_set(job.get("model_effects", ()))
     t0 = time.perf_counter()
     out = dict(job)
     with tempfile.TemporaryDirectory() as td:
@@ -301,7 +319,7 @@ def run_job(job: dict) -> dict:
                             job.get("duration_s"), job.get("truth"))
         tab = load_drive(path, veh)
         try:
-            rk = rank(tab, veh)
+            rk = rank(tab, veh, model_effects)
         except ValueError as e:
             out["error"] = str(e)
             return out
@@ -315,7 +333,7 @@ def run_job(job: dict) -> dict:
         if job.get("effect"):
             out["hit"] = is_hit(rk, job["effect"])
         if job.get("add"):
-            r = add_effects(tab, veh, EffectSet(), [job["add"]],
+            r = add_effects(tab, veh, model_effects, [job["add"]],
                             reestimate=reestimator(path, veh))
             out["add_before"] = r.before.get("simulation_error")
             out["add_after"] = r.after.get("simulation_error")
