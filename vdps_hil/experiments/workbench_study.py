@@ -217,18 +217,20 @@ def hidden_drive(path: str | os.PathLike, maneuver: str, effects: Sequence[str] 
 def model_effect_set(specs: Sequence[str] = ()):
     """The model's effects of a study job (``NAME`` or ``NAME:param=value,...`` each, as
     ``--effect`` takes them); an unknown effect or parameter raises ValueError (one line)."""
-    from vdps_hil.model.effects import EffectSet, make_effect
-    from vdps_hil.sim.drive import DriveError, parse_effect_spec
+    from vdps_hil.model.effects import effects_from_names
+    from vdps_hil.sim.drive import parse_effect_spec
 
-    out = []
-    for spec in specs:
-        try:
-            name, params = parse_effect_spec(spec)
-            out.append(make_effect(name, **params))
-        except (DriveError, KeyError, TypeError, ValueError) as e:
-            why = str(e).splitlines()[0] if str(e) else type(e).__name__
-            raise ValueError(f"model effect {spec!r}: {why}") from None
-    return EffectSet(out)
+    names: list[str] = []
+    params: dict[str, dict[str, float]] = {}
+    try:
+        for spec in specs:  # as ``Drive`` reads its --effect specs
+            name, p = parse_effect_spec(spec)
+            names += [] if name in names else [name]
+            params.setdefault(name, {}).update(p)
+        return effects_from_names(names, None, params)
+    except (KeyError, TypeError, ValueError) as e:
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ValueError(f"model effect: {why}") from None
 
 
 def model_file(truth: str | None) -> str:

@@ -67,8 +67,7 @@ def parameter_entries(effect: Effect, sigmas: dict, at_start: bool = False) -> d
         status, side = _status(float(v), s, lo, hi)
         if at_start and status == "fitted":
             status = "at start"
-        out[k] = {"value": v, "sigma": s if status == "fitted" or status == "held" else None, "status": status,
-                  "bound": side,
+        out[k] = {"value": v, "sigma": s if status == "fitted" else None, "status": status, "bound": side,
                   "lower": lo if math.isfinite(lo) else None, "upper": hi if math.isfinite(hi) else None,
                   "unit": spec.unit if spec is not None else ""}
     return out
@@ -80,16 +79,19 @@ def added_entries(parameters: dict):
     return ((e, ps) for e, ps in parameters.items() if e != IDENTIFIED_KEY)
 
 
+def _with_status(parameters: dict, *statuses: str) -> list[tuple[str, str]]:
+    return [(e, k) for e, ps in added_entries(parameters) for k, d in ps.items() if d.get("status") in statuses]
+
+
 def at_bound(parameters: dict) -> list[tuple[str, str]]:
     """(effect, parameter) of every added parameter at a bound (``AddResult.parameters``)."""
-    return [(e, k) for e, ps in added_entries(parameters) for k, d in ps.items() if d.get("status") == "at bound"]
+    return _with_status(parameters, "at bound")
 
 
 def not_fitted(parameters: dict) -> list[tuple[str, str]]:
     """(effect, parameter) of every added parameter the fit did not determine: at a bound or
     still at its start (``AddResult.parameters``)."""
-    return [(e, k) for e, ps in added_entries(parameters) for k, d in ps.items()
-            if d.get("status") in ("at bound", "at start")]
+    return _with_status(parameters, "at bound", "at start")
 
 
 def _unit(unit: str) -> str:

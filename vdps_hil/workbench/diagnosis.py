@@ -240,10 +240,10 @@ def _save_fitted(target, path, add, add_res, base: FittedModel, rk: Ranking) -> 
     src = f"vdps diagnose {Path(path).name}" + "".join(f" --add {a}" for a in add)
     esig = fm.sigmas
     bound = at_bound(add_res.parameters) if add_res is not None else []
-    unmoved = [ek for ek in not_fitted(add_res.parameters) if ek not in bound] if add_res is not None else []
-    if bound or unmoved:
-        esig = {e: {k: v for k, v in ps.items() if (e, k) not in bound and (e, k) not in unmoved}
-                for e, ps in fm.sigmas.items()}
+    dropped = not_fitted(add_res.parameters) if add_res is not None else []
+    unmoved = [ek for ek in dropped if ek not in bound]
+    if dropped:
+        esig = {e: {k: v for k, v in ps.items() if (e, k) not in dropped} for e, ps in fm.sigmas.items()}
     if bound:
         src += "; at bound, not identified: " + ", ".join(f"{e}.{k}" for e, k in bound)
     if unmoved:

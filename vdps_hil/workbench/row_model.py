@@ -136,6 +136,9 @@ class RowModel:
         mu = [a.unsprung_mass_kg for a in self.axles]
         self.unsprung_arm_m = tuple(sum(m * c[k] for m, c in zip(mu, self.corners)) / self.m for k in (0, 1)) + (
             sum(mu) * self._zw / self.m,)
+        ux, uy, uz = self.unsprung_arm_m
+        self._corners_u = [(x - ux, y - uy) for x, y in self.corners]  # the corners and wheel centre
+        self._zw_u = self._zw - uz  # relative to r_u, as the load and force columns take them
         tire = self.model.effects.tire
         self._tire = None if tire is None or tire.name == "linear_tire" else tire
         self._fz0 = self.model.static_load_n
@@ -221,19 +224,17 @@ class RowModel:
         part of the corner's normal load, so replacing that load by the springs' alone dropped
         them)."""
         nx, ny, nz = n_b
-        zw = self.model.wheel_centre_z_m
         farb = None
         if self._arb is not None:
             farb = anti_roll_forces_n(self._arb[0], self._arb[1], self._tracks[0], self._tracks[1], meas[14:18])
         jac = self._roll_centre_forces(rec, n_b) if self._roll_centre is not None else None
-        ux, uy, uz = self.unsprung_arm_m
         for i in range(4):
             fz = rk.measured_normal_load(*self._spring[i], meas[14 + i], meas[18 + i],
                                          0.0 if farb is None else farb[i])
             if jac is not None:
                 fz += jac[i]
-            xi, yi = self.corners[i]
-            rk.normal_load_change(r, fz - rec[i][2], rec[i][11], xi - ux, yi - uy, zw - uz, nx, ny, nz)
+            xi, yi = self._corners_u[i]
+            rk.normal_load_change(r, fz - rec[i][2], rec[i][11], xi, yi, self._zw_u, nx, ny, nz)
 
     def _roll_centre_forces(self, rec, n_b) -> tuple[float, float, float, float]:
         """J_i (``chassis.roll_centre_forces_n``) from the axles' lateral tire forces in body y
@@ -269,11 +270,9 @@ class RowModel:
         (columns 4-7, along e_t = n x e_l, times the slip angle: the cornering-stiffness columns of
         the linear tire)."""
         nx, ny, nz = n_b
-        zw = self.model.wheel_centre_z_m
-        ux, uy, uz = self.unsprung_arm_m
         out = np.zeros((14, 8))
         for i in range(4):
-            xi, yi = self.corners[i]
-            rk.corner_force_columns(out, i, rec[i][9], rec[i][10], rec[i][11], rec[i][4], xi - ux, yi - uy, zw - uz,
+            xi, yi = self._corners_u[i]
+            rk.corner_force_columns(out, i, rec[i][9], rec[i][10], rec[i][11], rec[i][4], xi, yi, self._zw_u,
                                     nx, ny, nz)
         return out
